@@ -1,0 +1,204 @@
+r"""The camera: lens, aperture, focus, shutter, sensor — validated at creation.
+
+Until real lens prescriptions land, a lens is a thin lens named ``thin:<focal length in mm>``.
+
+Units: lengths on the sensor and of the lens in millimetres, scene distances in metres, time in
+seconds. ``focus_distance_m`` is measured from the thin lens's principal plane (``math.inf`` for
+infinity focus).
+
+Derived optics (thin lens, Hecht, *Optics*, 5th ed., §5.2):
+
+.. math::
+
+    \frac{1}{u} + \frac{1}{v} = \frac{1}{f}
+    \qquad
+    \text{FOV} = 2\arctan\frac{K}{2f}
+
+with u the focus distance, v the image distance, K the sensor extent along the direction of the
+field of view (the FOV formula is the one for focus at infinity, as lens datasheets quote it;
+:attr:`Camera.field_of_view_focused_deg` uses v instead of f).
+
+Image aspect: the image spans the full sensor **width**; the pixel pitch is
+``sensor_width_mm / width_px`` and the used sensor height is ``pitch · height_px`` (Blender's
+"horizontal" sensor fit), so square pixels at any resolution.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+from .errors import InputError
+
+METERING_MODES = ("average", "centre", "spot")
+
+
+def _finite(name: str, value: Any, unit: str, fix: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"Camera.{name}={value!r} is not a number ({unit}); {fix}") from None
+    if not math.isfinite(v):
+        raise InputError(f"Camera.{name}={value!r} must be finite ({unit}); {fix}")
+    return v
+
+
+def parse_lens(name: str) -> float:
+    """Focal length in mm of a lens name. Only ``thin:<mm>`` is known until lens_data lands."""
+    if not isinstance(name, str) or not name.startswith("thin:"):
+        raise InputError(
+            f"Camera.lens={name!r} is unknown: use a thin lens 'thin:<focal length mm>', e.g. 'thin:50'"
+        )
+    try:
+        f = float(name[5:])
+    except ValueError:
+        raise InputError(f"Camera.lens={name!r}: focal length after 'thin:' must be a number of mm, e.g. 'thin:50'") from None
+    if not (math.isfinite(f) and f > 0):
+        raise InputError(f"Camera.lens={name!r}: focal length must be > 0 mm, e.g. 'thin:50'")
+    return f
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A physical camera. All fields carry their unit in the name or docstring.
+
+    ``f_number`` or ``shutter_s`` may be ``None``: the missing one is chosen per frame by the
+    reflected-light meter (aperture priority when ``shutter_s`` is None, shutter priority when
+    ``f_number`` is None), see :mod:`clpost.metering`. With both given the camera is manual.
+    """
+
+    lens: str = "thin:50"
+    f_number: float | None = 2.0
+    focus_distance_m: float = 3.0
+    shutter_s: float | None = 1 / 50
+    iso: float = 100.0
+    transmittance: float = 0.9
+    """T in (0, 1]: fraction of light the glass passes (a multi-coated lens ≈ 0.9)."""
+    sensor_mm: tuple[float, float] = (36.0, 24.0)
+    luminance_scale: float = 1.0
+    """cd/m² of input Y = 1 (maps a renderer's arbitrary units to photometric luminance)."""
+    blades: int = 0
+    """Aperture blades; 0 is a round aperture."""
+    blade_rotation_deg: float = 0.0
+    metering: str = "average"
+    exposure_compensation_ev: float = 0.0
+
+    def __post_init__(self) -> None:
+        parse_lens(self.lens)
+        if self.f_number is None and self.shutter_s is None:
+            raise InputError(
+                "Camera: f_number and shutter_s are both unset; give one (--f-number or --shutter) "
+                "and the meter picks the other"
+            )
+        if self.f_number is not None:
+            n = _finite("f_number", self.f_number, "f-number N = f/D", "e.g. 2.8")
+            if n <= 0:
+                raise InputError(f"Camera.f_number={self.f_number!r} must be > 0 (f/0.7 … f/64 are typical)")
+            object.__setattr__(self, "f_number", n)
+        if self.shutter_s is not None:
+            t = _finite("shutter_s", self.shutter_s, "seconds", "e.g. 0.02 for 1/50 s")
+            if t <= 0:
+                raise InputError(f"Camera.shutter_s={self.shutter_s!r} must be > 0 seconds, e.g. 0.02 for 1/50 s")
+            object.__setattr__(self, "shutter_s", t)
+        u = float(self.focus_distance_m)
+        if math.isnan(u) or u <= self.focal_length_mm / 1000.0:
+            raise InputError(
+                f"Camera.focus_distance_m={self.focus_distance_m!r} must be beyond the focal length "
+                f"({self.focal_length_mm / 1000:g} m) — a real image needs u > f; use inf for infinity focus"
+            )
+        object.__setattr__(self, "focus_distance_m", u)
+        iso = _finite("iso", self.iso, "ISO 12232 speed S", "e.g. 100")
+        if iso <= 0:
+            raise InputError(f"Camera.iso={self.iso!r} must be > 0, e.g. 100")
+        object.__setattr__(self, "iso", iso)
+        tr = _finite("transmittance", self.transmittance, "fraction", "e.g. 0.9")
+        if not 0 < tr <= 1:
+            raise InputError(f"Camera.transmittance={self.transmittance!r} must be in (0, 1], e.g. 0.9")
+        object.__setattr__(self, "transmittance", tr)
+        try:
+            sw, sh = (float(s) for s in self.sensor_mm)
+        except (TypeError, ValueError):
+            raise InputError(f"Camera.sensor_mm={self.sensor_mm!r} must be (width, height) in mm, e.g. (36, 24)") from None
+        if not (math.isfinite(sw) and math.isfinite(sh) and sw > 0 and sh > 0):
+            raise InputError(f"Camera.sensor_mm={self.sensor_mm!r} must be two positive mm values, e.g. (36, 24)")
+        object.__setattr__(self, "sensor_mm", (sw, sh))
+        ls = _finite("luminance_scale", self.luminance_scale, "cd/m² per unit Y", "e.g. 100")
+        if ls <= 0:
+            raise InputError(f"Camera.luminance_scale={self.luminance_scale!r} must be > 0 cd/m² per unit Y")
+        object.__setattr__(self, "luminance_scale", ls)
+        if int(self.blades) != self.blades or self.blades < 0 or self.blades in (1, 2):
+            raise InputError(f"Camera.blades={self.blades!r} must be 0 (round) or an integer >= 3")
+        object.__setattr__(self, "blades", int(self.blades))
+        _finite("blade_rotation_deg", self.blade_rotation_deg, "degrees", "e.g. 0")
+        if self.metering not in METERING_MODES:
+            raise InputError(f"Camera.metering={self.metering!r} must be one of {', '.join(METERING_MODES)}")
+        _finite("exposure_compensation_ev", self.exposure_compensation_ev, "EV", "e.g. +1 for one stop brighter")
+
+    # -- derived quantities -------------------------------------------------------------------
+    @property
+    def focal_length_mm(self) -> float:
+        return parse_lens(self.lens)
+
+    @property
+    def image_distance_mm(self) -> float:
+        r"""Lens-to-film distance v (mm) for the focus distance: :math:`v = 1/(1/f - 1/u)`."""
+        f = self.focal_length_mm
+        u = self.focus_distance_m * 1000.0
+        if math.isinf(u):
+            return f
+        return f * u / (u - f)
+
+    @property
+    def is_auto_exposure(self) -> bool:
+        return self.f_number is None or self.shutter_s is None
+
+    def field_of_view_deg(self, extent_mm: float | None = None) -> float:
+        r"""Angle of view :math:`2\arctan(K/2f)` in degrees for sensor extent K (default: width)."""
+        k = self.sensor_mm[0] if extent_mm is None else extent_mm
+        return math.degrees(2 * math.atan(k / (2 * self.focal_length_mm)))
+
+    @property
+    def field_of_view_focused_deg(self) -> float:
+        r"""Horizontal angle of view with the lens focused at u: :math:`2\arctan(K/2v)`."""
+        return math.degrees(2 * math.atan(self.sensor_mm[0] / (2 * self.image_distance_mm)))
+
+    def pixel_pitch_mm(self, width_px: int) -> float:
+        """Pixel pitch (mm) when the image is ``width_px`` wide (the image spans the sensor width)."""
+        return self.sensor_mm[0] / float(width_px)
+
+    def intrinsics(self, width_px: int, height_px: int) -> tuple[float, float, float, float]:
+        r"""Pinhole intrinsics ``(f_x, f_y, c_x, c_y)`` in pixels (OpenCV convention).
+
+        :math:`f_x = f_y = v / p` with v the image distance (the lens focused at u) and p the
+        pixel pitch; the principal point is the image centre ``((W-1)/2, (H-1)/2)`` because pixel
+        centres are at integer coordinates (CONVENTIONS.md).
+        """
+        f_px = self.image_distance_mm / self.pixel_pitch_mm(width_px)
+        return f_px, f_px, (width_px - 1) / 2.0, (height_px - 1) / 2.0
+
+    def default_resolution(self, width_px: int) -> tuple[int, int]:
+        """(width, height) with the sensor's aspect ratio, height rounded to an even number."""
+        h = int(round(width_px * self.sensor_mm[1] / self.sensor_mm[0] / 2)) * 2
+        return width_px, max(h, 2)
+
+    def with_(self, **changes: Any) -> "Camera":
+        """A copy with some fields changed (validated again)."""
+        return replace(self, **changes)
+
+    def describe(self) -> dict[str, str]:
+        """The parameters as strings (written into output EXR headers)."""
+        return {
+            "clpost.lens": self.lens,
+            "clpost.focalLength_mm": f"{self.focal_length_mm:g}",
+            "clpost.fNumber": "auto" if self.f_number is None else f"{self.f_number:g}",
+            "clpost.focusDistance_m": f"{self.focus_distance_m:g}",
+            "clpost.shutter_s": "auto" if self.shutter_s is None else f"{self.shutter_s:g}",
+            "clpost.iso": f"{self.iso:g}",
+            "clpost.transmittance": f"{self.transmittance:g}",
+            "clpost.sensor_mm": f"{self.sensor_mm[0]:g}x{self.sensor_mm[1]:g}",
+            "clpost.luminanceScale": f"{self.luminance_scale:g}",
+            "clpost.blades": str(self.blades),
+            "clpost.bladeRotation_deg": f"{self.blade_rotation_deg:g}",
+            "clpost.metering": self.metering,
+            "clpost.exposureCompensation_ev": f"{self.exposure_compensation_ev:g}",
+        }

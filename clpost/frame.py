@@ -1,0 +1,136 @@
+"""The buffers of one rendered frame, validated once at the boundary.
+
+Conventions (``shared/CONVENTIONS.md``): arrays are C-contiguous ``(H, W, C)`` with row 0 at
+the top; pixel centre of column i, row j at (x, y) = (i, j).
+
+============  ==========  ====================================================================
+buffer        shape       unit / meaning
+============  ==========  ====================================================================
+``color``     H×W×3       scene-referred linear RGB; Y = 1 is ``Camera.luminance_scale`` cd/m²
+``depth``     H×W         planar camera-space Z in metres, > 0, ``+inf`` for sky (optional)
+``velocity``  H×W×2       forward screen-space motion, px per frame, +x right, +y down (optional)
+``alpha``     H×W         coverage in [0, 1]; 0 marks "no data" (optional)
+============  ==========  ====================================================================
+
+A 4-channel ``color`` is split into ``color`` and ``alpha``. float16/32/64 input is converted
+once to float32 (explicitly, here); any other dtype is refused rather than silently cast.
+NaN is never valid; ±inf only as ``+inf`` in depth.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .errors import InputError
+
+_FLOAT_DTYPES = (np.float16, np.float32, np.float64)
+
+
+def _as_float32(name: str, a: Any) -> np.ndarray:
+    a = np.asarray(a)
+    if a.dtype.type not in _FLOAT_DTYPES:
+        raise InputError(
+            f"Frame.{name}: dtype {a.dtype} is not a float type; clpost takes linear float data "
+            f"(float16/32/64) — convert integer images to linear float yourself, e.g. decode sRGB first"
+        )
+    return np.ascontiguousarray(a, dtype=np.float32)
+
+
+def _first_bad(name: str, bad: np.ndarray, what: str, fix: str) -> None:
+    n = int(np.count_nonzero(bad))
+    if n:
+        idx = np.unravel_index(int(np.argmax(bad.reshape(-1))), bad.shape)
+        y, x = int(idx[0]), int(idx[1])
+        raise InputError(
+            f"Frame.{name}: {n} pixel(s) {what}, first at (x={x}, y={y}); {fix}"
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """One frame's buffers. See the module docstring for units and conventions."""
+
+    color: np.ndarray
+    depth: np.ndarray | None = None
+    velocity: np.ndarray | None = None
+    alpha: np.ndarray | None = None
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        color = _as_float32("color", self.color)
+        if color.ndim != 3 or color.shape[2] not in (3, 4):
+            raise InputError(
+                f"Frame.color: shape {color.shape} is not (H, W, 3) or (H, W, 4); "
+                "pass channels last, row 0 at the top"
+            )
+        alpha = self.alpha
+        if color.shape[2] == 4:
+            if alpha is not None:
+                raise InputError("Frame.color has 4 channels and alpha was also given; pass one of them")
+            alpha = color[:, :, 3]
+            color = np.ascontiguousarray(color[:, :, :3])
+        h, w = color.shape[:2]
+        if h < 1 or w < 1:
+            raise InputError(f"Frame.color: empty image of shape {color.shape}")
+        _first_bad("color", np.isnan(color).any(axis=2), "are NaN", "fix the renderer output (NaN is never valid)")
+        _first_bad("color", np.isinf(color).any(axis=2), "are ±inf", "clamp color to finite values")
+        object.__setattr__(self, "color", color)
+
+        if self.depth is not None:
+            depth = _as_float32("depth", self.depth)
+            if depth.ndim == 3 and depth.shape[2] == 1:
+                depth = np.ascontiguousarray(depth[:, :, 0])
+            if depth.shape != (h, w):
+                raise InputError(f"Frame.depth: shape {depth.shape} does not match color {(h, w)}; give H×W planar depth")
+            _first_bad("depth", np.isnan(depth), "are NaN", "use +inf for background, never NaN")
+            _first_bad("depth", ~(depth > 0), "are <= 0 or -inf",
+                       "depth is planar camera-space Z in metres (> 0); convert negative eye-space z or NDC depth first")
+            object.__setattr__(self, "depth", depth)
+
+        if self.velocity is not None:
+            vel = _as_float32("velocity", self.velocity)
+            if vel.shape != (h, w, 2):
+                raise InputError(f"Frame.velocity: shape {vel.shape} is not (H, W, 2) = {(h, w, 2)}")
+            _first_bad("velocity", np.isnan(vel).any(axis=2), "are NaN", "fix the renderer's vector pass")
+            _first_bad("velocity", np.isinf(vel).any(axis=2), "are ±inf", "clamp velocity to finite pixels per frame")
+            object.__setattr__(self, "velocity", vel)
+
+        if alpha is not None:
+            a = _as_float32("alpha", alpha)
+            if a.shape != (h, w):
+                raise InputError(f"Frame.alpha: shape {a.shape} does not match color {(h, w)}")
+            _first_bad("alpha", np.isnan(a), "are NaN", "alpha is coverage in [0, 1]")
+            _first_bad("alpha", (a < 0) | (a > 1), "are outside [0, 1]", "alpha is coverage in [0, 1]; clip it")
+            object.__setattr__(self, "alpha", np.ascontiguousarray(a))
+
+    @property
+    def height(self) -> int:
+        return int(self.color.shape[0])
+
+    @property
+    def width(self) -> int:
+        return int(self.color.shape[1])
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) in pixels."""
+        return self.width, self.height
+
+    def replace(self, *, validate: bool = True, **changes: Any) -> "Frame":
+        """A new Frame with some buffers replaced.
+
+        ``validate=False`` is for clpost's own stage outputs (float32, right shapes, finite by
+        construction — each stage's tests check that): it skips the full-frame scans, which would
+        otherwise cost more than an exposure pass.
+        """
+        kw = dict(color=self.color, depth=self.depth, velocity=self.velocity,
+                  alpha=self.alpha, metadata=dict(self.metadata))
+        kw.update(changes)
+        if validate:
+            return Frame(**kw)
+        out = object.__new__(Frame)
+        for k, v in kw.items():
+            object.__setattr__(out, k, v)
+        return out

@@ -1,0 +1,297 @@
+"""Plan and run a chain of stages on frames: build kernels once, run many frames.
+
+Plan time vs call time (after reikna): :meth:`Pipeline.plan` decides which stages change the
+image for this camera and frame (a stage that is an identity is not planned — "model only what the
+scene requires"); consecutive pointwise stages are fused into **one generated kernel** (one pass
+over memory); programs are built once per (stages, defines) and device buffers are allocated once
+per resolution, then reused for every frame. Per-frame scalars (exposure gain …) are kernel
+arguments, so changing them never rebuilds anything.
+
+Device layouts: the host frame (H, W, 3) is uploaded as is ("interleaved"); gathers work on
+planar buffers. The first and last fused kernels convert between the two as part of their single
+pass; a plan that starts or ends with a gather gets a conversion kernel there.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .camera import Camera
+from .errors import InputError
+from .frame import Frame
+from . import metering
+from .stages import QUALITIES, GatherStage, PointwiseStage, Stage, registry
+
+INTERLEAVED, PLANAR = "interleaved", "planar"
+
+
+@dataclass(frozen=True)
+class PlanEntry:
+    """One line of ``--explain``: a stage, whether it runs, and why."""
+
+    stage: str
+    planned: bool
+    reason: str
+
+    def __str__(self) -> str:
+        return f"{'+' if self.planned else '-'} {self.stage:<14} {self.reason}"
+
+
+def fused_source(stages: list[PointwiseStage], src_layout: str, dst_layout: str) -> tuple[str, str]:
+    """Generate one OpenCL kernel applying ``stages`` in order to each pixel.
+
+    Returns ``(kernel_name, source)``. The kernel is named after its stages joined by ``__``
+    (a single stage's kernel is named like the stage); with no stages it only converts layouts.
+    Arguments: ``src, dst, width, height`` then each stage's ``args`` prefixed ``<stage>_``.
+    """
+    from .runtime import kernel_source
+
+    name = "__".join(s.name for s in stages) or f"convert_{src_layout}_to_{dst_layout}"
+    params = ["__global const float *restrict src", "__global float *restrict dst",
+              "const int width", "const int height"]
+    body = []
+    for s in stages:
+        call_args = ["c", "p"]
+        for cl_type, arg in s.args:
+            params.append(f"{'const ' if '*' not in cl_type else ''}{cl_type} {s.name}_{arg}")
+            call_args.append(f"{s.name}_{arg}")
+        body.append(f"    c = {s.name}_apply({', '.join(call_args)});")
+    load = "load_interleaved(src, i)" if src_layout == INTERLEAVED else "load_planar(src, i, n)"
+    store = ("store_interleaved(dst, i, c);" if dst_layout == INTERLEAVED
+             else "store_planar(dst, i, n, c);")
+    parts = [kernel_source("common")] + [s.source() for s in stages]
+    nl = "\n"
+    parts.append(f"""
+__kernel void {name}({", ".join(params)})
+{{
+    const int x = get_global_id(0);
+    const int y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t i = (size_t)y * (size_t)width + (size_t)x;
+    const PixelCtx p = {{x, y, width, height}};
+    (void)n; (void)p;
+    float3 c = {load};
+{nl.join(body)}
+    {store}
+}}
+""")
+    return name, "\n".join(parts)
+
+
+@dataclass
+class _Node:
+    """One kernel launch of a plan: a fused pointwise group or a gather stage."""
+
+    stages: list[Stage]
+    src_layout: str
+    dst_layout: str
+    kernel: object = None
+
+    @property
+    def name(self) -> str:
+        return "__".join(s.name for s in self.stages) or f"convert_{self.src_layout}_to_{self.dst_layout}"
+
+
+@dataclass
+class _Buffers:
+    size: tuple[int, int]
+    color_in: object
+    color_out: object
+    planar: list = field(default_factory=list)
+    aux: dict = field(default_factory=dict)
+    args: dict = field(default_factory=dict)
+
+
+class Pipeline:
+    """A camera's chain of stages, planned per frame and run with OpenCL.
+
+    ``stages`` restricts the candidates to the named stages (compositors often want one effect);
+    ``device`` is a substring of an OpenCL platform/device name (see :mod:`clpost.runtime`).
+    """
+
+    def __init__(self, camera: Camera, quality: str = "final", stages: list[str] | None = None,
+                 device: str | None = None) -> None:
+        if not isinstance(camera, Camera):
+            raise InputError(f"Pipeline: camera must be a clpost.Camera, not {type(camera).__name__}")
+        if quality not in QUALITIES:
+            raise InputError(f"quality {quality!r} is unknown: use one of {', '.join(QUALITIES)}")
+        known = registry()
+        if stages is not None:
+            unknown = [s for s in stages if s not in known]
+            if unknown:
+                raise InputError(f"--stages: unknown stage(s) {', '.join(unknown)}; known: {', '.join(known)}")
+        self.camera = camera
+        self.quality = quality
+        self.device = device
+        self._selected = None if stages is None else set(stages)
+        self._stages = [cls(quality) for cls in known.values()]
+        self._runtime = None
+        self._nodes: dict[tuple, list[_Node]] = {}
+        self._buffers: _Buffers | None = None
+        self.last_timings: dict[str, float] = {}
+        """Device milliseconds of the last :meth:`run`, per kernel and for upload/download."""
+
+    # -- planning -----------------------------------------------------------------------------
+    @property
+    def runtime(self):
+        if self._runtime is None:
+            from .runtime import get_runtime
+
+            self._runtime = get_runtime(self.device)
+        return self._runtime
+
+    def camera_for(self, frame: Frame) -> Camera:
+        """The camera with auto-exposure resolved for this frame."""
+        return metering.resolve(self.camera, frame)
+
+    def explain(self, frame: Frame, camera: Camera | None = None) -> list[PlanEntry]:
+        """Every known stage, in physical order, with whether it runs and why."""
+        cam = camera or self.camera_for(frame)
+        out = []
+        for st in self._stages:
+            if self._selected is not None and st.name not in self._selected:
+                out.append(PlanEntry(st.name, False, "not selected by --stages"))
+                continue
+            why = st.skip_reason(cam, frame)
+            if why is None:
+                missing = [b for b in st.reads if getattr(frame, b) is None]
+                if missing:
+                    raise InputError(
+                        f"stage '{st.name}' needs the frame's {' and '.join(missing)} buffer; "
+                        f"provide it or leave the stage out with --stages"
+                    )
+                out.append(PlanEntry(st.name, True, st.reason_needed(cam, frame)))
+            else:
+                out.append(PlanEntry(st.name, False, why))
+        return out
+
+    def plan(self, frame: Frame) -> list[str]:
+        """Names of the stages that run for this frame, in order."""
+        return [e.stage for e in self.explain(frame) if e.planned]
+
+    def _planned(self, frame: Frame, cam: Camera) -> list[Stage]:
+        names = {e.stage for e in self.explain(frame, cam) if e.planned}
+        return [s for s in self._stages if s.name in names]
+
+    def kernels(self, frame: Frame) -> list[str]:
+        """The kernel launches of this frame's plan (fused groups joined by ``__``)."""
+        cam = self.camera_for(frame)
+        return [n.name for n in self._build_nodes(self._planned(frame, cam), cam, build=False)]
+
+    def _build_nodes(self, planned: list[Stage], cam: Camera, build: bool = True) -> list[_Node]:
+        defines: dict = {}
+        for s in planned:
+            defines.update({f"{k}": v for k, v in s.defines(cam).items()})
+        key = (tuple(s.name for s in planned), tuple(sorted(defines.items())))
+        if build and key in self._nodes:
+            return self._nodes[key]
+        groups: list[list[Stage]] = []
+        for s in planned:
+            if isinstance(s, PointwiseStage) and groups and isinstance(groups[-1][0], PointwiseStage):
+                groups[-1].append(s)
+            else:
+                groups.append([s])
+        if groups and isinstance(groups[0][0], GatherStage):
+            groups.insert(0, [])
+        if groups and isinstance(groups[-1][0] if groups[-1] else None, GatherStage):
+            groups.append([])
+        nodes = []
+        for i, g in enumerate(groups):
+            gather = bool(g) and isinstance(g[0], GatherStage)
+            src = PLANAR if gather or i > 0 else INTERLEAVED
+            dst = PLANAR if gather or i < len(groups) - 1 else INTERLEAVED
+            nodes.append(_Node(g, src, dst))
+        if build:
+            import pyopencl as cl
+
+            rt = self.runtime
+            for node in nodes:
+                if node.stages and isinstance(node.stages[0], GatherStage):
+                    continue
+                kname, src = fused_source(node.stages, node.src_layout, node.dst_layout)
+                prog = rt.program(src, kname, defines)
+                node.kernel = cl.Kernel(prog, kname)
+            self._nodes[key] = nodes
+        return nodes
+
+    # -- running ------------------------------------------------------------------------------
+    def _buffers_for(self, w: int, h: int) -> _Buffers:
+        if self._buffers is None or self._buffers.size != (w, h):
+            rt = self.runtime
+            self._buffers = _Buffers((w, h), rt.empty((h, w, 3)), rt.empty((h, w, 3)))
+        return self._buffers
+
+    def _planar(self, bufs: _Buffers, k: int):
+        while len(bufs.planar) <= k:
+            w, h = bufs.size
+            bufs.planar.append(self.runtime.empty((3, h, w)))
+        return bufs.planar[k]
+
+    def _arg_values(self, stage: PointwiseStage, cam: Camera, frame: Frame, bufs: _Buffers) -> list:
+        import pyopencl as cl
+
+        vals = []
+        for (cl_type, arg), v in zip(stage.args, stage.values(cam, frame)):
+            if "*" in cl_type:
+                a = np.ascontiguousarray(v)
+                key = (stage.name, arg)
+                buf = bufs.args.get(key)
+                if buf is None or buf.size != max(a.nbytes, 4):
+                    buf = bufs.args[key] = self.runtime.empty(a.shape, a.dtype)
+                cl.enqueue_copy(self.runtime.queue, buf, a)
+                vals.append(buf)
+            else:
+                vals.append(v)
+        return vals
+
+    def run(self, frame: Frame) -> Frame:
+        """Process one frame; returns a new Frame whose color is the camera's output
+        (normalised sensor signal; later stages: the film/sensor's recorded values)."""
+        import pyopencl as cl
+
+        from .runtime import event_ms
+
+        cam = self.camera_for(frame)
+        planned = self._planned(frame, cam)
+        meta = dict(frame.metadata, camera=cam.describe(), plan=[s.name for s in planned])
+        self.last_timings = {}
+        if not planned:
+            return frame.replace(metadata=meta, validate=False)
+        nodes = self._build_nodes(planned, cam)
+        rt, q = self.runtime, self.runtime.queue
+        w, h = frame.width, frame.height
+        bufs = self._buffers_for(w, h)
+        events = [("upload", cl.enqueue_copy(q, bufs.color_in, frame.color, is_blocking=False))]
+        src, planar_k = bufs.color_in, 0
+        for node in nodes:
+            if node.dst_layout == INTERLEAVED:
+                dst = bufs.color_out
+            else:
+                dst = self._planar(bufs, planar_k)
+                planar_k ^= 1
+            if node.kernel is None:
+                stage = node.stages[0]
+                for ev in stage.enqueue(rt, cam, frame, src, dst, bufs.aux):
+                    events.append((stage.name, ev))
+            else:
+                args = [src, dst, np.int32(w), np.int32(h)]
+                for s in node.stages:
+                    args += self._arg_values(s, cam, frame, bufs)
+                node.kernel.set_args(*args)
+                events.append((node.name, cl.enqueue_nd_range_kernel(q, node.kernel, (w, h), None)))
+            src = dst
+        out = np.empty((h, w, 3), np.float32)
+        events.append(("download", cl.enqueue_copy(q, out, bufs.color_out, is_blocking=True)))
+        for name, ev in events:
+            self.last_timings[name] = self.last_timings.get(name, 0.0) + event_ms(ev)
+        return frame.replace(color=out, metadata=meta, validate=False)
+
+    def reference(self, frame: Frame) -> np.ndarray:
+        """The same plan through each stage's float64 numpy reference; returns (H, W, 3) float64."""
+        cam = self.camera_for(frame)
+        color = frame.color.astype(np.float64)
+        for s in self._planned(frame, cam):
+            color = s.reference(cam, frame, color)
+        return color

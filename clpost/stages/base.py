@@ -1,0 +1,91 @@
+"""What a stage is.
+
+A stage is one physical effect. Its module (``clpost/stages/<name>.py``) holds one subclass of
+:class:`Stage` with:
+
+- ``name`` — used alike in ``--stages``, ``kernels/<name>.cl`` and ``tests/test_<name>.py``;
+- ``order`` — its place in the physical order of light through the camera (see
+  :data:`clpost.stages.PHYSICAL_ORDER`);
+- ``reads`` — the Frame buffers it needs besides color (``"depth"``, ``"velocity"``);
+- ``skip_reason(camera, frame)`` — why it is an identity for this camera and frame, or None;
+- ``reference(camera, frame, color)`` — a readable float64 numpy implementation (the oracle);
+- its OpenCL implementation: a :class:`PointwiseStage` supplies an inline per-pixel function
+  ``float3 <name>_apply(float3 c, const PixelCtx p, <args>)`` in ``kernels/<name>.cl`` that the
+  planner fuses with its pointwise neighbours into one kernel; a :class:`GatherStage` enqueues its
+  own kernels on planar buffers.
+
+Structural parameters (tap counts, LUT sizes) are ``defines`` — part of the program key;
+per-frame scalars are kernel arguments, so changing exposure never recompiles anything.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from ..camera import Camera
+    from ..frame import Frame
+    from ..runtime import Runtime
+
+QUALITIES = ("draft", "preview", "final")
+"""Quality levels; each stage documents what they change (sample counts, resolution)."""
+
+
+class Stage(ABC):
+    name: ClassVar[str]
+    order: ClassVar[float]
+    reads: ClassVar[tuple[str, ...]] = ()
+    kind: ClassVar[str] = "stage"
+
+    def __init__(self, quality: str = "final") -> None:
+        self.quality = quality
+
+    @abstractmethod
+    def skip_reason(self, camera: "Camera", frame: "Frame") -> str | None:
+        """Why this stage leaves the image unchanged for this camera/frame (None: it is needed)."""
+
+    def reason_needed(self, camera: "Camera", frame: "Frame") -> str:
+        """One line saying what the stage does to this frame (for ``--explain``)."""
+        return "changes the image"
+
+    @abstractmethod
+    def reference(self, camera: "Camera", frame: "Frame", color: np.ndarray) -> np.ndarray:
+        """float64 numpy oracle: ``color`` (H, W, 3) float64 in, same shape out."""
+
+    def defines(self, camera: "Camera") -> dict[str, object]:
+        """Structural ``#define``s (part of the program key); none by default."""
+        return {}
+
+
+class PointwiseStage(Stage):
+    """A per-pixel function, fused with neighbouring pointwise stages into one kernel.
+
+    ``args`` lists the extra kernel arguments of ``<name>_apply`` as ``(OpenCL type, name)``;
+    :meth:`values` gives their per-frame values in that order (numpy scalars or host arrays,
+    which the planner uploads into device buffers).
+    """
+
+    kind = "pointwise"
+    args: ClassVar[tuple[tuple[str, str], ...]] = ()
+
+    def source(self) -> str:
+        """OpenCL C defining ``<name>_apply`` (default: ``kernels/<name>.cl``)."""
+        from ..runtime import kernel_source
+
+        return kernel_source(self.name)
+
+    @abstractmethod
+    def values(self, camera: "Camera", frame: "Frame") -> tuple:
+        """Per-frame kernel argument values, in the order of ``args``."""
+
+
+class GatherStage(Stage):
+    """A neighbourhood operation with its own kernels on planar float32 color buffers."""
+
+    kind = "gather"
+
+    @abstractmethod
+    def enqueue(self, rt: "Runtime", camera: "Camera", frame: "Frame", src, dst, aux: dict) -> list:
+        """Enqueue the stage reading planar ``src`` and writing planar ``dst``; return events."""

@@ -1,0 +1,48 @@
+r"""exposure: scene luminance → normalised sensor signal (1.0 = saturation).
+
+.. math::
+
+    \text{signal} = Y_{in} \cdot s \cdot \frac{\pi T}{4 N_w^2} \cdot t \cdot \frac{S}{78}
+
+with s = ``Camera.luminance_scale`` (cd/m² of Y = 1), T transmittance, N_w the working f-number,
+t shutter (s) and S the ISO speed; all formulas and sources are in :mod:`clpost.photometry`.
+Applied alike to R, G and B so chromaticity is unchanged. Auto-exposure (a missing f-number or
+shutter) is resolved per frame by :mod:`clpost.metering` before this stage runs.
+
+Domain/range: any finite input ≥ 0 → output ≥ 0; no clipping here (highlights above 1.0 stay for
+the blurs and the film/sensor stages, which saturate physically).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..photometry import sensor_gain, working_f_number
+from .base import PointwiseStage
+
+
+def exposure_gain(camera) -> float:
+    """Sensor signal per unit input for a fully set (manual or resolved) camera."""
+    n_w = working_f_number(camera.f_number, camera.focal_length_mm, camera.image_distance_mm)
+    return sensor_gain(f_number_w=n_w, shutter_s=camera.shutter_s, iso=camera.iso,
+                       transmittance=camera.transmittance, luminance_scale=camera.luminance_scale)
+
+
+class Exposure(PointwiseStage):
+    name = "exposure"
+    order = 70.0
+    args = (("float", "gain"),)
+
+    def skip_reason(self, camera, frame):
+        if exposure_gain(camera) == 1.0:
+            return "gain is exactly 1 (input already in sensor units)"
+        return None
+
+    def reason_needed(self, camera, frame):
+        return (f"gain {exposure_gain(camera):.4g} (f/{camera.f_number:g}, {camera.shutter_s:g} s, "
+                f"ISO {camera.iso:g}, T {camera.transmittance:g})")
+
+    def values(self, camera, frame):
+        return (np.float32(exposure_gain(camera)),)
+
+    def reference(self, camera, frame, color):
+        return np.asarray(color, dtype=np.float64) * exposure_gain(camera)

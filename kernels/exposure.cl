@@ -1,0 +1,7 @@
+/* exposure: scene luminance -> normalised sensor signal (1.0 = saturation).
+ * gain = luminance_scale * pi*T / (4 N_w^2) * t * S / 78, computed once per frame on the host
+ * in float64 (clpost/stages/exposure.py documents the formula and its sources).
+ */
+inline float3 exposure_apply(const float3 c, const PixelCtx p, const float gain) {
+    return c * gain;
+}

@@ -1,0 +1,110 @@
+"""exposure: closed forms (ISO 2720 / ISO 12232), kernel vs float64 reference, extremes."""
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from clpost import Camera, Frame, Pipeline
+from clpost.photometry import K_REFLECTED
+from clpost.stages.exposure import exposure_gain
+
+
+def uniform(L, h=9, w=11):
+    """A uniform grey scene of luminance L cd/m² (luminance_scale=1: Y is cd/m²)."""
+    return Frame(np.full((h, w, 3), L, np.float32), depth=np.full((h, w), 5.0, np.float32))
+
+
+def test_gain_matches_the_written_formula():
+    cam = Camera(f_number=2.8, shutter_s=1 / 125, iso=400, transmittance=0.8,
+                 luminance_scale=250.0, focus_distance_m=math.inf)
+    expected = 250.0 * math.pi * 0.8 / (4 * 2.8**2) * (1 / 125) / (78 / 400)
+    assert exposure_gain(cam) == pytest.approx(expected, rel=1e-14)
+
+
+@pytest.mark.parametrize("n, t, s", [(1.4, 1 / 60, 100), (8, 1 / 250, 400), (16, 2.0, 50)])
+def test_metered_uniform_scene_lands_at_qK_over_78(n, t, s):
+    # ISO 2720: L S / K = N^2 / t  ->  L = K N^2 / (S t)
+    T = 0.83
+    L = K_REFLECTED * n * n / (s * t)
+    cam = Camera(f_number=n, shutter_s=t, iso=s, transmittance=T, luminance_scale=1.0,
+                 focus_distance_m=math.inf)
+    out = Pipeline(cam).run(uniform(L))
+    q = math.pi * T / 4
+    assert q * K_REFLECTED / 78 == pytest.approx(0.1045, abs=5e-4)  # the "0.104" of the brief
+    np.testing.assert_allclose(out.color, q * K_REFLECTED / 78, rtol=1e-6)
+
+
+def test_bellows_factor_costs_two_stops_at_one_to_one():
+    inf = Camera(focus_distance_m=math.inf)
+    macro = Camera(focus_distance_m=0.1)  # u = 2f: magnification 1, v = 2f
+    assert exposure_gain(macro) / exposure_gain(inf) == pytest.approx(0.25, rel=1e-12)
+
+
+def test_kernel_matches_reference_on_odd_size_random_and_adversarial(rng):
+    h, w = 23, 37
+    c = (rng.random((h, w, 3)) * 100).astype(np.float32)
+    adversarial = np.array([0.0, 1e-6, 1e-38, 1e-45, 1.0, 1e4, 1e8, 3e38 / 1e7], np.float32)
+    c.reshape(-1)[: adversarial.size * 5] = np.tile(adversarial, 5)
+    frame = Frame(c, depth=np.full((h, w), np.inf, np.float32))
+    pipe = Pipeline(Camera(f_number=1.4, shutter_s=1 / 30, iso=800))
+    out = pipe.run(frame)
+    ref = pipe.reference(frame)
+    assert out.color.dtype == np.float32 and out.color.shape == (h, w, 3)
+    assert np.isfinite(out.color).all()
+    normal = np.abs(ref) > 1e-30  # below that float32 denormals carry few bits
+    rel = np.abs(out.color[normal] - ref[normal]) / np.abs(ref[normal])
+    assert rel.max() <= 2e-7, f"worst at flat index {np.argmax(rel)}"
+    np.testing.assert_array_equal(out.color[ref == 0], 0)
+
+
+@given(
+    n=st.floats(0.7, 64), t=st.floats(1 / 8000, 30), s=st.floats(25, 102400),
+    u=st.one_of(st.just(math.inf), st.floats(0.06, 1e6)),
+    lum=st.sampled_from([1e-6, 1e-3, 1.0, 1e3, 1e8]),
+)
+def test_extremes_stay_finite_and_exact(n, t, s, u, lum):
+    cam = Camera(f_number=n, shutter_s=t, iso=s, focus_distance_m=u, luminance_scale=1.0)
+    frame = uniform(lum, 3, 5)
+    out = _pipe(cam).run(frame)
+    ref = lum * exposure_gain(cam)
+    assert np.isfinite(out.color).all()
+    np.testing.assert_allclose(out.color, ref, rtol=2e-7)
+
+
+_pipes = {}
+
+
+def _pipe(cam):
+    # One pipeline per test run: scalars change, programs and buffers must not be rebuilt.
+    p = _pipes.setdefault("p", Pipeline(cam))
+    p.camera = cam
+    return p
+
+
+def test_changing_exposure_never_rebuilds(rng):
+    frame = Frame(rng.random((8, 8, 3)).astype(np.float32))
+    pipe = Pipeline(Camera(f_number=2))
+    pipe.run(frame)
+    progs = dict(pipe.runtime._programs)
+    buf = pipe._buffers
+    for n in (1.4, 4, 11):
+        pipe.camera = Camera(f_number=n)
+        pipe.run(frame)
+    assert pipe.runtime._programs.keys() == progs.keys()
+    assert pipe._buffers is buf
+
+
+def test_skipped_exactly_when_identity():
+    cam = Camera(f_number=1.0, shutter_s=1.0, iso=78.0, transmittance=1.0,
+                 focus_distance_m=math.inf, luminance_scale=4 / math.pi)
+    assert exposure_gain(cam) == pytest.approx(1.0, rel=1e-15)
+    frame = uniform(0.3)
+    pipe = Pipeline(cam)
+    if exposure_gain(cam) == 1.0:
+        assert pipe.plan(frame) == []
+        np.testing.assert_array_equal(pipe.run(frame).color, frame.color)
+    else:  # rounding left the gain a hair off 1: then it must be planned and exact
+        assert pipe.plan(frame) == ["exposure"]
+    assert Pipeline(Camera()).plan(frame) == ["exposure"]
