@@ -20,3 +20,7 @@ class OpenCLUnavailableError(ClpostError, RuntimeError):
 
 class KernelBuildError(ClpostError, RuntimeError):
     """An OpenCL program failed to build; carries the kernel name, options and compiler log."""
+
+
+class OutputError(ClpostError, OSError):
+    """An output could not be written (directory not writable, disk full); nothing was lost."""

@@ -1,0 +1,140 @@
+"""Planner: registry and names, planning and explain, fusion, buffer/program reuse."""
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import clpost.pipeline as pipeline_mod
+from clpost import Camera, Frame, InputError, Pipeline
+from clpost.pipeline import fused_source
+from clpost.runtime import kernels_dir
+from clpost.stages import PointwiseStage, registry
+from clpost.stages.exposure import Exposure, exposure_gain
+
+from conftest import odd_frame
+
+TESTS = Path(__file__).parent
+
+
+def test_stage_names_match_kernel_files_functions_and_tests():
+    assert list(registry())[0:1] and "exposure" in registry()
+    for name, cls in registry().items():
+        assert re.fullmatch(r"[a-z_]+", name)
+        src = kernels_dir() / f"{name}.cl"
+        text = src.read_text()
+        if issubclass(cls, PointwiseStage):
+            assert re.search(rf"\b{name}_apply\s*\(", text), f"{src} must define {name}_apply"
+            kname, fused = fused_source([cls()], "interleaved", "interleaved")
+            assert kname == name and f"__kernel void {name}(" in fused
+        else:
+            assert re.search(rf"__kernel\s+void\s+{name}\s*\(", text), f"{src} must define __kernel {name}"
+        assert (TESTS / f"test_{name}.py").is_file(), f"stage {name} needs tests/test_{name}.py"
+
+
+def test_registry_is_in_physical_order():
+    orders = [cls.order for cls in registry().values()]
+    assert orders == sorted(orders)
+
+
+def test_unknown_stage_and_quality_are_refused():
+    with pytest.raises(InputError, match="unknown stage.*bokeh.*known: .*exposure"):
+        Pipeline(Camera(), stages=["bokeh"])
+    with pytest.raises(InputError, match="quality 'ultra'"):
+        Pipeline(Camera(), quality="ultra")
+
+
+def test_explain_lists_every_stage_with_a_reason(rng):
+    frame = odd_frame(rng)
+    lines = Pipeline(Camera(), stages=[]).explain(frame)
+    assert [e.stage for e in lines] == list(registry())
+    assert all(not e.planned and "--stages" in e.reason for e in lines)
+    assert Pipeline(Camera(), stages=[]).run(frame).color is frame.color
+
+
+class Tint(PointwiseStage):
+    """A test-only second pointwise stage: per-channel gain depending on x (exercises PixelCtx)."""
+
+    name = "tint"
+    order = 75.0
+    args = (("float", "k"), ("__global const float *", "lut"))
+
+    def source(self):
+        return """
+inline float3 tint_apply(const float3 c, const PixelCtx p, const float k, __global const float *lut) {
+    return c * (float3)(lut[0], lut[1], lut[2]) + k * (float)p.x;
+}"""
+
+    def skip_reason(self, camera, frame):
+        return None
+
+    def values(self, camera, frame):
+        return (np.float32(0.5), np.array([1.0, 2.0, 3.0], np.float32))
+
+    def reference(self, camera, frame, color):
+        x = np.arange(frame.width)[None, :, None]
+        return color * np.array([1.0, 2.0, 3.0]) + 0.5 * x
+
+
+def test_consecutive_pointwise_stages_fuse_into_one_kernel(rng, monkeypatch):
+    reg = {"exposure": Exposure, "tint": Tint}
+    monkeypatch.setattr(pipeline_mod, "registry", lambda: reg)
+    frame = odd_frame(rng)
+    pipe = Pipeline(Camera())
+    assert pipe.plan(frame) == ["exposure", "tint"]
+    assert pipe.kernels(frame) == ["exposure__tint"]
+    out = pipe.run(frame)
+    assert set(pipe.last_timings) == {"upload", "exposure__tint", "download"}
+    np.testing.assert_allclose(out.color, pipe.reference(frame), rtol=1e-6, atol=1e-6)
+    # restricting to one stage gives that stage alone
+    only = Pipeline(Camera(), stages=["tint"])
+    np.testing.assert_allclose(only.run(frame).color, Tint().reference(None, frame, frame.color.astype(float)),
+                               rtol=1e-6, atol=1e-6)
+
+
+def test_buffers_are_reused_per_resolution(rng):
+    pipe = Pipeline(Camera())
+    a, b = odd_frame(rng), odd_frame(rng)
+    pipe.run(a)
+    bufs = pipe._buffers
+    pipe.run(b)
+    assert pipe._buffers is bufs
+    pipe.run(odd_frame(rng, w=16, h=9))
+    assert pipe._buffers is not bufs and pipe._buffers.size == (16, 9)
+
+
+def test_depth_and_velocity_pass_through_untouched(rng):
+    frame = odd_frame(rng).replace(velocity=rng.normal(size=(23, 37, 2)))
+    out = Pipeline(Camera()).run(frame)
+    assert out.depth is frame.depth and out.velocity is frame.velocity
+    assert out.metadata["plan"] == ["exposure"]
+    assert out.metadata["camera"]["clpost.fNumber"] == "2"
+
+
+def test_auto_exposure_changes_only_scalars(rng):
+    pipe = Pipeline(Camera(shutter_s=None))
+    f1 = odd_frame(rng, scale=1.0)
+    f2 = odd_frame(rng, scale=100.0)
+    o1, o2 = pipe.run(f1), pipe.run(f2)
+    assert len(pipe._nodes) == 1
+    # the meter brings both to the same mean exposure level
+    assert o1.color.mean() == pytest.approx(o2.color.mean(), rel=0.05)
+    assert exposure_gain(pipe.camera_for(f1)) == pytest.approx(100 * exposure_gain(pipe.camera_for(f2)), rel=0.1)
+
+
+def test_a_stage_needing_a_missing_buffer_says_so(rng, monkeypatch):
+    class NeedsDepth(Tint):
+        name = "needs_depth"
+        reads = ("depth",)
+
+    monkeypatch.setattr(pipeline_mod, "registry", lambda: {"needs_depth": NeedsDepth})
+    frame = odd_frame(rng, depth=False)
+    with pytest.raises(InputError, match="needs_depth' needs the frame's depth buffer"):
+        Pipeline(Camera()).plan(frame)
+
+
+def test_half_float_input_runs(rng):
+    c = (rng.random((23, 37, 3)) * 1000).astype(np.float16)
+    frame = Frame(c, depth=np.full((23, 37), np.inf, np.float16))
+    pipe = Pipeline(Camera())
+    np.testing.assert_allclose(pipe.run(frame).color, pipe.reference(frame), rtol=2e-7)
