@@ -8,6 +8,7 @@ with an error naming it (the outputs already written are complete and stay).
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -43,10 +44,23 @@ def output_header(frame: Frame) -> dict[str, str]:
     return hdr
 
 
+def read_input(pipeline: Pipeline, path: Path, layout: str | None = None) -> Frame:
+    """Read one input frame; radial depth (Arnold's Z, see :mod:`clpost.exr`) is converted to
+    planar with the camera's own focal length in pixels at the frame's resolution."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", exr.DepthConventionWarning)
+        frame = exr.read_frame(path, layout)
+    if frame.metadata.get("depth_kind") == "radial" and frame.depth is not None:
+        fx, fy, _, _ = pipeline.camera.intrinsics(frame.width, frame.height)
+        meta = dict(frame.metadata, depth_kind="planar (converted from radial with the camera's focal length)")
+        frame = frame.replace(depth=exr.radial_to_planar(frame.depth, (fx, fy)), metadata=meta)
+    return frame
+
+
 def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
                 half: bool = False, expect_size: tuple[int, int] | None = None) -> Frame:
     """Read, process and write one frame; returns the processed frame."""
-    frame = exr.read_frame(job.src, layout)
+    frame = read_input(pipeline, job.src, layout)
     if expect_size is not None and frame.size != expect_size:
         raise InputError(
             f"{job.src}: size {frame.width}x{frame.height} differs from the sequence's "

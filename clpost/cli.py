@@ -119,8 +119,7 @@ def _jobs(args):
 
 
 def cmd_process(args) -> int:
-    from . import exr
-    from .batch import process_sequence
+    from .batch import process_sequence, read_input
     from .pipeline import Pipeline
 
     camera = camera_from_args(args)
@@ -129,7 +128,7 @@ def cmd_process(args) -> int:
     if not jobs:
         raise InputError(f"{args.input}: no input frames")
     if args.explain:
-        first = exr.read_frame(jobs[0].src, args.channels)
+        first = read_input(pipe, jobs[0].src, args.channels)
         cam = pipe.camera_for(first)
         print(f"plan for {jobs[0].src} ({first.width}x{first.height}, quality {args.quality}):")
         for e in pipe.explain(first):

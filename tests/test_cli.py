@@ -128,3 +128,18 @@ def test_console_script_is_installed_and_errors_cleanly(tmp_path):
                        capture_output=True, text=True, env=dict(os.environ))
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "nope.exr" in r.stderr
+
+
+def test_arnold_radial_depth_is_made_planar_with_the_camera(tmp_path, capsys):
+    from clpost.exr import planar_to_radial
+
+    h, w = 20, 30
+    planar = np.full((h, w), 4.0, np.float32)
+    fx = CAM.intrinsics(w, h)[0]
+    f = Frame(np.ones((h, w, 3), np.float32), depth=planar_to_radial(planar, fx),
+              velocity=np.zeros((h, w, 2), np.float32))
+    exr.write_frame(tmp_path / "a.exr", f, layout="arnold")  # focal_px omitted: Z stored as given
+    assert run_cli("process", tmp_path / "a.exr", "-o", tmp_path / "o.exr", "--quiet", *CAM_ARGS) == 0
+    assert capsys.readouterr().err == ""
+    got = exr.read_frame(tmp_path / "o.exr")
+    np.testing.assert_allclose(got.depth, planar, rtol=1e-6)
