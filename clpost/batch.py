@@ -58,7 +58,8 @@ def read_input(pipeline: Pipeline, path: Path, layout: str | None = None) -> Fra
 
 
 def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
-                half: bool = False, expect_size: tuple[int, int] | None = None) -> Frame:
+                half: bool = False, expect_size: tuple[int, int] | None = None,
+                compression: str = "zip") -> Frame:
     """Read, process and write one frame; returns the processed frame."""
     frame = read_input(pipeline, job.src, layout)
     if expect_size is not None and frame.size != expect_size:
@@ -67,12 +68,12 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
             f"{expect_size[0]}x{expect_size[1]}; all frames of a sequence must have one size"
         )
     out = pipeline.run(frame)
-    exr.write_frame(job.dst, out, header=output_header(out), half=half)
+    exr.write_frame(job.dst, out, header=output_header(out), half=half, compression=compression)
     return out
 
 
 def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | None = None,
-                     overwrite: bool = False, half: bool = False,
+                     overwrite: bool = False, half: bool = False, compression: str = "zip",
                      progress: Callable[[FrameJob, float | None], None] | None = None) -> BatchReport:
     """Process ``jobs`` in order; ``progress(job, seconds or None if skipped)`` after each."""
     report = BatchReport()
@@ -84,7 +85,7 @@ def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | 
                 progress(job, None)
             continue
         t0 = time.perf_counter()
-        out = process_one(pipeline, job, layout, half, size)
+        out = process_one(pipeline, job, layout, half, size, compression)
         size = out.size
         dt = time.perf_counter() - t0
         report.done.append(job.frame)

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from .camera import METERING_MODES, Camera
+from .exr import COMPRESSIONS
 from .errors import ClpostError, InputError
 from .stages import QUALITIES
 
@@ -153,7 +154,7 @@ def cmd_process(args) -> int:
 
     try:
         rep = process_sequence(pipe, jobs, layout=args.channels, overwrite=args.overwrite,
-                               half=args.half, progress=progress)
+                               half=args.half, compression=args.compression, progress=progress)
     finally:
         bar.close()
     if rep.seconds:
@@ -219,6 +220,8 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--explain", action="store_true", help="print the plan for the first frame and why each stage is in or out, then exit")
     pr.add_argument("--overwrite", action="store_true", help="replace existing outputs (default: skip them)")
     pr.add_argument("--half", action="store_true", help="write half-float EXRs")
+    pr.add_argument("--compression", default="zip", choices=list(COMPRESSIONS),
+                    help="lossless EXR compression of outputs (default zip; none is ~10x faster to write)")
     pr.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_camera_options(pr)
     _add_pipeline_options(pr)

@@ -464,3 +464,18 @@ def test_write_onto_a_directory_fails_cleanly(tmp_path):
     with pytest.raises(OutputError, match=r"out\.exr: cannot replace it.*not a directory"):
         exr.write_frame(tmp_path / "out.exr", _frame())
     assert [p.name for p in tmp_path.iterdir()] == ["out.exr"]
+
+
+@pytest.mark.parametrize("compression", ["zip", "zips", "piz", "rle", "none"])
+def test_every_offered_compression_is_lossless(tmp_path, compression):
+    f = _frame()
+    exr.write_frame(tmp_path / "c.exr", f, compression=compression)
+    g = exr.read_frame(tmp_path / "c.exr")
+    np.testing.assert_array_equal(g.color, f.color)
+    np.testing.assert_array_equal(g.depth, f.depth)
+
+
+def test_unknown_compression_is_refused(tmp_path):
+    with pytest.raises(InputError, match="compression 'dwaa' is unknown"):
+        exr.write_frame(tmp_path / "c.exr", _frame(), compression="dwaa")
+    assert not list(tmp_path.iterdir())

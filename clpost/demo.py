@@ -1,0 +1,81 @@
+"""``clpost demo``: render the built-in scene, process it with the default camera, write EXRs and
+PNG previews — the first thing a new user runs.
+
+Layout of the output directory::
+
+    render/demo.####.exr      the renderer's pinhole buffers (color, Z, velocity): input for
+                              `clpost process`
+    clpost.####.exr           the camera's output (linear sensor signal, camera in the header)
+    preview/clpost.####.png   sRGB previews of the output
+
+The demo camera meters the scene (aperture priority at f/2 unless --shutter is given) so the image
+is exposed as a camera would expose it. The scene's sunlit diffuse white (Y ≈ 1) is taken as
+1000 cd/m² (``luminance_scale``), white paper outdoors on an overcast day. Its small lamps
+(0.2 % of the pixels at 250–1000× diffuse white) pull an averaging meter down by about 1.4 stops,
+so the demo dials in +1 EV as a photographer would; the meter then picks about 1/1250 s at f/2,
+ISO 100.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Callable
+
+from . import exr
+from .atomic import write_png
+from .batch import output_header
+from .camera import Camera
+from .pipeline import Pipeline
+
+DEMO_CAMERA_DEFAULTS = dict(lens="thin:50", f_number=2.0, shutter_s=None, focus_distance_m=3.0,
+                            luminance_scale=1000.0, exposure_compensation_ev=1.0,
+                            blades=6)
+DEMO_WIDTH = 960
+
+
+def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int] | None = None,
+             n_frames: int = 3, quality: str = "final", stages: list[str] | None = None,
+             device: str | None = None, camera_motion: bool = True, overwrite: bool = False,
+             log: Callable[[str], None] = print) -> dict:
+    """Render, process and write the demo; returns a summary (paths, timings, plan)."""
+    from .render import render_demo_sequence
+
+    camera = camera or Camera(**DEMO_CAMERA_DEFAULTS)
+    size = size or camera.default_resolution(DEMO_WIDTH)
+    outdir = Path(outdir)
+    out_paths = [outdir / f"clpost.{i:04d}.exr" for i in range(1, n_frames + 1)]
+    existing = [p for p in out_paths if p.exists()]
+    if existing and not overwrite:
+        from .errors import InputError
+
+        raise InputError(f"{existing[0]} exists; choose a new OUTDIR or pass --overwrite")
+
+    t0 = time.perf_counter()
+    frames = render_demo_sequence(camera, size=size, n_frames=n_frames, camera_motion=camera_motion)
+    t_render = time.perf_counter() - t0
+    log(f"rendered {n_frames} frame(s) of the demo scene at {size[0]}x{size[1]} "
+        f"in {t_render:.2f} s (pyvista/VTK offscreen: HDR color, planar depth, velocity)")
+
+    pipe = Pipeline(camera, quality=quality, stages=stages, device=device)
+    log(f"OpenCL device: {pipe.runtime.name}")
+    t_proc, written = [], []
+    for i, frame in enumerate(frames, start=1):
+        exr.write_frame(outdir / "render" / f"demo.{i:04d}.exr", frame)
+        t1 = time.perf_counter()
+        out = pipe.run(frame)
+        t_proc.append(time.perf_counter() - t1)
+        exr.write_frame(out_paths[i - 1], out, header=output_header(out))
+        write_png(outdir / "preview" / f"clpost.{i:04d}.png", out.color)
+        written.append(out_paths[i - 1])
+        if i == 1:
+            for e in pipe.explain(frame):
+                log(f"  {e}")
+    cam = pipe.camera_for(frames[0])
+    log(f"camera: {camera.lens} f/{cam.f_number:.3g} {cam.shutter_s:.4g} s ISO {cam.iso:g} "
+        f"focus {cam.focus_distance_m:g} m")
+    log(f"processed {n_frames} frame(s): first {t_proc[0] * 1e3:.0f} ms (one-time setup: kernel build, "
+        f"colour-science import), "
+        f"then {min(t_proc[1:] or t_proc) * 1e3:.1f} ms/frame")
+    log(f"wrote {outdir}/render/demo.####.exr, {outdir}/clpost.####.exr and {outdir}/preview/clpost.####.png")
+    return {"outputs": written, "render_s": t_render, "process_s": t_proc, "size": size,
+            "plan": pipe.plan(frames[0])}
