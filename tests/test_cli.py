@@ -143,3 +143,20 @@ def test_arnold_radial_depth_is_made_planar_with_the_camera(tmp_path, capsys):
     assert capsys.readouterr().err == ""
     got = exr.read_frame(tmp_path / "o.exr")
     np.testing.assert_allclose(got.depth, planar, rtol=1e-6)
+
+
+def test_demo_writes_exrs_and_visibly_exposed_pngs(tmp_path, capsys):
+    from PIL import Image
+
+    out = tmp_path / "demo"
+    assert run_cli("demo", out, "--size", "96x64", "--frames", "2") == 0
+    text = capsys.readouterr().out
+    assert "+ exposure" in text and "wrote" in text
+    for i in (1, 2):
+        src = exr.read_frame(out / "render" / f"demo.{i:04d}.exr")
+        assert src.depth is not None and src.velocity is not None and src.color.max() >= 100  # lamps
+        got = exr.read_frame(out / f"clpost.{i:04d}.exr")
+        assert got.metadata["header"]["clpost.shutter_s"] != "auto"  # the meter's choice is recorded
+        png = np.asarray(Image.open(out / "preview" / f"clpost.{i:04d}.png"))
+        assert png.shape == (64, 96, 3) and 40 < png.mean() < 200  # exposed, neither black nor blown
+    assert "exists" in one_line_error(capsys, "demo", out, "--size", "96x64", "--frames", "2")
