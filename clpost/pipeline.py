@@ -21,6 +21,7 @@ from .camera import Camera
 from .errors import InputError
 from .frame import Frame
 from . import metering
+from .runtime import kernel_source
 from .stages import QUALITIES, GatherStage, PointwiseStage, Stage, registry
 
 INTERLEAVED, PLANAR = "interleaved", "planar"
@@ -38,21 +39,31 @@ class PlanEntry:
         return f"{'+' if self.planned else '-'} {self.stage:<14} {self.reason}"
 
 
+AUX_BUFFERS = {
+    # Frame buffer → OpenCL parameter of a fused kernel (uploaded once per frame when a planned
+    # stage reads it). Layouts: depth H×W float32 (+inf sky); velocity H×W×2 float32 interleaved.
+    "depth": "__global const float *restrict depth",
+    "velocity": "__global const float *restrict velocity",
+}
+
+
 def fused_source(stages: list[PointwiseStage], src_layout: str, dst_layout: str) -> tuple[str, str]:
     """Generate one OpenCL kernel applying ``stages`` in order to each pixel.
 
     Returns ``(kernel_name, source)``. The kernel is named after its stages joined by ``__``
     (a single stage's kernel is named like the stage); with no stages it only converts layouts.
-    Arguments: ``src, dst, width, height`` then each stage's ``args`` prefixed ``<stage>_``.
+    Parameters: ``src, dst, width, height``, then ``depth`` / ``velocity`` if any stage reads
+    them, then each stage's ``args`` prefixed ``<stage>_``. A stage that reads depth or velocity
+    receives those pointers right after ``p``, in that order.
     """
-    from .runtime import kernel_source
-
     name = "__".join(s.name for s in stages) or f"convert_{src_layout}_to_{dst_layout}"
     params = ["__global const float *restrict src", "__global float *restrict dst",
               "const int width", "const int height"]
+    aux = [b for b in AUX_BUFFERS if any(b in s.reads for s in stages)]
+    params += [AUX_BUFFERS[b] for b in aux]
     body = []
     for s in stages:
-        call_args = ["c", "p"]
+        call_args = ["c", "p"] + [b for b in AUX_BUFFERS if b in s.reads]
         for cl_type, arg in s.args:
             params.append(f"{'const ' if '*' not in cl_type else ''}{cl_type} {s.name}_{arg}")
             call_args.append(f"{s.name}_{arg}")
@@ -70,7 +81,7 @@ __kernel void {name}({", ".join(params)})
     if (x >= width || y >= height) return;
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
-    const PixelCtx p = {{x, y, width, height}};
+    const PixelCtx p = {{x, y, width, height, i}};
     (void)n; (void)p;
     float3 c = {load};
 {nl.join(body)}
@@ -181,21 +192,23 @@ class Pipeline:
         return [n.name for n in self._build_nodes(self._planned(frame, cam), cam, build=False)]
 
     def _build_nodes(self, planned: list[Stage], cam: Camera, build: bool = True) -> list[_Node]:
-        defines: dict = {}
-        for s in planned:
-            defines.update({f"{k}": v for k, v in s.defines(cam).items()})
-        key = (tuple(s.name for s in planned), tuple(sorted(defines.items())))
+        """Group the plan into kernel launches; build each fused group's program once.
+
+        Each group's program key is its stages plus *their* ``defines`` (structural
+        parameters), so a structural change of one stage rebuilds only its own group.
+        """
+        key = tuple((s.name, tuple(sorted(s.defines(cam).items()))) for s in planned)
         if build and key in self._nodes:
             return self._nodes[key]
         groups: list[list[Stage]] = []
         for s in planned:
-            if isinstance(s, PointwiseStage) and groups and isinstance(groups[-1][0], PointwiseStage):
+            if isinstance(s, PointwiseStage) and groups and groups[-1] and isinstance(groups[-1][0], PointwiseStage):
                 groups[-1].append(s)
             else:
                 groups.append([s])
         if groups and isinstance(groups[0][0], GatherStage):
             groups.insert(0, [])
-        if groups and isinstance(groups[-1][0] if groups[-1] else None, GatherStage):
+        if groups and groups[-1] and isinstance(groups[-1][0], GatherStage):
             groups.append([])
         nodes = []
         for i, g in enumerate(groups):
@@ -210,6 +223,9 @@ class Pipeline:
             for node in nodes:
                 if node.stages and isinstance(node.stages[0], GatherStage):
                     continue
+                defines: dict = {}
+                for s in node.stages:
+                    defines.update(s.defines(cam))
                 kname, src = fused_source(node.stages, node.src_layout, node.dst_layout)
                 prog = rt.program(src, kname, defines)
                 node.kernel = cl.Kernel(prog, kname)
@@ -264,6 +280,13 @@ class Pipeline:
         w, h = frame.width, frame.height
         bufs = self._buffers_for(w, h)
         events = [("upload", cl.enqueue_copy(q, bufs.color_in, frame.color, is_blocking=False))]
+        for name in AUX_BUFFERS:
+            if any(name in s.reads for s in planned):
+                host = getattr(frame, name)
+                buf = bufs.aux.get(name)
+                if buf is None:
+                    buf = bufs.aux[name] = rt.empty(host.shape)
+                events.append(("upload", cl.enqueue_copy(q, buf, host, is_blocking=False)))
         src, planar_k = bufs.color_in, 0
         for node in nodes:
             if node.dst_layout == INTERLEAVED:
@@ -277,6 +300,7 @@ class Pipeline:
                     events.append((stage.name, ev))
             else:
                 args = [src, dst, np.int32(w), np.int32(h)]
+                args += [bufs.aux[b] for b in AUX_BUFFERS if any(b in s.reads for s in node.stages)]
                 for s in node.stages:
                     args += self._arg_values(s, cam, frame, bufs)
                 node.kernel.set_args(*args)

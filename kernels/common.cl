@@ -12,6 +12,7 @@ typedef struct {
     int y;        /* row, 0 at the top */
     int width;
     int height;
+    size_t i;     /* y * width + x: index into depth[], and velocity[2i], velocity[2i+1] */
 } PixelCtx;
 
 inline float3 load_interleaved(__global const float *buf, const size_t i) {

@@ -9,7 +9,7 @@ import clpost.pipeline as pipeline_mod
 from clpost import Camera, Frame, InputError, Pipeline
 from clpost.pipeline import fused_source
 from clpost.runtime import kernels_dir
-from clpost.stages import PointwiseStage, registry
+from clpost.stages import GatherStage, PointwiseStage, registry
 from clpost.stages.exposure import Exposure, exposure_gain
 
 from conftest import odd_frame
@@ -138,3 +138,83 @@ def test_half_float_input_runs(rng):
     frame = Frame(c, depth=np.full((23, 37), np.inf, np.float16))
     pipe = Pipeline(Camera())
     np.testing.assert_allclose(pipe.run(frame).color, pipe.reference(frame), rtol=2e-7)
+
+
+class BoxBlur(GatherStage):
+    """A test-only gather: 3×3 box blur (edge-clamped) scaled by min(depth, 1) — exercises the
+    planar layout, layout conversions around gathers, and the depth upload."""
+
+    name = "boxblur"
+    order = 10.0
+    reads = ("depth",)
+    SRC = """
+__kernel void boxblur(__global const float *src, __global float *dst, const int width,
+                      const int height, __global const float *depth) {
+    const int x = get_global_id(0), y = get_global_id(1);
+    const size_t n = (size_t)width * height, i = (size_t)y * width + x;
+    for (int c = 0; c < 3; ++c) {
+        float acc = 0.0f;
+        for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx) {
+                const int xx = clamp(x + dx, 0, width - 1), yy = clamp(y + dy, 0, height - 1);
+                acc += src[c * n + (size_t)yy * width + xx];
+            }
+        dst[c * n + i] = acc / 9.0f * fmin(depth[i], 1.0f);
+    }
+}"""
+
+    def skip_reason(self, camera, frame):
+        return None
+
+    def enqueue(self, rt, camera, frame, src, dst, aux):
+        import pyopencl as cl
+
+        k = cl.Kernel(rt.program(self.SRC, "boxblur"), "boxblur")
+        k.set_args(src, dst, np.int32(frame.width), np.int32(frame.height), aux["depth"])
+        return [cl.enqueue_nd_range_kernel(rt.queue, k, (frame.width, frame.height), None)]
+
+    def reference(self, camera, frame, color):
+        p = np.pad(color, ((1, 1), (1, 1), (0, 0)), mode="edge")
+        h, w = frame.height, frame.width
+        acc = sum(p[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)) / 9.0
+        return acc * np.minimum(frame.depth, 1.0)[..., None]
+
+
+class DepthTint(Tint):
+    """Pointwise stage reading depth: c * depth."""
+
+    name = "depthtint"
+    order = 80.0
+    reads = ("depth",)
+    args = ()
+
+    def source(self):
+        return """
+inline float3 depthtint_apply(const float3 c, const PixelCtx p, __global const float *depth) {
+    return c * depth[p.i];
+}"""
+
+    def values(self, camera, frame):
+        return ()
+
+    def reference(self, camera, frame, color):
+        return color * frame.depth[..., None]
+
+
+@pytest.mark.parametrize("names, kernels", [
+    (["boxblur"], ["convert_interleaved_to_planar", "boxblur", "convert_planar_to_interleaved"]),
+    (["boxblur", "exposure"], ["convert_interleaved_to_planar", "boxblur", "exposure"]),
+    (["boxblur", "exposure", "depthtint"], ["convert_interleaved_to_planar", "boxblur", "exposure__depthtint"]),
+    (["exposure", "depthtint"], ["exposure__depthtint"]),
+])
+def test_gathers_get_planar_buffers_and_aux_uploads(rng, monkeypatch, names, kernels):
+    reg = {"boxblur": BoxBlur, "exposure": Exposure, "depthtint": DepthTint}
+    monkeypatch.setattr(pipeline_mod, "registry", lambda: reg)
+    frame = odd_frame(rng)
+    frame = frame.replace(depth=np.where(rng.random((23, 37)) < 0.1, np.inf, frame.depth))
+    frame = frame.replace(depth=np.minimum(frame.depth, 3.0))  # keep the depth tint finite
+    pipe = Pipeline(Camera(), stages=names)
+    assert pipe.kernels(frame) == kernels
+    out = pipe.run(frame)
+    np.testing.assert_allclose(out.color, pipe.reference(frame), rtol=2e-6, atol=1e-7)
+    assert set(kernels) <= set(pipe.last_timings)

@@ -15,7 +15,19 @@ A stage is one physical effect. Its module (``clpost/stages/<name>.py``) holds o
   own kernels on planar buffers.
 
 Structural parameters (tap counts, LUT sizes) are ``defines`` — part of the program key;
-per-frame scalars are kernel arguments, so changing exposure never recompiles anything.
+name them ``<STAGE>_...`` so fused groups never clash. Per-frame scalars are kernel arguments,
+so changing exposure never recompiles anything.
+
+How the planner calls a stage (:mod:`clpost.pipeline`):
+
+- pointwise: ``<name>_apply(c, p, [depth], [velocity], <args...>)`` where ``p`` is a
+  ``PixelCtx`` (x, y, width, height, i) and ``depth``/``velocity`` are passed only if the stage
+  lists them in ``reads`` (``depth[p.i]``; ``velocity[2*p.i]``, ``velocity[2*p.i+1]``).
+- gather: ``enqueue(rt, camera, frame, src, dst, aux)`` with planar float32 ``src``/``dst``
+  (channel c of pixel i at ``c*W*H + i``), ``aux["depth"]`` / ``aux["velocity"]`` device
+  buffers for what it ``reads``; it builds its programs through ``rt.program`` (memoised) and
+  caches its own scratch buffers per resolution. Returns the events it enqueued (profiled).
+- ``reference()`` gets float64 color and the host Frame; tests compare the two on odd sizes.
 """
 from __future__ import annotations
 
