@@ -32,6 +32,8 @@ class BatchReport:
     skipped: list[int] = field(default_factory=list)
     seconds: list[float] = field(default_factory=list)
     """Wall time per processed frame: read + process + write."""
+    failed: dict[int, str] = field(default_factory=dict)
+    """Frames that could not be processed (distributed runs go on past them), with the error."""
 
 
 def output_header(frame: Frame) -> dict[str, str]:

@@ -145,7 +145,8 @@ def cmd_process(args) -> int:
     bar = tqdm(total=len(jobs), unit="frame", disable=not use_bar, file=sys.stderr, leave=False)
 
     def progress(job, seconds):
-        what = "exists, skipped" if seconds is None else f"{seconds * 1e3:.0f} ms"
+        what = ("exists, skipped" if seconds is None else "FAILED" if seconds != seconds
+                else f"{seconds * 1e3:.0f} ms")
         if use_bar:
             bar.set_postfix_str(f"frame {job.frame}: {what}")
             bar.update(1)
@@ -153,17 +154,41 @@ def cmd_process(args) -> int:
             print(f"frame {job.frame}: {what} -> {job.dst}")
 
     try:
-        rep = process_sequence(pipe, jobs, layout=args.channels, overwrite=args.overwrite,
-                               half=args.half, compression=args.compression, progress=progress)
+        if args.workers or args.scheduler:
+            rep = _process_distributed(args, camera, jobs, progress)
+        else:
+            rep = process_sequence(pipe, jobs, layout=args.channels, overwrite=args.overwrite,
+                                   half=args.half, compression=args.compression, progress=progress)
     finally:
         bar.close()
+    for frame, err in sorted(rep.failed.items()):
+        print(f"clpost: frame {frame} failed: {err}", file=sys.stderr)
     if rep.seconds:
         ms = sorted(rep.seconds)[len(rep.seconds) // 2] * 1e3
         print(f"processed {len(rep.done)} frame(s), median {ms:.1f} ms/frame (read+process+write); "
               f"skipped {len(rep.skipped)} existing (use --overwrite)")
-    else:
+    elif not rep.failed:
         print(f"nothing to do: all {len(rep.skipped)} output frame(s) exist (use --overwrite)")
+    if rep.failed:
+        print(f"clpost: {len(rep.failed)} of {len(jobs)} frame(s) failed; the others are complete", file=sys.stderr)
+        return 1
     return 0
+
+
+def _process_distributed(args, camera, jobs, progress):
+    from .distributed import PipelineSpec, connect, first_size, process_sequence_dask
+
+    spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device)
+    client = connect(args.scheduler, args.workers)
+    try:
+        return process_sequence_dask(client, spec, jobs, layout=args.channels, overwrite=args.overwrite,
+                                     half=args.half, compression=args.compression, retries=args.retries,
+                                     expect_size=first_size(jobs), progress=progress)
+    finally:
+        cluster = getattr(client, "cluster", None)
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def cmd_info(args) -> int:
@@ -223,6 +248,10 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--compression", default="zip", choices=list(COMPRESSIONS),
                     help="lossless EXR compression of outputs (default zip; none is ~10x faster to write)")
     pr.add_argument("--quiet", action="store_true", help="no progress bar")
+    dist = pr.add_argument_group("distributed (Dask)")
+    dist.add_argument("--workers", type=int, default=None, help="run on a local Dask cluster of N worker processes")
+    dist.add_argument("--scheduler", default=None, help="run on an existing Dask cluster, e.g. tcp://HOST:8786")
+    dist.add_argument("--retries", type=int, default=2, help="retries of a failing frame before it is reported (default 2)")
     _add_camera_options(pr)
     _add_pipeline_options(pr)
     pr.set_defaults(func=cmd_process)

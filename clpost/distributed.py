@@ -1,0 +1,143 @@
+"""Run a frame sequence on a Dask cluster: the same per-frame code as the serial loop, placed
+on workers.
+
+- ``clpost process ... --workers N`` starts a :class:`distributed.LocalCluster` of N worker
+  processes (one thread each: a worker's OpenCL device already uses all its cores);
+  ``--scheduler tcp://HOST:8786`` joins an existing cluster. The serial path stays the default;
+  both call :func:`clpost.batch.process_one`, so only *where* a frame runs differs.
+- Each worker process builds its OpenCL pipeline once (device chosen per worker, programs
+  cached) and reuses it for every frame it gets: :func:`worker_pipeline` is memoised per process
+  on the hashable :class:`PipelineSpec`.
+- Frames are independent tasks reading and writing paths on a shared filesystem. Outputs are
+  written atomically (temporary file + rename, :mod:`clpost.atomic`), so a retried or duplicated
+  task can never leave a corrupt or half-written frame; existing outputs are skipped (resume).
+- A task that raises is retried ``retries`` times; a frame that keeps failing is reported with
+  its error while the others continue. A worker that dies is replaced by its nanny and its
+  tasks rescheduled by the scheduler (up to ``distributed.scheduler.allowed-failures`` times).
+
+Scaling beyond one machine (SLURM via dask-jobqueue, Kubernetes via dask-kubernetes) only changes
+how the scheduler address is obtained; see ``docs/scaling.md``.
+"""
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+from .batch import BatchReport, FrameJob, process_one
+from .camera import Camera
+from .errors import InputError
+
+
+@dataclass(frozen=True)
+class PipelineSpec:
+    """Everything a worker needs to build the same pipeline as the client (hashable)."""
+
+    camera: Camera
+    quality: str = "final"
+    stages: tuple[str, ...] | None = None
+    device: str | None = None
+
+
+@functools.lru_cache(maxsize=4)
+def worker_pipeline(spec: PipelineSpec):
+    """The pipeline of this worker process for ``spec``: built on first use, then reused."""
+    from .pipeline import Pipeline
+
+    return Pipeline(spec.camera, quality=spec.quality,
+                    stages=None if spec.stages is None else list(spec.stages), device=spec.device)
+
+
+def process_frame_task(spec: PipelineSpec, job: FrameJob, layout: str | None, half: bool,
+                       compression: str, overwrite: bool,
+                       expect_size: tuple[int, int] | None) -> dict:
+    """One frame on a worker. Returns what happened (the client aggregates)."""
+    if job.dst.exists() and not overwrite:
+        return {"frame": job.frame, "skipped": True, "seconds": 0.0}
+    t0 = time.perf_counter()
+    process_one(worker_pipeline(spec), job, layout, half, expect_size, compression)
+    return {"frame": job.frame, "skipped": False, "seconds": time.perf_counter() - t0}
+
+
+def connect(scheduler: str | None = None, workers: int | None = None):
+    """A Dask client: to ``scheduler`` if given, else a LocalCluster of ``workers`` processes."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({exc}); "
+                             "check the address (tcp://HOST:8786) and that it is running") from None
+    if not workers or workers < 1:
+        raise InputError(f"--workers {workers!r} must be a positive number of worker processes")
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           dashboard_address=None)
+    return Client(cluster)
+
+
+def process_sequence_dask(client, spec: PipelineSpec, jobs: list[FrameJob], *,
+                          layout: str | None = None, overwrite: bool = False, half: bool = False,
+                          compression: str = "zip", retries: int = 2,
+                          expect_size: tuple[int, int] | None = None,
+                          task: Callable = process_frame_task,
+                          progress: Callable[[FrameJob, float | None], None] | None = None,
+                          on_result: Callable[[int], None] | None = None) -> BatchReport:
+    """Submit one task per frame and collect results as they complete.
+
+    ``task`` is the per-frame function (tests inject faults through it); ``on_result(n_done)``
+    is called after each completed frame (tests use it to kill a worker mid-sequence).
+    """
+    from distributed import as_completed
+
+    report = BatchReport()
+    by_key = {}
+    for job in jobs:
+        if job.dst.exists() and not overwrite:
+            report.skipped.append(job.frame)
+            if progress:
+                progress(job, None)
+            continue
+        fut = client.submit(task, spec, job, layout, half, compression, overwrite, expect_size,
+                            key=f"clpost-frame-{job.frame}-{job.dst.name}-{time.time_ns()}",
+                            retries=retries, pure=False)
+        by_key[fut.key] = (fut, job)
+    n = 0
+    for fut in as_completed([f for f, _ in by_key.values()]):
+        job = by_key[fut.key][1]
+        if fut.status == "finished":
+            res = fut.result()
+            if res["skipped"]:
+                report.skipped.append(job.frame)
+                if progress:
+                    progress(job, None)
+            else:
+                report.done.append(job.frame)
+                report.seconds.append(res["seconds"])
+                if progress:
+                    progress(job, res["seconds"])
+        else:
+            exc = fut.exception()
+            report.failed[job.frame] = f"{job.src}: {exc}"
+            if progress:
+                progress(job, float("nan"))
+        n += 1
+        if on_result:
+            on_result(n)
+    report.done.sort()
+    return report
+
+
+def first_size(jobs: list[FrameJob]) -> tuple[int, int] | None:
+    """(width, height) of the first input frame whose output will be written: every task checks
+    its frame against it, so a mismatched frame fails by itself instead of stopping the run."""
+    from . import exr
+
+    for job in jobs:
+        if job.src.is_file():
+            info = exr.info(job.src)
+            return tuple(info["size"])  # type: ignore[return-value]
+    return None
+
+
