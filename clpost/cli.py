@@ -84,6 +84,10 @@ def _add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quality", choices=QUALITIES, default="final", help="speed/accuracy level")
     p.add_argument("--stages", type=lambda s: [x.strip() for x in s.split(",") if x.strip()],
                    default=None, help="only these stages, comma separated (e.g. exposure)")
+    # Also accepted after the subcommand (`clpost bench --device nvidia`); SUPPRESS keeps the
+    # top-level value when it is not given here.
+    p.add_argument("--device", default=argparse.SUPPRESS,
+                   help="OpenCL device: substring of platform/device name or version (e.g. pocl, nvidia)")
 
 
 # -- commands ---------------------------------------------------------------------------------

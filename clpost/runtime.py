@@ -122,7 +122,10 @@ def choose_device(spec: str | None = None) -> "cl.Device":
         raise OpenCLUnavailableError(f"no OpenCL platform found: {INSTALL_HINT}")
     if spec:
         s = spec.lower()
-        candidates = [d for d in devs if s in d.platform.name.lower() or s in d.name.lower()]
+        # The version string names the implementation ("PoCL 3.1", "CUDA 13.0") where the
+        # platform name does not ("Portable Computing Language"), so `pocl` matches too.
+        candidates = [d for d in devs if s in d.platform.name.lower() or s in d.name.lower()
+                      or s in d.platform.version.lower()]
         if not candidates:
             have = "; ".join(_describe(d) for d in devs)
             raise OpenCLUnavailableError(

@@ -47,3 +47,15 @@ def test_kernels_come_from_the_installed_package_in_ci():
     if os.environ.get("CLPOST_EXPECT_INSTALLED"):
         site = Path(sysconfig.get_paths()["purelib"]).resolve()
         assert site in d.resolve().parents, f"kernels found at {d}, not in the installed wheel"
+
+
+def test_pocl_matches_by_implementation_name():
+    dev = choose_device("pocl")
+    assert "pocl" in dev.platform.version.lower()
+
+
+def test_device_option_after_the_subcommand(capsys):
+    from clpost.cli import main
+
+    assert main(["bench", "--device", "no-such-device-xyz", "--sizes", "8x8"]) == 2
+    assert "no-such-device-xyz" in capsys.readouterr().err
