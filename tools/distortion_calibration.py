@@ -1,8 +1,8 @@
 """Verify the distortion stage as Lambers, Sommerhoff & Kolb did: render checkerboards, distort
 them with known OpenCV parameters, calibrate with OpenCV, compare.
 
-For each parameter set (barrel, pincushion, tangential): N views of a 10×7-square board
-(9×6 inner corners) in varied poses are rendered by the pyvista renderer at the extended frustum
+For each parameter set (barrel, pincushion, tangential): N views of a 14×10-square board
+(13×9 inner corners) in varied poses are rendered by the pyvista renderer at the extended frustum
 of :func:`clpost.calibration.required_render` (no unfilled pixels), distorted by the clpost
 pipeline (``--stages distortion``, final = bicubic), and fed to ``cv2.findChessboardCorners`` +
 ``cornerSubPix`` + ``cv2.calibrateCamera`` (k3 fixed at 0, as the paper). Also reports the
@@ -25,8 +25,8 @@ from clpost.calibration import OpenCVModel, inverse_residual_px, required_render
 from clpost.render import DemoScene, PyVistaRenderer
 from clpost.render.demo_scene import Material, Plane, RigidMotion, SceneObject
 
-SQUARES = (10, 7)
-SQUARE_M = 0.05
+SQUARES = (14, 10)
+SQUARE_M = 0.035
 PATTERN = (SQUARES[0] - 1, SQUARES[1] - 1)
 
 
@@ -41,20 +41,31 @@ def parameter_sets(size: tuple[int, int]) -> dict[str, OpenCVModel]:
     }
 
 
-def board_scene(view: int, n_views: int) -> DemoScene:
+def board_scene(view: int, n_views: int, model: OpenCVModel | None = None) -> DemoScene:
     """The board in the world xy plane (z up), seen from view ``view`` of ``n_views``: azimuth
-    around the board, elevation 50–75°, distance and look-at point varied so the board reaches
-    every part of the image (distortion is largest at the edges)."""
+    around the board, elevation 40–75°, distance 0.65–0.95 m and a look-at point off the board's
+    centre so the board reaches every part of the image (distortion is largest at the edges).
+    With ``model``, poses whose board (plus half a square) would leave the image are redrawn."""
     board = SceneObject("board", Plane(0.36), Material(albedo=(0.9, 0.9, 0.9), albedo2=(0.04, 0.04, 0.04),
                                                        texture="board", texture_scale_m=SQUARE_M,
                                                        board_squares=SQUARES), casts_shadow=False)
     rng = np.random.default_rng(1000 + view)
-    az = 2 * math.pi * view / n_views + rng.uniform(-0.2, 0.2)
-    el = math.radians(rng.uniform(50, 75))
-    dist = rng.uniform(0.55, 0.75)
-    target = np.array([rng.uniform(-0.1, 0.1), rng.uniform(-0.07, 0.07), 0.0])
-    pos = target + dist * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
-    cam = RigidMotion.camera(tuple(pos), tuple(target - pos))
+    hx, hy = (0.5 * SQUARES[0] + 0.5) * SQUARE_M, (0.5 * SQUARES[1] + 0.5) * SQUARE_M
+    corners = np.array([[sx * hx, sy * hy, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
+    for _ in range(200):
+        az = 2 * math.pi * view / n_views + rng.uniform(-0.3, 0.3)
+        el = math.radians(rng.uniform(40, 75))
+        dist = rng.uniform(0.65, 0.95)
+        target = np.array([rng.uniform(-0.2, 0.2), rng.uniform(-0.15, 0.15), 0.0])
+        pos = target + dist * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+        cam = RigidMotion.camera(tuple(pos), tuple(target - pos))
+        if model is None:
+            break
+        rot = cam.matrix(0)[:3, :3]
+        xc = (corners - pos) @ rot
+        u, v = model.project(xc[:, 0] / xc[:, 2], xc[:, 1] / xc[:, 2])
+        if u.min() > 5 and v.min() > 5 and u.max() < model.width - 6 and v.max() < model.height - 6:
+            break
     return DemoScene(objects=(board,), camera_motion=cam, sun_direction=(0.0, 0.0, 1.0), sun_irradiance=1.0,
                      ambient=0.3, emitter_lighting=False)
 
@@ -69,7 +80,7 @@ def render_views(model: OpenCVModel, n_views: int, supersample: int = 1):
     try:
         for v in range(n_views):
             # the VTK actors depend only on the objects, identical in every view: swap the scene
-            renderer.scene = board_scene(v, n_views)
+            renderer.scene = board_scene(v, n_views, model)
             f = renderer.render(cam, (spec.width, spec.height), 0, spec.intrinsics())
             raw.append(f)
             out.append(pipe.run(f))
@@ -96,7 +107,9 @@ def calibrate(frames, size) -> tuple[dict, int, float]:
         ok, corners = cv2.findChessboardCorners(g, PATTERN, flags=cv2.CALIB_CB_ADAPTIVE_THRESH)
         if not ok:
             continue
-        corners = cv2.cornerSubPix(g, corners, (7, 7), (-1, -1), crit)
+        # refine on the float image: no 8-bit quantisation in the sub-pixel fit
+        y = (fr.color @ np.array([0.2126, 0.7152, 0.0722])).astype(np.float32)
+        corners = cv2.cornerSubPix(y / y.max(), corners, (5, 5), (-1, -1), crit)
         obj.append(objp)
         img.append(corners)
     if len(obj) < 3:
@@ -135,7 +148,7 @@ def undistort_roundtrip(model: OpenCVModel, view: int = 3, n_views: int = 17) ->
 
 def render_views_single(model: OpenCVModel, view: int, n_views: int):
     cam = Camera(distortion=model)
-    renderer = PyVistaRenderer(board_scene(view, n_views))
+    renderer = PyVistaRenderer(board_scene(view, n_views, model))
     try:
         raw = renderer.render(cam, (model.width, model.height), 0, (model.fx, model.fy, model.cx, model.cy))
     finally:

@@ -136,7 +136,7 @@ class _IdDepthPass:
         """VTK camera from a camera-to-world pose (columns right, down, forward) and f in px.
         ``principal`` = (c_x, c_y, width): an off-centre principal point (distortion's extended
         frustum). VTK shifts the projection by minus its window centre, so the window centre is
-        minus the optical axis's NDC position :math:`(2(c_x + ½)/W - 1,\ 1 - 2(c_y + ½)/H)`
+        minus the optical axis's NDC position :math:`(2(c_x + ½)/W - 1, 1 - 2(c_y + ½)/H)`
         (checked in tests/test_distortion.py against a crop of a wider centred render)."""
         cam = self.renderer.GetActiveCamera()
         c = pose[:3, 3]
