@@ -82,6 +82,12 @@ class Camera:
     blade_rotation_deg: float = 0.0
     metering: str = "average"
     exposure_compensation_ev: float = 0.0
+    distortion: Any = None
+    """distortion stage: a :class:`clpost.calibration.OpenCVModel` (OpenCV standard model, e.g.
+    from ``--calibration cam.yaml``); None = no distortion."""
+    vignetting: str = "off"
+    """vignetting stage: ``off``, ``natural`` (cos⁴θ of the thin lens), ``lens`` (the registered
+    relative-illumination curve of ``lens``) or ``table:<path>`` (manufacturer-style table)."""
 
     def __post_init__(self) -> None:
         parse_lens(self.lens)
@@ -133,6 +139,17 @@ class Camera:
         if self.metering not in METERING_MODES:
             raise InputError(f"Camera.metering={self.metering!r} must be one of {', '.join(METERING_MODES)}")
         _finite("exposure_compensation_ev", self.exposure_compensation_ev, "EV", "e.g. +1 for one stop brighter")
+        # distortion stage
+        if self.distortion is not None:
+            from .calibration import OpenCVModel
+
+            if not isinstance(self.distortion, OpenCVModel):
+                raise InputError(f"Camera.distortion must be a clpost.calibration.OpenCVModel or None, not "
+                                 f"{type(self.distortion).__name__}; load one with load_calibration('cam.yaml')")
+        # vignetting stage
+        v = self.vignetting
+        if not isinstance(v, str) or not (v in ("off", "natural", "lens") or (v.startswith("table:") and len(v) > 6)):
+            raise InputError(f"Camera.vignetting={v!r} must be 'off', 'natural', 'lens' or 'table:<path>'")
 
     # -- derived quantities -------------------------------------------------------------------
     @property
@@ -201,4 +218,10 @@ class Camera:
             "clpost.bladeRotation_deg": f"{self.blade_rotation_deg:g}",
             "clpost.metering": self.metering,
             "clpost.exposureCompensation_ev": f"{self.exposure_compensation_ev:g}",
+            # distortion / vignetting stages: recorded only when in use
+            **({"clpost.distortion": " ".join(f"{t:.9g}" for t in (
+                self.distortion.width, self.distortion.height, self.distortion.fx, self.distortion.fy,
+                self.distortion.cx, self.distortion.cy, *self.distortion.vector()))}
+               if self.distortion is not None else {}),
+            **({"clpost.vignetting": self.vignetting} if self.vignetting != "off" else {}),
         }

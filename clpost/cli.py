@@ -50,6 +50,16 @@ def _size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT in pixels (e.g. 1280x720)") from None
 
 
+def _calibration(text: str):
+    """A calibration file → OpenCVModel (distortion stage); its errors become usage errors."""
+    from .calibration import load_calibration
+
+    try:
+        return load_calibration(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 CAMERA_OPTIONS = {
     # flag: (Camera field, type, help)
     "--lens": ("lens", str, "lens name: thin:<focal mm> (e.g. thin:50)"),
@@ -64,6 +74,9 @@ CAMERA_OPTIONS = {
     "--blade-rotation": ("blade_rotation_deg", _positive_float, "aperture blade rotation in degrees"),
     "--metering": ("metering", str, f"metering pattern for auto-exposure: {', '.join(METERING_MODES)}"),
     "--ev": ("exposure_compensation_ev", _positive_float, "exposure compensation in EV (+1 = one stop brighter)"),
+    "--calibration": ("distortion", _calibration, "camera calibration (OpenCV YAML/JSON, ROS camera_info, "
+                      "COLMAP cameras.txt[#ID]): renders its distortion (distortion stage)"),
+    "--vignetting": ("vignetting", str, "off, natural (cos^4), lens or table:<file> (vignetting stage)"),
 }
 
 

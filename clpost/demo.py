@@ -51,7 +51,15 @@ def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int
         raise InputError(f"{existing[0]} exists; choose a new OUTDIR or pass --overwrite")
 
     t0 = time.perf_counter()
-    frames = render_demo_sequence(camera, size=size, n_frames=n_frames, camera_motion=camera_motion)
+    render_size, intrinsics = size, None
+    if camera.distortion is not None:
+        # distortion stage: render the extended frustum so barrel distortion leaves no hole
+        from .calibration import required_render
+
+        spec = required_render(camera.distortion)
+        render_size, intrinsics = (spec.width, spec.height), spec.intrinsics()
+    frames = render_demo_sequence(camera, size=render_size, n_frames=n_frames, camera_motion=camera_motion,
+                                  intrinsics=intrinsics)
     t_render = time.perf_counter() - t0
     log(f"rendered {n_frames} frame(s) of the demo scene at {size[0]}x{size[1]} "
         f"in {t_render:.2f} s (pyvista/VTK offscreen: HDR color, planar depth, velocity)")

@@ -239,11 +239,25 @@ class Pipeline:
             self._buffers = _Buffers((w, h), rt.empty((h, w, 3)), rt.empty((h, w, 3)))
         return self._buffers
 
-    def _planar(self, bufs: _Buffers, k: int):
+    def _planar(self, bufs: _Buffers, k: int, size: tuple[int, int] | None = None):
+        if size is not None and size != bufs.size:
+            # a resampling gather (distortion) changed the size: later buffers at the new size
+            key = ("planar", size, k)
+            if key not in bufs.args:
+                bufs.args[key] = self.runtime.empty((3, size[1], size[0]))
+            return bufs.args[key]
         while len(bufs.planar) <= k:
             w, h = bufs.size
             bufs.planar.append(self.runtime.empty((3, h, w)))
         return bufs.planar[k]
+
+    def _color_out(self, bufs: _Buffers, size: tuple[int, int]):
+        if size == bufs.size:
+            return bufs.color_out
+        key = ("color_out", size)
+        if key not in bufs.args:
+            bufs.args[key] = self.runtime.empty((size[1], size[0], 3))
+        return bufs.args[key]
 
     def _arg_values(self, stage: PointwiseStage, cam: Camera, frame: Frame, bufs: _Buffers) -> list:
         import pyopencl as cl
@@ -288,17 +302,29 @@ class Pipeline:
                     buf = bufs.aux[name] = rt.empty(host.shape)
                 events.append(("upload", cl.enqueue_copy(q, buf, host, is_blocking=False)))
         src, planar_k = bufs.color_in, 0
+        size, host_out = (w, h), {}
         for node in nodes:
+            gather = node.kernel is None
+            out_size = node.stages[0].output_size(cam, frame) if gather else size
             if node.dst_layout == INTERLEAVED:
-                dst = bufs.color_out
+                dst = self._color_out(bufs, out_size)
             else:
-                dst = self._planar(bufs, planar_k)
+                dst = self._planar(bufs, planar_k, out_size)
                 planar_k ^= 1
-            if node.kernel is None:
+            if gather:
                 stage = node.stages[0]
+                if size != frame.size:
+                    raise InputError(f"stage '{stage.name}' follows a resampling stage; only one "
+                                     "size-changing gather per plan is supported")
                 for ev in stage.enqueue(rt, cam, frame, src, dst, bufs.aux):
                     events.append((stage.name, ev))
+                host_out.update(stage.host_buffers(cam, frame))
+                size = out_size
             else:
+                if size != frame.size and any(b in s.reads for s in node.stages for b in AUX_BUFFERS):
+                    raise InputError(f"stages {node.name} read depth/velocity after a resampling "
+                                     "stage changed the image size; this plan is not supported")
+                w, h = size
                 args = [src, dst, np.int32(w), np.int32(h)]
                 args += [bufs.aux[b] for b in AUX_BUFFERS if any(b in s.reads for s in node.stages)]
                 for s in node.stages:
@@ -306,11 +332,12 @@ class Pipeline:
                 node.kernel.set_args(*args)
                 events.append((node.name, cl.enqueue_nd_range_kernel(q, node.kernel, (w, h), None)))
             src = dst
+        w, h = size
         out = np.empty((h, w, 3), np.float32)
-        events.append(("download", cl.enqueue_copy(q, out, bufs.color_out, is_blocking=True)))
+        events.append(("download", cl.enqueue_copy(q, out, self._color_out(bufs, size), is_blocking=True)))
         for name, ev in events:
             self.last_timings[name] = self.last_timings.get(name, 0.0) + event_ms(ev)
-        return frame.replace(color=out, metadata=meta, validate=False)
+        return frame.replace(color=out, metadata=meta, validate=False, **host_out)
 
     def reference(self, frame: Frame) -> np.ndarray:
         """The same plan through each stage's float64 numpy reference; returns (H, W, 3) float64."""

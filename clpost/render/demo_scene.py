@@ -263,7 +263,7 @@ Shape = Sphere | Box | Cylinder | Plane
 # Materials and objects
 # ---------------------------------------------------------------------------------------------
 
-TEXTURES = ("flat", "checker", "ground")
+TEXTURES = ("flat", "checker", "ground", "board")
 
 
 @dataclass(frozen=True)
@@ -280,6 +280,10 @@ class Material:
     texture: str = "flat"
     texture_scale_m: float = 0.25
     emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    board_squares: tuple[int, int] = (10, 7)
+    """``board`` texture (a calibration target, distortion tests): squares (x, y) of side
+    ``texture_scale_m`` centred on the local origin in the xy plane, ``albedo2`` in the corner
+    squares, ``albedo`` between them and as the margin around the board."""
 
     def __post_init__(self) -> None:
         if self.texture not in TEXTURES:

@@ -131,8 +131,13 @@ class _IdDepthPass:
             self.actors.append(actor)
         self.size: tuple[int, int] | None = None
 
-    def set_camera(self, pose: np.ndarray, f_px: float, height_px: int) -> None:
-        """VTK camera from a camera-to-world pose (columns right, down, forward) and f in px."""
+    def set_camera(self, pose: np.ndarray, f_px: float, height_px: int,
+                   principal: tuple[float, float, int] | None = None) -> None:
+        """VTK camera from a camera-to-world pose (columns right, down, forward) and f in px.
+        ``principal`` = (c_x, c_y, width): an off-centre principal point (distortion's extended
+        frustum). VTK shifts the projection by minus its window centre, so the window centre is
+        minus the optical axis's NDC position :math:`(2(c_x + ½)/W - 1, 1 - 2(c_y + ½)/H)`
+        (checked in tests/test_distortion.py against a crop of a wider centred render)."""
         cam = self.renderer.GetActiveCamera()
         c = pose[:3, 3]
         cam.SetPosition(*c)
@@ -140,6 +145,9 @@ class _IdDepthPass:
         cam.SetViewUp(*(-pose[:3, 1]))
         cam.SetViewAngle(math.degrees(2.0 * math.atan(0.5 * height_px / f_px)))
         cam.SetWindowCenter(0.0, 0.0)
+        if principal is not None:
+            cx, cy, w = principal
+            cam.SetWindowCenter(1.0 - 2.0 * (cx + 0.5) / w, 2.0 * (cy + 0.5) / height_px - 1.0)
         cam.SetClippingRange(_NEAR_M, _FAR_M)
 
     def render(self, size: tuple[int, int], object_poses: list[np.ndarray]) -> GBuffer:
@@ -285,6 +293,16 @@ def _albedo(material, coord: np.ndarray, width: np.ndarray) -> np.ndarray:
         s = material.texture_scale_m
         # +0.5 cell keeps the face planes of boxes (whole multiples of the cell) off a boundary
         t = checker(coord / s + 0.5, width / s)
+        return a2 + (a1 - a2) * t[:, None]
+    if material.texture == "board":
+        s = material.texture_scale_m
+        nx, ny = material.board_squares
+        # cells [k, k+1) of the filtered checker from the board's corner; +1 in x puts the
+        # dark colour (albedo2) in the corner square
+        xy = coord[:, :2] / s + 0.5 * np.array([nx, ny]) + np.array([1.0, 0.0])
+        t = checker(xy, width[:, :2] / s)
+        inside = (np.abs(coord[:, 0]) < 0.5 * nx * s) & (np.abs(coord[:, 1]) < 0.5 * ny * s)
+        t = np.where(inside, t, 1.0)
         return a2 + (a1 - a2) * t[:, None]
     # ground: 1 m checker, a faint 0.1 m checker and 3 m value noise, in the local xy plane
     xy, wxy = coord[:, :2], width[:, :2]
@@ -463,26 +481,32 @@ class PyVistaRenderer:
         self.supersample = int(supersample)
         self._pass = _IdDepthPass(scene)
 
-    def gbuffer(self, size: tuple[int, int], f_px: float, frame_index: int) -> tuple[GBuffer, np.ndarray, list]:
+    def gbuffer(self, size: tuple[int, int], f_px: float, frame_index: int,
+                c: tuple[float, float] | None = None) -> tuple[GBuffer, np.ndarray, list]:
         """Rasterize ids and planar depth at ``size`` with focal length ``f_px`` (principal point
-        at the image centre); returns the G-buffer, the camera pose and the object poses."""
+        ``c``, default the image centre); returns the G-buffer, the camera pose and the object poses."""
         cam_pose = self.scene.camera_pose(frame_index)
         poses = [self.scene.object_pose(k, frame_index) for k in range(len(self.scene.objects))]
-        self._pass.set_camera(cam_pose, f_px, size[1])
+        self._pass.set_camera(cam_pose, f_px, size[1], None if c is None else (c[0], c[1], size[0]))
         return self._pass.render(size, poses), cam_pose, poses
 
-    def render(self, camera: Camera, size: tuple[int, int], frame_index: int) -> Frame:
+    def render(self, camera: Camera, size: tuple[int, int], frame_index: int,
+               intrinsics: tuple[float, float, float, float] | None = None) -> Frame:
+        """``intrinsics`` (f, f, c_x, c_y) overrides ``camera.intrinsics(W, H)``, e.g. the
+        extended frustum :func:`clpost.calibration.required_render` asks for (square pixels)."""
         w, h = (int(v) for v in size)
         if w < 1 or h < 1 or (w, h) != tuple(size):
             raise InputError(f"render size {size!r} must be (width, height) in whole pixels >= 1")
-        fx, fy, cx, cy = camera.intrinsics(w, h)
-        if fx != fy or abs(cx - (w - 1) / 2) > 1e-9 or abs(cy - (h - 1) / 2) > 1e-9:
+        fx, fy, cx, cy = camera.intrinsics(w, h) if intrinsics is None else (float(t) for t in intrinsics)
+        if fx != fy or (intrinsics is None and (abs(cx - (w - 1) / 2) > 1e-9 or abs(cy - (h - 1) / 2) > 1e-9)):
             raise InputError("PyVistaRenderer renders square pixels with the principal point at the image "
-                             f"centre; got intrinsics {(fx, fy, cx, cy)}")
+                             f"centre unless intrinsics are given; got intrinsics {(fx, fy, cx, cy)}")
         s = self.supersample
         ws, hs, fs = w * s, h * s, fx * s
-        cs = ((ws - 1) / 2.0, (hs - 1) / 2.0)
-        gbuf, cam_pose, poses = self.gbuffer((ws, hs), fs, frame_index)
+        # pixel-centre convention: the image's edge −½ stays at −½ when pixels are split s×s
+        cs = ((cx + 0.5) * s - 0.5, (cy + 0.5) * s - 0.5)
+        centred = abs(cs[0] - (ws - 1) / 2) < 1e-9 and abs(cs[1] - (hs - 1) / 2) < 1e-9
+        gbuf, cam_pose, poses = self.gbuffer((ws, hs), fs, frame_index, None if centred else cs)
         color = shade(self.scene, gbuf, fs, cs, cam_pose, poses)
         vel = velocity(self.scene, gbuf, fs, cs, frame_index)
         if s > 1:
@@ -510,12 +534,14 @@ class PyVistaRenderer:
 
 
 def render_demo_sequence(camera: Camera, size: tuple[int, int] = (960, 640), n_frames: int = 3,
-                         camera_motion: bool = False, scene: DemoScene | None = None) -> list[Frame]:
-    """Frames 0 … n_frames−1 of the demo scene (or ``scene``) through one reusable renderer."""
+                         camera_motion: bool = False, scene: DemoScene | None = None,
+                         intrinsics: tuple[float, float, float, float] | None = None) -> list[Frame]:
+    """Frames 0 … n_frames−1 of the demo scene (or ``scene``) through one reusable renderer
+    (``intrinsics``: see :meth:`PyVistaRenderer.render`)."""
     if int(n_frames) != n_frames or n_frames < 1:
         raise InputError(f"n_frames={n_frames!r} must be an integer >= 1")
     renderer = PyVistaRenderer(scene if scene is not None else DemoScene.default(camera_motion=camera_motion))
     try:
-        return [renderer.render(camera, size, i) for i in range(int(n_frames))]
+        return [renderer.render(camera, size, i, intrinsics) for i in range(int(n_frames))]
     finally:
         renderer.close()

@@ -101,3 +101,13 @@ class GatherStage(Stage):
     @abstractmethod
     def enqueue(self, rt: "Runtime", camera: "Camera", frame: "Frame", src, dst, aux: dict) -> list:
         """Enqueue the stage reading planar ``src`` and writing planar ``dst``; return events."""
+
+    def output_size(self, camera: "Camera", frame: "Frame") -> tuple[int, int]:
+        """(width, height) of ``dst``; the planner runs every later node at this size. Default:
+        the frame's size (only a resampling stage such as distortion changes it)."""
+        return frame.size
+
+    def host_buffers(self, camera: "Camera", frame: "Frame") -> dict:
+        """Host buffers of the output Frame this stage replaces (``alpha``, ``depth``,
+        ``velocity``), e.g. alpha 0 where a resampling had no data. Default: none."""
+        return {}

@@ -1,0 +1,210 @@
+r"""distortion: resample the undistorted pinhole render into the image of a calibrated camera.
+
+Each output pixel (u, v) of the distorted image asks where its light came from: the exact inverse
+of the OpenCV standard model (:func:`clpost.calibration.undistort_newton`, or the Heikkilä fit if
+``OpenCVModel.inverse == "heikkila"``) gives undistorted normalised coordinates (x', y'), and the
+render's pinhole intrinsics (f_r, c_r) give the source position
+
+.. math::
+
+    s_x = f_{r,x}\,x' + c_{r,x}, \qquad s_y = f_{r,y}\,y' + c_{r,y}
+
+Distortion is static, so this map is computed once per (model, render size, render intrinsics)
+on the host in float64 and kept on the device; each frame costs one resampling pass
+(Lambers, Sommerhoff & Kolb, "Realistic Lens Distortion Rendering", WSCG 2018, sec. 3).
+
+The render's intrinsics come from ``frame.metadata["intrinsics"]`` (the pyvista renderer records
+them) or, for EXRs, from the frame size: the calibration's own size means "rendered with the
+calibration's K", the size of :func:`clpost.calibration.required_render` means "rendered with
+that frustum" (use it: barrel distortion then leaves no unfilled pixel). Any other size is an
+error. The output has the calibration's size.
+
+Quality: ``draft``/``preview`` bilinear (4 taps); ``final`` Keys cubic (a = −½, 16 taps) clamped
+to the 4 nearest samples (no ringing, no negative HDR values).
+
+Alpha: output pixels with no preimage inside the render — outside its frustum, beyond the model's
+fold radius (clamped, see :mod:`clpost.calibration`), or where Newton did not converge — get
+color 0 and **alpha 0**; elsewhere alpha is the input alpha resampled bilinearly (1 without one).
+Depth is looked up at the nearest source pixel (+inf where alpha is 0); velocity likewise and
+mapped into output pixels by the inverse Jacobian of the map, :math:`v_{out} = J^{-1} v_{in}`,
+:math:`J = \partial s / \partial (u, v)` by central differences (0 where alpha is 0; untransformed
+on the 1-pixel rim of the valid area, where a neighbour has no data).
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from ..calibration import OpenCVModel, required_render, undistort
+from ..errors import InputError
+from .base import GatherStage
+
+INVALID = -1.0e30
+"""Map value marking an output pixel without a preimage (the kernel writes 0, alpha is 0)."""
+
+
+def source_intrinsics(model: OpenCVModel, frame) -> tuple[float, float, float, float]:
+    """(f_x, f_y, c_x, c_y) of the pinhole render in ``frame`` (see the module docstring)."""
+    k = frame.metadata.get("intrinsics") if isinstance(frame.metadata, dict) else None
+    if k is not None:
+        return tuple(float(t) for t in k)
+    if frame.size == (model.width, model.height):
+        return model.fx, model.fy, model.cx, model.cy
+    spec = required_render(model)
+    if frame.size == (spec.width, spec.height):
+        return spec.intrinsics()
+    raise InputError(
+        f"distortion: the frame is {frame.width}x{frame.height} but the calibration{model._where()} is "
+        f"{model.width}x{model.height}; render at {model.width}x{model.height} (the calibration's K) or at "
+        f"{spec.width}x{spec.height} (f={spec.f:.6g}, c=({spec.cx:.6g}, {spec.cy:.6g}): no unfilled pixels), "
+        "or record the render's intrinsics in frame.metadata['intrinsics']")
+
+
+@lru_cache(maxsize=8)
+def distortion_map(model: OpenCVModel, src_size: tuple[int, int],
+                   src_k: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """float64 source positions (2, H, W) for every output pixel and the validity mask (H, W)."""
+    vv, uu = np.mgrid[0:model.height, 0:model.width].astype(np.float64)
+    x, y, ok = undistort(model, uu, vv)
+    fx, fy, cx, cy = src_k
+    sx, sy = fx * x + cx, fy * y + cy
+    sw, sh = src_size
+    ok &= (sx >= -0.5) & (sx <= sw - 0.5) & (sy >= -0.5) & (sy <= sh - 0.5)
+    m = np.stack([np.where(ok, sx, INVALID), np.where(ok, sy, INVALID)])
+    m.setflags(write=False)
+    ok.setflags(write=False)
+    return m, ok
+
+
+def _taps(plane: np.ndarray, xi: np.ndarray, yi: np.ndarray) -> np.ndarray:
+    h, w = plane.shape
+    return plane[np.clip(yi, 0, h - 1), np.clip(xi, 0, w - 1)]
+
+
+def _keys(t: np.ndarray) -> np.ndarray:
+    t = np.abs(t)
+    return np.where(t <= 1, (1.5 * t - 2.5) * t * t + 1, np.where(t < 2, ((-0.5 * t + 2.5) * t - 4) * t + 2, 0.0))
+
+
+def resample(plane: np.ndarray, m: np.ndarray, filt: int) -> np.ndarray:
+    """float64 oracle of the kernel: ``plane`` (h, w) sampled at the map ``m`` (2, H, W)."""
+    sx, sy = m
+    ok = sx > -1e29
+    sx, sy = np.where(ok, sx, 0.0), np.where(ok, sy, 0.0)
+    x0, y0 = np.floor(sx), np.floor(sy)
+    tx, ty = sx - x0, sy - y0
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    a, b = _taps(plane, x0, y0), _taps(plane, x0 + 1, y0)
+    d, e = _taps(plane, x0, y0 + 1), _taps(plane, x0 + 1, y0 + 1)
+    if filt == 1:
+        v = (a * (1 - tx) + b * tx) * (1 - ty) + (d * (1 - tx) + e * tx) * ty
+    else:
+        v = np.zeros_like(tx)
+        for mm in range(4):
+            row = sum(_keys(tx - (k - 1)) * _taps(plane, x0 + k - 1, y0 + mm - 1) for k in range(4))
+            v += _keys(ty - (mm - 1)) * row
+        lo = np.minimum(np.minimum(a, b), np.minimum(d, e))
+        hi = np.maximum(np.maximum(a, b), np.maximum(d, e))
+        v = np.clip(v, lo, hi)
+    return np.where(ok, v, 0.0)
+
+
+class Distortion(GatherStage):
+    name = "distortion"
+    order = 50.0
+
+    def __init__(self, quality: str = "final") -> None:
+        super().__init__(quality)
+        self._dev_maps: dict = {}
+
+    @property
+    def filter_taps(self) -> int:
+        """1: bilinear (draft, preview); 3: Keys bicubic (final)."""
+        return 3 if self.quality == "final" else 1
+
+    def _model(self, camera) -> OpenCVModel | None:
+        return getattr(camera, "distortion", None)
+
+    def skip_reason(self, camera, frame):
+        model = self._model(camera)
+        if model is None:
+            return "no distortion model (Camera.distortion / --calibration)"
+        k = source_intrinsics(model, frame)
+        if model.is_identity and frame.size == (model.width, model.height) and np.allclose(
+                k, (model.fx, model.fy, model.cx, model.cy), rtol=0, atol=1e-9):
+            return "all distortion coefficients are 0 and the render already has the calibration's intrinsics"
+        return None
+
+    def reason_needed(self, camera, frame):
+        model = self._model(camera)
+        m, ok = self._host_map(camera, frame)
+        nz = ", ".join(f"{n}={getattr(model, n):.4g}" for n in ("k1", "k2", "p1", "p2", "k3") if getattr(model, n))
+        return (f"OpenCV model {nz or '(intrinsics only)'} → {model.width}x{model.height}, "
+                f"{'bicubic' if self.filter_taps == 3 else 'bilinear'}; {int((~ok).sum())} pixel(s) without data (alpha 0)")
+
+    def _host_map(self, camera, frame):
+        model = self._model(camera)
+        return distortion_map(model, frame.size, source_intrinsics(model, frame))
+
+    def output_size(self, camera, frame) -> tuple[int, int]:
+        model = self._model(camera)
+        return model.width, model.height
+
+    def defines(self, camera):
+        return {"DISTORTION_FILTER": self.filter_taps}
+
+    def enqueue(self, rt, camera, frame, src, dst, aux):
+        import pyopencl as cl
+
+        from ..runtime import kernel_source
+
+        model = self._model(camera)
+        kkey = source_intrinsics(model, frame)
+        key = (id(rt), model, frame.size, kkey)
+        buf = self._dev_maps.get(key)
+        if buf is None:
+            m, _ = self._host_map(camera, frame)
+            host = np.ascontiguousarray(m, dtype=np.float32)
+            buf = rt.empty(host.shape)
+            cl.enqueue_copy(rt.queue, buf, host)
+            self._dev_maps = {key: buf}  # one camera and size at a time: the map is static
+        prog = rt.program(kernel_source("common") + kernel_source("distortion"), "distortion",
+                          self.defines(camera))
+        kern = cl.Kernel(prog, "distortion")
+        kern.set_args(src, dst, buf, np.int32(frame.width), np.int32(frame.height),
+                      np.int32(model.width), np.int32(model.height))
+        return [cl.enqueue_nd_range_kernel(rt.queue, kern, (model.width, model.height), None)]
+
+    def reference(self, camera, frame, color):
+        m, _ = self._host_map(camera, frame)
+        m = m.astype(np.float32).astype(np.float64)  # the device's map, to compare filters alone
+        return np.stack([resample(np.asarray(color[..., c], np.float64), m, self.filter_taps)
+                         for c in range(3)], -1)
+
+    def host_buffers(self, camera, frame) -> dict:
+        """alpha, depth and velocity of the distorted image (see the module docstring)."""
+        m, ok = self._host_map(camera, frame)
+        alpha = ok.astype(np.float32)
+        if frame.alpha is not None:
+            alpha *= np.clip(resample(frame.alpha.astype(np.float64), m, 1), 0.0, 1.0).astype(np.float32)
+        out = {"alpha": alpha}
+        xi = np.where(ok, np.rint(m[0]), 0).astype(np.int64)
+        yi = np.where(ok, np.rint(m[1]), 0).astype(np.int64)
+        if frame.depth is not None:
+            out["depth"] = np.where(ok, _taps(frame.depth, xi, yi), np.inf).astype(np.float32)
+        if frame.velocity is not None:
+            vin = frame.velocity[np.clip(yi, 0, frame.height - 1), np.clip(xi, 0, frame.width - 1)].astype(np.float64)
+            sx, sy = np.where(ok, m[0], np.nan), np.where(ok, m[1], np.nan)
+            j11, j12 = np.gradient(sx, axis=1), np.gradient(sx, axis=0)
+            j21, j22 = np.gradient(sy, axis=1), np.gradient(sy, axis=0)
+            det = j11 * j22 - j12 * j21
+            with np.errstate(all="ignore"):
+                vx = (j22 * vin[..., 0] - j12 * vin[..., 1]) / det
+                vy = (-j21 * vin[..., 0] + j11 * vin[..., 1]) / det
+            # on the 1-px rim of the valid area J is unknown (a neighbour has no data): untransformed
+            good = np.isfinite(vx) & np.isfinite(vy)
+            vx, vy = np.where(good, vx, vin[..., 0]), np.where(good, vy, vin[..., 1])
+            out["velocity"] = np.stack([np.where(ok, vx, 0.0), np.where(ok, vy, 0.0)], -1).astype(np.float32)
+        return out
+

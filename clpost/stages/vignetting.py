@@ -1,0 +1,184 @@
+r"""vignetting: the fall-off of illumination towards the image corners, a pointwise factor.
+
+Natural vignetting of the thin lens (``Camera.vignetting = "natural"``): the aperture is the
+exit pupil, at the image distance v from the film (v from ``Camera.image_distance_mm``, so it
+follows focus). Light reaching image height r arrives at :math:`\tan\theta = r/v`, and the
+irradiance falls as
+
+.. math::
+
+    \mathrm{RI}(r) = \cos^4\theta = \Big(1 + \frac{r^2}{v^2}\Big)^{-2}
+
+(cos θ for the oblique pupil, cos θ for the oblique film, cos² θ for the longer path; Hecht,
+*Optics*, 5th ed., §5.7.1; Ray, *Applied Photographic Optics*, 3rd ed., §24.4). r is in mm on
+the sensor from the principal point (the calibration's c_x, c_y when ``Camera.distortion`` is
+set, else the image centre); the image spans the sensor width (pixel pitch ``sensor_w/W``).
+
+Other sources of RI(r) (all normalised to 1 on the axis):
+
+* ``"lens"`` — a real lens's relative-illumination curve for the camera's f-number (which then
+  includes optical vignetting). The interface is :func:`register_relative_illumination`: a
+  provider ``provider(camera) -> RI | None``, RI a function of image height in mm (numpy array
+  in, array in (0, 1] out); the first provider that knows ``camera.lens`` is used. The lens
+  tracer registers one; until then ``"lens"`` with no provider is an error naming the fix.
+* ``"table:<path>"`` — a manufacturer-style table (:func:`read_table`): text lines
+  ``image_height_mm relative_illumination`` (comma or whitespace separated) starting at 0 mm,
+  with a ``# source:`` provenance comment; linear interpolation. The table must reach the sensor's
+  half diagonal.
+
+The curve is sampled on the host into a LUT of ``VIGNETTING_LUT_SIZE`` entries over
+:math:`[0, \sqrt{w^2 + h^2}]` of the sensor (twice the half diagonal, so an off-centre principal
+point stays inside) and interpolated linearly in the kernel (max error < 1e-5 for cos⁴ of a 12 mm
+lens). Fused with exposure (both linear, pointwise).
+
+Default: ``off`` (opt-in). A real camera always vignettes, but turning it on by default would
+change every existing output and plan (exposure-only plans, metered levels); ``--vignetting
+natural`` turns it on.
+
+Domain/range: input ≥ 0 → output ≥ 0, never larger than the input (RI ≤ 1).
+"""
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..errors import InputError
+from .base import PointwiseStage
+
+LUT_SIZE = 1024
+
+RelativeIllumination = Callable[[np.ndarray], np.ndarray]
+_PROVIDERS: list[Callable[[object], RelativeIllumination | None]] = []
+
+
+def register_relative_illumination(provider: Callable[[object], RelativeIllumination | None]) -> None:
+    """Add a source of RI(r_mm) curves for ``Camera.vignetting = "lens"``: ``provider(camera)``
+    returns a function of image height (mm, array) giving RI in (0, 1] for that camera's lens,
+    f-number and focus, or None if it does not know the lens."""
+    if not callable(provider):
+        raise InputError("register_relative_illumination: provider must be callable(camera) -> RI or None")
+    if provider not in _PROVIDERS:
+        _PROVIDERS.append(provider)
+
+
+def natural(camera) -> RelativeIllumination:
+    """cos⁴θ with tan θ = r / v (thin lens, exit pupil at the lens)."""
+    v = camera.image_distance_mm
+    return lambda r: (1.0 + (np.asarray(r, np.float64) / v) ** 2) ** -2
+
+
+@lru_cache(maxsize=16)
+def read_table(path: str) -> tuple[np.ndarray, np.ndarray, str]:
+    """(image_height_mm, RI, provenance) of a relative-illumination table file."""
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise InputError(f"--vignetting table:{path}: cannot read it ({exc})") from None
+    source, rows = "", []
+    for n, line in enumerate(text.splitlines(), 1):
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("#"):
+            if s[1:].strip().lower().startswith("source:"):
+                source = s[1:].strip()[7:].strip()
+            continue
+        parts = s.replace(",", " ").split()
+        try:
+            rows.append((float(parts[0]), float(parts[1])))
+        except (ValueError, IndexError):
+            if not rows:  # a header line such as "image_height_mm,relative_illumination"
+                continue
+            raise InputError(f"{path}:{n}: expected 'image_height_mm relative_illumination', got {s!r}") from None
+    if not source:
+        raise InputError(f"{path}: no '# source: …' line; a relative-illumination table must say where it comes from")
+    if len(rows) < 2:
+        raise InputError(f"{path}: needs at least two rows 'image_height_mm relative_illumination'")
+    r, ri = np.array(rows).T
+    if r[0] != 0 or np.any(np.diff(r) <= 0):
+        raise InputError(f"{path}: image heights must start at 0 mm and increase")
+    if not np.all((ri > 0) & (ri <= 1)):
+        raise InputError(f"{path}: relative illumination must be in (0, 1] (a fraction, 1 on the axis), "
+                         f"got {ri.min():g} … {ri.max():g}; divide percentages by 100")
+    return r, ri, source
+
+
+def relative_illumination(camera) -> RelativeIllumination | None:
+    """The camera's RI(r_mm) curve (None when vignetting is off)."""
+    mode = camera.vignetting
+    if mode == "off":
+        return None
+    if mode == "natural":
+        return natural(camera)
+    if mode == "lens":
+        for provider in _PROVIDERS:
+            ri = provider(camera)
+            if ri is not None:
+                return ri
+        raise InputError(f"--vignetting lens: no relative-illumination curve is registered for lens "
+                         f"{camera.lens!r}; use --vignetting natural (cos⁴θ) or table:<file>")
+    r, ri, _ = read_table(mode[6:])
+    half_diag = 0.5 * math.hypot(*camera.sensor_mm)
+    if r[-1] < half_diag - 1e-9:
+        raise InputError(f"{mode[6:]}: the table ends at {r[-1]:g} mm but the sensor's half diagonal is "
+                         f"{half_diag:.4g} mm; extend the table to the image corner")
+    return lambda x: np.interp(np.asarray(x, np.float64), r, ri)
+
+
+def principal_offset_mm(camera) -> tuple[float, float]:
+    """Principal point minus image centre on the sensor (mm): from the calibration, else 0."""
+    m = camera.distortion
+    if m is None:
+        return 0.0, 0.0
+    pitch = camera.sensor_mm[0] / m.width
+    return (m.cx - 0.5 * (m.width - 1)) * pitch, (m.cy - 0.5 * (m.height - 1)) * pitch
+
+
+class Vignetting(PointwiseStage):
+    name = "vignetting"
+    order = 60.0
+    args = (("float", "sensor_w_mm"), ("float", "off_x_mm"), ("float", "off_y_mm"),
+            ("float", "r_max_mm"), ("__global const float *", "lut"))
+
+    def skip_reason(self, camera, frame):
+        ri = relative_illumination(camera)
+        if ri is None:
+            return "Camera.vignetting is 'off' (opt-in: --vignetting natural)"
+        if np.all(self._lut(camera) == 1.0):
+            return "relative illumination is 1 over the whole sensor"
+        return None
+
+    def reason_needed(self, camera, frame):
+        lut = self._lut(camera)
+        half = 0.5 * math.hypot(*camera.sensor_mm)
+        corner = float(relative_illumination(camera)(np.array(half)))
+        return f"{camera.vignetting}: RI at the sensor corner {corner:.3f} ({math.log2(corner):+.2f} EV); LUT {lut.size}"
+
+    def _r_max(self, camera) -> float:
+        return math.hypot(*camera.sensor_mm)
+
+    def _lut(self, camera) -> np.ndarray:
+        r = np.linspace(0.0, self._r_max(camera), LUT_SIZE)
+        return np.clip(relative_illumination(camera)(r), 0.0, 1.0).astype(np.float32)
+
+    def defines(self, camera):
+        return {"VIGNETTING_LUT_SIZE": LUT_SIZE}
+
+    def values(self, camera, frame):
+        ox, oy = principal_offset_mm(camera)
+        return (np.float32(camera.sensor_mm[0]), np.float32(ox), np.float32(oy),
+                np.float32(self._r_max(camera)), self._lut(camera))
+
+    def reference(self, camera, frame, color):
+        color = np.asarray(color, np.float64)
+        h, w = color.shape[:2]
+        pitch = camera.sensor_mm[0] / w
+        ox, oy = principal_offset_mm(camera)
+        x = (np.arange(w) - 0.5 * (w - 1)) * pitch - ox
+        y = (np.arange(h) - 0.5 * (h - 1)) * pitch - oy
+        r = np.minimum(np.hypot(x[None, :], y[:, None]), self._r_max(camera))
+        return color * relative_illumination(camera)(r)[..., None]

@@ -1,0 +1,79 @@
+/* distortion: resample the undistorted (pinhole) render into the distorted image.
+ *
+ * map holds, for every output pixel i, the source position in the render (planar: x at map[i],
+ * y at map[n + i], render pixel centres at integers). It is computed once per (camera, size) on
+ * the host in float64 by the exact Newton inverse of the OpenCV model (clpost/calibration.py);
+ * a pixel with no preimage (outside the render, beyond the fold, no convergence) has x = -1e30
+ * and gets color 0 (its alpha, written on the host, is 0).
+ *
+ * DISTORTION_FILTER 1: bilinear (4 taps, draft/preview). 3: Keys cubic, a = -1/2 (16 taps,
+ * final), clamped to the range of the 4 nearest samples so HDR edges cannot ring to negative
+ * values. Taps outside the render repeat its edge (index clamp): the map is arbitrary, so tap
+ * offsets are not uniform and padding would not make addresses affine anyway.
+ */
+#ifndef DISTORTION_FILTER
+#define DISTORTION_FILTER 1
+#endif
+
+inline float distortion_tap(__global const float *src, const size_t plane, int x, int y,
+                            const int sw, const int sh) {
+    x = clamp(x, 0, sw - 1);
+    y = clamp(y, 0, sh - 1);
+    return src[plane + (size_t)y * (size_t)sw + (size_t)x];
+}
+
+/* Keys (1981) cubic convolution kernel with a = -1/2 */
+inline float distortion_keys(float t) {
+    t = fabs(t);
+    if (t <= 1.0f) return (1.5f * t - 2.5f) * t * t + 1.0f;
+    if (t < 2.0f) return ((-0.5f * t + 2.5f) * t - 4.0f) * t + 2.0f;
+    return 0.0f;
+}
+
+__kernel void distortion(__global const float *restrict src, __global float *restrict dst,
+                         __global const float *restrict map, const int src_w, const int src_h,
+                         const int width, const int height)
+{
+    const int x = get_global_id(0);
+    const int y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t sn = (size_t)src_w * (size_t)src_h;
+    const size_t i = (size_t)y * (size_t)width + (size_t)x;
+    const float sx = map[i];
+    const float sy = map[n + i];
+    if (!(sx > -1.0e29f)) {
+        dst[i] = 0.0f;
+        dst[n + i] = 0.0f;
+        dst[2 * n + i] = 0.0f;
+        return;
+    }
+    const float fx0 = floor(sx), fy0 = floor(sy);
+    const int x0 = (int)fx0, y0 = (int)fy0;
+    const float tx = sx - fx0, ty = sy - fy0;
+    for (int c = 0; c < 3; ++c) {
+        const size_t plane = (size_t)c * sn;
+        const float a = distortion_tap(src, plane, x0, y0, src_w, src_h);
+        const float b = distortion_tap(src, plane, x0 + 1, y0, src_w, src_h);
+        const float d = distortion_tap(src, plane, x0, y0 + 1, src_w, src_h);
+        const float e = distortion_tap(src, plane, x0 + 1, y0 + 1, src_w, src_h);
+#if DISTORTION_FILTER == 1
+        const float v = (a * (1.0f - tx) + b * tx) * (1.0f - ty) + (d * (1.0f - tx) + e * tx) * ty;
+#else
+        float wx[4], wy[4];
+        for (int k = 0; k < 4; ++k) {
+            wx[k] = distortion_keys(tx - (float)(k - 1));
+            wy[k] = distortion_keys(ty - (float)(k - 1));
+        }
+        float acc = 0.0f;
+        for (int m = 0; m < 4; ++m) {
+            float row = 0.0f;
+            for (int k = 0; k < 4; ++k)
+                row += wx[k] * distortion_tap(src, plane, x0 + k - 1, y0 + m - 1, src_w, src_h);
+            acc += wy[m] * row;
+        }
+        const float v = clamp(acc, fmin(fmin(a, b), fmin(d, e)), fmax(fmax(a, b), fmax(d, e)));
+#endif
+        dst[(size_t)c * n + i] = v;
+    }
+}

@@ -1,0 +1,23 @@
+/* vignetting: multiply by the relative illumination RI(r) at the pixel's image height r (mm).
+ *
+ * r is measured on the sensor from the principal point: pitch = sensor_w_mm / width (the image
+ * spans the sensor width), principal point = image centre + (off_x_mm, off_y_mm). RI is a table of
+ * VIGNETTING_LUT_SIZE samples over r in [0, r_max_mm], built once per camera on the host
+ * (cos^4 theta of the thin lens, a lens's curve or a manufacturer table: clpost/stages/vignetting.py),
+ * interpolated linearly; beyond r_max_mm the last value holds.
+ */
+#ifndef VIGNETTING_LUT_SIZE
+#define VIGNETTING_LUT_SIZE 1024
+#endif
+
+inline float3 vignetting_apply(const float3 c, const PixelCtx p, const float sensor_w_mm,
+                               const float off_x_mm, const float off_y_mm, const float r_max_mm,
+                               __global const float *lut) {
+    const float pitch = sensor_w_mm / (float)p.width;
+    const float dx = ((float)p.x - 0.5f * (float)(p.width - 1)) * pitch - off_x_mm;
+    const float dy = ((float)p.y - 0.5f * (float)(p.height - 1)) * pitch - off_y_mm;
+    const float t = fmin(sqrt(dx * dx + dy * dy) / r_max_mm, 1.0f) * (float)(VIGNETTING_LUT_SIZE - 1);
+    const int k = min((int)t, VIGNETTING_LUT_SIZE - 2);
+    const float f = t - (float)k;
+    return c * (lut[k] * (1.0f - f) + lut[k + 1] * f);
+}

@@ -1,0 +1,118 @@
+"""vignetting: cos⁴θ closed form, LUT kernel vs float64 reference, energy, tables, plan."""
+import math
+
+import numpy as np
+import pytest
+from scipy import integrate
+
+from clpost import Camera, Frame, InputError, Pipeline
+from clpost.calibration import OpenCVModel
+from clpost.stages import vignetting as vig
+from clpost.stages.vignetting import Vignetting
+
+from conftest import odd_frame
+
+DATA = __import__("pathlib").Path(__file__).parent / "data"
+
+
+def test_off_by_default_so_existing_plans_are_unchanged(rng):
+    frame = odd_frame(rng)
+    assert Pipeline(Camera()).plan(frame) == ["exposure"]
+    e = {x.stage: x for x in Pipeline(Camera()).explain(frame)}["vignetting"]
+    assert not e.planned and "off" in e.reason
+
+
+def test_natural_is_cos4_of_the_field_angle():
+    cam = Camera(lens="thin:50", focus_distance_m=math.inf, vignetting="natural")
+    ri = vig.relative_illumination(cam)
+    for r in (0.0, 10.0, 21.63):
+        theta = math.atan(r / 50.0)
+        assert ri(np.array(r)) == pytest.approx(math.cos(theta) ** 4, rel=1e-12)
+    # focus moves the exit pupil's distance to the film: v = f u/(u - f)
+    near = Camera(lens="thin:50", focus_distance_m=0.5, vignetting="natural")
+    assert vig.relative_illumination(near)(np.array(20.0)) > ri(np.array(20.0))
+
+
+@pytest.mark.parametrize("lens,w,h", [("thin:12", 37, 23), ("thin:50", 64, 43), ("thin:200", 23, 37)])
+def test_kernel_matches_reference(rng, lens, w, h):
+    cam = Camera(lens=lens, vignetting="natural")
+    frame = odd_frame(rng, w=w, h=h, scale=1e4)
+    pipe = Pipeline(cam)
+    assert pipe.kernels(frame) == ["vignetting__exposure"]
+    out = pipe.run(frame).color
+    ref = pipe.reference(frame)
+    rel = np.abs(out / ref - 1)
+    j = np.unravel_index(int(np.argmax(rel)), rel.shape)
+    assert rel.max() < 2e-5, f"max rel error {rel.max():.3g} at (x={j[1]}, y={j[0]})"
+    assert np.all(np.isfinite(out)) and out.dtype == np.float32
+
+
+def test_energy_of_a_uniform_field_is_the_integral_of_cos4_over_the_sensor():
+    cam = Camera(lens="thin:24", vignetting="natural", focus_distance_m=math.inf)
+    w, h = 360, 240
+    frame = Frame(np.ones((h, w, 3), np.float32))
+    out = Pipeline(cam, stages=["vignetting"]).run(frame).color
+    v = 24.0
+    exact, _ = integrate.dblquad(lambda y, x: (1 + (x * x + y * y) / v ** 2) ** -2, -18, 18, -12, 12)
+    assert out.mean() == pytest.approx(exact / (36 * 24), rel=2e-5)
+    assert out.max() <= 1.0 and out.min() > 0
+
+
+def test_principal_point_of_the_calibration_is_the_centre(rng):
+    m = OpenCVModel(37, 23, 30, 30, 10.0, 15.0)
+    cam = Camera(lens="thin:12", vignetting="natural", distortion=m)
+    frame = Frame(np.ones((23, 37, 3), np.float32))
+    out = Pipeline(cam, stages=["vignetting"]).run(frame).color[..., 0]
+    assert np.unravel_index(int(np.argmax(out)), out.shape) == (15, 10)
+    np.testing.assert_allclose(out, Pipeline(cam, stages=["vignetting"]).reference(frame)[..., 0], rtol=2e-5)
+
+
+def test_table_file_and_its_errors(tmp_path):
+    cam = Camera(vignetting=f"table:{DATA / 'ri_table.csv'}")
+    ri = vig.relative_illumination(cam)
+    assert ri(np.array(7.5)) == pytest.approx((0.980 + 0.925) / 2)
+    frame = Frame(np.ones((23, 37, 3), np.float32))
+    np.testing.assert_allclose(Pipeline(cam, stages=["vignetting"]).run(frame).color,
+                               Pipeline(cam, stages=["vignetting"]).reference(frame), rtol=5e-5)  # LUT vs table kinks
+    bad = tmp_path / "t.csv"
+    bad.write_text("0 1\n10 0.9\n")
+    vig.read_table.cache_clear()
+    with pytest.raises(InputError, match="source"):
+        vig.relative_illumination(Camera(vignetting=f"table:{bad}"))
+    bad = tmp_path / "t2.csv"  # read_table is cached per path
+    bad.write_text("# source: x\n0 1\n10 0.9\n")
+    with pytest.raises(InputError, match="half diagonal"):
+        vig.relative_illumination(Camera(vignetting=f"table:{bad}"))
+    bad = tmp_path / "t3.csv"
+    bad.write_text("# source: x\n0 100\n30 90\n")
+    with pytest.raises(InputError, match="percentages"):
+        vig.relative_illumination(Camera(vignetting=f"table:{bad}"))
+
+
+def test_lens_mode_uses_a_registered_curve_or_says_what_to_do(rng):
+    cam = Camera(lens="thin:35", vignetting="lens")
+    with pytest.raises(InputError, match="--vignetting natural"):
+        vig.relative_illumination(cam)
+    curve = lambda r: np.full(np.shape(r), 0.5)  # noqa: E731
+    provider = lambda c: curve if c.lens == "thin:35" else None  # noqa: E731
+    vig.register_relative_illumination(provider)
+    try:
+        frame = odd_frame(rng)
+        out = Pipeline(cam, stages=["vignetting"]).run(frame).color
+        np.testing.assert_allclose(out, 0.5 * frame.color, rtol=1e-6)
+    finally:
+        vig._PROVIDERS.remove(provider)
+
+
+def test_flat_curve_is_not_planned(rng):
+    provider = lambda c: (lambda r: np.ones(np.shape(r)))  # noqa: E731
+    vig.register_relative_illumination(provider)
+    try:
+        assert Pipeline(Camera(vignetting="lens")).plan(odd_frame(rng)) == ["exposure"]
+    finally:
+        vig._PROVIDERS.remove(provider)
+
+
+def test_bad_mode_is_refused():
+    with pytest.raises(InputError, match="natural"):
+        Camera(vignetting="cos4")
