@@ -198,7 +198,7 @@ class Lens:
             z_obj = z_film - distance_mm
             u_h = self.paraxial.z_principal_front_mm - z_obj
             mag = -v / u_h
-        st = FocusState(float(distance_mm), b, b - b_inf, v, u_h, u_thin, mag)
+        st = FocusState(float(distance_mm), float(b), float(b - b_inf), float(v), float(u_h), float(u_thin), float(mag))
         self._focus_cache[key] = st
         return st
 
