@@ -167,7 +167,7 @@ def _paraxial_chief_gain(lens, pres, fld: _Field) -> float:
 
 def compute_curves(lens, focus_distance_m: float, f_number: float,
                    image_height_max_mm: float = FULL_FRAME_HALF_DIAGONAL_MM,
-                   n_fields: int = 48, pupil_samples: int = 40) -> LensCurves:
+                   n_fields: int = 48, pupil_samples: int = 64) -> LensCurves:
     focus_mm = focus_distance_m * 1000.0
     pres = lens.focused(focus_mm, f_number)
     stop_r = lens.stop_radius_mm(f_number)
