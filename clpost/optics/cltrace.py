@@ -3,9 +3,8 @@
 current GPU drivers offer). ``LENS_TRACE_NSURF`` is the only ``#define`` (program key); the film
 plane and the rays are arguments, so refocusing or stopping down never recompiles.
 
-Failed rays keep their last position/direction like the numpy version; one difference: the numpy
-tracer keeps the values *before* the failing surface for all statuses, and so does the kernel
-(it breaks before updating), so the outputs match element for element.
+Failed rays keep their position/direction from before the failing surface, as in the numpy
+version, so the outputs match element for element (tests: |Δ| < 1e-9 mm, equal statuses).
 """
 from __future__ import annotations
 
