@@ -1,10 +1,20 @@
 r"""The camera: lens, aperture, focus, shutter, sensor — validated at creation.
 
-Until real lens prescriptions land, a lens is a thin lens named ``thin:<focal length in mm>``.
+A lens is a thin lens named ``thin:<focal length in mm>`` or a real prescription from
+``lens_data/`` by name (``zeiss-planar-50-f1.4``; see :mod:`clpost.optics`).
 
 Units: lengths on the sensor and of the lens in millimetres, scene distances in metres, time in
 seconds. ``focus_distance_m`` is measured from the thin lens's principal plane (``math.inf`` for
-infinity focus).
+infinity focus); for a real prescription it is measured **from the film plane** and must be at
+least the lens's ``min_focus_m``.
+
+Real prescriptions (issue "real lenses"): ``focal_length_mm`` is the paraxial EFL;
+``image_distance_mm`` is the thin-lens-equivalent v = EFL + extension, where the extension is
+the lens travel found by real-ray unit focusing at the taking f-number
+(:meth:`clpost.optics.Lens.focus`); an ``f_number`` below the lens's maximum aperture is clamped
+to it with a :class:`clpost.optics.FNumberClampedWarning`. :attr:`Camera.optics` is the
+:class:`clpost.optics.Lens` (None for a thin lens) and :meth:`Camera.lens_curves` its curves at
+this focus and f-number — the API later stages consume.
 
 Derived optics (thin lens, Hecht, *Optics*, 5th ed., §5.2):
 
@@ -44,10 +54,15 @@ def _finite(name: str, value: Any, unit: str, fix: str) -> float:
 
 
 def parse_lens(name: str) -> float:
-    """Focal length in mm of a lens name. Only ``thin:<mm>`` is known until lens_data lands."""
+    """Focal length in mm of a lens name: ``thin:<mm>``, or the EFL of a ``lens_data`` prescription."""
+    if isinstance(name, str) and not name.startswith("thin:") and _is_lens_data(name):
+        from .optics import get_lens
+
+        return get_lens(name).efl_mm
     if not isinstance(name, str) or not name.startswith("thin:"):
         raise InputError(
-            f"Camera.lens={name!r} is unknown: use a thin lens 'thin:<focal length mm>', e.g. 'thin:50'"
+            f"Camera.lens={name!r} is unknown: use a thin lens 'thin:<focal length mm>', e.g. 'thin:50', "
+            f"or a lens_data name ({', '.join(_lens_data_names())}; see `clpost lens list`)"
         )
     try:
         f = float(name[5:])
@@ -56,6 +71,18 @@ def parse_lens(name: str) -> float:
     if not (math.isfinite(f) and f > 0):
         raise InputError(f"Camera.lens={name!r}: focal length must be > 0 mm, e.g. 'thin:50'")
     return f
+
+
+def _lens_data_names() -> list[str]:
+    from .optics.prescription import available_lenses
+
+    return available_lenses()
+
+
+def _is_lens_data(name: str) -> bool:
+    from .optics.prescription import lens_data_dir
+
+    return (lens_data_dir() / f"{name}.toml").is_file()
 
 
 @dataclass(frozen=True)
@@ -139,6 +166,15 @@ class Camera:
         if self.metering not in METERING_MODES:
             raise InputError(f"Camera.metering={self.metering!r} must be one of {', '.join(METERING_MODES)}")
         _finite("exposure_compensation_ev", self.exposure_compensation_ev, "EV", "e.g. +1 for one stop brighter")
+        # Real lenses (issue "real lenses"): clamp the f-number to the lens, check min focus.
+        lens = self.optics
+        if lens is not None:
+            if self.f_number is not None:
+                object.__setattr__(self, "f_number", lens.clamp_f_number(self.f_number))
+            if self.focus_distance_m * 1000.0 < lens.min_focus_m * 1000.0 * (1 - 1e-12):
+                raise InputError(
+                    f"Camera.focus_distance_m={self.focus_distance_m!r} is closer than {self.lens}'s minimum "
+                    f"focus distance {lens.min_focus_m:g} m (measured from the film plane); use >= {lens.min_focus_m:g}")
         # distortion stage
         if self.distortion is not None:
             from .calibration import OpenCVModel
@@ -159,11 +195,32 @@ class Camera:
     @property
     def image_distance_mm(self) -> float:
         r"""Lens-to-film distance v (mm) for the focus distance: :math:`v = 1/(1/f - 1/u)`."""
+        lens = self.optics
+        if lens is not None:
+            # Real lens: v = EFL + extension from real-ray unit focusing (u from the film plane).
+            return lens.focus(self.focus_distance_m * 1000.0, self.f_number).image_distance_mm
         f = self.focal_length_mm
         u = self.focus_distance_m * 1000.0
         if math.isinf(u):
             return f
         return f * u / (u - f)
+
+    @property
+    def optics(self):
+        """The :class:`clpost.optics.Lens` of a ``lens_data`` lens, None for a thin lens."""
+        if self.lens.startswith("thin:"):
+            return None
+        from .optics import get_lens
+
+        return get_lens(self.lens)
+
+    def lens_curves(self):
+        """:class:`clpost.optics.curves.LensCurves` at this focus and f-number (None for a thin
+        lens); cached per (lens, focus, f-number). Auto f-number: the lens wide open."""
+        lens = self.optics
+        if lens is None:
+            return None
+        return lens.curves(self.focus_distance_m, self.f_number)
 
     @property
     def is_auto_exposure(self) -> bool:

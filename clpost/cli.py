@@ -237,6 +237,25 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_lens(args) -> int:
+    # Real lenses (issue "real lenses"): list / info / plot of lens_data prescriptions.
+    from .optics import available_lenses, get_lens
+    from .optics.report import format_info, lens_info, plot_lens
+
+    if args.lens_command == "list":
+        for name in available_lenses():
+            lens = get_lens(name)
+            print(f"{name:24s} EFL {lens.efl_mm:7.2f} mm  f/{lens.max_aperture:.3g}  {lens.prescription.description}")
+        return 0
+    if args.lens_command == "info":
+        d = lens_info(args.name, sensor_mm=args.sensor, focus_distance_m=args.focus, f_number=args.f_number)
+        print(json.dumps(d, indent=2, default=str) if args.json else format_info(d))
+        return 0
+    plot_lens(args.name, args.output, sensor_mm=args.sensor, focus_distance_m=args.focus)
+    print(f"wrote {args.output}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="clpost", description="A realistic camera for rendered images.")
     p.add_argument("--debug", action="store_true", help="show tracebacks on errors")
@@ -286,6 +305,23 @@ def build_parser() -> argparse.ArgumentParser:
     _add_camera_options(b)
     _add_pipeline_options(b)
     b.set_defaults(func=cmd_bench)
+
+    ln = sub.add_parser("lens", help="real lens prescriptions in lens_data/: list, info, datasheet plot")
+    lsub = ln.add_subparsers(dest="lens_command", required=True)
+    lsub.add_parser("list", help="the lenses in lens_data/").set_defaults(func=cmd_lens)
+    for cmd, help_ in (("info", "EFL, BFL, pupils, f-numbers, FOV, corner distortion and illumination"),
+                       ("plot", "datasheet-style plots (needs the 'plot' extra: matplotlib)")):
+        q = lsub.add_parser(cmd, help=help_)
+        q.add_argument("name", help="lens name (see `clpost lens list`)")
+        q.add_argument("--sensor", type=_sensor, default=(36.0, 24.0), help="sensor WxH in mm (default 36x24)")
+        q.add_argument("--focus", type=_positive_float, default=float("inf"),
+                       help="focus distance in metres from the film (default inf)")
+        if cmd == "info":
+            q.add_argument("--f-number", type=_positive_float, default=None, help="f-number (default: wide open)")
+            q.add_argument("--json", action="store_true")
+        else:
+            q.add_argument("-o", "--output", required=True, help="output PNG")
+        q.set_defaults(func=cmd_lens)
     return p
 
 
