@@ -89,28 +89,26 @@ def test_table_file_and_its_errors(tmp_path):
         vig.relative_illumination(Camera(vignetting=f"table:{bad}"))
 
 
-def test_lens_mode_uses_a_registered_curve_or_says_what_to_do(rng):
-    cam = Camera(lens="thin:35", vignetting="lens")
+def test_lens_mode_uses_the_traced_curve_or_says_what_to_do(rng):
     with pytest.raises(InputError, match="--vignetting natural"):
-        vig.relative_illumination(cam)
-    curve = lambda r: np.full(np.shape(r), 0.5)  # noqa: E731
-    provider = lambda c: curve if c.lens == "thin:35" else None  # noqa: E731
-    vig.register_relative_illumination(provider)
-    try:
-        frame = odd_frame(rng)
-        out = Pipeline(cam, stages=["vignetting"]).run(frame).color
-        np.testing.assert_allclose(out, 0.5 * frame.color, rtol=1e-6)
-    finally:
-        vig._PROVIDERS.remove(provider)
+        vig.relative_illumination(Camera(lens="thin:35", vignetting="lens"))
+    cam = Camera(lens="zeiss-planar-50-f1.4", f_number=1.4, vignetting="lens")
+    curves = cam.lens_curves()
+    frame = odd_frame(rng)
+    out = Pipeline(cam, stages=["vignetting"]).run(frame).color
+    # the pixel at the image corner gets the traced RI at the corner's image height
+    pitch = cam.pixel_pitch_mm(frame.width)
+    r = pitch * np.hypot((frame.width - 1) / 2, (frame.height - 1) / 2)
+    expected = float(np.clip(curves.at("relative_illumination", np.array([r])), 0, 1)[0])
+    np.testing.assert_allclose(out[0, 0], expected * frame.color[0, 0], rtol=2e-4)
+    assert out[0, 0, 0] / frame.color[0, 0, 0] < out[11, 18, 0] / frame.color[11, 18, 0]  # darker corner
 
 
-def test_flat_curve_is_not_planned(rng):
-    provider = lambda c: (lambda r: np.ones(np.shape(r)))  # noqa: E731
-    vig.register_relative_illumination(provider)
-    try:
-        assert Pipeline(Camera(vignetting="lens")).plan(odd_frame(rng)) == ["exposure"]
-    finally:
-        vig._PROVIDERS.remove(provider)
+def test_wide_open_flagship_vignettes_more_than_stopped_down(rng):
+    frame = odd_frame(rng)
+    wide = Pipeline(Camera(lens="zeiss-planar-50-f1.4", f_number=1.4, vignetting="lens"), stages=["vignetting"])
+    f8 = Pipeline(Camera(lens="zeiss-planar-50-f1.4", f_number=8, vignetting="lens"), stages=["vignetting"])
+    assert (wide.run(frame).color[0, 0] < f8.run(frame).color[0, 0]).all()
 
 
 def test_bad_mode_is_refused():

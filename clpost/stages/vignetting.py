@@ -16,11 +16,9 @@ set, else the image centre); the image spans the sensor width (pixel pitch ``sen
 
 Other sources of RI(r) (all normalised to 1 on the axis):
 
-* ``"lens"`` — a real lens's relative-illumination curve for the camera's f-number (which then
-  includes optical vignetting). The interface is :func:`register_relative_illumination`: a
-  provider ``provider(camera) -> RI | None``, RI a function of image height in mm (numpy array
-  in, array in (0, 1] out); the first provider that knows ``camera.lens`` is used. The lens
-  tracer registers one; until then ``"lens"`` with no provider is an error naming the fix.
+* ``"lens"`` — a real lens's traced relative-illumination curve for the camera's f-number and
+  focus (``camera.lens_curves()``, :mod:`clpost.optics.curves`: pupil area that passes × cos
+  factors, so it includes natural *and* optical vignetting). A thin lens has no traced curve.
 * ``"table:<path>"`` — a manufacturer-style table (:func:`read_table`): text lines
   ``image_height_mm relative_illumination`` (comma or whitespace separated) starting at 0 mm,
   with a ``# source:`` provenance comment; linear interpolation. The table must reach the sensor's
@@ -52,17 +50,6 @@ from .base import PointwiseStage
 LUT_SIZE = 1024
 
 RelativeIllumination = Callable[[np.ndarray], np.ndarray]
-_PROVIDERS: list[Callable[[object], RelativeIllumination | None]] = []
-
-
-def register_relative_illumination(provider: Callable[[object], RelativeIllumination | None]) -> None:
-    """Add a source of RI(r_mm) curves for ``Camera.vignetting = "lens"``: ``provider(camera)``
-    returns a function of image height (mm, array) giving RI in (0, 1] for that camera's lens,
-    f-number and focus, or None if it does not know the lens."""
-    if not callable(provider):
-        raise InputError("register_relative_illumination: provider must be callable(camera) -> RI or None")
-    if provider not in _PROVIDERS:
-        _PROVIDERS.append(provider)
 
 
 def natural(camera) -> RelativeIllumination:
@@ -115,12 +102,12 @@ def relative_illumination(camera) -> RelativeIllumination | None:
     if mode == "natural":
         return natural(camera)
     if mode == "lens":
-        for provider in _PROVIDERS:
-            ri = provider(camera)
-            if ri is not None:
-                return ri
-        raise InputError(f"--vignetting lens: no relative-illumination curve is registered for lens "
-                         f"{camera.lens!r}; use --vignetting natural (cos⁴θ) or table:<file>")
+        if camera.optics is None:
+            raise InputError(f"--vignetting lens needs a traced lens from lens_data (e.g. --lens "
+                             f"zeiss-planar-50-f1.4), not {camera.lens!r}; for a thin lens use "
+                             "--vignetting natural (cos⁴θ) or table:<file>")
+        curves = camera.lens_curves()
+        return lambda r: np.clip(curves.at("relative_illumination", np.asarray(r, np.float64)), 0.0, 1.0)
     r, ri, _ = read_table(mode[6:])
     half_diag = 0.5 * math.hypot(*camera.sensor_mm)
     if r[-1] < half_diag - 1e-9:
