@@ -3,8 +3,10 @@
  * clpost/stages/motion_blur.py documents the formulas; its reference() is the oracle.
  *
  * Buffers: colour planar (c*n + i); velocity interleaved (2i, 2i+1) px per frame, forward,
- * +x right, +y down; depth planar metres (+inf sky). Scratch: hv = clamped half-vectors
- * (2 planes), iz = 1/depth (0 for sky), tile and neighbour-max half-vectors (2 planes each).
+ * +x right, +y down; depth planar metres (+inf sky). Scratch: hv = clamped half-vectors and
+ * their unclamped length (3 planes: x, y, key), iz = 1/depth (0 for sky), tile and
+ * neighbour-max (3 planes each). Maxima are ranked by the unclamped length: clamped vectors all
+ * have length K, and ranking them by a rounding-level difference would not be reproducible.
  *
  * Defines: MOTION_BLUR_TILE (tile size K = the largest blur half-length in px),
  * MOTION_BLUR_SAMPLES (S, odd; the centre tap is the pixel itself).
@@ -47,14 +49,16 @@ __kernel void motion_blur_prep(__global const float *restrict velocity,
     /* scale by the inf-norm first: |v| up to FLT_MAX never overflows to inf */
     const float m = fmax(fabs(v.x), fabs(v.y));
     float2 h = (float2)(0.0f, 0.0f);
+    float len = 0.0f;
     if (m > 0.0f) {
         const float2 u = v / m;                     /* inf-norm 1 */
-        const float len = sqrt(motion_blur_len2(u)) * m * k;   /* |h| (may be inf only if k huge) */
+        len = sqrt(motion_blur_len2(u)) * m * k;    /* unclamped |h| (inf only beyond FLT_MAX) */
         const float r = fmin(len, (float)MOTION_BLUR_TILE);
         h = u * (r / sqrt(motion_blur_len2(u)));
     }
     hv[i] = h.x;
     hv[n + i] = h.y;
+    hv[2 * n + i] = len;
     const float z = depth[i];
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
 }
@@ -67,21 +71,21 @@ __kernel void motion_blur_tilemax(__global const float *restrict hv, __global fl
     if (tx >= tw || ty >= th) return;
     const size_t n = (size_t)width * (size_t)height;
     float2 best = (float2)(0.0f, 0.0f);
-    float best2 = 0.0f;
+    float best2 = 0.0f;   /* the unclamped length of best */
     const int y1 = min(ty * MOTION_BLUR_TILE + MOTION_BLUR_TILE, height);
     const int x1 = min(tx * MOTION_BLUR_TILE + MOTION_BLUR_TILE, width);
     for (int y = ty * MOTION_BLUR_TILE; y < y1; ++y) {
         for (int x = tx * MOTION_BLUR_TILE; x < x1; ++x) {
             const size_t i = (size_t)y * (size_t)width + (size_t)x;
-            const float2 h = (float2)(hv[i], hv[n + i]);
-            const float l2 = motion_blur_len2(h);
-            if (l2 > best2) { best2 = l2; best = h; }
+            const float l = hv[2 * n + i];
+            if (l > best2) { best2 = l; best = (float2)(hv[i], hv[n + i]); }
         }
     }
     const size_t t = (size_t)ty * (size_t)tw + (size_t)tx;
     const size_t tn = (size_t)tw * (size_t)th;
     tile[t] = best.x;
     tile[tn + t] = best.y;
+    tile[2 * tn + t] = best2;
 }
 
 /* largest tile half-vector in the 3 x 3 tile neighbourhood (scan order on ties) */
@@ -98,9 +102,8 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
             const int sx = tx + dx, sy = ty + dy;
             if (sx < 0 || sy < 0 || sx >= tw || sy >= th) continue;
             const size_t t = (size_t)sy * (size_t)tw + (size_t)sx;
-            const float2 h = (float2)(tile[t], tile[tn + t]);
-            const float l2 = motion_blur_len2(h);
-            if (l2 > best2) { best2 = l2; best = h; }
+            const float l = tile[2 * tn + t];
+            if (l > best2) { best2 = l; best = (float2)(tile[t], tile[tn + t]); }
         }
     }
     const size_t t = (size_t)ty * (size_t)tw + (size_t)tx;

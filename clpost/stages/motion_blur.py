@@ -15,7 +15,8 @@ whose half-vector is
 **Reconstruction filter** (McGuire, Hennessy, Bukowski, Osman 2012, "A Reconstruction Filter for
 Plausible Motion Blur", I3D; Jimenez 2014, "Next Generation Post Processing in Call of Duty:
 Advanced Warfare", SIGGRAPH course): the image is cut in K×K tiles; TileMax holds each tile's
-longest h and NeighborMax the longest of its 3×3 tiles, :math:`v_N`, so a fast object blurs over a
+longest h (ranked by the unclamped length, first in scan order on ties) and NeighborMax the
+longest of its 3×3 tiles, :math:`v_N`, so a fast object blurs over a
 static background *and* a static pixel receives the smear of a neighbour. Output at pixel X, with
 S taps along :math:`v_N`:
 
@@ -165,8 +166,8 @@ class MotionBlur(GatherStage):
         key = (id(rt.context), w, h)
         if key not in self._scratch:
             tw, th = -(-w // TILE), -(-h // TILE)
-            self._scratch = {key: dict(hv=rt.empty((2, h, w)), iz=rt.empty((h, w)),
-                                       tile=rt.empty((2, th, tw)), nmax=rt.empty((2, th, tw)),
+            self._scratch = {key: dict(hv=rt.empty((3, h, w)), iz=rt.empty((h, w)),
+                                       tile=rt.empty((3, th, tw)), nmax=rt.empty((2, th, tw)),
                                        tmp=rt.empty((3, h, w)), tw=tw, th=th)}
         return self._scratch[key]
 
@@ -240,32 +241,34 @@ def jitter(seed: int, frame: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return ((h >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0) - np.float32(0.5))
 
 
-def half_vectors(velocity: np.ndarray, k: float) -> np.ndarray:
-    """h = v·k clamped to |h| ≤ K (H×W×2, float64)."""
+def half_vectors(velocity: np.ndarray, k: float, with_length: bool = False) -> np.ndarray:
+    """h = v·k clamped to |h| ≤ K (H×W×2, float64); ``with_length`` appends the unclamped |v·k|
+    (the key TileMax ranks by) as a third component."""
     v = np.asarray(velocity, dtype=np.float64)
     m = np.max(np.abs(v), axis=-1, keepdims=True)
     u = np.divide(v, m, out=np.zeros_like(v), where=m > 0)
     ul = np.hypot(u[..., 0], u[..., 1])[..., None]
-    r = np.minimum(ul * m * k, TILE)
-    return np.divide(u * r, ul, out=np.zeros_like(v), where=ul > 0)
+    length = ul * m * k
+    h = np.divide(u * np.minimum(length, TILE), ul, out=np.zeros_like(v), where=ul > 0)
+    return np.concatenate([h, length], axis=-1) if with_length else h
 
 
 def _argmax_len(vecs: np.ndarray) -> np.ndarray:
-    """vecs (..., N, 2) → the longest of the N (first on ties; zero if all are zero)."""
-    l2 = vecs[..., 0] ** 2 + vecs[..., 1] ** 2
-    idx = np.argmax(l2, axis=-1)
+    """vecs (..., N, 3) → the one of the N with the largest key (component 2; first on ties)."""
+    idx = np.argmax(vecs[..., 2], axis=-1)
     return np.take_along_axis(vecs, idx[..., None, None], axis=-2)[..., 0, :]
 
 
 def tile_max(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(TileMax, NeighborMax) of half-vectors h (H×W×2): th×tw×2 each."""
+    """(TileMax, NeighborMax) of keyed half-vectors h (H×W×3 from ``half_vectors(...,
+    with_length=True)``): th×tw×3 each."""
     hh, ww = h.shape[:2]
     tw, th = -(-ww // TILE), -(-hh // TILE)
-    pad = np.zeros((th * TILE, tw * TILE, 2))
+    pad = np.zeros((th * TILE, tw * TILE, 3))
     pad[:hh, :ww] = h
-    tiles = pad.reshape(th, TILE, tw, TILE, 2).transpose(0, 2, 1, 3, 4).reshape(th, tw, TILE * TILE, 2)
+    tiles = pad.reshape(th, TILE, tw, TILE, 3).transpose(0, 2, 1, 3, 4).reshape(th, tw, TILE * TILE, 3)
     tmax = _argmax_len(tiles)
-    tp = np.zeros((th + 2, tw + 2, 2))
+    tp = np.zeros((th + 2, tw + 2, 3))
     tp[1:-1, 1:-1] = tmax
     neigh = np.stack([tp[1 + dy:1 + dy + th, 1 + dx:1 + dx + tw] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=2)
     return tmax, _argmax_len(neigh)
@@ -285,10 +288,11 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
                    samples: int, frame_index: int = 0, seed: int = SEED) -> np.ndarray:
     """The reconstruction filter of the module docstring in float64 (H×W×3 in and out)."""
     hh, ww = color.shape[:2]
-    h = half_vectors(velocity, fraction / 2.0)
-    _, nmax = tile_max(h)
+    hk = half_vectors(velocity, fraction / 2.0, with_length=True)
+    h = hk[..., :2]
+    _, nmax = tile_max(hk)
     ys, xs = np.mgrid[0:hh, 0:ww]
-    vn = nmax[ys // TILE, xs // TILE]
+    vn = nmax[ys // TILE, xs // TILE, :2]
     vn32 = vn.astype(np.float32)
     z = np.full((hh, ww), np.inf) if depth is None else np.asarray(depth, dtype=np.float64)
     iz = np.where(np.isinf(z), 0.0, 1.0 / np.where(np.isinf(z), 1.0, z))
