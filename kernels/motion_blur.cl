@@ -34,7 +34,7 @@ inline float motion_blur_len2(float2 v) {
     return a + b;
 }
 
-/* half-vector h = v * k (k = shutter fraction / 2), clamped to |h| <= K keeping its direction;
+/* motion_blur (the gather, below) needs: half-vector h = v * k (k = shutter fraction / 2), clamped to |h| <= K keeping its direction;
  * inverse depth for the soft depth test (0 for the sky, so no inf - inf). */
 __kernel void motion_blur_prep(__global const float *restrict velocity,
                                __global const float *restrict depth,
@@ -126,7 +126,7 @@ inline float motion_blur_front(float wa, float wb) {
     return clamp(1.0f - (wb - wa) / (MOTION_BLUR_SOFT_Z * m), 0.0f, 1.0f);
 }
 
-__kernel void motion_blur_gather(__global const float *restrict src, __global float *restrict dst,
+__kernel void motion_blur(__global const float *restrict src, __global float *restrict dst,
                                  __global const float *restrict hv, __global const float *restrict iz,
                                  __global const float *restrict nmax,
                                  const int width, const int height, const int tw, const int th,

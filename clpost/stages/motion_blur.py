@@ -192,7 +192,7 @@ class MotionBlur(GatherStage):
             k = self._kernel(rt, camera, "motion_blur_neighbormax")
             k.set_args(b["tile"], b["nmax"], np.int32(tw), np.int32(th))
             events.append(cl.enqueue_nd_range_kernel(q, k, (tw, th), None))
-            k = self._kernel(rt, camera, "motion_blur_gather")
+            k = self._kernel(rt, camera, "motion_blur")
             k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], np.int32(w), np.int32(h),
                        np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(_frame_index(frame)),
                        np.float32(1.0 / (self.samples + 1)))
