@@ -131,3 +131,14 @@ def test_subframe_reference_renders_and_blurs_the_mover():
         assert np.isfinite(rolling.color).all() and not np.array_equal(rolling.color, ref.color)
     finally:
         r.close()
+
+
+def test_demo_writes_the_reference_and_refuses_it_without_a_frame_rate(tmp_path):
+    rc = main(["demo", str(tmp_path / "d"), "--frames", "1", "--size", "48x32", "--fps", "24",
+               "--shutter-angle", "180", "--reference-subframes", "2"])
+    assert rc == 0
+    ref = exr.read_frame(tmp_path / "d" / "render" / "reference_blur.0001.exr")
+    assert ref.color.shape == (32, 48, 3) and ref.velocity is not None
+    assert (tmp_path / "d" / "preview" / "reference_blur.0001.png").is_file()
+    assert main(["demo", str(tmp_path / "e"), "--frames", "1", "--size", "48x32",
+                 "--reference-subframes", "2"]) == 2
