@@ -113,8 +113,14 @@ class Camera:
     """distortion stage: a :class:`clpost.calibration.OpenCVModel` (OpenCV standard model, e.g.
     from ``--calibration cam.yaml``); None = no distortion."""
     vignetting: str = "off"
-    """vignetting stage: ``off``, ``natural`` (cos⁴θ of the thin lens), ``lens`` (the registered
+    """vignetting stage: ``off``, ``natural`` (cos⁴θ of the thin lens), ``lens`` (the traced
     relative-illumination curve of ``lens``) or ``table:<path>`` (manufacturer-style table)."""
+    # motion_blur stage: the frame rate turns px-per-frame velocities into a blur over the
+    # shutter (fraction shutter_s × fps); None (default) leaves motion blur unmodelled.
+    frame_rate_fps: float | None = None
+    """Frames per second of the sequence (e.g. 24); with ``shutter_s`` it gives the open fraction."""
+    readout_time_s: float = 0.0
+    """Rolling shutter: time from reading the top row to the bottom row (s); 0 = global shutter."""
 
     def __post_init__(self) -> None:
         parse_lens(self.lens)
@@ -186,6 +192,19 @@ class Camera:
         v = self.vignetting
         if not isinstance(v, str) or not (v in ("off", "natural", "lens") or (v.startswith("table:") and len(v) > 6)):
             raise InputError(f"Camera.vignetting={v!r} must be 'off', 'natural', 'lens' or 'table:<path>'")
+        # motion_blur stage
+        if self.frame_rate_fps is not None:
+            fps = _finite("frame_rate_fps", self.frame_rate_fps, "frames per second", "e.g. 24")
+            if fps <= 0:
+                raise InputError(f"Camera.frame_rate_fps={self.frame_rate_fps!r} must be > 0 frames per second, e.g. 24")
+            object.__setattr__(self, "frame_rate_fps", fps)
+        ro = _finite("readout_time_s", self.readout_time_s, "seconds", "e.g. 0.01 for a 10 ms sensor readout")
+        if ro < 0:
+            raise InputError(f"Camera.readout_time_s={self.readout_time_s!r} must be >= 0 seconds (0 = global shutter)")
+        if ro > 0 and self.frame_rate_fps is None:
+            raise InputError("Camera.readout_time_s > 0 needs Camera.frame_rate_fps (--fps) to turn "
+                             "px-per-frame velocities into a per-row shift")
+        object.__setattr__(self, "readout_time_s", ro)
 
     # -- derived quantities -------------------------------------------------------------------
     @property

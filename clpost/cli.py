@@ -77,6 +77,10 @@ CAMERA_OPTIONS = {
     "--calibration": ("distortion", _calibration, "camera calibration (OpenCV YAML/JSON, ROS camera_info, "
                       "COLMAP cameras.txt[#ID]): renders its distortion (distortion stage)"),
     "--vignetting": ("vignetting", str, "off, natural (cos^4), lens or table:<file> (vignetting stage)"),
+    # motion_blur stage
+    "--fps": ("frame_rate_fps", _positive_float, "frame rate of the sequence (enables motion blur: shutter × fps of a frame)"),
+    "--shutter-angle": ("shutter_angle_deg", _positive_float, "rotary shutter angle in degrees (needs --fps; sets the shutter: 180° at 24 fps = 1/48 s)"),
+    "--readout": ("readout_time_s", _positive_float, "rolling-shutter readout time top to bottom row in seconds (needs --fps)"),
 }
 
 
@@ -90,6 +94,13 @@ def camera_from_args(args: argparse.Namespace, **defaults) -> Camera:
     """Camera from the options given; ``defaults`` overrides Camera's own defaults (demo)."""
     kw = dict(defaults)
     kw.update({k[4:]: v for k, v in vars(args).items() if k.startswith("cam_")})
+    if "shutter_angle_deg" in kw:  # motion_blur: a shutter angle is a shutter time at a frame rate
+        from .stages.motion_blur import shutter_from_angle
+
+        angle = kw.pop("shutter_angle_deg")
+        if kw.get("frame_rate_fps") is None:
+            raise InputError("--shutter-angle needs --fps (the shutter time is angle / (360° × fps))")
+        kw["shutter_s"] = shutter_from_angle(angle, kw["frame_rate_fps"])
     return Camera(**kw)
 
 
@@ -111,7 +122,7 @@ def cmd_demo(args) -> int:
     camera = camera_from_args(args, **DEMO_CAMERA_DEFAULTS)
     run_demo(Path(args.outdir), camera, size=args.size, n_frames=args.frames, quality=args.quality,
              stages=args.stages, device=args.device, camera_motion=not args.static_camera,
-             overwrite=args.overwrite, log=print)
+             overwrite=args.overwrite, log=print, reference_subframes=args.reference_subframes)
     return 0
 
 
@@ -206,6 +217,41 @@ def _process_distributed(args, camera, jobs, progress):
         client.close()
         if cluster is not None:
             cluster.close()
+def cmd_expose(args) -> int:
+    from . import exr
+    from .atomic import write_png
+    from .expose import expose, frames_needed
+    from .sequence import expand, find_frames, has_pattern, parse_frames
+
+    if not has_pattern(args.input):
+        raise InputError(f"{args.input!r}: expose needs a frame sequence pattern (in.####.exr, in.%%04d.exr)")
+    out = Path(args.output)
+    if out.exists() and not args.overwrite:
+        raise InputError(f"{out} exists; choose another -o or pass --overwrite")
+    found = parse_frames(args.frames) if args.frames else find_frames(args.input)
+    want = set(frames_needed(args.fps, args.open, args.close))
+    frames = [n for n in found if n in want]
+
+    def read(n):
+        return exr.read_frame(expand(args.input, n), args.channels)
+
+    def progress(n, w):
+        if not args.quiet:
+            print(f"frame {n}: {float(w):.6g} s of the exposure")
+
+    part = expose(read, frames or found, args.fps, args.open, args.close, device=args.device, progress=progress)
+    from .frame import Frame
+
+    color = part.exposure() if args.sum else part.mean()
+    header = {"clpost.expose.open_s": str(args.open), "clpost.expose.close_s": str(args.close),
+              "clpost.expose.fps": str(args.fps), "clpost.expose.seconds": f"{float(part.seconds):.9g}",
+              "clpost.expose.frames": str(part.count),
+              "clpost.expose.output": "exposure (input x seconds)" if args.sum else "time average (input units)"}
+    exr.write_frame(out, Frame(color), header=header)
+    if args.png:
+        write_png(args.png, color * (args.png_gain or 1.0))
+    print(f"exposed {part.count} frame(s) for {float(part.seconds):.6g} s -> {out}")
+    return 0
 
 
 def cmd_info(args) -> int:
@@ -269,6 +315,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--size", type=_size, default=None, help="WIDTHxHEIGHT (default 960 wide, sensor aspect)")
     d.add_argument("--static-camera", action="store_true", help="no camera motion")
     d.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    d.add_argument("--reference-subframes", type=int, default=0, metavar="K",
+                   help="also render a reference motion-blurred frame from K sub-frames per frame "
+                        "(needs --fps and --shutter or --shutter-angle)")
     _add_camera_options(d)
     _add_pipeline_options(d)
     d.set_defaults(func=cmd_demo)
@@ -291,6 +340,21 @@ def build_parser() -> argparse.ArgumentParser:
     _add_camera_options(pr)
     _add_pipeline_options(pr)
     pr.set_defaults(func=cmd_process)
+
+    e = sub.add_parser("expose", help="long exposure: exact time-weighted sum of a sequence over [--open, --close]")
+    e.add_argument("input", help="input EXR pattern; frame n spans [n/fps, (n+1)/fps) seconds")
+    e.add_argument("-o", "--output", required=True, help="output EXR (written atomically)")
+    e.add_argument("--open", required=True, help="shutter opens at this time in seconds (e.g. 0.5 or 1/48)")
+    e.add_argument("--close", required=True, help="shutter closes at this time in seconds")
+    e.add_argument("--fps", required=True, help="frame rate of the sequence (24, 25, 24000/1001)")
+    e.add_argument("--frames", default=None, help="frame range to consider (default: all found)")
+    e.add_argument("--channels", default=None, help="input channel layout (default: detect)")
+    e.add_argument("--sum", action="store_true", help="write H = ∫E dt (input × seconds) instead of the time average")
+    e.add_argument("--png", default=None, help="also write an sRGB preview PNG here")
+    e.add_argument("--png-gain", type=_positive_float, default=None, help="scale before the PNG encoding")
+    e.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    e.add_argument("--quiet", action="store_true")
+    e.set_defaults(func=cmd_expose)
 
     i = sub.add_parser("info", help="channels, size, depth and velocity ranges of EXR files")
     i.add_argument("files", nargs="+")

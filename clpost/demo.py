@@ -36,7 +36,7 @@ DEMO_WIDTH = 960
 def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int] | None = None,
              n_frames: int = 3, quality: str = "final", stages: list[str] | None = None,
              device: str | None = None, camera_motion: bool = True, overwrite: bool = False,
-             log: Callable[[str], None] = print) -> dict:
+             log: Callable[[str], None] = print, reference_subframes: int = 0) -> dict:
     """Render, process and write the demo; returns a summary (paths, timings, plan)."""
     from .render import render_demo_sequence
 
@@ -85,5 +85,24 @@ def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int
         f"colour-science import), "
         f"then {min(t_proc[1:] or t_proc) * 1e3:.1f} ms/frame")
     log(f"wrote {outdir}/render/demo.####.exr, {outdir}/clpost.####.exr and {outdir}/preview/clpost.####.png")
+    if reference_subframes:
+        # motion_blur: the ground truth the velocity-buffer blur is measured against
+        from .render.motion import render_motion_blur_reference
+
+        from .stages import stage_names
+
+        t2 = time.perf_counter()
+        # the reference is already blurred: process it with every stage but motion_blur
+        ref_pipe = Pipeline(cam, quality=quality, device=device,
+                            stages=[s for s in (stages or stage_names()) if s != "motion_blur"])
+        for i in range(1, n_frames + 1):
+            ref = render_motion_blur_reference(cam, size, frame_index=i - 1, subframes=reference_subframes,
+                                               camera_motion=camera_motion)
+            exr.write_frame(outdir / "render" / f"reference_blur.{i:04d}.exr", ref)
+            out = ref_pipe.run(ref)
+            write_png(outdir / "preview" / f"reference_blur.{i:04d}.png", out.color)
+        log(f"rendered {n_frames} motion-blur reference frame(s) from {reference_subframes} sub-frames each "
+            f"in {time.perf_counter() - t2:.1f} s: {outdir}/render/reference_blur.####.exr and "
+            f"{outdir}/preview/reference_blur.####.png (the same camera minus motion_blur)")
     return {"outputs": written, "render_s": t_render, "process_s": t_proc, "size": size,
             "plan": pipe.plan(frames[0])}

@@ -1,0 +1,347 @@
+r"""motion_blur: integration over the shutter from a velocity buffer, and a rolling shutter.
+
+**Shutter fraction.** Velocities are forward motion in px per frame (CONVENTIONS.md). The shutter
+is open for :math:`s = t_{shutter} \cdot F` of a frame interval (``Camera.shutter_s`` ×
+``Camera.frame_rate_fps``; a shutter angle θ gives :math:`t = \theta / (360° F)`, see
+:func:`shutter_from_angle` — 180° at 24 fps is 1/48 s, the same ``shutter_s`` the exposure stage
+uses, so blur and brightness always agree). The shutter interval is centred on the frame time, so a
+pixel moving with velocity v sweeps the segment :math:`p + v\,\tau`, :math:`\tau \in [-s/2, s/2]`,
+whose half-vector is
+
+.. math::
+
+    h = v\,\frac{s}{2}, \qquad |h| \le K
+
+**Reconstruction filter** (McGuire, Hennessy, Bukowski, Osman 2012, "A Reconstruction Filter for
+Plausible Motion Blur", I3D; Jimenez 2014, "Next Generation Post Processing in Call of Duty:
+Advanced Warfare", SIGGRAPH course): the image is cut in K×K tiles; TileMax holds each tile's
+longest h (ranked by the unclamped length, first in scan order on ties) and NeighborMax the
+longest of its 3×3 tiles, :math:`v_N`, so a fast object blurs over a
+static background *and* a static pixel receives the smear of a neighbour. Output at pixel X, with
+S taps along :math:`v_N`:
+
+.. math::
+
+    C'(X) = \frac{C(X)/|h_X| + \sum_{i \ne c} \alpha_i\,C(Y_i)}{1/|h_X| + \sum_{i \ne c} \alpha_i},
+    \quad Y_i = \Big\lfloor X + v_N\,t_i + \tfrac12 \Big\rfloor,
+    \quad t_i = -1 + 2\,\frac{i + 1 + j}{S + 1}
+
+.. math::
+
+    \alpha = f\,\mathrm{cone}(d, |h_Y|) + b\,\mathrm{cone}(d, |h_X|)
+           + 2\,\mathrm{cyl}(d, |h_Y|)\,\mathrm{cyl}(d, |h_X|)
+
+with :math:`d = |X - Y|`, cone(d, l) = clamp(1 − d/l, 0, 1), cyl(d, l) = 1 − smoothstep(0.95 l,
+1.05 l, d), f = "Y in front of X" and b = "X in front of Y" by a soft depth test on inverse depth
+(ramp over 5 % relative depth; the sky's inverse depth is 0), |h| clamped to ≥ 0.5 px, and
+:math:`j \in [-\tfrac12, \tfrac12)` a per-pixel jitter from a counter-based hash of (seed, frame
+index, x, y) (CONVENTIONS "Randomness") that turns banding into fine noise. If :math:`|v_N| \le
+0.5` px the pixel is left exactly as it is — hence the stage is *not planned* when no pixel's half-
+vector reaches 0.5 px (skipped ⇔ identity).
+
+**Quality** sets S (taps per pixel; measured error and cost in ``docs/motion_blur.md``):
+draft 7, preview 15, final 31. K = 20 px for all levels.
+
+**Clamping.** :math:`|h|` is limited to K = 20 px (a streak of at most 40 px, i.e. 2K) keeping
+its direction: faster motion blurs as if it moved 2K px during the exposure, so its streak is
+too short and too bright at each end rather than wrong in direction; the colour is still a
+weighted mean of input colours (no energy is created). Velocities up to FLT_MAX are safe (the
+length is computed after scaling by the inf-norm).
+
+**Rolling shutter** (``Camera.readout_time_s`` = r seconds from the top row to the bottom row):
+row y is exposed :math:`\tau_y = rF\,(y/(H-1) - \tfrac12)` frames after the frame time (the
+middle row stays in place), so it shows the surface that moved there. After the blur the image is
+warped by :math:`q = p - v(q)\,\tau_y` (three fixed-point steps, v at the nearest pixel of q,
+bilinear colour, clamped to the image). Exact for rigid translation; occlusions revealed by the
+motion are not invented (the reference renders them, see :mod:`clpost.render.motion`).
+
+Domain/range: any finite colour ≥ 0 → convex combinations of input colours (≥ 0, ≤ max input).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import InputError
+from .base import GatherStage
+
+TILE = 20
+"""K: tile size and the largest blur half-length in px."""
+SAMPLES = {"draft": 7, "preview": 15, "final": 31}
+"""S per quality level (odd: the centre tap is the pixel itself)."""
+SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
+SOFT_Z = 0.05
+
+
+def shutter_from_angle(angle_deg: float, fps: float) -> float:
+    r"""Shutter time of a rotary shutter: :math:`t = \theta / (360° \cdot F)` seconds."""
+    a, f = float(angle_deg), float(fps)
+    if not (math.isfinite(a) and 0 < a <= 360):
+        raise InputError(f"--shutter-angle {angle_deg!r} must be in (0, 360] degrees, e.g. 180")
+    if not (math.isfinite(f) and f > 0):
+        raise InputError(f"--fps {fps!r} must be > 0 frames per second, e.g. 24")
+    return a / (360.0 * f)
+
+
+def shutter_fraction(camera) -> float:
+    """Open fraction of a frame interval, s = shutter_s × frame_rate_fps (0 without a frame rate)."""
+    if camera.frame_rate_fps is None or camera.shutter_s is None:
+        return 0.0
+    return float(camera.shutter_s) * float(camera.frame_rate_fps)
+
+
+def _frame_index(frame) -> int:
+    v = frame.metadata.get("frame_index", 0)
+    try:
+        return int(v) & 0xFFFFFFFF
+    except (TypeError, ValueError):
+        return 0
+
+
+def _max_speed_bound(frame) -> float:
+    """An upper bound of max |v| (px/frame): √2 × the inf-norm (cheap; never under-estimates)."""
+    if frame.velocity is None:
+        return math.inf
+    return math.sqrt(2.0) * float(np.max(np.abs(frame.velocity))) if frame.velocity.size else 0.0
+
+
+def _blur_needed(camera, frame) -> bool:
+    return _max_speed_bound(frame) * shutter_fraction(camera) / 2.0 > 0.5
+
+
+def _rolling_needed(camera, frame) -> bool:
+    return camera.readout_time_s > 0 and frame.height > 1 and _max_speed_bound(frame) > 0
+
+
+class MotionBlur(GatherStage):
+    name = "motion_blur"
+    order = 40.0
+    reads = ("velocity", "depth")
+
+    def __init__(self, quality: str = "final") -> None:
+        super().__init__(quality)
+        self._scratch: dict = {}
+        self._kernels: dict = {}
+
+    @property
+    def samples(self) -> int:
+        return SAMPLES[self.quality]
+
+    def skip_reason(self, camera, frame):
+        if camera.frame_rate_fps is None:
+            return "no frame rate (Camera.frame_rate_fps / --fps): velocities in px per frame need it"
+        if frame.velocity is None:
+            return None  # needed: the planner asks for the velocity buffer
+        if not _blur_needed(camera, frame) and not _rolling_needed(camera, frame):
+            return (f"no blur: largest half-length ≤ {_max_speed_bound(frame) * shutter_fraction(camera) / 2:.3g} px "
+                    f"(< 0.5 px) at shutter fraction {shutter_fraction(camera):.3g}, global shutter")
+        return None
+
+    def reason_needed(self, camera, frame):
+        s = shutter_fraction(camera)
+        out = (f"shutter {camera.shutter_s:.4g} s at {camera.frame_rate_fps:g} fps = {s:.3g} frame, "
+               f"blur up to {min(_max_speed_bound(frame) * s, 2 * TILE):.3g} px, {self.samples} taps")
+        if camera.readout_time_s > 0:
+            out += f", rolling readout {camera.readout_time_s:g} s"
+        return out
+
+    def defines(self, camera):
+        return {"MOTION_BLUR_TILE": TILE, "MOTION_BLUR_SAMPLES": self.samples}
+
+    # -- OpenCL -----------------------------------------------------------------------------
+    def _kernel(self, rt, camera, name):
+        import pyopencl as cl
+
+        from ..runtime import kernel_source
+
+        src = kernel_source("common") + "\n" + kernel_source("motion_blur")
+        prog = rt.program(src, "motion_blur", self.defines(camera))
+        key = (id(prog), name)
+        if key not in self._kernels:
+            self._kernels[key] = cl.Kernel(prog, name)
+        return self._kernels[key]
+
+    def _buffers(self, rt, w, h):
+        key = (id(rt.context), w, h)
+        if key not in self._scratch:
+            tw, th = -(-w // TILE), -(-h // TILE)
+            self._scratch = {key: dict(hv=rt.empty((3, h, w)), iz=rt.empty((h, w)),
+                                       tile=rt.empty((3, th, tw)), nmax=rt.empty((2, th, tw)),
+                                       tmp=rt.empty((3, h, w)), tw=tw, th=th)}
+        return self._scratch[key]
+
+    def enqueue(self, rt, camera, frame, src, dst, aux):
+        import pyopencl as cl
+
+        q = rt.queue
+        w, h = frame.width, frame.height
+        b = self._buffers(rt, w, h)
+        tw, th = b["tw"], b["th"]
+        blur, rolling = _blur_needed(camera, frame), _rolling_needed(camera, frame)
+        events = []
+        blur_dst = b["tmp"] if rolling else dst
+        if blur:
+            k = self._kernel(rt, camera, "motion_blur_prep")
+            k.set_args(aux["velocity"], aux["depth"], b["hv"], b["iz"], np.int32(w), np.int32(h),
+                       np.float32(shutter_fraction(camera) / 2.0))
+            events.append(cl.enqueue_nd_range_kernel(q, k, (w, h), None))
+            k = self._kernel(rt, camera, "motion_blur_tilemax")
+            k.set_args(b["hv"], b["tile"], np.int32(w), np.int32(h), np.int32(tw), np.int32(th))
+            events.append(cl.enqueue_nd_range_kernel(q, k, (tw, th), None))
+            k = self._kernel(rt, camera, "motion_blur_neighbormax")
+            k.set_args(b["tile"], b["nmax"], np.int32(tw), np.int32(th))
+            events.append(cl.enqueue_nd_range_kernel(q, k, (tw, th), None))
+            k = self._kernel(rt, camera, "motion_blur")
+            k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], np.int32(w), np.int32(h),
+                       np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(_frame_index(frame)),
+                       np.float32(1.0 / (self.samples + 1)))
+            events.append(cl.enqueue_nd_range_kernel(q, k, (w, h), None))
+        if rolling:
+            k = self._kernel(rt, camera, "motion_blur_rolling")
+            k.set_args(blur_dst if blur else src, dst, aux["velocity"], np.int32(w), np.int32(h),
+                       np.float32(camera.readout_time_s * camera.frame_rate_fps))
+            events.append(cl.enqueue_nd_range_kernel(q, k, (w, h), None))
+        if not events:  # only reachable when forced past skip_reason (e.g. a test): copy through
+            events.append(cl.enqueue_copy(q, dst, src))
+        return events
+
+    # -- the oracle -------------------------------------------------------------------------
+    def reference(self, camera, frame, color):
+        """float64 numpy implementation of the module docstring (tap positions in float32,
+        rounded exactly as the kernel rounds them)."""
+        out = np.asarray(color, dtype=np.float64)
+        if frame.velocity is None:
+            raise InputError("motion_blur needs the frame's velocity buffer")
+        if _blur_needed(camera, frame):
+            out = reference_blur(out, frame.velocity, frame.depth, shutter_fraction(camera),
+                                 self.samples, _frame_index(frame))
+        if _rolling_needed(camera, frame):
+            out = reference_rolling(out, frame.velocity, camera.readout_time_s * camera.frame_rate_fps)
+        return out
+
+
+# -- numpy reference ---------------------------------------------------------------------------
+
+def _mix32(x: np.ndarray) -> np.ndarray:
+    x = np.asarray(x, dtype=np.uint32)
+    with np.errstate(over="ignore"):
+        x = x ^ (x >> np.uint32(16))
+        x = x * np.uint32(0x7FEB352D)
+        x = x ^ (x >> np.uint32(15))
+        x = x * np.uint32(0x846CA68B)
+        x = x ^ (x >> np.uint32(16))
+    return x
+
+
+def jitter(seed: int, frame: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Per-pixel jitter j ∈ [−½, ½) — the kernel's ``motion_blur_jitter`` (float32)."""
+    inner = _mix32(np.uint32(frame) ^ _mix32(np.uint32(seed)))
+    h = _mix32(x.astype(np.uint32) ^ _mix32(y.astype(np.uint32) ^ inner))
+    return ((h >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0) - np.float32(0.5))
+
+
+def half_vectors(velocity: np.ndarray, k: float, with_length: bool = False) -> np.ndarray:
+    """h = v·k clamped to |h| ≤ K (H×W×2, float64); ``with_length`` appends the unclamped |v·k|
+    (the key TileMax ranks by) as a third component."""
+    v = np.asarray(velocity, dtype=np.float64)
+    m = np.max(np.abs(v), axis=-1, keepdims=True)
+    u = np.divide(v, m, out=np.zeros_like(v), where=m > 0)
+    ul = np.hypot(u[..., 0], u[..., 1])[..., None]
+    length = ul * m * k
+    h = np.divide(u * np.minimum(length, TILE), ul, out=np.zeros_like(v), where=ul > 0)
+    return np.concatenate([h, length], axis=-1) if with_length else h
+
+
+def _argmax_len(vecs: np.ndarray) -> np.ndarray:
+    """vecs (..., N, 3) → the one of the N with the largest key (component 2; first on ties)."""
+    idx = np.argmax(vecs[..., 2], axis=-1)
+    return np.take_along_axis(vecs, idx[..., None, None], axis=-2)[..., 0, :]
+
+
+def tile_max(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(TileMax, NeighborMax) of keyed half-vectors h (H×W×3 from ``half_vectors(...,
+    with_length=True)``): th×tw×3 each."""
+    hh, ww = h.shape[:2]
+    tw, th = -(-ww // TILE), -(-hh // TILE)
+    pad = np.zeros((th * TILE, tw * TILE, 3))
+    pad[:hh, :ww] = h
+    tiles = pad.reshape(th, TILE, tw, TILE, 3).transpose(0, 2, 1, 3, 4).reshape(th, tw, TILE * TILE, 3)
+    tmax = _argmax_len(tiles)
+    tp = np.zeros((th + 2, tw + 2, 3))
+    tp[1:-1, 1:-1] = tmax
+    neigh = np.stack([tp[1 + dy:1 + dy + th, 1 + dx:1 + dx + tw] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=2)
+    return tmax, _argmax_len(neigh)
+
+
+def _smoothstep(e0, e1, x):
+    t = np.clip((x - e0) / np.where(e1 > e0, e1 - e0, 1.0), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _front(wa, wb):
+    m = np.maximum(np.maximum(wa, wb), 1e-30)
+    return np.clip(1.0 - (wb - wa) / (SOFT_Z * m), 0.0, 1.0)
+
+
+def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | None, fraction: float,
+                   samples: int, frame_index: int = 0, seed: int = SEED) -> np.ndarray:
+    """The reconstruction filter of the module docstring in float64 (H×W×3 in and out)."""
+    hh, ww = color.shape[:2]
+    hk = half_vectors(velocity, fraction / 2.0, with_length=True)
+    h = hk[..., :2]
+    _, nmax = tile_max(hk)
+    ys, xs = np.mgrid[0:hh, 0:ww]
+    vn = nmax[ys // TILE, xs // TILE, :2]
+    vn32 = vn.astype(np.float32)
+    z = np.full((hh, ww), np.inf) if depth is None else np.asarray(depth, dtype=np.float64)
+    iz = np.where(np.isinf(z), 0.0, 1.0 / np.where(np.isinf(z), 1.0, z))
+    lx = np.maximum(np.hypot(h[..., 0], h[..., 1]), 0.5)
+    j = jitter(seed, frame_index, xs, ys)
+    inv = np.float32(1.0 / (samples + 1))
+    weight = 1.0 / lx
+    total = color * weight[..., None]
+    for s in range(samples):
+        if s == samples // 2:
+            continue
+        u = (np.float32(s + 1) + j) * inv
+        t = np.float32(2.0) * u - np.float32(1.0)
+        ox, oy = vn32[..., 0] * t, vn32[..., 1] * t
+        sx = np.clip(np.floor(xs.astype(np.float32) + ox + np.float32(0.5)).astype(np.int64), 0, ww - 1)
+        sy = np.clip(np.floor(ys.astype(np.float32) + oy + np.float32(0.5)).astype(np.int64), 0, hh - 1)
+        dist = np.hypot(sx - xs, sy - ys)
+        hy = h[sy, sx]
+        ly = np.maximum(np.hypot(hy[..., 0], hy[..., 1]), 0.5)
+        wy = iz[sy, sx]
+        f, b = _front(wy, iz), _front(iz, wy)
+        cone_y = np.clip(1.0 - dist / ly, 0.0, 1.0)
+        cone_x = np.clip(1.0 - dist / lx, 0.0, 1.0)
+        cyl = (1.0 - _smoothstep(0.95 * ly, 1.05 * ly, dist)) * (1.0 - _smoothstep(0.95 * lx, 1.05 * lx, dist))
+        a = f * cone_y + b * cone_x + 2.0 * cyl
+        weight = weight + a
+        total = total + a[..., None] * color[sy, sx]
+    out = total / weight[..., None]
+    still = vn[..., 0] ** 2 + vn[..., 1] ** 2 <= 0.25
+    out[still] = color[still]
+    return out
+
+
+def reference_rolling(color: np.ndarray, velocity: np.ndarray, readout_frames: float) -> np.ndarray:
+    """Rolling-shutter warp of the module docstring (float64)."""
+    hh, ww = color.shape[:2]
+    ys, xs = np.mgrid[0:hh, 0:ww].astype(np.float64)
+    tau = readout_frames * (ys / (hh - 1) - 0.5) if hh > 1 else np.zeros_like(ys)
+    v = np.asarray(velocity, dtype=np.float64)
+    qx, qy = xs.copy(), ys.copy()
+    for _ in range(3):
+        nx = np.clip(np.floor(qx + 0.5), 0, ww - 1).astype(np.int64)
+        ny = np.clip(np.floor(qy + 0.5), 0, hh - 1).astype(np.int64)
+        qx = np.clip(xs - v[ny, nx, 0] * tau, 0, ww - 1)
+        qy = np.clip(ys - v[ny, nx, 1] * tau, 0, hh - 1)
+    x0 = np.minimum(np.floor(qx), ww - 1).astype(np.int64)
+    y0 = np.minimum(np.floor(qy), hh - 1).astype(np.int64)
+    x1, y1 = np.minimum(x0 + 1, ww - 1), np.minimum(y0 + 1, hh - 1)
+    fx, fy = (qx - x0)[..., None], (qy - y0)[..., None]
+    top = color[y0, x0] * (1 - fx) + color[y0, x1] * fx
+    bot = color[y1, x0] * (1 - fx) + color[y1, x1] * fx
+    return top * (1 - fy) + bot * fy

@@ -1,0 +1,209 @@
+/* motion_blur: velocity-buffer motion blur (McGuire, Hennessy, Bukowski, Osman 2012, "A
+ * Reconstruction Filter for Plausible Motion Blur") and a rolling-shutter warp.
+ * clpost/stages/motion_blur.py documents the formulas; its reference() is the oracle.
+ *
+ * Buffers: colour planar (c*n + i); velocity interleaved (2i, 2i+1) px per frame, forward,
+ * +x right, +y down; depth planar metres (+inf sky). Scratch: hv = clamped half-vectors and
+ * their unclamped length (3 planes: x, y, key), iz = 1/depth (0 for sky), tile and
+ * neighbour-max (3 planes each). Maxima are ranked by the unclamped length: clamped vectors all
+ * have length K, and ranking them by a rounding-level difference would not be reproducible.
+ *
+ * Defines: MOTION_BLUR_TILE (tile size K = the largest blur half-length in px),
+ * MOTION_BLUR_SAMPLES (S, odd; the centre tap is the pixel itself).
+ */
+#pragma OPENCL FP_CONTRACT OFF
+/* FP_CONTRACT OFF: no a*b+c fusion, so tap positions round exactly as in the numpy reference. */
+
+#define MOTION_BLUR_SOFT_Z 0.05f   /* relative depth difference over which fore/background blend */
+
+inline uint motion_blur_mix(uint x) {
+    /* lowbias32 (C. Wellons, "Hash Prospector"): a counter-based hash, same on every device. */
+    x ^= x >> 16; x *= 0x7feb352dU; x ^= x >> 15; x *= 0x846ca68bU; x ^= x >> 16;
+    return x;
+}
+
+inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
+    /* j in [-0.5, 0.5): hash of (seed, frame, pixel, sample 0) per CONVENTIONS "Randomness". */
+    uint h = motion_blur_mix((uint)x ^ motion_blur_mix((uint)y ^ motion_blur_mix(frame ^ motion_blur_mix(seed))));
+    return (float)(h >> 8) * (1.0f / 16777216.0f) - 0.5f;
+}
+
+inline float motion_blur_len2(float2 v) {
+    float a = v.x * v.x;
+    float b = v.y * v.y;
+    return a + b;
+}
+
+/* motion_blur (the gather, below) needs: half-vector h = v * k (k = shutter fraction / 2), clamped to |h| <= K keeping its direction;
+ * inverse depth for the soft depth test (0 for the sky, so no inf - inf). */
+__kernel void motion_blur_prep(__global const float *restrict velocity,
+                               __global const float *restrict depth,
+                               __global float *restrict hv, __global float *restrict iz,
+                               const int width, const int height, const float k)
+{
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t i = (size_t)y * (size_t)width + (size_t)x;
+    float2 v = (float2)(velocity[2 * i], velocity[2 * i + 1]);
+    /* scale by the inf-norm first: |v| up to FLT_MAX never overflows to inf */
+    const float m = fmax(fabs(v.x), fabs(v.y));
+    float2 h = (float2)(0.0f, 0.0f);
+    float len = 0.0f;
+    if (m > 0.0f) {
+        const float2 u = v / m;                     /* inf-norm 1 */
+        len = sqrt(motion_blur_len2(u)) * m * k;    /* unclamped |h| (inf only beyond FLT_MAX) */
+        const float r = fmin(len, (float)MOTION_BLUR_TILE);
+        h = u * (r / sqrt(motion_blur_len2(u)));
+    }
+    hv[i] = h.x;
+    hv[n + i] = h.y;
+    hv[2 * n + i] = len;
+    const float z = depth[i];
+    iz[i] = isinf(z) ? 0.0f : 1.0f / z;
+}
+
+/* largest half-vector (by length; first in scan order on ties) of each K x K tile */
+__kernel void motion_blur_tilemax(__global const float *restrict hv, __global float *restrict tile,
+                                  const int width, const int height, const int tw, const int th)
+{
+    const int tx = get_global_id(0), ty = get_global_id(1);
+    if (tx >= tw || ty >= th) return;
+    const size_t n = (size_t)width * (size_t)height;
+    float2 best = (float2)(0.0f, 0.0f);
+    float best2 = 0.0f;   /* the unclamped length of best */
+    const int y1 = min(ty * MOTION_BLUR_TILE + MOTION_BLUR_TILE, height);
+    const int x1 = min(tx * MOTION_BLUR_TILE + MOTION_BLUR_TILE, width);
+    for (int y = ty * MOTION_BLUR_TILE; y < y1; ++y) {
+        for (int x = tx * MOTION_BLUR_TILE; x < x1; ++x) {
+            const size_t i = (size_t)y * (size_t)width + (size_t)x;
+            const float l = hv[2 * n + i];
+            if (l > best2) { best2 = l; best = (float2)(hv[i], hv[n + i]); }
+        }
+    }
+    const size_t t = (size_t)ty * (size_t)tw + (size_t)tx;
+    const size_t tn = (size_t)tw * (size_t)th;
+    tile[t] = best.x;
+    tile[tn + t] = best.y;
+    tile[2 * tn + t] = best2;
+}
+
+/* largest tile half-vector in the 3 x 3 tile neighbourhood (scan order on ties) */
+__kernel void motion_blur_neighbormax(__global const float *restrict tile, __global float *restrict nmax,
+                                      const int tw, const int th)
+{
+    const int tx = get_global_id(0), ty = get_global_id(1);
+    if (tx >= tw || ty >= th) return;
+    const size_t tn = (size_t)tw * (size_t)th;
+    float2 best = (float2)(0.0f, 0.0f);
+    float best2 = 0.0f;
+    for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+            const int sx = tx + dx, sy = ty + dy;
+            if (sx < 0 || sy < 0 || sx >= tw || sy >= th) continue;
+            const size_t t = (size_t)sy * (size_t)tw + (size_t)sx;
+            const float l = tile[2 * tn + t];
+            if (l > best2) { best2 = l; best = (float2)(tile[t], tile[tn + t]); }
+        }
+    }
+    const size_t t = (size_t)ty * (size_t)tw + (size_t)tx;
+    nmax[t] = best.x;
+    nmax[tn + t] = best.y;
+}
+
+inline float motion_blur_cone(float dist, float len) {
+    return clamp(1.0f - dist / len, 0.0f, 1.0f);
+}
+
+inline float motion_blur_cylinder(float dist, float len) {
+    return 1.0f - smoothstep(0.95f * len, 1.05f * len, dist);
+}
+
+/* weight that a surface of inverse depth wa is in front of one of inverse depth wb:
+ * 1 when nearer or equal, 0 when farther by more than MOTION_BLUR_SOFT_Z (relative) */
+inline float motion_blur_front(float wa, float wb) {
+    const float m = fmax(fmax(wa, wb), 1e-30f);
+    return clamp(1.0f - (wb - wa) / (MOTION_BLUR_SOFT_Z * m), 0.0f, 1.0f);
+}
+
+__kernel void motion_blur(__global const float *restrict src, __global float *restrict dst,
+                                 __global const float *restrict hv, __global const float *restrict iz,
+                                 __global const float *restrict nmax,
+                                 const int width, const int height, const int tw, const int th,
+                                 const uint seed, const uint frame, const float inv_s1)
+{
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t i = (size_t)y * (size_t)width + (size_t)x;
+    const size_t tn = (size_t)tw * (size_t)th;
+    const size_t t = (size_t)(y / MOTION_BLUR_TILE) * (size_t)tw + (size_t)(x / MOTION_BLUR_TILE);
+    const float2 vn = (float2)(nmax[t], nmax[tn + t]);
+    const float3 cx = load_planar(src, i, n);
+    if (motion_blur_len2(vn) <= 0.25f) {          /* nothing in reach moves by half a pixel */
+        store_planar(dst, i, n, cx);
+        return;
+    }
+    const float2 hx = (float2)(hv[i], hv[n + i]);
+    const float lx = fmax(sqrt(motion_blur_len2(hx)), 0.5f);
+    const float wx = iz[i];
+    const float j = motion_blur_jitter(seed, frame, x, y);
+    float weight = 1.0f / lx;
+    float3 sum = cx * weight;
+    for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
+        if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre tap is X itself */
+        const float u = ((float)(s + 1) + j) * inv_s1;
+        const float tt = 2.0f * u - 1.0f;
+        const float ox = vn.x * tt;
+        const float oy = vn.y * tt;
+        const int sx = clamp((int)floor((float)x + ox + 0.5f), 0, width - 1);
+        const int sy = clamp((int)floor((float)y + oy + 0.5f), 0, height - 1);
+        const size_t k = (size_t)sy * (size_t)width + (size_t)sx;
+        const float ddx = (float)(sx - x), ddy = (float)(sy - y);
+        const float dist = sqrt(ddx * ddx + ddy * ddy);
+        const float2 hy = (float2)(hv[k], hv[n + k]);
+        const float ly = fmax(sqrt(motion_blur_len2(hy)), 0.5f);
+        const float wy = iz[k];
+        const float f = motion_blur_front(wy, wx);    /* Y in front of X */
+        const float b = motion_blur_front(wx, wy);    /* X in front of Y */
+        const float a = f * motion_blur_cone(dist, ly) + b * motion_blur_cone(dist, lx)
+                      + motion_blur_cylinder(dist, ly) * motion_blur_cylinder(dist, lx) * 2.0f;
+        weight += a;
+        sum += a * load_planar(src, k, n);
+    }
+    store_planar(dst, i, n, sum / weight);
+}
+
+/* rolling shutter: row y is exposed tau_y = r (y/(H-1) - 1/2) frames after the frame time, so it
+ * shows the surface that moved there: q = p - v(q) tau_y (3 fixed-point steps, v at the nearest
+ * pixel), bilinear with clamp to edge. */
+__kernel void motion_blur_rolling(__global const float *restrict src, __global float *restrict dst,
+                                  __global const float *restrict velocity,
+                                  const int width, const int height, const float r)
+{
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t i = (size_t)y * (size_t)width + (size_t)x;
+    const float tau = height > 1 ? r * ((float)y / (float)(height - 1) - 0.5f) : 0.0f;
+    float qx = (float)x, qy = (float)y;
+    for (int it = 0; it < 3; ++it) {
+        const int nx = clamp((int)floor(qx + 0.5f), 0, width - 1);
+        const int ny = clamp((int)floor(qy + 0.5f), 0, height - 1);
+        const size_t k = (size_t)ny * (size_t)width + (size_t)nx;
+        const float dx = velocity[2 * k] * tau;
+        const float dy = velocity[2 * k + 1] * tau;
+        qx = clamp((float)x - dx, 0.0f, (float)(width - 1));
+        qy = clamp((float)y - dy, 0.0f, (float)(height - 1));
+    }
+    const int x0 = min((int)floor(qx), width - 1), y0 = min((int)floor(qy), height - 1);
+    const int x1 = min(x0 + 1, width - 1), y1 = min(y0 + 1, height - 1);
+    const float fx = qx - (float)x0, fy = qy - (float)y0;
+    const float3 c00 = load_planar(src, (size_t)y0 * width + x0, n);
+    const float3 c10 = load_planar(src, (size_t)y0 * width + x1, n);
+    const float3 c01 = load_planar(src, (size_t)y1 * width + x0, n);
+    const float3 c11 = load_planar(src, (size_t)y1 * width + x1, n);
+    const float3 top = c00 * (1.0f - fx) + c10 * fx;
+    const float3 bot = c01 * (1.0f - fx) + c11 * fx;
+    store_planar(dst, i, n, top * (1.0f - fy) + bot * fy);
+}
