@@ -239,7 +239,21 @@ def cmd_expose(args) -> int:
         if not args.quiet:
             print(f"frame {n}: {float(w):.6g} s of the exposure")
 
-    part = expose(read, frames or found, args.fps, args.open, args.close, device=args.device, progress=progress)
+    if args.workers or args.scheduler:
+        from .distributed import connect, expose_dask
+
+        client = connect(args.scheduler, args.workers)
+        try:
+            part = expose_dask(client, args.input, frames or found, args.fps, args.open, args.close,
+                               layout=args.channels, device=args.device)
+        finally:
+            cluster = getattr(client, "cluster", None)
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    else:
+        part = expose(read, frames or found, args.fps, args.open, args.close, device=args.device,
+                      progress=progress)
     from .frame import Frame
 
     color = part.exposure() if args.sum else part.mean()
@@ -354,6 +368,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--png-gain", type=_positive_float, default=None, help="scale before the PNG encoding")
     e.add_argument("--overwrite", action="store_true", help="replace an existing output")
     e.add_argument("--quiet", action="store_true")
+    e.add_argument("--workers", type=int, default=None, help="tree-reduce on a local Dask cluster of N worker processes")
+    e.add_argument("--scheduler", default=None, help="tree-reduce on an existing Dask cluster, e.g. tcp://HOST:8786")
     e.set_defaults(func=cmd_expose)
 
     i = sub.add_parser("info", help="channels, size, depth and velocity ranges of EXR files")

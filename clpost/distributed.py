@@ -141,3 +141,51 @@ def first_size(jobs: list[FrameJob]) -> tuple[int, int] | None:
     return None
 
 
+
+
+# -- long exposure as a tree reduction ------------------------------------------------------------
+
+def expose_chunk(pattern: str, items: list, fps, layout: str | None, device: str | None):
+    """Accumulate one run of frames ``items`` = [(frame, seconds), …] on a worker; returns the
+    :class:`~clpost.expose.ExposurePartial` (host float64 sums, exact weights)."""
+    from . import exr
+    from .expose import ExposureAccumulator
+    from .sequence import expand
+
+    acc = None
+    for n, seconds in items:
+        frame = exr.read_frame(expand(pattern, n), layout)
+        if acc is None:
+            acc = ExposureAccumulator(frame.size, fps, device)
+        acc.add(frame.color, seconds)
+    return acc.partial()
+
+
+def combine_partials(a, b):
+    """One node of the reduction tree (associative: weights exact, sums in float64)."""
+    return a.combine(b)
+
+
+def expose_dask(client, pattern: str, frames, fps, t_open, t_close, *, layout: str | None = None,
+                device: str | None = None, chunk: int = 8, retries: int = 2):
+    """``clpost expose`` on a cluster: chunks of ``chunk`` consecutive frames are accumulated on
+    workers, then the partial exposures are combined pairwise in a tree (log₂ depth), so no
+    worker holds more than two partials. Same result as the serial accumulation to float32
+    rounding of each chunk's compensated sum (tested to 1e-6)."""
+    from .expose import exposure_plan
+
+    plan = exposure_plan(frames, fps, t_open, t_close)
+    if not plan:
+        raise InputError("no frame lies inside the shutter interval")
+    if chunk < 1:
+        raise InputError(f"chunk={chunk!r} must be >= 1 frame")
+    futs = [client.submit(expose_chunk, pattern, plan[i:i + chunk], fps, layout, device,
+                          retries=retries, pure=False)
+            for i in range(0, len(plan), chunk)]
+    while len(futs) > 1:
+        paired = [client.submit(combine_partials, a, b, retries=retries, pure=False)
+                  for a, b in zip(futs[::2], futs[1::2])]
+        if len(futs) % 2:
+            paired.append(futs[-1])
+        futs = paired
+    return futs[0].result()

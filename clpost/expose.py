@@ -174,6 +174,23 @@ class ExposureAccumulator:
         return ExposurePartial(total, self.applied, self.seconds, self.count)
 
 
+def exposure_plan(frames, fps, t_open, t_close) -> list[tuple[int, Fraction]]:
+    """(frame, seconds) for every frame the shutter sees, in frame order.
+
+    A frame of the interval missing from ``frames`` is an error (the exposure would silently be
+    too dark otherwise).
+    """
+    frames = [int(n) for n in frames]
+    weights = exposure_weights(frames, fps, t_open, t_close)
+    t0, t1 = as_time(t_open, "--open"), as_time(t_close, "--close")
+    needed = [n for n in frames_needed(fps, t_open, t_close) if overlap(*frame_interval(n, fps), t0, t1) > 0]
+    missing = [n for n in needed if n not in weights]
+    if missing:
+        raise InputError(f"frames {missing[0]}…{missing[-1]} lie inside the shutter interval but are not in "
+                         f"the sequence ({len(missing)} missing); render them or move --open/--close")
+    return sorted(weights.items())
+
+
 def expose(read, frames, fps, t_open, t_close, device: str | None = None,
            progress=None) -> ExposurePartial:
     """Accumulate ``read(n)`` (a :class:`~clpost.frame.Frame` or H×W×3 array) over the frames
@@ -182,16 +199,9 @@ def expose(read, frames, fps, t_open, t_close, device: str | None = None,
     Only the frames with a non-zero weight are read; a frame of the interval missing from
     ``frames`` is an error (the exposure would silently be too dark otherwise).
     """
-    frames = [int(n) for n in frames]
-    weights = exposure_weights(frames, fps, t_open, t_close)
-    needed = [n for n in frames_needed(fps, t_open, t_close)
-              if overlap(*frame_interval(n, fps), as_time(t_open, "--open"), as_time(t_close, "--close")) > 0]
-    missing = [n for n in needed if n not in weights]
-    if missing:
-        raise InputError(f"frames {missing[0]}…{missing[-1]} lie inside the shutter interval but are not in "
-                         f"the sequence ({len(missing)} missing); render them or move --open/--close")
+    weights = exposure_plan(frames, fps, t_open, t_close)
     acc = None
-    for n, w in sorted(weights.items()):
+    for n, w in weights:
         img = read(n)
         img = getattr(img, "color", img)
         if acc is None:

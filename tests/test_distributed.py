@@ -80,3 +80,18 @@ def test_a_failing_frame_is_named_and_the_others_finish(tmp_path, capsys):
     assert code == 1
     assert "frame 3 failed" in err and "in.0003.exr" in err and "1 of 5 frame(s) failed" in err
     assert visible_outputs(tmp_path) == ["o.0001.exr", "o.0002.exr", "o.0004.exr", "o.0005.exr"]
+
+
+def test_long_exposure_tree_reduction_equals_serial(tmp_path, client):
+    from clpost.distributed import expose_dask
+    from clpost.expose import expose
+    from clpost.sequence import expand
+
+    make_sequence(tmp_path, n=11, w=40, h=30)
+    pattern = str(tmp_path / "in.####.exr")
+    frames = list(range(1, 12))
+    t0, t1 = "0.07", "0.43"  # 24 fps: starts inside frame 1, ends inside frame 10
+    serial = expose(lambda n: exr.read_frame(expand(pattern, n)), frames, 24, t0, t1)
+    tree = expose_dask(client, pattern, frames, 24, t0, t1, chunk=3)
+    assert tree.seconds == serial.seconds and tree.applied == serial.applied and tree.count == serial.count
+    np.testing.assert_allclose(tree.mean(), serial.mean(), rtol=1e-6, atol=1e-7)
