@@ -82,6 +82,20 @@ class Camera:
     blade_rotation_deg: float = 0.0
     metering: str = "average"
     exposure_compensation_ev: float = 0.0
+    # -- recording medium (stages film, grain, print, sensor) -----------------------------------
+    film: str | None = None
+    """Film stock name (``clpost.film_stock.stock_names()``) or stock .toml path; None: no film."""
+    film_output: str = "print"
+    """Negative film's output: 'print' (display-referred paper print), 'linear' (re-linearised
+    scene-linear), 'negative' (the developed densities themselves)."""
+    grain_scale: float = 1.0
+    """Multiplier on the stock's grain radius; 0 turns grain off (grain stage)."""
+    sensor_preset: str | None = None
+    """Digital sensor preset (``clpost.stages.sensor.SENSOR_PRESETS``); None: no sensor stage."""
+    noise_seed: int = 0
+    """Seed of the grain and sensor noise (with the frame index, CONVENTIONS "Randomness")."""
+    working_space: str = "rec709"
+    """Linear RGB working space of the input: 'rec709' (default) or 'acescg'."""
 
     def __post_init__(self) -> None:
         parse_lens(self.lens)
@@ -133,6 +147,31 @@ class Camera:
         if self.metering not in METERING_MODES:
             raise InputError(f"Camera.metering={self.metering!r} must be one of {', '.join(METERING_MODES)}")
         _finite("exposure_compensation_ev", self.exposure_compensation_ev, "EV", "e.g. +1 for one stop brighter")
+        # film / grain / print / sensor stages: one recording medium per camera.
+        if self.film is not None and self.sensor_preset is not None:
+            raise InputError(f"Camera: film={self.film!r} and sensor_preset={self.sensor_preset!r} are both "
+                             "set; a camera records on one medium — give --film or --sensor-preset, not both")
+        if self.film is not None:
+            from .film_stock import load_stock
+
+            load_stock(self.film)
+        if self.film_output not in ("print", "linear", "negative"):
+            raise InputError(f"Camera.film_output={self.film_output!r} must be 'print', 'linear' or 'negative'")
+        gs = _finite("grain_scale", self.grain_scale, "× the stock's grain radius", "e.g. 1, or 0 for no grain")
+        if gs < 0:
+            raise InputError(f"Camera.grain_scale={self.grain_scale!r} must be >= 0 (0 turns grain off)")
+        object.__setattr__(self, "grain_scale", gs)
+        if self.sensor_preset is not None:
+            from .stages.sensor import SENSOR_PRESETS
+
+            if self.sensor_preset not in SENSOR_PRESETS:
+                raise InputError(f"Camera.sensor_preset={self.sensor_preset!r} is unknown: use one of "
+                                 f"{', '.join(SENSOR_PRESETS)}")
+        if int(self.noise_seed) != self.noise_seed or not 0 <= int(self.noise_seed) < 2**32:
+            raise InputError(f"Camera.noise_seed={self.noise_seed!r} must be an integer in [0, 2**32)")
+        object.__setattr__(self, "noise_seed", int(self.noise_seed))
+        if self.working_space not in ("rec709", "acescg"):
+            raise InputError(f"Camera.working_space={self.working_space!r} must be 'rec709' or 'acescg'")
 
     # -- derived quantities -------------------------------------------------------------------
     @property
@@ -201,4 +240,10 @@ class Camera:
             "clpost.bladeRotation_deg": f"{self.blade_rotation_deg:g}",
             "clpost.metering": self.metering,
             "clpost.exposureCompensation_ev": f"{self.exposure_compensation_ev:g}",
+            "clpost.film": self.film or "none",
+            "clpost.filmOutput": self.film_output,
+            "clpost.grainScale": f"{self.grain_scale:g}",
+            "clpost.sensorPreset": self.sensor_preset or "none",
+            "clpost.noiseSeed": str(self.noise_seed),
+            "clpost.workingSpace": self.working_space,
         }
