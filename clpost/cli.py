@@ -64,6 +64,13 @@ CAMERA_OPTIONS = {
     "--blade-rotation": ("blade_rotation_deg", _positive_float, "aperture blade rotation in degrees"),
     "--metering": ("metering", str, f"metering pattern for auto-exposure: {', '.join(METERING_MODES)}"),
     "--ev": ("exposure_compensation_ev", _positive_float, "exposure compensation in EV (+1 = one stop brighter)"),
+    # film / grain / print / sensor stages
+    "--film": ("film", str, "film stock: neutral-100, kodak-ektar-100, kodak-gold-200, fuji-superia-400, or a stock .toml"),
+    "--film-output": ("film_output", str, "negative film output: print (display-referred), linear (re-linearised), negative (densities)"),
+    "--grain-scale": ("grain_scale", float, "grain radius multiplier (0 = no grain)"),
+    "--sensor-preset": ("sensor_preset", str, "digital sensor: fullframe-cmos, apsc-cmos, smartphone, machine-vision"),
+    "--noise-seed": ("noise_seed", int, "seed of grain and sensor noise"),
+    "--working-space": ("working_space", str, "input working space: rec709 (default) or acescg"),
 }
 
 
@@ -94,7 +101,7 @@ def cmd_demo(args) -> int:
     camera = camera_from_args(args, **DEMO_CAMERA_DEFAULTS)
     run_demo(Path(args.outdir), camera, size=args.size, n_frames=args.frames, quality=args.quality,
              stages=args.stages, device=args.device, camera_motion=not args.static_camera,
-             overwrite=args.overwrite, log=print)
+             overwrite=args.overwrite, log=print, display=args.display)
     return 0
 
 
@@ -208,6 +215,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--size", type=_size, default=None, help="WIDTHxHEIGHT (default 960 wide, sensor aspect)")
     d.add_argument("--static-camera", action="store_true", help="no camera motion")
     d.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    d.add_argument("--display", default="srgb", choices=["srgb", "rec709", "display-p3"],
+                   help="preview PNG encoding (default srgb)")
     _add_camera_options(d)
     _add_pipeline_options(d)
     d.set_defaults(func=cmd_demo)

@@ -84,7 +84,9 @@ class FilmStock:
                                  f"d_max - d_min > 0.2 (got gamma={g}, d_min={lo}, d_max={hi})")
             span = hi - lo
             k = 4 * g / span
-            f = ISO5800_DELTA_D / span
+            # the stored curve starts at 0.1 % of the range above the asymptote d_min; the speed
+            # point is 0.10 above that first (D_min) point, as iso_speed() measures it
+            f = ISO5800_DELTA_D / span + 1e-3
             x0 = x_speed - math.log(f / (1 - f)) / k
             half = math.log(999.0) / k
             x = np.linspace(x0 - half, x0 + half, points)

@@ -28,8 +28,9 @@ __kernel void grain_gaussian(__global const float *restrict src, __global float 
         const int k = min((int)u, GRAIN_LUT_SIZE - 2);
         const float sigma = mix(sigma_lut[k], sigma_lut[k + 1], u - (float)k);
         float g = 0.0f;
-        for (int j = 0; j < 3; ++j) {
-            for (int q = 0; q < 3; ++q) {
+        /* GRAIN_TAPS 1: uncorrelated grain (a = 0), the centre tap alone — 9x fewer hashes. */
+        for (int j = 1 - GRAIN_TAPS / 2; j <= 1 + GRAIN_TAPS / 2; ++j) {
+            for (int q = 1 - GRAIN_TAPS / 2; q <= 1 + GRAIN_TAPS / 2; ++q) {
                 /* counters are pixel coordinates (+1 so the border neighbours are >= 0) */
                 const uint hh = rnd_hash4(seed, frame, (uint)(x + q), ((uint)(y + j) << 2) | c);
                 g += w3[j] * w3[q] * rnd_normal(hh, rnd_mix(hh ^ 0x68e31da4u));

@@ -71,7 +71,8 @@ def gaussian_tables(r_px: float, d_span: float, samples_side: int | None):
                 / pixel_covariance(dm, r_px, samples_side=samples_side)[0])
     rho = min(max(rho, 0.0), 0.7)
     # a/b = t: 2t/(2t²+1) = ρ → ρ·2t² − 2t + ρ = 0 → t = (1 − sqrt(1 − 2ρ²)) / (2ρ)
-    t = 0.0 if rho < 1e-9 else (1 - math.sqrt(1 - 2 * rho * rho)) / (2 * rho)
+    # ρ below 1e-3 is invisible (and would cost 9× the hashes): treat as white.
+    t = 0.0 if rho < 1e-3 else (1 - math.sqrt(1 - 2 * rho * rho)) / (2 * rho)
     b = 1.0 / math.sqrt(2 * t * t + 1)
     return sigma, (t * b, b)
 
@@ -119,14 +120,16 @@ class Grain(GatherStage):
         if boolean:
             k = int(min(8, max(1, math.floor(1.0 / r))))
             prog = rt.program(kernel_source("common") + src_text, "grain_boolean",
-                              {"GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k, "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE})
+                              {"GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k, "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE,
+                               "GRAIN_TAPS": 1})
             pbuf = self._buffer(rt, "params", params)
             knl = cl.Kernel(prog, "grain_boolean")
             knl.set_args(src, dst, np.int32(w), np.int32(h), pbuf, np.float32(r), seed, fr)
         else:
             sigma, (a, b) = gaussian_tables(round(r, 12), span, None)
             prog = rt.program(kernel_source("common") + src_text, "grain_gaussian",
-                              {"GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": 1, "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE})
+                              {"GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": 1, "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE,
+                               "GRAIN_TAPS": 1 if a == 0.0 else 3})
             pbuf = self._buffer(rt, "params", params)
             lbuf = self._buffer(rt, "lut", sigma.astype(np.float32))
             knl = cl.Kernel(prog, "grain_gaussian")
