@@ -14,6 +14,12 @@ inline float sensor_poisson_inversion(const float mean, const float u) {
     return n;
 }
 
+/* The read-noise normal has its own counter; its second uniform is a re-mix of the first hash
+ * (a constant XOR alone would leave the two normals correlated). */
+inline float sensor_read_normal(const uint h3) {
+    return rnd_normal(h3, rnd_mix(h3 ^ 0x5bd1e995u));
+}
+
 inline float sensor_channel(const float s, const uint ch, const PixelCtx p, const float e_sat,
                             const float full_well, const float read_noise, const float black,
                             const float white, const uint seed, const uint frame) {
@@ -27,7 +33,7 @@ inline float sensor_channel(const float s, const uint ch, const PixelCtx p, cons
     } else {
         e = sensor_poisson_inversion(mean, rnd_uniform(rnd_hash4(seed, frame, i, 4u * ch)));
     }
-    e = fmin(e, full_well) + read_noise * rnd_normal(rnd_hash4(seed, frame, i, 4u * ch + 3u), h2 ^ 0x5bd1e995u);
+    e = fmin(e, full_well) + read_noise * sensor_read_normal(rnd_hash4(seed, frame, i, 4u * ch + 3u));
     const float dn = clamp(rint(black + e * ((white - black) / e_sat)), 0.0f, white);
     return (dn - black) / (white - black);
 }

@@ -103,7 +103,8 @@ class Sensor(PointwiseStage):
         mean = np.minimum(np.maximum(np.asarray(color, np.float64), 0.0) * e_sat, 2.0 * p.full_well_e)
         u = rnd.uniform(rnd.hash4(seed, fr, i, ch * 4))
         g_shot = rnd.normal(rnd.hash4(seed, fr, i, ch * 4 + 1), rnd.hash4(seed, fr, i, ch * 4 + 2))
-        g_read = rnd.normal(rnd.hash4(seed, fr, i, ch * 4 + 3), rnd.hash4(seed, fr, i, ch * 4 + 2) ^ np.uint32(0x5bd1e995))
+        h3 = rnd.hash4(seed, fr, i, ch * 4 + 3)
+        g_read = rnd.normal(h3, rnd.mix(h3 ^ np.uint32(0x5BD1E995)))
         e = np.where(mean > POISSON_EXACT_MAX,
                      np.maximum(np.round(mean + np.sqrt(mean) * g_shot), 0.0),
                      _poisson_inversion(np.minimum(mean, POISSON_EXACT_MAX), u))
