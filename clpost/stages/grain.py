@@ -20,7 +20,8 @@ Two implementations, matched in mean, variance and lag-1 autocorrelation (tested
 - otherwise (``draft``/``preview``, or grains smaller than 1/8 px where the samples could not
   resolve them and the central limit theorem makes the pixel average Gaussian): a Gaussian clear
   fraction, :math:`T' = T + σ_T(D_{img})\,G`, with σ_T from the model's exact pixel-box variance
-  (a LUT) and G a unit-variance field correlated by the separable kernel [a, b, a] so its lag-1
+  (a LUT; where final renders the Boolean model, the variance of its 64-sample estimator, so
+  draft matches final) and G a unit-variance field correlated by the separable kernel [a, b, a] so its lag-1
   correlation equals the model's.
 
 Randomness: counter-based hash of (``Camera.noise_seed``, ``metadata["frame_index"]``, …).
@@ -77,6 +78,12 @@ def gaussian_tables(r_px: float, d_span: float, samples_side: int | None):
     return sigma, (t * b, b)
 
 
+def _stats_samples(r_px: float) -> int | None:
+    """Whose statistics the Gaussian reproduces: where final renders the Boolean model with
+    GRAIN_NS² samples, that estimator's (so draft matches final); else the continuous pixel box."""
+    return GRAIN_NS if r_px >= RESOLVED_MIN_PX else None
+
+
 class Grain(GatherStage):
     name = "grain"
     order = 90.0
@@ -126,7 +133,7 @@ class Grain(GatherStage):
             knl = cl.Kernel(prog, "grain_boolean")
             knl.set_args(src, dst, np.int32(w), np.int32(h), pbuf, np.float32(r), seed, fr)
         else:
-            sigma, (a, b) = gaussian_tables(round(r, 12), span, None)
+            sigma, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
             prog = rt.program(kernel_source("common") + src_text, "grain_gaussian",
                               {"GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": 1, "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE,
                                "GRAIN_TAPS": 1 if a == 0.0 else 3})
@@ -156,7 +163,7 @@ class Grain(GatherStage):
         if boolean:
             t = boolean_clear_fraction(d_img, r, seed, fr)
         else:
-            sigma, (a, b) = gaussian_tables(round(r, 12), span, None)
+            sigma, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
             t = 10.0 ** -d_img + np.stack(
                 [np.interp(d_img[..., c], np.linspace(0, span, GRAIN_LUT_SIZE), sigma) for c in range(3)], -1
             ) * correlated_normal(color.shape[0], color.shape[1], a, b, seed, fr)
