@@ -11,7 +11,7 @@ inline float grain_to_density(const float t, const float dmin, const float dmax)
 
 /* draft/preview, and final with unresolved grains: Gaussian clear fraction with the model's
  * pixel variance (LUT over image density) and lag-1 correlation (separable [a, b, a]). */
-__kernel void grain_gaussian(__global const float *restrict src, __global float *restrict dst,
+inline void grain_gaussian(__global const float *restrict src, __global float *restrict dst,
                              const int width, const int height, __global const float *params,
                              __global const float *sigma_lut, const float lut_scale,
                              const float a, const float b, const uint seed, const uint frame) {
@@ -52,7 +52,7 @@ inline float grain_poisson(const float mean, const float u) {
 
 /* final, resolved grains: the Boolean model (Newson et al. 2017). GRAIN_CELLS^2 cells per pixel,
  * each cell's grains a pure function of (seed, frame, cell, layer); GRAIN_NS^2 jittered samples. */
-__kernel void grain_boolean(__global const float *restrict src, __global float *restrict dst,
+inline void grain_boolean(__global const float *restrict src, __global float *restrict dst,
                             const int width, const int height, __global const float *params,
                             const float r, const uint seed, const uint frame) {
     const int x = get_global_id(0);
@@ -96,4 +96,18 @@ __kernel void grain_boolean(__global const float *restrict src, __global float *
         const float clear = (float)(NS2 - (int)popcount(covered)) / (float)NS2;
         dst[c * n + i] = grain_to_density(clear, dmin, dmax);
     }
+}
+
+/* The stage's one entry point; GRAIN_BOOLEAN (a #define, part of the program key) picks the model. */
+__kernel void grain(__global const float *restrict src, __global float *restrict dst,
+                    const int width, const int height, __global const float *params,
+                    __global const float *sigma_lut, const float lut_scale, const float a,
+                    const float b, const float r, const uint seed, const uint frame) {
+#if GRAIN_BOOLEAN
+    (void)sigma_lut; (void)lut_scale; (void)a; (void)b;
+    grain_boolean(src, dst, width, height, params, r, seed, frame);
+#else
+    (void)r;
+    grain_gaussian(src, dst, width, height, params, sigma_lut, lut_scale, a, b, seed, frame);
+#endif
 }

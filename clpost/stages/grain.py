@@ -126,22 +126,18 @@ class Grain(GatherStage):
         src_text = kernel_source("random") + kernel_source("grain")
         if boolean:
             k = int(min(8, max(1, math.floor(1.0 / r))))
-            prog = rt.program(kernel_source("common") + src_text, "grain_boolean",
-                              {"GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k, "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE,
-                               "GRAIN_TAPS": 1})
-            pbuf = self._buffer(rt, "params", params)
-            knl = cl.Kernel(prog, "grain_boolean")
-            knl.set_args(src, dst, np.int32(w), np.int32(h), pbuf, np.float32(r), seed, fr)
+            sigma, (a, b) = np.zeros(GRAIN_LUT_SIZE), (0.0, 1.0)
         else:
+            k = 1
             sigma, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
-            prog = rt.program(kernel_source("common") + src_text, "grain_gaussian",
-                              {"GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": 1, "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE,
-                               "GRAIN_TAPS": 1 if a == 0.0 else 3})
-            pbuf = self._buffer(rt, "params", params)
-            lbuf = self._buffer(rt, "lut", sigma.astype(np.float32))
-            knl = cl.Kernel(prog, "grain_gaussian")
-            knl.set_args(src, dst, np.int32(w), np.int32(h), pbuf, lbuf,
-                         np.float32((GRAIN_LUT_SIZE - 1) / span), np.float32(a), np.float32(b), seed, fr)
+        defines = {"GRAIN_BOOLEAN": int(boolean), "GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k,
+                   "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE, "GRAIN_TAPS": 1 if a == 0.0 else 3}
+        prog = rt.program(kernel_source("common") + src_text, "grain", defines)
+        knl = cl.Kernel(prog, "grain")
+        knl.set_args(src, dst, np.int32(w), np.int32(h), self._buffer(rt, "params", params),
+                     self._buffer(rt, "lut", sigma.astype(np.float32)),
+                     np.float32((GRAIN_LUT_SIZE - 1) / span), np.float32(a), np.float32(b),
+                     np.float32(r), seed, fr)
         return [cl.enqueue_nd_range_kernel(rt.queue, knl, (w, h), None)]
 
     def _buffer(self, rt, key, host):
