@@ -6,7 +6,7 @@
 
 inline float grain_to_density(const float t, const float dmin, const float dmax) {
     /* clear fraction -> density, clamped to the stock's [D_min, D_max] (t = 0 would be +inf) */
-    return dmin - log10(clamp(t, exp10(dmin - dmax), 1.0f));
+    return clamp(dmin - log10(fmax(t, 1e-30f)), dmin, dmax);
 }
 
 /* draft/preview, and final with unresolved grains: Gaussian clear fraction with the model's
@@ -20,23 +20,29 @@ inline void grain_gaussian(__global const float *restrict src, __global float *r
     if (x >= width || y >= height) return;
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
+#if GRAIN_TAPS != 1
     const float w3[3] = {a, b, a};
+#endif
     for (uint c = 0; c < 3; ++c) {
         const float dmin = params[c], dmax = params[3 + c];
         const float d_img = fmax(src[c * n + i] - dmin, 0.0f);
         const float u = fmin(d_img * lut_scale, (float)(GRAIN_LUT_SIZE - 1));
         const int k = min((int)u, GRAIN_LUT_SIZE - 2);
         const float sigma = mix(sigma_lut[k], sigma_lut[k + 1], u - (float)k);
+#if GRAIN_TAPS == 1
+        const uint h0 = rnd_hash4(seed, frame, (uint)(x + 1), ((uint)(y + 1) << 2) | c);
+        const float g = rnd_normal(h0, rnd_mix(h0 ^ 0x68e31da4u));
+#else
         float g = 0.0f;
-        /* GRAIN_TAPS 1: uncorrelated grain (a = 0), the centre tap alone — 9x fewer hashes. */
-        for (int j = 1 - GRAIN_TAPS / 2; j <= 1 + GRAIN_TAPS / 2; ++j) {
-            for (int q = 1 - GRAIN_TAPS / 2; q <= 1 + GRAIN_TAPS / 2; ++q) {
+        for (int j = 0; j < 3; ++j) {
+            for (int q = 0; q < 3; ++q) {
                 /* counters are pixel coordinates (+1 so the border neighbours are >= 0) */
                 const uint hh = rnd_hash4(seed, frame, (uint)(x + q), ((uint)(y + j) << 2) | c);
                 g += w3[j] * w3[q] * rnd_normal(hh, rnd_mix(hh ^ 0x68e31da4u));
             }
         }
-        dst[c * n + i] = grain_to_density(exp10(-d_img) + sigma * g, dmin, dmax);
+#endif
+        dst[c * n + i] = grain_to_density(exp(-GRAIN_LN10 * d_img) + sigma * g, dmin, dmax);
     }
 }
 
