@@ -46,6 +46,8 @@ GRAIN_NS = 8
 RESOLVED_MIN_PX = 1.0 / 8.0
 """Grain radius (px) from which final renders the Boolean model (cells ≥ r, ≤ 8 per pixel side)."""
 GRAIN_LUT_SIZE = 64
+RHO_WHITE = 0.02
+"""Lag-1 correlation below which the Gaussian path draws white noise (one normal, not nine)."""
 T_FLOOR_MARGIN = 0.0
 
 
@@ -72,8 +74,8 @@ def gaussian_tables(r_px: float, d_span: float, samples_side: int | None):
                 / pixel_covariance(dm, r_px, samples_side=samples_side)[0])
     rho = min(max(rho, 0.0), 0.7)
     # a/b = t: 2t/(2t²+1) = ρ → ρ·2t² − 2t + ρ = 0 → t = (1 − sqrt(1 − 2ρ²)) / (2ρ)
-    # ρ below 1e-3 is invisible (and would cost 9× the hashes): treat as white.
-    t = 0.0 if rho < 1e-3 else (1 - math.sqrt(1 - 2 * rho * rho)) / (2 * rho)
+    # ρ below 0.02 is invisible (and the 3×3 taps cost 9× the normals): treat it as white.
+    t = 0.0 if rho < RHO_WHITE else (1 - math.sqrt(1 - 2 * rho * rho)) / (2 * rho)
     b = 1.0 / math.sqrt(2 * t * t + 1)
     return sigma, (t * b, b)
 
