@@ -69,6 +69,8 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
             f"{job.src}: size {frame.width}x{frame.height} differs from the sequence's "
             f"{expect_size[0]}x{expect_size[1]}; all frames of a sequence must have one size"
         )
+    # The frame number seeds grain/sensor noise (CONVENTIONS "Randomness"): frames differ, reruns agree.
+    frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(job.frame)), validate=False)
     out = pipeline.run(frame)
     exr.write_frame(job.dst, out, header=output_header(out), half=half, compression=compression)
     return out

@@ -121,6 +121,20 @@ class Camera:
     """Frames per second of the sequence (e.g. 24); with ``shutter_s`` it gives the open fraction."""
     readout_time_s: float = 0.0
     """Rolling shutter: time from reading the top row to the bottom row (s); 0 = global shutter."""
+    # -- recording medium (stages film, grain, print, sensor) -----------------------------------
+    film: str | None = None
+    """Film stock name (``clpost.film_stock.stock_names()``) or stock .toml path; None: no film."""
+    film_output: str = "print"
+    """Negative film's output: 'print' (display-referred paper print), 'linear' (re-linearised
+    scene-linear), 'negative' (the developed densities themselves)."""
+    grain_scale: float = 1.0
+    """Multiplier on the stock's grain radius; 0 turns grain off (grain stage)."""
+    sensor_preset: str | None = None
+    """Digital sensor preset (``clpost.stages.sensor.SENSOR_PRESETS``); None: no sensor stage."""
+    noise_seed: int = 0
+    """Seed of the grain and sensor noise (with the frame index, CONVENTIONS "Randomness")."""
+    working_space: str = "rec709"
+    """Linear RGB working space of the input: 'rec709' (default) or 'acescg'."""
 
     def __post_init__(self) -> None:
         parse_lens(self.lens)
@@ -205,6 +219,31 @@ class Camera:
             raise InputError("Camera.readout_time_s > 0 needs Camera.frame_rate_fps (--fps) to turn "
                              "px-per-frame velocities into a per-row shift")
         object.__setattr__(self, "readout_time_s", ro)
+        # film / grain / print / sensor stages: one recording medium per camera.
+        if self.film is not None and self.sensor_preset is not None:
+            raise InputError(f"Camera: film={self.film!r} and sensor_preset={self.sensor_preset!r} are both "
+                             "set; a camera records on one medium — give --film or --sensor-preset, not both")
+        if self.film is not None:
+            from .film_stock import load_stock
+
+            load_stock(self.film)
+        if self.film_output not in ("print", "linear", "negative"):
+            raise InputError(f"Camera.film_output={self.film_output!r} must be 'print', 'linear' or 'negative'")
+        gs = _finite("grain_scale", self.grain_scale, "× the stock's grain radius", "e.g. 1, or 0 for no grain")
+        if gs < 0:
+            raise InputError(f"Camera.grain_scale={self.grain_scale!r} must be >= 0 (0 turns grain off)")
+        object.__setattr__(self, "grain_scale", gs)
+        if self.sensor_preset is not None:
+            from .stages.sensor import SENSOR_PRESETS
+
+            if self.sensor_preset not in SENSOR_PRESETS:
+                raise InputError(f"Camera.sensor_preset={self.sensor_preset!r} is unknown: use one of "
+                                 f"{', '.join(SENSOR_PRESETS)}")
+        if int(self.noise_seed) != self.noise_seed or not 0 <= int(self.noise_seed) < 2**32:
+            raise InputError(f"Camera.noise_seed={self.noise_seed!r} must be an integer in [0, 2**32)")
+        object.__setattr__(self, "noise_seed", int(self.noise_seed))
+        if self.working_space not in ("rec709", "acescg"):
+            raise InputError(f"Camera.working_space={self.working_space!r} must be 'rec709' or 'acescg'")
 
     # -- derived quantities -------------------------------------------------------------------
     @property
@@ -300,4 +339,10 @@ class Camera:
                 self.distortion.cx, self.distortion.cy, *self.distortion.vector()))}
                if self.distortion is not None else {}),
             **({"clpost.vignetting": self.vignetting} if self.vignetting != "off" else {}),
+            "clpost.film": self.film or "none",
+            "clpost.filmOutput": self.film_output,
+            "clpost.grainScale": f"{self.grain_scale:g}",
+            "clpost.sensorPreset": self.sensor_preset or "none",
+            "clpost.noiseSeed": str(self.noise_seed),
+            "clpost.workingSpace": self.working_space,
         }

@@ -81,6 +81,13 @@ CAMERA_OPTIONS = {
     "--fps": ("frame_rate_fps", _positive_float, "frame rate of the sequence (enables motion blur: shutter × fps of a frame)"),
     "--shutter-angle": ("shutter_angle_deg", _positive_float, "rotary shutter angle in degrees (needs --fps; sets the shutter: 180° at 24 fps = 1/48 s)"),
     "--readout": ("readout_time_s", _positive_float, "rolling-shutter readout time top to bottom row in seconds (needs --fps)"),
+    # film / grain / print / sensor stages
+    "--film": ("film", str, "film stock: neutral-100, kodak-ektar-100, kodak-gold-200, fuji-superia-400, or a stock .toml"),
+    "--film-output": ("film_output", str, "negative film output: print (display-referred), linear (re-linearised), negative (densities)"),
+    "--grain-scale": ("grain_scale", float, "grain radius multiplier (0 = no grain)"),
+    "--sensor-preset": ("sensor_preset", str, "digital sensor: fullframe-cmos, apsc-cmos, smartphone, machine-vision"),
+    "--noise-seed": ("noise_seed", int, "seed of grain and sensor noise"),
+    "--working-space": ("working_space", str, "input working space: rec709 (default) or acescg"),
 }
 
 
@@ -122,7 +129,8 @@ def cmd_demo(args) -> int:
     camera = camera_from_args(args, **DEMO_CAMERA_DEFAULTS)
     run_demo(Path(args.outdir), camera, size=args.size, n_frames=args.frames, quality=args.quality,
              stages=args.stages, device=args.device, camera_motion=not args.static_camera,
-             overwrite=args.overwrite, log=print, reference_subframes=args.reference_subframes)
+             overwrite=args.overwrite, log=print, reference_subframes=args.reference_subframes,
+             display=args.display)
     return 0
 
 
@@ -332,6 +340,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--reference-subframes", type=int, default=0, metavar="K",
                    help="also render a reference motion-blurred frame from K sub-frames per frame "
                         "(needs --fps and --shutter or --shutter-angle)")
+    d.add_argument("--display", default="srgb", choices=["srgb", "rec709", "display-p3"],
+                   help="preview PNG encoding (default srgb)")
     _add_camera_options(d)
     _add_pipeline_options(d)
     d.set_defaults(func=cmd_demo)

@@ -36,7 +36,8 @@ DEMO_WIDTH = 960
 def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int] | None = None,
              n_frames: int = 3, quality: str = "final", stages: list[str] | None = None,
              device: str | None = None, camera_motion: bool = True, overwrite: bool = False,
-             log: Callable[[str], None] = print, reference_subframes: int = 0) -> dict:
+             log: Callable[[str], None] = print, reference_subframes: int = 0,
+             display: str = "srgb") -> dict:
     """Render, process and write the demo; returns a summary (paths, timings, plan)."""
     from .render import render_demo_sequence
 
@@ -73,7 +74,8 @@ def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int
         out = pipe.run(frame)
         t_proc.append(time.perf_counter() - t1)
         exr.write_frame(out_paths[i - 1], out, header=output_header(out))
-        write_png(outdir / "preview" / f"clpost.{i:04d}.png", out.color)
+        write_png(outdir / "preview" / f"clpost.{i:04d}.png", out.color, display=display,
+                  working_space=camera.working_space)
         written.append(out_paths[i - 1])
         if i == 1:
             for e in pipe.explain(frame):

@@ -15,6 +15,9 @@ buffer        shape       unit / meaning
 A 4-channel ``color`` is split into ``color`` and ``alpha``. float16/32/64 input is converted
 once to float32 (explicitly, here); any other dtype is refused rather than silently cast.
 NaN is never valid; ±inf only as ``+inf`` in depth.
+
+``metadata["frame_index"]`` (int, default 0) is the frame number of a sequence; the renderer and
+the batch loop set it, and the grain and sensor stages hash it into their noise.
 """
 from __future__ import annotations
 

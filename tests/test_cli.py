@@ -160,3 +160,23 @@ def test_demo_writes_exrs_and_visibly_exposed_pngs(tmp_path, capsys):
         png = np.asarray(Image.open(out / "preview" / f"clpost.{i:04d}.png"))
         assert png.shape == (64, 96, 3) and 40 < png.mean() < 200  # exposed, neither black nor blown
     assert "exists" in one_line_error(capsys, "demo", out, "--size", "96x64", "--frames", "2")
+
+
+def test_film_and_sensor_options_reach_the_camera(tmp_path, capsys):
+    make_blender_sequence(tmp_path, n=1)
+    src = tmp_path / "shot.0001.exr"
+    assert run_cli("process", src, "-o", tmp_path / "f.exr", "--explain", "--film", "kodak-gold-200",
+                   "--film-output", "linear", *CAM_ARGS) == 0
+    out = capsys.readouterr().out
+    assert "Kodak Gold 200" in out and "kernels: exposure__film, grain, print" in out
+    assert run_cli("process", src, "-o", tmp_path / "s.exr", "--quiet", "--sensor-preset", "smartphone",
+                   "--noise-seed", "3", *CAM_ARGS) == 0
+    got = exr.read_frame(tmp_path / "s.exr")
+    cam = CAM.with_(sensor_preset="smartphone", noise_seed=3)
+    frame = exr.read_frame(src)
+    want = Pipeline(cam).run(frame.replace(metadata=dict(frame.metadata, frame_index=0))).color
+    np.testing.assert_array_equal(got.color, want)
+    assert got.metadata["header"]["clpost.sensorPreset"] == "smartphone"
+    assert run_cli("process", src, "-o", tmp_path / "x.exr", "--film", "kodak-gold-200",
+                   "--sensor-preset", "smartphone", *CAM_ARGS) == 2
+    assert "one medium" in capsys.readouterr().err

@@ -1,0 +1,41 @@
+"""numpy twin of ``kernels/random.cl``: the same counter-based hash, bit for bit.
+
+Every random number in clpost is a pure function of (seed, frame, pixel, sample) — see
+CONVENTIONS.md "Randomness" — so references reproduce a kernel's noise exactly and results do not
+depend on the device or the work-group size. Hash: Wellons' ``lowbias32`` finaliser chained over
+the counter words.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+_M = np.uint32
+
+
+def mix(x):
+    x = np.asarray(x, dtype=np.uint32)
+    with np.errstate(over="ignore"):
+        x = x ^ (x >> _M(16))
+        x = x * _M(0x7FEB352D)
+        x = x ^ (x >> _M(15))
+        x = x * _M(0x846CA68B)
+        x = x ^ (x >> _M(16))
+    return x
+
+
+def hash4(seed, frame, a, b):
+    u = lambda v: np.asarray(v).astype(np.uint32)  # noqa: E731 — wraps like C's uint
+    h = mix(u(seed) ^ _M(0x9E3779B9))
+    h = mix(h ^ u(frame))
+    h = mix(h ^ u(a))
+    return mix(h ^ u(b))
+
+
+def uniform(h):
+    """(0, 1) from the 24 high bits, as ``rnd_uniform`` (exact in float64)."""
+    return ((np.asarray(h, np.uint32) >> _M(8)).astype(np.float64) + 0.5) / 16777216.0
+
+
+def normal(h1, h2):
+    """Box-Muller as ``rnd_normal`` (float64 here; the kernel's float32 differs by ~1e-6)."""
+    return np.sqrt(-2.0 * np.log(uniform(h1))) * np.cos(2.0 * np.pi * uniform(h2))

@@ -1,0 +1,232 @@
+r"""grain: the developed negative's grain, per dye layer, on the film stage's densities.
+
+Model (:mod:`clpost.grain_model`): each dye layer is a Boolean model of discs of radius r (the
+stock's effective grain radius × ``Camera.grain_scale``, in µm on the film → pixels through
+``Camera.pixel_pitch_mm``) with Poisson intensity :math:`λ = D_{img}\ln 10/(\pi r^2)`, where
+:math:`D_{img} = D - D_{min}` is the image density above base. A pixel records the clear fraction
+:math:`T'` of its area; :math:`D' = D_{min} - \log_{10} T'`, clamped to [D_min, D_max].
+:math:`E[T'] = 10^{-D_{img}}` exactly; granularity grows with density and with speed, and
+σ_D·√(pixel area) is constant (Selwyn) — so the same film at 2× resolution has the same grain
+in millimetres.
+
+Two implementations, matched in mean, variance and lag-1 autocorrelation (tested):
+
+- ``final`` with resolved grains (r ≥ 1/8 px): Newson et al.'s Boolean model rendered in
+  OpenCL. The pixel is split into GRAIN_CELLS² cells (cell ≥ r); each cell holds
+  Poisson(λ/K²) grains placed by a hash of (seed, frame, cell, layer) — so a grain straddling two
+  pixels is the same grain for both — with λ from the density of the pixel the cell lies in;
+  T' is the clear fraction of GRAIN_NS² jittered-stratified samples. Cost grows with
+  (cells per pixel)·(grains per cell)·samples: about 64·(K+2)²·λ/K² disc tests per layer.
+- otherwise (``draft``/``preview``, or grains smaller than 1/8 px where the samples could not
+  resolve them and the central limit theorem makes the pixel average Gaussian): a Gaussian clear
+  fraction, :math:`T' = T + σ_T(D_{img})\,G`, with σ_T from the model's exact pixel-box variance
+  (a LUT; where final renders the Boolean model, the variance of its 64-sample estimator, so
+  draft matches final) and G a unit-variance field correlated by the separable kernel [a, b, a] so its lag-1
+  correlation equals the model's.
+
+Randomness: counter-based hash of (``Camera.noise_seed``, ``metadata["frame_index"]``, …).
+Reference: A. Newson, J. Delon, B. Galerne, "A Stochastic Film Grain Model for
+Resolution-Independent Rendering", Computer Graphics Forum 36(8), 2017; Selwyn (1935).
+"""
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+from .. import random as rnd
+from ..film_stock import load_stock
+from ..grain_model import LN10, grain_radius_um, pixel_covariance
+from .base import GatherStage
+from .sensor import frame_index
+
+GRAIN_NS = 8
+"""Samples per pixel side of the final Boolean model (64 samples)."""
+RESOLVED_MIN_PX = 1.0 / 8.0
+"""Grain radius (px) from which final renders the Boolean model (cells ≥ r, ≤ 8 per pixel side)."""
+GRAIN_LUT_SIZE = 64
+RHO_WHITE = 0.02
+"""Lag-1 correlation below which the Gaussian path draws white noise (one normal, not nine)."""
+T_FLOOR_MARGIN = 0.0
+
+
+def grain_radius_px(camera, width: int) -> float:
+    stock = load_stock(camera.film)
+    r_um = grain_radius_um(stock.iso) * camera.grain_scale
+    return r_um / 1000.0 / camera.pixel_pitch_mm(width)
+
+
+def use_boolean(quality: str, r_px: float) -> bool:
+    return quality == "final" and r_px >= RESOLVED_MIN_PX
+
+
+@lru_cache(maxsize=64)
+def gaussian_tables(r_px: float, d_span: float, samples_side: int | None):
+    """(σ_T LUT over D_img ∈ [0, d_span], kernel weights (a, b)) for the Gaussian path."""
+    d = np.linspace(0.0, d_span, GRAIN_LUT_SIZE)
+    var = pixel_covariance(d, r_px, samples_side=samples_side)
+    sigma = np.sqrt(np.maximum(var, 0.0))
+    # lag-1 correlation at a mid density (the model's ρ₁ varies little with D): solve
+    # 2ab/(2a²+b²) = ρ for the kernel [a, b, a], then normalise 2a² + b² = 1.
+    dm = np.array([min(1.0, d_span / 2)])
+    rho = float(pixel_covariance(dm, r_px, lag=(1, 0), samples_side=samples_side)[0]
+                / pixel_covariance(dm, r_px, samples_side=samples_side)[0])
+    rho = min(max(rho, 0.0), 0.7)
+    # a/b = t: 2t/(2t²+1) = ρ → ρ·2t² − 2t + ρ = 0 → t = (1 − sqrt(1 − 2ρ²)) / (2ρ)
+    # ρ below 0.02 is invisible (and the 3×3 taps cost 9× the normals): treat it as white.
+    t = 0.0 if rho < RHO_WHITE else (1 - math.sqrt(1 - 2 * rho * rho)) / (2 * rho)
+    b = 1.0 / math.sqrt(2 * t * t + 1)
+    return sigma, (t * b, b)
+
+
+def _stats_samples(r_px: float) -> int | None:
+    """Whose statistics the Gaussian reproduces: where final renders the Boolean model with
+    GRAIN_NS² samples, that estimator's (so draft matches final); else the continuous pixel box."""
+    return GRAIN_NS if r_px >= RESOLVED_MIN_PX else None
+
+
+class Grain(GatherStage):
+    name = "grain"
+    order = 90.0
+
+    def skip_reason(self, camera, frame):
+        if not camera.film:
+            return "no film stock (Camera.film is None)"
+        if camera.grain_scale == 0:
+            return "Camera.grain_scale is 0"
+        return None
+
+    def reason_needed(self, camera, frame):
+        r = grain_radius_px(camera, frame.width)
+        how = ("Boolean model (Newson 2017), 64 samples/px" if use_boolean(self.quality, r)
+               else "Gaussian clear fraction matched to the Boolean model")
+        return f"grain radius {r:.3g} px ({r * camera.pixel_pitch_mm(frame.width) * 1e3:.3g} µm): {how}"
+
+    # -- host tables --------------------------------------------------------------------------
+    def _setup(self, camera, width):
+        stock = load_stock(camera.film)
+        d_min = stock.d_min()
+        d_max = stock.d_max()
+        span = float((d_max - d_min).max())
+        r = grain_radius_px(camera, width)
+        boolean = use_boolean(self.quality, r)
+        return stock, d_min, d_max, span, r, boolean
+
+    def defines(self, camera):
+        return {}
+
+    def enqueue(self, rt, camera, frame, src, dst, aux):
+        import pyopencl as cl
+
+        from ..runtime import kernel_source
+
+        stock, d_min, d_max, span, r, boolean = self._setup(camera, frame.width)
+        w, h = frame.width, frame.height
+        params = np.concatenate([d_min, d_max]).astype(np.float32)
+        seed, fr = np.uint32(camera.noise_seed), np.uint32(frame_index(frame))
+        src_text = kernel_source("random") + kernel_source("grain")
+        if boolean:
+            k = int(min(8, max(1, math.floor(1.0 / r))))
+            sigma, (a, b) = np.zeros(GRAIN_LUT_SIZE), (0.0, 1.0)
+        else:
+            k = 1
+            sigma, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
+        defines = {"GRAIN_BOOLEAN": int(boolean), "GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k,
+                   "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE, "GRAIN_TAPS": 1 if a == 0.0 else 3}
+        prog = rt.program(kernel_source("common") + src_text, "grain", defines)
+        knl = cl.Kernel(prog, "grain")
+        knl.set_args(src, dst, np.int32(w), np.int32(h), self._buffer(rt, "params", params),
+                     self._buffer(rt, "lut", sigma.astype(np.float32)),
+                     np.float32((GRAIN_LUT_SIZE - 1) / span), np.float32(a), np.float32(b),
+                     np.float32(r), seed, fr)
+        return [cl.enqueue_nd_range_kernel(rt.queue, knl, (w, h), None)]
+
+    def _buffer(self, rt, key, host):
+        import pyopencl as cl
+
+        cache = self.__dict__.setdefault("_bufs", {})
+        buf = cache.get((key, id(rt)))
+        if buf is None or buf.size != host.nbytes:
+            buf = cache[(key, id(rt))] = rt.empty(host.shape, host.dtype)
+        cl.enqueue_copy(rt.queue, buf, host)
+        return buf
+
+    # -- float64 reference --------------------------------------------------------------------
+    def reference(self, camera, frame, color):
+        stock, d_min, d_max, span, r, boolean = self._setup(camera, frame.width)
+        seed, fr = camera.noise_seed, frame_index(frame)
+        d = np.asarray(color, np.float64)
+        d_img = np.clip(d - d_min, 0.0, None)
+        if boolean:
+            t = boolean_clear_fraction(d_img, r, seed, fr)
+        else:
+            sigma, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
+            t = 10.0 ** -d_img + np.stack(
+                [np.interp(d_img[..., c], np.linspace(0, span, GRAIN_LUT_SIZE), sigma) for c in range(3)], -1
+            ) * correlated_normal(color.shape[0], color.shape[1], a, b, seed, fr)
+        t_floor = 10.0 ** -(d_max - d_min)
+        return d_min + -np.log10(np.clip(t, t_floor, 1.0))
+
+
+def correlated_normal(h, w, a, b, seed, fr):
+    """(h, w, 3) unit-variance field: [a, b, a]⊗[a, b, a] over hashed normals at pixel (x+1, y+1)."""
+    ys, xs = np.mgrid[-1:h + 1, -1:w + 1]
+    out = np.zeros((h, w, 3))
+    wts = (a, b, a)
+    for c in range(3):
+        hh = rnd.hash4(seed, fr, (xs + 1).astype(np.uint32), ((ys + 1) << 2 | c).astype(np.uint32))
+        n = rnd.normal(hh, rnd.mix(hh ^ np.uint32(0x68E31DA4)))
+        for j in range(3):
+            for i in range(3):
+                out[..., c] += wts[j] * wts[i] * n[j:j + h, i:i + w]
+    return out
+
+
+def boolean_clear_fraction(d_img, r, seed, fr):
+    """Reference Boolean model: the clear fraction of each pixel's GRAIN_NS² jittered samples.
+
+    Same cells, Poisson counts, grain positions and samples as ``grain_boolean`` (all from the
+    counter hash), evaluated in float64 and vectorised over samples."""
+    h, w, _ = d_img.shape
+    k = int(min(8, max(1, math.floor(1.0 / r))))
+    ns = GRAIN_NS
+    # samples, shared by the three layers
+    py, px = np.mgrid[0:h, 0:w]
+    pix = (py * w + px).astype(np.uint32)[..., None]
+    s = np.arange(ns * ns, dtype=np.uint32)[None, None]
+    hs = rnd.hash4(seed, fr, pix, s | np.uint32(0x80000000))
+    su = px[..., None] + ((s % ns) + rnd.uniform(hs)) / ns
+    sv = py[..., None] + ((s // ns) + rnd.uniform(rnd.mix(hs ^ np.uint32(0x85EBCA6B)))) / ns
+    out = np.empty((h, w, 3))
+    reach = int(math.ceil(r * k))  # cells a grain centre within r of a sample can lie in
+    margin = reach + 2
+    cx0, cy0 = -margin, -margin
+    ncx, ncy = w * k + 2 * margin, h * k + 2 * margin
+    cy, cx = np.mgrid[cy0:cy0 + ncy, cx0:cx0 + ncx]
+    for c in range(3):
+        pxl = np.clip(np.floor_divide(cx, k), 0, w - 1)
+        pyl = np.clip(np.floor_divide(cy, k), 0, h - 1)
+        lam = d_img[pyl, pxl, c] * LN10 / (math.pi * r * r) / (k * k)
+        hc = rnd.hash4(seed, fr, (cx + 64).astype(np.uint32), (((cy + 64) << 2) | c).astype(np.uint32))
+        from .sensor import _poisson_inversion
+
+        n = _poisson_inversion(lam, rnd.uniform(hc)).astype(int)
+        kmax = max(int(n.max()), 1)
+        kk = np.arange(kmax, dtype=np.uint32)
+        with np.errstate(over="ignore"):
+            hk = rnd.mix(hc[..., None] + np.uint32(0x9E3779B9) * (kk + np.uint32(1)))
+        gx = (cx[..., None] + rnd.uniform(hk)) / k
+        gy = (cy[..., None] + rnd.uniform(rnd.mix(hk ^ np.uint32(0x85EBCA6B)))) / k
+        valid = kk[None, None, :] < n[..., None]
+        covered = np.zeros(su.shape, bool)
+        scx = np.floor(su * k).astype(int) - cx0
+        scy = np.floor(sv * k).astype(int) - cy0
+        for dy in range(-reach, reach + 1):
+            for dx in range(-reach, reach + 1):
+                ix, iy = scx + dx, scy + dy
+                gxx, gyy, vv = gx[iy, ix], gy[iy, ix], valid[iy, ix]
+                dist2 = (gxx - su[..., None]) ** 2 + (gyy - sv[..., None]) ** 2
+                covered |= ((dist2 <= r * r) & vv).any(axis=-1)
+        out[..., c] = 1.0 - covered.mean(axis=-1)
+    return out
