@@ -10,6 +10,7 @@
 
 /* launched with local size (DOF_TILE, DOF_TILE): one work-group per tile */
 __kernel void dof(__global const float *restrict pc, __global const float *restrict pr,
+         __global const float *restrict pv,
                 __global const int *restrict tn,
                 __global const int *restrict tap_dx, __global const int *restrict tap_dy,
                 __global const float *restrict tap_dist, __global const float *restrict rho_far,
@@ -48,11 +49,10 @@ __kernel void dof(__global const float *restrict pc, __global const float *restr
             const float hx = ((float)(x + dx) - cx) * inv_half, hy = ((float)(y + dy) - cy) * inv_half;
             const float sgn = far ? 1.0f : -1.0f;
             const float ax = -(float)dx / (r * sgn), ay = -(float)dy / (r * sgn);
-            const float e = hypot(ax - vig * hx, ay - vig * hy);
-            /* per-source pupil area: the clipped bokeh keeps the source's energy */
-            const float d = vig * fmin(hypot(hx, hy), 1.0f);
-            const float phi = (2.0f * acos(0.5f * d) - 0.5f * d * sqrt(4.0f - d * d)) / M_PI_F;
-            w *= clamp((1.0f - e) * r + 0.5f, 0.0f, 1.0f) / phi;
+            const float ex = ax - vig * hx, ey = ay - vig * hy;
+            const float e = sqrt(ex * ex + ey * ey);
+            /* per-source pupil area (pv = 1/area fraction): the clipped bokeh keeps its energy */
+            w *= clamp((1.0f - e) * r + 0.5f, 0.0f, 1.0f) * pv[q];
         }
 #endif
         const float3 c = (float3)(pc[q], pc[pn + q], pc[2 * pn + q]);

@@ -26,6 +26,15 @@ def _kernels(rt, defines):
     return out
 
 
+def _launch(q, kernel, size, local):
+    """Global size rounded up to whole work-groups (kernels guard their bounds): left to itself
+    PoCL picks tiny work-groups for sizes like 706×426 and runs 10–50× slower (measured)."""
+    import pyopencl as cl
+
+    glob = tuple(-(-s // local) * local for s in size)
+    return cl.enqueue_nd_range_kernel(q, kernel, glob, (local, local))
+
+
 def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     import pyopencl as cl
 
@@ -55,6 +64,7 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
                      const(rn.astype(np.float32))],
             "ntaps": const(ntaps),
             "coc": rt.empty((h, w)), "pc": rt.empty((3, ph, pw)), "pr": rt.empty((ph, pw)),
+            "pv": rt.empty((ph, pw) if camera.optical_vignetting > 0 else (1,)),
             "tmax": rt.empty((th, tw)), "tn": rt.empty((th, tw), np.int32),
             "alpha": rt.empty((hw, ww)),
             "blur": rt.empty((3, hw, ww)) if scale > 1 else None,
@@ -68,23 +78,23 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     evs = []
     k["dof_coc"].set_args(src, aux["depth"], cache["coc"], i32(w), i32(h), f32(kc), f32(inv_u),
                           f32(scale * rmax))
-    evs.append(cl.enqueue_nd_range_kernel(q, k["dof_coc"], (w, h), None))
-    k["dof_prepare"].set_args(src, cache["coc"], cache["pc"], cache["pr"], i32(w), i32(h), i32(ww),
-                              i32(hw), i32(pad))
-    evs.append(cl.enqueue_nd_range_kernel(q, k["dof_prepare"], (pw, ph), None))
-    k["dof_tile_max"].set_args(cache["pr"], cache["tmax"], i32(ww), i32(hw), i32(pad), i32(tw), i32(th))
-    evs.append(cl.enqueue_nd_range_kernel(q, k["dof_tile_max"], (tw, th), None))
-    k["dof_tile_dilate"].set_args(cache["tmax"], cache["tn"], cache["ntaps"], i32(tw), i32(th))
-    evs.append(cl.enqueue_nd_range_kernel(q, k["dof_tile_dilate"], (tw, th), None))
-    target = dst if scale == 1 else cache["blur"]
+    evs.append(_launch(q, k["dof_coc"], (w, h), 16))
     half = math.hypot(ww / 2.0, hw / 2.0)
-    k["dof"].set_args(cache["pc"], cache["pr"], cache["tn"], *cache["taps"], target, cache["alpha"],
+    field = (f32(camera.optical_vignetting), f32((ww - 1) / 2.0), f32((hw - 1) / 2.0), f32(1.0 / half))
+    k["dof_prepare"].set_args(src, cache["coc"], cache["pc"], cache["pr"], cache["pv"], i32(w), i32(h),
+                              i32(ww), i32(hw), i32(pad), *field)
+    evs.append(_launch(q, k["dof_prepare"], (pw, ph), 16))
+    k["dof_tile_max"].set_args(cache["pr"], cache["tmax"], i32(ww), i32(hw), i32(pad), i32(tw), i32(th))
+    evs.append(_launch(q, k["dof_tile_max"], (tw, th), 4))
+    k["dof_tile_dilate"].set_args(cache["tmax"], cache["tn"], cache["ntaps"], i32(tw), i32(th))
+    evs.append(_launch(q, k["dof_tile_dilate"], (tw, th), 4))
+    target = dst if scale == 1 else cache["blur"]
+    k["dof"].set_args(cache["pc"], cache["pr"], cache["pv"], cache["tn"], *cache["taps"], target, cache["alpha"],
                              i32(ww), i32(hw), i32(pad), i32(tw), cache["inv_area"],
-                             f32(camera.spherical_aberration), f32(camera.optical_vignetting),
-                             f32((ww - 1) / 2.0), f32((hw - 1) / 2.0), f32(1.0 / half))
-    evs.append(cl.enqueue_nd_range_kernel(q, k["dof"], (tw * T, th * T), (T, T)))
+                             f32(camera.spherical_aberration), *field)
+    evs.append(_launch(q, k["dof"], (tw * T, th * T), T))
     if scale > 1:
         k["dof_upsample"].set_args(src, cache["coc"], cache["blur"], cache["alpha"], cache["pr"], dst,
                                    i32(w), i32(h), i32(ww), i32(hw), i32(pad))
-        evs.append(cl.enqueue_nd_range_kernel(q, k["dof_upsample"], (w, h), None))
+        evs.append(_launch(q, k["dof_upsample"], (w, h), 16))
     return evs
