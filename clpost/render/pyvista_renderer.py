@@ -131,15 +131,17 @@ class _IdDepthPass:
             self.actors.append(actor)
         self.size: tuple[int, int] | None = None
 
-    def set_camera(self, pose: np.ndarray, f_px: float, height_px: int) -> None:
-        """VTK camera from a camera-to-world pose (columns right, down, forward) and f in px."""
+    def set_camera(self, pose: np.ndarray, f_px: float, height_px: int,
+                   window_center: tuple[float, float] = (0.0, 0.0)) -> None:
+        """VTK camera from a camera-to-world pose (columns right, down, forward) and f in px;
+        ``window_center`` (VTK viewport units) shears the frustum (dof reference renders)."""
         cam = self.renderer.GetActiveCamera()
         c = pose[:3, 3]
         cam.SetPosition(*c)
         cam.SetFocalPoint(*(c + pose[:3, 2]))
         cam.SetViewUp(*(-pose[:3, 1]))
         cam.SetViewAngle(math.degrees(2.0 * math.atan(0.5 * height_px / f_px)))
-        cam.SetWindowCenter(0.0, 0.0)
+        cam.SetWindowCenter(*window_center)
         cam.SetClippingRange(_NEAR_M, _FAR_M)
 
     def render(self, size: tuple[int, int], object_poses: list[np.ndarray]) -> GBuffer:
@@ -471,7 +473,16 @@ class PyVistaRenderer:
         self._pass.set_camera(cam_pose, f_px, size[1])
         return self._pass.render(size, poses), cam_pose, poses
 
-    def render(self, camera: Camera, size: tuple[int, int], frame_index: int) -> Frame:
+    def render(self, camera: Camera, size: tuple[int, int], frame_index: int,
+               aperture_offset_m: tuple[float, float] = (0.0, 0.0)) -> Frame:
+        r"""Frame ``frame_index`` through ``camera``'s pinhole at ``size``.
+
+        ``aperture_offset_m`` = (a_x, a_y) (camera axes, metres, x right, y down; added for the dof
+        accumulation reference) moves the pinhole to a point of the lens aperture and shears the
+        frustum so the focus plane stays put (Haeberli & Akeley 1990): centre
+        :math:`C + R(a_x, a_y, 0)`, principal point :math:`c + f\,a/u`, so a point at depth S
+        moves by :math:`f\,a\,(1/u - 1/S)` px. Such frames carry no velocity (None).
+        """
         w, h = (int(v) for v in size)
         if w < 1 or h < 1 or (w, h) != tuple(size):
             raise InputError(f"render size {size!r} must be (width, height) in whole pixels >= 1")
@@ -482,18 +493,33 @@ class PyVistaRenderer:
         s = self.supersample
         ws, hs, fs = w * s, h * s, fx * s
         cs = ((ws - 1) / 2.0, (hs - 1) / 2.0)
-        gbuf, cam_pose, poses = self.gbuffer((ws, hs), fs, frame_index)
-        color = shade(self.scene, gbuf, fs, cs, cam_pose, poses)
-        vel = velocity(self.scene, gbuf, fs, cs, frame_index)
+        ax, ay = (float(v) for v in aperture_offset_m)
+        if ax or ay:
+            u = camera.focus_distance_m
+            shift = (0.0, 0.0) if math.isinf(u) else (fs * ax / u, fs * ay / u)
+            cs = (cs[0] + shift[0], cs[1] + shift[1])
+            # VTK subtracts the window centre in NDC (x right, y up): +shift px -> -2 shift / size
+            wc = (-2.0 * shift[0] / ws, 2.0 * shift[1] / hs)
+            cam_pose = self.scene.camera_pose(frame_index).copy()
+            cam_pose[:3, 3] += cam_pose[:3, :3] @ np.array([ax, ay, 0.0])
+            poses = [self.scene.object_pose(k, frame_index) for k in range(len(self.scene.objects))]
+            self._pass.set_camera(cam_pose, fs, hs, wc)
+            gbuf = self._pass.render((ws, hs), poses)
+            color = shade(self.scene, gbuf, fs, cs, cam_pose, poses)
+            vel = None
+        else:
+            gbuf, cam_pose, poses = self.gbuffer((ws, hs), fs, frame_index)
+            color = shade(self.scene, gbuf, fs, cs, cam_pose, poses)
+            vel = velocity(self.scene, gbuf, fs, cs, frame_index)
         if s > 1:
             color = color.reshape(h, s, w, s, 3).mean(axis=(1, 3))
             centre = slice(s // 2, None, s)
             gbuf = GBuffer(ids=gbuf.ids[centre, centre], depth=gbuf.depth[centre, centre])
-            vel = vel[centre, centre] / s
+            vel = None if vel is None else vel[centre, centre] / s
         return Frame(
             color=color.astype(np.float32),
             depth=gbuf.depth.astype(np.float32),
-            velocity=vel.astype(np.float32),
+            velocity=None if vel is None else vel.astype(np.float32),
             metadata={
                 "renderer": "PyVistaRenderer",
                 "frame_index": int(frame_index),
