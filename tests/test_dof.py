@@ -289,3 +289,14 @@ def test_deterministic(rng):
     a, _ = run(Camera(**CAM, blades=6), frame)
     b, _ = run(Camera(**CAM, blades=6), frame)
     assert np.array_equal(a, b)
+
+
+def test_cli_camera_options_reach_the_camera():
+    from clpost.cli import build_parser, camera_from_args
+
+    args = build_parser().parse_args(["bench", "--depth-of-field", "on", "--roundness", "0.25",
+                                      "--spherical-aberration", "-0.5", "--cats-eye", "0.3"])
+    cam = camera_from_args(args)
+    assert (cam.depth_of_field, cam.aperture_roundness, cam.spherical_aberration, cam.optical_vignetting) == \
+        (True, 0.25, -0.5, 0.3)
+    assert camera_from_args(build_parser().parse_args(["bench"])).depth_of_field is False
