@@ -66,7 +66,7 @@ class DofRow:
 def run_dof_bench(sizes=DOF_BENCH_SIZES, samples=(128, 64), repeats: int = 5, device: str | None = None,
                   log=print, save_dir=None):
     """Rows per (size, quality) plus the pinhole row and the reference's convergence
-    ``{size: [(M, PSNR of the M-sample average vs the full one)]}``."""
+    ``{size: (M, [(k, PSNR of the k-sample average vs the M-sample one)])}``."""
     from .render import DemoScene, PyVistaRenderer
     from .render.thin_lens import accumulate
 
@@ -81,7 +81,7 @@ def run_dof_bench(sizes=DOF_BENCH_SIZES, samples=(128, 64), repeats: int = 5, de
             pin = renderer.render(camera, (w, h), 0)
             log(f"{w}x{h}: reference from {m} aperture samples in {time.perf_counter() - t0:.0f} s")
             ref = ref_frame.color.astype(np.float64)
-            convergence[(w, h)] = [(k, psnr_linear(ref, partial[k])) for k in checkpoints]
+            convergence[(w, h)] = (m, [(k, psnr_linear(ref, partial[k])) for k in checkpoints])
             rows.append(DofRow(w, h, "pinhole", 0.0, psnr_linear(ref, pin.color), flip_ldr(ref, pin.color)))
             log(f"  pinhole: PSNR {rows[-1].psnr_db:.2f} dB, FLIP {rows[-1].flip}")
             if save_dir is not None:
@@ -114,11 +114,12 @@ def format_dof_table(rows, convergence, device_name: str) -> str:
         flip = "n/a" if r.flip is None else f"{r.flip:.4f}"
         ms = "—" if r.quality == "pinhole" else f"{r.ms:.1f}"
         lines.append(f"| {r.width}×{r.height} | {r.quality} | {ms} | {r.psnr_db:.2f} | {flip} |")
-    lines += ["", "Reference convergence (PSNR of the M-sample average against the full reference):", "",
-              "| size | " + " | ".join(f"M={k}" for k, _ in next(iter(convergence.values()))) + " |",
-              "|---|" + "---|" * len(next(iter(convergence.values())))]
-    for (w, h), pts in convergence.items():
-        lines.append(f"| {w}×{h} | " + " | ".join(f"{p:.1f}" for _, p in pts) + " |")
+    lines += ["", "Reference convergence (PSNR in dB of the average of the first M aperture samples against "
+              "the full reference; it bounds how finely the table above can rank errors):", "",
+              "| size | full M | M: PSNR |", "|---|---|---|"]
+    for (w, h), (m, pts) in convergence.items():
+        lines.append(f"| {w}×{h} | {m} | "
+                     + ", ".join(f"{k}: {p:.1f}" for k, p in pts) + " |")
     return "\n".join(lines)
 
 
