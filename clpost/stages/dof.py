@@ -84,9 +84,9 @@ Quality levels (``max_coc_px`` at the output resolution; taps = offsets inside t
 =========  =================  ================  ====================================================
 level      working res        max CoC radius    taps per pixel at the max (in-focus tiles: 1)
 =========  =================  ================  ====================================================
-draft      half (2×2 box)     32 px (16 work)   805
-preview    half               64 px (32 work)   3 209
-final      full               64 px             12 853
+draft      half (2×2 box)     32 px (16 work)   889
+preview    half               64 px (32 work)   3 405
+final      full               64 px             13 237
 =========  =================  ================  ====================================================
 Half-resolution levels composite with the full-resolution image by
 :math:`\mathrm{lerp}(c_{full}, \mathrm{up}(c_{blur}), \max(\mathrm{clamp}(|r|-0.5, 0, 1), \mathrm{up}(\alpha)))`
