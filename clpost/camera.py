@@ -135,6 +135,15 @@ class Camera:
     """Seed of the grain and sensor noise (with the frame index, CONVENTIONS "Randomness")."""
     working_space: str = "rec709"
     """Linear RGB working space of the input: 'rec709' (default) or 'acescg'."""
+    # -- dof stage (clpost/stages/dof.py); defaults keep the pinhole image (stage not planned) --
+    depth_of_field: bool = False
+    """dof: True renders the thin lens's defocus from the depth buffer; False keeps the pinhole."""
+    aperture_roundness: float = 0.0
+    """dof: 0 = straight blades (polygon), 1 = circle; corners stay on the f/N circle."""
+    spherical_aberration: float = 0.0
+    """dof: bokeh texture in [-1, 1]; > 0 undercorrected (near: bright rim, far: bright core)."""
+    optical_vignetting: float = 0.0
+    """dof: cat's-eye strength in [0, 1]: barrel-clip displacement in aperture radii at the corner."""
 
     def __post_init__(self) -> None:
         parse_lens(self.lens)
@@ -244,6 +253,17 @@ class Camera:
         object.__setattr__(self, "noise_seed", int(self.noise_seed))
         if self.working_space not in ("rec709", "acescg"):
             raise InputError(f"Camera.working_space={self.working_space!r} must be 'rec709' or 'acescg'")
+        # dof stage fields
+        if not isinstance(self.depth_of_field, (bool, int)):
+            raise InputError(f"Camera.depth_of_field={self.depth_of_field!r} must be True or False")
+        object.__setattr__(self, "depth_of_field", bool(self.depth_of_field))
+        for name, lo, hi, eg in (("aperture_roundness", 0.0, 1.0, "0 (polygon) … 1 (circle)"),
+                                 ("spherical_aberration", -1.0, 1.0, "0.5 (undercorrected) or -0.5"),
+                                 ("optical_vignetting", 0.0, 1.0, "0.5 for visible cat's-eye bokeh")):
+            v = _finite(name, getattr(self, name), "unitless", f"e.g. {eg}")
+            if not lo <= v <= hi:
+                raise InputError(f"Camera.{name}={v!r} must be in [{lo:g}, {hi:g}], e.g. {eg}")
+            object.__setattr__(self, name, v)
 
     # -- derived quantities -------------------------------------------------------------------
     @property
@@ -345,4 +365,8 @@ class Camera:
             "clpost.sensorPreset": self.sensor_preset or "none",
             "clpost.noiseSeed": str(self.noise_seed),
             "clpost.workingSpace": self.working_space,
+            "clpost.depthOfField": str(self.depth_of_field),
+            "clpost.apertureRoundness": f"{self.aperture_roundness:g}",
+            "clpost.sphericalAberration": f"{self.spherical_aberration:g}",
+            "clpost.opticalVignetting": f"{self.optical_vignetting:g}",
         }

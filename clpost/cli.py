@@ -88,6 +88,12 @@ CAMERA_OPTIONS = {
     "--sensor-preset": ("sensor_preset", str, "digital sensor: fullframe-cmos, apsc-cmos, smartphone, machine-vision"),
     "--noise-seed": ("noise_seed", int, "seed of grain and sensor noise"),
     "--working-space": ("working_space", str, "input working space: rec709 (default) or acescg"),
+    # dof stage
+    "--depth-of-field": ("depth_of_field", lambda t: t.lower() in ("1", "on", "true", "yes"),
+                         "thin-lens defocus from the depth buffer: on/off (default off: pinhole)"),
+    "--roundness": ("aperture_roundness", float, "aperture blade roundness 0 (polygon) … 1 (circle)"),
+    "--spherical-aberration": ("spherical_aberration", float, "bokeh texture -1 … 1 (> 0: undercorrected)"),
+    "--cats-eye": ("optical_vignetting", float, "optical vignetting (cat's-eye bokeh) strength 0 … 1"),
 }
 
 
@@ -291,6 +297,16 @@ def cmd_info(args) -> int:
 def cmd_bench(args) -> int:
     from .bench import DEFAULT_SIZES, bench_size, format_table
 
+    if getattr(args, "dof", False):
+        from .dof_bench import DOF_BENCH_SIZES, format_dof_table, run_dof_bench
+        from .runtime import get_runtime
+
+        sizes = args.sizes or list(DOF_BENCH_SIZES)
+        rows, conv = run_dof_bench(sizes=sizes, samples=args.dof_samples[:len(sizes)], repeats=args.repeats,
+                                   device=args.device)
+        print(format_dof_table(rows, conv, get_runtime(args.device).name))
+        return 0
+
     camera = camera_from_args(args)
     sizes = args.sizes or list(DEFAULT_SIZES)
     rows = [bench_size(camera, w, h, quality=args.quality, stages=args.stages, device=args.device,
@@ -392,6 +408,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated WxH (default 640x360,1280x720,1920x1080,3840x2160)")
     b.add_argument("--repeats", type=int, default=10)
     b.add_argument("--json", action="store_true")
+    b.add_argument("--dof", action="store_true",
+                   help="dof speed/accuracy per quality against the thin-lens accumulation reference (demo scene)")
+    b.add_argument("--dof-samples", type=lambda s: [int(x) for x in s.split(",")], default=[128, 64],
+                   help="reference aperture samples per size for --dof (default 128,64)")
     _add_camera_options(b)
     _add_pipeline_options(b)
     b.set_defaults(func=cmd_bench)

@@ -482,18 +482,33 @@ class PyVistaRenderer:
         self._pass = _IdDepthPass(scene)
 
     def gbuffer(self, size: tuple[int, int], f_px: float, frame_index: int,
-                c: tuple[float, float] | None = None) -> tuple[GBuffer, np.ndarray, list]:
+                c: tuple[float, float] | None = None,
+                offset_m: tuple[float, float] = (0.0, 0.0)) -> tuple[GBuffer, np.ndarray, list]:
         """Rasterize ids and planar depth at ``size`` with focal length ``f_px`` (principal point
-        ``c``, default the image centre); returns the G-buffer, the camera pose and the object poses."""
+        ``c``, default the image centre; the camera centre moved by ``offset_m`` along its x, y
+        axes); returns the G-buffer, the camera pose and the object poses."""
         cam_pose = self.scene.camera_pose(frame_index)
+        if offset_m[0] or offset_m[1]:
+            cam_pose = cam_pose.copy()
+            cam_pose[:3, 3] += cam_pose[:3, :3] @ np.array([offset_m[0], offset_m[1], 0.0])
         poses = [self.scene.object_pose(k, frame_index) for k in range(len(self.scene.objects))]
         self._pass.set_camera(cam_pose, f_px, size[1], None if c is None else (c[0], c[1], size[0]))
         return self._pass.render(size, poses), cam_pose, poses
 
     def render(self, camera: Camera, size: tuple[int, int], frame_index: int,
-               intrinsics: tuple[float, float, float, float] | None = None) -> Frame:
-        """``intrinsics`` (f, f, c_x, c_y) overrides ``camera.intrinsics(W, H)``, e.g. the
-        extended frustum :func:`clpost.calibration.required_render` asks for (square pixels)."""
+               intrinsics: tuple[float, float, float, float] | None = None,
+               aperture_offset_m: tuple[float, float] = (0.0, 0.0)) -> Frame:
+        r"""Frame ``frame_index`` through ``camera``'s pinhole at ``size``.
+
+        ``intrinsics`` (f, f, c_x, c_y) overrides ``camera.intrinsics(W, H)``, e.g. the extended
+        frustum :func:`clpost.calibration.required_render` asks for (square pixels).
+
+        ``aperture_offset_m`` = (a_x, a_y) (camera axes, metres, x right, y down; for the dof
+        accumulation reference) moves the pinhole to a point of the lens aperture and shears the
+        frustum so the focus plane stays put (Haeberli & Akeley 1990): centre
+        :math:`C + R(a_x, a_y, 0)`, principal point :math:`c + f\,a/u`, so a point at depth S
+        moves by :math:`f\,a\,(1/u - 1/S)` px. Such frames carry no velocity (None).
+        """
         w, h = (int(v) for v in size)
         if w < 1 or h < 1 or (w, h) != tuple(size):
             raise InputError(f"render size {size!r} must be (width, height) in whole pixels >= 1")
@@ -505,19 +520,24 @@ class PyVistaRenderer:
         ws, hs, fs = w * s, h * s, fx * s
         # pixel-centre convention: the image's edge −½ stays at −½ when pixels are split s×s
         cs = ((cx + 0.5) * s - 0.5, (cy + 0.5) * s - 0.5)
+        ax, ay = (float(v) for v in aperture_offset_m)
+        sheared = bool(ax or ay)
+        if sheared and not math.isinf(camera.focus_distance_m):
+            u = camera.focus_distance_m
+            cs = (cs[0] + fs * ax / u, cs[1] + fs * ay / u)
         centred = abs(cs[0] - (ws - 1) / 2) < 1e-9 and abs(cs[1] - (hs - 1) / 2) < 1e-9
-        gbuf, cam_pose, poses = self.gbuffer((ws, hs), fs, frame_index, None if centred else cs)
+        gbuf, cam_pose, poses = self.gbuffer((ws, hs), fs, frame_index, None if centred else cs, (ax, ay))
         color = shade(self.scene, gbuf, fs, cs, cam_pose, poses)
-        vel = velocity(self.scene, gbuf, fs, cs, frame_index)
+        vel = None if sheared else velocity(self.scene, gbuf, fs, cs, frame_index)
         if s > 1:
             color = color.reshape(h, s, w, s, 3).mean(axis=(1, 3))
             centre = slice(s // 2, None, s)
             gbuf = GBuffer(ids=gbuf.ids[centre, centre], depth=gbuf.depth[centre, centre])
-            vel = vel[centre, centre] / s
+            vel = None if vel is None else vel[centre, centre] / s
         return Frame(
             color=color.astype(np.float32),
             depth=gbuf.depth.astype(np.float32),
-            velocity=vel.astype(np.float32),
+            velocity=None if vel is None else vel.astype(np.float32),
             metadata={
                 "renderer": "PyVistaRenderer",
                 "frame_index": int(frame_index),

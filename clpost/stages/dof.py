@@ -1,0 +1,397 @@
+r"""dof: thin-lens depth of field — signed circle of confusion and a tiled scatter-as-gather with
+bladed, textured, cat's-eye bokeh.
+
+Circle of confusion (thin lens, Hecht §5.2; Potmesil & Chakravarty 1981)
+-------------------------------------------------------------------------
+A lens of focal length f focused at u (film at :math:`v = fu/(u-f)`) images a point at planar
+depth S at :math:`v_S = fS/(S-f)`. Its light fills the aperture of diameter :math:`A = f/N` and
+meets the film in a disc of diameter :math:`A\,|v - v_S|/v_S`. Signed (far > 0, near < 0):
+
+.. math::
+
+    c(S) = \frac{f^2}{N}\,\frac{1/u - 1/S}{1 - f/u}
+         = \frac{f\,v}{N}\Big(\frac1u - \frac1S\Big) \quad [\text{mm on the film}],
+    \qquad r_{px} = \frac{c}{2p}
+
+with p the pixel pitch (:meth:`Camera.pixel_pitch_mm`); r is the bokeh *radius* in pixels. The
+form in 1/S and 1/u is exact, needs no special case for u = ∞ or S = ∞, and gives the finite
+far limit :math:`c_\infty = f v /(N u)`. The talk's :math:`C = v^2|S-u|/(uSN)` equals
+:math:`|c|\cdot v/f`: it takes the aperture as :math:`A = v/N` (N as a working f-number at the
+image distance); we use the f-number as engraved (:math:`A = f/N`, the entrance pupil of a thin
+lens). The two agree for u ≫ f (1.7 % apart at u = 3 m with f = 50 mm).
+
+Depth → 0⁺ gives c → −∞: r is clamped to ±``max_coc_px`` of the quality level (below), which is
+also the largest blur the gather supports — larger CoC saturates there (never NaN, never a hole).
+
+Edge pixels whose colour and depth disagree (CONVENTIONS.md: anti-aliased colour, one-sample
+depth — the edge of a small bright light carries the light's colour and the sky's depth): a
+pixel brighter than 1.5× every neighbour of its own depth (3×3, depth ≥ 0.8× its own) takes the
+nearest depth of its 3×3 neighbourhood. This keeps the light's energy in the light's bokeh instead
+of smearing it into a sky-sized halo, and never fires on ordinary edges (a pixel is not brighter
+than all of its own surface).
+
+Gather (scatter-as-gather, one pass, per 16×16 tile)
+-----------------------------------------------------
+Every source pixel q spreads its colour over its bokeh :math:`K_q`; output pixel p sums the
+bokehs that cover it. Ideas used, by source:
+
+* Tiles of max |CoC| dilated by the reach of neighbouring tiles (Jimenez 2014, "Next Generation
+  Post Processing in Call of Duty", tile max + neighbourhood max): each tile loops over exactly the
+  integer offsets its neighbourhood's blur can reach — an in-focus tile reads one tap.
+* Taps are *all* integer offsets inside the reach, sorted by distance (dense rings): point lights
+  become solid polygons with a 1-px anti-aliased edge, no sampling noise or dot patterns. Shape
+  and texture are evaluated per tap (Abadie 2018, "A Life of a Bokeh": the bokeh as the sampling
+  kernel, weights normalised by the kernel area so energy is conserved).
+* Near/far separation by depth order relative to p (Jimenez's scatter-as-gather classification):
+  taps nearer than p by more than 1 px of CoC form the *front* layer F (their own radius, so a
+  blurred foreground spreads over the in-focus background); taps behind p have their radius
+  clamped to p's own (far) CoC — Jimenez's background clamp — so background never bleeds onto a
+  sharp foreground; same-depth taps use their own radius. Compositing with the front layer's
+  coverage α (partial occlusion):
+
+  .. math::
+
+      w_q = \frac{\mathrm{cov}_q\, I_q\, B_q}{a_K\, r_q^2}, \quad
+      \alpha = \min\!\Big(1, \frac{\sum_F w}{\phi(p)}\Big), \quad
+      \text{out} = \alpha\frac{\sum_F w c}{\sum_F w} + (1-\alpha)\frac{\sum_B w c}{\sum_B w}
+
+  Normalising each layer by its own weight makes a defocused flat field exactly flat and removes
+  the dark halo around sharp foreground edges; a constant-CoC region conserves energy exactly
+  (every pixel's normaliser is the same sum over the same offsets).
+
+Aperture shape :math:`K` (Cycles' convention): an N-gon with corners on the unit circle, blade
+rotation 0 putting a corner at the top of a *background* bokeh (rotation turns it
+counter-clockwise on screen); ``aperture_roundness`` blends its radius function toward the circle:
+:math:`\rho(\phi) = (1-R)\,\frac{\cos(\pi/N)}{\cos(((\phi-\phi_0) \bmod 2\pi/N) - \pi/N)} + R`.
+A point in front of the focus plane (c < 0) shows the aperture point-reflected, as a thin lens
+does. Coverage is the 1-px ramp :math:`\mathrm{cov} = \mathrm{clamp}(r\rho - |o| + 0.5, 0, 1)`;
+:math:`a_K = \tfrac12\oint\rho^2 d\phi` is the unit shape's area; r ≥ 0.5 px.
+
+Spherical aberration texture (parametric): :math:`I(t) = 1 + a\,(2t^2 - 1)`, t the normalised
+radius in the bokeh; :math:`\int I = \int 1` for any a, so energy is unchanged. a = +σ in the near
+field and −σ in the far field for σ = ``spherical_aberration`` (undercorrected σ > 0: foreground
+bokeh with a dark core and bright rim, background bokeh with a bright core fading out; σ < 0 swaps
+them). |σ| ≤ 1 keeps I ≥ 0.
+
+Optical vignetting (cat's-eye): :class:`PupilModel` — the aperture intersected with a lens-barrel
+circle of the same radius displaced by :math:`\eta\,h` (η = ``optical_vignetting``, h the
+source's field position over the half diagonal, so |ηh| ≤ 1): the pupil's shape per field point.
+Only the shape changes here; the light it removes belongs to the vignetting stage, so weights are
+renormalised by the clipped area :math:`\phi = (2\arccos(d/2) - \tfrac d2\sqrt{4-d^2})/\pi`
+(d = η|h|, the two-disc lens area) for the coverage α.
+
+Quality levels (``max_coc_px`` at the output resolution; taps = offsets inside the largest radius)
+=========  =================  ================  ====================================================
+level      working res        max CoC radius    taps per pixel at the max (in-focus tiles: 1)
+=========  =================  ================  ====================================================
+draft      half (2×2 box)     32 px (16 work)   889
+preview    half               64 px (32 work)   3 405
+final      full               64 px             13 237
+=========  =================  ================  ====================================================
+Half-resolution levels composite with the full-resolution image by
+:math:`\mathrm{lerp}(c_{full}, \mathrm{up}(c_{blur}), \max(\mathrm{clamp}(|r|-0.5, 0, 1), \mathrm{up}(\alpha)))`
+(depth-aware bilinear upsampling, :func:`_upsample`), so in-focus pixels stay at full resolution.
+
+Domain/range: colour ≥ 0 finite (HDR, nothing clipped); depth > 0 or +inf; output finite ≥ 0.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from .base import GatherStage
+
+TILE = 16
+"""Work-group / tile edge in working pixels."""
+
+QUALITY = {
+    # name: (working-resolution divisor, max CoC radius in working px)
+    "draft": (2, 16),
+    "preview": (2, 32),
+    "final": (1, 64),
+}
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+MIXED_BRIGHTER = 1.5
+MIXED_SAME_DEPTH = 0.8
+FRONT_MARGIN_PX = 1.0
+
+
+def max_coc_px(quality: str) -> float:
+    """Largest CoC radius (output pixels) the gather supports at ``quality``."""
+    s, r = QUALITY[quality]
+    return float(s * r)
+
+
+# ---------------------------------------------------------------------------------------------
+# Circle of confusion
+# ---------------------------------------------------------------------------------------------
+
+
+def coc_coefficients(camera, width_px: int) -> tuple[float, float]:
+    r"""``(k, inv_u)`` with :math:`r_{px} = k\,(1/u - 1/S)` for S and u in metres:
+    :math:`k = \frac{f v}{2 N p}\cdot 10^{-3}` (f, v, p in mm; 1/m → 1/mm)."""
+    f = camera.focal_length_mm
+    v = camera.image_distance_mm
+    p = camera.pixel_pitch_mm(width_px)
+    k = f * v / (2.0 * camera.f_number * p) * 1e-3
+    u = camera.focus_distance_m
+    return k, (0.0 if math.isinf(u) else 1.0 / u)
+
+
+def coc_mm(camera, depth_m) -> np.ndarray:
+    r"""Signed CoC *diameter* on the film in mm (far > 0): :math:`c = \frac{fv}{N}(1/u - 1/S)`."""
+    s = np.asarray(depth_m, dtype=np.float64)
+    u = camera.focus_distance_m
+    inv_u = 0.0 if math.isinf(u) else 1.0 / (u * 1e3)
+    with np.errstate(divide="ignore"):
+        inv_s = np.where(np.isinf(s), 0.0, 1.0 / (s * 1e3))
+    return camera.focal_length_mm * camera.image_distance_mm / camera.f_number * (inv_u - inv_s)
+
+
+def coc_px(camera, depth_m, width_px: int, limit_px: float = math.inf) -> np.ndarray:
+    """Signed CoC radius in pixels at image width ``width_px``, clamped to ±``limit_px``."""
+    k, inv_u = coc_coefficients(camera, width_px)
+    s = np.asarray(depth_m, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        inv_s = np.where(np.isinf(s), 0.0, 1.0 / s)
+    return np.clip(k * (inv_u - inv_s), -limit_px, limit_px)
+
+
+def _neighbourhood(a: np.ndarray):
+    """The 9 edge-clamped 3×3 shifts of an H×W array (centre first)."""
+    p = np.pad(a, 1, mode="edge")
+    h, w = a.shape
+    offs = [(0, 0)] + [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)]
+    return [p[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy, dx in offs]
+
+
+def effective_depth(color: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Depth with the colour/depth disagreement at edges resolved (see the module docstring)."""
+    d = np.asarray(depth, dtype=np.float64)
+    lum = np.asarray(color, dtype=np.float64)[..., :3] @ LUMA
+    dn, ln = _neighbourhood(d), _neighbourhood(lum)
+    nearest = np.minimum.reduce(dn)
+    brightest_same = np.zeros_like(d)
+    for dq, lq in zip(dn[1:], ln[1:]):
+        brightest_same = np.maximum(brightest_same, np.where(dq >= MIXED_SAME_DEPTH * d, lq, 0.0))
+    mixed = (lum > MIXED_BRIGHTER * brightest_same) & (nearest < d)
+    return np.where(mixed, nearest, d)
+
+
+# ---------------------------------------------------------------------------------------------
+# Aperture shape, texture and pupil (cat's-eye)
+# ---------------------------------------------------------------------------------------------
+
+
+def aperture_radius(phi: np.ndarray, blades: int, rotation_deg: float, roundness: float) -> np.ndarray:
+    r"""Radius ρ(φ) of the unit aperture in screen direction φ (atan2(y, x), y down)."""
+    phi = np.asarray(phi, dtype=np.float64)
+    if blades == 0:
+        return np.ones_like(phi)
+    seg = 2 * math.pi / blades
+    phi0 = -math.pi / 2 - math.radians(rotation_deg)  # corner at the top; + turns counter-clockwise
+    t = np.mod(phi - phi0, seg) - seg / 2
+    poly = math.cos(math.pi / blades) / np.cos(t)
+    return (1.0 - roundness) * poly + roundness
+
+
+def aperture_area(blades: int, rotation_deg: float, roundness: float) -> float:
+    r""":math:`a_K = \frac12\oint\rho^2\,d\phi` (π for a circle, :math:`\frac N2\sin\frac{2\pi}N` for an N-gon)."""
+    phi = (np.arange(8192) + 0.5) * (2 * math.pi / 8192)
+    return float(0.5 * np.mean(aperture_radius(phi, blades, rotation_deg, roundness) ** 2) * 2 * math.pi)
+
+
+@dataclass(frozen=True)
+class PupilModel:
+    """The pupil's shape at a field point, as the gather uses it: the aperture polygon intersected
+    with a barrel circle (same radius) displaced by ``strength · h`` aperture radii.
+
+    A lens tracer can replace this with its exit-pupil outline per field height; the gather only
+    needs ``inside(a, h)`` (coverage of aperture point a at field position h) and ``area_fraction``.
+    """
+
+    strength: float = 0.0
+
+    def barrel_centre(self, h: np.ndarray) -> np.ndarray:
+        return self.strength * np.asarray(h, dtype=np.float64)
+
+    def area_fraction(self, h_norm: np.ndarray) -> np.ndarray:
+        r"""Area of unit disc ∩ unit disc at distance d = η·min(|h|, 1), over π (≥ 0.39 as η ≤ 1;
+        padding beyond the corners counts as the corner)."""
+        d = self.strength * np.minimum(np.asarray(h_norm, dtype=np.float64), 1.0)
+        return (2 * np.arccos(d / 2) - d / 2 * np.sqrt(4 - d * d)) / math.pi
+
+
+def field_position(x: np.ndarray, y: np.ndarray, w: int, h: int) -> tuple[np.ndarray, np.ndarray]:
+    """Field position (x, y) over the half diagonal from the image centre (|h| = 1 at a corner)."""
+    cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
+    half = math.hypot(w / 2.0, h / 2.0)
+    return (x - cx) / half, (y - cy) / half
+
+
+@lru_cache(maxsize=32)
+def tap_table(rmax: int, blades: int, rotation_deg: float, roundness: float):
+    """All integer offsets o = q − p with |o| < rmax + 1, sorted by |o|; per tap
+    ``(dx, dy, |o|, ρ_far, ρ_near)`` (ρ in the aperture direction of p − q for a far source,
+    q − p for a near one) and ``ntaps[k]`` = number of taps with |o| < k + 1."""
+    r = rmax + 1
+    dy, dx = np.mgrid[-r:r + 1, -r:r + 1]
+    dx, dy = dx.ravel(), dy.ravel()
+    dist = np.hypot(dx, dy)
+    keep = dist < rmax + 1
+    dx, dy, dist = dx[keep], dy[keep], dist[keep]
+    order = np.lexsort((dx, dy, dist))
+    dx, dy, dist = dx[order], dy[order], dist[order]
+    rho_far = aperture_radius(np.arctan2(-dy, -dx), blades, rotation_deg, roundness)
+    rho_near = aperture_radius(np.arctan2(dy, dx), blades, rotation_deg, roundness)
+    ntaps = np.array([np.count_nonzero(dist < k + 1) for k in range(rmax + 1)], np.int32)
+    return dx.astype(np.int32), dy.astype(np.int32), dist, rho_far, rho_near, ntaps
+
+
+# ---------------------------------------------------------------------------------------------
+# The float64 reference of the whole stage
+# ---------------------------------------------------------------------------------------------
+
+
+def _working(color: np.ndarray, coc: np.ndarray, scale: int):
+    """Working-resolution colour (s×s box mean) and CoC (nearest = min signed, in working px);
+    odd sizes replicate the last row/column."""
+    if scale == 1:
+        return color, coc
+    h, w = coc.shape
+    hw, ww = -(-h // scale), -(-w // scale)
+    pc = np.pad(color, ((0, hw * scale - h), (0, ww * scale - w), (0, 0)), mode="edge")
+    pr = np.pad(coc, ((0, hw * scale - h), (0, ww * scale - w)), mode="edge")
+    cw = pc.reshape(hw, scale, ww, scale, 3).mean(axis=(1, 3))
+    rw = pr.reshape(hw, scale, ww, scale).min(axis=(1, 3)) / scale
+    return cw, rw
+
+
+def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, blades: int, rotation_deg: float,
+                     roundness: float, sa: float, vignetting: float) -> tuple[np.ndarray, np.ndarray]:
+    """The gather in float64 over *all* taps up to ``rmax`` (no tiles — which also checks that
+    the kernel's tile dilation misses nothing). Returns (colour, front coverage α)."""
+    h, w = coc.shape
+    dxs, dys, dists, rf, rn, _ = tap_table(rmax, blades, rotation_deg, roundness)
+    area = aperture_area(blades, rotation_deg, roundness)
+    pad = rmax + 1
+    pc = np.pad(color, ((pad, pad), (pad, pad), (0, 0)), mode="edge")
+    pr = np.pad(coc, pad, mode="edge")
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    pupil = PupilModel(vignetting)
+    rp = coc
+    F = np.zeros((h, w, 3)); Wf = np.zeros((h, w))
+    B = np.zeros((h, w, 3)); Wb = np.zeros((h, w))
+    for dx, dy, dist, rhof, rhon in zip(dxs, dys, dists, rf, rn):
+        rq = pr[pad + dy:pad + dy + h, pad + dx:pad + dx + w]
+        cq = pc[pad + dy:pad + dy + h, pad + dx:pad + dx + w]
+        front = rq < rp - FRONT_MARGIN_PX
+        behind = rq > rp + FRONT_MARGIN_PX
+        r = np.where(behind, np.maximum(np.abs(rp), 0.5), np.maximum(np.abs(rq), 0.5))
+        far = rq >= 0
+        rho = np.where(far, rhof, rhon)
+        cov = np.clip(r * rho - dist + 0.5, 0.0, 1.0)
+        t = np.minimum(dist / (r * rho), 1.0)
+        a = np.where(far, -sa, sa)
+        wgt = cov * (1.0 + a * (2 * t * t - 1)) / (area * r * r)
+        if vignetting > 0:
+            hx, hy = field_position(xs + dx, ys + dy, w, h)
+            sgn = np.where(far, 1.0, -1.0)
+            ax, ay = -dx / (r * sgn), -dy / (r * sgn)
+            e = np.hypot(ax - vignetting * hx, ay - vignetting * hy)
+            wgt = wgt * np.clip((1.0 - e) * r + 0.5, 0.0, 1.0) / pupil.area_fraction(np.hypot(hx, hy))
+        wf = np.where(front, wgt, 0.0)
+        wb = wgt - wf
+        F += wf[..., None] * cq; Wf += wf
+        B += wb[..., None] * cq; Wb += wb
+    alpha = np.minimum(1.0, Wf)
+    fr = np.where((Wf > 0)[..., None], F / np.where(Wf > 0, Wf, 1.0)[..., None], 0.0)
+    out = alpha[..., None] * fr + (1 - alpha)[..., None] * B / Wb[..., None]
+    return out, alpha
+
+
+def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.ndarray, scale: int):
+    r"""Depth-aware bilinear upsampling of the working-resolution blur and α: bilinear weights
+    times :math:`g_i = 1/(1/4 + (r - s\,r_i)^2)` (r the full-resolution CoC, :math:`r_i` the
+    working CoC of corner i), so a blurred background next to a sharp edge is not mixed with the
+    working pixels that straddle the edge (which carry the nearer CoC). Edges are clamped."""
+    h, w = coc.shape
+    hw, ww = coc_w.shape
+    sx = (np.arange(w) + 0.5) / scale - 0.5
+    sy = (np.arange(h) + 0.5) / scale - 0.5
+    x0 = np.clip(np.floor(sx), 0, ww - 1).astype(int); y0 = np.clip(np.floor(sy), 0, hw - 1).astype(int)
+    fx = np.clip(sx - x0, 0, 1)[None, :]; fy = np.clip(sy - y0, 0, 1)[:, None]
+    x1 = np.minimum(x0 + 1, ww - 1); y1 = np.minimum(y0 + 1, hw - 1)
+    acc = np.zeros((h, w, 3)); acc_a = np.zeros((h, w)); wsum = np.zeros((h, w))
+    for ys, xs, b in ((y0, x0, (1 - fx) * (1 - fy)), (y0, x1, fx * (1 - fy)),
+                      (y1, x0, (1 - fx) * fy), (y1, x1, fx * fy)):
+        g = b / (0.25 + (coc - scale * coc_w[ys][:, xs]) ** 2)
+        acc += g[..., None] * img[ys][:, xs]
+        acc_a += g * alpha[ys][:, xs]
+        wsum += g
+    return acc / wsum[..., None], acc_a / wsum
+
+
+def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "final") -> np.ndarray:
+    """float64 numpy implementation of the whole stage (the oracle of the OpenCL kernels)."""
+    scale, rmax = QUALITY[quality]
+    color = np.asarray(color, dtype=np.float64)
+    h, w = depth.shape
+    coc = coc_px(camera, effective_depth(color, depth), w, limit_px=scale * rmax)
+    cw, rw = _working(color, coc, scale)
+    out, alpha = gather_reference(cw, rw, rmax, camera.blades, camera.blade_rotation_deg,
+                                  camera.aperture_roundness, camera.spherical_aberration,
+                                  camera.optical_vignetting)
+    if scale == 1:
+        return out
+    up, up_alpha = _upsample(out, alpha, rw, coc, scale)
+    b = np.maximum(np.clip(np.abs(coc) - 0.5, 0.0, 1.0), up_alpha)
+    return color + (up - color) * b[..., None]
+
+
+# ---------------------------------------------------------------------------------------------
+# The stage
+# ---------------------------------------------------------------------------------------------
+
+
+class Dof(GatherStage):
+    name = "dof"
+    order = 10.0
+    reads = ("depth",)
+
+    def skip_reason(self, camera, frame):
+        if not camera.depth_of_field:
+            return "Camera.depth_of_field is off (pinhole: everything in focus)"
+        if frame.depth is None:
+            return None  # the planner then asks for the depth buffer
+        k, inv_u = coc_coefficients(camera, frame.width)
+        finite = frame.depth[np.isfinite(frame.depth)].astype(np.float64)
+        inv = [0.0] if finite.size < frame.depth.size else []
+        if finite.size:
+            inv += [1.0 / finite.min(), 1.0 / finite.max()]
+        worst = max(abs(k * (inv_u - i)) for i in inv)
+        if worst <= 0.5:
+            return f"all pixels in focus (largest CoC radius {worst:.3g} px <= 0.5 px)"
+        return None
+
+    def reason_needed(self, camera, frame):
+        coc = coc_px(camera, frame.depth, frame.width)
+        return (f"CoC radius {np.min(coc):.3g} … {np.max(coc):.3g} px (max {max_coc_px(self.quality):g} px, "
+                f"{self.quality}), {camera.blades or 'round'} blades")
+
+    def defines(self, camera):
+        scale, rmax = QUALITY[self.quality]
+        return {"DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_TILE": TILE,
+                "DOF_VIGNETTING": int(camera.optical_vignetting > 0)}
+
+    def reference(self, camera, frame, color):
+        return dof_reference(camera, color, frame.depth, self.quality)
+
+    def enqueue(self, rt, camera, frame, src, dst, aux):
+        from .dof_cl import enqueue_dof
+
+        return enqueue_dof(self, rt, camera, frame, src, dst, aux)

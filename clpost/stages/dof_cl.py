@@ -1,0 +1,100 @@
+"""OpenCL side of the dof stage: programs, per-resolution scratch buffers, kernel launches.
+
+Kept apart from :mod:`clpost.stages.dof` (formulas + float64 reference) so the oracle reads
+without OpenCL plumbing. Launch sequence: ``dof_coc`` (full res) → ``dof_prepare`` (padded working
+buffers) → ``dof_tile_max`` → ``dof_tile_dilate`` → ``dof`` (the gather) → (half res) ``dof_upsample``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import dof as D
+
+
+def _kernels(rt, defines):
+    import pyopencl as cl
+
+    from ..runtime import kernel_source
+
+    out = {}
+    for src in ("dof_coc", "dof_tiles", "dof"):
+        prog = rt.program(kernel_source("common") + kernel_source(src), src, defines)
+        for k in prog.all_kernels():
+            out[k.function_name] = cl.Kernel(prog, k.function_name)
+    return out
+
+
+def _launch(q, kernel, size, local):
+    """Global size rounded up to whole work-groups (kernels guard their bounds): left to itself
+    PoCL picks tiny work-groups for sizes like 706×426 and runs 10–50× slower (measured)."""
+    import pyopencl as cl
+
+    glob = tuple(-(-s // local) * local for s in size)
+    return cl.enqueue_nd_range_kernel(q, kernel, glob, (local, local))
+
+
+def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
+    import pyopencl as cl
+
+    q = rt.queue
+    scale, rmax = D.QUALITY[stage.quality]
+    T = D.TILE
+    w, h = frame.width, frame.height
+    ww, hw = -(-w // scale), -(-h // scale)
+    pad = rmax + 1
+    pw, ph = ww + 2 * pad, hw + 2 * pad
+    tw, th = -(-ww // T), -(-hw // T)
+    defines = stage.defines(camera)
+    key = (id(rt), tuple(sorted(defines.items())), w, h, camera.blades, camera.blade_rotation_deg,
+           camera.aperture_roundness)
+    cache = getattr(stage, "_cl_cache", None)
+    if cache is None or cache["key"] != key:
+        dx, dy, dist, rf, rn, ntaps = D.tap_table(rmax, camera.blades, camera.blade_rotation_deg,
+                                                  camera.aperture_roundness)
+        mf = cl.mem_flags
+
+        def const(a):
+            return cl.Buffer(rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
+
+        cache = {
+            "key": key, "k": _kernels(rt, defines),
+            "taps": [const(dx), const(dy), const(dist.astype(np.float32)), const(rf.astype(np.float32)),
+                     const(rn.astype(np.float32))],
+            "ntaps": const(ntaps),
+            "coc": rt.empty((h, w)), "pc": rt.empty((3, ph, pw)), "pr": rt.empty((ph, pw)),
+            "pv": rt.empty((ph, pw) if camera.optical_vignetting > 0 else (1,)),
+            "tmax": rt.empty((th, tw)), "tn": rt.empty((th, tw), np.int32),
+            "alpha": rt.empty((hw, ww)),
+            "blur": rt.empty((3, hw, ww)) if scale > 1 else None,
+            "inv_area": np.float32(1.0 / D.aperture_area(camera.blades, camera.blade_rotation_deg,
+                                                         camera.aperture_roundness)),
+        }
+        stage._cl_cache = cache
+    k = cache["k"]
+    kc, inv_u = D.coc_coefficients(camera, w)
+    i32, f32 = np.int32, np.float32
+    evs = []
+    k["dof_coc"].set_args(src, aux["depth"], cache["coc"], i32(w), i32(h), f32(kc), f32(inv_u),
+                          f32(scale * rmax))
+    evs.append(_launch(q, k["dof_coc"], (w, h), 16))
+    half = math.hypot(ww / 2.0, hw / 2.0)
+    field = (f32(camera.optical_vignetting), f32((ww - 1) / 2.0), f32((hw - 1) / 2.0), f32(1.0 / half))
+    k["dof_prepare"].set_args(src, cache["coc"], cache["pc"], cache["pr"], cache["pv"], i32(w), i32(h),
+                              i32(ww), i32(hw), i32(pad), *field)
+    evs.append(_launch(q, k["dof_prepare"], (pw, ph), 16))
+    k["dof_tile_max"].set_args(cache["pr"], cache["tmax"], i32(ww), i32(hw), i32(pad), i32(tw), i32(th))
+    evs.append(_launch(q, k["dof_tile_max"], (tw, th), 4))
+    k["dof_tile_dilate"].set_args(cache["tmax"], cache["tn"], cache["ntaps"], i32(tw), i32(th))
+    evs.append(_launch(q, k["dof_tile_dilate"], (tw, th), 4))
+    target = dst if scale == 1 else cache["blur"]
+    k["dof"].set_args(cache["pc"], cache["pr"], cache["pv"], cache["tn"], *cache["taps"], target, cache["alpha"],
+                             i32(ww), i32(hw), i32(pad), i32(tw), cache["inv_area"],
+                             f32(camera.spherical_aberration), *field)
+    evs.append(_launch(q, k["dof"], (tw * T, th * T), T))
+    if scale > 1:
+        k["dof_upsample"].set_args(src, cache["coc"], cache["blur"], cache["alpha"], cache["pr"], dst,
+                                   i32(w), i32(h), i32(ww), i32(hw), i32(pad))
+        evs.append(_launch(q, k["dof_upsample"], (w, h), 16))
+    return evs

@@ -1,0 +1,302 @@
+"""dof: thin-lens CoC closed forms, kernels vs the float64 reference, energy, bokeh shape and
+texture, occlusion (no halo, partial occlusion), extremes and the plan."""
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from clpost import Camera, Frame, Pipeline
+from clpost.stages import dof as D
+
+from conftest import odd_frame
+
+CAM = dict(depth_of_field=True, f_number=1.4, focus_distance_m=2.0, shutter_s=1 / 50, sensor_mm=(6.0, 4.0))
+"""A small sensor makes CoC of 5–40 px on test images ~100 px wide."""
+
+
+def run(cam, frame, quality="final"):
+    pipe = Pipeline(cam, quality=quality, stages=["dof"])
+    return pipe.run(frame).color, pipe
+
+
+def assert_matches_reference(pipe, frame, out, rtol=2e-4):
+    ref = pipe.reference(frame)
+    err = np.abs(out - ref) / (np.abs(ref) + 1e-3 * max(1.0, float(np.abs(ref).max())))
+    worst = np.unravel_index(int(np.argmax(err)), err.shape)
+    assert err.max() < rtol, f"largest relative error {err.max():.3g} at (y, x, c) = {worst}"
+
+
+# -- CoC: closed forms -------------------------------------------------------------------------
+
+@pytest.mark.parametrize("f_mm, n, u_m", [(50, 2.0, 3.0), (35, 1.4, 0.5), (85, 8.0, 10.0), (24, 0.7, 0.1)])
+def test_coc_is_the_thin_lens_blur_disc(f_mm, n, u_m):
+    cam = Camera(lens=f"thin:{f_mm}", f_number=n, focus_distance_m=u_m)
+    s_m = np.array([0.06, u_m / 2, u_m, 2 * u_m, 1e3])
+    s = s_m * 1e3
+    v = f_mm * u_m * 1e3 / (u_m * 1e3 - f_mm)
+    v_s = f_mm * s / (s - f_mm)
+    a = f_mm / n
+    geometric = a * (v - v_s) / v_s  # blur disc where the cone to v_s meets the film at v
+    np.testing.assert_allclose(D.coc_mm(cam, s_m), geometric, rtol=1e-9, atol=1e-12)
+    # the talk's C = v^2 |S-u| / (u S N) is the same disc with A = v/N: ratio v/f exactly
+    talk = v * v * np.abs(s - u_m * 1e3) / (u_m * 1e3 * s * n)
+    np.testing.assert_allclose(np.abs(D.coc_mm(cam, s_m)) * v / f_mm, talk, rtol=1e-9)
+
+
+def test_coc_sign_far_limit_and_pixels():
+    cam = Camera(lens="thin:50", f_number=2.0, focus_distance_m=3.0)
+    v = cam.image_distance_mm
+    assert D.coc_mm(cam, 1.0) < 0 < D.coc_mm(cam, 10.0)
+    assert D.coc_mm(cam, np.inf) == pytest.approx(50 * v / (2.0 * 3000.0), rel=1e-12)
+    # radius in px = diameter / (2 pitch); 640 px across 36 mm
+    assert D.coc_px(cam, np.inf, 640) == pytest.approx(D.coc_mm(cam, np.inf) / (2 * 36 / 640), rel=1e-12)
+    # infinity focus: far limit 0, everything else near field
+    inf = cam.with_(focus_distance_m=math.inf)
+    assert D.coc_px(inf, np.inf, 640) == 0.0 and D.coc_px(inf, 5.0, 640) < 0
+    # depth -> 0+ is clamped to the documented maximum
+    assert D.coc_px(cam, 1e-9, 640, limit_px=D.max_coc_px("final")) == -64.0
+
+
+# -- kernels vs the float64 reference ----------------------------------------------------------
+
+@pytest.mark.parametrize("quality", ["final", "preview", "draft"])
+@pytest.mark.parametrize("extra", [dict(blades=6), dict(blades=5, blade_rotation_deg=17, aperture_roundness=0.3,
+                                                         spherical_aberration=0.6, optical_vignetting=0.8)])
+def test_kernel_matches_reference_on_odd_sizes(rng, quality, extra):
+    frame = odd_frame(rng)
+    depth = frame.depth.copy()
+    depth[rng.random(depth.shape) < 0.1] = np.inf
+    depth[0, :3] = 1e-4  # CoC far beyond the maximum
+    color = frame.color.copy()
+    color[5, 7] = 1e8
+    color[9, 30] = 1e-6
+    frame = Frame(color, depth=depth)
+    out, pipe = run(Camera(**CAM, **extra), frame, quality)
+    assert out.dtype == np.float32 and np.isfinite(out).all() and (out >= 0).all()
+    assert_matches_reference(pipe, frame, out)
+
+
+@given(st.integers(0, 2**31 - 1), st.sampled_from([0, 3, 6, 8]), st.floats(-1, 1), st.floats(0.7, 8))
+def test_kernel_matches_reference_random(seed, blades, sa, n):
+    rng = np.random.default_rng(seed)
+    h, w = int(rng.integers(3, 30)), int(rng.integers(3, 30))
+    color = (rng.random((h, w, 3)) * 10 ** rng.uniform(-3, 3, (h, w, 1))).astype(np.float32)
+    depth = rng.uniform(0.5, 8, (h, w)).astype(np.float32)
+    cam = Camera(**{**CAM, "f_number": n}, blades=blades, spherical_aberration=sa)
+    frame = Frame(color, depth=depth)
+    out, pipe = run(cam, frame, "draft")
+    assert_matches_reference(pipe, frame, out)
+
+
+# -- energy, flatness, shape -------------------------------------------------------------------
+
+def point_frame(depth_m, w=121, h=101, value=1000.0, at=None):
+    color = np.full((h, w, 3), 0.0, np.float32)
+    y, x = at or (h // 2, w // 2)
+    color[y, x] = value
+    return Frame(color, depth=np.full((h, w), depth_m, np.float32))
+
+
+@pytest.mark.parametrize("quality", ["final", "draft"])
+@pytest.mark.parametrize("depth_m", [0.9, 20.0])
+def test_point_light_keeps_its_energy_and_becomes_a_hexagon(quality, depth_m):
+    cam = Camera(**CAM, blades=6, spherical_aberration=0.5)
+    frame = point_frame(depth_m)
+    out, _ = run(cam, frame, quality)
+    assert out.sum() == pytest.approx(3000.0, rel=0.02)
+    r = abs(float(D.coc_px(cam, depth_m, 121)))
+    assert 5 < r < 40
+    lit = out[..., 0] > 1e-3 * out[..., 0].max()
+    ys, xs = np.nonzero(lit)
+    # hexagon with a corner at the top: vertical extent r, horizontal r cos 30°
+    height, width = ys.max() - ys.min() + 1, xs.max() - xs.min() + 1
+    tol = 2.5 if quality == "final" else 6.0  # half resolution: bilinear upsampling widens the edge
+    assert height == pytest.approx(2 * r, abs=tol)
+    assert width == pytest.approx(2 * r * math.cos(math.pi / 6), abs=tol)
+
+
+def test_round_aperture_gives_a_circle():
+    cam = Camera(**CAM, blades=0)
+    out, _ = run(cam, point_frame(20.0))
+    lit = out[..., 0] > 1e-6
+    ys, xs = np.nonzero(lit)
+    assert ys.max() - ys.min() == xs.max() - xs.min()
+    r = float(D.coc_px(cam, 20.0, 121))
+    assert np.count_nonzero(lit) == pytest.approx(math.pi * (r + 0.5) ** 2, rel=0.05)  # 1-px AA edge
+
+
+def test_odd_blade_count_points_a_corner_up_behind_focus_and_down_in_front():
+    cam = Camera(**CAM, blades=3)
+    far, _ = run(cam, point_frame(20.0))
+    near, _ = run(cam, point_frame(1.2))
+    for img, top_is_corner in ((far, True), (near, False)):
+        lit = img[..., 0] > 1e-6
+        ys, xs = np.nonzero(lit)
+        top_row = np.count_nonzero(lit[ys.min()])
+        bottom_row = np.count_nonzero(lit[ys.max()])
+        assert (top_row < bottom_row) == top_is_corner
+
+
+@pytest.mark.parametrize("quality", ["final", "preview", "draft"])
+def test_defocused_flat_field_stays_flat(rng, quality):
+    h, w = 41, 57
+    depth = rng.uniform(0.3, 50, (h, w)).astype(np.float32)
+    depth[rng.random((h, w)) < 0.2] = np.inf
+    frame = Frame(np.full((h, w, 3), 3.0, np.float32), depth=depth)
+    out, _ = run(Camera(**CAM, blades=7, spherical_aberration=0.8, optical_vignetting=1.0), frame, quality)
+    assert np.abs(out / 3.0 - 1).max() < 0.01
+
+
+@pytest.mark.parametrize("sa, near_rim_brighter", [(0.7, True), (-0.7, False)])
+def test_spherical_aberration_textures_near_and_far_oppositely(sa, near_rim_brighter):
+    cam = Camera(**CAM, blades=0, spherical_aberration=sa)
+    for depth_m, rim_brighter in ((1.1, near_rim_brighter), (20.0, not near_rim_brighter)):
+        out, _ = run(cam, point_frame(depth_m))
+        r = abs(float(D.coc_px(cam, depth_m, 121)))
+        row = out[50, 60:, 0]
+        centre, rim = row[0], row[int(0.85 * r)]
+        assert (rim > 1.3 * centre) if rim_brighter else (centre > 1.3 * rim)
+
+
+def test_cats_eye_toward_the_corner():
+    cam = Camera(**CAM, blades=0, optical_vignetting=1.0)
+    h, w = 101, 161
+    centre, _ = run(cam, point_frame(20.0, w=w, h=h, at=(50, 80)))
+    corner, _ = run(cam, point_frame(20.0, w=w, h=h, at=(12, 18)))
+    assert corner.sum() == pytest.approx(centre.sum(), rel=0.03)
+    lit_c = np.count_nonzero(centre[..., 0] > 1e-6)
+    lit_k = np.count_nonzero(corner[..., 0] > 1e-6)
+    assert lit_k < 0.75 * lit_c  # the barrel clips the pupil
+    ys, xs = np.nonzero(corner[..., 0] > 1e-6)
+    # the clipped pupil is elongated across the radius (the diagonal towards the centre)
+    v = np.stack([xs - xs.mean(), ys - ys.mean()], 1).astype(float)
+    radial = np.array([80 - 18, 50 - 12], float)
+    radial /= np.linalg.norm(radial)
+    tangential = np.array([-radial[1], radial[0]])
+    assert np.std(v @ tangential) > 1.3 * np.std(v @ radial)
+
+
+# -- occlusion ---------------------------------------------------------------------------------
+
+def edge_frame():
+    """A sharp dark foreground square at the focus distance over a bright textured background at 30 m."""
+    h, w = 61, 81
+    yy, xx = np.mgrid[0:h, 0:w]
+    color = np.stack([1 + 0.5 * np.sin(xx / 3.0), 1 + 0.5 * np.cos(yy / 4.0), np.ones((h, w))], -1)
+    depth = np.full((h, w), 30.0)
+    fg = (abs(yy - 30) < 15) & (abs(xx - 40) < 15)
+    color[fg] = (0.05, 0.1, 0.2)
+    depth[fg] = 2.0
+    return Frame(color.astype(np.float32), depth=depth.astype(np.float32)), fg
+
+
+@pytest.mark.parametrize("quality", ["final", "draft"])
+def test_in_focus_foreground_has_no_halo_and_does_not_bleed(quality):
+    frame, fg = edge_frame()
+    out, _ = run(Camera(**CAM, blades=6), frame, quality)
+    # the sharp foreground stays exactly itself: background light does not bleed onto it
+    np.testing.assert_allclose(out[fg], frame.color[fg], rtol=1e-5)
+    # the background next to it is the blurred background, not darkened by the foreground
+    ring = np.zeros_like(fg)
+    ring[13:48, 23:58] = True
+    ring &= ~fg
+    lum = out[..., 2]
+    assert lum[ring].min() > 0.97  # background blue channel is 1 everywhere
+
+
+def test_blurred_foreground_covers_the_in_focus_background():
+    h, w = 61, 81
+    yy, xx = np.mgrid[0:h, 0:w]
+    color = np.zeros((h, w, 3), np.float32)
+    color[..., 1] = 1.0                       # green background at the focus distance
+    depth = np.full((h, w), 2.0, np.float32)
+    fg = (abs(yy - 30) < 8) & (abs(xx - 40) < 8)
+    color[fg] = (4.0, 0.0, 0.0)               # red foreground at 0.7 m: CoC ≈ −10 px
+    depth[fg] = 0.7
+    cam = Camera(**CAM, blades=0)
+    out, pipe = run(cam, Frame(color, depth=depth))
+    outside = (~fg) & (abs(yy - 30) < 12) & (abs(xx - 40) < 12)
+    assert out[outside, 0].max() > 0.5          # red spreads over the sharp green background
+    far_bg = (abs(yy - 30) > 25) | (abs(xx - 40) > 30)
+    np.testing.assert_allclose(out[far_bg], color[far_bg], atol=1e-6)  # beyond the reach: untouched
+    # energy: red spread out, green partially hidden, total red conserved within 2 %
+    assert out[..., 0].sum() == pytest.approx(color[..., 0].sum(), rel=0.02)
+
+
+def test_antialiased_light_edge_takes_the_lights_depth():
+    # a small bright light at 20 m whose AA edge pixels carry the sky's depth (+inf)
+    h, w = 41, 41
+    color = np.full((h, w, 3), 0.1, np.float32)
+    depth = np.full((h, w), np.inf, np.float32)
+    color[20, 20] = 500.0
+    depth[20, 20] = 20.0
+    color[20, 21] = 200.0  # edge pixel: half light, sky depth
+    cam = Camera(**{**CAM, "focus_distance_m": 20.0})
+    eff = D.effective_depth(color.astype(np.float64), depth)
+    assert eff[20, 21] == 20.0 and np.isinf(eff[0, 0])
+    out, _ = run(cam, Frame(color, depth=depth))
+    # both pixels stay in focus (no sky-sized halo of the light's energy)
+    assert out[20, 21, 0] == pytest.approx(200.0, rel=1e-3)
+
+
+# -- extremes, plan, determinism ---------------------------------------------------------------
+
+@pytest.mark.parametrize("n", [0.7, 1.4, 64.0])
+@pytest.mark.parametrize("u", [0.1, 2.0, 1e6])
+def test_extreme_apertures_focus_and_depths_stay_finite(rng, n, u):
+    h, w = 23, 37
+    depth = np.geomspace(1e-4, 1e4, h * w).reshape(h, w).astype(np.float32)
+    depth[::5, ::3] = np.inf
+    color = (rng.random((h, w, 3)) * np.geomspace(1e-6, 6e4, w)[None, :, None]).astype(np.float16)
+    frame = Frame(color, depth=depth)
+    cam = Camera(**{**CAM, "f_number": n, "focus_distance_m": u})
+    pipe = Pipeline(cam, quality="draft", stages=["dof"])
+    out = pipe.run(frame).color
+    assert np.isfinite(out).all() and (out >= 0).all()
+    assert_matches_reference(pipe, frame, out, rtol=1e-3)
+
+
+def test_not_planned_when_off_or_all_in_focus():
+    frame = point_frame(5.0)
+    assert "dof" not in Pipeline(Camera(), stages=["dof"]).plan(frame)
+    focused = Camera(**{**CAM, "focus_distance_m": 5.0})
+    entry = [e for e in Pipeline(focused).explain(frame) if e.stage == "dof"][0]
+    assert not entry.planned and "in focus" in entry.reason
+    assert Pipeline(Camera(**CAM)).plan(frame)[0] == "dof"
+    # f/64 at 50 mm, focused at infinity: the blur at 5 m is far below half a pixel at 121 px
+    assert "dof" not in Pipeline(Camera(**{**CAM, "f_number": 64.0, "focus_distance_m": math.inf})).plan(frame)
+
+
+def test_needs_depth_when_on():
+    from clpost.errors import InputError
+
+    with pytest.raises(InputError, match="needs the frame's depth"):
+        Pipeline(Camera(**CAM)).plan(Frame(np.ones((5, 5, 3), np.float32)))
+
+
+def test_camera_validates_the_dof_fields():
+    from clpost.errors import InputError
+
+    for kw in (dict(aperture_roundness=1.5), dict(spherical_aberration=-2), dict(optical_vignetting=float("nan"))):
+        with pytest.raises(InputError, match="Camera\\."):
+            Camera(**kw)
+
+
+def test_deterministic(rng):
+    frame = odd_frame(rng)
+    a, _ = run(Camera(**CAM, blades=6), frame)
+    b, _ = run(Camera(**CAM, blades=6), frame)
+    assert np.array_equal(a, b)
+
+
+def test_cli_camera_options_reach_the_camera():
+    from clpost.cli import build_parser, camera_from_args
+
+    args = build_parser().parse_args(["bench", "--depth-of-field", "on", "--roundness", "0.25",
+                                      "--spherical-aberration", "-0.5", "--cats-eye", "0.3"])
+    cam = camera_from_args(args)
+    assert (cam.depth_of_field, cam.aperture_roundness, cam.spherical_aberration, cam.optical_vignetting) == \
+        (True, 0.25, -0.5, 0.3)
+    assert camera_from_args(build_parser().parse_args(["bench"])).depth_of_field is False
