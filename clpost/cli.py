@@ -122,7 +122,8 @@ def cmd_demo(args) -> int:
     camera = camera_from_args(args, **DEMO_CAMERA_DEFAULTS)
     run_demo(Path(args.outdir), camera, size=args.size, n_frames=args.frames, quality=args.quality,
              stages=args.stages, device=args.device, camera_motion=not args.static_camera,
-             overwrite=args.overwrite, log=print, reference_subframes=args.reference_subframes)
+             overwrite=args.overwrite, log=print, reference_subframes=args.reference_subframes,
+             lens_model=args.lens_model)
     return 0
 
 
@@ -332,6 +333,10 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--reference-subframes", type=int, default=0, metavar="K",
                    help="also render a reference motion-blurred frame from K sub-frames per frame "
                         "(needs --fps and --shutter or --shutter-angle)")
+    d.add_argument("--lens-model", choices=("post", "geometry-distortion"), default="post",
+                   help="post: lens effects as post-process stages (default); geometry-distortion: the "
+                        "--calibration's distortion applied to the vertices before rasterisation "
+                        "(Lambers et al. 3.2; docs/geometry_distortion.md)")
     _add_camera_options(d)
     _add_pipeline_options(d)
     d.set_defaults(func=cmd_demo)

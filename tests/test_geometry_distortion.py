@@ -118,3 +118,22 @@ def test_bad_scene_or_model_type():
         GeometryDistortionRenderer(DemoScene.default(), {"k1": 0.1})
     with pytest.raises(InputError, match="DemoScene"):
         GeometryDistortionRenderer("scene", model())
+
+
+def test_cli_demo_geometry_distortion_writes_frames_and_refuses_without_calibration(tmp_path):
+    import json
+
+    from clpost.cli import main
+
+    cal = tmp_path / "cal.json"
+    cal.write_text(json.dumps({"camera_matrix": [[100.0, 0, 47.5], [0, 100.0, 31.5], [0, 0, 1]],
+                               "distortion_coefficients": [-0.2, 0.05, 0.0, 0.0],
+                               "image_width": 96, "image_height": 64}))
+    out = tmp_path / "out"
+    assert main(["demo", str(out), "--frames", "1", "--size", "96x64", "--static-camera",
+                 "--calibration", str(cal), "--lens-model", "geometry-distortion", "--stages", "exposure"]) == 0
+    assert (out / "clpost.0001.exr").exists() and (out / "preview" / "clpost.0001.png").exists()
+    with pytest.raises(InputError, match="--calibration"):
+        from clpost.demo import run_demo
+
+        run_demo(tmp_path / "x", size=(96, 64), n_frames=1, log=lambda s: None, lens_model="geometry-distortion")

@@ -425,3 +425,18 @@ def render_reference(scene: DemoScene, model: OpenCVModel, frame_index: int = 0)
     depth = np.where(ok, gbuf.depth, np.inf)
     return Frame(color=color.astype(np.float32), depth=depth.astype(np.float32), alpha=ok.astype(np.float32),
                  metadata={"renderer": "raycast", "object_id": np.where(ok, gbuf.ids, -1)})
+
+
+def render_geometry_distorted_sequence(model: OpenCVModel, size: tuple[int, int], n_frames: int = 1,
+                                       camera_motion: bool = False, scene: DemoScene | None = None,
+                                       error_px: float = 0.1) -> list[Frame]:
+    """Frames 0 … n_frames−1 of the demo scene rendered through ``model`` (scaled to ``size``)
+    by geometry distortion — what ``clpost demo --lens-model geometry-distortion`` uses."""
+    if int(n_frames) != n_frames or n_frames < 1:
+        raise InputError(f"n_frames={n_frames!r} must be an integer >= 1")
+    r = GeometryDistortionRenderer(scene if scene is not None else DemoScene.default(camera_motion=camera_motion),
+                                   model.scaled_to(*size), error_px=error_px)
+    try:
+        return [r.render(i) for i in range(int(n_frames))]
+    finally:
+        r.close()
