@@ -136,7 +136,7 @@ def cmd_demo(args) -> int:
     run_demo(Path(args.outdir), camera, size=args.size, n_frames=args.frames, quality=args.quality,
              stages=args.stages, device=args.device, camera_motion=not args.static_camera,
              overwrite=args.overwrite, log=print, reference_subframes=args.reference_subframes,
-             display=args.display)
+             display=args.display, lens_model=args.lens_model)
     return 0
 
 
@@ -358,6 +358,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(needs --fps and --shutter or --shutter-angle)")
     d.add_argument("--display", default="srgb", choices=["srgb", "rec709", "display-p3"],
                    help="preview PNG encoding (default srgb)")
+    d.add_argument("--lens-model", choices=("post", "geometry-distortion"), default="post",
+                   help="post: lens effects as post-process stages (default); geometry-distortion: the "
+                        "--calibration's distortion applied to the vertices before rasterisation "
+                        "(Lambers et al. 3.2; docs/geometry_distortion.md)")
     _add_camera_options(d)
     _add_pipeline_options(d)
     d.set_defaults(func=cmd_demo)

@@ -37,8 +37,11 @@ def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int
              n_frames: int = 3, quality: str = "final", stages: list[str] | None = None,
              device: str | None = None, camera_motion: bool = True, overwrite: bool = False,
              log: Callable[[str], None] = print, reference_subframes: int = 0,
-             display: str = "srgb") -> dict:
-    """Render, process and write the demo; returns a summary (paths, timings, plan)."""
+             display: str = "srgb", lens_model: str = "post") -> dict:
+    """Render, process and write the demo; returns a summary (paths, timings, plan).
+    ``lens_model``: ``post`` (the pipeline's stages) or ``geometry-distortion`` (the camera's
+    calibration applied to the vertices, :mod:`clpost.render.geometry_distortion`; the
+    distortion stage is then left out)."""
     from .render import render_demo_sequence
 
     camera = camera or Camera(**DEMO_CAMERA_DEFAULTS)
@@ -59,8 +62,23 @@ def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int
 
         spec = required_render(camera.distortion)
         render_size, intrinsics = (spec.width, spec.height), spec.intrinsics()
-    frames = render_demo_sequence(camera, size=render_size, n_frames=n_frames, camera_motion=camera_motion,
-                                  intrinsics=intrinsics)
+    if lens_model == "geometry-distortion":
+        # renderer-side lens model: distorted geometry, so the distortion stage must not run again
+        from .errors import InputError
+        from .render.geometry_distortion import render_geometry_distorted_sequence
+        from .stages import stage_names
+
+        if camera.distortion is None:
+            raise InputError("--lens-model geometry-distortion needs a calibration (--calibration FILE)")
+        frames = render_geometry_distorted_sequence(camera.distortion, size, n_frames, camera_motion)
+        stages = [s for s in (stages or stage_names()) if s != "distortion"]
+    elif lens_model != "post":
+        from .errors import InputError
+
+        raise InputError(f"lens_model={lens_model!r} must be 'post' or 'geometry-distortion'")
+    else:
+        frames = render_demo_sequence(camera, size=render_size, n_frames=n_frames, camera_motion=camera_motion,
+                                      intrinsics=intrinsics)
     t_render = time.perf_counter() - t0
     log(f"rendered {n_frames} frame(s) of the demo scene at {size[0]}x{size[1]} "
         f"in {t_render:.2f} s (pyvista/VTK offscreen: HDR color, planar depth, velocity)")

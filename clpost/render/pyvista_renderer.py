@@ -355,10 +355,12 @@ def _sun_visibility(points: np.ndarray, normals: np.ndarray, owner: np.ndarray, 
 
 
 def shade(scene: DemoScene, gbuf: GBuffer, f_px: float, c: tuple[float, float],
-          cam_pose: np.ndarray, poses: list[np.ndarray]) -> np.ndarray:
-    """Linear HDR radiance (H×W×3, float64) of the G-buffer; see :class:`DemoScene` for the model."""
+          cam_pose: np.ndarray, poses: list[np.ndarray], rays: np.ndarray | None = None) -> np.ndarray:
+    """Linear HDR radiance (H×W×3, float64) of the G-buffer; see :class:`DemoScene` for the model.
+    ``rays`` (H×W×3, unit Z) replaces the pinhole rays per pixel (renderer-side lens models:
+    geometry distortion, image-based lens)."""
     h, w = gbuf.ids.shape
-    rays = pixel_rays((w, h), f_px, c)
+    rays = pixel_rays((w, h), f_px, c) if rays is None else rays
     rot_c, cen_c = cam_pose[:3, :3], cam_pose[:3, 3]
     dirs = rays @ rot_c.T
     color = _sky(dirs, scene)
@@ -426,11 +428,13 @@ def shade(scene: DemoScene, gbuf: GBuffer, f_px: float, c: tuple[float, float],
 # ---------------------------------------------------------------------------------------------
 
 
-def velocity(scene: DemoScene, gbuf: GBuffer, f_px: float, c: tuple[float, float], frame: int) -> np.ndarray:
+def velocity(scene: DemoScene, gbuf: GBuffer, f_px: float, c: tuple[float, float], frame: int,
+             rays: np.ndarray | None = None, project_px=None) -> np.ndarray:
     """Forward screen-space motion (H×W×2, px per frame, +x right, +y down) by reprojection; see
-    the module docstring for the formula."""
+    the module docstring for the formula. ``rays`` (H×W×3, unit Z) and ``project_px``
+    (camera-space points …×3 → pixels …×2) replace the pinhole for renderer-side lens models."""
     h, w = gbuf.ids.shape
-    rays = pixel_rays((w, h), f_px, c)
+    rays = pixel_rays((w, h), f_px, c) if rays is None else rays
     cam0, cam1 = scene.camera_pose(frame), scene.camera_pose(frame + 1)
     finite = np.isfinite(gbuf.depth)
     depth = np.where(finite, gbuf.depth, 1.0)
@@ -447,7 +451,7 @@ def velocity(scene: DemoScene, gbuf: GBuffer, f_px: float, c: tuple[float, float
     moved = np.where(finite[..., None], pts - cam1[:3, 3], dirs) @ cam1[:3, :3]
     # a point that passes behind the next camera has no image: clamp its Z so motion stays finite
     moved[..., 2] = np.maximum(moved[..., 2], 1e-6)
-    xy = project(moved, f_px, c)
+    xy = project(moved, f_px, c) if project_px is None else project_px(moved)
     base = np.stack(np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64)), -1)
     vel = np.clip(xy - base, -1e6, 1e6)
     if np.array_equal(cam0, cam1):

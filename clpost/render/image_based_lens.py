@@ -1,0 +1,357 @@
+r"""The image-based lens model of Heidrich, Slusallek & Seidel ("An Image-Based Model for
+Realistic Lens Systems in Interactive Computer Graphics", Graphics Interface 1997): its
+preprocessing — the set of perspective projections that replaces a real lens for one point of
+its exit pupil — built from the real ray tracer (:mod:`clpost.optics.trace`).
+
+Frames. The lens frame is the prescription's (mm, z from the first vertex, light toward +z, film
+at :math:`z_f`). Rays are traced **backwards**, film → object, through the mirrored prescription
+(:math:`z' = z_f - z`, curvatures negated, each surface's indices swapped), so the forward tracer
+is reused unchanged. A camera-space direction (X right, Y down, Z forward) is the lens-frame
+direction (x, −y, −z); the camera origin is the film centre (focus distances of real lenses are
+measured from the film, ``shared/CONVENTIONS.md``).
+
+For every pupil sample :math:`p_i` (stratified: an n×n grid of cell centres mapped to the disc
+by Shirley's concentric map, on the paraxial exit-pupil plane — the lens_data achromat and
+singlet have their stop at the front face, so points on the last surface would be vignetted for
+most of the film — inside the radius the axial film point sees through the stopped-down iris):
+
+1. **Grid rays** (sec. 3.2): a regular grid on a film cell (10×10 by default), each ray from
+   its film point x' through :math:`p_i`, traced back to the object side: points q and unit
+   directions d.
+2. **Vignetting** (sec. 3.4): border grid points whose ray does not pass are moved toward the
+   cell centre by bisection (40 steps) until they pass; the inner points are then placed evenly
+   inside by the Coons patch of the moved border.
+3. **Virtual centre of projection** (sec. 3.3): the e that maximises
+
+   .. math:: F(e) = \sum_k \frac{\langle d_k \mid q_k - e\rangle^2}{\lVert q_k - e\rVert^2},
+
+   i.e. minimises the angles between each ray and the line from e through its point, by Newton
+   iteration (analytic gradient, central-difference Hessian, halving steps that do not increase
+   F, and refusing points in front of a ray's point: cos² also rewards the antipode), started
+   from the lens centre (the entrance pupil on the axis) or from the parent cell's e — or from
+   the least-squares point nearest to all rays where that has the larger F (nearly parallel
+   bundles of small cells put e far away, where Newton from the centre is slow).
+   The ray-angle error is :math:`\max_k \angle(d_k, q_k - e)`.
+4. **Subdivision** (sec. 3.2): where that error exceeds the threshold (0.05° as in the paper),
+   the cell is split as a quad-tree and each quadrant gets its own grid and fit.
+
+Each leaf is a :class:`Projection`: e, the film grid, the texture coordinates of the grid rays
+in the projection's image plane (camera-space :math:`(X/Z, Y/Z)` of :math:`q_k - e`, whose
+bounding box is the off-axis frustum) and the weights of sec. 3.5,
+
+.. math:: W(x') = \frac{\cos\theta'\cos\theta''}{\lVert x'' - x'\rVert^2},
+
+θ' between the ray and the film normal, θ'' between the ray and the exit-pupil plane's normal
+at :math:`x'' = p_i` (both the optical axis). :func:`build` caches the result per (lens, focus, aperture, sampling).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+
+from ..errors import InputError
+from ..optics import get_lens
+from ..optics.prescription import available_lenses
+from ..optics.trace import OK, surface_table, trace_table
+
+THRESHOLD_DEG = 0.05
+"""The paper's ray-angle error threshold."""
+
+
+@dataclass(frozen=True)
+class Projection:
+    pupil_index: int
+    depth: int
+    cell_mm: tuple[float, float, float, float]  # film x0, x1, y0, y1 (lens frame, mm)
+    cop_mm: np.ndarray  # virtual centre of projection e (lens frame, mm)
+    film_mm: np.ndarray  # (n, n, 2) grid points on the film after vignetting
+    tex: np.ndarray  # (n, n, 2) camera-space (X/Z, Y/Z) of q − e: the image-plane coordinates
+    weight: np.ndarray  # (n, n) W(x') of sec. 3.5 (1/mm²), 0 where the ray does not pass
+    max_angle_deg: float
+    frustum: tuple[float, float, float, float]  # bounding box of tex: x0, x1, y0, y1
+
+    @property
+    def cop_camera_m(self) -> np.ndarray:
+        """e in camera space (metres), camera origin at the film centre (see the module)."""
+        return np.array([self.cop_mm[0], -self.cop_mm[1], -(self.cop_mm[2] - self._z_film)]) / 1000.0
+
+    _z_film: float = 0.0
+
+
+@dataclass
+class ImageBasedLens:
+    lens: str
+    focus_distance_m: float
+    f_number: float
+    sensor_mm: tuple[float, float]
+    pupil_samples_mm: np.ndarray  # (k, 3)
+    projections: list[Projection] = field(default_factory=list)
+    threshold_deg: float = THRESHOLD_DEG
+    preprocess_s: float = 0.0
+    dropped_cells: int = 0
+
+    @property
+    def max_angle_deg(self) -> float:
+        return max((p.max_angle_deg for p in self.projections), default=0.0)
+
+    def projections_per_sample(self) -> np.ndarray:
+        return np.bincount([p.pupil_index for p in self.projections], minlength=len(self.pupil_samples_mm))
+
+
+# ---------------------------------------------------------------------------------------------
+# Backward tracing through the mirrored prescription
+# ---------------------------------------------------------------------------------------------
+
+
+def mirrored_table(pres, stop_radius_mm: float) -> tuple[np.ndarray, float]:
+    """The :func:`surface_table` of the prescription seen from the film: z' = z_f − z, c' = −c,
+    index after each surface = the forward index before it. Returns (table, z_f)."""
+    fwd = surface_table(pres, stop_radius_mm=stop_radius_mm)
+    zf = float(pres.vertex_z[-1] + pres.surfaces[-1].thickness_mm)
+    rows = []
+    for k in range(len(fwd) - 1, -1, -1):
+        zk, c, sd, _, is_stop = fwd[k]
+        n_before = fwd[k - 1, 3] if k > 0 else 1.0
+        rows.append((zf - zk, -c, sd, n_before, is_stop))
+    return np.array(rows), zf
+
+
+def trace_back(table: np.ndarray, zf: float, film_xy: np.ndarray, p: np.ndarray):
+    """Rays from film points (N×2, mm) through the exit-side point p (lens frame) to the object
+    side: (q, d, ok) in the lens frame — q on the plane 1 mm before the first vertex, d unit and
+    pointing to the object (d_z < 0)."""
+    film_xy = np.asarray(film_xy, np.float64).reshape(-1, 2)
+    o = np.concatenate([film_xy, np.zeros((len(film_xy), 1))], 1)
+    pm = np.array([p[0], p[1], zf - p[2]])
+    r = trace_table(table, o, pm[None, :] - o, zf + 1.0)
+    q = r.pos.copy()
+    d = r.dir.copy()
+    q[:, 2] = zf - q[:, 2]
+    d[:, 2] = -d[:, 2]
+    return q, d, r.status == OK
+
+
+# ---------------------------------------------------------------------------------------------
+# Pupil sampling, the COP fit and vignetting
+# ---------------------------------------------------------------------------------------------
+
+
+def _concentric(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Shirley–Chiu concentric map of [−1, 1]² onto the unit disc (area preserving)."""
+    a, b = u, v
+    big = np.abs(a) > np.abs(b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(big, a, b)
+        phi = np.where(big, (math.pi / 4) * b / a, math.pi / 2 - (math.pi / 4) * a / b)
+    phi = np.where((a == 0) & (b == 0), 0.0, phi)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
+def pupil_samples(pres, table, zf, z_exit_mm: float, n: int) -> np.ndarray:
+    """n×n stratified points on the exit-pupil plane z = ``z_exit_mm``, inside the radius
+    through which the axial film point's rays pass the stopped-down iris (bisection)."""
+    lo, hi = 0.0, 4.0 * float(pres.surfaces[-1].semi_diameter_mm)
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        if trace_back(table, zf, np.zeros((1, 2)), np.array([mid, 0.0, z_exit_mm]))[2][0]:
+            lo = mid
+        else:
+            hi = mid
+    g = (np.arange(n) + 0.5) / n * 2 - 1
+    u, v = np.meshgrid(g, g)
+    x, y = _concentric(u.ravel(), v.ravel())
+    return np.stack([lo * 0.999 * x, lo * 0.999 * y, np.full(x.shape, z_exit_mm)], -1)
+
+
+def fit_cop(q: np.ndarray, d: np.ndarray, e0: np.ndarray, iters: int = 60, max_step_mm: float = 5.0) -> np.ndarray:
+    r"""Newton maximisation of :math:`F(e) = \sum \langle d|q-e\rangle^2/\lVert q-e\rVert^2`
+    (module docstring) from ``e0``; d unit. Steps that do not increase F are halved."""
+    def f_and_grad(e):
+        r = q - e
+        s = np.einsum("ij,ij->i", d, r)
+        n2 = np.einsum("ij,ij->i", r, r)
+        f = np.sum(s * s / n2)
+        # dF/de = −Σ (2 s d / n2 − 2 s² r / n2²)
+        g = -np.sum(2 * (s / n2)[:, None] * d - 2 * (s * s / (n2 * n2))[:, None] * r, axis=0)
+        return f, g
+
+    def behind(e):  # e on the lens side of every ray point (cos² alone also rewards the antipode)
+        return bool(np.all(np.einsum("ij,ij->i", d, q - e) > 0))
+
+    # also try the least-squares point nearest to all rays (closed form); keep the better start
+    proj = np.eye(3)[None] - d[:, :, None] * d[:, None, :]
+    try:
+        e_ls = np.linalg.solve(proj.sum(0), np.einsum("kij,kj->i", proj, q))
+    except np.linalg.LinAlgError:
+        e_ls = None
+    e = np.asarray(e0, np.float64).copy()
+    f, g = f_and_grad(e)
+    if e_ls is not None and np.all(np.isfinite(e_ls)) and behind(e_ls) and f_and_grad(e_ls)[0] > f:
+        e = e_ls
+        f, g = f_and_grad(e)
+    for _ in range(iters):
+        h = 1e-4 * max(1.0, float(np.abs(e).max()))
+        hess = np.empty((3, 3))
+        for k in range(3):
+            dk = np.zeros(3)
+            dk[k] = h
+            hess[:, k] = (f_and_grad(e + dk)[1] - f_and_grad(e - dk)[1]) / (2 * h)
+        try:
+            step = -np.linalg.solve(hess, g)
+        except np.linalg.LinAlgError:
+            step = g * 1e-3
+        norm = np.linalg.norm(step)
+        if norm > max_step_mm:  # trust region: F is bounded and flat far away (e → ∞ along the rays)
+            step *= max_step_mm / norm
+        if np.dot(step, g) <= 0:  # not an ascent direction (Hessian not negative definite): gradient
+            step = g / max(np.linalg.norm(g), 1e-300) * min(1.0, np.linalg.norm(step))
+        t = 1.0
+        while t > 1e-8:
+            f_new, g_new = f_and_grad(e + t * step)
+            if f_new >= f and behind(e + t * step):
+                break
+            t *= 0.5
+        if t <= 1e-8:
+            break
+        e, f_prev, f, g = e + t * step, f, f_new, g_new
+        if abs(f - f_prev) <= 1e-15 * max(f, 1.0) and np.linalg.norm(t * step) < 1e-10:
+            break
+    return e
+
+
+def angle_errors_deg(q: np.ndarray, d: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Angle between each ray direction d and the approximating ray q − e (degrees)."""
+    r = q - e
+    c = np.einsum("ij,ij->i", d, r) / np.linalg.norm(r, axis=1)
+    return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def _coons(border: dict, n: int) -> np.ndarray:
+    """Grid (n×n×2) from four border curves (bottom j=0, top j=n−1 along i; left i=0, right
+    i=n−1 along j) by the bilinearly blended Coons patch."""
+    s = np.linspace(0, 1, n)
+    bot, top, left, right = border["b"], border["t"], border["l"], border["r"]
+    u, v = s[None, :, None], s[:, None, None]  # grid[j, i]
+    ruled_v = (1 - v) * bot[None, :, :] + v * top[None, :, :]
+    ruled_u = (1 - u) * left[:, None, :] + u * right[:, None, :]
+    corners = ((1 - u) * (1 - v) * bot[0] + u * (1 - v) * bot[-1] + (1 - u) * v * top[0] + u * v * top[-1])
+    return ruled_v + ruled_u - corners
+
+
+def _vignetting_grid(table, zf, p, cell, n):
+    """The film grid of a cell after sec. 3.4 (None when the cell centre is vignetted)."""
+    x0, x1, y0, y1 = cell
+    gx, gy = np.meshgrid(np.linspace(x0, x1, n), np.linspace(y0, y1, n))
+    grid = np.stack([gx, gy], -1)
+    _, _, ok = trace_back(table, zf, grid.reshape(-1, 2), p)
+    if ok.all():
+        return grid
+    centre = np.array([0.5 * (x0 + x1), 0.5 * (y0 + y1)])
+    if not trace_back(table, zf, centre[None], p)[2][0]:
+        return None
+    border = {"b": grid[0].copy(), "t": grid[-1].copy(), "l": grid[:, 0].copy(), "r": grid[:, -1].copy()}
+    for key, pts in border.items():
+        _, _, pass_ = trace_back(table, zf, pts, p)
+        lo, hi = np.zeros(len(pts)), np.ones(len(pts))
+        lo[pass_] = 1.0
+        for _ in range(24):
+            mid = 0.5 * (lo + hi)
+            _, _, okm = trace_back(table, zf, centre + mid[:, None] * (pts - centre), p)
+            lo = np.where(okm & ~pass_, mid, lo)
+            hi = np.where(~okm & ~pass_, mid, hi)
+        border[key] = centre + lo[:, None] * (pts - centre)
+    # corners are shared by two border curves: use the one pulled in further
+    for (a, ia), (b, ib) in ((("b", 0), ("l", 0)), (("b", -1), ("r", 0)), (("t", 0), ("l", -1)), (("t", -1), ("r", -1))):
+        pa, pb = border[a][ia], border[b][ib]
+        pick = pa if np.linalg.norm(pa - centre) < np.linalg.norm(pb - centre) else pb
+        border[a][ia] = border[b][ib] = pick
+    return _coons(border, n)
+
+
+# ---------------------------------------------------------------------------------------------
+# Building the model
+# ---------------------------------------------------------------------------------------------
+
+
+def _projection(pres, table, zf, p, index, cell, grid, e, depth):
+    n = grid.shape[0]
+    q, d, ok = trace_back(table, zf, grid.reshape(-1, 2), p)
+    err = angle_errors_deg(q[ok], d[ok], e)
+    r = q - e
+    cam = np.stack([r[:, 0], -r[:, 1], -r[:, 2]], -1)
+    tex = cam[:, :2] / cam[:, 2:3]
+    x1 = np.concatenate([grid.reshape(-1, 2), np.full((n * n, 1), zf)], 1)
+    ray = p[None, :] - x1
+    dist = np.linalg.norm(ray, axis=1)
+    cos1 = np.abs(ray[:, 2]) / dist
+    cos2 = cos1  # the exit-pupil plane is parallel to the film
+    w = np.where(ok, cos1 * cos2 / (dist * dist), 0.0)
+    t_ok = tex[ok]
+    fr = (float(t_ok[:, 0].min()), float(t_ok[:, 0].max()), float(t_ok[:, 1].min()), float(t_ok[:, 1].max()))
+    proj = Projection(index, depth, cell, e, grid, tex.reshape(n, n, 2), w.reshape(n, n),
+                      float(err.max(initial=0.0)), fr)
+    object.__setattr__(proj, "_z_film", zf)
+    return proj, float(err.max(initial=0.0))
+
+
+@lru_cache(maxsize=16)
+def build(lens: str, focus_distance_m: float = math.inf, f_number: float | None = None,
+          sensor_mm: tuple[float, float] = (36.0, 24.0), grid: int = 10, pupil_n: int = 3,
+          threshold_deg: float = THRESHOLD_DEG, max_depth: int = 4) -> ImageBasedLens:
+    """The image-based model of ``lens`` (a ``lens_data`` name) focused at ``focus_distance_m``
+    (from the film) at ``f_number``; cached per arguments (module docstring)."""
+    if lens not in available_lenses():
+        raise InputError(f"lens {lens!r} is not in lens_data/; choose one of {', '.join(available_lenses())}")
+    if int(grid) != grid or grid < 2:
+        raise InputError(f"grid={grid!r} must be an integer >= 2 (rays per cell side; the paper uses 10)")
+    if int(pupil_n) != pupil_n or pupil_n < 1:
+        raise InputError(f"pupil_n={pupil_n!r} must be an integer >= 1 (pupil samples per side)")
+    if not (math.isfinite(threshold_deg) and threshold_deg > 0):
+        raise InputError(f"threshold_deg={threshold_deg!r} must be > 0 degrees (the paper uses 0.05)")
+    if len(sensor_mm) != 2 or not all(math.isfinite(s) and s > 0 for s in sensor_mm):
+        raise InputError(f"sensor_mm={sensor_mm!r} must be (width, height) in mm > 0")
+    t0 = time.perf_counter()
+    L = get_lens(lens)
+    n_num = L.clamp_f_number(f_number if f_number is not None else L.max_aperture)
+    dist_mm = focus_distance_m * 1000.0 if math.isfinite(focus_distance_m) else math.inf
+    pres = L.focused(dist_mm, n_num)
+    table, zf = mirrored_table(pres, L.stop_radius_mm(n_num))
+    samples = pupil_samples(pres, table, zf, L.paraxial.z_exit_pupil_mm, int(pupil_n))
+    e_root = np.array([0.0, 0.0, L.paraxial.z_entrance_pupil_mm])
+    model = ImageBasedLens(lens, float(focus_distance_m), float(n_num), tuple(sensor_mm), samples,
+                           threshold_deg=float(threshold_deg))
+    hw, hh = 0.5 * sensor_mm[0], 0.5 * sensor_mm[1]
+
+    def recurse(index, p, cell, e0, depth):
+        g = _vignetting_grid(table, zf, p, cell, int(grid))
+        if g is None:
+            if depth < max_depth:
+                x0, x1, y0, y1 = cell
+                xm, ym = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+                for c in ((x0, xm, y0, ym), (xm, x1, y0, ym), (x0, xm, ym, y1), (xm, x1, ym, y1)):
+                    recurse(index, p, c, e0, depth + 1)
+            else:
+                model.dropped_cells += 1
+            return
+        q, d, ok = trace_back(table, zf, g.reshape(-1, 2), p)
+        if ok.sum() < 4:
+            model.dropped_cells += 1
+            return
+        e = fit_cop(q[ok], d[ok], e0)
+        proj, err = _projection(pres, table, zf, p, index, cell, g, e, depth)
+        if err > threshold_deg and depth < max_depth:
+            x0, x1, y0, y1 = cell
+            xm, ym = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+            for c in ((x0, xm, y0, ym), (xm, x1, y0, ym), (x0, xm, ym, y1), (xm, x1, ym, y1)):
+                recurse(index, p, c, e, depth + 1)
+            return
+        model.projections.append(proj)
+
+    for i, p in enumerate(samples):
+        recurse(i, p, (-hw, hw, -hh, hh), e_root, 0)
+    model.preprocess_s = time.perf_counter() - t0
+    return model
