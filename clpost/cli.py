@@ -295,7 +295,8 @@ def cmd_info(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from .bench import DEFAULT_SIZES, bench_size, format_table
+    from .bench import DEFAULT_SIZES, SCENES, format_markdown, format_table, run, update_markdown
+    from .demo import DEMO_CAMERA_DEFAULTS
 
     if getattr(args, "dof", False):
         from .dof_bench import DOF_BENCH_SIZES, format_dof_table, run_dof_bench
@@ -307,17 +308,20 @@ def cmd_bench(args) -> int:
         print(format_dof_table(rows, conv, get_runtime(args.device).name))
         return 0
 
-    camera = camera_from_args(args)
-    sizes = args.sizes or list(DEFAULT_SIZES)
-    rows = [bench_size(camera, w, h, quality=args.quality, stages=args.stages, device=args.device,
-                       repeats=args.repeats) for w, h in sizes]
-    from .runtime import get_runtime
-
-    name = get_runtime(args.device).name
-    if args.json:
-        print(json.dumps({"device": name, "rows": [r.as_dict() for r in rows]}, indent=2))
-    else:
-        print(format_table(rows, name))
+    scenes = args.scenes.split(",") if args.scenes else ["demo", "worst", "no_defocus", "full"]
+    unknown = [s for s in scenes if s not in SCENES]
+    if unknown:
+        raise InputError(f"--scenes: unknown scene(s) {', '.join(unknown)}; known: {', '.join(SCENES)}")
+    qualities = args.qualities.split(",") if args.qualities else [args.quality]
+    # the demo scene uses the demo camera with the command line's camera options on top
+    base = camera_from_args(args, **DEMO_CAMERA_DEFAULTS)
+    doc = run(scenes, args.sizes or list(DEFAULT_SIZES), qualities, device=args.device,
+              repeats=args.repeats, warmup=args.warmup, numpy_max_pixels=args.numpy_max_pixels,
+              base_camera=base, cache_dir=args.cache, log=lambda m: print(m, file=sys.stderr))
+    if args.markdown:
+        cmd = "clpost bench " + " ".join(a for a in sys.argv[2:] if a) if len(sys.argv) > 2 else "clpost bench"
+        update_markdown(args.markdown, format_markdown(doc, cmd))
+    print(json.dumps(doc, indent=2) if args.json else format_table(doc))
     return 0
 
 
@@ -416,6 +420,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="dof speed/accuracy per quality against the thin-lens accumulation reference (demo scene)")
     b.add_argument("--dof-samples", type=lambda s: [int(x) for x in s.split(",")], default=[128, 64],
                    help="reference aperture samples per size for --dof (default 128,64)")
+    # issue "performance": scenes, quality levels, baselines, docs/benchmarks.md
+    b.add_argument("--scenes", default=None,
+                   help="comma-separated: demo, worst, no_defocus, full (default: all)")
+    b.add_argument("--qualities", default=None, help="comma-separated quality levels (default: --quality)")
+    b.add_argument("--warmup", type=int, default=2, help="runs before timing (default 2)")
+    b.add_argument("--numpy-max-pixels", type=int, default=1280 * 720,
+                   help="time the numpy reference only up to this many pixels (default 921600)")
+    b.add_argument("--cache", default=None, help="where the rendered demo frames are cached (EXR)")
+    b.add_argument("--markdown", default=None,
+                   help="also regenerate the generated section of this file (docs/benchmarks.md)")
     _add_camera_options(b)
     _add_pipeline_options(b)
     b.set_defaults(func=cmd_bench)

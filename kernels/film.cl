@@ -15,8 +15,10 @@ inline float film_lookup(__global const float *lut, const int layer, const float
 
 inline float3 film_apply(const float3 c, const PixelCtx p, __global const float *lut,
                          const float log_offset, const float lo, const float inv_step) {
-    const float3 x = log10(fmax(c, (float3)(1e-37f))) + log_offset;
-    return (float3)(film_lookup(lut, 0, x.x, lo, inv_step),
-                    film_lookup(lut, 1, x.y, lo, inv_step),
-                    film_lookup(lut, 2, x.z, lo, inv_step));
+    /* log10 = log2 * log10(2) with the vectorising clp_log2 (kernels/common.cl), per channel in
+     * scalar code: on PoCL, PoCL's log10 and float3 arithmetic both stop the vectorisation across
+     * work-items. fmax keeps the argument a normal float (clp_log2's domain). */
+    return (float3)(film_lookup(lut, 0, mad(clp_log2(fmax(c.x, 1e-37f)), 0.30102999566f, log_offset), lo, inv_step),
+                    film_lookup(lut, 1, mad(clp_log2(fmax(c.y, 1e-37f)), 0.30102999566f, log_offset), lo, inv_step),
+                    film_lookup(lut, 2, mad(clp_log2(fmax(c.z, 1e-37f)), 0.30102999566f, log_offset), lo, inv_step));
 }

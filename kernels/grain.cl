@@ -6,7 +6,7 @@
 
 inline float grain_to_density(const float t, const float dmin, const float dmax) {
     /* clear fraction -> density, clamped to the stock's [D_min, D_max] (t = 0 would be +inf) */
-    return clamp(dmin - log10(fmax(t, 1e-30f)), dmin, dmax);
+    return clamp(dmin - 0.30102999566f * clp_log2(fmax(t, 1e-30f)), dmin, dmax);  /* log10, vectorising */
 }
 
 /* draft/preview, and final with unresolved grains: Gaussian clear fraction with the model's
@@ -42,7 +42,7 @@ inline void grain_gaussian(__global const float *restrict src, __global float *r
             }
         }
 #endif
-        dst[c * n + i] = grain_to_density(exp(-GRAIN_LN10 * d_img) + sigma * g, dmin, dmax);
+        dst[c * n + i] = grain_to_density(clp_exp2(-3.32192809f * d_img) + sigma * g, dmin, dmax);  /* 10^-d */
     }
 }
 

@@ -19,5 +19,7 @@ inline float3 vignetting_apply(const float3 c, const PixelCtx p, const float sen
     const float t = fmin(sqrt(dx * dx + dy * dy) / r_max_mm, 1.0f) * (float)(VIGNETTING_LUT_SIZE - 1);
     const int k = min((int)t, VIGNETTING_LUT_SIZE - 2);
     const float f = t - (float)k;
-    return c * (lut[k] * (1.0f - f) + lut[k + 1] * f);
+    const float ri = lut[k] * (1.0f - f) + lut[k + 1] * f;
+    /* per channel: float3 arithmetic stops PoCL's vectorisation of the fused kernel */
+    return (float3)(c.x * ri, c.y * ri, c.z * ri);
 }

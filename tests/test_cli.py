@@ -114,11 +114,14 @@ def test_info_reports_ranges(tmp_path, capsys):
     assert d["layout"] == "blender"
 
 
-def test_bench_json(capsys):
-    assert run_cli("bench", "--sizes", "48x32", "--repeats", "2", "--json") == 0
+def test_bench_json(capsys, tmp_path):
+    # the demo scene renders its frame once into --cache (EXR) and reads it back after
+    assert run_cli("bench", "--sizes", "48x32", "--repeats", "2", "--scenes", "demo", "--cache",
+                   str(tmp_path), "--json") == 0
     d = json.loads(capsys.readouterr().out)
     row = d["rows"][0]
-    assert row["plan"] == "exposure" and row["wall_ms"] > 0 and row["copy_gbps"] > 0
+    assert (tmp_path / "demo_48x32.exr").is_file()
+    assert row["plan"] == ["exposure"] and row["wall_ms"] > 0 and row["copy_kernel_gbps"] > 0
 
 
 def test_console_script_is_installed_and_errors_cleanly(tmp_path):

@@ -116,6 +116,15 @@ class Grain(GatherStage):
     def defines(self, camera):
         return {}
 
+    def taps_per_pixel(self, camera, frame) -> int | None:
+        """Normals drawn per pixel, all three layers, on the Gaussian path (1 or 3×3 per layer,
+        for ``clpost bench`` taps/s); None on the Boolean path, whose work varies with density."""
+        _, _, _, span, r, boolean = self._setup(camera, frame.width)
+        if boolean:
+            return None
+        _, (a, _) = gaussian_tables(round(r, 12), span, _stats_samples(r))
+        return 3 * (1 if a == 0.0 else 9)
+
     def enqueue(self, rt, camera, frame, src, dst, aux):
         import pyopencl as cl
 

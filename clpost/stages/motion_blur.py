@@ -149,6 +149,11 @@ class MotionBlur(GatherStage):
     def defines(self, camera):
         return {"MOTION_BLUR_TILE": TILE, "MOTION_BLUR_SAMPLES": self.samples}
 
+    def taps_per_pixel(self, camera, frame) -> int:
+        """Colour samples per output pixel, all channels: the centre plus ``samples`` taps
+        (``clpost bench`` taps/s; each tap also reads the tap's half-vector and depth)."""
+        return 3 * (self.samples + 1)
+
     # -- OpenCL -----------------------------------------------------------------------------
     def _kernel(self, rt, camera, name):
         import pyopencl as cl
