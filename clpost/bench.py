@@ -138,7 +138,7 @@ SCENES: dict[str, Scene] = {s.name: s for s in (
           wants=("dof", "astigmatism", "distortion", "vignetting", "exposure"),
           # focus at 0.5 m, f/1.4: every depth of the frame (1-21 m) is out of focus. The
           # astigmatism stage's Camera fields are added here once it is merged.
-          camera_fields=dict(f_number=1.4, focus_distance_m=0.5, vignetting="natural"),
+          camera_fields=dict(f_number=1.4, focus_distance_m=0.5, vignetting="natural", depth_of_field=True),
           adjust=_distorted),
     Scene("no_defocus", "talk's 'all effects except defocus': lens aberrations, distortion, vignetting",
           wants=("astigmatism", "coma", "lateral_color", "distortion", "vignetting", "exposure"),
@@ -146,7 +146,7 @@ SCENES: dict[str, Scene] = {s.name: s for s in (
     Scene("full", "full pipeline: motion blur, distortion, vignetting, exposure, film, grain, print",
           wants=("motion_blur", "distortion", "vignetting", "exposure", "film", "grain", "print"),
           camera_fields=dict(f_number=4.0, vignetting="natural", film="kodak-ektar-100",
-                             frame_rate_fps=24.0),
+                             frame_rate_fps=24.0, shutter_s=1 / 48),
           adjust=_distorted, velocity_px=24.0),
 )}
 
