@@ -30,18 +30,29 @@ nearest depth of its 3×3 neighbourhood. This keeps the light's energy in the li
 of smearing it into a sky-sized halo, and never fires on ordinary edges (a pixel is not brighter
 than all of its own surface).
 
-Gather (scatter-as-gather, one pass, per 16×16 tile)
------------------------------------------------------
+Gather (scatter-as-gather, one pass, per 16×16 tile, fixed tap budget)
+-----------------------------------------------------------------------
 Every source pixel q spreads its colour over its bokeh :math:`K_q`; output pixel p sums the
 bokehs that cover it. Ideas used, by source:
 
 * Tiles of max |CoC| dilated by the reach of neighbouring tiles (Jimenez 2014, "Next Generation
-  Post Processing in Call of Duty", tile max + neighbourhood max): each tile loops over exactly the
-  integer offsets its neighbourhood's blur can reach — an in-focus tile reads one tap.
-* Taps are *all* integer offsets inside the reach, sorted by distance (dense rings): point lights
-  become solid polygons with a 1-px anti-aliased edge, no sampling noise or dot patterns. Shape
-  and texture are evaluated per tap (Abadie 2018, "A Life of a Bokeh": the bokeh as the sampling
-  kernel, weights normalised by the kernel area so energy is conserved).
+  Post Processing in Call of Duty", tile max + neighbourhood max): an in-focus tile reads one tap.
+* A fixed per-pixel budget scaled to the tile's reach R (Abadie 2018, "A Life of a Bokeh": sample
+  count independent of the CoC's area): the tile gathers the unit lattice disc
+  :math:`\{o \in \mathbb Z^2 : |o| < R_b + 1\}` (sorted by distance) scaled by the stride
+  :math:`s = 2^\ell`, the smallest with :math:`\lceil R/s - \tfrac12\rceil \le R_b`, so at most
+  :math:`\approx\pi(R_b+1)^2` taps per pixel at any CoC. Taps read level ℓ of a prefiltered
+  pyramid (:func:`prefiltered_levels`): colour filtered by the tent of half-width s — a partition
+  of unity over :math:`s\mathbb Z^2`, so a constant-CoC region conserves energy exactly and a point
+  light becomes the polygon interpolated between lattice points (deterministic: no noise, no
+  post-filter needed) — and CoC by the min over the same window, so a tap straddling an in-focus
+  edge counts as in focus and never smears it. Blurs up to R_b px use s = 1: the exact dense gather
+  (every integer offset). Price: beyond R_b the bokeh's edge widens by ≈ 1.5 (s − 1) px per side,
+  and a pixel whose own CoC is far below its tile's R is blurred at the lattice scale (its centre
+  tap blends its own colour toward the level's by :math:`\beta = \min(1, |r_p|/s)`).
+* Shape and texture are evaluated per tap, weighted by each sample's own CoC (scatter-as-gather),
+  with the coverage ramp one lattice step wide: :math:`\mathrm{cov} = \mathrm{clamp}((r\rho - |o|)/s + \tfrac12, 0, 1)`
+  and the cell area :math:`s^2` in the weight.
 * Near/far separation by depth order relative to p (Jimenez's scatter-as-gather classification):
   taps nearer than p by more than 1 px of CoC form the *front* layer F (their own radius, so a
   blurred foreground spreads over the in-focus background); taps behind p have their radius
@@ -51,7 +62,7 @@ bokehs that cover it. Ideas used, by source:
 
   .. math::
 
-      w_q = \frac{\mathrm{cov}_q\, I_q\, B_q}{a_K\, r_q^2}, \quad
+      w_q = \frac{s^2\,\mathrm{cov}_q\, I_q\, B_q}{a_K\, r_q^2}, \quad
       \alpha = \min\!\Big(1, \frac{\sum_F w}{\phi(p)}\Big), \quad
       \text{out} = \alpha\frac{\sum_F w c}{\sum_F w} + (1-\alpha)\frac{\sum_B w c}{\sum_B w}
 
@@ -80,14 +91,15 @@ Only the shape changes here; the light it removes belongs to the vignetting stag
 renormalised by the clipped area :math:`\phi = (2\arccos(d/2) - \tfrac d2\sqrt{4-d^2})/\pi`
 (d = η|h|, the two-disc lens area) for the coverage α.
 
-Quality levels (``max_coc_px`` at the output resolution; taps = offsets inside the largest radius)
-=========  =================  ================  ====================================================
-level      working res        max CoC radius    taps per pixel at the max (in-focus tiles: 1)
-=========  =================  ================  ====================================================
-draft      half (2×2 box)     32 px (16 work)   889
-preview    half               64 px (32 work)   3 405
-final      full               64 px             13 237
-=========  =================  ================  ====================================================
+Quality levels (``max_coc_px`` at the output resolution; R_b the lattice budget; taps per pixel
+at most, at any CoC; in-focus tiles: 1; error vs the accumulation reference in docs/benchmarks.md)
+=========  =================  ================  ===  =====================================================
+level      working res        max CoC radius    R_b  taps per pixel (max)
+=========  =================  ================  ===  =====================================================
+draft      half (2×2 box)     32 px (16 work)   3    45 (dense up to 3 work px, then stride 2, 4, 8)
+preview    half               64 px (32 work)   5    109 (dense up to 5 work px, then stride 2, 4, 8)
+final      full               64 px             8    249 (dense up to 8 px, then stride 2, 4, 8)
+=========  =================  ================  ===  =====================================================
 Half-resolution levels composite with the full-resolution image by
 :math:`\mathrm{lerp}(c_{full}, \mathrm{up}(c_{blur}), \max(\mathrm{clamp}(|r|-0.5, 0, 1), \mathrm{up}(\alpha)))`
 (depth-aware bilinear upsampling, :func:`_upsample`), so in-focus pixels stay at full resolution.
