@@ -22,30 +22,35 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float d = depth[i];
     const float lum = dof_luma(src, i, n);
+    /* neighbour rows/columns clamped once per pixel, selects instead of branches (PoCL then
+     * vectorises across work-items) */
+    const int xs[3] = {max(x - 1, 0), x, min(x + 1, width - 1)};
+    const int ys[3] = {max(y - 1, 0), y, min(y + 1, height - 1)};
     float nearest = d, brightest_same = 0.0f;
-    for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
-            const size_t j = (size_t)clamp(y + dy, 0, height - 1) * width + clamp(x + dx, 0, width - 1);
+#pragma unroll
+    for (int b = 0; b < 3; ++b)
+#pragma unroll
+        for (int a = 0; a < 3; ++a) {
+            const size_t j = (size_t)ys[b] * width + xs[a];
             const float dq = depth[j];
             nearest = fmin(nearest, dq);
-            if ((dx != 0 || dy != 0) && dq >= DOF_MIXED_SAME_DEPTH * d)
-                brightest_same = fmax(brightest_same, dof_luma(src, j, n));
+            const float lq = (a == 1 && b == 1) ? 0.0f : dof_luma(src, j, n);
+            brightest_same = fmax(brightest_same, dq >= DOF_MIXED_SAME_DEPTH * d ? lq : 0.0f);
         }
     const float s = (lum > DOF_MIXED_BRIGHTER * brightest_same && nearest < d) ? nearest : d;
     const float inv_s = isinf(s) ? 0.0f : 1.0f / s;
     coc[i] = clamp(k * (inv_u - inv_s), -limit, limit);
 }
 
-/* Padded working buffers: colour = mean of the DOF_SCALE^2 block, CoC = nearest (min signed) of
+/* Padded working buffers (level 0 of `lv`, see dof_levels.cl): colour = mean of the DOF_SCALE^2 block, CoC = nearest (min signed) of
  * the block in working px; the border of width `pad` replicates the edge (no clamp per tap). */
 __kernel void dof_prepare(__global const float *restrict src, __global const float *restrict coc,
-                          __global float *restrict pc, __global float *restrict pr,
-                          __global float *restrict pv,
+                          __global float *restrict lv, __global float *restrict pv,
                           const int width, const int height, const int ww, const int hw, const int pad,
                           const float vig, const float cx, const float cy, const float inv_half)
 {
     const int gx = get_global_id(0), gy = get_global_id(1);
-    const int pw = ww + 2 * pad, ph = hw + 2 * pad;
+    const int pw = DOF_PW(ww, pad), ph = DOF_PW(hw, pad);
     if (gx >= pw || gy >= ph) return;
     const int xw = clamp(gx - pad, 0, ww - 1), yw = clamp(gy - pad, 0, hw - 1);
     const size_t n = (size_t)width * height, pn = (size_t)pw * ph, o = (size_t)gy * pw + gx;
@@ -66,8 +71,8 @@ __kernel void dof_prepare(__global const float *restrict src, __global const flo
 #else
 #error "DOF_SCALE must be 1 or 2"
 #endif
-    pc[o] = acc.x; pc[pn + o] = acc.y; pc[2 * pn + o] = acc.z;
-    pr[o] = r / DOF_SCALE;
+    lv[o] = acc.x; lv[pn + o] = acc.y; lv[2 * pn + o] = acc.z;
+    lv[3 * pn + o] = r / DOF_SCALE;
 #if DOF_VIGNETTING
     /* 1 / pupil area fraction of a source here (two-disc lens area, |h| capped at the corner):
      * once per pixel instead of an acos per tap */

@@ -30,18 +30,29 @@ nearest depth of its 3×3 neighbourhood. This keeps the light's energy in the li
 of smearing it into a sky-sized halo, and never fires on ordinary edges (a pixel is not brighter
 than all of its own surface).
 
-Gather (scatter-as-gather, one pass, per 16×16 tile)
------------------------------------------------------
+Gather (scatter-as-gather, one pass, per 16×16 tile, fixed tap budget)
+-----------------------------------------------------------------------
 Every source pixel q spreads its colour over its bokeh :math:`K_q`; output pixel p sums the
 bokehs that cover it. Ideas used, by source:
 
 * Tiles of max |CoC| dilated by the reach of neighbouring tiles (Jimenez 2014, "Next Generation
-  Post Processing in Call of Duty", tile max + neighbourhood max): each tile loops over exactly the
-  integer offsets its neighbourhood's blur can reach — an in-focus tile reads one tap.
-* Taps are *all* integer offsets inside the reach, sorted by distance (dense rings): point lights
-  become solid polygons with a 1-px anti-aliased edge, no sampling noise or dot patterns. Shape
-  and texture are evaluated per tap (Abadie 2018, "A Life of a Bokeh": the bokeh as the sampling
-  kernel, weights normalised by the kernel area so energy is conserved).
+  Post Processing in Call of Duty", tile max + neighbourhood max): an in-focus tile reads one tap.
+* A fixed per-pixel budget scaled to the tile's reach R (Abadie 2018, "A Life of a Bokeh": sample
+  count independent of the CoC's area): the tile gathers the unit lattice disc
+  :math:`\{o \in \mathbb Z^2 : |o| < R_b + 1\}` (sorted by distance) scaled by the stride
+  :math:`s = 2^\ell`, the smallest with :math:`\lceil R/s - \tfrac12\rceil \le R_b`, so at most
+  :math:`\approx\pi(R_b+1)^2` taps per pixel at any CoC. Taps read level ℓ of a prefiltered
+  pyramid (:func:`prefiltered_levels`): colour filtered by the tent of half-width s — a partition
+  of unity over :math:`s\mathbb Z^2`, so a constant-CoC region conserves energy exactly and a point
+  light becomes the polygon interpolated between lattice points (deterministic: no noise, no
+  post-filter needed) — and CoC by the min over the same window, so a tap straddling an in-focus
+  edge counts as in focus and never smears it. Blurs up to R_b px use s = 1: the exact dense gather
+  (every integer offset). Price: beyond R_b the bokeh's edge widens by ≈ 1.5 (s − 1) px per side,
+  and a pixel whose own CoC is far below its tile's R is blurred at the lattice scale (its centre
+  tap blends its own colour toward the level's by :math:`\beta = \min(1, |r_p|/s)`).
+* Shape and texture are evaluated per tap, weighted by each sample's own CoC (scatter-as-gather),
+  with the coverage ramp one lattice step wide: :math:`\mathrm{cov} = \mathrm{clamp}((r\rho - |o|)/s + \tfrac12, 0, 1)`
+  and the cell area :math:`s^2` in the weight.
 * Near/far separation by depth order relative to p (Jimenez's scatter-as-gather classification):
   taps nearer than p by more than 1 px of CoC form the *front* layer F (their own radius, so a
   blurred foreground spreads over the in-focus background); taps behind p have their radius
@@ -51,7 +62,7 @@ bokehs that cover it. Ideas used, by source:
 
   .. math::
 
-      w_q = \frac{\mathrm{cov}_q\, I_q\, B_q}{a_K\, r_q^2}, \quad
+      w_q = \frac{s^2\,\mathrm{cov}_q\, I_q\, B_q}{a_K\, r_q^2}, \quad
       \alpha = \min\!\Big(1, \frac{\sum_F w}{\phi(p)}\Big), \quad
       \text{out} = \alpha\frac{\sum_F w c}{\sum_F w} + (1-\alpha)\frac{\sum_B w c}{\sum_B w}
 
@@ -80,14 +91,15 @@ Only the shape changes here; the light it removes belongs to the vignetting stag
 renormalised by the clipped area :math:`\phi = (2\arccos(d/2) - \tfrac d2\sqrt{4-d^2})/\pi`
 (d = η|h|, the two-disc lens area) for the coverage α.
 
-Quality levels (``max_coc_px`` at the output resolution; taps = offsets inside the largest radius)
-=========  =================  ================  ====================================================
-level      working res        max CoC radius    taps per pixel at the max (in-focus tiles: 1)
-=========  =================  ================  ====================================================
-draft      half (2×2 box)     32 px (16 work)   889
-preview    half               64 px (32 work)   3 405
-final      full               64 px             13 237
-=========  =================  ================  ====================================================
+Quality levels (``max_coc_px`` at the output resolution; R_b the lattice budget; taps per pixel
+at most, at any CoC; in-focus tiles: 1; error vs the accumulation reference in docs/benchmarks.md)
+=========  =================  ================  ===  =====================================================
+level      working res        max CoC radius    R_b  taps per pixel (max)
+=========  =================  ================  ===  =====================================================
+draft      half (2×2 box)     32 px (16 work)   3    45 (dense up to 3 work px, then stride 2, 4, 8)
+preview    half               64 px (32 work)   5    109 (dense up to 5 work px, then stride 2, 4, 8)
+final      full               64 px             8    249 (dense up to 8 px, then stride 2, 4, 8)
+=========  =================  ================  ===  =====================================================
 Half-resolution levels composite with the full-resolution image by
 :math:`\mathrm{lerp}(c_{full}, \mathrm{up}(c_{blur}), \max(\mathrm{clamp}(|r|-0.5, 0, 1), \mathrm{up}(\alpha)))`
 (depth-aware bilinear upsampling, :func:`_upsample`), so in-focus pixels stay at full resolution.
@@ -108,10 +120,10 @@ TILE = 16
 """Work-group / tile edge in working pixels."""
 
 QUALITY = {
-    # name: (working-resolution divisor, max CoC radius in working px)
-    "draft": (2, 16),
-    "preview": (2, 32),
-    "final": (1, 64),
+    # name: (working-resolution divisor, max CoC radius in working px, lattice budget R_b)
+    "draft": (2, 16, 3),
+    "preview": (2, 32, 5),
+    "final": (1, 64, 8),
 }
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -120,9 +132,18 @@ MIXED_SAME_DEPTH = 0.8
 FRONT_MARGIN_PX = 1.0
 
 
+def lattice_stride(r_px: float, budget: int) -> int:
+    """Lattice stride s = 2^ℓ the tile plan picks for a tile whose dilated max CoC is ``r_px``
+    (working px): the smallest with :math:`\lceil r/s - \tfrac12\rceil \le R_b`."""
+    lv = 0
+    while math.ceil(r_px / 2 ** lv - 0.5) > budget:
+        lv += 1
+    return 2 ** lv
+
+
 def max_coc_px(quality: str) -> float:
     """Largest CoC radius (output pixels) the gather supports at ``quality``."""
-    s, r = QUALITY[quality]
+    s, r, _ = QUALITY[quality]
     return float(s * r)
 
 
@@ -271,39 +292,144 @@ def _working(color: np.ndarray, coc: np.ndarray, scale: int):
     return cw, rw
 
 
-def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, blades: int, rotation_deg: float,
-                     roundness: float, sa: float, vignetting: float) -> tuple[np.ndarray, np.ndarray]:
-    """The gather in float64 over *all* taps up to ``rmax`` (no tiles — which also checks that
-    the kernel's tile dilation misses nothing). Returns (colour, front coverage α)."""
+def levels_for(rmax: int, budget: int) -> int:
+    r"""Number of prefiltered levels above level 0: strides 1, 2, …, 2^L with
+    :math:`\lceil r_{max}/2^L - \tfrac12\rceil \le` ``budget``."""
+    lv = 0
+    while math.ceil(rmax / 2 ** lv - 0.5) > budget:
+        lv += 1
+    return lv
+
+
+def gather_pad(rmax: int, budget: int) -> int:
+    """Border (working px) the padded buffers need: the farthest lattice tap, s (R_b + 1)."""
+    return 2 ** levels_for(rmax, budget) * (budget + 1) + 1
+
+
+def tent_weights(s: int) -> np.ndarray:
+    """1-D tent of half-width s, :math:`w_j = (s-|j|)/s^2`, |j| < s (sums to 1; its 2-D product
+    is a partition of unity over the lattice sZ², which is what makes the lattice gather conserve
+    energy)."""
+    j = np.arange(-(s - 1), s)
+    return (s - np.abs(j)) / float(s * s)
+
+
+def _shift_clamped(a: np.ndarray, off: int, axis: int) -> np.ndarray:
+    """a[i + off] along ``axis`` with the index clamped to the array (edge replicated)."""
+    n = a.shape[axis]
+    idx = np.clip(np.arange(n) + off, 0, n - 1)
+    return np.take(a, idx, axis=axis)
+
+
+def prefiltered_levels(pc: np.ndarray, pr: np.ndarray, nlevels: int):
+    r"""Level ℓ (stride s = 2^ℓ) of the padded working buffers: colour filtered by the separable
+    tent of half-width s (:func:`tent_weights`), CoC by the min (nearest, signed) over the same
+    (2s−1)² window, so a tap that straddles an in-focus edge counts as in focus and never spreads
+    the edge's colour.
+
+    Built recursively, 3 taps per pass per level: :math:`\mathrm{tent}_{2s} = \mathrm{tent}_s *
+    	frac14(\delta_{-s} + 2\delta_0 + \delta_s)` (a tent is a box convolved with itself, and
+    :math:`\mathrm{box}_{2s} = \mathrm{box}_s * 	frac12(\delta_0 + \delta_s)`); the min window
+    of width 4s−1 is the union of the three windows of width 2s−1 at −s, 0, s. Reads beyond the
+    padded buffer are clamped, exactly as the kernel does."""
+    cols, cocs = [pc], [pr]
+    for lv in range(nlevels):
+        s = 2 ** lv
+        c, r = cols[-1], cocs[-1]
+        for ax in (1, 0):
+            c = 0.25 * (_shift_clamped(c, -s, ax) + 2.0 * c + _shift_clamped(c, s, ax))
+            r = np.minimum(np.minimum(_shift_clamped(r, -s, ax), r), _shift_clamped(r, s, ax))
+        cols.append(c)
+        cocs.append(r)
+    return cols, cocs
+
+
+def tile_plan(coc: np.ndarray, rmax: int, budget: int) -> tuple[np.ndarray, np.ndarray]:
+    r"""Per tile (Jimenez 2014: tile max, dilated by the reach of the neighbouring tiles) the
+    lattice level ℓ and tap count: R = the largest |CoC| that can reach a pixel of the tile,
+    ℓ the smallest level with :math:`k = \lceil R/2^\ell - \tfrac12\rceil \le R_b`, taps =
+    ntaps[k] of the unit lattice table. Returns per-pixel (level, count) arrays."""
     h, w = coc.shape
-    dxs, dys, dists, rf, rn, _ = tap_table(rmax, blades, rotation_deg, roundness)
+    tw, th = -(-w // TILE), -(-h // TILE)
+    a = np.pad(np.abs(coc), ((0, th * TILE - h), (0, tw * TILE - w)))
+    tmax = a.reshape(th, TILE, tw, TILE).max(axis=(1, 3)).astype(np.float32).astype(np.float64)
+    ntaps = tap_table(budget, 0, 0.0, 0.0)[5]
+    reach = (rmax + TILE) // TILE
+    lvl = np.zeros((th, tw), int)
+    cnt = np.zeros((th, tw), int)
+    for ty in range(th):
+        for tx in range(tw):
+            r = 0.5
+            for ny in range(max(ty - reach, 0), min(ty + reach, th - 1) + 1):
+                for nx in range(max(tx - reach, 0), min(tx + reach, tw - 1) + 1):
+                    gx = max(0, abs(nx - tx) * TILE - (TILE - 1))
+                    gy = max(0, abs(ny - ty) * TILE - (TILE - 1))
+                    m = tmax[ny, nx]
+                    if np.float32(m + 0.5) > np.float32(math.sqrt(gx * gx + gy * gy)):
+                        r = max(r, m)
+            lv = 0
+            while math.ceil(r / 2 ** lv - 0.5) > budget:
+                lv += 1
+            lvl[ty, tx] = lv
+            cnt[ty, tx] = ntaps[min(max(math.ceil(r / 2 ** lv - 0.5), 0), budget)]
+    expand = np.ones((TILE, TILE), int)
+    return np.kron(lvl, expand)[:h, :w], np.kron(cnt, expand)[:h, :w]
+
+
+def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int, blades: int,
+                     rotation_deg: float, roundness: float, sa: float,
+                     vignetting: float) -> tuple[np.ndarray, np.ndarray]:
+    """The lattice gather in float64 (see the module docstring), tile plan included. Returns
+    (colour, front coverage α)."""
+    h, w = coc.shape
+    dxs, dys, dists, rf, rn, _ = tap_table(budget, blades, rotation_deg, roundness)
     area = aperture_area(blades, rotation_deg, roundness)
-    pad = rmax + 1
+    nlev = levels_for(rmax, budget)
+    pad = gather_pad(rmax, budget)
     pc = np.pad(color, ((pad, pad), (pad, pad), (0, 0)), mode="edge")
     pr = np.pad(coc, pad, mode="edge")
-    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    cols, cocs = prefiltered_levels(pc, pr, nlev)
+    lvl, cnt = tile_plan(coc, rmax, budget)
+    s = (2 ** lvl).astype(np.float64)
+    ys, xs = np.mgrid[0:h, 0:w]
     pupil = PupilModel(vignetting)
     rp = coc
+    # centre tap: own colour blended toward the level's prefiltered colour as p's own bokeh grows
+    # past the lattice spacing (a point light's centre must not stay a one-pixel spike)
+    beta = np.clip(np.abs(rp) / s, 0.0, 1.0)
+    own = pc[pad:pad + h, pad:pad + w]
+    lvl_c = np.stack(cols)[lvl, ys + pad, xs + pad]
     F = np.zeros((h, w, 3)); Wf = np.zeros((h, w))
     B = np.zeros((h, w, 3)); Wb = np.zeros((h, w))
-    for dx, dy, dist, rhof, rhon in zip(dxs, dys, dists, rf, rn):
-        rq = pr[pad + dy:pad + dy + h, pad + dx:pad + dx + w]
-        cq = pc[pad + dy:pad + dy + h, pad + dx:pad + dx + w]
+    col_stack, coc_stack = np.stack(cols), np.stack(cocs)
+    for k in range(int(cnt.max())):
+        live = k < cnt
+        dx = (s * dxs[k]).astype(int)
+        dy = (s * dys[k]).astype(int)
+        dist = s * dists[k]
+        if k == 0:
+            rq = rp
+            cq = own + (lvl_c - own) * beta[..., None]
+        else:
+            rq = coc_stack[lvl, ys + pad + dy, xs + pad + dx]
+            cq = col_stack[lvl, ys + pad + dy, xs + pad + dx]
         front = rq < rp - FRONT_MARGIN_PX
         behind = rq > rp + FRONT_MARGIN_PX
         r = np.where(behind, np.maximum(np.abs(rp), 0.5), np.maximum(np.abs(rq), 0.5))
         far = rq >= 0
-        rho = np.where(far, rhof, rhon)
-        cov = np.clip(r * rho - dist + 0.5, 0.0, 1.0)
-        t = np.minimum(dist / (r * rho), 1.0)
+        rho = np.where(far, rf[k], rn[k])
+        rr = r * rho
+        cov = np.clip((rr - dist) / s + 0.5, 0.0, 1.0)
+        t = np.minimum(dist / rr, 1.0)
         a = np.where(far, -sa, sa)
-        wgt = cov * (1.0 + a * (2 * t * t - 1)) / (area * r * r)
+        wgt = cov * (1.0 + a * (2 * t * t - 1.0)) * s * s / (area * r * r)
         if vignetting > 0:
             hx, hy = field_position(xs + dx, ys + dy, w, h)
             sgn = np.where(far, 1.0, -1.0)
             ax, ay = -dx / (r * sgn), -dy / (r * sgn)
             e = np.hypot(ax - vignetting * hx, ay - vignetting * hy)
             wgt = wgt * np.clip((1.0 - e) * r + 0.5, 0.0, 1.0) / pupil.area_fraction(np.hypot(hx, hy))
+        wgt = np.where(live, wgt, 0.0)
         wf = np.where(front, wgt, 0.0)
         wb = wgt - wf
         F += wf[..., None] * cq; Wf += wf
@@ -338,12 +464,12 @@ def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.nda
 
 def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "final") -> np.ndarray:
     """float64 numpy implementation of the whole stage (the oracle of the OpenCL kernels)."""
-    scale, rmax = QUALITY[quality]
+    scale, rmax, budget = QUALITY[quality]
     color = np.asarray(color, dtype=np.float64)
     h, w = depth.shape
     coc = coc_px(camera, effective_depth(color, depth), w, limit_px=scale * rmax)
     cw, rw = _working(color, coc, scale)
-    out, alpha = gather_reference(cw, rw, rmax, camera.blades, camera.blade_rotation_deg,
+    out, alpha = gather_reference(cw, rw, rmax, budget, camera.blades, camera.blade_rotation_deg,
                                   camera.aperture_roundness, camera.spherical_aberration,
                                   camera.optical_vignetting)
     if scale == 1:
@@ -384,8 +510,9 @@ class Dof(GatherStage):
                 f"{self.quality}), {camera.blades or 'round'} blades")
 
     def defines(self, camera):
-        scale, rmax = QUALITY[self.quality]
-        return {"DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_TILE": TILE,
+        scale, rmax, budget = QUALITY[self.quality]
+        return {"DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_TILE": TILE, "DOF_BUDGET": budget,
+                "DOF_LEVELS": levels_for(rmax, budget),
                 "DOF_VIGNETTING": int(camera.optical_vignetting > 0)}
 
     def reference(self, camera, frame, color):

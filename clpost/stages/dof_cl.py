@@ -2,7 +2,8 @@
 
 Kept apart from :mod:`clpost.stages.dof` (formulas + float64 reference) so the oracle reads
 without OpenCL plumbing. Launch sequence: ``dof_coc`` (full res) → ``dof_prepare`` (padded working
-buffers) → ``dof_tile_max`` → ``dof_tile_dilate`` → ``dof`` (the gather) → (half res) ``dof_upsample``.
+buffers = level 0) → ``dof_levels_x``/``dof_levels_y`` per prefiltered level → ``dof_tile_max`` →
+``dof_tile_dilate`` → ``dof`` (the gather) → (half res) ``dof_upsample``.
 """
 from __future__ import annotations
 
@@ -19,8 +20,9 @@ def _kernels(rt, defines):
     from ..runtime import kernel_source
 
     out = {}
-    for src in ("dof_coc", "dof_tiles", "dof"):
-        prog = rt.program(kernel_source("common") + kernel_source(src), src, defines)
+    for src in ("dof_coc", "dof_levels", "dof_tiles", "dof"):
+        head = kernel_source("common") + kernel_source("dof_common")  # DOF_PW: the padded extent
+        prog = rt.program(head + kernel_source(src), src, defines)
         for k in prog.all_kernels():
             out[k.function_name] = cl.Kernel(prog, k.function_name)
     return out
@@ -39,19 +41,20 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     import pyopencl as cl
 
     q = rt.queue
-    scale, rmax = D.QUALITY[stage.quality]
+    scale, rmax, budget = D.QUALITY[stage.quality]
+    nlev = D.levels_for(rmax, budget)
     T = D.TILE
     w, h = frame.width, frame.height
     ww, hw = -(-w // scale), -(-h // scale)
-    pad = rmax + 1
-    pw, ph = ww + 2 * pad, hw + 2 * pad
+    pad = D.gather_pad(rmax, budget)
     tw, th = -(-ww // T), -(-hw // T)
+    pw, ph = tw * T + 2 * pad, th * T + 2 * pad  # DOF_PW in dof_common.cl: whole tiles + border
     defines = stage.defines(camera)
     key = (id(rt), tuple(sorted(defines.items())), w, h, camera.blades, camera.blade_rotation_deg,
            camera.aperture_roundness)
     cache = getattr(stage, "_cl_cache", None)
     if cache is None or cache["key"] != key:
-        dx, dy, dist, rf, rn, ntaps = D.tap_table(rmax, camera.blades, camera.blade_rotation_deg,
+        dx, dy, dist, rf, rn, ntaps = D.tap_table(budget, camera.blades, camera.blade_rotation_deg,
                                                   camera.aperture_roundness)
         mf = cl.mem_flags
 
@@ -63,7 +66,8 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
             "taps": [const(dx), const(dy), const(dist.astype(np.float32)), const(rf.astype(np.float32)),
                      const(rn.astype(np.float32))],
             "ntaps": const(ntaps),
-            "coc": rt.empty((h, w)), "pc": rt.empty((3, ph, pw)), "pr": rt.empty((ph, pw)),
+            "coc": rt.empty((h, w)), "lv": rt.empty((nlev + 1, 4, ph, pw)),
+            "tmp": rt.empty((4, ph, pw)) if nlev else None,
             "pv": rt.empty((ph, pw) if camera.optical_vignetting > 0 else (1,)),
             "tmax": rt.empty((th, tw)), "tn": rt.empty((th, tw), np.int32),
             "alpha": rt.empty((hw, ww)),
@@ -81,20 +85,25 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     evs.append(_launch(q, k["dof_coc"], (w, h), 16))
     half = math.hypot(ww / 2.0, hw / 2.0)
     field = (f32(camera.optical_vignetting), f32((ww - 1) / 2.0), f32((hw - 1) / 2.0), f32(1.0 / half))
-    k["dof_prepare"].set_args(src, cache["coc"], cache["pc"], cache["pr"], cache["pv"], i32(w), i32(h),
+    k["dof_prepare"].set_args(src, cache["coc"], cache["lv"], cache["pv"], i32(w), i32(h),
                               i32(ww), i32(hw), i32(pad), *field)
     evs.append(_launch(q, k["dof_prepare"], (pw, ph), 16))
-    k["dof_tile_max"].set_args(cache["pr"], cache["tmax"], i32(ww), i32(hw), i32(pad), i32(tw), i32(th))
+    for lvl in range(nlev):
+        k["dof_levels_x"].set_args(cache["lv"], cache["tmp"], i32(pw), i32(ph), i32(2 ** lvl), i32(lvl))
+        evs.append(_launch(q, k["dof_levels_x"], (pw, ph), 16))
+        k["dof_levels_y"].set_args(cache["tmp"], cache["lv"], i32(pw), i32(ph), i32(2 ** lvl), i32(lvl + 1))
+        evs.append(_launch(q, k["dof_levels_y"], (pw, ph), 16))
+    k["dof_tile_max"].set_args(cache["lv"], cache["tmax"], i32(ww), i32(hw), i32(pad), i32(tw), i32(th))
     evs.append(_launch(q, k["dof_tile_max"], (tw, th), 4))
     k["dof_tile_dilate"].set_args(cache["tmax"], cache["tn"], cache["ntaps"], i32(tw), i32(th))
     evs.append(_launch(q, k["dof_tile_dilate"], (tw, th), 4))
     target = dst if scale == 1 else cache["blur"]
-    k["dof"].set_args(cache["pc"], cache["pr"], cache["pv"], cache["tn"], *cache["taps"], target, cache["alpha"],
+    k["dof"].set_args(cache["lv"], cache["pv"], cache["tn"], *cache["taps"], target, cache["alpha"],
                              i32(ww), i32(hw), i32(pad), i32(tw), cache["inv_area"],
                              f32(camera.spherical_aberration), *field)
     evs.append(_launch(q, k["dof"], (tw * T, th * T), T))
     if scale > 1:
-        k["dof_upsample"].set_args(src, cache["coc"], cache["blur"], cache["alpha"], cache["pr"], dst,
+        k["dof_upsample"].set_args(src, cache["coc"], cache["blur"], cache["alpha"], cache["lv"], dst,
                                    i32(w), i32(h), i32(ww), i32(hw), i32(pad))
         evs.append(_launch(q, k["dof_upsample"], (w, h), 16))
     return evs
