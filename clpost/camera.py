@@ -121,6 +121,18 @@ class Camera:
     """Frames per second of the sequence (e.g. 24); with ``shutter_s`` it gives the open fraction."""
     readout_time_s: float = 0.0
     """Rolling shutter: time from reading the top row to the bottom row (s); 0 = global shutter."""
+    # astigmatism / coma / lateral_color stages: parametric third-order aberrations (mm on the
+    # film at the sensor's half diagonal) for a lens without a prescription. None (default) takes
+    # them from the traced lens (a lens_data lens) or leaves them out (thin lens: passthrough);
+    # a number replaces the traced curve (0 turns the effect off).
+    field_curvature_mm: float | None = None
+    """Mean of the sagittal and tangential focal offsets at the image corner (mm, + = behind the film)."""
+    astigmatism_mm: float | None = None
+    """Tangential minus sagittal focal offset at the image corner (mm)."""
+    coma_mm: float | None = None
+    """Length of the comet (tangential coma, 3C) at the image corner (mm; + = tail away from the centre)."""
+    lateral_color_mm: float | None = None
+    """Chief-ray height at F (486.1 nm) minus at C (656.3 nm) at the image corner (mm)."""
 
     def __post_init__(self) -> None:
         parse_lens(self.lens)
@@ -205,6 +217,12 @@ class Camera:
             raise InputError("Camera.readout_time_s > 0 needs Camera.frame_rate_fps (--fps) to turn "
                              "px-per-frame velocities into a per-row shift")
         object.__setattr__(self, "readout_time_s", ro)
+        # astigmatism / coma / lateral_color stages
+        for name in ("field_curvature_mm", "astigmatism_mm", "coma_mm", "lateral_color_mm"):
+            val = getattr(self, name)
+            if val is not None:
+                object.__setattr__(self, name, _finite(name, val, "mm on the film at the image corner",
+                                                       "e.g. 0.1, or 0 to turn the effect off"))
 
     # -- derived quantities -------------------------------------------------------------------
     @property

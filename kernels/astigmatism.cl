@@ -1,0 +1,94 @@
+/* astigmatism: field curvature + astigmatism as a per-pixel elliptical gather.
+ * clpost/stages/astigmatism.py documents the formulas; its reference() is the oracle.
+ *
+ * Buffers: colour planar (c*n + i); padded = colour with ASTIGMATISM_PAD px of edge values on
+ * every side (so taps never clamp); depth planar metres (+inf sky); lut = 2 planes of
+ * ASTIGMATISM_LUT_SIZE focal offsets (sagittal, tangential; mm) over image height [0, r_max];
+ * taps = ASTIGMATISM_TAPS points of a Vogel spiral over the unit disc (uniform weights).
+ * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE.
+ */
+#define ASTIGMATISM_MAX_SEMI ((float)(ASTIGMATISM_PAD - 1))
+#define ASTIGMATISM_MIN_SEMI 1e-3f
+#define ASTIGMATISM_MIN_DEPTH_MM 1e-3f
+
+__kernel void astigmatism_pad(__global const float *restrict src, __global float *restrict padded,
+                              const int width, const int height)
+{
+    const int x = get_global_id(0), y = get_global_id(1);
+    const int pw = width + 2 * ASTIGMATISM_PAD, ph = height + 2 * ASTIGMATISM_PAD;
+    if (x >= pw || y >= ph) return;
+    const int sx = clamp(x - ASTIGMATISM_PAD, 0, width - 1), sy = clamp(y - ASTIGMATISM_PAD, 0, height - 1);
+    const size_t n = (size_t)width * height, pn = (size_t)pw * ph;
+    const size_t i = (size_t)sy * width + sx, j = (size_t)y * pw + x;
+    for (int c = 0; c < 3; ++c) padded[c * pn + j] = src[c * n + i];
+}
+
+inline float astigmatism_semi(float e0, float g, float d, float c0, float aperture, float half_inv_pitch)
+{
+    /* semi-axis (px) of this stage's ellipse: sqrt(max(c^2 - c0^2, 0)) / 2p, capped */
+    const float den = 1.0f + d * g;
+    if (!(den > 1e-6f)) return ASTIGMATISM_MAX_SEMI;
+    const float c = aperture * fabs(e0 + d * g) / den;
+    const float q = (c - c0) * (c + c0);
+    const float a = sqrt(fmax(q, 0.0f)) * half_inv_pitch;
+    return isfinite(a) ? fmin(a, ASTIGMATISM_MAX_SEMI) : ASTIGMATISM_MAX_SEMI;
+}
+
+__kernel void astigmatism(__global const float *restrict padded, __global float *restrict dst,
+                          __global const float *restrict depth, __global const float *restrict lut,
+                          __constant float2 *taps, const int width, const int height,
+                          const float cx, const float cy, const float pitch_mm, const float lut_scale,
+                          const float aperture_mm, const float v_mm, const float inv_f_mm)
+{
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    const size_t n = (size_t)width * height;
+    const size_t i = (size_t)y * width + x;
+    const int pw = width + 2 * ASTIGMATISM_PAD;
+    const size_t pn = (size_t)pw * (height + 2 * ASTIGMATISM_PAD);
+
+    const float dx = (float)x - cx, dy = (float)y - cy;
+    const float r = sqrt(dx * dx + dy * dy);
+    const float ex = r > 0.0f ? dx / r : 1.0f, ey = r > 0.0f ? dy / r : 0.0f;
+    /* focal offsets at this image height (linear LUT) */
+    const float t = fmin(r * pitch_mm * lut_scale, (float)(ASTIGMATISM_LUT_SIZE - 1));
+    const int k0 = min((int)t, ASTIGMATISM_LUT_SIZE - 2);
+    const float ft = t - (float)k0;
+    const float ds = mix(lut[k0], lut[k0 + 1], ft);
+    const float dt = mix(lut[ASTIGMATISM_LUT_SIZE + k0], lut[ASTIGMATISM_LUT_SIZE + k0 + 1], ft);
+    /* thin-lens defocus terms: g = 1/f - 1/z, e0 = 1 - v g = (1 - v/f) + v/z */
+    const float zmm = fmax(depth[i] * 1000.0f, ASTIGMATISM_MIN_DEPTH_MM);
+    const float inv_z = isinf(zmm) ? 0.0f : 1.0f / zmm;
+    const float g = inv_f_mm - inv_z;
+    const float e0 = (1.0f - v_mm * inv_f_mm) + v_mm * inv_z;
+    const float c0 = aperture_mm * fabs(e0);
+    const float hip = 0.5f / pitch_mm;
+    const float as = astigmatism_semi(e0, g, ds, c0, aperture_mm, hip);
+    const float at = astigmatism_semi(e0, g, dt, c0, aperture_mm, hip);
+    if (as < ASTIGMATISM_MIN_SEMI && at < ASTIGMATISM_MIN_SEMI) {
+        const size_t j = (size_t)(y + ASTIGMATISM_PAD) * pw + (x + ASTIGMATISM_PAD);
+        for (int c = 0; c < 3; ++c) dst[c * n + i] = padded[c * pn + j];
+        return;
+    }
+    /* tap k: as*u.x along e_s = (-ey, ex), at*u.y along e_t = (ex, ey) */
+    const float2 ax_s = (float2)(-ey, ex) * as, ax_t = (float2)(ex, ey) * at;
+    const float bx = (float)(x + ASTIGMATISM_PAD), by = (float)(y + ASTIGMATISM_PAD);
+    float3 acc = (float3)(0.0f);
+    for (int k = 0; k < ASTIGMATISM_TAPS; ++k) {
+        const float2 u = taps[k];
+        const float px = bx + ax_s.x * u.x + ax_t.x * u.y;
+        const float py = by + ax_s.y * u.x + ax_t.y * u.y;
+        const float fx0 = floor(px), fy0 = floor(py);
+        const float fx = px - fx0, fy = py - fy0;
+        const size_t j = (size_t)((int)fy0) * pw + (size_t)((int)fx0);
+        const float w00 = (1.0f - fx) * (1.0f - fy), w10 = fx * (1.0f - fy);
+        const float w01 = (1.0f - fx) * fy, w11 = fx * fy;
+        acc.x += w00 * padded[j] + w10 * padded[j + 1] + w01 * padded[j + pw] + w11 * padded[j + pw + 1];
+        acc.y += w00 * padded[pn + j] + w10 * padded[pn + j + 1] + w01 * padded[pn + j + pw] + w11 * padded[pn + j + pw + 1];
+        acc.z += w00 * padded[2 * pn + j] + w10 * padded[2 * pn + j + 1] + w01 * padded[2 * pn + j + pw] + w11 * padded[2 * pn + j + pw + 1];
+    }
+    const float inv = 1.0f / (float)ASTIGMATISM_TAPS;
+    dst[i] = acc.x * inv;
+    dst[n + i] = acc.y * inv;
+    dst[2 * n + i] = acc.z * inv;
+}
