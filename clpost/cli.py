@@ -81,6 +81,12 @@ CAMERA_OPTIONS = {
     "--fps": ("frame_rate_fps", _positive_float, "frame rate of the sequence (enables motion blur: shutter × fps of a frame)"),
     "--shutter-angle": ("shutter_angle_deg", _positive_float, "rotary shutter angle in degrees (needs --fps; sets the shutter: 180° at 24 fps = 1/48 s)"),
     "--readout": ("readout_time_s", _positive_float, "rolling-shutter readout time top to bottom row in seconds (needs --fps)"),
+    # astigmatism / coma / lateral_color stages: parametric aberrations at the image corner (mm);
+    # default: the traced lens's (lens_data lenses) or none (thin lens)
+    "--field-curvature": ("field_curvature_mm", _positive_float, "mean sagittal/tangential focal offset at the image corner in mm (astigmatism stage)"),
+    "--astigmatism": ("astigmatism_mm", _positive_float, "tangential minus sagittal focal offset at the image corner in mm (astigmatism stage)"),
+    "--coma": ("coma_mm", _positive_float, "comet length (tangential coma) at the image corner in mm (coma stage)"),
+    "--lateral-color": ("lateral_color_mm", _positive_float, "chief-ray height F minus C at the image corner in mm (lateral_color stage)"),
 }
 
 
