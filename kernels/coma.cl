@@ -2,7 +2,8 @@
  * clpost/stages/coma.py documents the formulas; its reference() is the oracle.
  *
  * Buffers: colour planar (c*n + i); padded = colour with COMA_PAD px of edge values on every
- * side; lut = COMA_LUT_SIZE values of C (mm) over image height [0, r_max]; taps = COMA_TAPS
+ * side; lut = 2 planes of COMA_LUT_SIZE values over image height [0, r_max]: C (mm) and dC/dr;
+ * taps = COMA_TAPS
  * landing offsets (sagittal, radial) in units of C of a Vogel spiral over the pupil.
  * Defines: COMA_TAPS, COMA_PAD, COMA_LUT_SIZE.
  */
@@ -37,20 +38,27 @@ __kernel void coma(__global const float *restrict padded, __global float *restri
     const float ex = r > 0.0f ? dx / r : 1.0f, ey = r > 0.0f ? dy / r : 0.0f;
     const float t = fmin(r * pitch_mm * lut_scale, (float)(COMA_LUT_SIZE - 1));
     const int k0 = min((int)t, COMA_LUT_SIZE - 2);
-    const float c = clamp(mix(lut[k0], lut[k0 + 1], t - (float)k0) / pitch_mm, -COMA_MAX_C, COMA_MAX_C);
-    /* gather from x - C (es * e_s + er * e_r), e_s = (-ey, ex), e_r = (ex, ey) */
+    const float craw = mix(lut[k0], lut[k0 + 1], t - (float)k0) / pitch_mm;
+    const float c = clamp(craw, -COMA_MAX_C, COMA_MAX_C);
+    /* C' = dC/dr (0 where the comet is capped) and C/r (-> C'(0) on the axis): the Jacobian of
+     * each tap's map, so a point's light is conserved although the PSF changes with r */
+    const float dc = fabs(craw) > COMA_MAX_C ? 0.0f
+                   : mix(lut[COMA_LUT_SIZE + k0], lut[COMA_LUT_SIZE + k0 + 1], t - (float)k0);
+    const float q = r > 0.0f ? c / r : dc;
+    /* gather from x - C (ts * e_s + tr * e_r), e_s = (-ey, ex), e_r = (ex, ey) */
     const float2 ax_s = (float2)(ey, -ex) * c, ax_r = (float2)(-ex, -ey) * c;
     const float bx = (float)(x + COMA_PAD), by = (float)(y + COMA_PAD);
     float3 acc = (float3)(0.0f);
     for (int k = 0; k < COMA_TAPS; ++k) {
         const float2 u = taps[k];
+        const float jac = fmax((1.0f - dc * u.y) * (1.0f - q * u.y) + q * dc * u.x * u.x, 0.0f);
         const float px = bx + ax_s.x * u.x + ax_r.x * u.y;
         const float py = by + ax_s.y * u.x + ax_r.y * u.y;
         const float fx0 = floor(px), fy0 = floor(py);
         const float fx = px - fx0, fy = py - fy0;
         const size_t j = (size_t)((int)fy0) * pw + (size_t)((int)fx0);
-        const float w00 = (1.0f - fx) * (1.0f - fy), w10 = fx * (1.0f - fy);
-        const float w01 = (1.0f - fx) * fy, w11 = fx * fy;
+        const float w00 = (1.0f - fx) * (1.0f - fy) * jac, w10 = fx * (1.0f - fy) * jac;
+        const float w01 = (1.0f - fx) * fy * jac, w11 = fx * fy * jac;
         acc.x += w00 * padded[j] + w10 * padded[j + 1] + w01 * padded[j + pw] + w11 * padded[j + pw + 1];
         acc.y += w00 * padded[pn + j] + w10 * padded[pn + j + 1] + w01 * padded[pn + j + pw] + w11 * padded[pn + j + pw + 1];
         acc.z += w00 * padded[2 * pn + j] + w10 * padded[2 * pn + j + 1] + w01 * padded[2 * pn + j + pw] + w11 * padded[2 * pn + j + pw + 1];

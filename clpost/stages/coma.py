@@ -28,12 +28,25 @@ head (⟨ρ²⟩ = ½ for a uniform pupil). C > 0 points the tail away from the 
 * parametric: ``Camera.coma_mm`` = the comet length 3C at the image corner :math:`r_c`, linear in
   the field height (Seidel coma ∝ r): :math:`C(r) = \text{coma\_mm}/3 \cdot r/r_c`.
 
-**Gather.** :math:`C'(x) = \frac1N\sum_k C_{in}\big(x - \varepsilon(u_k; C(r_x))\big)`, the
+**Gather.** :math:`C'(x) = \frac1N\sum_k J_k(x)\,C_{in}\big(x - \varepsilon_k(x)\big)`, the
 pupil sampled by a Vogel spiral :math:`u_k` of N points (uniform weights, so the ray density is
-the PSF's), ε rotated into the pixel's (sagittal, radial) frame, bilinear taps from a copy padded
-by 16 px. The PSF is that of the output pixel's field height; energy is exactly conserved for a
-uniform field and to :math:`O(\mathrm{d}C/\mathrm{d}r)` for a point (≈ C/r, 10⁻⁴ for real
-lenses). The comet length is capped at 15 px. Quality sets N: draft 16, preview 32, final 64.
+the PSF's), :math:`\varepsilon_k = C(r)\,(t_{k,s}\,e_s + t_{k,r}\,e_r)` with
+:math:`t_k = (2p_xp_y,\ p_x^2 + 3p_y^2)` in the pixel's (sagittal, radial) frame, bilinear taps
+from a copy padded by 16 px. Because the PSF changes with r, a plain gather would not conserve
+energy (the comet of a point at r carries :math:`1 - 2C/r` of it: 4 % for a linear coma of
+C/r = 2 %); each tap is weighted by the Jacobian of its map :math:`x \mapsto x - \varepsilon_k(x)`,
+in polar coordinates
+
+.. math::
+
+    J_k = \Big(1 - C'\,t_{k,r}\Big)\Big(1 - \frac{C}{r}\,t_{k,r}\Big) + \frac{C}{r}\,C'\,t_{k,s}^2
+
+(C' = dC/dr; C/r → C'(0) on the axis; J clamped at 0 where a comet folds over), so the light of
+every source point is conserved (a scatter's property) up to the bilinear resampling's ripple.
+A uniform field is therefore *not* left exactly uniform: coma moves the energy centroid outward by
+C(r), which dims it by :math:`\langle J\rangle \approx 1 - 2C/r`, as a magnification would. The
+comet length is capped at 15 px (C' = 0 where capped). Quality sets N: draft 16, preview 32,
+final 64.
 
 Domain/range: colour ≥ 0 → convex combination of input colours.
 """
@@ -118,12 +131,12 @@ class Coma(GatherStage):
 
     def _lut(self, camera) -> np.ndarray:
         fn = coma_curve(camera)
-        return fld.sample_lut(lambda r: (fn(r),), camera, 1)
+        return fld.sample_lut(lambda r: (fn(r), derivative(fn, r)), camera, 2)
 
     def skip_reason(self, camera, frame):
         if coma_curve(camera) is None:
             return "thin lens without Camera.coma_mm"
-        if not np.any(self._lut(camera)):
+        if not np.any(self._lut(camera)[0]):
             return "coma is zero over the sensor"
         return None
 
@@ -153,7 +166,7 @@ class Coma(GatherStage):
         if key not in self._scratch:
             off = comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)).astype(np.float32)
             self._scratch = {key: dict(
-                pad=rt.empty((3, h + 2 * fld.PAD, w + 2 * fld.PAD)), lut=rt.empty((1, fld.LUT_SIZE)),
+                pad=rt.empty((3, h + 2 * fld.PAD, w + 2 * fld.PAD)), lut=rt.empty((2, fld.LUT_SIZE)),
                 taps=cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=off))}
         return self._scratch[key]
 
@@ -177,26 +190,40 @@ class Coma(GatherStage):
 
     # -- the oracle -------------------------------------------------------------------------
     def c_px(self, camera, w: int, h: int):
-        """Per-pixel C in px (capped so the tail 3C ≤ 15 px) and the radial unit vector."""
+        """Per pixel: C in px (capped so the tail 3C ≤ 15 px), C' = dC/dr, C/r and the radial
+        unit vector (float64)."""
         cx, cy = fld.principal_point_px(camera, w, h)
         pitch = fld.pitch_mm(camera, w)
         _, _, r, ex, ey = fld.radial_frame(w, h, cx, cy)
-        c = coma_curve(camera)(r * pitch) / pitch
-        return np.clip(c, -MAX_TAIL_PX / 3.0, MAX_TAIL_PX / 3.0), ex, ey
+        fn = coma_curve(camera)
+        c = fn(r * pitch) / pitch
+        capped = np.abs(c) > MAX_TAIL_PX / 3.0
+        c = np.clip(c, -MAX_TAIL_PX / 3.0, MAX_TAIL_PX / 3.0)
+        dc = np.where(capped, 0.0, derivative(fn, r * pitch))
+        q = np.where(r > 0, c / np.where(r > 0, r, 1.0), dc)
+        return c, dc, q, ex, ey
 
     def reference(self, camera, frame, color):
         """float64 numpy implementation of the module docstring (exact C(r), no LUT)."""
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
-        c, ex, ey = self.c_px(camera, w, h)
+        c, dc, q, ex, ey = self.c_px(camera, w, h)
         xs, ys = np.mgrid[0:h, 0:w].astype(np.float64)[::-1]
         acc = np.zeros_like(color)
-        for es, er in comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)):
+        for ts, tr in comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)):
             # sagittal e_s = (-ey, ex), radial e_r = (ex, ey); gather from x - ε
-            ox = c * (es * -ey + er * ex)
-            oy = c * (es * ex + er * ey)
-            acc += fld.bilinear_padded(color, xs - ox, ys - oy)
+            ox = c * (ts * -ey + tr * ex)
+            oy = c * (ts * ex + tr * ey)
+            jac = np.maximum((1.0 - dc * tr) * (1.0 - q * tr) + q * dc * ts * ts, 0.0)
+            acc += fld.bilinear_padded(color, xs - ox, ys - oy) * jac[..., None]
         return acc / self.taps
+
+
+def derivative(fn, r_mm, step_mm: float = 1e-3) -> np.ndarray:
+    """dC/dr (dimensionless) by central differences (one-sided at r = 0)."""
+    r = np.asarray(r_mm, np.float64)
+    lo = np.maximum(r - step_mm, 0.0)
+    return (fn(r + step_mm) - fn(lo)) / (r + step_mm - lo)
 
 
 def comet_geometry_px(camera, r_mm: float, width: int) -> dict:
