@@ -318,4 +318,7 @@ class Camera:
                 self.distortion.cx, self.distortion.cy, *self.distortion.vector()))}
                if self.distortion is not None else {}),
             **({"clpost.vignetting": self.vignetting} if self.vignetting != "off" else {}),
+            # astigmatism / coma / lateral_color stages: parametric coefficients when given
+            **{f"clpost.{k}": f"{getattr(self, k):g}" for k in
+               ("field_curvature_mm", "astigmatism_mm", "coma_mm", "lateral_color_mm") if getattr(self, k) is not None},
         }

@@ -150,3 +150,14 @@ def test_needs_depth_and_rejects_bad_coefficients():
         Camera(astigmatism_mm=float("nan"))
     with pytest.raises(InputError, match="field_curvature_mm"):
         Camera(field_curvature_mm="x")
+
+
+def test_cli_options_set_the_parametric_coefficients():
+    from clpost.cli import build_parser, camera_from_args
+
+    args = build_parser().parse_args(["process", "in.exr", "-o", "out.exr", "--astigmatism", "0.2",
+                                      "--field-curvature", "-0.1", "--coma", "0.05", "--lateral-color", "0.01"])
+    cam = camera_from_args(args)
+    assert (cam.astigmatism_mm, cam.field_curvature_mm, cam.coma_mm, cam.lateral_color_mm) == (0.2, -0.1, 0.05, 0.01)
+    assert cam.describe()["clpost.astigmatism_mm"] == "0.2"
+    assert "clpost.coma_mm" not in Camera().describe()

@@ -148,10 +148,12 @@ class Astigmatism(GatherStage):
         return None
 
     def reason_needed(self, camera, frame):
-        rc = fld.corner_mm(camera)
-        ds, dt = focal_offsets(camera)(np.array(rc))
-        return (f"focal offsets at the corner: sagittal {float(ds):+.3g} mm, tangential {float(dt):+.3g} mm; "
-                f"{self.taps} taps")
+        r = np.linspace(0.0, fld.corner_mm(camera), 256)
+        ds, dt = focal_offsets(camera)(r)
+        i = int(np.argmax(np.abs(ds - dt)))
+        s, t = point_source_axes_px(camera, float(r[i]), camera.focus_distance_m, frame.width)
+        return (f"largest astigmatism at {r[i]:.3g} mm: sagittal {float(ds[i]):+.3g} mm, tangential "
+                f"{float(dt[i]):+.3g} mm (in focus: {s:.2g} × {t:.2g} px); {self.taps} taps")
 
     def defines(self, camera):
         return {"ASTIGMATISM_TAPS": self.taps, "ASTIGMATISM_PAD": fld.PAD,

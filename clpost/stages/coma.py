@@ -141,8 +141,11 @@ class Coma(GatherStage):
         return None
 
     def reason_needed(self, camera, frame):
-        c = float(coma_curve(camera)(np.array(fld.corner_mm(camera))))
-        return f"comet length 3C at the corner {3 * c * 1000:+.3g} µm; {self.taps} taps"
+        r = np.linspace(0.0, fld.corner_mm(camera), 256)
+        c = coma_curve(camera)(r)
+        i = int(np.argmax(np.abs(c)))
+        g = comet_geometry_px(camera, float(r[i]), frame.width)
+        return f"longest comet at {r[i]:.3g} mm: 3C = {3 * c[i] * 1000:+.3g} µm ({g['length']:+.2g} px); {self.taps} taps"
 
     def defines(self, camera):
         return {"COMA_TAPS": self.taps, "COMA_PAD": fld.PAD, "COMA_LUT_SIZE": fld.LUT_SIZE}

@@ -123,10 +123,11 @@ class LateralColor(GatherStage):
         return None
 
     def reason_needed(self, camera, frame):
-        rc = fld.corner_mm(camera)
-        d = channel_shifts(camera)(np.array(rc))
+        r = np.linspace(0.0, fld.corner_mm(camera), 256)
+        d = channel_shifts(camera)(r)
+        i = int(np.argmax(np.abs(d[0] - d[2])))
         p = fld.pitch_mm(camera, frame.width)
-        return (f"R−B at the corner {(d[0] - d[2]) * 1000:+.3g} µm ({(d[0] - d[2]) / p:+.3g} px); "
+        return (f"largest R−B at {r[i]:.3g} mm: {(d[0, i] - d[2, i]) * 1000:+.3g} µm ({(d[0, i] - d[2, i]) / p:+.2g} px); "
                 f"channels at {', '.join(f'{w:g}' for w in channel_wavelengths_nm())} nm")
 
     def defines(self, camera):
