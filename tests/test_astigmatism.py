@@ -142,10 +142,10 @@ def test_flagship_wide_open_is_anisotropic_in_the_corner():
     assert s8 < s and t8 < t
 
 
-def test_needs_depth_and_rejects_bad_coefficients():
+def test_without_depth_it_is_not_planned_and_bad_coefficients_are_refused():
     frame = Frame(np.ones((5, 7, 3), np.float32))
-    with pytest.raises(InputError, match="depth"):
-        Pipeline(Camera(astigmatism_mm=0.1), stages=["astigmatism"]).plan(frame)
+    entry = Pipeline(Camera(astigmatism_mm=0.1), stages=["astigmatism"]).explain(frame)[0]
+    assert not entry.planned and "depth" in entry.reason  # colour-only frames keep working
     with pytest.raises(InputError, match="astigmatism_mm"):
         Camera(astigmatism_mm=float("nan"))
     with pytest.raises(InputError, match="field_curvature_mm"):
@@ -161,3 +161,23 @@ def test_cli_options_set_the_parametric_coefficients():
     assert (cam.astigmatism_mm, cam.field_curvature_mm, cam.coma_mm, cam.lateral_color_mm) == (0.2, -0.1, 0.05, 0.01)
     assert cam.describe()["clpost.astigmatism_mm"] == "0.2"
     assert "clpost.coma_mm" not in Camera().describe()
+
+
+@pytest.mark.parametrize("n,focus", [(0.7, 0.45), (64.0, math.inf)])
+def test_traced_lens_at_the_extremes_is_finite_and_matches_the_references(n, focus):
+    """f/0.7 clamps to the lens's f/1.4 and f/64 to its f/16 (with a warning); closest focus and
+    infinity; depths from 1e-9 to 1e9 m through all three aberration stages."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cam = Camera(lens=FLAGSHIP, f_number=n, focus_distance_m=focus)
+    rng = np.random.default_rng(0)
+    frame = Frame((rng.random((23, 37, 3)) * 10).astype(np.float32),
+                  depth=np.geomspace(1e-9, 1e9, 23 * 37).reshape(23, 37).astype(np.float32))
+    pipe = Pipeline(cam, stages=["astigmatism", "coma", "lateral_color"])
+    assert pipe.plan(frame) == ["astigmatism", "coma", "lateral_color"]
+    out = pipe.run(frame).color
+    assert np.all(np.isfinite(out))
+    err, where = _max_err(out, pipe.reference(frame))
+    assert err < 5e-3, where  # values 0–10: LUTs of the traced curves vs np.interp

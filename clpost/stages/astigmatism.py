@@ -55,6 +55,8 @@ in the plan, out-of-focus content lacks c_0.
 the output pixel only (no occlusion handling, like a gather DoF). Semi-axes are capped at 15 px;
 below 1e-3 px both, the pixel is copied. Quality sets N: draft 16, preview 32, final 64.
 
+A frame without depth: not planned (``--explain`` says so).
+
 Domain/range: colour ≥ 0 → convex combination of input colours; depth 0⁺ … +inf (depths below
 1 µm are treated as 1 µm); no NaN/Inf for any finite camera.
 
@@ -145,6 +147,10 @@ class Astigmatism(GatherStage):
             return "thin lens without Camera.field_curvature_mm / astigmatism_mm"
         if not np.any(self._lut(camera)):
             return "sagittal and tangential focal offsets are zero over the sensor"
+        if frame.depth is None:
+            # the blur depends on each pixel's depth; a colour-only frame keeps working (as it did
+            # before this stage existed) and --explain says why nothing was added
+            return "the frame has no depth buffer (the blur depends on each pixel's depth)"
         return None
 
     def reason_needed(self, camera, frame):
