@@ -1,8 +1,9 @@
 /* astigmatism: field curvature + astigmatism as a per-pixel elliptical gather.
  * clpost/stages/astigmatism.py documents the formulas; its reference() is the oracle.
  *
- * Buffers: colour planar (c*n + i); padded = colour with ASTIGMATISM_PAD px of edge values on
- * every side (so taps never clamp); depth planar metres (+inf sky); lut = 2 planes of
+ * Buffers: colour planar (c*n + i); padded = colour as float4 (RGB_) with ASTIGMATISM_PAD px of
+ * edge values on every side (so taps never clamp; one float4 load per bilinear corner instead of
+ * three planar loads: the taps' addresses vary per pixel, so nothing vectorises across pixels); depth planar metres (+inf sky); lut = 2 planes of
  * ASTIGMATISM_LUT_SIZE focal offsets (sagittal, tangential; mm) over image height [0, r_max];
  * taps = ASTIGMATISM_TAPS points of a Vogel spiral over the unit disc (uniform weights).
  * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE.
@@ -11,16 +12,16 @@
 #define ASTIGMATISM_MIN_SEMI 1e-3f
 #define ASTIGMATISM_MIN_DEPTH_MM 1e-3f
 
-__kernel void astigmatism_pad(__global const float *restrict src, __global float *restrict padded,
+__kernel void astigmatism_pad(__global const float *restrict src, __global float4 *restrict padded,
                               const int width, const int height)
 {
     const int x = get_global_id(0), y = get_global_id(1);
     const int pw = width + 2 * ASTIGMATISM_PAD, ph = height + 2 * ASTIGMATISM_PAD;
     if (x >= pw || y >= ph) return;
     const int sx = clamp(x - ASTIGMATISM_PAD, 0, width - 1), sy = clamp(y - ASTIGMATISM_PAD, 0, height - 1);
-    const size_t n = (size_t)width * height, pn = (size_t)pw * ph;
+    const size_t n = (size_t)width * height;
     const size_t i = (size_t)sy * width + sx, j = (size_t)y * pw + x;
-    for (int c = 0; c < 3; ++c) padded[c * pn + j] = src[c * n + i];
+    padded[j] = (float4)(src[i], src[n + i], src[2 * n + i], 0.0f);
 }
 
 inline float astigmatism_semi(float e0, float g, float d, float c0, float aperture, float half_inv_pitch)
@@ -34,7 +35,7 @@ inline float astigmatism_semi(float e0, float g, float d, float c0, float apertu
     return isfinite(a) ? fmin(a, ASTIGMATISM_MAX_SEMI) : ASTIGMATISM_MAX_SEMI;
 }
 
-__kernel void astigmatism(__global const float *restrict padded, __global float *restrict dst,
+__kernel void astigmatism(__global const float4 *restrict padded, __global float *restrict dst,
                           __global const float *restrict depth, __global const float *restrict lut,
                           __constant float2 *taps, const int width, const int height,
                           const float cx, const float cy, const float pitch_mm, const float lut_scale,
@@ -45,7 +46,6 @@ __kernel void astigmatism(__global const float *restrict padded, __global float 
     const size_t n = (size_t)width * height;
     const size_t i = (size_t)y * width + x;
     const int pw = width + 2 * ASTIGMATISM_PAD;
-    const size_t pn = (size_t)pw * (height + 2 * ASTIGMATISM_PAD);
 
     const float dx = (float)x - cx, dy = (float)y - cy;
     const float r = sqrt(dx * dx + dy * dy);
@@ -67,25 +67,26 @@ __kernel void astigmatism(__global const float *restrict padded, __global float 
     const float at = astigmatism_semi(e0, g, dt, c0, aperture_mm, hip);
     if (as < ASTIGMATISM_MIN_SEMI && at < ASTIGMATISM_MIN_SEMI) {
         const size_t j = (size_t)(y + ASTIGMATISM_PAD) * pw + (x + ASTIGMATISM_PAD);
-        for (int c = 0; c < 3; ++c) dst[c * n + i] = padded[c * pn + j];
+        const float4 v = padded[j];
+        dst[i] = v.x;
+        dst[n + i] = v.y;
+        dst[2 * n + i] = v.z;
         return;
     }
     /* tap k: as*u.x along e_s = (-ey, ex), at*u.y along e_t = (ex, ey) */
     const float2 ax_s = (float2)(-ey, ex) * as, ax_t = (float2)(ex, ey) * at;
     const float bx = (float)(x + ASTIGMATISM_PAD), by = (float)(y + ASTIGMATISM_PAD);
-    float3 acc = (float3)(0.0f);
+    float4 acc = (float4)(0.0f);
     for (int k = 0; k < ASTIGMATISM_TAPS; ++k) {
         const float2 u = taps[k];
         const float px = bx + ax_s.x * u.x + ax_t.x * u.y;
         const float py = by + ax_s.y * u.x + ax_t.y * u.y;
         const float fx0 = floor(px), fy0 = floor(py);
         const float fx = px - fx0, fy = py - fy0;
-        const size_t j = (size_t)((int)fy0) * pw + (size_t)((int)fx0);
-        const float w00 = (1.0f - fx) * (1.0f - fy), w10 = fx * (1.0f - fy);
-        const float w01 = (1.0f - fx) * fy, w11 = fx * fy;
-        acc.x += w00 * padded[j] + w10 * padded[j + 1] + w01 * padded[j + pw] + w11 * padded[j + pw + 1];
-        acc.y += w00 * padded[pn + j] + w10 * padded[pn + j + 1] + w01 * padded[pn + j + pw] + w11 * padded[pn + j + pw + 1];
-        acc.z += w00 * padded[2 * pn + j] + w10 * padded[2 * pn + j + 1] + w01 * padded[2 * pn + j + pw] + w11 * padded[2 * pn + j + pw + 1];
+        const int j = (int)fy0 * pw + (int)fx0;
+        const float4 top = mix(padded[j], padded[j + 1], fx);
+        const float4 bot = mix(padded[j + pw], padded[j + pw + 1], fx);
+        acc += mix(top, bot, fy);
     }
     const float inv = 1.0f / (float)ASTIGMATISM_TAPS;
     dst[i] = acc.x * inv;

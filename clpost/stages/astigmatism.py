@@ -184,7 +184,7 @@ class Astigmatism(GatherStage):
         if key not in self._scratch:
             taps = fld.vogel_disc(self.taps)
             self._scratch = {key: dict(
-                pad=rt.empty((3, h + 2 * fld.PAD, w + 2 * fld.PAD)),
+                pad=rt.empty((h + 2 * fld.PAD, w + 2 * fld.PAD, 4)),
                 lut=rt.empty((2, fld.LUT_SIZE)),
                 taps=cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=taps))}
         return self._scratch[key]

@@ -169,7 +169,7 @@ class Coma(GatherStage):
         if key not in self._scratch:
             off = comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)).astype(np.float32)
             self._scratch = {key: dict(
-                pad=rt.empty((3, h + 2 * fld.PAD, w + 2 * fld.PAD)), lut=rt.empty((2, fld.LUT_SIZE)),
+                pad=rt.empty((h + 2 * fld.PAD, w + 2 * fld.PAD, 4)), lut=rt.empty((2, fld.LUT_SIZE)),
                 taps=cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=off))}
         return self._scratch[key]
 
