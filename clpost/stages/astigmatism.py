@@ -48,12 +48,26 @@ Where c_0 exceeds c_s or c_t (a surface whose depth defocus is partly cancelled 
 curvature), the sum is too blurred along that axis: stages only add blur. Without a dof stage
 in the plan, out-of-focus content lacks c_0.
 
-**Gather.** :math:`C'(x) = \frac1N\sum_k C\big(x + \tfrac{a_s}{2p}u_{k,x}\,e_s +
-\tfrac{a_t}{2p}u_{k,y}\,e_t\big)` with :math:`u_k` a Vogel spiral of N points over the unit disc
-(uniform weights: a uniform ellipse), p the pixel pitch, :math:`e_t` the unit radial vector and
-:math:`e_s` its perpendicular, bilinear taps from a copy padded by 16 px (edge repeated). Depth of
-the output pixel only (no occlusion handling, like a gather DoF). Semi-axes are capped at 15 px;
-below 1e-3 px both, the pixel is copied. Quality sets N: draft 16, preview 32, final 64.
+**Gather.** The taps :math:`x + o_k`, :math:`o_k = \tfrac{a_s}{2p}u_{k,x}\,e_s +
+\tfrac{a_t}{2p}u_{k,y}\,e_t` cover the output pixel's own ellipse (:math:`u_k` a Vogel spiral of
+N points over the unit disc, p the pixel pitch, :math:`e_t` the unit radial vector, :math:`e_s`
+its perpendicular; bilinear taps from a copy padded by 16 px, edge repeated). Each tap is
+weighted by whether the *source* pixel's own ellipse reaches back to the target
+(scatter-as-gather, as DoF gathers do):
+
+.. math::
+
+    w_k = \mathrm{clamp}\big(5 - 4 q_k,\ 0,\ 1\big), \quad
+    q_k = \Big\| \Big(\frac{a_s u_{k,x}}{a_s^{src} + p},\ \frac{a_t u_{k,y}}{a_t^{src} + p}\Big) \Big\|,
+    \qquad C'(x) = \frac{\sum_k w_k\,C(x + o_k)}{\sum_k w_k}
+
+(source axes at the nearest pixel, +½ px for its own extent; weight 1 inside, fading to 0 at 1.25
+of the source's ellipse). Without it, a sharp highlight beside a strongly blurred neighbour (a
+lamp against the sky) is copied into the neighbour's large ellipse: +2.5 % energy on the demo
+frame at f/1.4, +0.8 % with it (the rest: pixels whose depth is the sky's but whose colour is
+the lamp's, CONVENTIONS "depth from one sample"). A uniform field stays uniform exactly.
+Semi-axes are capped at 15 px; below 1e-3 px both, the pixel is copied. Quality sets N: draft
+16, preview 32, final 64.
 
 A frame without depth: not planned (``--explain`` says so).
 
@@ -185,6 +199,7 @@ class Astigmatism(GatherStage):
             taps = fld.vogel_disc(self.taps)
             self._scratch = {key: dict(
                 pad=rt.empty((h + 2 * fld.PAD, w + 2 * fld.PAD, 4)),
+                axes=rt.empty((h + 2 * fld.PAD, w + 2 * fld.PAD, 2)),
                 lut=rt.empty((2, fld.LUT_SIZE)),
                 taps=cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=taps))}
         return self._scratch[key]
@@ -199,13 +214,13 @@ class Astigmatism(GatherStage):
         aperture, v, f = thin_lens(camera)
         events = [cl.enqueue_copy(q, b["lut"], self._lut(camera), is_blocking=False)]
         k = self._kernel(rt, camera, "astigmatism_pad")
-        k.set_args(src, b["pad"], np.int32(w), np.int32(h))
-        events.append(cl.enqueue_nd_range_kernel(q, k, (w + 2 * fld.PAD, h + 2 * fld.PAD), None))
-        k = self._kernel(rt, camera, "astigmatism")
-        k.set_args(b["pad"], dst, aux["depth"], b["lut"], b["taps"], np.int32(w), np.int32(h),
+        k.set_args(src, aux["depth"], b["lut"], b["pad"], b["axes"], np.int32(w), np.int32(h),
                    np.float32(cx), np.float32(cy), np.float32(fld.pitch_mm(camera, w)),
                    np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)),
                    np.float32(aperture), np.float32(v), np.float32(1.0 / f))
+        events.append(cl.enqueue_nd_range_kernel(q, k, (w + 2 * fld.PAD, h + 2 * fld.PAD), None))
+        k = self._kernel(rt, camera, "astigmatism")
+        k.set_args(b["pad"], b["axes"], dst, b["taps"], np.int32(w), np.int32(h), np.float32(cx), np.float32(cy))
         events.append(cl.enqueue_nd_range_kernel(q, k, (w, h), None))
         return events
 
@@ -226,13 +241,22 @@ class Astigmatism(GatherStage):
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
         a_s, a_t, ex, ey = self.semi_axes_px(camera, frame)
+        pad = fld.PAD
+        src_s, src_t = np.pad(a_s, pad, mode="edge"), np.pad(a_t, pad, mode="edge")
         xs, ys = np.mgrid[0:h, 0:w].astype(np.float64)[::-1]
         acc = np.zeros_like(color)
+        wsum = np.zeros((h, w))
         for ux, uy in fld.vogel_disc(self.taps).astype(np.float64):
             ox = a_s * ux * -ey + a_t * uy * ex
             oy = a_s * ux * ex + a_t * uy * ey
-            acc += fld.bilinear_padded(color, xs + ox, ys + oy)
-        out = acc / self.taps
+            # the source pixel's own ellipse (+ half a pixel) must reach back to the target
+            ix = np.clip(np.floor(xs + ox + 0.5).astype(np.int64) + pad, 0, w + 2 * pad - 1)
+            iy = np.clip(np.floor(ys + oy + 0.5).astype(np.int64) + pad, 0, h + 2 * pad - 1)
+            q = np.hypot(a_s * ux / (src_s[iy, ix] + 0.5), a_t * uy / (src_t[iy, ix] + 0.5))
+            wk = np.clip(5.0 - 4.0 * q, 0.0, 1.0)
+            acc += fld.bilinear_padded(color, xs + ox, ys + oy) * wk[..., None]
+            wsum += wk
+        out = np.where(wsum[..., None] > 0, acc / np.where(wsum > 0, wsum, 1.0)[..., None], color)
         still = (a_s < MIN_SEMI_PX) & (a_t < MIN_SEMI_PX)
         out[still] = color[still]
         return out
