@@ -58,10 +58,12 @@ weighted by whether the *source* pixel's own ellipse reaches back to the target
 .. math::
 
     w_k = \mathrm{clamp}\big(5 - 4 q_k,\ 0,\ 1\big), \quad
-    q_k = \Big\| \Big(\frac{a_s u_{k,x}}{a_s^{src} + p},\ \frac{a_t u_{k,y}}{a_t^{src} + p}\Big) \Big\|,
+    q_k = \Big\| \Big(\frac{\alpha_s u_{k,x}}{\alpha_s^{src} + \frac12},\
+                      \frac{\alpha_t u_{k,y}}{\alpha_t^{src} + \frac12}\Big) \Big\|,
     \qquad C'(x) = \frac{\sum_k w_k\,C(x + o_k)}{\sum_k w_k}
 
-(source axes at the nearest pixel, +½ px for its own extent; weight 1 inside, fading to 0 at 1.25
+with :math:`\alpha = a/2p` the semi-axes in px (the source's at its nearest pixel, +½ px for
+its own extent; weight 1 inside, fading to 0 at 1.25
 of the source's ellipse). Without it, a sharp highlight beside a strongly blurred neighbour (a
 lamp against the sky) is copied into the neighbour's large ellipse: +2.5 % energy on the demo
 frame at f/1.4, +0.8 % with it (the rest: pixels whose depth is the sky's but whose colour is
