@@ -181,3 +181,20 @@ def test_traced_lens_at_the_extremes_is_finite_and_matches_the_references(n, foc
     assert np.all(np.isfinite(out))
     err, where = _max_err(out, pipe.reference(frame))
     assert err < 5e-3, where  # values 0–10: LUTs of the traced curves vs np.interp
+
+
+def test_a_sharp_highlight_is_not_copied_into_blurred_neighbours():
+    """An in-focus lamp against the (far, strongly blurred) sky: the sky pixels' large ellipses
+    reach the lamp, but the lamp's own small ellipse does not reach them — its light stays
+    (a plain gather would add each sky pixel's share of the lamp: +30 % here; weighted: −0.2 %)."""
+    w, h = 301, 201
+    color = np.zeros((h, w, 3), np.float32)
+    color[100, 250] = 1000.0
+    depth = np.full((h, w), np.inf, np.float32)
+    depth[100, 250] = 3.0
+    cam = Camera(f_number=1.4, focus_distance_m=3.0, field_curvature_mm=-1.0, astigmatism_mm=0.4)
+    stage = ast.Astigmatism()
+    a_s, a_t, _, _ = stage.semi_axes_px(cam, Frame(color, depth=depth))
+    assert a_s[100, 245] > 2 * a_s[100, 250] and a_s[100, 245] > 2.0  # the sky blurs much more
+    out = Pipeline(cam, stages=["astigmatism"]).run(Frame(color, depth=depth)).color
+    assert out.sum() == pytest.approx(3000.0, rel=0.03)
