@@ -144,6 +144,18 @@ class Camera:
     """dof: bokeh texture in [-1, 1]; > 0 undercorrected (near: bright rim, far: bright core)."""
     optical_vignetting: float = 0.0
     """dof: cat's-eye strength in [0, 1]: barrel-clip displacement in aperture radii at the corner."""
+    # astigmatism / coma / lateral_color stages: parametric third-order aberrations (mm on the
+    # film at the sensor's half diagonal) for a lens without a prescription. None (default) takes
+    # them from the traced lens (a lens_data lens) or leaves them out (thin lens: passthrough);
+    # a number replaces the traced curve (0 turns the effect off).
+    field_curvature_mm: float | None = None
+    """Mean of the sagittal and tangential focal offsets at the image corner (mm, + = behind the film)."""
+    astigmatism_mm: float | None = None
+    """Tangential minus sagittal focal offset at the image corner (mm)."""
+    coma_mm: float | None = None
+    """Length of the comet (tangential coma, 3C) at the image corner (mm; + = tail away from the centre)."""
+    lateral_color_mm: float | None = None
+    """Chief-ray height at F (486.1 nm) minus at C (656.3 nm) at the image corner (mm)."""
 
     def __post_init__(self) -> None:
         parse_lens(self.lens)
@@ -264,6 +276,12 @@ class Camera:
             if not lo <= v <= hi:
                 raise InputError(f"Camera.{name}={v!r} must be in [{lo:g}, {hi:g}], e.g. {eg}")
             object.__setattr__(self, name, v)
+        # astigmatism / coma / lateral_color stages
+        for name in ("field_curvature_mm", "astigmatism_mm", "coma_mm", "lateral_color_mm"):
+            val = getattr(self, name)
+            if val is not None:
+                object.__setattr__(self, name, _finite(name, val, "mm on the film at the image corner",
+                                                       "e.g. 0.1, or 0 to turn the effect off"))
 
     # -- derived quantities -------------------------------------------------------------------
     @property
@@ -369,4 +387,7 @@ class Camera:
             "clpost.apertureRoundness": f"{self.aperture_roundness:g}",
             "clpost.sphericalAberration": f"{self.spherical_aberration:g}",
             "clpost.opticalVignetting": f"{self.optical_vignetting:g}",
+            # astigmatism / coma / lateral_color stages: parametric coefficients when given
+            **{f"clpost.{k}": f"{getattr(self, k):g}" for k in
+               ("field_curvature_mm", "astigmatism_mm", "coma_mm", "lateral_color_mm") if getattr(self, k) is not None},
         }

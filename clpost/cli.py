@@ -94,6 +94,12 @@ CAMERA_OPTIONS = {
     "--roundness": ("aperture_roundness", float, "aperture blade roundness 0 (polygon) … 1 (circle)"),
     "--spherical-aberration": ("spherical_aberration", float, "bokeh texture -1 … 1 (> 0: undercorrected)"),
     "--cats-eye": ("optical_vignetting", float, "optical vignetting (cat's-eye bokeh) strength 0 … 1"),
+    # astigmatism / coma / lateral_color stages: parametric aberrations at the image corner (mm);
+    # default: the traced lens's (lens_data lenses) or none (thin lens)
+    "--field-curvature": ("field_curvature_mm", _positive_float, "mean sagittal/tangential focal offset at the image corner in mm (astigmatism stage)"),
+    "--astigmatism": ("astigmatism_mm", _positive_float, "tangential minus sagittal focal offset at the image corner in mm (astigmatism stage)"),
+    "--coma": ("coma_mm", _positive_float, "comet length (tangential coma) at the image corner in mm (coma stage)"),
+    "--lateral-color": ("lateral_color_mm", _positive_float, "chief-ray height F minus C at the image corner in mm (lateral_color stage)"),
 }
 
 

@@ -1,0 +1,87 @@
+r"""Shared geometry of the field-dependent lens stages (astigmatism, coma, lateral_color).
+
+Image height r (mm on the film) is measured from the image centre ((W−1)/2, (H−1)/2) in the
+pixel-centre convention of CONVENTIONS.md (these stages run before distortion, on the undistorted
+render); the image spans the sensor width, so the pixel pitch
+is :math:`p = w_{sensor}/W` mm. The *corner* of the parametric coefficients is the sensor's half
+diagonal :math:`r_c = \tfrac12\sqrt{w^2 + h^2}`.
+
+Curves are sampled into LUTs of ``LUT_SIZE`` entries over :math:`[0, \sqrt{w^2 + h^2}]` (twice
+the half diagonal, so an off-centre principal point stays inside) and interpolated linearly in
+the kernels, as the vignetting stage does.
+
+The gathers read a copy of the image padded by ``PAD`` pixels (edge values repeated, i.e. the
+render is assumed to continue as its border) so no tap needs a clamp (PERFORMANCE.md); every tap
+offset is therefore limited to ``PAD − 1`` pixels.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+LUT_SIZE = 512
+PAD = 16
+GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
+
+
+def principal_point_px(camera, w: int, h: int) -> tuple[float, float]:
+    """The optical centre in the (undistorted) frame these stages see: its centre. (With a
+    calibration the render may be an extended frustum; its off-centre principal point is not
+    modelled here.)"""
+    return 0.5 * (w - 1), 0.5 * (h - 1)
+
+
+def pitch_mm(camera, w: int) -> float:
+    return camera.sensor_mm[0] / float(w)
+
+
+def corner_mm(camera) -> float:
+    return 0.5 * math.hypot(*camera.sensor_mm)
+
+
+def lut_range_mm(camera) -> float:
+    return math.hypot(*camera.sensor_mm)
+
+
+def sample_lut(fn, camera, planes: int) -> np.ndarray:
+    """(planes, LUT_SIZE) float32 of ``fn(r_mm) -> tuple of planes`` on the LUT grid."""
+    r = np.linspace(0.0, lut_range_mm(camera), LUT_SIZE)
+    vals = fn(r)
+    return np.ascontiguousarray(np.stack([np.broadcast_to(v, r.shape) for v in vals[:planes]]), np.float32)
+
+
+def vogel_disc(n: int) -> np.ndarray:
+    r"""n points uniform over the unit disc (Vogel spiral): :math:`\sqrt{(k+\frac12)/n}\,
+    (\cos k\phi_g, \sin k\phi_g)`, φ_g the golden angle. (n, 2) float32, the kernels' taps."""
+    k = np.arange(n, dtype=np.float64)
+    rad = np.sqrt((k + 0.5) / n)
+    return np.stack([rad * np.cos(k * GOLDEN_ANGLE), rad * np.sin(k * GOLDEN_ANGLE)], -1).astype(np.float32)
+
+
+def radial_frame(w: int, h: int, cx: float, cy: float):
+    """Per pixel (float64): dx, dy from the principal point, r_px, and the unit radial vector
+    (e_r; (1, 0) at the centre) — the tangential direction of the lens, e_s = (−e_r.y, e_r.x)."""
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    dx, dy = xs - cx, ys - cy
+    r = np.hypot(dx, dy)
+    safe = np.where(r > 0, r, 1.0)
+    ex = np.where(r > 0, dx / safe, 1.0)
+    ey = np.where(r > 0, dy / safe, 0.0)
+    return xs, ys, r, ex, ey
+
+
+def bilinear_padded(color: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Bilinear samples of ``color`` (H, W, C) at pixel positions (px, py) with the image
+    continued by its edge values (what the kernels' padded copy holds), float64."""
+    h, w = color.shape[:2]
+    px = np.clip(px, -PAD, w - 1 + PAD - 1e-9)
+    py = np.clip(py, -PAD, h - 1 + PAD - 1e-9)
+    x0, y0 = np.floor(px), np.floor(py)
+    fx, fy = (px - x0)[..., None], (py - y0)[..., None]
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+    xa, xb = np.clip(x0, 0, w - 1), np.clip(x0 + 1, 0, w - 1)
+    ya, yb = np.clip(y0, 0, h - 1), np.clip(y0 + 1, 0, h - 1)
+    top = color[ya, xa] * (1 - fx) + color[ya, xb] * fx
+    bot = color[yb, xa] * (1 - fx) + color[yb, xb] * fx
+    return top * (1 - fy) + bot * fy

@@ -1,0 +1,240 @@
+r"""coma: the comet-shaped, field-dependent PSF of third-order coma, as a gather.
+
+**The PSF.** A ray through the normalised pupil point :math:`(p_x, p_y) = \rho(\sin\theta,
+\cos\theta)` (y radial, away from the centre) lands, relative to the chief ray, at
+
+.. math::
+
+    \varepsilon_x = C\rho^2\sin 2\theta = 2C\,p_x p_y, \qquad
+    \varepsilon_y = C\rho^2(2 + \cos 2\theta) = C\,(p_x^2 + 3p_y^2)
+
+(Seidel coma; Smith, *Modern Optical Engineering*, 4th ed., §3.5; Hecht, *Optics*, 5th ed.,
+§6.3.1): each pupil zone ρ draws a circle of radius Cρ² centred 2Cρ² from the chief ray, so the
+comet's head sits on the chief ray, its tail reaches :math:`3C` (tangential coma) radially, its
+width is :math:`2C` (sagittal coma ×2), inside a 60° wedge, and its centroid is :math:`C` from the
+head (⟨ρ²⟩ = ½ for a uniform pupil). C > 0 points the tail away from the centre.
+
+**C(r)** (mm on the film):
+
+* a traced lens: the meridional fan at each field height of the lens curves, traced (unclipped,
+  like the curves' astigmatic foci) to the film at the camera's focus and f-number; the
+  even part of the transverse ray aberration, :math:`\tfrac12(\varepsilon_y(\rho) +
+  \varepsilon_y(-\rho)) = 3C\rho^2` (defocus and spherical aberration are odd in ρ), fitted by
+  least squares (pupil-area weight ρ dρ) over ρ ∈ [0.07, 0.7]: the inner half of the pupil's
+  area, where the ρ² law of third-order coma holds. At f/1.4 the Planar's rim rays
+  (ρ > 0.8) scatter by 0.1–0.3 mm with the steep zonal spherical aberration of a fast double
+  Gauss; fitting them would make a comet of ~0.2 mm next to the axis, where the real PSF is a
+  sharp core with a faint flare (that flare is spherical aberration, not this stage's);
+* parametric: ``Camera.coma_mm`` = the comet length 3C at the image corner :math:`r_c`, linear in
+  the field height (Seidel coma ∝ r): :math:`C(r) = \text{coma\_mm}/3 \cdot r/r_c`.
+
+**Gather.** :math:`C'(x) = \frac1N\sum_k J_k(x)\,C_{in}\big(x - \varepsilon_k(x)\big)`, the
+pupil sampled by a Vogel spiral :math:`u_k` of N points (uniform weights, so the ray density is
+the PSF's), :math:`\varepsilon_k = C(r)\,(t_{k,s}\,e_s + t_{k,r}\,e_r)` with
+:math:`t_k = (2p_xp_y,\ p_x^2 + 3p_y^2)` in the pixel's (sagittal, radial) frame, bilinear taps
+from a copy padded by 16 px. Because the PSF changes with r, a plain gather would not conserve
+energy (the comet of a point at r carries :math:`1 - 2C/r` of it: 4 % for a linear coma of
+C/r = 2 %); each tap is weighted by the Jacobian of its map :math:`x \mapsto x - \varepsilon_k(x)`,
+in polar coordinates
+
+.. math::
+
+    J_k = \Big(1 - C'\,t_{k,r}\Big)\Big(1 - \frac{C}{r}\,t_{k,r}\Big) + \frac{C}{r}\,C'\,t_{k,s}^2
+
+(C' = dC/dr; C/r → C'(0) on the axis; J clamped at 0 where a comet folds over), so the light of
+every source point is conserved (a scatter's property) up to the bilinear resampling's ripple.
+A uniform field is therefore *not* left exactly uniform: coma moves the energy centroid outward by
+C(r), which dims it by :math:`\langle J\rangle \approx 1 - 2C/r`, as a magnification would. The
+comet length is capped at 15 px (C' = 0 where capped). Quality sets N: draft 16, preview 32,
+final 64.
+
+Domain/range: colour ≥ 0 → convex combination of input colours.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from . import _field as fld
+from .base import GatherStage
+
+TAPS = {"draft": 16, "preview": 32, "final": 64}
+MAX_TAIL_PX = fld.PAD - 1
+RHO_FIT = 0.7
+"""C is fitted over ρ ≤ 0.7 (half of the pupil's area), where the third-order ρ² law holds; the
+rim zone of a fast lens is dominated by high-order flare (spherical aberration's), which a ρ² fit
+would turn into a far too long comet."""
+
+
+@lru_cache(maxsize=32)
+def _traced(lens_name: str, focus_distance_m: float, f_number: float) -> tuple[np.ndarray, np.ndarray]:
+    """(image_height_mm, C_mm) of a traced lens from its meridional fans."""
+    from ..optics import get_lens
+    from ..optics.curves import _Field, lens_curves
+
+    lens = get_lens(lens_name)
+    curves = lens_curves(lens_name, focus_distance_m, f_number)
+    focus_mm = focus_distance_m * 1000.0
+    pres = lens.focused(focus_mm, f_number)
+    field = _Field(lens, pres, focus_mm, lens.stop_radius_mm(f_number))
+    r_e = curves.entrance_pupil_radius_mm
+    th = np.radians(np.asarray(curves.field_angle_deg, np.float64))
+    aim = field.chief_aim(th)
+    rho = np.linspace(0.07, RHO_FIT, 10)
+    fan = np.concatenate([-rho[::-1], [0.0], rho])
+    t = np.repeat(th, fan.size)
+    ay = np.repeat(aim, fan.size) + np.tile(fan, th.size) * r_e / np.cos(t)
+    res = field.trace(t, 0.0, ay, clip=False)
+    y = res.pos[:, 1].reshape(th.size, fan.size)
+    ok = (res.status == 0).reshape(th.size, fan.size)
+    eps = y - y[:, rho.size][:, None]
+    even = 0.5 * (eps[:, rho.size + 1:] + eps[:, :rho.size][:, ::-1])
+    good = ok[:, rho.size + 1:] & ok[:, :rho.size][:, ::-1] & ok[:, rho.size][:, None]
+    w = np.where(good, rho ** 3, 0.0)  # least squares of 3Cρ² with the pupil-area weight ρ dρ
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = np.where(w.sum(1) > 0, np.sum(w * np.where(good, even, 0.0), 1) / (3.0 * np.sum(w * rho ** 2, 1)), 0.0)
+    c = np.nan_to_num(c)
+    c[0] = 0.0  # on axis the fan is symmetric: no coma
+    return np.asarray(curves.image_height_mm), c
+
+
+def coma_curve(camera):
+    """``fn(r_mm) -> C`` in mm (+ = tail away from the centre), or None (no source)."""
+    if camera.coma_mm is not None:
+        k = camera.coma_mm / 3.0 / fld.corner_mm(camera)
+        return lambda r: k * np.asarray(r, np.float64)
+    if camera.optics is None:
+        return None
+    r, c = _traced(camera.lens, camera.focus_distance_m, camera.lens_curves().f_number)
+    return lambda x: np.interp(np.abs(np.asarray(x, np.float64)), r, c)
+
+
+def comet_offsets(u: np.ndarray) -> np.ndarray:
+    """Landing offsets (sagittal, radial) in units of C of pupil points u (..., 2) = (p_x, p_y)."""
+    px, py = u[..., 0], u[..., 1]
+    return np.stack([2.0 * px * py, px * px + 3.0 * py * py], -1)
+
+
+class Coma(GatherStage):
+    name = "coma"
+    order = 25.0
+
+    def __init__(self, quality: str = "final") -> None:
+        super().__init__(quality)
+        self._kernels: dict = {}
+        self._scratch: dict = {}
+
+    @property
+    def taps(self) -> int:
+        return TAPS[self.quality]
+
+    def _lut(self, camera) -> np.ndarray:
+        fn = coma_curve(camera)
+        return fld.sample_lut(lambda r: (fn(r), derivative(fn, r)), camera, 2)
+
+    def skip_reason(self, camera, frame):
+        if coma_curve(camera) is None:
+            return "thin lens without Camera.coma_mm"
+        if not np.any(self._lut(camera)[0]):
+            return "coma is zero over the sensor"
+        return None
+
+    def reason_needed(self, camera, frame):
+        r = np.linspace(0.0, fld.corner_mm(camera), 256)
+        c = coma_curve(camera)(r)
+        i = int(np.argmax(np.abs(c)))
+        g = comet_geometry_px(camera, float(r[i]), frame.width)
+        return f"longest comet at {r[i]:.3g} mm: 3C = {3 * c[i] * 1000:+.3g} µm ({g['length']:+.2g} px); {self.taps} taps"
+
+    def defines(self, camera):
+        return {"COMA_TAPS": self.taps, "COMA_PAD": fld.PAD, "COMA_LUT_SIZE": fld.LUT_SIZE}
+
+    # -- OpenCL -----------------------------------------------------------------------------
+    def _kernel(self, rt, camera, name):
+        import pyopencl as cl
+
+        from ..runtime import kernel_source
+
+        prog = rt.program(kernel_source("coma"), "coma", self.defines(camera))
+        key = (id(prog), name)
+        if key not in self._kernels:
+            self._kernels[key] = cl.Kernel(prog, name)
+        return self._kernels[key]
+
+    def _buffers(self, rt, w, h):
+        import pyopencl as cl
+
+        key = (id(rt.context), w, h, self.taps)
+        if key not in self._scratch:
+            off = comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)).astype(np.float32)
+            self._scratch = {key: dict(
+                pad=rt.empty((h + 2 * fld.PAD, w + 2 * fld.PAD, 4)), lut=rt.empty((2, fld.LUT_SIZE)),
+                taps=cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=off))}
+        return self._scratch[key]
+
+    def enqueue(self, rt, camera, frame, src, dst, aux):
+        import pyopencl as cl
+
+        q = rt.queue
+        w, h = frame.width, frame.height
+        b = self._buffers(rt, w, h)
+        cx, cy = fld.principal_point_px(camera, w, h)
+        events = [cl.enqueue_copy(q, b["lut"], self._lut(camera), is_blocking=False)]
+        k = self._kernel(rt, camera, "coma_pad")
+        k.set_args(src, b["pad"], np.int32(w), np.int32(h))
+        events.append(cl.enqueue_nd_range_kernel(q, k, (w + 2 * fld.PAD, h + 2 * fld.PAD), None))
+        k = self._kernel(rt, camera, "coma")
+        pitch = fld.pitch_mm(camera, w)
+        k.set_args(b["pad"], dst, b["lut"], b["taps"], np.int32(w), np.int32(h), np.float32(cx), np.float32(cy),
+                   np.float32(pitch), np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
+        events.append(cl.enqueue_nd_range_kernel(q, k, (w, h), None))
+        return events
+
+    # -- the oracle -------------------------------------------------------------------------
+    def c_px(self, camera, w: int, h: int):
+        """Per pixel: C in px (capped so the tail 3C ≤ 15 px), C' = dC/dr, C/r and the radial
+        unit vector (float64)."""
+        cx, cy = fld.principal_point_px(camera, w, h)
+        pitch = fld.pitch_mm(camera, w)
+        _, _, r, ex, ey = fld.radial_frame(w, h, cx, cy)
+        fn = coma_curve(camera)
+        c = fn(r * pitch) / pitch
+        capped = np.abs(c) > MAX_TAIL_PX / 3.0
+        c = np.clip(c, -MAX_TAIL_PX / 3.0, MAX_TAIL_PX / 3.0)
+        dc = np.where(capped, 0.0, derivative(fn, r * pitch))
+        q = np.where(r > 0, c / np.where(r > 0, r, 1.0), dc)
+        return c, dc, q, ex, ey
+
+    def reference(self, camera, frame, color):
+        """float64 numpy implementation of the module docstring (exact C(r), no LUT)."""
+        color = np.asarray(color, np.float64)
+        h, w = color.shape[:2]
+        c, dc, q, ex, ey = self.c_px(camera, w, h)
+        xs, ys = np.mgrid[0:h, 0:w].astype(np.float64)[::-1]
+        acc = np.zeros_like(color)
+        for ts, tr in comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)):
+            # sagittal e_s = (-ey, ex), radial e_r = (ex, ey); gather from x - ε
+            ox = c * (ts * -ey + tr * ex)
+            oy = c * (ts * ex + tr * ey)
+            jac = np.maximum((1.0 - dc * tr) * (1.0 - q * tr) + q * dc * ts * ts, 0.0)
+            acc += fld.bilinear_padded(color, xs - ox, ys - oy) * jac[..., None]
+        return acc / self.taps
+
+
+def derivative(fn, r_mm, step_mm: float = 1e-3) -> np.ndarray:
+    """dC/dr (dimensionless) by central differences (one-sided at r = 0)."""
+    r = np.asarray(r_mm, np.float64)
+    lo = np.maximum(r - step_mm, 0.0)
+    return (fn(r + step_mm) - fn(lo)) / (r + step_mm - lo)
+
+
+def comet_geometry_px(camera, r_mm: float, width: int) -> dict:
+    """Closed form for a point at image height ``r_mm``: tail length 3C, width 2C and centroid
+    shift C in px (for tests and docs)."""
+    c = float(coma_curve(camera)(np.array(r_mm))) / fld.pitch_mm(camera, width)
+    c = float(np.clip(c, -MAX_TAIL_PX / 3.0, MAX_TAIL_PX / 3.0))
+    return {"length": 3 * c, "width": 2 * abs(c), "centroid": c}
+
+
+__all__ = ["Coma", "coma_curve", "comet_geometry_px", "comet_offsets"]

@@ -1,0 +1,200 @@
+"""astigmatism: planning, kernel vs float64 reference, ellipse axes of a point source, energy,
+stability at the extremes, the traced lens."""
+import math
+
+import numpy as np
+import pytest
+
+from clpost import Camera, Frame, InputError, Pipeline
+from clpost.stages import _field as fld
+from clpost.stages import astigmatism as ast
+
+from conftest import odd_frame
+
+FLAGSHIP = "zeiss-planar-50-f1.4"
+
+
+def _max_err(out, ref):
+    err = np.abs(out.astype(np.float64) - ref)
+    j = np.unravel_index(int(np.argmax(err)), err.shape)
+    return err.max(), f"max abs error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
+
+
+def test_not_planned_without_offsets_and_identity_when_skipped(rng):
+    frame = odd_frame(rng)
+    for cam in (Camera(), Camera(field_curvature_mm=0.0, astigmatism_mm=0.0),
+                Camera(lens=FLAGSHIP, f_number=2.0, field_curvature_mm=0.0, astigmatism_mm=0.0)):
+        pipe = Pipeline(cam, stages=["astigmatism"])
+        assert pipe.plan(frame) == []
+        assert np.array_equal(pipe.run(frame).color, frame.color)
+    assert "astigmatism" in Pipeline(Camera(lens=FLAGSHIP, f_number=1.4)).plan(frame)
+    assert Pipeline(Camera(astigmatism_mm=0.1), stages=["astigmatism"]).plan(frame) == ["astigmatism"]
+
+
+@pytest.mark.parametrize("w,h,kw", [
+    (37, 23, dict(lens="thin:50", f_number=1.4, field_curvature_mm=-0.2, astigmatism_mm=0.3)),
+    (23, 37, dict(lens="thin:24", f_number=0.7, focus_distance_m=0.3, astigmatism_mm=-0.05)),
+    (41, 29, dict(lens=FLAGSHIP, f_number=1.4)),
+])
+def test_kernel_matches_reference(rng, w, h, kw):
+    frame = odd_frame(rng, w=w, h=h, scale=10.0)
+    depth = frame.depth.copy()
+    depth[0, :5] = [1e-9, 1e-4, 0.05, 1e30, np.inf]  # adversarial: 0+, inside f, far, sky
+    depth[-1, -3:] = np.inf
+    frame = Frame(frame.color, depth=depth)
+    pipe = Pipeline(Camera(**kw), stages=["astigmatism"])
+    out = pipe.run(frame).color
+    ref = pipe.reference(frame)
+    err, where = _max_err(out, ref)
+    assert err < 1e-3 * 10.0, where  # LUT vs exact curve, float32 taps
+    assert np.all(np.isfinite(out)) and out.dtype == np.float32
+
+
+@pytest.mark.parametrize("fc,a", [(8.0, 6.0), (-8.0, 6.0)])  # axes 4.5–11 px
+def test_point_source_gives_the_closed_form_ellipse(fc, a):
+    w, h = 201, 135
+    cam = Camera(lens="thin:50", f_number=2.0, focus_distance_m=3.0, field_curvature_mm=fc, astigmatism_mm=a)
+    x0 = 170  # on the horizontal axis through the centre: radial = x, sagittal = y
+    cx = (w - 1) / 2
+    pitch = 36.0 / w
+    r_mm = (x0 - cx) * pitch
+    # closed form in focus (v g = 1): c = D |δ| / (v + δ)
+    rc = math.hypot(36, 24) / 2
+    v, d = cam.image_distance_mm, 50.0 / 2.0
+    ds, dt = (fc - a / 2) * (r_mm / rc) ** 2, (fc + a / 2) * (r_mm / rc) ** 2
+    want_s, want_t = d * abs(ds) / (v + ds) / pitch, d * abs(dt) / (v + dt) / pitch
+    got_s, got_t = ast.point_source_axes_px(cam, r_mm, 3.0, w)
+    assert got_s == pytest.approx(want_s, rel=1e-9) and got_t == pytest.approx(want_t, rel=1e-9)
+    color = np.zeros((h, w, 3), np.float32)
+    color[(h - 1) // 2, x0] = 1.0
+    frame = Frame(color, depth=np.full((h, w), 3.0, np.float32))
+    out = Pipeline(cam, stages=["astigmatism"]).run(frame).color[..., 1].astype(np.float64)
+    assert out.sum() == pytest.approx(1.0, rel=0.02)
+    ys, xs = np.mgrid[0:h, 0:w]
+    m = out / out.sum()
+    mx, my = (m * xs).sum(), (m * ys).sum()
+    vx, vy = (m * (xs - mx) ** 2).sum(), (m * (ys - my) ** 2).sum()
+    taps = fld.vogel_disc(64).astype(np.float64)
+    # variance of the splat: (a/2)² <u²> + 1/6 from bilinear weights at uniform sub-pixel offsets
+    meas_t = 2 * math.sqrt(max(vx - 1 / 6, 0) / np.mean(taps[:, 1] ** 2))
+    meas_s = 2 * math.sqrt(max(vy - 1 / 6, 0) / np.mean(taps[:, 0] ** 2))
+    assert meas_t == pytest.approx(want_t, rel=0.05), (meas_t, want_t)
+    assert meas_s == pytest.approx(want_s, rel=0.05), (meas_s, want_s)
+
+
+def test_rims_or_spokes_sharp_not_both():
+    """δ_s = 0: the sagittal focus is on the film — a circle's rim is blurred only along the
+    radius, and a spoke (radial line) keeps its width; δ_t = 0 is the other way round."""
+    w, h = 121, 81
+    cx, cy = (w - 1) / 2, (h - 1) / 2
+    ys, xs = np.mgrid[0:h, 0:w]
+    spoke = ((np.abs(ys - cy) < 0.5) & (xs > cx + 20)).astype(np.float32)  # horizontal radial line
+    depth = np.full((h, w), 3.0, np.float32)
+    frame = Frame(np.repeat(spoke[..., None], 3, -1), depth=depth)
+    col = int(cx + 50)
+
+    def width_across(camera):
+        out = Pipeline(camera, stages=["astigmatism"]).run(frame).color[:, col, 0].astype(np.float64)
+        m = out / out.sum()
+        return math.sqrt((m * (np.arange(h) - cy) ** 2).sum())
+
+    sag_sharp = Camera(f_number=1.4, field_curvature_mm=4.0, astigmatism_mm=8.0)   # δ_s = 0
+    tan_sharp = Camera(f_number=1.4, field_curvature_mm=4.0, astigmatism_mm=-8.0)  # δ_t = 0
+    # blurred only along itself (a neighbour row's radius converges to the centre: a small leak)
+    sharp, blurred = width_across(sag_sharp), width_across(tan_sharp)
+    assert sharp < 0.25 and blurred > 8 * sharp, (sharp, blurred)
+
+
+def test_uniform_field_is_unchanged_and_depth_extremes_are_finite():
+    w, h = 45, 31
+    depth = np.geomspace(1e-9, 1e6, w * h).reshape(h, w).astype(np.float32)
+    depth[::7, ::5] = np.inf
+    for kw in (dict(f_number=0.7, astigmatism_mm=1e3, field_curvature_mm=-1e3),
+               dict(f_number=64.0, astigmatism_mm=1e-6), dict(f_number=0.7, focus_distance_m=0.051, astigmatism_mm=5.0)):
+        cam = Camera(**kw)
+        frame = Frame(np.full((h, w, 3), 7.0, np.float32), depth=depth)
+        out = Pipeline(cam, stages=["astigmatism"]).run(frame).color
+        assert np.all(np.isfinite(out))
+        np.testing.assert_allclose(out, 7.0, rtol=1e-5)
+        a_s, a_t, _, _ = ast.Astigmatism().semi_axes_px(cam, frame)
+        assert np.all(np.isfinite(a_s)) and a_s.max() <= ast.MAX_SEMI_PX and a_t.max() <= ast.MAX_SEMI_PX
+
+
+def test_quadrature_ownership_with_depth_defocus():
+    """Out of focus, this stage adds √(c_s² − c_0²): with dof's disc c_0 the second moments sum
+    to the lens's c_s² (variances of convolved PSFs add)."""
+    cam = Camera(f_number=2.0, focus_distance_m=3.0, field_curvature_mm=-0.1, astigmatism_mm=0.2)
+    d, v, f = ast.thin_lens(cam)
+    for z in (1.0, 2.5, 3.0, 10.0, math.inf):
+        cs, ct, c0 = ast.axes_mm(np.array(-0.2), np.array(0.0), np.array(z), d, v, f)
+        a = 2 * ast.residual_semi_px(cs, c0, 1.0)
+        assert float(a) ** 2 + float(c0) ** 2 == pytest.approx(max(float(cs), float(c0)) ** 2, rel=1e-9)
+        # thin-lens closed form of c_0: D |1 - v (1/f - 1/z)|
+        assert float(c0) == pytest.approx(d * abs(1 - v * (1 / f - (0 if math.isinf(z) else 1 / (z * 1000)))), rel=1e-9)
+
+
+def test_flagship_wide_open_is_anisotropic_in_the_corner():
+    cam = Camera(lens=FLAGSHIP, f_number=1.4, focus_distance_m=3.0)
+    s, t = ast.point_source_axes_px(cam, 16.5, 3.0, 1280)
+    assert s > 1.0 and t > 1.0 and abs(s - t) > 1.0
+    assert ast.point_source_axes_px(cam, 0.0, 3.0, 1280) == (0.0, 0.0)  # the axis belongs to dof/SA
+    s8, t8 = ast.point_source_axes_px(cam.with_(f_number=8.0), 16.5, 3.0, 1280)
+    assert s8 < s and t8 < t
+
+
+def test_without_depth_it_is_not_planned_and_bad_coefficients_are_refused():
+    frame = Frame(np.ones((5, 7, 3), np.float32))
+    entry = Pipeline(Camera(astigmatism_mm=0.1), stages=["astigmatism"]).explain(frame)[0]
+    assert not entry.planned and "depth" in entry.reason  # colour-only frames keep working
+    with pytest.raises(InputError, match="astigmatism_mm"):
+        Camera(astigmatism_mm=float("nan"))
+    with pytest.raises(InputError, match="field_curvature_mm"):
+        Camera(field_curvature_mm="x")
+
+
+def test_cli_options_set_the_parametric_coefficients():
+    from clpost.cli import build_parser, camera_from_args
+
+    args = build_parser().parse_args(["process", "in.exr", "-o", "out.exr", "--astigmatism", "0.2",
+                                      "--field-curvature", "-0.1", "--coma", "0.05", "--lateral-color", "0.01"])
+    cam = camera_from_args(args)
+    assert (cam.astigmatism_mm, cam.field_curvature_mm, cam.coma_mm, cam.lateral_color_mm) == (0.2, -0.1, 0.05, 0.01)
+    assert cam.describe()["clpost.astigmatism_mm"] == "0.2"
+    assert "clpost.coma_mm" not in Camera().describe()
+
+
+@pytest.mark.parametrize("n,focus", [(0.7, 0.45), (64.0, math.inf)])
+def test_traced_lens_at_the_extremes_is_finite_and_matches_the_references(n, focus):
+    """f/0.7 clamps to the lens's f/1.4 and f/64 to its f/16 (with a warning); closest focus and
+    infinity; depths from 1e-9 to 1e9 m through all three aberration stages."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cam = Camera(lens=FLAGSHIP, f_number=n, focus_distance_m=focus)
+    rng = np.random.default_rng(0)
+    frame = Frame((rng.random((23, 37, 3)) * 10).astype(np.float32),
+                  depth=np.geomspace(1e-9, 1e9, 23 * 37).reshape(23, 37).astype(np.float32))
+    pipe = Pipeline(cam, stages=["astigmatism", "coma", "lateral_color"])
+    assert pipe.plan(frame) == ["astigmatism", "coma", "lateral_color"]
+    out = pipe.run(frame).color
+    assert np.all(np.isfinite(out))
+    err, where = _max_err(out, pipe.reference(frame))
+    assert err < 5e-3, where  # values 0–10: LUTs of the traced curves vs np.interp
+
+
+def test_a_sharp_highlight_is_not_copied_into_blurred_neighbours():
+    """An in-focus lamp against the (far, strongly blurred) sky: the sky pixels' large ellipses
+    reach the lamp, but the lamp's own small ellipse does not reach them — its light stays
+    (a plain gather would add each sky pixel's share of the lamp: +30 % here; weighted: −0.2 %)."""
+    w, h = 301, 201
+    color = np.zeros((h, w, 3), np.float32)
+    color[100, 250] = 1000.0
+    depth = np.full((h, w), np.inf, np.float32)
+    depth[100, 250] = 3.0
+    cam = Camera(f_number=1.4, focus_distance_m=3.0, field_curvature_mm=-1.0, astigmatism_mm=0.4)
+    stage = ast.Astigmatism()
+    a_s, a_t, _, _ = stage.semi_axes_px(cam, Frame(color, depth=depth))
+    assert a_s[100, 245] > 2 * a_s[100, 250] and a_s[100, 245] > 2.0  # the sky blurs much more
+    out = Pipeline(cam, stages=["astigmatism"]).run(Frame(color, depth=depth)).color
+    assert out.sum() == pytest.approx(3000.0, rel=0.03)

@@ -1,0 +1,104 @@
+"""coma: planning, kernel vs float64 reference, comet geometry of a point source, energy,
+sign, stability, the traced lens's coma."""
+import numpy as np
+import pytest
+
+from clpost import Camera, Frame, InputError, Pipeline
+from clpost.stages import _field as fld
+from clpost.stages import coma
+
+from conftest import odd_frame
+
+FLAGSHIP = "zeiss-planar-50-f1.4"
+
+
+def test_not_planned_without_coma_and_identity_when_skipped(rng):
+    frame = odd_frame(rng)
+    for cam in (Camera(), Camera(coma_mm=0.0), Camera(lens=FLAGSHIP, f_number=2.0, coma_mm=0.0)):
+        pipe = Pipeline(cam, stages=["coma"])
+        assert pipe.plan(frame) == []
+        assert np.array_equal(pipe.run(frame).color, frame.color)
+    assert "coma" in Pipeline(Camera(lens=FLAGSHIP, f_number=1.4)).plan(frame)
+
+
+@pytest.mark.parametrize("w,h,kw", [(37, 23, dict(coma_mm=0.9)), (23, 37, dict(coma_mm=-40.0)),
+                                    (41, 29, dict(lens=FLAGSHIP, f_number=1.4))])
+def test_kernel_matches_reference(rng, w, h, kw):
+    frame = odd_frame(rng, w=w, h=h, scale=10.0)
+    color = frame.color.copy()
+    color[0, 0] = 1e8  # adversarial: a highlight in the corner, zeros beside it
+    color[1, :4] = 0.0
+    frame = Frame(color)
+    pipe = Pipeline(Camera(**kw), stages=["coma"])
+    out = pipe.run(frame).color
+    ref = pipe.reference(frame)
+    err = np.abs(out - ref) / np.maximum(np.abs(ref), 10.0)
+    j = np.unravel_index(int(np.argmax(err)), err.shape)
+    assert err.max() < 2e-4, f"max rel error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
+    assert np.all(np.isfinite(out)) and out.dtype == np.float32
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_point_source_comet_length_width_and_centroid(sign):
+    w, h = 301, 201
+    cam = Camera(coma_mm=sign * 1.2)  # comet 3C = 1.2 mm at the corner
+    cx, cy = (w - 1) / 2, (h - 1) / 2
+    x0 = 250
+    r_mm = (x0 - cx) * fld.pitch_mm(cam, w)
+    g = coma.comet_geometry_px(cam, r_mm, w)
+    c = sign * 1.2 / 3 / (np.hypot(36, 24) / 2) * r_mm / (36 / w)   # closed form, px
+    assert g["centroid"] == pytest.approx(c, rel=1e-12)
+    color = np.zeros((h, w, 3), np.float32)
+    color[int(cy), x0] = 1.0
+    out = Pipeline(cam, stages=["coma"]).run(Frame(color)).color[..., 0].astype(np.float64)
+    assert out.sum() == pytest.approx(1.0, abs=3e-3)  # energy: Jacobian-weighted taps (bilinear ripple left)
+    ys, xs = np.mgrid[0:h, 0:w]
+    m = out / out.sum()
+    taps = coma.comet_offsets(fld.vogel_disc(64).astype(np.float64))
+    mean_r = taps[:, 1].mean()  # ⟨p_x² + 3 p_y²⟩ = 1 for the continuous pupil
+    assert mean_r == pytest.approx(1.0, abs=0.01)
+    # centroid: C radially (+x here), none sideways
+    assert (m * xs).sum() - x0 == pytest.approx(c * mean_r, abs=0.03 * abs(c) + 0.02)
+    assert (m * ys).sum() - cy == pytest.approx(0.0, abs=0.01 * abs(c) + 0.01)  # Vogel taps: ⟨t_s⟩ ≈ 0
+    # extent: the tail reaches 3C, the comet is 2C wide (±1 px of bilinear spread)
+    lit = out > 1e-6
+    span_x = xs[lit] - x0
+    tip = span_x.max() if sign > 0 else -span_x.min()
+    assert abs(tip - g["length"] * sign) <= 1.0 and (span_x.min() >= -1 if sign > 0 else span_x.max() <= 1)
+    assert abs((ys[lit].max() - ys[lit].min()) - g["width"]) <= 2.0
+
+
+def test_uniform_field_dims_by_the_mean_jacobian_and_huge_coma_is_capped():
+    """Linear coma C = k r moves each comet's centroid outward like a magnification: a uniform
+    field becomes ⟨J⟩ = ⟨(1 − k t_r)² + k² t_s²⟩ (closed form of the tap Jacobian)."""
+    w, h = 45, 31
+    frame = Frame(np.full((h, w, 3), 3.0, np.float32))
+    cam = Camera(coma_mm=0.9)
+    k = 0.9 / 3 / (np.hypot(36, 24) / 2)
+    t = coma.comet_offsets(fld.vogel_disc(64).astype(np.float64))
+    want = 3.0 * np.mean((1 - k * t[:, 1]) ** 2 + k * k * t[:, 0] ** 2)
+    out = Pipeline(cam, stages=["coma"]).run(frame).color
+    inner = out[8:-8, 8:-8]  # away from the border's edge-continued padding
+    np.testing.assert_allclose(inner, want, rtol=2e-5)
+    np.testing.assert_allclose(Pipeline(Camera(coma_mm=1e-9), stages=["coma"]).run(frame).color, 3.0, rtol=1e-6)
+    for big in (1e6, -1e6):
+        out = Pipeline(Camera(coma_mm=big), stages=["coma"]).run(frame).color
+        assert np.all(np.isfinite(out)) and out.min() >= 0
+    c, _, _, _, _ = coma.Coma().c_px(Camera(coma_mm=1e6), w, h)
+    assert np.abs(c).max() == pytest.approx(coma.MAX_TAIL_PX / 3)
+
+
+def test_traced_coma_grows_with_field_and_with_aperture():
+    wide = coma.coma_curve(Camera(lens=FLAGSHIP, f_number=1.4))
+    f4 = coma.coma_curve(Camera(lens=FLAGSHIP, f_number=4.0))
+    r = np.linspace(0.0, 19.0, 20)
+    cw = wide(r)
+    assert cw[0] == 0.0 and np.all(np.diff(cw) > 0)
+    assert abs(f4(19.0)) < 0.25 * abs(cw[-1])  # Seidel coma ∝ aperture²: (4/1.4)² ≈ 8
+    g = coma.comet_geometry_px(Camera(lens=FLAGSHIP, f_number=1.4), 16.5, 1280)
+    assert 2.0 < g["length"] <= coma.MAX_TAIL_PX  # a visible comet in the corners wide open
+
+
+def test_bad_coefficient():
+    with pytest.raises(InputError, match="coma_mm"):
+        Camera(coma_mm=float("inf"))
