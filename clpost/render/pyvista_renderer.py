@@ -410,6 +410,8 @@ def shade(scene: DemoScene, gbuf: GBuffer, f_px: float, c: tuple[float, float],
     owner = ids[lit]
     order = np.argsort(owner, kind="stable")
     bounds = np.flatnonzero(np.r_[True, owner[order][1:] != owner[order][:-1], True])
+    if lit.size == 0:  # only sky or emitters in view (a small sub-frustum): no albedo to look up
+        bounds = bounds[:1]
     for a, b in zip(bounds[:-1], bounds[1:]):
         sel = order[a:b]
         k = int(owner[sel[0]])
