@@ -368,10 +368,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "(needs --fps and --shutter or --shutter-angle)")
     d.add_argument("--display", default="srgb", choices=["srgb", "rec709", "display-p3"],
                    help="preview PNG encoding (default srgb)")
-    d.add_argument("--lens-model", choices=("post", "geometry-distortion"), default="post",
+    d.add_argument("--lens-model", choices=("post", "geometry-distortion", "image-based"), default="post",
                    help="post: lens effects as post-process stages (default); geometry-distortion: the "
                         "--calibration's distortion applied to the vertices before rasterisation "
-                        "(Lambers et al. 3.2; docs/geometry_distortion.md)")
+                        "(Lambers et al. 3.2; docs/geometry_distortion.md); image-based: the --lens "
+                        "prescription as perspective projections per pupil sample (Heidrich et al.; "
+                        "docs/image_based_lens.md)")
     _add_camera_options(d)
     _add_pipeline_options(d)
     d.set_defaults(func=cmd_demo)

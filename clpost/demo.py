@@ -31,6 +31,11 @@ DEMO_CAMERA_DEFAULTS = dict(lens="thin:50", f_number=2.0, shutter_s=None, focus_
                             luminance_scale=1000.0, exposure_compensation_ev=1.0,
                             blades=6)
 DEMO_WIDTH = 960
+# --lens-model image-based: quad-tree depth limit of the demo (≤ 16 projections per pupil sample,
+# ≈ 1 s/frame of renders; the ray-angle error this leaves is logged) and the stages whose effect
+# the model's image already contains
+IBL_DEMO_MAX_DEPTH = 2
+IBL_CONTAINS = ("dof", "distortion", "vignetting", "astigmatism", "coma")
 
 
 def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int] | None = None,
@@ -41,7 +46,9 @@ def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int
     """Render, process and write the demo; returns a summary (paths, timings, plan).
     ``lens_model``: ``post`` (the pipeline's stages) or ``geometry-distortion`` (the camera's
     calibration applied to the vertices, :mod:`clpost.render.geometry_distortion`; the
-    distortion stage is then left out)."""
+    distortion stage is then left out) or ``image-based`` (the lens_data prescription as
+    projections per pupil sample, :mod:`clpost.render.image_based_lens`; dof, distortion,
+    vignetting and the aberration stages are then left out)."""
     from .render import render_demo_sequence
 
     camera = camera or Camera(**DEMO_CAMERA_DEFAULTS)
@@ -72,10 +79,19 @@ def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int
             raise InputError("--lens-model geometry-distortion needs a calibration (--calibration FILE)")
         frames = render_geometry_distorted_sequence(camera.distortion, size, n_frames, camera_motion)
         stages = [s for s in (stages or stage_names()) if s != "distortion"]
+    elif lens_model == "image-based":
+        # renderer-side lens model: the image already has the lens's defocus, distortion,
+        # aberrations and fall-off (natural + optical vignetting), so those stages must not run again
+        from .render.image_based_lens import render_image_based_sequence
+        from .stages import stage_names
+
+        frames = render_image_based_sequence(camera, size, n_frames, camera_motion, max_depth=IBL_DEMO_MAX_DEPTH,
+                                             device=device, log=log)
+        stages = [s for s in (stages or stage_names()) if s not in IBL_CONTAINS]
     elif lens_model != "post":
         from .errors import InputError
 
-        raise InputError(f"lens_model={lens_model!r} must be 'post' or 'geometry-distortion'")
+        raise InputError(f"lens_model={lens_model!r} must be 'post', 'geometry-distortion' or 'image-based'")
     else:
         frames = render_demo_sequence(camera, size=render_size, n_frames=n_frames, camera_motion=camera_motion,
                                       intrinsics=intrinsics)

@@ -410,6 +410,8 @@ def shade(scene: DemoScene, gbuf: GBuffer, f_px: float, c: tuple[float, float],
     owner = ids[lit]
     order = np.argsort(owner, kind="stable")
     bounds = np.flatnonzero(np.r_[True, owner[order][1:] != owner[order][:-1], True])
+    if lit.size == 0:  # only sky or emitters in view (a small sub-frustum): no albedo to look up
+        bounds = bounds[:1]
     for a, b in zip(bounds[:-1], bounds[1:]):
         sel = order[a:b]
         k = int(owner[sel[0]])
@@ -490,11 +492,13 @@ class PyVistaRenderer:
                 offset_m: tuple[float, float] = (0.0, 0.0)) -> tuple[GBuffer, np.ndarray, list]:
         """Rasterize ids and planar depth at ``size`` with focal length ``f_px`` (principal point
         ``c``, default the image centre; the camera centre moved by ``offset_m`` along its x, y
-        axes); returns the G-buffer, the camera pose and the object poses."""
+        axes, or x, y, z with a third entry); returns the G-buffer, the camera pose and the object
+        poses."""
         cam_pose = self.scene.camera_pose(frame_index)
-        if offset_m[0] or offset_m[1]:
+        if any(offset_m):
             cam_pose = cam_pose.copy()
-            cam_pose[:3, 3] += cam_pose[:3, :3] @ np.array([offset_m[0], offset_m[1], 0.0])
+            # a third entry (image-based lens: a COP off the camera centre along the axis) moves along z
+            cam_pose[:3, 3] += cam_pose[:3, :3] @ np.array([offset_m[0], offset_m[1], offset_m[2] if len(offset_m) > 2 else 0.0])
         poses = [self.scene.object_pose(k, frame_index) for k in range(len(self.scene.objects))]
         self._pass.set_camera(cam_pose, f_px, size[1], None if c is None else (c[0], c[1], size[0]))
         return self._pass.render(size, poses), cam_pose, poses
