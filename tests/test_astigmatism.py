@@ -144,7 +144,7 @@ def test_flagship_wide_open_is_anisotropic_in_the_corner():
 
 def test_without_depth_it_is_not_planned_and_bad_coefficients_are_refused():
     frame = Frame(np.ones((5, 7, 3), np.float32))
-    entry = Pipeline(Camera(astigmatism_mm=0.1), stages=["astigmatism"]).explain(frame)[0]
+    entry = {e.stage: e for e in Pipeline(Camera(astigmatism_mm=0.1), stages=["astigmatism"]).explain(frame)}["astigmatism"]
     assert not entry.planned and "depth" in entry.reason  # colour-only frames keep working
     with pytest.raises(InputError, match="astigmatism_mm"):
         Camera(astigmatism_mm=float("nan"))
