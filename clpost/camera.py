@@ -156,6 +156,10 @@ class Camera:
     """Length of the comet (tangential coma, 3C) at the image corner (mm; + = tail away from the centre)."""
     lateral_color_mm: float | None = None
     """Chief-ray height at F (486.1 nm) minus at C (656.3 nm) at the image corner (mm)."""
+    # distortion stage, traced lenses: without a calibration (``distortion``), a lens_data lens
+    # distorts by its traced curve (:func:`clpost.calibration.lens_distortion_model`).
+    lens_distortion: bool = True
+    """distortion: a lens_data lens without a calibration distorts by its traced curve; False = not."""
 
     def __post_init__(self) -> None:
         parse_lens(self.lens)
@@ -282,6 +286,9 @@ class Camera:
             if val is not None:
                 object.__setattr__(self, name, _finite(name, val, "mm on the film at the image corner",
                                                        "e.g. 0.1, or 0 to turn the effect off"))
+        if not isinstance(self.lens_distortion, (bool, int)):
+            raise InputError(f"Camera.lens_distortion={self.lens_distortion!r} must be True or False")
+        object.__setattr__(self, "lens_distortion", bool(self.lens_distortion))
 
     # -- derived quantities -------------------------------------------------------------------
     @property

@@ -98,6 +98,8 @@ CAMERA_OPTIONS = {
     # default: the traced lens's (lens_data lenses) or none (thin lens)
     "--field-curvature": ("field_curvature_mm", _positive_float, "mean sagittal/tangential focal offset at the image corner in mm (astigmatism stage)"),
     "--astigmatism": ("astigmatism_mm", _positive_float, "tangential minus sagittal focal offset at the image corner in mm (astigmatism stage)"),
+    "--lens-distortion": ("lens_distortion", lambda t: t.lower() in ("1", "on", "true", "yes"),
+                          "a lens_data lens without --calibration distorts by its traced curve: on (default)/off"),
     "--coma": ("coma_mm", _positive_float, "comet length (tangential coma) at the image corner in mm (coma stage)"),
     "--lateral-color": ("lateral_color_mm", _positive_float, "chief-ray height F minus C at the image corner in mm (lateral_color stage)"),
 }

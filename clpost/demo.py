@@ -27,7 +27,7 @@ from .batch import output_header
 from .camera import Camera
 from .pipeline import Pipeline
 
-DEMO_CAMERA_DEFAULTS = dict(lens="thin:50", f_number=2.0, shutter_s=None, focus_distance_m=3.0,
+DEMO_CAMERA_DEFAULTS = dict(lens="zeiss-planar-50-f1.4", depth_of_field=True, vignetting="lens", f_number=2.0, shutter_s=None, focus_distance_m=3.0,
                             luminance_scale=1000.0, exposure_compensation_ev=1.0,
                             blades=6)
 DEMO_WIDTH = 960
@@ -63,6 +63,14 @@ def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int
 
     t0 = time.perf_counter()
     render_size, intrinsics = size, None
+    if camera.distortion is None and lens_model == "post":
+        # a lens_data lens distorts by its traced curve: fix the model at the output size, so the
+        # render below covers its extended frustum (Pipeline.camera_for would fit the render's size)
+        from .calibration import lens_distortion_model
+
+        model = lens_distortion_model(camera, size)
+        if model is not None:
+            camera = camera.with_(distortion=model)
     if camera.distortion is not None:
         # distortion stage: render the extended frustum so barrel distortion leaves no hole
         from .calibration import required_render

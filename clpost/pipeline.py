@@ -154,8 +154,16 @@ class Pipeline:
         return self._runtime
 
     def camera_for(self, frame: Frame) -> Camera:
-        """The camera with auto-exposure resolved for this frame."""
-        return metering.resolve(self.camera, frame)
+        """The camera resolved for this frame: auto-exposure metered, and a lens_data lens without
+        a calibration given its traced distortion at the frame's size."""
+        cam = metering.resolve(self.camera, frame)
+        if cam.distortion is None and cam.optics is not None and cam.lens_distortion:
+            from .calibration import lens_distortion_model
+
+            model = lens_distortion_model(cam, frame.size)
+            if model is not None:
+                cam = cam.with_(distortion=model)
+        return cam
 
     def explain(self, frame: Frame, camera: Camera | None = None) -> list[PlanEntry]:
         """Every known stage, in physical order, with whether it runs and why."""

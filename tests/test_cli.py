@@ -121,7 +121,7 @@ def test_bench_json(capsys, tmp_path):
     d = json.loads(capsys.readouterr().out)
     row = d["rows"][0]
     assert (tmp_path / "demo_48x32.exr").is_file()
-    assert row["plan"] == ["exposure"] and row["wall_ms"] > 0 and row["copy_kernel_gbps"] > 0
+    assert "exposure" in row["plan"] and row["wall_ms"] > 0 and row["copy_kernel_gbps"] > 0
 
 
 def test_console_script_is_installed_and_errors_cleanly(tmp_path):

@@ -230,3 +230,25 @@ def test_checkerboards_calibrate_back_to_their_parameters():
     for n in ("fx", "fy", "k1"):
         assert rows[n][2] < 0.01, (n, rows[n])
     assert abs(est["cx"] - m.cx) < 6.4 and abs(est["cy"] - m.cy) < 4.8
+
+
+def test_a_traced_lens_distorts_by_its_own_curve():
+    import math
+
+    from clpost.calibration import lens_distortion_model
+    from clpost.optics.curves import lens_curves
+
+    cam = Camera(lens="zeiss-planar-50-f1.4", f_number=2.0, focus_distance_m=3.0)
+    model = lens_distortion_model(cam, (960, 640))
+    assert model is not None and model.k1 < 0  # the Planar's barrel distortion
+    assert float(model.source.split("residual ")[1].split(" %")[0]) < 0.05
+    # the model reproduces the traced curve at the image corner
+    c = lens_curves(cam.lens, cam.focus_distance_m, cam.f_number)
+    theta = math.radians(float(np.interp(21.0, c.image_height_mm, c.field_angle_deg)))
+    t = math.tan(theta)
+    d_model = 100 * (model.k1 * t**2 + model.k2 * t**4 + model.k3 * t**6)
+    assert d_model == pytest.approx(float(c.at("distortion_pct", np.array([21.0]))[0]), abs=0.05)
+    frame = Frame(np.ones((64, 96, 3), np.float32), depth=np.full((64, 96), 3.0, np.float32))
+    assert "distortion" in Pipeline(cam).plan(frame)
+    assert "distortion" not in Pipeline(cam.with_(lens_distortion=False)).plan(frame)
+    assert lens_distortion_model(Camera(lens="thin:50"), (960, 640)) is None
