@@ -26,9 +26,12 @@ def main(argv=None) -> int:
     rows, conv = run_dof_bench(samples=samples, repeats=a.repeats, save_dir=a.save)
     table = format_dof_table(rows, conv, get_runtime().name)
     cmd = "PYTHONPATH=. python tools/dof_bench.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    # the Blender Defocus section belongs to tools/compare_blender_dof.py: keep it across reruns
+    old = (out / "benchmarks.md").read_text() if (out / "benchmarks.md").exists() else ""
+    keep = old[old.find("\n## dof: Blender"):] if "\n## dof: Blender" in old else ""
     (out / "benchmarks.md").write_text(
         "# Benchmarks\n\n## dof: speed vs accuracy (demo scene, 50 mm f/2 focused at 3 m, 6 blades)\n\n"
-        f"Command: `{cmd.strip()}`\n\n" + table + "\n\n![error vs time](dof_error_vs_time.png)\n")
+        f"Command: `{cmd.strip()}`\n\n" + table + "\n\n![error vs time](dof_error_vs_time.png)\n" + keep)
     plot(rows, out / "dof_error_vs_time.png")
     print(table)
     return 0
