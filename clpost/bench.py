@@ -136,13 +136,17 @@ SCENES: dict[str, Scene] = {s.name: s for s in (
           wants=(), frame="demo"),
     Scene("worst", "talk's worst case: whole image defocused + astigmatism + distortion + vignetting",
           wants=("dof", "astigmatism", "distortion", "vignetting", "exposure"),
-          # focus at 0.5 m, f/1.4: every depth of the frame (1-21 m) is out of focus. The
-          # astigmatism stage's Camera fields are added here once it is merged.
-          camera_fields=dict(f_number=1.4, focus_distance_m=0.5, vignetting="natural", depth_of_field=True),
+          # focus at 0.5 m, f/1.4: every depth of the frame (1-21 m) is out of focus; thin-lens
+          # aberration coefficients of the flagship's order (its traced values at the corner:
+          # sagittal −0.19 mm, tangential −0.08 mm)
+          camera_fields=dict(f_number=1.4, focus_distance_m=0.5, vignetting="natural", depth_of_field=True,
+                             field_curvature_mm=-0.14, astigmatism_mm=0.11),
           adjust=_distorted),
     Scene("no_defocus", "talk's 'all effects except defocus': lens aberrations, distortion, vignetting",
           wants=("astigmatism", "coma", "lateral_color", "distortion", "vignetting", "exposure"),
-          camera_fields=dict(f_number=4.0, vignetting="natural"), adjust=_distorted),
+          camera_fields=dict(f_number=4.0, vignetting="natural", field_curvature_mm=-0.14,
+                             astigmatism_mm=0.11, coma_mm=0.087, lateral_color_mm=0.007),
+          adjust=_distorted),
     Scene("full", "full pipeline: motion blur, distortion, vignetting, exposure, film, grain, print",
           wants=("motion_blur", "distortion", "vignetting", "exposure", "film", "grain", "print"),
           camera_fields=dict(f_number=4.0, vignetting="natural", film="kodak-ektar-100",
