@@ -244,6 +244,12 @@ class Camera:
             raise InputError("Camera.readout_time_s > 0 needs Camera.frame_rate_fps (--fps) to turn "
                              "px-per-frame velocities into a per-row shift")
         object.__setattr__(self, "readout_time_s", ro)
+        if (self.frame_rate_fps is not None and self.shutter_s is not None
+                and self.shutter_s * self.frame_rate_fps > 1.0 + 1e-9):
+            raise InputError(f"Camera.shutter_s={self.shutter_s:g} s is longer than one frame interval at "
+                             f"{self.frame_rate_fps:g} fps (a 360° shutter is {1 / self.frame_rate_fps:.4g} s); "
+                             "use a shorter --shutter or --shutter-angle <= 360")
+
         # film / grain / print / sensor stages: one recording medium per camera.
         if self.film is not None and self.sensor_preset is not None:
             raise InputError(f"Camera: film={self.film!r} and sensor_preset={self.sensor_preset!r} are both "
@@ -324,6 +330,22 @@ class Camera:
         if lens is None:
             return None
         return lens.curves(self.focus_distance_m, self.f_number)
+
+    @property
+    def focused_depth_m(self) -> float:
+        r"""Planar scene depth (m, from the camera centre) that is imaged sharply: the thin-lens
+        conjugate of the image distance, :math:`u = f v / (v - f)`.
+
+        For a thin lens this is ``focus_distance_m`` itself. For a traced lens,
+        ``focus_distance_m`` is measured from the film plane (CONVENTIONS) and the real-ray focus
+        sets v; its thin-lens equivalent (measured from the front principal plane, which the
+        pinhole render's centre stands for) is what the CoC of every stage uses, so dof and
+        astigmatism agree on the sharp plane.
+        """
+        if self.optics is None:
+            return self.focus_distance_m
+        f, v = self.focal_length_mm, self.image_distance_mm
+        return math.inf if v <= f else f * v / (v - f) / 1000.0
 
     @property
     def is_auto_exposure(self) -> bool:

@@ -31,6 +31,15 @@ def _auto_or_float(text: str):
     return None if text.lower() == "auto" else _positive_float(text)
 
 
+def _on_off(text: str) -> bool:
+    t = text.lower()
+    if t in ("1", "on", "true", "yes"):
+        return True
+    if t in ("0", "off", "false", "no"):
+        return False
+    raise argparse.ArgumentTypeError(f"{text!r} is not on/off")
+
+
 def _sensor(text: str) -> tuple[float, float]:
     try:
         w, h = text.lower().split("x")
@@ -89,7 +98,7 @@ CAMERA_OPTIONS = {
     "--noise-seed": ("noise_seed", int, "seed of grain and sensor noise"),
     "--working-space": ("working_space", str, "input working space: rec709 (default) or acescg"),
     # dof stage
-    "--depth-of-field": ("depth_of_field", lambda t: t.lower() in ("1", "on", "true", "yes"),
+    "--depth-of-field": ("depth_of_field", _on_off,
                          "thin-lens defocus from the depth buffer: on/off (default off: pinhole)"),
     "--roundness": ("aperture_roundness", float, "aperture blade roundness 0 (polygon) … 1 (circle)"),
     "--spherical-aberration": ("spherical_aberration", float, "bokeh texture -1 … 1 (> 0: undercorrected)"),
@@ -98,7 +107,7 @@ CAMERA_OPTIONS = {
     # default: the traced lens's (lens_data lenses) or none (thin lens)
     "--field-curvature": ("field_curvature_mm", _positive_float, "mean sagittal/tangential focal offset at the image corner in mm (astigmatism stage)"),
     "--astigmatism": ("astigmatism_mm", _positive_float, "tangential minus sagittal focal offset at the image corner in mm (astigmatism stage)"),
-    "--lens-distortion": ("lens_distortion", lambda t: t.lower() in ("1", "on", "true", "yes"),
+    "--lens-distortion": ("lens_distortion", _on_off,
                           "a lens_data lens without --calibration distorts by its traced curve: on (default)/off"),
     "--coma": ("coma_mm", _positive_float, "comet length (tangential coma) at the image corner in mm (coma stage)"),
     "--lateral-color": ("lateral_color_mm", _positive_float, "chief-ray height F minus C at the image corner in mm (lateral_color stage)"),
@@ -114,7 +123,8 @@ def _add_camera_options(p: argparse.ArgumentParser) -> None:
 def camera_from_args(args: argparse.Namespace, **defaults) -> Camera:
     """Camera from the options given; ``defaults`` overrides Camera's own defaults (demo)."""
     kw = dict(defaults)
-    kw.update({k[4:]: v for k, v in vars(args).items() if k.startswith("cam_")})
+    given = {k[4:]: v for k, v in vars(args).items() if k.startswith("cam_")}
+    kw.update(given)
     if "shutter_angle_deg" in kw:  # motion_blur: a shutter angle is a shutter time at a frame rate
         from .stages.motion_blur import shutter_from_angle
 
@@ -122,7 +132,12 @@ def camera_from_args(args: argparse.Namespace, **defaults) -> Camera:
         if kw.get("frame_rate_fps") is None:
             raise InputError("--shutter-angle needs --fps (the shutter time is angle / (360° × fps))")
         kw["shutter_s"] = shutter_from_angle(angle, kw["frame_rate_fps"])
-    return Camera(**kw)
+    cam = Camera(**kw)
+    if not cam.is_auto_exposure and ({"metering", "exposure_compensation_ev"} & given.keys()):
+        # a silently ignored option is worse than an error: the meter only acts in auto-exposure
+        raise InputError("--metering/--ev act only in auto-exposure: add --shutter auto (aperture "
+                         "priority) or --f-number auto (shutter priority)")
+    return cam
 
 
 def _add_pipeline_options(p: argparse.ArgumentParser) -> None:

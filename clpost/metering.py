@@ -32,7 +32,8 @@ import numpy as np
 
 from .colorspace import luminance
 from .errors import InputError
-from .photometry import K_REFLECTED
+from .colorspace import WORKING_SPACES
+from .photometry import K_REFLECTED, camera_bellows_factor
 
 SHUTTER_RANGE_S = (1 / 8000, 30.0)
 F_NUMBER_RANGE = (0.7, 64.0)
@@ -61,7 +62,7 @@ def metering_weights(mode: str, height: int, width: int) -> np.ndarray:
 
 def metered_luminance(camera, frame) -> float:
     """The meter reading L (cd/m²) of a frame for the camera's metering mode."""
-    y = luminance(frame.color) * camera.luminance_scale
+    y = luminance(frame.color, WORKING_SPACES[camera.working_space]) * camera.luminance_scale
     w = metering_weights(camera.metering, frame.height, frame.width)
     return float(np.sum(w * y))
 
@@ -77,17 +78,24 @@ def resolve(camera, frame):
             "give both --f-number and --shutter"
         )
     s, k = camera.iso, K_REFLECTED * 2.0 ** camera.exposure_compensation_ev
-    bellows = camera.image_distance_mm / camera.focal_length_mm  # N_w = N * bellows
+    bellows = camera_bellows_factor(camera)  # N_w = N * bellows (TTL: the meter sees it)
     if camera.shutter_s is None:
         t = (camera.f_number * bellows) ** 2 * k / (lum * s)
-        t_c = min(max(t, SHUTTER_RANGE_S[0]), SHUTTER_RANGE_S[1])
+        lo, hi = SHUTTER_RANGE_S
+        if camera.frame_rate_fps is not None:  # a frame's shutter cannot outlast the frame
+            hi = min(hi, 1.0 / camera.frame_rate_fps)
+        t_c = min(max(t, lo), hi)
         if t_c != t:
-            warnings.warn(f"auto-exposure: shutter {t:.3g} s is outside {SHUTTER_RANGE_S}; using {t_c:.3g} s",
-                          stacklevel=2)
+            warnings.warn(f"auto-exposure: shutter {t:.3g} s is outside {lo:.3g}–{hi:.3g} s; using {t_c:.3g} s, "
+                          f"so the frame is {math.log2(t_c / t):+.2f} EV off the meter", stacklevel=2)
         return camera.with_(shutter_s=t_c)
     n = math.sqrt(lum * s * camera.shutter_s / k) / bellows
-    n_c = min(max(n, F_NUMBER_RANGE[0]), F_NUMBER_RANGE[1])
+    lo, hi = F_NUMBER_RANGE
+    if camera.optics is not None:  # the lens's own aperture range
+        lo, hi = max(lo, camera.optics.max_aperture), min(hi, camera.optics.min_aperture)
+    n_c = min(max(n, lo), hi)
     if n_c != n:
-        warnings.warn(f"auto-exposure: f-number {n:.3g} is outside {F_NUMBER_RANGE}; using f/{n_c:.3g}",
+        warnings.warn(f"auto-exposure: f/{n:.3g} is outside the {camera.lens} range f/{lo:.3g}–f/{hi:.3g}; "
+                      f"using f/{n_c:.3g}, so the frame is {2 * math.log2(n / n_c):+.2f} EV off the meter",
                       stacklevel=2)
     return camera.with_(f_number=n_c)

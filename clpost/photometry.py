@@ -14,7 +14,9 @@ The π converts luminance (cd/m²) to the illuminance of a Lambertian source (E 
 sin θ = 1/2N_w). The talk writes E = TL/4N², i.e. luminance in units where the π is absorbed
 (apostilbs: 1 asb = 1/π cd/m²); the factor only rescales and we keep SI units. N_w is the working
 (effective) f-number: focusing closer moves the film away (image distance v) and dims the image by
-the bellows factor (v/f)²; pupil magnification is 1 for a thin lens. Off-axis falloff (cos⁴θ) and
+the bellows factor; with lateral magnification m = v/f − 1 and pupil magnification P (exit over
+entrance pupil diameter; 1 for a thin lens), :math:`N_w = N\,(1 + m/P)` (Ray, §12.3), which is
+N·v/f for a thin lens. Off-axis falloff (cos⁴θ) and
 vignetting belong to the vignetting stage, not here.
 
 Exposure :math:`H = E\,t` (lux·s). The sensor signal is normalised by the ISO 12232
@@ -44,9 +46,21 @@ SATURATION_EXPOSURE_ISO = 78.0
 """ISO 12232 saturation-based speed: H_sat = 78 / S lux·s."""
 
 
-def working_f_number(f_number: float, focal_length_mm: float, image_distance_mm: float) -> float:
-    """N_w = N · v / f (thin lens, pupil magnification 1)."""
-    return f_number * image_distance_mm / focal_length_mm
+def working_f_number(f_number: float, focal_length_mm: float, image_distance_mm: float,
+                     pupil_magnification: float = 1.0) -> float:
+    """N_w = N · (1 + m/P), m = v/f − 1 (N·v/f for a thin lens, P = 1)."""
+    return f_number * bellows_factor(focal_length_mm, image_distance_mm, pupil_magnification)
+
+
+def bellows_factor(focal_length_mm: float, image_distance_mm: float, pupil_magnification: float = 1.0) -> float:
+    """N_w / N = 1 + (v/f − 1)/P."""
+    return 1.0 + (image_distance_mm / focal_length_mm - 1.0) / pupil_magnification
+
+
+def camera_bellows_factor(camera) -> float:
+    """The camera's N_w / N: its lens's pupil magnification for a traced lens, 1 for a thin one."""
+    p = 1.0 if camera.optics is None else camera.optics.paraxial.pupil_magnification
+    return bellows_factor(camera.focal_length_mm, camera.image_distance_mm, p)
 
 
 def sensor_gain(*, f_number_w: float, shutter_s: float, iso: float, transmittance: float,

@@ -59,7 +59,7 @@ def test_adversarial_velocities_and_depths(rng):
     assert out.min() >= color.min() - 1e-6 and out.max() <= color.max() * (1 + 1e-6)
 
 
-@given(speed=st.floats(0.0, 200.0), fraction=st.floats(0.05, 2.0), seed=st.integers(0, 2**16))
+@given(speed=st.floats(0.0, 200.0), fraction=st.floats(0.05, 1.0), seed=st.integers(0, 2**16))
 def test_kernel_matches_reference_hypothesis(speed, fraction, seed):
     rng = np.random.default_rng(seed)
     f = _frame(rng, 23, 19, speed=speed, sky_rows=2)
@@ -215,3 +215,9 @@ def test_nan_velocity_rejected_at_the_frame():
     v[1, 2, 0] = np.nan
     with pytest.raises(InputError, match="velocity"):
         Frame(np.ones((3, 4, 3), np.float32), velocity=v)
+
+
+def test_a_shutter_longer_than_the_frame_interval_is_refused():
+    with pytest.raises(InputError, match="longer than one frame interval at 24 fps"):
+        Camera(frame_rate_fps=24.0, shutter_s=1 / 5)
+    Camera(frame_rate_fps=24.0, shutter_s=1 / 24)  # 360° is the longest a frame can be exposed

@@ -97,8 +97,12 @@ def _map_geometry(model: OpenCVModel, src_size: tuple[int, int],
     xi = np.clip(np.where(ok, np.rint(m[0]), 0), 0, sw - 1).astype(np.int64)
     yi = np.clip(np.where(ok, np.rint(m[1]), 0), 0, sh - 1).astype(np.int64)
     sx, sy = np.where(ok, m[0], np.nan), np.where(ok, m[1], np.nan)
-    j11, j12 = np.gradient(sx, axis=1), np.gradient(sx, axis=0)
-    j21, j22 = np.gradient(sy, axis=1), np.gradient(sy, axis=0)
+
+    def grad(a, axis):  # a 1-px-wide image has no neighbour along that axis: no derivative
+        return np.gradient(a, axis=axis) if a.shape[axis] > 1 else np.full(a.shape, np.nan)
+
+    j11, j12 = grad(sx, 1), grad(sx, 0)
+    j21, j22 = grad(sy, 1), grad(sy, 0)
     det = j11 * j22 - j12 * j21
     with np.errstate(all="ignore"):
         inv = np.stack([j22 / det, -j12 / det, -j21 / det, j11 / det])

@@ -133,7 +133,7 @@ FRONT_MARGIN_PX = 1.0
 
 
 def lattice_stride(r_px: float, budget: int) -> int:
-    """Lattice stride s = 2^ℓ the tile plan picks for a tile whose dilated max CoC is ``r_px``
+    r"""Lattice stride s = 2^ℓ the tile plan picks for a tile whose dilated max CoC is ``r_px``
     (working px): the smallest with :math:`\lceil r/s - \tfrac12\rceil \le R_b`."""
     lv = 0
     while math.ceil(r_px / 2 ** lv - 0.5) > budget:
@@ -159,14 +159,14 @@ def coc_coefficients(camera, width_px: int) -> tuple[float, float]:
     v = camera.image_distance_mm
     p = camera.pixel_pitch_mm(width_px)
     k = f * v / (2.0 * camera.f_number * p) * 1e-3
-    u = camera.focus_distance_m
+    u = camera.focused_depth_m
     return k, (0.0 if math.isinf(u) else 1.0 / u)
 
 
 def coc_mm(camera, depth_m) -> np.ndarray:
     r"""Signed CoC *diameter* on the film in mm (far > 0): :math:`c = \frac{fv}{N}(1/u - 1/S)`."""
     s = np.asarray(depth_m, dtype=np.float64)
-    u = camera.focus_distance_m
+    u = camera.focused_depth_m
     inv_u = 0.0 if math.isinf(u) else 1.0 / (u * 1e3)
     with np.errstate(divide="ignore"):
         inv_s = np.where(np.isinf(s), 0.0, 1.0 / (s * 1e3))

@@ -16,13 +16,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..photometry import sensor_gain, working_f_number
+from ..photometry import camera_bellows_factor, sensor_gain
 from .base import PointwiseStage
 
 
 def exposure_gain(camera) -> float:
     """Sensor signal per unit input for a fully set (manual or resolved) camera."""
-    n_w = working_f_number(camera.f_number, camera.focal_length_mm, camera.image_distance_mm)
+    n_w = camera.f_number * camera_bellows_factor(camera)
     return sensor_gain(f_number_w=n_w, shutter_s=camera.shutter_s, iso=camera.iso,
                        transmittance=camera.transmittance, luminance_scale=camera.luminance_scale)
 
