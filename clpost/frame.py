@@ -109,6 +109,15 @@ class Frame:
             object.__setattr__(self, "alpha", np.ascontiguousarray(a))
 
     @property
+    def index(self) -> int:
+        """The frame counter of the noise hash (CONVENTIONS "Randomness"):
+        ``metadata["frame_index"]`` as an unsigned 32-bit integer, 0 when absent or not a number."""
+        try:
+            return int(self.metadata.get("frame_index", 0)) & 0xFFFFFFFF
+        except (TypeError, ValueError):
+            return 0
+
+    @property
     def height(self) -> int:
         return int(self.color.shape[0])
 

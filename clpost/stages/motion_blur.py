@@ -91,12 +91,6 @@ def shutter_fraction(camera) -> float:
     return float(camera.shutter_s) * float(camera.frame_rate_fps)
 
 
-def _frame_index(frame) -> int:
-    v = frame.metadata.get("frame_index", 0)
-    try:
-        return int(v) & 0xFFFFFFFF
-    except (TypeError, ValueError):
-        return 0
 
 
 def _max_speed_bound(frame) -> float:
@@ -199,7 +193,7 @@ class MotionBlur(GatherStage):
             events.append(cl.enqueue_nd_range_kernel(q, k, (tw, th), None))
             k = self._kernel(rt, camera, "motion_blur")
             k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], np.int32(w), np.int32(h),
-                       np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(_frame_index(frame)),
+                       np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(frame.index),
                        np.float32(1.0 / (self.samples + 1)))
             events.append(cl.enqueue_nd_range_kernel(q, k, (w, h), None))
         if rolling:
@@ -220,7 +214,7 @@ class MotionBlur(GatherStage):
             raise InputError("motion_blur needs the frame's velocity buffer")
         if _blur_needed(camera, frame):
             out = reference_blur(out, frame.velocity, frame.depth, shutter_fraction(camera),
-                                 self.samples, _frame_index(frame))
+                                 self.samples, frame.index)
         if _rolling_needed(camera, frame):
             out = reference_rolling(out, frame.velocity, camera.readout_time_s * camera.frame_rate_fps)
         return out

@@ -58,8 +58,8 @@ SENSOR_PRESETS = {
 
 
 def frame_index(frame) -> int:
-    """The frame counter of the noise hash: ``Frame.metadata["frame_index"]`` (default 0)."""
-    return int(frame.metadata.get("frame_index", 0)) & 0xFFFFFFFF
+    """The frame counter of the noise hash (:attr:`clpost.frame.Frame.index`)."""
+    return frame.index
 
 
 def sensor_scalars(camera):
