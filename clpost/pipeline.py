@@ -91,6 +91,18 @@ __kernel void {name}({", ".join(params)})
     return name, "\n".join(parts)
 
 
+def resized_view(frame: Frame, size: tuple[int, int], host: dict, by: str) -> Frame:
+    """The frame as stages after a resampling stage ``by`` see it: ``size`` (width, height), the
+    resampler's depth/velocity/alpha (``host``), and no host color (stages read color on the
+    device; a zero-stride placeholder keeps shapes right without allocating)."""
+    w, h = size
+    placeholder = np.broadcast_to(np.zeros((1, 1, 3), np.float32), (h, w, 3))
+    meta = dict(frame.metadata, resampled_by=by)
+    meta.pop("intrinsics", None)  # the render's pinhole intrinsics no longer describe these pixels
+    return frame.replace(color=placeholder, depth=host.get("depth"), velocity=host.get("velocity"),
+                         alpha=host.get("alpha"), metadata=meta, validate=False)
+
+
 @dataclass
 class _Node:
     """One kernel launch of a plan: a fused pointwise group or a gather stage."""
@@ -310,10 +322,11 @@ class Pipeline:
                     buf = bufs.aux[name] = rt.empty(host.shape)
                 events.append(("upload", cl.enqueue_copy(q, buf, host, is_blocking=False)))
         src, planar_k = bufs.color_in, 0
-        size, host_out = (w, h), {}
-        for node in nodes:
+        size, host_out, aux = (w, h), {}, bufs.aux
+        view = frame  # the frame as the next stage sees it: resampling stages change its size
+        for k, node in enumerate(nodes):
             gather = node.kernel is None
-            out_size = node.stages[0].output_size(cam, frame) if gather else size
+            out_size = node.stages[0].output_size(cam, view) if gather else size
             if node.dst_layout == INTERLEAVED:
                 dst = self._color_out(bufs, out_size)
             else:
@@ -321,22 +334,21 @@ class Pipeline:
                 planar_k ^= 1
             if gather:
                 stage = node.stages[0]
-                if size != frame.size:
-                    raise InputError(f"stage '{stage.name}' follows a resampling stage; only one "
-                                     "size-changing gather per plan is supported")
-                for ev in stage.enqueue(rt, cam, frame, src, dst, bufs.aux):
+                for ev in stage.enqueue(rt, cam, view, src, dst, aux):
                     events.append((stage.name, ev))
-                host_out.update(stage.host_buffers(cam, frame))
+                host_out.update(stage.host_buffers(cam, view))
+                if out_size != size:
+                    view = resized_view(frame, out_size, host_out, stage.name)
+                    later = [s for n in nodes[k + 1:] for s in n.stages]
+                    aux, evs = self._upload_aux(bufs, view, later, out_size)
+                    events += evs
                 size = out_size
             else:
-                if size != frame.size and any(b in s.reads for s in node.stages for b in AUX_BUFFERS):
-                    raise InputError(f"stages {node.name} read depth/velocity after a resampling "
-                                     "stage changed the image size; this plan is not supported")
                 w, h = size
                 args = [src, dst, np.int32(w), np.int32(h)]
-                args += [bufs.aux[b] for b in AUX_BUFFERS if any(b in s.reads for s in node.stages)]
+                args += [aux[b] for b in AUX_BUFFERS if any(b in s.reads for s in node.stages)]
                 for s in node.stages:
-                    args += self._arg_values(s, cam, frame, bufs)
+                    args += self._arg_values(s, cam, view, bufs)
                 node.kernel.set_args(*args)
                 events.append((node.name, cl.enqueue_nd_range_kernel(q, node.kernel, (w, h), None)))
             src = dst
@@ -351,6 +363,31 @@ class Pipeline:
         """The same plan through each stage's float64 numpy reference; returns (H, W, 3) float64."""
         cam = self.camera_for(frame)
         color = frame.color.astype(np.float64)
+        view, host = frame, {}
         for s in self._planned(frame, cam):
-            color = s.reference(cam, frame, color)
+            color = s.reference(cam, view, color)
+            if color.shape[:2] != (view.height, view.width):
+                host.update(s.host_buffers(cam, view))
+                view = resized_view(frame, (color.shape[1], color.shape[0]), host, s.name)
         return color
+
+    def _upload_aux(self, bufs: _Buffers, view: Frame, later: list[Stage], size: tuple[int, int]):
+        """Device depth/velocity at a resampled size for the stages after the resampling one."""
+        import pyopencl as cl
+
+        aux, events = {}, []
+        for name in AUX_BUFFERS:
+            readers = [s.name for s in later if name in s.reads]
+            if not readers:
+                continue
+            host = getattr(view, name)
+            if host is None:
+                raise InputError(f"stage '{readers[0]}' needs {name} after a resampling stage that "
+                                 f"provides none; leave one of them out with --stages")
+            key = ("aux", size, name)
+            if key not in bufs.args:
+                bufs.args[key] = self.runtime.empty(host.shape)
+            aux[name] = bufs.args[key]
+            events.append(("upload", cl.enqueue_copy(self.runtime.queue, aux[name],
+                                                     np.ascontiguousarray(host), is_blocking=False)))
+        return aux, events

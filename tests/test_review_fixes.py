@@ -68,3 +68,24 @@ def test_meter_options_without_auto_exposure_are_an_error(tmp_path, capsys):
         main(["demo", str(tmp_path / "d"), "--depth-of-field", "enabled"])
     assert exc.value.code == 2
     assert "is not on/off" in capsys.readouterr().err
+
+
+def test_stages_after_a_resampling_stage_run_at_its_size():
+    """A traced lens distorts by default; film grain (a gather) after it used to be refused."""
+    from clpost.calibration import lens_distortion_model, required_render
+
+    cam = Camera(lens=FLAGSHIP, film="kodak-gold-200", f_number=2.0, shutter_s=1 / 100,
+                 luminance_scale=200.0)
+    cam = cam.with_(distortion=lens_distortion_model(cam, (48, 32)))
+    spec = required_render(cam.distortion)
+    rng = np.random.default_rng(3)
+    frame = Frame((rng.random((spec.height, spec.width, 3)) * 2).astype(np.float32),
+                  depth=np.full((spec.height, spec.width), 3.0, np.float32),
+                  metadata={"intrinsics": spec.intrinsics(), "frame_index": 7})
+    pipe = Pipeline(cam, stages=["distortion", "exposure", "film", "grain", "print"])
+    assert pipe.plan(frame) == ["distortion", "exposure", "film", "grain", "print"]
+    out = pipe.run(frame)
+    assert out.color.shape == (32, 48, 3) and out.depth.shape == (32, 48)
+    ref = pipe.reference(frame)
+    assert ref.shape == out.color.shape
+    np.testing.assert_allclose(out.color, ref, rtol=2e-3, atol=2e-3)
