@@ -13,6 +13,7 @@ pass; a plan that starts or ends with a gather gets a conversion kernel there.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -89,6 +90,21 @@ __kernel void {name}({", ".join(params)})
 }}
 """)
     return name, "\n".join(parts)
+
+
+def _check_calibration_focal(cam: Camera) -> None:
+    """Warn when a calibration's focal length disagrees with the camera's lens and sensor: the
+    distortion stage uses the calibration, while vignetting, dof and the aberrations use the
+    camera's f / pixel pitch."""
+    model = cam.distortion
+    if model is None:
+        return
+    f_cam = cam.intrinsics(model.width, model.height)[0]
+    if abs(model.fx - f_cam) > 0.01 * f_cam:
+        warnings.warn(f"calibration{model._where()} has f_x = {model.fx:.6g} px but the camera "
+                      f"({cam.lens}, {cam.sensor_mm[0]:g} mm wide) gives {f_cam:.6g} px at "
+                      f"{model.width} px: vignetting, dof and aberrations follow the camera; set "
+                      "--lens/--sensor to match the calibration", stacklevel=3)
 
 
 def resized_view(frame: Frame, size: tuple[int, int], host: dict, by: str) -> Frame:
@@ -169,6 +185,8 @@ class Pipeline:
         """The camera resolved for this frame: auto-exposure metered, and a lens_data lens without
         a calibration given its traced distortion at the frame's size."""
         cam = metering.resolve(self.camera, frame)
+        if self.camera.distortion is not None:
+            _check_calibration_focal(cam)
         if cam.distortion is None and cam.optics is not None and cam.lens_distortion:
             from .calibration import lens_distortion_model
 

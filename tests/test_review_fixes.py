@@ -89,3 +89,17 @@ def test_stages_after_a_resampling_stage_run_at_its_size():
     ref = pipe.reference(frame)
     assert ref.shape == out.color.shape
     np.testing.assert_allclose(out.color, ref, rtol=2e-3, atol=2e-3)
+
+
+def test_a_calibration_that_disagrees_with_the_camera_is_named():
+    from clpost.calibration import OpenCVModel
+
+    model = OpenCVModel(37, 23, 20.0, 20.0, 18.0, 11.0, k1=-0.1)
+    frame = Frame(np.ones((23, 37, 3), np.float32))
+    with pytest.warns(UserWarning, match="f_x = 20 px but the camera"):
+        Pipeline(Camera(distortion=model)).camera_for(frame)
+    fx = Camera().intrinsics(37, 23)[0]
+    agree = OpenCVModel(37, 23, fx, fx, 18.0, 11.0, k1=-0.1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        Pipeline(Camera(distortion=agree)).camera_for(frame)
