@@ -56,6 +56,7 @@ def test_small_field_is_one_projection_per_sample_and_wide_field_is_subdivided_b
 
 @pytest.mark.parametrize("kw, word", [(dict(lens="nope"), "lens_data"), (dict(grid=1), "grid"),
                                       (dict(pupil_n=0), "pupil_n"), (dict(threshold_deg=0.0), "threshold_deg"),
+                                      (dict(pupil_pattern="hex"), "pupil_pattern"),
                                       (dict(sensor_mm=(36.0, -1.0)), "sensor_mm")])
 def test_bad_inputs_name_the_fix(kw, word):
     args = dict(lens="thorlabs-lb1471", focus_distance_m=3.0, f_number=8.0)
@@ -261,3 +262,26 @@ def test_no_step_across_cell_boundaries_for_uniform_and_in_focus_scenes(lens, de
         img, _ = render_image_based(model, size, fn)
         at_edges, inside = _boundary_jump(img, cells)
         assert at_edges < tol and at_edges < 1.5 * inside + 1e-4, (fn.__name__, at_edges, inside)
+
+
+def test_spiral_pupil_samples_are_stratified_in_area_and_angle():
+    """The Vogel spiral (ghost copies fill the blur disc instead of lining up in rows): n² points
+    inside the passing radius, equal counts in equal-area annuli and in equal sectors, centred."""
+    from clpost.render.image_based_lens import pupil_samples
+
+    lens = get_lens("thorlabs-ac254-050-a")
+    pres = lens.focused(3000.0, 4.0)
+    table, zf = mirrored_table(pres, lens.stop_radius_mm(4.0))
+    z_x = lens.paraxial.z_exit_pupil_mm
+    grid = pupil_samples(pres, table, zf, z_x, 6, "grid")
+    spiral = pupil_samples(pres, table, zf, z_x, 6, "spiral")
+    assert spiral.shape == grid.shape == (36, 3) and np.all(spiral[:, 2] == z_x)
+    r_max = np.hypot(grid[:, 0], grid[:, 1]).max() / (5 / 6)  # concentric map: outer cell centres at r = 5/6
+    r = np.hypot(spiral[:, 0], spiral[:, 1])
+    assert r.max() <= r_max * (1 + 1e-9)
+    assert np.abs(spiral[:, :2].mean(0)).max() < 0.05 * r_max
+    rings = np.bincount(np.minimum((r / r_max) ** 2 * 6, 5.999).astype(int), minlength=6)
+    sectors = np.bincount(((np.arctan2(spiral[:, 1], spiral[:, 0]) + np.pi) / (2 * np.pi) * 6).astype(int) % 6, minlength=6)
+    assert rings.tolist() == [6] * 6 and np.abs(sectors - 6).max() <= 1, (rings, sectors)
+    # every sample passes the iris from the axial film point
+    assert all(trace_back(table, zf, np.zeros((1, 2)), p)[2][0] for p in spiral)

@@ -151,9 +151,15 @@ def _concentric(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return r * np.cos(phi), r * np.sin(phi)
 
 
-def pupil_samples(pres, table, zf, z_exit_mm: float, n: int) -> np.ndarray:
-    """n×n stratified points on the exit-pupil plane z = ``z_exit_mm``, inside the radius
-    through which the axial film point's rays pass the stopped-down iris (bisection)."""
+def pupil_samples(pres, table, zf, z_exit_mm: float, n: int, pattern: str = "grid") -> np.ndarray:
+    r"""n² stratified points on the exit-pupil plane z = ``z_exit_mm``, inside the radius R
+    through which the axial film point's rays pass the stopped-down iris (bisection).
+
+    ``pattern``: ``"grid"`` — the n×n cell centres mapped by the concentric map (rows and
+    columns: a defocused highlight shows as an n×n array of copies); ``"spiral"`` — the Vogel
+    (golden-angle) spiral :math:`r_k = R\sqrt{(k + ½)/n^2},\ \varphi_k = k \cdot 137.5°`,
+    equally stratified in area but with no rows, so the copies of a defocused point fill its
+    blur disc evenly instead of lining up (the same count, the same cost)."""
     lo, hi = 0.0, 4.0 * float(pres.surfaces[-1].semi_diameter_mm)
     for _ in range(50):
         mid = 0.5 * (lo + hi)
@@ -161,6 +167,11 @@ def pupil_samples(pres, table, zf, z_exit_mm: float, n: int) -> np.ndarray:
             lo = mid
         else:
             hi = mid
+    if pattern == "spiral":
+        k = np.arange(n * n)
+        rad, phi = np.sqrt((k + 0.5) / (n * n)), k * math.pi * (3.0 - math.sqrt(5.0))
+        x, y = rad * np.cos(phi), rad * np.sin(phi)
+        return np.stack([lo * 0.999 * x, lo * 0.999 * y, np.full(x.shape, z_exit_mm)], -1)
     g = (np.arange(n) + 0.5) / n * 2 - 1
     u, v = np.meshgrid(g, g)
     x, y = _concentric(u.ravel(), v.ravel())
@@ -328,7 +339,7 @@ def _projection(pres, table, zf, p, index, cell, grid, e, depth, z_plane_mm):
 @lru_cache(maxsize=16)
 def build(lens: str, focus_distance_m: float = math.inf, f_number: float | None = None,
           sensor_mm: tuple[float, float] = (36.0, 24.0), grid: int = 10, pupil_n: int = 3,
-          threshold_deg: float = THRESHOLD_DEG, max_depth: int = 4) -> ImageBasedLens:
+          threshold_deg: float = THRESHOLD_DEG, max_depth: int = 4, pupil_pattern: str = "grid") -> ImageBasedLens:
     """The image-based model of ``lens`` (a ``lens_data`` name) focused at ``focus_distance_m``
     (from the film) at ``f_number``; cached per arguments (module docstring)."""
     if lens not in available_lenses():
@@ -337,6 +348,8 @@ def build(lens: str, focus_distance_m: float = math.inf, f_number: float | None 
         raise InputError(f"grid={grid!r} must be an integer >= 2 (rays per cell side; the paper uses 10)")
     if int(pupil_n) != pupil_n or pupil_n < 1:
         raise InputError(f"pupil_n={pupil_n!r} must be an integer >= 1 (pupil samples per side)")
+    if pupil_pattern not in ("grid", "spiral"):
+        raise InputError(f"pupil_pattern={pupil_pattern!r} must be 'grid' or 'spiral' (pupil_samples)")
     if not (math.isfinite(threshold_deg) and threshold_deg > 0):
         raise InputError(f"threshold_deg={threshold_deg!r} must be > 0 degrees (the paper uses 0.05)")
     if len(sensor_mm) != 2 or not all(math.isfinite(s) and s > 0 for s in sensor_mm):
@@ -347,7 +360,7 @@ def build(lens: str, focus_distance_m: float = math.inf, f_number: float | None 
     dist_mm = focus_distance_m * 1000.0 if math.isfinite(focus_distance_m) else math.inf
     pres = L.focused(dist_mm, n_num)
     table, zf = mirrored_table(pres, L.stop_radius_mm(n_num))
-    samples = pupil_samples(pres, table, zf, L.paraxial.z_exit_pupil_mm, int(pupil_n))
+    samples = pupil_samples(pres, table, zf, L.paraxial.z_exit_pupil_mm, int(pupil_n), pupil_pattern)
     e_root = np.array([0.0, 0.0, L.paraxial.z_entrance_pupil_mm])
     model = ImageBasedLens(lens, float(focus_distance_m), float(n_num), tuple(sensor_mm), samples,
                            threshold_deg=float(threshold_deg))
@@ -647,19 +660,21 @@ def pyvista_render_fn(renderer, frame_index: int = 0):
 
 
 def model_for_camera(camera, *, pupil_n: int = 3, threshold_deg: float = THRESHOLD_DEG, max_depth: int = 4,
-                     grid: int = 10) -> ImageBasedLens:
+                     grid: int = 10, pupil_pattern: str = "grid") -> ImageBasedLens:
     """The cached model of a :class:`~clpost.camera.Camera` with a ``lens_data`` lens (auto
     f-number: the lens wide open)."""
     if camera.optics is None:
         raise InputError(f"the image-based lens model needs a real lens from lens_data (--lens "
                          f"{', '.join(available_lenses())}); {camera.lens!r} is a thin lens")
     return build(camera.lens, float(camera.focus_distance_m), camera.f_number, tuple(camera.sensor_mm),
-                 grid=grid, pupil_n=pupil_n, threshold_deg=threshold_deg, max_depth=max_depth)
+                 grid=grid, pupil_n=pupil_n, threshold_deg=threshold_deg, max_depth=max_depth,
+                 pupil_pattern=pupil_pattern)
 
 
 def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1, camera_motion: bool = False,
                                  scene=None, *, pupil_n: int = 3, threshold_deg: float = THRESHOLD_DEG,
-                                 max_depth: int = 4, device: str | None = None, log=None) -> list:
+                                 max_depth: int = 4, device: str | None = None, log=None,
+                                 pupil_pattern: str = "grid") -> list:
     """Frames 0 … n_frames−1 through the image-based model of ``camera``'s lens: colour from
     :func:`render_image_based`, depth and velocity from the pinhole at the entrance pupil
     (the centre of the chief rays; what the post-process path renders). Metadata records the
@@ -669,7 +684,8 @@ def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1
 
     if int(n_frames) != n_frames or n_frames < 1:
         raise InputError(f"n_frames={n_frames!r} must be an integer >= 1")
-    model = model_for_camera(camera, pupil_n=pupil_n, threshold_deg=threshold_deg, max_depth=max_depth)
+    model = model_for_camera(camera, pupil_n=pupil_n, threshold_deg=threshold_deg, max_depth=max_depth,
+                             pupil_pattern=pupil_pattern)
     renderer = PyVistaRenderer(scene if scene is not None else DemoScene.default(camera_motion=camera_motion))
     try:
         frames = []
