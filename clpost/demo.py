@@ -31,10 +31,13 @@ DEMO_CAMERA_DEFAULTS = dict(lens="zeiss-planar-50-f1.4", depth_of_field=True, vi
                             luminance_scale=1000.0, exposure_compensation_ev=1.0,
                             blades=6)
 DEMO_WIDTH = 960
-# --lens-model image-based: quad-tree depth limit of the demo (≤ 16 projections per pupil sample,
-# ≈ 1 s/frame of renders; the ray-angle error this leaves is logged) and the stages whose effect
-# the model's image already contains
-IBL_DEMO_MAX_DEPTH = 2
+# --lens-model image-based: the pupil sampling and the stages whose effect the model's image
+# already contains. 36 samples on a Vogel spiral at quad-tree depth limit 1 (144 projections, as
+# many as 9 samples at depth 2; the ray-angle error this leaves is logged) turn the 3×3 ghost
+# copies of defocused highlights into a filled blur disc; cells meet without a step at the focus
+# plane at any depth (image_based_lens.image_plane_tex). Measured in docs/image_based_lens.md
+# (tools/ibl_bench.py pupil).
+IBL_DEMO_PUPIL = dict(pupil_n=6, pupil_pattern="spiral", max_depth=1)
 IBL_CONTAINS = ("dof", "distortion", "vignetting", "astigmatism", "coma")
 
 
@@ -93,8 +96,8 @@ def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int
         from .render.image_based_lens import render_image_based_sequence
         from .stages import stage_names
 
-        frames = render_image_based_sequence(camera, size, n_frames, camera_motion, max_depth=IBL_DEMO_MAX_DEPTH,
-                                             device=device, log=log)
+        frames = render_image_based_sequence(camera, size, n_frames, camera_motion, device=device, log=log,
+                                             **IBL_DEMO_PUPIL)
         stages = [s for s in (stages or stage_names()) if s not in IBL_CONTAINS]
     elif lens_model != "post":
         from .errors import InputError

@@ -56,6 +56,7 @@ def test_small_field_is_one_projection_per_sample_and_wide_field_is_subdivided_b
 
 @pytest.mark.parametrize("kw, word", [(dict(lens="nope"), "lens_data"), (dict(grid=1), "grid"),
                                       (dict(pupil_n=0), "pupil_n"), (dict(threshold_deg=0.0), "threshold_deg"),
+                                      (dict(pupil_pattern="hex"), "pupil_pattern"),
                                       (dict(sensor_mm=(36.0, -1.0)), "sensor_mm")])
 def test_bad_inputs_name_the_fix(kw, word):
     args = dict(lens="thorlabs-lb1471", focus_distance_m=3.0, f_number=8.0)
@@ -186,10 +187,11 @@ def test_single_projection_doublet_renders_an_in_focus_plane_like_the_pinhole():
     at = np.unravel_index(int(err.argmax()), err.shape)
     if os.environ.get("CLPOST_TEST_IMAGES"):
         np.save(os.environ["CLPOST_TEST_IMAGES"] + "/plane.npy", np.stack([img, expect]))
-    # tolerance: 3.5 % mean (|Δ| / mean level); the residue sits on the checker edges (f/8
-    # diffraction-free blur of the doublet + bilinear resampling of the 2× render); a one-pixel
-    # misregistration costs more than twice as much, so the test sees geometry errors
-    assert err.mean() < 0.035 and err.max() < 0.3, f"mean {err.mean():.3f}, max {err.max():.3f} at {at}"
+    # tolerance: 4.5 % mean (|Δ| / mean level); the residue sits on the checker edges (bilinear
+    # resampling of the 2× renders against the aliased pinhole: 0.037 measured, best at zero
+    # sub-pixel shift, 0.056 at 0.2 px); a one-pixel misregistration costs more than twice as
+    # much, so the test sees geometry errors
+    assert err.mean() < 0.045 and err.max() < 0.45, f"mean {err.mean():.3f}, max {err.max():.3f} at {at}"
     shifted = np.abs(img[:, 1:] - expect[:, :-1]).mean(-1) / expect.mean()
     assert shifted.mean() > 2 * err.mean()
 
@@ -210,3 +212,76 @@ def test_rendering_bad_inputs_name_the_fix():
 
     with pytest.raises(InputError, match="lens_data"):
         model_for_camera(Camera(lens="thin:50"))
+
+
+# -- seams between quad-tree cells ---------------------------------------------------------------
+
+
+def _boundary_jump(img: np.ndarray, cells) -> tuple[float, float]:
+    """Largest step across the cells' shared edges and across every other pixel edge: the
+    first difference at an edge minus the mean of its neighbours' (a smooth image has none),
+    relative to the image mean."""
+    I = img[..., 0].astype(np.float64)
+
+    def jumps(a, cols):
+        return max((np.abs((a[:, i] - a[:, i - 1]) - 0.5 * ((a[:, i - 1] - a[:, i - 2]) + (a[:, i + 1] - a[:, i]))).max()
+                    for i in cols if 2 <= i < a.shape[1] - 1), default=0.0)
+
+    bx = {c.box[0] for c in cells} - {0}
+    by = {c.box[2] for c in cells} - {0}
+    at_edges = max(jumps(I, bx), jumps(I.T, by))
+    inside = max(jumps(I, set(range(I.shape[1])) - bx), jumps(I.T, set(range(I.shape[0])) - by))
+    return at_edges / I.mean(), inside / I.mean()
+
+
+@pytest.mark.parametrize("lens, depth", [("thorlabs-ac254-050-a", 1), ("thorlabs-lb1471", 4)])
+def test_no_step_across_cell_boundaries_for_uniform_and_in_focus_scenes(lens, depth):
+    """Seams (docs/image_based_lens.md): a uniform scene tests that W is continuous across cells;
+    a smooth radiance ramp on the plane of focus tests the texture coordinates — neighbouring
+    cells have different COPs and must still map their shared edge to the same scene point.
+    With the image plane 1 mm before the lens (the first version) the ramp's step at the edges
+    was 0.020 (achromat, depth 1, fit error 0.15°) and 0.0072 (singlet, 0.03°) of the mean,
+    2–20× the steps inside cells; anchored at the focus plane they match the inside's."""
+    warnings.simplefilter("ignore")
+    model = build(lens, 3.0, 4.0, sensor_mm=(12.0, 8.0), pupil_n=1, max_depth=depth)
+    assert model.projections_per_sample()[0] >= 4  # subdivided: there are shared edges
+    lens_ = get_lens(lens)
+    pres = lens_.focused(3000.0, model.f_number)
+    zf = float(pres.vertex_z[-1] + pres.surfaces[-1].thickness_mm)
+    z_cam = 3.0 - (zf - lens_.paraxial.z_entrance_pupil_mm) / 1000.0  # focus plane, camera space
+
+    def ramp(cop, f, c, size):
+        u, v = np.meshgrid(np.arange(size[0]), np.arange(size[1]))
+        t = z_cam - cop[2]
+        x, y = cop[0] + t * (u - c[0]) / f, cop[1] + t * (v - c[1]) / f
+        return np.repeat((2.0 + 3.0 * x + 3.0 * y + 0.3 * np.sin(40.0 * x))[..., None], 3, -1)
+
+    size = (121, 81)
+    cells, _ = warp_cells(model, size)
+    for fn, tol in ((_const, 2e-4), (ramp, 2e-3)):
+        img, _ = render_image_based(model, size, fn)
+        at_edges, inside = _boundary_jump(img, cells)
+        assert at_edges < tol and at_edges < 1.5 * inside + 1e-4, (fn.__name__, at_edges, inside)
+
+
+def test_spiral_pupil_samples_are_stratified_in_area_and_angle():
+    """The Vogel spiral (ghost copies fill the blur disc instead of lining up in rows): n² points
+    inside the passing radius, equal counts in equal-area annuli and in equal sectors, centred."""
+    from clpost.render.image_based_lens import pupil_samples
+
+    lens = get_lens("thorlabs-ac254-050-a")
+    pres = lens.focused(3000.0, 4.0)
+    table, zf = mirrored_table(pres, lens.stop_radius_mm(4.0))
+    z_x = lens.paraxial.z_exit_pupil_mm
+    grid = pupil_samples(pres, table, zf, z_x, 6, "grid")
+    spiral = pupil_samples(pres, table, zf, z_x, 6, "spiral")
+    assert spiral.shape == grid.shape == (36, 3) and np.all(spiral[:, 2] == z_x)
+    r_max = np.hypot(grid[:, 0], grid[:, 1]).max() / (5 / 6)  # concentric map: outer cell centres at r = 5/6
+    r = np.hypot(spiral[:, 0], spiral[:, 1])
+    assert r.max() <= r_max * (1 + 1e-9)
+    assert np.abs(spiral[:, :2].mean(0)).max() < 0.05 * r_max
+    rings = np.bincount(np.minimum((r / r_max) ** 2 * 6, 5.999).astype(int), minlength=6)
+    sectors = np.bincount(((np.arctan2(spiral[:, 1], spiral[:, 0]) + np.pi) / (2 * np.pi) * 6).astype(int) % 6, minlength=6)
+    assert rings.tolist() == [6] * 6 and np.abs(sectors - 6).max() <= 1, (rings, sectors)
+    # every sample passes the iris from the axial film point
+    assert all(trace_back(table, zf, np.zeros((1, 2)), p)[2][0] for p in spiral)

@@ -36,7 +36,7 @@ most of the film — inside the radius the axial film point sees through the sto
    the cell is split as a quad-tree and each quadrant gets its own grid and fit.
 
 Each leaf is a :class:`Projection`: e, the film grid, the texture coordinates of the grid rays
-in the projection's image plane (camera-space :math:`(X/Z, Y/Z)` of :math:`q_k - e`, whose
+in the projection's image plane (camera-space :math:`(X/Z, Y/Z)` of the ray's point on the plane of focus, seen from e, whose
 bounding box is the off-axis frustum) and the weights of sec. 3.5,
 
 .. math:: W(x') = \frac{\cos\theta'\cos\theta''}{\lVert x'' - x'\rVert^2},
@@ -69,7 +69,7 @@ class Projection:
     cell_mm: tuple[float, float, float, float]  # film x0, x1, y0, y1 (lens frame, mm)
     cop_mm: np.ndarray  # virtual centre of projection e (lens frame, mm)
     film_mm: np.ndarray  # (n, n, 2) grid points on the film after vignetting
-    tex: np.ndarray  # (n, n, 2) camera-space (X/Z, Y/Z) of q − e: the image-plane coordinates
+    tex: np.ndarray  # (n, n, 2) camera-space (X/Z, Y/Z) of the ray at the focus plane − e (image_plane_tex)
     weight: np.ndarray  # (n, n) W(x') of sec. 3.5 (1/mm²), 0 where the ray does not pass
     max_angle_deg: float
     frustum: tuple[float, float, float, float]  # bounding box of tex: x0, x1, y0, y1
@@ -151,9 +151,15 @@ def _concentric(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return r * np.cos(phi), r * np.sin(phi)
 
 
-def pupil_samples(pres, table, zf, z_exit_mm: float, n: int) -> np.ndarray:
-    """n×n stratified points on the exit-pupil plane z = ``z_exit_mm``, inside the radius
-    through which the axial film point's rays pass the stopped-down iris (bisection)."""
+def pupil_samples(pres, table, zf, z_exit_mm: float, n: int, pattern: str = "grid") -> np.ndarray:
+    r"""n² stratified points on the exit-pupil plane z = ``z_exit_mm``, inside the radius R
+    through which the axial film point's rays pass the stopped-down iris (bisection).
+
+    ``pattern``: ``"grid"`` — the n×n cell centres mapped by the concentric map (rows and
+    columns: a defocused highlight shows as an n×n array of copies); ``"spiral"`` — the Vogel
+    (golden-angle) spiral :math:`r_k = R\sqrt{(k + ½)/n^2},\ \varphi_k = k \cdot 137.5°`,
+    equally stratified in area but with no rows, so the copies of a defocused point fill its
+    blur disc evenly instead of lining up (the same count, the same cost)."""
     lo, hi = 0.0, 4.0 * float(pres.surfaces[-1].semi_diameter_mm)
     for _ in range(50):
         mid = 0.5 * (lo + hi)
@@ -161,6 +167,11 @@ def pupil_samples(pres, table, zf, z_exit_mm: float, n: int) -> np.ndarray:
             lo = mid
         else:
             hi = mid
+    if pattern == "spiral":
+        k = np.arange(n * n)
+        rad, phi = np.sqrt((k + 0.5) / (n * n)), k * math.pi * (3.0 - math.sqrt(5.0))
+        x, y = rad * np.cos(phi), rad * np.sin(phi)
+        return np.stack([lo * 0.999 * x, lo * 0.999 * y, np.full(x.shape, z_exit_mm)], -1)
     g = (np.arange(n) + 0.5) / n * 2 - 1
     u, v = np.meshgrid(g, g)
     x, y = _concentric(u.ravel(), v.ravel())
@@ -230,6 +241,35 @@ def angle_errors_deg(q: np.ndarray, d: np.ndarray, e: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
 
 
+def image_plane_tex(q: np.ndarray, d: np.ndarray, e: np.ndarray, z_plane_mm: float) -> np.ndarray:
+    r"""Texture coordinates of rays (q, d) in a projection with centre e (sec. 3.3): camera-space
+    :math:`(X/Z, Y/Z)` of :math:`x_f - e`, where :math:`x_f = q + t d` is the ray's intersection
+    with the **image plane** — the plane of sharp focus, lens-frame z = ``z_plane_mm``
+    (:math:`-\infty` for focus at infinity: the direction d itself).
+
+    Why the focus plane and not a point near the lens: two projections sharing a film edge have
+    different COPs, and each maps a ray to the scene point seen from its own e. Anchored at the
+    focus plane, both map the edge's ray to the *same* in-focus scene point — the seam vanishes
+    where the image is sharp and grows only with defocus, :math:`\approx \alpha\,|D - D_f|`
+    for a fit error α, where the image is blurred anyway. Anchored 1 mm before the lens (the
+    first version) the mismatch was :math:`\approx \alpha D` at every depth: visible seams."""
+    q = np.asarray(q, np.float64)
+    d = np.asarray(d, np.float64)
+    if math.isfinite(z_plane_mm):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (z_plane_mm - q[:, 2]) / d[:, 2]
+        r = q + t[:, None] * d - e
+    else:
+        r = d
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.stack([r[:, 0], -r[:, 1]], -1) / (-r[:, 2:3])
+
+
+def focus_plane_z_mm(focus_distance_m: float, z_film_mm: float) -> float:
+    """Lens-frame z of the plane of sharp focus (focus distances are measured from the film)."""
+    return z_film_mm - focus_distance_m * 1000.0 if math.isfinite(focus_distance_m) else -math.inf
+
+
 def _coons(border: dict, n: int) -> np.ndarray:
     """Grid (n×n×2) from four border curves (bottom j=0, top j=n−1 along i; left i=0, right
     i=n−1 along j) by the bilinearly blended Coons patch."""
@@ -277,13 +317,11 @@ def _vignetting_grid(table, zf, p, cell, n):
 # ---------------------------------------------------------------------------------------------
 
 
-def _projection(pres, table, zf, p, index, cell, grid, e, depth):
+def _projection(pres, table, zf, p, index, cell, grid, e, depth, z_plane_mm):
     n = grid.shape[0]
     q, d, ok = trace_back(table, zf, grid.reshape(-1, 2), p)
     err = angle_errors_deg(q[ok], d[ok], e)
-    r = q - e
-    cam = np.stack([r[:, 0], -r[:, 1], -r[:, 2]], -1)
-    tex = cam[:, :2] / cam[:, 2:3]
+    tex = image_plane_tex(q, d, e, z_plane_mm)
     x1 = np.concatenate([grid.reshape(-1, 2), np.full((n * n, 1), zf)], 1)
     ray = p[None, :] - x1
     dist = np.linalg.norm(ray, axis=1)
@@ -301,7 +339,7 @@ def _projection(pres, table, zf, p, index, cell, grid, e, depth):
 @lru_cache(maxsize=16)
 def build(lens: str, focus_distance_m: float = math.inf, f_number: float | None = None,
           sensor_mm: tuple[float, float] = (36.0, 24.0), grid: int = 10, pupil_n: int = 3,
-          threshold_deg: float = THRESHOLD_DEG, max_depth: int = 4) -> ImageBasedLens:
+          threshold_deg: float = THRESHOLD_DEG, max_depth: int = 4, pupil_pattern: str = "grid") -> ImageBasedLens:
     """The image-based model of ``lens`` (a ``lens_data`` name) focused at ``focus_distance_m``
     (from the film) at ``f_number``; cached per arguments (module docstring)."""
     if lens not in available_lenses():
@@ -310,6 +348,8 @@ def build(lens: str, focus_distance_m: float = math.inf, f_number: float | None 
         raise InputError(f"grid={grid!r} must be an integer >= 2 (rays per cell side; the paper uses 10)")
     if int(pupil_n) != pupil_n or pupil_n < 1:
         raise InputError(f"pupil_n={pupil_n!r} must be an integer >= 1 (pupil samples per side)")
+    if pupil_pattern not in ("grid", "spiral"):
+        raise InputError(f"pupil_pattern={pupil_pattern!r} must be 'grid' or 'spiral' (pupil_samples)")
     if not (math.isfinite(threshold_deg) and threshold_deg > 0):
         raise InputError(f"threshold_deg={threshold_deg!r} must be > 0 degrees (the paper uses 0.05)")
     if len(sensor_mm) != 2 or not all(math.isfinite(s) and s > 0 for s in sensor_mm):
@@ -320,11 +360,12 @@ def build(lens: str, focus_distance_m: float = math.inf, f_number: float | None 
     dist_mm = focus_distance_m * 1000.0 if math.isfinite(focus_distance_m) else math.inf
     pres = L.focused(dist_mm, n_num)
     table, zf = mirrored_table(pres, L.stop_radius_mm(n_num))
-    samples = pupil_samples(pres, table, zf, L.paraxial.z_exit_pupil_mm, int(pupil_n))
+    samples = pupil_samples(pres, table, zf, L.paraxial.z_exit_pupil_mm, int(pupil_n), pupil_pattern)
     e_root = np.array([0.0, 0.0, L.paraxial.z_entrance_pupil_mm])
     model = ImageBasedLens(lens, float(focus_distance_m), float(n_num), tuple(sensor_mm), samples,
                            threshold_deg=float(threshold_deg))
     hw, hh = 0.5 * sensor_mm[0], 0.5 * sensor_mm[1]
+    z_plane = focus_plane_z_mm(float(focus_distance_m), zf)
 
     def recurse(index, p, cell, e0, depth):
         g = _vignetting_grid(table, zf, p, cell, int(grid))
@@ -342,7 +383,7 @@ def build(lens: str, focus_distance_m: float = math.inf, f_number: float | None 
             model.dropped_cells += 1
             return
         e = fit_cop(q[ok], d[ok], e0)
-        proj, err = _projection(pres, table, zf, p, index, cell, g, e, depth)
+        proj, err = _projection(pres, table, zf, p, index, cell, g, e, depth, z_plane)
         if err > threshold_deg and depth < max_depth:
             x0, x1, y0, y1 = cell
             xm, ym = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
@@ -432,6 +473,7 @@ def warp_cells(model: ImageBasedLens, size: tuple[int, int], node_spacing_px: fl
     pres = L.focused(dist_mm, model.f_number)
     table, zf = mirrored_table(pres, L.stop_radius_mm(model.f_number))
     z_e = L.paraxial.z_entrance_pupil_mm
+    z_plane = focus_plane_z_mm(model.focus_distance_m, zf)
     pitch = model.sensor_mm[0] / w
     f_px = supersample * L.focus(dist_mm, model.f_number).image_distance_mm / pitch
     cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
@@ -456,9 +498,7 @@ def warp_cells(model: ImageBasedLens, size: tuple[int, int], node_spacing_px: fl
         q, d, ok = trace_back(table, zf, film, p)
         if ok.sum() < 3:
             continue
-        r = q - proj.cop_mm
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tex = np.stack([r[:, 0], -r[:, 1]], -1) / (-r[:, 2:3])
+        tex = image_plane_tex(q, d, proj.cop_mm, z_plane)
         ok &= np.all(np.isfinite(tex), axis=1)
         if ok.sum() < 3:
             continue
@@ -620,19 +660,21 @@ def pyvista_render_fn(renderer, frame_index: int = 0):
 
 
 def model_for_camera(camera, *, pupil_n: int = 3, threshold_deg: float = THRESHOLD_DEG, max_depth: int = 4,
-                     grid: int = 10) -> ImageBasedLens:
+                     grid: int = 10, pupil_pattern: str = "grid") -> ImageBasedLens:
     """The cached model of a :class:`~clpost.camera.Camera` with a ``lens_data`` lens (auto
     f-number: the lens wide open)."""
     if camera.optics is None:
         raise InputError(f"the image-based lens model needs a real lens from lens_data (--lens "
                          f"{', '.join(available_lenses())}); {camera.lens!r} is a thin lens")
     return build(camera.lens, float(camera.focus_distance_m), camera.f_number, tuple(camera.sensor_mm),
-                 grid=grid, pupil_n=pupil_n, threshold_deg=threshold_deg, max_depth=max_depth)
+                 grid=grid, pupil_n=pupil_n, threshold_deg=threshold_deg, max_depth=max_depth,
+                 pupil_pattern=pupil_pattern)
 
 
 def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1, camera_motion: bool = False,
                                  scene=None, *, pupil_n: int = 3, threshold_deg: float = THRESHOLD_DEG,
-                                 max_depth: int = 4, device: str | None = None, log=None) -> list:
+                                 max_depth: int = 4, device: str | None = None, log=None,
+                                 pupil_pattern: str = "grid") -> list:
     """Frames 0 … n_frames−1 through the image-based model of ``camera``'s lens: colour from
     :func:`render_image_based`, depth and velocity from the pinhole at the entrance pupil
     (the centre of the chief rays; what the post-process path renders). Metadata records the
@@ -642,7 +684,8 @@ def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1
 
     if int(n_frames) != n_frames or n_frames < 1:
         raise InputError(f"n_frames={n_frames!r} must be an integer >= 1")
-    model = model_for_camera(camera, pupil_n=pupil_n, threshold_deg=threshold_deg, max_depth=max_depth)
+    model = model_for_camera(camera, pupil_n=pupil_n, threshold_deg=threshold_deg, max_depth=max_depth,
+                             pupil_pattern=pupil_pattern)
     renderer = PyVistaRenderer(scene if scene is not None else DemoScene.default(camera_motion=camera_motion))
     try:
         frames = []
