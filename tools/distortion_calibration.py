@@ -105,9 +105,12 @@ def board_pose(view: int, model: OpenCVModel, margin_px: float = 6.0) -> tuple[n
     return r, hi * ray
 
 
-def board_scene(view: int, n_views: int, model: OpenCVModel) -> DemoScene:
+def board_scene(view: int, n_views: int, model: OpenCVModel | None = None) -> DemoScene:
     """The board in the world xy plane (z up, world = board frame) seen from view ``view`` (see
-    :func:`board_pose`; ``n_views`` is accepted for the caller's loop and not needed)."""
+    :func:`board_pose`; ``n_views`` is accepted for the caller's loop and not needed). Without
+    ``model`` (callers that only need the objects to build a renderer) the 800×600 barrel set
+    places the board."""
+    model = model or parameter_sets((800, 600))["barrel"]
     board = SceneObject("board", Plane(0.36), Material(albedo=(0.9, 0.9, 0.9), albedo2=(0.04, 0.04, 0.04),
                                                        texture="board", texture_scale_m=SQUARE_M,
                                                        board_squares=SQUARES), casts_shadow=False)
