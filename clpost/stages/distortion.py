@@ -19,8 +19,12 @@ calibration's K", the size of :func:`clpost.calibration.required_render` means "
 that frustum" (use it: barrel distortion then leaves no unfilled pixel). Any other size is an
 error. The output has the calibration's size.
 
-Quality: ``draft``/``preview`` bilinear (4 taps); ``final`` Keys cubic (a = −½, 16 taps) clamped
-to the 4 nearest samples (no ringing, no negative HDR values).
+Quality: ``draft``/``preview`` bilinear (4 taps); ``final`` Keys (1981) cubic convolution with
+a = −¾ (16 taps, OpenCV's ``INTER_CUBIC``), clamped below at 0 (no negative HDR values; edges
+overshoot by up to ~7 % of the step above). Measured on checkerboards (tools/distortion_calibration.py,
+docs/distortion_calibration.md): corners detected on the output lie 0.038 px RMS from the true
+model — the detector's floor on the undistorted render itself — whereas a = −½ clamped to the 4
+nearest samples (the previous filter) gave 0.055 px and cost 10× in recovered k2.
 
 Alpha: output pixels with no preimage inside the render — outside its frustum, beyond the model's
 fold radius (clamped, see :mod:`clpost.calibration`), or where Newton did not converge — get
@@ -122,7 +126,8 @@ def _taps(plane: np.ndarray, xi: np.ndarray, yi: np.ndarray) -> np.ndarray:
 
 def _keys(t: np.ndarray) -> np.ndarray:
     t = np.abs(t)
-    return np.where(t <= 1, (1.5 * t - 2.5) * t * t + 1, np.where(t < 2, ((-0.5 * t + 2.5) * t - 4) * t + 2, 0.0))
+    # a = -3/4: (a+2)t³ - (a+3)t² + 1 on [0, 1], a(t³ - 5t² + 8t - 4) on [1, 2)
+    return np.where(t <= 1, (1.25 * t - 2.25) * t * t + 1, np.where(t < 2, ((-0.75 * t + 3.75) * t - 6) * t + 3, 0.0))
 
 
 def resample(plane: np.ndarray, m: np.ndarray, filt: int) -> np.ndarray:
@@ -142,9 +147,7 @@ def resample(plane: np.ndarray, m: np.ndarray, filt: int) -> np.ndarray:
         for mm in range(4):
             row = sum(_keys(tx - (k - 1)) * _taps(plane, x0 + k - 1, y0 + mm - 1) for k in range(4))
             v += _keys(ty - (mm - 1)) * row
-        lo = np.minimum(np.minimum(a, b), np.minimum(d, e))
-        hi = np.maximum(np.maximum(a, b), np.maximum(d, e))
-        v = np.clip(v, lo, hi)
+        v = np.maximum(v, 0.0)
     return np.where(ok, v, 0.0)
 
 
@@ -158,7 +161,7 @@ class Distortion(GatherStage):
 
     @property
     def filter_taps(self) -> int:
-        """1: bilinear (draft, preview); 3: Keys bicubic (final)."""
+        """1: bilinear (draft, preview); 3: Keys bicubic, a = −¾ (final)."""
         return 3 if self.quality == "final" else 1
 
     def _model(self, camera) -> OpenCVModel | None:
