@@ -148,8 +148,7 @@ inline float astigmatism_sat(float v)
     return 0.5f * (m + ASTIGMATISM_ABS(m));
 }
 
-__kernel __attribute__((reqd_work_group_size(ASTIGMATISM_TILE_W, ASTIGMATISM_TILE_H, 1)))
-void astigmatism(__global const float *restrict padded, __global const float *restrict axes,
+__kernel void astigmatism(__global const float *restrict padded, __global const float *restrict axes,
                  __global float *restrict dst, __global const float *restrict rec,
                  const int width, const int height)
 {
@@ -214,8 +213,7 @@ void astigmatism(__global const float *restrict padded, __global const float *re
 
 /* the per-pixel model (each pixel's own ellipse and direction; per-pixel addresses, so it does
  * not vectorise) for the tiles astigmatism_tiles flagged; the other groups return at once */
-__kernel __attribute__((reqd_work_group_size(ASTIGMATISM_TILE_W, ASTIGMATISM_TILE_H, 1)))
-void astigmatism_exact(__global const float *restrict padded, __global const float *restrict axes,
+__kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict axes,
                        __global float *restrict dst, __global const int *restrict flags,
                        const int width, const int height, const float cx, const float cy)
 {

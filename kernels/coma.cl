@@ -70,8 +70,7 @@ __kernel void coma_pad(__global const float *restrict src, __global float *restr
 #define COMA_TENT(f, wm, w0, wp) \
     const float wm = 0.5f * (COMA_ABS(f) - (f)), wp = 0.5f * (COMA_ABS(f) + (f)), w0 = 1.0f - COMA_ABS(f)
 
-__kernel __attribute__((reqd_work_group_size(COMA_TILE_W, COMA_TILE_H, 1)))
-void coma(__global const float *restrict padded, __global const float *restrict shape,
+__kernel void coma(__global const float *restrict padded, __global const float *restrict shape,
           __global float *restrict dst, __global const float *restrict tiles,
           const int width, const int height)
 {
