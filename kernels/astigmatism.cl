@@ -1,18 +1,30 @@
-/* astigmatism: field curvature + astigmatism as a per-pixel elliptical gather.
+/* astigmatism: field curvature + astigmatism as an elliptical gather on tiles.
  * clpost/stages/astigmatism.py documents the formulas; its reference() is the oracle.
  *
- * Buffers: colour planar (c*n + i); padded = colour as float4 (RGB_) with ASTIGMATISM_PAD px of
- * edge values on every side (so taps never clamp; one float4 load per bilinear corner instead of
- * three planar loads: the taps' addresses vary per pixel, so nothing vectorises across pixels); depth planar metres (+inf sky); lut = 2 planes of
- * ASTIGMATISM_LUT_SIZE focal offsets (sagittal, tangential; mm) over image height [0, r_max];
- * taps = ASTIGMATISM_TAPS points of a Vogel spiral over the unit disc (uniform weights).
- * axes = per padded pixel the ellipse semi-axes (a_s, a_t) in px of the pixel it continues, so a
- * tap can ask whether its *source* pixel's blur reaches the target (scatter-as-gather weights).
- * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE.
+ * Vectorisation (PERFORMANCE.md; what stops PoCL's work-item-loop vectoriser was found with
+ * POCL_VECTORIZER_REMARKS): work-groups are tiles of ASTIGMATISM_TILE_W × ASTIGMATISM_TILE_H
+ * pixels and every tap offset is group-uniform — the tile's bounding ellipse (largest semi-axes
+ * of its pixels, the tile centre's directions) sampled by the Vogel spiral — so the addresses
+ * are affine in the work-item id. Each pixel keeps its own ellipse through the tap weights. The
+ * loop body has no library calls (floor, fabs, clamp, sqrt), no float2 and no per-tap selects
+ * (the SLP pass would pack them across the unrolled taps into vectors that block it); the taps
+ * are a program-scope literal table that Astigmatism prepends to this source.
+ *
+ * Buffers: colour planar (c*n + i); padded = 3 planes of pw × ph (pw = tiles_x * TILE_W +
+ * 2 PAD, ph likewise), edge values repeated (no clamp per tap; the rounded-up work-items read
+ * inside); axes = 4 planes pw × ph: the ellipse semi-axes (a_s, a_t) in px of the pixel each
+ * padded pixel continues, and 1/(a_s + 1/2)^2, 1/(a_t + 1/2)^2 for the reach test; lut = 2 planes of ASTIGMATISM_LUT_SIZE focal offsets (sagittal,
+ * tangential; mm) over image height [0, r_max]; tiles = per tile (row-major) the tile centre's
+ * unit radial vector (e_x, e_y) from the host and the tile's largest (a_s, a_t) from
+ * astigmatism_tiles.
+ * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE, ASTIGMATISM_TILE_W,
+ * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch).
  */
 #define ASTIGMATISM_MAX_SEMI ((float)(ASTIGMATISM_PAD - 1))
 #define ASTIGMATISM_MIN_SEMI 1e-3f
 #define ASTIGMATISM_MIN_DEPTH_MM 1e-3f
+#define ASTIGMATISM_EXACT_PX 0.5f
+#define ASTIGMATISM_MIXED 0.5f
 
 inline float astigmatism_semi(float e0, float g, float d, float c0, float aperture, float half_inv_pitch)
 {
@@ -26,18 +38,20 @@ inline float astigmatism_semi(float e0, float g, float d, float c0, float apertu
 }
 
 __kernel void astigmatism_pad(__global const float *restrict src, __global const float *restrict depth,
-                              __global const float *restrict lut, __global float4 *restrict padded,
-                              __global float2 *restrict axes, const int width, const int height,
+                              __global const float *restrict lut, __global float *restrict padded,
+                              __global float *restrict axes, const int width, const int height,
+                              const int pw, const int ph,
                               const float cx, const float cy, const float pitch_mm, const float lut_scale,
                               const float aperture_mm, const float v_mm, const float inv_f_mm)
 {
     const int x = get_global_id(0), y = get_global_id(1);
-    const int pw = width + 2 * ASTIGMATISM_PAD, ph = height + 2 * ASTIGMATISM_PAD;
     if (x >= pw || y >= ph) return;
     const int sx = clamp(x - ASTIGMATISM_PAD, 0, width - 1), sy = clamp(y - ASTIGMATISM_PAD, 0, height - 1);
-    const size_t n = (size_t)width * height;
+    const size_t n = (size_t)width * height, pn = (size_t)pw * ph;
     const size_t i = (size_t)sy * width + sx, j = (size_t)y * pw + x;
-    padded[j] = (float4)(src[i], src[n + i], src[2 * n + i], 0.0f);
+    padded[j] = src[i];
+    padded[pn + j] = src[n + i];
+    padded[2 * pn + j] = src[2 * n + i];
 
     const float dx = (float)sx - cx, dy = (float)sy - cy;
     const float r = sqrt(dx * dx + dy * dy);
@@ -54,55 +68,193 @@ __kernel void astigmatism_pad(__global const float *restrict src, __global const
     const float e0 = (1.0f - v_mm * inv_f_mm) + v_mm * inv_z;
     const float c0 = aperture_mm * fabs(e0);
     const float hip = 0.5f / pitch_mm;
-    axes[j] = (float2)(astigmatism_semi(e0, g, ds, c0, aperture_mm, hip),
-                       astigmatism_semi(e0, g, dt, c0, aperture_mm, hip));
+    const float as = astigmatism_semi(e0, g, ds, c0, aperture_mm, hip);
+    const float at = astigmatism_semi(e0, g, dt, c0, aperture_mm, hip);
+    axes[j] = as;
+    axes[pn + j] = at;
+    /* 1/(a + 1/2)^2 for the reach test of the taps that land here (no division per tap) */
+    axes[2 * pn + j] = 1.0f / ((as + 0.5f) * (as + 0.5f));
+    axes[3 * pn + j] = 1.0f / ((at + 0.5f) * (at + 0.5f));
 }
 
-__kernel void astigmatism(__global const float4 *restrict padded, __global const float2 *restrict axes,
-                          __global float *restrict dst, __constant float2 *taps,
-                          const int width, const int height, const float cx, const float cy)
+/* one work-item per tile: the largest semi-axes of the tile's pixels (inside the frame) */
+__kernel void astigmatism_tiles(__global const float *restrict axes, __global float *restrict tiles,
+                                __global int *restrict flags,
+                                const int width, const int height, const int tiles_x, const int tiles_y)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
+    const int tx = get_global_id(0), ty = get_global_id(1);
+    if (tx >= tiles_x || ty >= tiles_y) return;
+    const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
+    const size_t pn = (size_t)pw * (tiles_y * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
+    const int x1 = min((tx + 1) * ASTIGMATISM_TILE_W, width), y1 = min((ty + 1) * ASTIGMATISM_TILE_H, height);
+    float ms = 0.0f, mt = 0.0f;
+    for (int y = ty * ASTIGMATISM_TILE_H; y < y1; ++y)
+        for (int x = tx * ASTIGMATISM_TILE_W; x < x1; ++x) {
+            const size_t j = (size_t)(y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
+            ms = fmax(ms, axes[j]);
+            mt = fmax(mt, axes[pn + j]);
+        }
+    /* exact (per-pixel) path for tiles where the shared ellipse would be wrong by more than
+     * about half a pixel: the tile centre's direction is off by up to (half diagonal)/r rad, or
+     * some pixel's ellipse is less than ASTIGMATISM_MIXED of the bound (a depth edge) */
+    float mn_s = ms, mn_t = mt;
+    for (int y = ty * ASTIGMATISM_TILE_H; y < y1; ++y)
+        for (int x = tx * ASTIGMATISM_TILE_W; x < x1; ++x) {
+            const size_t j = (size_t)(y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
+            mn_s = fmin(mn_s, axes[j]);
+            mn_t = fmin(mn_t, axes[pn + j]);
+        }
+    const float r = tiles[4 * (ty * tiles_x + tx) + 2];  /* the host put the tile centre's r here */
+    const float half_diag = 0.5f * sqrt((float)(ASTIGMATISM_TILE_W * ASTIGMATISM_TILE_W + ASTIGMATISM_TILE_H * ASTIGMATISM_TILE_H));
+    const bool turn = fmax(ms, mt) * half_diag > ASTIGMATISM_EXACT_PX * r;
+    const bool mixed = (ms > ASTIGMATISM_EXACT_PX && mn_s < ASTIGMATISM_MIXED * ms)
+                    || (mt > ASTIGMATISM_EXACT_PX && mn_t < ASTIGMATISM_MIXED * mt);
+    tiles[4 * (ty * tiles_x + tx) + 2] = ms;
+    tiles[4 * (ty * tiles_x + tx) + 3] = mt;
+    flags[ty * tiles_x + tx] = (turn || mixed) ? 1 : 0;
+}
+
+/* one work-item per (tap, tile): the tile's tap record, ASTIGMATISM_REC floats — the bilinear
+ * corner and the nearest pixel as index offsets in the padded planes (int bits), the bilinear
+ * fractions and the tap's squared coordinates (a_s u_x)^2, (a_t u_y)^2 in the tile's ellipse */
+#define ASTIGMATISM_REC 6
+__kernel void astigmatism_taptable(__global const float *restrict tiles, __global float *restrict rec,
+                                   const int tiles_x, const int tiles_y)
+{
+    const int k = get_global_id(0), t = get_global_id(1);
+    if (k >= ASTIGMATISM_TAPS || t >= tiles_x * tiles_y) return;
+    const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
+    __global const float *tile = tiles + 4 * t;
+    const float ex = tile[0], ey = tile[1];
+    const float us = tile[2] * astigmatism_taps[2 * k], ut = tile[3] * astigmatism_taps[2 * k + 1];
+    const float ox = -ey * us + ex * ut, oy = ex * us + ey * ut;
+    const float fx0 = floor(ox), fy0 = floor(oy);
+    __global float *r = rec + ((size_t)t * ASTIGMATISM_TAPS + k) * ASTIGMATISM_REC;
+    r[0] = as_float((int)fy0 * pw + (int)fx0);
+    r[1] = as_float((int)floor(oy + 0.5f) * pw + (int)floor(ox + 0.5f));
+    r[2] = ox - fx0;
+    r[3] = oy - fy0;
+    r[4] = us * us;
+    r[5] = ut * ut;
+}
+
+#define ASTIGMATISM_ABS(v) as_float(as_uint(v) & 0x7fffffffu)
+/* clamp(v, 0, 1) without a call or a select: m = min(v, 1) = (v + 1 - |v - 1|) / 2, then
+ * max(m, 0) = (m + |m|) / 2 — two dependent steps, so the SLP pass finds no pair of |.| to pack
+ * (exact while v - 1 is exact in float, |v| < 4e6) */
+inline float astigmatism_sat(float v)
+{
+    const float m = 0.5f * (v + 1.0f - ASTIGMATISM_ABS(v - 1.0f));
+    return 0.5f * (m + ASTIGMATISM_ABS(m));
+}
+
+__kernel void astigmatism(__global const float *restrict padded, __global const float *restrict axes,
+                 __global float *restrict dst, __global const float *restrict rec,
+                 const int width, const int height)
+{
+    const int tx = get_group_id(0), ty = get_group_id(1);
+    const int x = tx * ASTIGMATISM_TILE_W + (int)get_local_id(0);
+    const int y = ty * ASTIGMATISM_TILE_H + (int)get_local_id(1);
+    const int pw = (int)get_num_groups(0) * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
+    const size_t pn = (size_t)pw * ((int)get_num_groups(1) * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
+    const int jc = (y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
+    /* the pixel's own ellipse: 1/a^2 (a tap outside it gets no weight). The 1e-3 px^2 keeps
+     * a = 0 finite and the weights' argument below 4e6, where astigmatism_sat is exact in float */
+    const float as = axes[jc], at = axes[pn + jc];
+    const float is2 = 1.0f / (as * as + 1e-3f), it2 = 1.0f / (1e-3f + at * at);
+    /* the tile's taps (group-uniform records; the per-tap constants come from memory, not from
+     * literals, so the SLP pass cannot pack the unrolled taps into vectors that would stop the
+     * vectorisation across pixels) */
+    __global const float *tr = rec + (size_t)(ty * (int)get_num_groups(0) + tx) * ASTIGMATISM_TAPS * ASTIGMATISM_REC;
+    float ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
+#pragma unroll
+    for (int k = 0; k < ASTIGMATISM_TAPS; ++k) {
+        __global const float *r = tr + k * ASTIGMATISM_REC;
+        const int j = jc + as_int(r[0]), jn = jc + as_int(r[1]);
+        /* z = 0 (wsum is finite), but a dependency on the previous tap: the SLP pass cannot pack
+         * taps k and k+1 into 2-wide vectors, which would stop the vectorisation across pixels.
+         * It serialises the taps' weights (a latency chain); the shorter chains tried (through
+         * us2 only) let SLP pack again. */
+        const float z = 0.0f * wsum;
+        const float fx = r[2], fy = r[3], us2 = r[4] + z, ut2 = r[5] + z;
+        /* does the source pixel's own ellipse (+ half a pixel) reach back to the target? weight 1
+         * inside, 0 from 1.25 times its size (in q^2: 1 .. 1.5625). Is the tap inside the
+         * target's own ellipse? weight 1 inside, 0 from q^2 = 1.125. The paired s/t terms and the
+         * two saturations are written in different forms on purpose: identical ones get packed
+         * into 2-wide vectors by the SLP pass, which stops the vectorisation across pixels. */
+        const float q2 = us2 * axes[2 * pn + jn] + ut2 * axes[3 * pn + jn];
+        const float reach = astigmatism_sat((1.5625f - q2) * (1.0f / 0.5625f));
+        const float vo = 9.0f - 8.0f * (us2 * is2 + ut2 * it2);
+        const float own = 0.5f * (vo + ASTIGMATISM_ABS(vo) - ASTIGMATISM_ABS(vo - 1.0f) - (vo - 1.0f));
+        const float w = reach * own;
+        const float w00 = w * (1.0f - fx) * (1.0f - fy), w01 = w * fx * (1.0f - fy);
+        const float w10 = w * (1.0f - fx) * fy, w11 = w * fx * fy;
+        __global const float *p = padded + j;
+        ar += w00 * p[0] + w01 * p[1] + w10 * p[pw] + w11 * p[pw + 1];
+        p += pn;
+        ag += w00 * p[0] + w01 * p[1] + w10 * p[pw] + w11 * p[pw + 1];
+        p += pn;
+        ab += w00 * p[0] + w01 * p[1] + w10 * p[pw] + w11 * p[pw + 1];
+        wsum += w;
+    }
+    const bool keep = (as < ASTIGMATISM_MIN_SEMI && at < ASTIGMATISM_MIN_SEMI) || !(wsum > 0.0f);
+    const float inv = keep ? 0.0f : 1.0f / wsum;
+    const float r = keep ? padded[jc] : ar * inv, g = keep ? padded[pn + jc] : ag * inv;
+    const float b = keep ? padded[2 * pn + jc] : ab * inv;
+#if !ASTIGMATISM_WHOLE_TILES
     if (x >= width || y >= height) return;
+#endif
     const size_t n = (size_t)width * height;
     const size_t i = (size_t)y * width + x;
-    const int pw = width + 2 * ASTIGMATISM_PAD;
+    dst[i] = r;
+    dst[n + i] = g;
+    dst[2 * n + i] = b;
+}
+
+/* the per-pixel model (each pixel's own ellipse and direction; per-pixel addresses, so it does
+ * not vectorise) for the tiles astigmatism_tiles flagged; the other groups return at once */
+__kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict axes,
+                       __global float *restrict dst, __global const int *restrict flags,
+                       const int width, const int height, const float cx, const float cy)
+{
+    if (!flags[get_group_id(1) * get_num_groups(0) + get_group_id(0)]) return;
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    const int pw = (int)get_num_groups(0) * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
+    const size_t pn = (size_t)pw * ((int)get_num_groups(1) * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
+    const size_t n = (size_t)width * height;
+    const size_t i = (size_t)y * width + x;
     const int jc = (y + ASTIGMATISM_PAD) * pw + (x + ASTIGMATISM_PAD);
-    const float2 a = axes[jc];
-    if (a.x < ASTIGMATISM_MIN_SEMI && a.y < ASTIGMATISM_MIN_SEMI) {
-        const float4 v = padded[jc];
-        dst[i] = v.x;
-        dst[n + i] = v.y;
-        dst[2 * n + i] = v.z;
+    const float as = axes[jc], at = axes[pn + jc];
+    if (as < ASTIGMATISM_MIN_SEMI && at < ASTIGMATISM_MIN_SEMI) {
+        dst[i] = padded[jc];
+        dst[n + i] = padded[pn + jc];
+        dst[2 * n + i] = padded[2 * pn + jc];
         return;
     }
     const float dx = (float)x - cx, dy = (float)y - cy;
     const float r = sqrt(dx * dx + dy * dy);
     const float ex = r > 0.0f ? dx / r : 1.0f, ey = r > 0.0f ? dy / r : 0.0f;
-    /* tap k: a_s*u.x along e_s = (-ey, ex), a_t*u.y along e_t = (ex, ey) */
-    const float2 ax_s = (float2)(-ey, ex) * a.x, ax_t = (float2)(ex, ey) * a.y;
     const float bx = (float)(x + ASTIGMATISM_PAD), by = (float)(y + ASTIGMATISM_PAD);
-    float4 acc = (float4)(0.0f);
-    float wsum = 0.0f;
+    float ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
     for (int k = 0; k < ASTIGMATISM_TAPS; ++k) {
-        const float2 u = taps[k];
-        const float px = bx + ax_s.x * u.x + ax_t.x * u.y;
-        const float py = by + ax_s.y * u.x + ax_t.y * u.y;
+        const float ux = astigmatism_taps[2 * k], uy = astigmatism_taps[2 * k + 1];
+        const float us = as * ux, ut = at * uy;
+        const float px = bx - ey * us + ex * ut, py = by + ex * us + ey * ut;
         /* does the source pixel's own ellipse (+ half a pixel) reach back to the target? */
-        const float2 as = axes[(int)floor(py + 0.5f) * pw + (int)floor(px + 0.5f)];
-        const float qs = a.x * u.x / (as.x + 0.5f), qt = a.y * u.y / (as.y + 0.5f);
-        const float w = clamp(5.0f - 4.0f * sqrt(qs * qs + qt * qt), 0.0f, 1.0f);
+        const int jn = (int)floor(py + 0.5f) * pw + (int)floor(px + 0.5f);
+        const float qs = us / (axes[jn] + 0.5f), qt = ut / (axes[pn + jn] + 0.5f);
+        const float w = clamp((1.5625f - (qs * qs + qt * qt)) * (1.0f / 0.5625f), 0.0f, 1.0f);
         const float fx0 = floor(px), fy0 = floor(py);
         const float fx = px - fx0, fy = py - fy0;
         const int j = (int)fy0 * pw + (int)fx0;
-        const float4 top = mix(padded[j], padded[j + 1], fx);
-        const float4 bot = mix(padded[j + pw], padded[j + pw + 1], fx);
-        acc += mix(top, bot, fy) * w;
+        ar += w * mix(mix(padded[j], padded[j + 1], fx), mix(padded[j + pw], padded[j + pw + 1], fx), fy);
+        ag += w * mix(mix(padded[pn + j], padded[pn + j + 1], fx), mix(padded[pn + j + pw], padded[pn + j + pw + 1], fx), fy);
+        ab += w * mix(mix(padded[2 * pn + j], padded[2 * pn + j + 1], fx), mix(padded[2 * pn + j + pw], padded[2 * pn + j + pw + 1], fx), fy);
         wsum += w;
     }
-    const float4 own = padded[jc];
-    const float4 out = wsum > 0.0f ? acc / wsum : own;
-    dst[i] = out.x;
-    dst[n + i] = out.y;
-    dst[2 * n + i] = out.z;
+    const bool keep = !(wsum > 0.0f);
+    dst[i] = keep ? padded[jc] : ar / wsum;
+    dst[n + i] = keep ? padded[pn + jc] : ag / wsum;
+    dst[2 * n + i] = keep ? padded[2 * pn + jc] : ab / wsum;
 }

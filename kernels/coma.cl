@@ -1,39 +1,49 @@
 /* coma: third-order coma as a gather with the comet PSF of the pixel's field height.
  * clpost/stages/coma.py documents the formulas; its reference() is the oracle.
  *
- * Buffers: colour planar (c*n + i); padded = colour as float4 (RGB_) with COMA_PAD px of edge
- * values on every side (one float4 load per bilinear corner: tap addresses vary per pixel, so
- * nothing vectorises across pixels); lut = 2 planes of COMA_LUT_SIZE values over image height
- * [0, r_max]: C (mm) and dC/dr; taps = COMA_TAPS landing offsets (sagittal, radial) in units of
- * C of a Vogel spiral over the pupil.
- * Defines: COMA_TAPS, COMA_PAD, COMA_LUT_SIZE.
+ * Vectorisation (PERFORMANCE.md: PoCL widens the implicit work-item loop only when the addresses
+ * are affine in the work-item id and the loop body has no library calls, float2 arithmetic or
+ * branches): work-groups are tiles of COMA_TILE_W × COMA_TILE_H pixels. Each tap reads a 3 × 3
+ * window at an integer offset b_k that is the same for the whole tile (the tile centre's landing
+ * point, rounded), and interpolates inside it with tent weights at the pixel's *own* landing
+ * point: exactly the bilinear tap of the per-pixel comet while that point lies within 1 px of
+ * b_k (the comet changes by < 0.5 px across a tile for the lenses and coefficients in the tests
+ * and benchmarks: Coma.shape_error_px), clamped to the window beyond (the reference does the
+ * same).
+ *
+ * Buffers: colour planar (c*n + i); padded = 3 planes of pw × ph, pw = tiles_x * COMA_TILE_W +
+ * 2 COMA_PAD (ph likewise), edge values repeated, so no tap clamps and the rounded-up work-items
+ * read inside the buffer; shape = 4 planes of (tiles_y * COMA_TILE_H) × (tiles_x * COMA_TILE_W),
+ * per pixel C e_r (x, y) in px, C' = dC/dr and C/r (written by coma_pad from the LUT); lut = 2 planes of COMA_LUT_SIZE values over image height [0, r_max]:
+ * C (mm) and dC/dr; tiles = per tile (row-major) the tile centre's -C e_s, -C e_r (px; from the
+ * host, float64 exact C); coma_taps = COMA_TAPS landing offsets (sagittal, radial) in units of C
+ * of a Vogel spiral over the pupil, a program-scope __constant table that Coma prepends to this
+ * source (so the unrolled loop folds them to literals; read from a buffer, the SLP pass packs
+ * them into vector gathers that stop the work-item loop's vectorisation).
+ * Defines: COMA_TAPS, COMA_PAD, COMA_LUT_SIZE, COMA_TILE_W, COMA_TILE_H, COMA_WHOLE_TILES (the
+ * frame is a whole number of tiles, so every work-item stores without a branch).
  */
 #define COMA_MAX_C ((float)(COMA_PAD - 1) / 3.0f)
 
-__kernel void coma_pad(__global const float *restrict src, __global float4 *restrict padded,
-                       const int width, const int height)
+__kernel void coma_pad(__global const float *restrict src, __global float *restrict padded,
+                       __global float *restrict shape, __global const float *restrict lut,
+                       const int width, const int height, const int pw, const int ph,
+                       const float cx, const float cy, const float pitch_mm, const float lut_scale)
 {
     const int x = get_global_id(0), y = get_global_id(1);
-    const int pw = width + 2 * COMA_PAD, ph = height + 2 * COMA_PAD;
     if (x >= pw || y >= ph) return;
     const int sx = clamp(x - COMA_PAD, 0, width - 1), sy = clamp(y - COMA_PAD, 0, height - 1);
-    const size_t n = (size_t)width * height;
+    const size_t n = (size_t)width * height, pn = (size_t)pw * ph;
     const size_t i = (size_t)sy * width + sx, j = (size_t)y * pw + x;
-    padded[j] = (float4)(src[i], src[n + i], src[2 * n + i], 0.0f);
-}
+    padded[j] = src[i];
+    padded[pn + j] = src[n + i];
+    padded[2 * pn + j] = src[2 * n + i];
 
-__kernel void coma(__global const float4 *restrict padded, __global float *restrict dst,
-                   __global const float *restrict lut, __constant float2 *taps,
-                   const int width, const int height, const float cx, const float cy,
-                   const float pitch_mm, const float lut_scale)
-{
-    const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= width || y >= height) return;
-    const size_t n = (size_t)width * height;
-    const size_t i = (size_t)y * width + x;
-    const int pw = width + 2 * COMA_PAD;
-
-    const float dx = (float)x - cx, dy = (float)y - cy;
+    /* the comet of output pixel (ox, oy) of the rounded-up frame */
+    const int ow = pw - 2 * COMA_PAD, oh = ph - 2 * COMA_PAD;
+    const int ox = x - COMA_PAD, oy = y - COMA_PAD;
+    if (ox < 0 || oy < 0 || ox >= ow || oy >= oh) return;
+    const float dx = (float)ox - cx, dy = (float)oy - cy;
     const float r = sqrt(dx * dx + dy * dy);
     const float ex = r > 0.0f ? dx / r : 1.0f, ey = r > 0.0f ? dy / r : 0.0f;
     const float t = fmin(r * pitch_mm * lut_scale, (float)(COMA_LUT_SIZE - 1));
@@ -44,25 +54,74 @@ __kernel void coma(__global const float4 *restrict padded, __global float *restr
      * each tap's map, so a point's light is conserved although the PSF changes with r */
     const float dc = fabs(craw) > COMA_MAX_C ? 0.0f
                    : mix(lut[COMA_LUT_SIZE + k0], lut[COMA_LUT_SIZE + k0 + 1], t - (float)k0);
-    const float q = r > 0.0f ? c / r : dc;
-    /* gather from x - C (ts * e_s + tr * e_r), e_s = (-ey, ex), e_r = (ex, ey) */
-    const float2 ax_s = (float2)(ey, -ex) * c, ax_r = (float2)(-ex, -ey) * c;
-    const float bx = (float)(x + COMA_PAD), by = (float)(y + COMA_PAD);
-    float4 acc = (float4)(0.0f);
+    const size_t on = (size_t)ow * oh, o = (size_t)oy * ow + ox;
+    shape[o] = c * ex;
+    shape[on + o] = c * ey;
+    shape[2 * on + o] = dc;
+    shape[3 * on + o] = r > 0.0f ? c / r : dc;
+}
+
+/* tent weights of the 3 window samples at -1, 0, 1 for a position f in [-1, 1] (linear
+ * interpolation between the two neighbours of f). |v| by clearing the sign bit (integer code the
+ * vectoriser widens) and clamps/max written with it: OpenCL's fabs/fmin/clamp are library calls in PoCL and selects get packed by
+ * the SLP pass across the unrolled taps into <N x i1> vectors that block it. */
+#define COMA_ABS(v) as_float(as_uint(v) & 0x7fffffffu)
+#define COMA_CLAMP1(v) (0.5f * (COMA_ABS((v) + 1.0f) - COMA_ABS((v) - 1.0f)))
+#define COMA_TENT(f, wm, w0, wp) \
+    const float wm = 0.5f * (COMA_ABS(f) - (f)), wp = 0.5f * (COMA_ABS(f) + (f)), w0 = 1.0f - COMA_ABS(f)
+
+__kernel void coma(__global const float *restrict padded, __global const float *restrict shape,
+          __global float *restrict dst, __global const float *restrict tiles,
+          const int width, const int height)
+{
+    const int tx = get_group_id(0), ty = get_group_id(1);
+    const int x = tx * COMA_TILE_W + (int)get_local_id(0), y = ty * COMA_TILE_H + (int)get_local_id(1);
+    const int ow = (int)get_num_groups(0) * COMA_TILE_W, oh = (int)get_num_groups(1) * COMA_TILE_H;
+    const int pw = ow + 2 * COMA_PAD;
+    const size_t pn = (size_t)pw * (oh + 2 * COMA_PAD), on = (size_t)ow * oh;
+    const int o = y * ow + x;
+    const float cex = shape[o], cey = shape[on + o], dc = shape[2 * on + o], q = shape[3 * on + o];
+    /* the tile centre's comet (group-uniform): each tap's window offset */
+    __global const float *tile = tiles + 4 * (ty * (int)get_num_groups(0) + tx);
+    const float tsxx = tile[0], tsxy = tile[1], trxx = tile[2], trxy = tile[3];
+    const int base = (y + COMA_PAD) * pw + x + COMA_PAD;
+    float ar = 0.0f, ag = 0.0f, ab = 0.0f;
+    /* fully unrolled: PoCL vectorises the implicit work-item loop only when it is innermost */
+#pragma unroll
     for (int k = 0; k < COMA_TAPS; ++k) {
-        const float2 u = taps[k];
-        const float jac = fmax((1.0f - dc * u.y) * (1.0f - q * u.y) + q * dc * u.x * u.x, 0.0f);
-        const float px = bx + ax_s.x * u.x + ax_r.x * u.y;
-        const float py = by + ax_s.y * u.x + ax_r.y * u.y;
-        const float fx0 = floor(px), fy0 = floor(py);
-        const float fx = px - fx0, fy = py - fy0;
-        const int j = (int)fy0 * pw + (int)fx0;
-        const float4 top = mix(padded[j], padded[j + 1], fx);
-        const float4 bot = mix(padded[j + pw], padded[j + pw + 1], fx);
-        acc += mix(top, bot, fy) * jac;
+        const float ux = coma_taps[2 * k], uy = coma_taps[2 * k + 1];
+        /* window centre b: round(tile offset), by truncating a positive number (|offset| < PAD) */
+        const int bx = (int)(tsxx * ux + trxx * uy + ((float)COMA_PAD + 0.5f)) - COMA_PAD;
+        const int by = (int)(tsxy * ux + trxy * uy + ((float)COMA_PAD + 0.5f)) - COMA_PAD;
+        /* the pixel's own landing point: -C (ux e_s + uy e_r), e_s = (-ey, ex), e_r = (ex, ey) */
+        float fx = cey * ux - cex * uy - (float)bx, fy = -(cex * ux + cey * uy) - (float)by;
+        fx = COMA_CLAMP1(fx);
+        fy = COMA_CLAMP1(fy);
+        COMA_TENT(fx, hm, h0, hp);
+        COMA_TENT(fy, vm, v0, vp);
+        float jac = (1.0f - dc * uy) * (1.0f - q * uy) + q * dc * ux * ux;
+        jac = 0.5f * (jac + COMA_ABS(jac));
+        const float wm = vm * jac, w0 = v0 * jac, wp = vp * jac;
+        __global const float *p = padded + base + by * pw + bx;
+#define COMA_WIN(p) (wm * (hm * p[-pw - 1] + h0 * p[-pw] + hp * p[-pw + 1]) \
+                   + w0 * (hm * p[-1] + h0 * p[0] + hp * p[1]) \
+                   + wp * (hm * p[pw - 1] + h0 * p[pw] + hp * p[pw + 1]))
+        ar += COMA_WIN(p);
+        p += pn;
+        ag += COMA_WIN(p);
+        p += pn;
+        ab += COMA_WIN(p);
+#undef COMA_WIN
     }
     const float inv = 1.0f / (float)COMA_TAPS;
-    dst[i] = acc.x * inv;
-    dst[n + i] = acc.y * inv;
-    dst[2 * n + i] = acc.z * inv;
+#if !COMA_WHOLE_TILES
+    /* frames that are not whole tiles: the rounded-up work-items compute but do not store
+     * (a branch, so this variant does not vectorise; 1280×720 and 1920×1080 are whole tiles) */
+    if (x >= width || y >= height) return;
+#endif
+    const size_t n = (size_t)width * height;
+    const size_t i = (size_t)y * width + x;
+    dst[i] = ar * inv;
+    dst[n + i] = ag * inv;
+    dst[2 * n + i] = ab * inv;
 }

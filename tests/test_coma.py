@@ -102,3 +102,14 @@ def test_traced_coma_grows_with_field_and_with_aperture():
 def test_bad_coefficient():
     with pytest.raises(InputError, match="coma_mm"):
         Camera(coma_mm=float("inf"))
+
+
+def test_tile_windows_hold_the_per_pixel_comet():
+    """The kernel reads each tap from a 3 × 3 window placed by the tile centre's comet; it is exact
+    while the pixel's own landing point stays within ½ px of the tile's (Coma.shape_error_px)."""
+    cam = Camera(lens=FLAGSHIP, f_number=1.4, focus_distance_m=3.0)
+    for w, h in ((1280, 720), (1920, 1080)):
+        err, where = coma.Coma().shape_error_px(cam, w, h)
+        assert 0.0 < err < 0.5, (w, h, err, where)
+    err, where = coma.Coma().shape_error_px(Camera(coma_mm=1.2), 301, 201)  # the point-source test's
+    assert err < 0.5, (err, where)

@@ -99,6 +99,13 @@ def main():
             ms, np_ms = device_ms(cam, stage, q, frame, a.repeats, a.warmup)
             print(f"| {stage} | {q} | {ms:.1f} | {np_ms:.0f} | {np_ms / ms:.0f}× |")
     print()
+    print("| tile model (16×8 tiles) | value |")
+    print("|---|---|")
+    err, (ex, ey) = coma.Coma("final").shape_error_px(cam, w, h)
+    print(f"| coma: largest landing-point change across a tile (exact while < 0.5 px) | {err:.3f} px at ({ex}, {ey}) |")
+    exact = ast.Astigmatism("final").tile_plan(cam, frame)[-1]
+    print(f"| astigmatism: tiles on the exact per-pixel path | {exact.mean():.1%} of {exact.size} |")
+    print()
     print("| closed-form check | expected | measured | error |")
     print("|---|---|---|---|")
     for k, (want, got) in closed_form_errors(w, h).items():

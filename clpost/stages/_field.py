@@ -13,6 +13,14 @@ the kernels, as the vignetting stage does.
 The gathers read a copy of the image padded by ``PAD`` pixels (edge values repeated, i.e. the
 render is assumed to continue as its border) so no tap needs a clamp (PERFORMANCE.md); every tap
 offset is therefore limited to ``PAD − 1`` pixels.
+
+**Tiles.** PoCL vectorises a gather across pixels only when the work-items of a group read at
+the same offsets (PERFORMANCE.md: uniform offsets on planar padded buffers run at 1–2 Gtaps/s,
+per-pixel offsets at 0.1–0.3). The field-dependent PSFs change slowly with field height, so the
+gathers run on tiles of ``TILE_W × TILE_H`` pixels (grid from the top-left pixel; 16 px wide =
+one AVX-512 vector of floats) whose tap positions are placed by the tile centre
+:math:`(t_x W_t + \tfrac{W_t-1}{2},\ t_y H_t + \tfrac{H_t-1}{2})`; each stage documents how it
+keeps (or approximates) the per-pixel shape within a tile.
 """
 from __future__ import annotations
 
@@ -22,6 +30,8 @@ import numpy as np
 
 LUT_SIZE = 512
 PAD = 16
+TILE_W = 16
+TILE_H = 8
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 
 
@@ -85,3 +95,25 @@ def bilinear_padded(color: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.nda
     top = color[ya, xa] * (1 - fx) + color[ya, xb] * fx
     bot = color[yb, xa] * (1 - fx) + color[yb, xb] * fx
     return top * (1 - fy) + bot * fy
+
+
+def tiles(w: int, h: int) -> tuple[int, int]:
+    """Number of tiles (x, y) covering a w × h frame (the kernels' work-group grid)."""
+    return -(-w // TILE_W), -(-h // TILE_H)
+
+
+def tile_centres(w: int, h: int, cx: float, cy: float):
+    """Per tile (tiles_y, tiles_x), float64: the tile centre's dx, dy from the principal point,
+    r_px and unit radial vector (e_x, e_y; (1, 0) at the centre)."""
+    ntx, nty = tiles(w, h)
+    ty, tx = np.mgrid[0:nty, 0:ntx].astype(np.float64)
+    dx = tx * TILE_W + 0.5 * (TILE_W - 1) - cx
+    dy = ty * TILE_H + 0.5 * (TILE_H - 1) - cy
+    r = np.hypot(dx, dy)
+    safe = np.where(r > 0, r, 1.0)
+    return dx, dy, r, np.where(r > 0, dx / safe, 1.0), np.where(r > 0, dy / safe, 0.0)
+
+
+def per_pixel(table: np.ndarray, w: int, h: int) -> np.ndarray:
+    """Expand a per-tile array (tiles_y, tiles_x, ...) to the pixels (h, w, ...) it covers."""
+    return np.repeat(np.repeat(table, TILE_H, 0), TILE_W, 1)[:h, :w]

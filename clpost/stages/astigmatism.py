@@ -57,19 +57,41 @@ weighted by whether the *source* pixel's own ellipse reaches back to the target
 
 .. math::
 
-    w_k = \mathrm{clamp}\big(5 - 4 q_k,\ 0,\ 1\big), \quad
+    w_k = \mathrm{clamp}\Big(\frac{1.5625 - q_k^2}{0.5625},\ 0,\ 1\Big), \quad
     q_k = \Big\| \Big(\frac{\alpha_s u_{k,x}}{\alpha_s^{src} + \frac12},\
                       \frac{\alpha_t u_{k,y}}{\alpha_t^{src} + \frac12}\Big) \Big\|,
     \qquad C'(x) = \frac{\sum_k w_k\,C(x + o_k)}{\sum_k w_k}
 
 with :math:`\alpha = a/2p` the semi-axes in px (the source's at its nearest pixel, +½ px for
-its own extent; weight 1 inside, fading to 0 at 1.25
-of the source's ellipse). Without it, a sharp highlight beside a strongly blurred neighbour (a
-lamp against the sky) is copied into the neighbour's large ellipse: +2.5 % energy on the demo
-frame at f/1.4, +0.8 % with it (the rest: pixels whose depth is the sky's but whose colour is
-the lamp's, CONVENTIONS "depth from one sample"). A uniform field stays uniform exactly.
+its own extent; weight 1 inside, fading to 0 at 1.25 of the source's ellipse, linearly in q²
+so the kernel needs no square root). Without it, a sharp highlight beside a strongly blurred
+neighbour (a lamp against the sky) is copied into the neighbour's large ellipse: +2.5 % energy
+on the demo frame at f/1.4, +0.8 % with it (the rest: pixels whose depth is the sky's but whose
+colour is the lamp's, CONVENTIONS "depth from one sample"). A uniform field stays uniform exactly.
 Semi-axes are capped at 15 px; below 1e-3 px both, the pixel is copied. Quality sets N: draft
 16, preview 32, final 64.
+
+**Tiles (speed).** PoCL vectorises a gather across pixels only when all work-items of a group
+read at the same offsets (PERFORMANCE.md), so the kernel runs on tiles of 16 × 8 px
+(:mod:`clpost.stages._field`) and, per tile, places the N taps on the tile's *bounding* ellipse:
+the largest :math:`\alpha_s, \alpha_t` of its pixels, along the tile centre's :math:`e_s, e_t`.
+Each pixel keeps its own ellipse through a second weight, membership
+
+.. math::
+
+    m_k = \mathrm{clamp}\big(9 - 8\,\mu_k^2,\ 0,\ 1\big), \qquad
+    \mu_k^2 = \frac{(A_s u_{k,x})^2}{\alpha_s^2 + 10^{-3}} + \frac{(A_t u_{k,y})^2}{\alpha_t^2 + 10^{-3}}
+
+(1 inside the pixel's ellipse, 0 beyond 1.06 of it; A the tile's bound), so the taps of a pixel
+are the spiral points inside its ellipse: all N where the tile's ellipses are equal, about
+:math:`N\alpha_s\alpha_t/A_sA_t` elsewhere. Two approximations follow, and the tiles where they
+would exceed about half a pixel take the per-pixel gather above instead (``tile_plan``; a second
+kernel that only those work-groups run): the direction — the tile centre's is off by up to
+(half diagonal ≈ 9 px)/r rad, so a tile takes the exact path when :math:`\max(A)\cdot 9/r >
+\frac12` px — and undersampling at depth edges, where a pixel's ellipse is smaller than half the
+tile's bound along an axis longer than ½ px. On the flagship f/1.4 benchmark frame 1.5 % of the
+tiles take the exact path. The reference implements both paths and the same tile plan (a tile
+whose float32 and float64 plans disagree at a threshold would differ; none do in the tests).
 
 A frame without depth: not planned (``--explain`` says so).
 
@@ -179,32 +201,48 @@ class Astigmatism(GatherStage):
 
     def defines(self, camera):
         return {"ASTIGMATISM_TAPS": self.taps, "ASTIGMATISM_PAD": fld.PAD,
-                "ASTIGMATISM_LUT_SIZE": fld.LUT_SIZE}
+                "ASTIGMATISM_LUT_SIZE": fld.LUT_SIZE, "ASTIGMATISM_TILE_W": fld.TILE_W,
+                "ASTIGMATISM_TILE_H": fld.TILE_H}
 
     # -- OpenCL -----------------------------------------------------------------------------
-    def _kernel(self, rt, camera, name):
+    def _kernel(self, rt, camera, name, whole_tiles: bool):
         import pyopencl as cl
 
         from ..runtime import kernel_source
 
-        prog = rt.program(kernel_source("astigmatism"), "astigmatism", self.defines(camera))
+        # ASTIGMATISM_WHOLE_TILES is a property of the frame size, not of the camera
+        prog = rt.program(self._tap_table() + kernel_source("astigmatism"), "astigmatism",
+                          {**self.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole_tiles)})
         key = (id(prog), name)
         if key not in self._kernels:
             self._kernels[key] = cl.Kernel(prog, name)
         return self._kernels[key]
 
-    def _buffers(self, rt, camera, w, h):
-        import pyopencl as cl
+    def _tap_table(self) -> str:
+        """OpenCL source of the ``astigmatism_taps`` table (float32 literals, exact round trip):
+        folded into the unrolled tap loop (from a buffer, PoCL's SLP pass packs the loads into
+        vector gathers that stop the vectorisation across pixels)."""
+        taps = fld.vogel_disc(self.taps).ravel()
+        vals = ", ".join(f"{float(v)!r}f" for v in taps)
+        return f"__constant float astigmatism_taps[{taps.size}] = {{{vals}}};\n"
 
+    def _buffers(self, rt, camera, w, h):
         key = (id(rt.context), w, h, self.taps)
         if key not in self._scratch:
-            taps = fld.vogel_disc(self.taps)
+            ntx, nty = fld.tiles(w, h)
+            pw, ph = ntx * fld.TILE_W + 2 * fld.PAD, nty * fld.TILE_H + 2 * fld.PAD
             self._scratch = {key: dict(
-                pad=rt.empty((h + 2 * fld.PAD, w + 2 * fld.PAD, 4)),
-                axes=rt.empty((h + 2 * fld.PAD, w + 2 * fld.PAD, 2)),
-                lut=rt.empty((2, fld.LUT_SIZE)),
-                taps=cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=taps))}
+                pad=rt.empty((3, ph, pw)), axes=rt.empty((4, ph, pw)), lut=rt.empty((2, fld.LUT_SIZE)),
+                tiles=rt.empty((nty, ntx, 4)), flags=rt.empty((nty, ntx), np.int32),
+                rec=rt.empty((nty * ntx, self.taps, 6)))}
         return self._scratch[key]
+
+    def tile_directions(self, w: int, h: int, cx: float, cy: float) -> np.ndarray:
+        """(tiles_y, tiles_x, 4) float32: the tile centre's unit radial vector (e_x, e_y), its
+        distance r (px) from the principal point and a zero; the device replaces the last two by
+        the tile's largest semi-axes."""
+        _, _, r, ex, ey = fld.tile_centres(w, h, cx, cy)
+        return np.stack([ex, ey, r, np.zeros_like(ex)], -1).astype(np.float32)
 
     def enqueue(self, rt, camera, frame, src, dst, aux):
         import pyopencl as cl
@@ -213,17 +251,33 @@ class Astigmatism(GatherStage):
         w, h = frame.width, frame.height
         b = self._buffers(rt, camera, w, h)
         cx, cy = fld.principal_point_px(camera, w, h)
+        ntx, nty = fld.tiles(w, h)
+        pw, ph = ntx * fld.TILE_W + 2 * fld.PAD, nty * fld.TILE_H + 2 * fld.PAD
+        whole = (ntx * fld.TILE_W, nty * fld.TILE_H) == (w, h)
         aperture, v, f = thin_lens(camera)
-        events = [cl.enqueue_copy(q, b["lut"], self._lut(camera), is_blocking=False)]
-        k = self._kernel(rt, camera, "astigmatism_pad")
+        events = [cl.enqueue_copy(q, b["lut"], self._lut(camera), is_blocking=False),
+                  cl.enqueue_copy(q, b["tiles"], self.tile_directions(w, h, cx, cy), is_blocking=False)]
+        k = self._kernel(rt, camera, "astigmatism_pad", whole)
         k.set_args(src, aux["depth"], b["lut"], b["pad"], b["axes"], np.int32(w), np.int32(h),
+                   np.int32(pw), np.int32(ph),
                    np.float32(cx), np.float32(cy), np.float32(fld.pitch_mm(camera, w)),
                    np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)),
                    np.float32(aperture), np.float32(v), np.float32(1.0 / f))
-        events.append(cl.enqueue_nd_range_kernel(q, k, (w + 2 * fld.PAD, h + 2 * fld.PAD), None))
-        k = self._kernel(rt, camera, "astigmatism")
-        k.set_args(b["pad"], b["axes"], dst, b["taps"], np.int32(w), np.int32(h), np.float32(cx), np.float32(cy))
-        events.append(cl.enqueue_nd_range_kernel(q, k, (w, h), None))
+        events.append(cl.enqueue_nd_range_kernel(q, k, (pw, ph), None))
+        k = self._kernel(rt, camera, "astigmatism_tiles", whole)
+        k.set_args(b["axes"], b["tiles"], b["flags"], np.int32(w), np.int32(h), np.int32(ntx), np.int32(nty))
+        events.append(cl.enqueue_nd_range_kernel(q, k, (ntx, nty), None))
+        k = self._kernel(rt, camera, "astigmatism_taptable", whole)
+        k.set_args(b["tiles"], b["rec"], np.int32(ntx), np.int32(nty))
+        events.append(cl.enqueue_nd_range_kernel(q, k, (self.taps, ntx * nty), None))
+        k = self._kernel(rt, camera, "astigmatism", whole)
+        k.set_args(b["pad"], b["axes"], dst, b["rec"], np.int32(w), np.int32(h))
+        events.append(cl.enqueue_nd_range_kernel(q, k, (ntx * fld.TILE_W, nty * fld.TILE_H),
+                                                 (fld.TILE_W, fld.TILE_H)))
+        k = self._kernel(rt, camera, "astigmatism_exact", whole)
+        k.set_args(b["pad"], b["axes"], dst, b["flags"], np.int32(w), np.int32(h), np.float32(cx), np.float32(cy))
+        events.append(cl.enqueue_nd_range_kernel(q, k, (ntx * fld.TILE_W, nty * fld.TILE_H),
+                                                 (fld.TILE_W, fld.TILE_H)))
         return events
 
     # -- the oracle -------------------------------------------------------------------------
@@ -238,30 +292,65 @@ class Astigmatism(GatherStage):
         cs, ct, c0 = axes_mm(ds, dt, depth, *thin_lens(camera))
         return residual_semi_px(cs, c0, pitch), residual_semi_px(ct, c0, pitch), ex, ey
 
+    EXACT_PX = 0.5
+    MIXED = 0.5
+
+    def tile_plan(self, camera, frame):
+        """Per tile (float64): the bounding semi-axes (A_s, A_t), the tile centre's radial
+        vector (e_x, e_y), and whether it takes the exact per-pixel path (bool)."""
+        w, h = frame.width, frame.height
+        a_s, a_t, _, _ = self.semi_axes_px(camera, frame)
+        cx, cy = fld.principal_point_px(camera, w, h)
+        _, _, r, tex, tey = fld.tile_centres(w, h, cx, cy)
+        ntx, nty = fld.tiles(w, h)
+        big = np.full((2, nty * fld.TILE_H, ntx * fld.TILE_W), np.nan)
+        big[0, :h, :w], big[1, :h, :w] = a_s, a_t
+        blocks = big.reshape(2, nty, fld.TILE_H, ntx, fld.TILE_W)
+        hi, lo = np.nanmax(blocks, axis=(2, 4)), np.nanmin(blocks, axis=(2, 4))
+        half_diag = 0.5 * np.hypot(fld.TILE_W, fld.TILE_H)
+        turn = np.maximum(hi[0], hi[1]) * half_diag > self.EXACT_PX * r
+        mixed = np.any((hi > self.EXACT_PX) & (lo < self.MIXED * hi), axis=0)
+        return hi[0], hi[1], tex, tey, turn | mixed
+
     def reference(self, camera, frame, color):
-        """float64 numpy implementation of the module docstring (exact offset curves, no LUT)."""
+        """float64 numpy implementation of the module docstring (exact offset curves, no LUT):
+        the tile model, and the per-pixel model on the tiles ``tile_plan`` flags."""
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
-        a_s, a_t, ex, ey = self.semi_axes_px(camera, frame)
+        a_s, a_t, pex, pey = self.semi_axes_px(camera, frame)
+        bound_s, bound_t, tex, tey, exact = self.tile_plan(camera, frame)
+        tiled = self._gather(color, a_s, a_t, fld.per_pixel(bound_s, w, h), fld.per_pixel(bound_t, w, h),
+                             fld.per_pixel(tex, w, h), fld.per_pixel(tey, w, h), own=True)
+        plain = self._gather(color, a_s, a_t, a_s, a_t, pex, pey, own=False)
+        out = np.where(fld.per_pixel(exact, w, h)[..., None], plain, tiled)
+        still = (a_s < MIN_SEMI_PX) & (a_t < MIN_SEMI_PX)
+        out[still] = color[still]
+        return out
+
+    def _gather(self, color, a_s, a_t, bs, bt, ex, ey, own: bool):
+        """Taps over the ellipse (bs, bt) along (e_s, e_t) = ((−e_y, e_x), (e_x, e_y)), weighted
+        by the source's reach and (``own``) by membership in the pixel's own ellipse (a_s, a_t)."""
+        h, w = color.shape[:2]
         pad = fld.PAD
         src_s, src_t = np.pad(a_s, pad, mode="edge"), np.pad(a_t, pad, mode="edge")
+        is2, it2 = 1.0 / (a_s * a_s + 1e-3), 1.0 / (a_t * a_t + 1e-3)
         xs, ys = np.mgrid[0:h, 0:w].astype(np.float64)[::-1]
         acc = np.zeros_like(color)
         wsum = np.zeros((h, w))
         for ux, uy in fld.vogel_disc(self.taps).astype(np.float64):
-            ox = a_s * ux * -ey + a_t * uy * ex
-            oy = a_s * ux * ex + a_t * uy * ey
+            us, ut = bs * ux, bt * uy
+            ox = -ey * us + ex * ut
+            oy = ex * us + ey * ut
             # the source pixel's own ellipse (+ half a pixel) must reach back to the target
             ix = np.clip(np.floor(xs + ox + 0.5).astype(np.int64) + pad, 0, w + 2 * pad - 1)
             iy = np.clip(np.floor(ys + oy + 0.5).astype(np.int64) + pad, 0, h + 2 * pad - 1)
-            q = np.hypot(a_s * ux / (src_s[iy, ix] + 0.5), a_t * uy / (src_t[iy, ix] + 0.5))
-            wk = np.clip(5.0 - 4.0 * q, 0.0, 1.0)
+            q2 = (us / (src_s[iy, ix] + 0.5)) ** 2 + (ut / (src_t[iy, ix] + 0.5)) ** 2
+            wk = np.clip((1.5625 - q2) / 0.5625, 0.0, 1.0)
+            if own:  # and the tap must lie inside the target's own ellipse
+                wk = wk * np.clip((1.125 - (us * us * is2 + ut * ut * it2)) * 8.0, 0.0, 1.0)
             acc += fld.bilinear_padded(color, xs + ox, ys + oy) * wk[..., None]
             wsum += wk
-        out = np.where(wsum[..., None] > 0, acc / np.where(wsum > 0, wsum, 1.0)[..., None], color)
-        still = (a_s < MIN_SEMI_PX) & (a_t < MIN_SEMI_PX)
-        out[still] = color[still]
-        return out
+        return np.where(wsum[..., None] > 0, acc / np.where(wsum > 0, wsum, 1.0)[..., None], color)
 
 
 def point_source_axes_px(camera, r_mm: float, depth_m: float, width: int) -> tuple[float, float]:
