@@ -45,19 +45,15 @@ def _umask() -> int:
     return mask
 
 
-def write_png(path: str | os.PathLike, signal, encoding: str = "sRGB", *, display: str | None = None,
+def write_png(path: str | os.PathLike, signal, *, display: str = "srgb",
               working_space: str = "rec709") -> None:
-    """Display-encode a linear (H, W, 3) image (1.0 = white) and write an 8-bit PNG, atomically.
-
-    ``display`` (``colorspace.DISPLAYS``: srgb, rec709, display-p3) converts from the
-    ``working_space`` primaries to the display's first; without it ``encoding`` is applied as is."""
+    """Display-encode a linear (H, W, 3) image (1.0 = white) and write an 8-bit PNG, atomically:
+    ``working_space`` primaries → the ``display``'s (``colorspace.DISPLAYS``: srgb, rec709,
+    display-p3), clipped, encoded, quantised."""
     from PIL import Image
 
-    from .colorspace import display_encode, encode_preview
+    from .colorspace import display_encode
 
-    if display is None:
-        img = encode_preview(signal, encoding, 8)
-    else:
-        img = display_encode(signal, working_space, display, 8)
+    img = display_encode(signal, working_space, display, 8)
     with atomic_path(path) as tmp:
         Image.fromarray(img, mode="RGB").save(tmp, format="PNG")

@@ -38,6 +38,7 @@ from typing import Callable
 
 import numpy as np
 
+from .atomic import atomic_path
 from .camera import Camera
 from .frame import Frame
 from .pipeline import AUX_BUFFERS, Pipeline
@@ -95,9 +96,7 @@ def demo_frame(width: int, height: int, cache_dir: str | os.PathLike | None = No
         frame = PyVistaRenderer(DemoScene.default(camera_motion=True)).render(
             Camera(**DEMO_CAMERA_DEFAULTS), (width, height), 0)
         root.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp.exr")
-        exr.write_frame(tmp, frame)
-        os.replace(tmp, path)
+        exr.write_frame(path, frame)  # atomic
     return exr.read_frame(path)
 
 
@@ -415,9 +414,8 @@ def update_markdown(path: str | os.PathLike, section: str) -> None:
     else:
         text = text.rstrip("\n") + "\n\n" + section + "\n"
     p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_suffix(p.suffix + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, p)
+    with atomic_path(p) as tmp:
+        tmp.write_text(text)
 
 
 __all__ = ["SCENES", "Scene", "DEFAULT_SIZES", "bench_case", "run", "format_table", "format_markdown",

@@ -29,16 +29,17 @@ def luminance(rgb: np.ndarray, space: str = WORKING_SPACE) -> np.ndarray:
     return np.asarray(rgb, dtype=np.float64) @ luminance_weights(space)
 
 
-def encode_preview(signal: np.ndarray, encoding: str = "sRGB", bits: int = 8) -> np.ndarray:
-    """Display-encode a linear image for a PNG preview: clip to [0, 1], apply the encoding's
-    inverse-EOTF/OETF (colour.cctf_encoding), quantise to ``bits`` (8 or 16)."""
+def cctf_encode(linear: np.ndarray, function: str = "sRGB") -> np.ndarray:
+    """Clip a linear image to [0, 1] and apply a display encoding (colour.cctf_encoding), float64."""
     import colour
 
-    x = np.clip(np.asarray(signal, dtype=np.float64), 0.0, 1.0)
-    enc = colour.cctf_encoding(x, function=encoding)
+    return colour.cctf_encoding(np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0), function=function)
+
+
+def quantise(encoded: np.ndarray, bits: int = 8) -> np.ndarray:
+    """Code values in [0, 1] → uint8 or uint16."""
     scale = (1 << bits) - 1
-    dtype = np.uint8 if bits == 8 else np.uint16
-    return np.round(enc * scale).astype(dtype)
+    return np.round(encoded * scale).astype(np.uint8 if bits == 8 else np.uint16)
 
 
 WORKING_SPACES = {"rec709": "ITU-R BT.709", "acescg": "ACEScg"}
@@ -77,9 +78,5 @@ def display_encode(signal: np.ndarray, working_space: str = "rec709", display: s
                    bits: int = 8) -> np.ndarray:
     """Working-space linear image (1.0 = display white) → display code values (uint8/16):
     convert primaries, clip to [0, 1], apply the display's encoding, quantise."""
-    import colour
-
-    x = np.clip(working_to_display_linear(signal, working_space, display), 0.0, 1.0)
-    enc = colour.cctf_encoding(x, function=DISPLAYS[display][1])
-    scale = (1 << bits) - 1
-    return np.round(enc * scale).astype(np.uint8 if bits == 8 else np.uint16)
+    return quantise(cctf_encode(working_to_display_linear(signal, working_space, display),
+                                DISPLAYS[display][1]), bits)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import Camera
+from .colorspace import cctf_encode
 from .pipeline import Pipeline
 from .stages import QUALITIES
 
@@ -31,9 +32,8 @@ VIEW_SCALE = 0.5
 
 
 def srgb(linear: np.ndarray) -> np.ndarray:
-    """IEC 61966-2-1 encoding of linear values clipped to [0, 1]."""
-    c = np.clip(linear, 0.0, 1.0)
-    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
+    """sRGB code values in [0, 1] of a linear image (the FLIP inputs)."""
+    return cctf_encode(linear, "sRGB")
 
 
 def psnr_linear(ref: np.ndarray, test: np.ndarray) -> float:
