@@ -76,18 +76,28 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
     return out
 
 
+def pending(jobs: list[FrameJob], overwrite: bool, report: BatchReport,
+            progress: Callable[[FrameJob, float | None], None] | None = None) -> list[FrameJob]:
+    """The jobs to run: those whose output exists are recorded as skipped (resume) unless
+    ``overwrite``. Shared by the serial and the distributed loop."""
+    todo = []
+    for job in jobs:
+        if job.dst.exists() and not overwrite:
+            report.skipped.append(job.frame)
+            if progress:
+                progress(job, None)
+        else:
+            todo.append(job)
+    return todo
+
+
 def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | None = None,
                      overwrite: bool = False, half: bool = False, compression: str = "zip",
                      progress: Callable[[FrameJob, float | None], None] | None = None) -> BatchReport:
     """Process ``jobs`` in order; ``progress(job, seconds or None if skipped)`` after each."""
     report = BatchReport()
     size = None
-    for job in jobs:
-        if job.dst.exists() and not overwrite:
-            report.skipped.append(job.frame)
-            if progress:
-                progress(job, None)
-            continue
+    for job in pending(jobs, overwrite, report, progress):
         t0 = time.perf_counter()
         out = process_one(pipeline, job, layout, half, size, compression)
         size = out.size

@@ -25,7 +25,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from .batch import BatchReport, FrameJob, process_one
+from .batch import BatchReport, FrameJob, pending, process_one
 from .camera import Camera
 from .errors import InputError
 
@@ -93,12 +93,7 @@ def process_sequence_dask(client, spec: PipelineSpec, jobs: list[FrameJob], *,
 
     report = BatchReport()
     by_key = {}
-    for job in jobs:
-        if job.dst.exists() and not overwrite:
-            report.skipped.append(job.frame)
-            if progress:
-                progress(job, None)
-            continue
+    for job in pending(jobs, overwrite, report, progress):
         fut = client.submit(task, spec, job, layout, half, compression, overwrite, expect_size,
                             key=f"clpost-frame-{job.frame}-{job.dst.name}-{time.time_ns()}",
                             retries=retries, pure=False)
