@@ -206,17 +206,11 @@ class Astigmatism(GatherStage):
 
     # -- OpenCL -----------------------------------------------------------------------------
     def _kernel(self, rt, camera, name, whole_tiles: bool):
-        import pyopencl as cl
-
         from ..runtime import kernel_source
 
         # ASTIGMATISM_WHOLE_TILES is a property of the frame size, not of the camera
-        prog = rt.program(self._tap_table() + kernel_source("astigmatism"), "astigmatism",
-                          {**self.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole_tiles)})
-        key = (id(prog), name)
-        if key not in self._kernels:
-            self._kernels[key] = cl.Kernel(prog, name)
-        return self._kernels[key]
+        return fld.cached_kernel(self._kernels, rt, self._tap_table() + kernel_source("astigmatism"), "astigmatism",
+                                 {**self.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole_tiles)}, name)
 
     def _tap_table(self) -> str:
         """OpenCL source of the ``astigmatism_taps`` table (float32 literals, exact round trip):

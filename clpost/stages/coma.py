@@ -164,18 +164,12 @@ class Coma(GatherStage):
 
     # -- OpenCL -----------------------------------------------------------------------------
     def _kernel(self, rt, camera, name, whole_tiles: bool):
-        import pyopencl as cl
-
         from ..runtime import kernel_source
 
         # COMA_WHOLE_TILES (the frame is whole tiles: stores need no branch) is a property of the
         # frame size, not of the camera, so it is added here rather than in defines()
-        prog = rt.program(self._tap_table() + kernel_source("coma"), "coma",
-                          {**self.defines(camera), "COMA_WHOLE_TILES": int(whole_tiles)})
-        key = (id(prog), name)
-        if key not in self._kernels:
-            self._kernels[key] = cl.Kernel(prog, name)
-        return self._kernels[key]
+        return fld.cached_kernel(self._kernels, rt, self._tap_table() + kernel_source("coma"), "coma",
+                                 {**self.defines(camera), "COMA_WHOLE_TILES": int(whole_tiles)}, name)
 
     def _tap_table(self) -> str:
         """OpenCL source of the ``coma_taps`` table (float32 literals, exact round trip)."""
