@@ -35,8 +35,9 @@ import numpy as np
 from .errors import InputError
 
 
-def as_time(value, name: str) -> Fraction:
-    """A time in seconds as an exact fraction (accepts ``'1/48'``, ``0.5``, ``Fraction``)."""
+def as_time(value, name: str, what: str = "a time in seconds (e.g. 0.5 or 1/48)") -> Fraction:
+    """A time in seconds (or, with ``what``, a rate) as an exact fraction (accepts ``'1/48'``,
+    ``0.5``, ``Fraction``)."""
     try:
         if isinstance(value, str) and "/" in value:
             num, den = value.split("/", 1)
@@ -44,13 +45,18 @@ def as_time(value, name: str) -> Fraction:
         else:
             t = Fraction(value) if not isinstance(value, float) else Fraction(str(value))
     except (ValueError, ZeroDivisionError, TypeError):
-        raise InputError(f"{name}={value!r} is not a time in seconds (e.g. 0.5 or 1/48)") from None
+        raise InputError(f"{name}={value!r} is not {what}") from None
     return t
+
+
+def as_rate(fps) -> Fraction:
+    """A frame rate (frames per second) as an exact fraction, e.g. ``24`` or ``'24000/1001'``."""
+    return as_time(fps, "--fps", "a frame rate in frames per second (e.g. 24 or 24000/1001)")
 
 
 def frame_interval(n: int, fps) -> tuple[Fraction, Fraction]:
     """The time interval [n/F, (n+1)/F) that frame ``n`` stands for (seconds, exact)."""
-    f = as_time(fps, "fps")
+    f = as_rate(fps)
     if f <= 0:
         raise InputError(f"--fps {fps!r} must be > 0 frames per second, e.g. 24")
     return Fraction(n) / f, Fraction(n + 1) / f
@@ -78,7 +84,7 @@ def exposure_weights(frames, fps, t_open, t_close) -> dict[int, Fraction]:
 
 def frames_needed(fps, t_open, t_close) -> range:
     """Frame numbers whose intervals meet [t_open, t_close]."""
-    f = as_time(fps, "fps")
+    f = as_rate(fps)
     t0, t1 = as_time(t_open, "--open"), as_time(t_close, "--close")
     first = math.floor(t0 * f)
     last = math.ceil(t1 * f) - 1
@@ -126,7 +132,7 @@ class ExposureAccumulator:
         from .runtime import get_runtime, kernel_source
 
         self.width, self.height = (int(v) for v in size)
-        self.fps = as_time(fps, "fps")
+        self.fps = as_rate(fps)
         if self.fps <= 0:
             raise InputError(f"--fps {fps!r} must be > 0 frames per second, e.g. 24")
         self.rt = get_runtime(device)
