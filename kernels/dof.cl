@@ -8,43 +8,48 @@
  */
 
 #define DOF_FRONT_MARGIN 1.0f
+/* pixels per work-item along x (explicit float8: PoCL does not vectorise across work-items
+ * around a tap loop whose trip count is only known per tile) */
+#define DOF_VEC 8
 
-typedef struct { float3 F, B; float wf, wb; } DofAcc;
+typedef struct { float8 r, g, b, wf, fr, fg, fb, wb; } DofAcc8;
 
-/* one source tap: colour c, signed CoC rq at offset (dx, dy) px, |o| = dist px */
-inline void dof_tap(DofAcc *acc, const float3 c, const float rq, const float rp, const float dist,
-                    const float rhof, const float rhon, const float inv_s, const float cell,
-                    const float sa, const int x, const int y, const int dx, const int dy,
-                    const float pvq, const float vig, const float cx, const float cy, const float inv_half)
+/* one source tap for 8 neighbouring target pixels: colours (cr, cg, cb), signed CoC rq at
+ * offset (dx, dy) px, |o| = dist px; the tap's constants are uniform (scalars). Selects and
+ * float8 arithmetic only, no branch. */
+inline void dof_tap8(DofAcc8 *acc, const float8 cr, const float8 cg, const float8 cb, const float8 rq,
+                     const float8 rp, const float8 arp, const float dist, const float rhof,
+                     const float rhon, const float inv_s, const float cell, const float sa,
+                     const float8 hx, const float8 hy, const int dx, const int dy, const float8 pvq,
+                     const float vig)
 {
-    const int front = rq < rp - DOF_FRONT_MARGIN;
-    const int behind = rq > rp + DOF_FRONT_MARGIN;
-    const float r = behind ? fmax(fabs(rp), 0.5f) : fmax(fabs(rq), 0.5f);
-    const int far = rq >= 0.0f;
-    const float rho = far ? rhof : rhon;
-    const float rr = r * rho;
-    const float cov = clamp((rr - dist) * inv_s + 0.5f, 0.0f, 1.0f);
-    const float t = fmin(dist / rr, 1.0f);
-    const float a = far ? -sa : sa;
-    float w = cov * (1.0f + a * (2.0f * t * t - 1.0f)) * cell / (r * r);
+    const int8 front = rq < rp - DOF_FRONT_MARGIN;
+    const int8 behind = rq > rp + DOF_FRONT_MARGIN;
+    const int8 far = rq >= 0.0f;
+    /* r = max(|rp|, 1/2) behind p (background clamp), else max(|rq|, 1/2) */
+    const float8 r = select(fmax(fabs(rq), 0.5f), arp, behind);
+    const float8 rho = select((float8)(rhon), (float8)(rhof), far);
+    const float8 rr = r * rho;
+    const float8 cov = clamp((rr - dist) * inv_s + 0.5f, 0.0f, 1.0f);
+    const float8 t = fmin(dist / rr, 1.0f);
+    const float8 a = select((float8)(sa), (float8)(-sa), far);
+    float8 w = cov * (1.0f + a * (2.0f * t * t - 1.0f)) * cell / (r * r);
 #if DOF_VIGNETTING
     {
-        const float hx = ((float)(x + dx) - cx) * inv_half, hy = ((float)(y + dy) - cy) * inv_half;
-        const float sgn = far ? 1.0f : -1.0f;
-        const float ax = -(float)dx / (r * sgn), ay = -(float)dy / (r * sgn);
-        const float ex = ax - vig * hx, ey = ay - vig * hy;
-        const float e = sqrt(ex * ex + ey * ey);
+        const float8 sr = select(-r, r, far);  /* r sgn */
+        const float8 ex = -(float)dx / sr - vig * hx, ey = -(float)dy / sr - vig * hy;
+        const float8 e = sqrt(ex * ex + ey * ey);
         /* per-source pupil area (pv = 1/area fraction): the clipped bokeh keeps its energy */
         w *= clamp((1.0f - e) * r + 0.5f, 0.0f, 1.0f) * pvq;
     }
 #endif
-    /* selects, not branches: PoCL vectorises the tap loop across work-items */
-    const float wfr = front ? w : 0.0f, wbk = w - wfr;
-    acc->F += wfr * c; acc->wf += wfr;
-    acc->B += wbk * c; acc->wb += wbk;
+    const float8 wfr = select((float8)(0.0f), w, front), wbk = w - wfr;
+    acc->fr += wfr * cr; acc->fg += wfr * cg; acc->fb += wfr * cb; acc->wf += wfr;
+    acc->r += wbk * cr; acc->g += wbk * cg; acc->b += wbk * cb; acc->wb += wbk;
 }
 
-/* launched with local size (DOF_TILE, DOF_TILE): one work-group per tile */
+/* launched with local size (DOF_TILE / DOF_VEC, DOF_TILE): one work-group per tile, each
+ * work-item 8 pixels of a row */
 __kernel void dof(__global const float *restrict lv, __global const float *restrict pv,
                   __global const int *restrict tn,
                   __constant const int *restrict tap_dx, __constant const int *restrict tap_dy,
@@ -55,10 +60,10 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                   const float inv_area, const float sa, const float vig,
                   const float cx, const float cy, const float inv_half)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
-    /* per work-group (= tile) values from the group id: provably uniform, so the tap loop's trip
-     * count and offsets are the same for every work-item; edge-tile work-items beyond the image
-     * read the padding (DOF_PW) and only skip the final write */
+    const int x = DOF_VEC * get_global_id(0), y = get_global_id(1);
+    /* per work-group (= tile) values from the group id: uniform, so the tap loop's trip count
+     * and offsets are the same for every work-item; edge-tile work-items beyond the image read
+     * the padding (DOF_PW) and only skip the final write */
     const int packed = tn[get_group_id(1) * tw + get_group_id(0)];
     const int count = packed & 0xffffff, lvl = packed >> 24;
     const int s = 1 << lvl;
@@ -67,31 +72,52 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     const size_t pn = (size_t)pw * DOF_PW(hw, pad);
     const size_t c0 = (size_t)(y + pad) * pw + (x + pad);
     __global const float *L = lv + (size_t)4 * lvl * pn;
-    const float rp = lv[3 * pn + c0];
-    DofAcc acc = {(float3)(0.0f), (float3)(0.0f), 0.0f, 0.0f};
+    const float8 rp = vload8(0, lv + 3 * pn + c0);
+    const float8 arp = fmax(fabs(rp), 0.5f);
+    const float8 lane = (float8)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f);
+    const float8 hx0 = ((float)x + lane - cx) * inv_half;
+    const float hy0 = ((float)y - cy) * inv_half;
+    DofAcc8 acc = {(float8)(0.0f), (float8)(0.0f), (float8)(0.0f), (float8)(0.0f),
+                   (float8)(0.0f), (float8)(0.0f), (float8)(0.0f), (float8)(0.0f)};
     {
         /* centre tap: own colour, blended toward the level's as p's own bokeh outgrows the
          * lattice spacing (a point light's centre must not stay a one-pixel spike) */
-        const float beta = clamp(fabs(rp) * inv_s, 0.0f, 1.0f);
-        const float3 own = (float3)(lv[c0], lv[pn + c0], lv[2 * pn + c0]);
-        const float3 lc = (float3)(L[c0], L[pn + c0], L[2 * pn + c0]);
-        dof_tap(&acc, own * (1.0f - beta) + lc * beta, rp, rp, 0.0f, rho_far[0], rho_near[0], inv_s, cell, sa,
-                x, y, 0, 0, pv[DOF_VIGNETTING ? c0 : 0], vig, cx, cy, inv_half);
+        const float8 beta = clamp(fabs(rp) * inv_s, 0.0f, 1.0f);
+        const float8 ob = 1.0f - beta;
+        dof_tap8(&acc, vload8(0, lv + c0) * ob + vload8(0, L + c0) * beta,
+                 vload8(0, lv + pn + c0) * ob + vload8(0, L + pn + c0) * beta,
+                 vload8(0, lv + 2 * pn + c0) * ob + vload8(0, L + 2 * pn + c0) * beta,
+                 rp, rp, arp, 0.0f, rho_far[0], rho_near[0], inv_s, cell, sa, hx0, (float8)(hy0), 0, 0,
+                 DOF_VIGNETTING ? vload8(0, pv + c0) : (float8)(1.0f), vig);
     }
     for (int k = 1; k < count; ++k) {
         const int dx = s * tap_dx[k], dy = s * tap_dy[k];
         const size_t q = (size_t)((long)c0 + (long)dy * pw + dx);
-        const float3 c = (float3)(L[q], L[pn + q], L[2 * pn + q]);
-        dof_tap(&acc, c, L[3 * pn + q], rp, fs * tap_dist[k], rho_far[k], rho_near[k], inv_s, cell, sa,
-                x, y, dx, dy, pv[DOF_VIGNETTING ? q : 0], vig, cx, cy, inv_half);
+        dof_tap8(&acc, vload8(0, L + q), vload8(0, L + pn + q), vload8(0, L + 2 * pn + q),
+                 vload8(0, L + 3 * pn + q), rp, arp, fs * tap_dist[k], rho_far[k], rho_near[k],
+                 inv_s, cell, sa, ((float)(x + dx) + lane - cx) * inv_half, (float8)(((float)(y + dy) - cy) * inv_half),
+                 dx, dy, DOF_VIGNETTING ? vload8(0, pv + q) : (float8)(1.0f), vig);
     }
-    const float alpha = fmin(1.0f, acc.wf);
-    const float3 fr = acc.wf > 0.0f ? acc.F / acc.wf : (float3)(0.0f);
-    const float3 res = alpha * fr + (1.0f - alpha) * (acc.B / acc.wb);
-    if (x < ww && y < hw) {
-        const size_t n = (size_t)ww * hw, i = (size_t)y * ww + x;
-        out[i] = res.x; out[n + i] = res.y; out[2 * n + i] = res.z;
-        alpha_out[i] = alpha;
+    const float8 alpha = fmin(1.0f, acc.wf);
+    const float8 inv_wf = select((float8)(0.0f), 1.0f / acc.wf, acc.wf > 0.0f);
+    const float8 inv_wb = 1.0f / acc.wb;
+    const float8 ob = 1.0f - alpha, af = alpha * inv_wf;
+    const float8 o_r = af * acc.fr + ob * (acc.r * inv_wb);
+    const float8 o_g = af * acc.fg + ob * (acc.g * inv_wb);
+    const float8 o_b = af * acc.fb + ob * (acc.b * inv_wb);
+    if (y >= hw || x >= ww) return;
+    const size_t n = (size_t)ww * hw, i = (size_t)y * ww + x;
+    if (x + DOF_VEC <= ww) {
+        vstore8(o_r, 0, out + i); vstore8(o_g, 0, out + n + i); vstore8(o_b, 0, out + 2 * n + i);
+        vstore8(alpha, 0, alpha_out + i);
+    } else {
+        /* the image's last, partial group of 8 */
+        float tr[DOF_VEC], tg[DOF_VEC], tb[DOF_VEC], ta[DOF_VEC];
+        vstore8(o_r, 0, tr); vstore8(o_g, 0, tg); vstore8(o_b, 0, tb); vstore8(alpha, 0, ta);
+        for (int j = 0; j < ww - x; ++j) {
+            out[i + j] = tr[j]; out[n + i + j] = tg[j]; out[2 * n + i + j] = tb[j];
+            alpha_out[i + j] = ta[j];
+        }
     }
 }
 

@@ -101,7 +101,8 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     k["dof"].set_args(cache["lv"], cache["pv"], cache["tn"], *cache["taps"], target, cache["alpha"],
                              i32(ww), i32(hw), i32(pad), i32(tw), cache["inv_area"],
                              f32(camera.spherical_aberration), *field)
-    evs.append(_launch(q, k["dof"], (tw * T, th * T), T))
+    # one work-group per tile, DOF_VEC (8) pixels of a row per work-item (dof.cl)
+    evs.append(cl.enqueue_nd_range_kernel(q, k["dof"], (tw * T // 8, th * T), (T // 8, T)))
     if scale > 1:
         k["dof_upsample"].set_args(src, cache["coc"], cache["blur"], cache["alpha"], cache["lv"], dst,
                                    i32(w), i32(h), i32(ww), i32(hw), i32(pad))
