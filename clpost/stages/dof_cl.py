@@ -37,6 +37,16 @@ def _launch(q, kernel, size, local):
     return cl.enqueue_nd_range_kernel(q, kernel, glob, (local, local))
 
 
+def _launch_rows(q, kernel, size, per_item=8, local=(8, 8)):
+    """Kernels that do ``per_item`` pixels of a row per work-item (explicit float8): the x size
+    divided by ``per_item``, then rounded up to whole work-groups like :func:`_launch`."""
+    import pyopencl as cl
+
+    glob = (-(-size[0] // per_item), size[1])
+    glob = tuple(-(-g // l) * l for g, l in zip(glob, local))
+    return cl.enqueue_nd_range_kernel(q, kernel, glob, local)
+
+
 def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     import pyopencl as cl
 
@@ -90,9 +100,9 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     evs.append(_launch(q, k["dof_prepare"], (pw, ph), 16))
     for lvl in range(nlev):
         k["dof_levels_x"].set_args(cache["lv"], cache["tmp"], i32(pw), i32(ph), i32(2 ** lvl), i32(lvl))
-        evs.append(_launch(q, k["dof_levels_x"], (pw, ph), 16))
+        evs.append(_launch_rows(q, k["dof_levels_x"], (pw, ph)))
         k["dof_levels_y"].set_args(cache["tmp"], cache["lv"], i32(pw), i32(ph), i32(2 ** lvl), i32(lvl + 1))
-        evs.append(_launch(q, k["dof_levels_y"], (pw, ph), 16))
+        evs.append(_launch_rows(q, k["dof_levels_y"], (pw, ph)))
     k["dof_tile_max"].set_args(cache["lv"], cache["tmax"], i32(ww), i32(hw), i32(pad), i32(tw), i32(th))
     evs.append(_launch(q, k["dof_tile_max"], (tw, th), 4))
     k["dof_tile_dilate"].set_args(cache["tmax"], cache["tn"], cache["ntaps"], i32(tw), i32(th))
