@@ -52,16 +52,16 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
         const float8 d = vload8(0, depth + i);
         const float8 lum = dof_luma8(src + i, n);
         float8 nearest = d, brightest_same = (float8)(0.0f);
-        for (int b = -1; b <= 1; ++b) {
-            const size_t r = (size_t)clamp(y + b, 0, height - 1) * width + x;
+        const size_t rows[3] = {(size_t)max(y - 1, 0) * width + x, i, (size_t)min(y + 1, height - 1) * width + x};
+#pragma unroll
+        for (int b = 0; b < 3; ++b)
+#pragma unroll
             for (int a = -1; a <= 1; ++a) {
-                const float8 dq = vload8(0, depth + r + a);
+                const float8 dq = vload8(0, depth + rows[b] + a);
                 nearest = fmin(nearest, dq);
-                if (a == 0 && b == 0) continue;  /* uniform: the same for every work-item */
-                const float8 lq = dof_luma8(src + r + a, n);
+                const float8 lq = (a == 0 && b == 1) ? (float8)(0.0f) : dof_luma8(src + rows[b] + a, n);
                 brightest_same = fmax(brightest_same, select((float8)(0.0f), lq, dq >= DOF_MIXED_SAME_DEPTH * d));
             }
-        }
         const float8 s = select(d, nearest, (lum > DOF_MIXED_BRIGHTER * brightest_same) & (nearest < d));
         const float8 inv_s = select(1.0f / s, (float8)(0.0f), isinf(s));
         vstore8(clamp(k * (inv_u - inv_s), -limit, limit), 0, coc + i);

@@ -37,7 +37,7 @@ def _launch(q, kernel, size, local):
     return cl.enqueue_nd_range_kernel(q, kernel, glob, (local, local))
 
 
-def _launch_rows(q, kernel, size, per_item=8, local=(8, 8)):
+def _launch_rows(q, kernel, size, per_item=8, local=(8, 1)):
     """Kernels that do ``per_item`` pixels of a row per work-item (explicit float8): the x size
     divided by ``per_item``, then rounded up to whole work-groups like :func:`_launch`."""
     import pyopencl as cl
