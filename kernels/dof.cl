@@ -2,7 +2,8 @@
  * s = 2^l over the tent-prefiltered level l (dof_levels.cl), near/far layers, bladed + textured +
  * cat's-eye bokeh; and the half-resolution composite. Every formula is in clpost/stages/dof.py
  * (the float64 reference mirrors this line by line).
- * Structural: DOF_TILE (= local size), DOF_RMAX, DOF_SCALE, DOF_BUDGET, DOF_LEVELS, DOF_VIGNETTING.
+ * Structural: DOF_TILE (tile = work-group of DOF_TILE/8 x DOF_TILE work-items), DOF_RMAX, DOF_SCALE, DOF_BUDGET, DOF_LEVELS, DOF_VIGNETTING,
+ * DOF_TEXTURE (spherical aberration's texture on: σ ≠ 0).
  * The tap count and stride are uniform per work-group (one tile), tap offsets uniform across
  * work-items, and borders are padded, so no tap is clamped.
  */
@@ -14,12 +15,14 @@
 
 typedef struct { float8 r, g, b, wf, fr, fg, fb, wb; } DofAcc8;
 
-/* one source tap for 8 neighbouring target pixels: colours (cr, cg, cb), signed CoC rq at
- * offset (dx, dy) px, |o| = dist px; the tap's constants are uniform (scalars). Selects and
- * float8 arithmetic only, no branch. */
+/* one source tap for 8 neighbouring target pixels: colours (cr, cg, cb), signed CoC rq and
+ * iq = 1/max(|rq|, 1/2) at offset (dx, dy) px, |o| = dist px; the tap's constants (ρ and 1/ρ
+ * of both layers) are uniform scalars. Selects and float8 arithmetic only: no branch, no
+ * division (1/r comes from the level's fifth plane, 1/ρ from the tap table). */
 inline void dof_tap8(DofAcc8 *acc, const float8 cr, const float8 cg, const float8 cb, const float8 rq,
-                     const float8 rp, const float8 arp, const float dist, const float rhof,
-                     const float rhon, const float inv_s, const float cell, const float sa,
+                     const float8 iq, const float8 rp, const float8 arp, const float8 iarp,
+                     const float dist, const float rhof, const float rhon, const float irhof,
+                     const float irhon, const float inv_s, const float cell, const float sa,
                      const float8 hx, const float8 hy, const int dx, const int dy, const float8 pvq,
                      const float vig)
 {
@@ -28,16 +31,21 @@ inline void dof_tap8(DofAcc8 *acc, const float8 cr, const float8 cg, const float
     const int8 far = rq >= 0.0f;
     /* r = max(|rp|, 1/2) behind p (background clamp), else max(|rq|, 1/2) */
     const float8 r = select(fmax(fabs(rq), 0.5f), arp, behind);
-    const float8 rho = select((float8)(rhon), (float8)(rhof), far);
-    const float8 rr = r * rho;
+    const float8 ir = select(iq, iarp, behind);
+    const float8 rr = r * select((float8)(rhon), (float8)(rhof), far);
     const float8 cov = clamp((rr - dist) * inv_s + 0.5f, 0.0f, 1.0f);
-    const float8 t = fmin(dist / rr, 1.0f);
-    const float8 a = select((float8)(sa), (float8)(-sa), far);
-    float8 w = cov * (1.0f + a * (2.0f * t * t - 1.0f)) * cell / (r * r);
+    float8 w = cov * (cell * ir * ir);
+#if DOF_TEXTURE
+    {
+        const float8 t = fmin(dist * ir * select((float8)(irhon), (float8)(irhof), far), 1.0f);
+        const float8 a = select((float8)(sa), (float8)(-sa), far);
+        w *= 1.0f + a * (2.0f * t * t - 1.0f);
+    }
+#endif
 #if DOF_VIGNETTING
     {
-        const float8 sr = select(-r, r, far);  /* r sgn */
-        const float8 ex = -(float)dx / sr - vig * hx, ey = -(float)dy / sr - vig * hy;
+        const float8 sir = select(-ir, ir, far);  /* 1 / (r sgn) */
+        const float8 ex = -(float)dx * sir - vig * hx, ey = -(float)dy * sir - vig * hy;
         const float8 e = sqrt(ex * ex + ey * ey);
         /* per-source pupil area (pv = 1/area fraction): the clipped bokeh keeps its energy */
         w *= clamp((1.0f - e) * r + 0.5f, 0.0f, 1.0f) * pvq;
@@ -54,7 +62,8 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                   __global const int *restrict tn,
                   __constant const int *restrict tap_dx, __constant const int *restrict tap_dy,
                   __constant const float *restrict tap_dist, __constant const float *restrict rho_far,
-                  __constant const float *restrict rho_near,
+                  __constant const float *restrict rho_near, __constant const float *restrict inv_rho_far,
+                  __constant const float *restrict inv_rho_near,
                   __global float *restrict out, __global float *restrict alpha_out,
                   const int ww, const int hw, const int pad, const int tw,
                   const float inv_area, const float sa, const float vig,
@@ -71,9 +80,9 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     const int pw = DOF_PW(ww, pad);
     const size_t pn = (size_t)pw * DOF_PW(hw, pad);
     const size_t c0 = (size_t)(y + pad) * pw + (x + pad);
-    __global const float *L = lv + (size_t)4 * lvl * pn;
+    __global const float *L = lv + (size_t)DOF_PLANES * lvl * pn;
     const float8 rp = vload8(0, lv + 3 * pn + c0);
-    const float8 arp = fmax(fabs(rp), 0.5f);
+    const float8 arp = fmax(fabs(rp), 0.5f), iarp = 1.0f / arp;
     const float8 lane = (float8)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f);
     const float8 hx0 = ((float)x + lane - cx) * inv_half;
     const float hy0 = ((float)y - cy) * inv_half;
@@ -87,15 +96,15 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
         dof_tap8(&acc, vload8(0, lv + c0) * ob + vload8(0, L + c0) * beta,
                  vload8(0, lv + pn + c0) * ob + vload8(0, L + pn + c0) * beta,
                  vload8(0, lv + 2 * pn + c0) * ob + vload8(0, L + 2 * pn + c0) * beta,
-                 rp, rp, arp, 0.0f, rho_far[0], rho_near[0], inv_s, cell, sa, hx0, (float8)(hy0), 0, 0,
+                 rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0], inv_s, cell, sa, hx0, (float8)(hy0), 0, 0,
                  DOF_VIGNETTING ? vload8(0, pv + c0) : (float8)(1.0f), vig);
     }
     for (int k = 1; k < count; ++k) {
         const int dx = s * tap_dx[k], dy = s * tap_dy[k];
         const size_t q = (size_t)((long)c0 + (long)dy * pw + dx);
         dof_tap8(&acc, vload8(0, L + q), vload8(0, L + pn + q), vload8(0, L + 2 * pn + q),
-                 vload8(0, L + 3 * pn + q), rp, arp, fs * tap_dist[k], rho_far[k], rho_near[k],
-                 inv_s, cell, sa, ((float)(x + dx) + lane - cx) * inv_half, (float8)(((float)(y + dy) - cy) * inv_half),
+                 vload8(0, L + 3 * pn + q), vload8(0, L + 4 * pn + q), rp, arp, iarp, fs * tap_dist[k],
+                 rho_far[k], rho_near[k], inv_rho_far[k], inv_rho_near[k], inv_s, cell, sa, ((float)(x + dx) + lane - cx) * inv_half, (float8)(((float)(y + dy) - cy) * inv_half),
                  dx, dy, DOF_VIGNETTING ? vload8(0, pv + q) : (float8)(1.0f), vig);
     }
     const float8 alpha = fmin(1.0f, acc.wf);

@@ -118,7 +118,9 @@ __kernel void dof_prepare(__global const float *restrict src, __global const flo
         vstore8(vload8(0, src + j), 0, lv + o);
         vstore8(vload8(0, src + n + j), 0, lv + pn + o);
         vstore8(vload8(0, src + 2 * n + j), 0, lv + 2 * pn + o);
-        vstore8(vload8(0, coc + j), 0, lv + 3 * pn + o);
+        const float8 r = vload8(0, coc + j);
+        vstore8(r, 0, lv + 3 * pn + o);
+        vstore8(DOF_INV_R(r), 0, lv + 4 * pn + o);
 #else
         const size_t j0 = (size_t)(2 * yw) * width + 2 * xw;
         const size_t j1 = (size_t)min(2 * yw + 1, height - 1) * width + 2 * xw;
@@ -127,13 +129,16 @@ __kernel void dof_prepare(__global const float *restrict src, __global const flo
             vstore8(0.25f * (((a.even + a.odd) + b.even) + b.odd), 0, lv + c * pn + o);
         }
         const float16 a = vload16(0, coc + j0), b = vload16(0, coc + j1);
-        vstore8(fmin(fmin(a.even, a.odd), fmin(b.even, b.odd)) / DOF_SCALE, 0, lv + 3 * pn + o);
+        const float8 r = fmin(fmin(a.even, a.odd), fmin(b.even, b.odd)) / DOF_SCALE;
+        vstore8(r, 0, lv + 3 * pn + o);
+        vstore8(DOF_INV_R(r), 0, lv + 4 * pn + o);
 #endif
     } else {
         for (int xi = gx; xi < min(gx + 8, pw); ++xi) {
             const float4 v = dof_prepare_px(src, coc, xi, gy, width, height, ww, hw, pad);
             const size_t oi = (size_t)gy * pw + xi;
             lv[oi] = v.x; lv[pn + oi] = v.y; lv[2 * pn + oi] = v.z; lv[3 * pn + oi] = v.w;
+            lv[4 * pn + oi] = DOF_INV_R(v.w);
         }
     }
 #if DOF_VIGNETTING

@@ -1,7 +1,8 @@
 /* dof: prefiltered lattice levels of the padded working buffers (clpost/stages/dof.py,
  * prefiltered_levels). Level l+1 = level l convolved with (1, 2, 1)/4 at spacing s = 2^l along x
  * then y (tent of half-width 2s), CoC = min over the offsets -s, 0, s (min over the (4s-1)^2
- * window). Layout of `lv`: level l, channel c (R, G, B, CoC) of padded pixel o at (4 l + c) pn + o.
+ * window). Layout of `lv`: level l, channel c (R, G, B, CoC, 1/max(|CoC|, 1/2)) of padded pixel o
+ * at (DOF_PLANES l + c) pn + o; `tmp` has the first four.
  * Reads beyond the padded buffer clamp (the reference does the same).
  * Each work-item does DOF_LVEC pixels of a row in explicit float8 (PoCL did not vectorise the
  * per-pixel form: 25 ms per pass at 1080p, measured); the few groups of 8 that touch the
@@ -16,7 +17,7 @@ __kernel void dof_levels_x(__global const float *restrict lv, __global float *re
     const int x = DOF_LVEC * get_global_id(0), y = get_global_id(1);
     if (x >= pw || y >= ph) return;
     const size_t pn = (size_t)pw * ph, row = (size_t)y * pw;
-    __global const float *src = lv + (size_t)4 * lv_in * pn;
+    __global const float *src = lv + (size_t)DOF_PLANES * lv_in * pn;
     if (x - s >= 0 && x + DOF_LVEC - 1 + s <= pw - 1) {
         const size_t o = row + x;
         for (int c = 0; c < 3; ++c) {
@@ -44,18 +45,22 @@ __kernel void dof_levels_y(__global const float *restrict tmp, __global float *r
     const size_t pn = (size_t)pw * ph;
     const size_t o = (size_t)y * pw + x, a = (size_t)max(y - s, 0) * pw + x;
     const size_t b = (size_t)min(y + s, ph - 1) * pw + x;
-    __global float *dst = lv + (size_t)4 * lv_out * pn;
+    __global float *dst = lv + (size_t)DOF_PLANES * lv_out * pn;
     if (x + DOF_LVEC <= pw) {
         for (int c = 0; c < 3; ++c)
             vstore8(0.25f * (vload8(0, tmp + c * pn + a) + 2.0f * vload8(0, tmp + c * pn + o)
                              + vload8(0, tmp + c * pn + b)), 0, dst + c * pn + o);
-        vstore8(fmin(fmin(vload8(0, tmp + 3 * pn + a), vload8(0, tmp + 3 * pn + o)),
-                     vload8(0, tmp + 3 * pn + b)), 0, dst + 3 * pn + o);
+        const float8 r = fmin(fmin(vload8(0, tmp + 3 * pn + a), vload8(0, tmp + 3 * pn + o)),
+                              vload8(0, tmp + 3 * pn + b));
+        vstore8(r, 0, dst + 3 * pn + o);
+        vstore8(DOF_INV_R(r), 0, dst + 4 * pn + o);
         return;
     }
     for (int j = 0; j < pw - x; ++j) {
         for (int c = 0; c < 3; ++c)
             dst[c * pn + o + j] = 0.25f * (tmp[c * pn + a + j] + 2.0f * tmp[c * pn + o + j] + tmp[c * pn + b + j]);
-        dst[3 * pn + o + j] = fmin(fmin(tmp[3 * pn + a + j], tmp[3 * pn + o + j]), tmp[3 * pn + b + j]);
+        const float r = fmin(fmin(tmp[3 * pn + a + j], tmp[3 * pn + o + j]), tmp[3 * pn + b + j]);
+        dst[3 * pn + o + j] = r;
+        dst[4 * pn + o + j] = DOF_INV_R(r);
     }
 }

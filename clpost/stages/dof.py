@@ -513,7 +513,8 @@ class Dof(GatherStage):
         scale, rmax, budget = QUALITY[self.quality]
         return {"DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_TILE": TILE, "DOF_BUDGET": budget,
                 "DOF_LEVELS": levels_for(rmax, budget),
-                "DOF_VIGNETTING": int(camera.optical_vignetting > 0)}
+                "DOF_VIGNETTING": int(camera.optical_vignetting > 0),
+                "DOF_TEXTURE": int(camera.spherical_aberration != 0)}
 
     def reference(self, camera, frame, color):
         return dof_reference(camera, color, frame.depth, self.quality)

@@ -74,9 +74,10 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
         cache = {
             "key": key, "k": _kernels(rt, defines),
             "taps": [const(dx), const(dy), const(dist.astype(np.float32)), const(rf.astype(np.float32)),
-                     const(rn.astype(np.float32))],
+                     const(rn.astype(np.float32)), const((1.0 / rf).astype(np.float32)),
+                     const((1.0 / rn).astype(np.float32))],
             "ntaps": const(ntaps),
-            "coc": rt.empty((h, w)), "lv": rt.empty((nlev + 1, 4, ph, pw)),
+            "coc": rt.empty((h, w)), "lv": rt.empty((nlev + 1, 5, ph, pw)),
             "tmp": rt.empty((4, ph, pw)) if nlev else None,
             "pv": rt.empty((ph, pw) if camera.optical_vignetting > 0 else (1,)),
             "tmax": rt.empty((th, tw)), "tn": rt.empty((th, tw), np.int32),
