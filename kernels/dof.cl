@@ -9,49 +9,67 @@
  */
 
 #define DOF_FRONT_MARGIN 1.0f
-/* pixels per work-item along x (explicit float8: PoCL does not vectorise across work-items
- * around a tap loop whose trip count is only known per tile) */
+/* DOF_VEC pixels of a row per work-item in explicit vectors (PoCL does not vectorise across
+ * work-items around a tap loop whose trip count is only known per tile): 16 on AVX-512 (one
+ * register per vector, 32 registers hold the accumulators), else 8 */
+#ifndef DOF_VEC
 #define DOF_VEC 8
+#endif
+#if DOF_VEC == 16
+#define DOF_F float16
+#define DOF_I int16
+#define DOF_LOAD(p) vload16(0, (p))
+#define DOF_STORE(v, p) vstore16((v), 0, (p))
+#define DOF_LANES ((float16)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f, 8.0f, 9.0f, 10.0f, 11.0f, 12.0f, 13.0f, 14.0f, 15.0f))
+#elif DOF_VEC == 8
+#define DOF_F float8
+#define DOF_I int8
+#define DOF_LOAD(p) vload8(0, (p))
+#define DOF_STORE(v, p) vstore8((v), 0, (p))
+#define DOF_LANES ((float8)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f))
+#else
+#error "DOF_VEC must be 8 or 16"
+#endif
 
-typedef struct { float8 r, g, b, wf, fr, fg, fb, wb; } DofAcc8;
+typedef struct { DOF_F r, g, b, wf, fr, fg, fb, wb; } DofAccV;
 
 /* one source tap for 8 neighbouring target pixels: colours (cr, cg, cb), signed CoC rq and
  * iq = 1/max(|rq|, 1/2) at offset (dx, dy) px, |o| = dist px; the tap's constants (ρ and 1/ρ
- * of both layers) are uniform scalars. Selects and float8 arithmetic only: no branch, no
+ * of both layers) are uniform scalars. Selects and DOF_F arithmetic only: no branch, no
  * division (1/r comes from the level's fifth plane, 1/ρ from the tap table). */
-inline void dof_tap8(DofAcc8 *acc, const float8 cr, const float8 cg, const float8 cb, const float8 rq,
-                     const float8 iq, const float8 rp, const float8 arp, const float8 iarp,
+inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F cb, const DOF_F rq,
+                     const DOF_F iq, const DOF_F rp, const DOF_F arp, const DOF_F iarp,
                      const float dist, const float rhof, const float rhon, const float irhof,
                      const float irhon, const float inv_s, const float cell, const float sa,
-                     const float8 hx, const float8 hy, const int dx, const int dy, const float8 pvq,
+                     const DOF_F hx, const DOF_F hy, const int dx, const int dy, const DOF_F pvq,
                      const float vig)
 {
-    const int8 front = rq < rp - DOF_FRONT_MARGIN;
-    const int8 behind = rq > rp + DOF_FRONT_MARGIN;
-    const int8 far = rq >= 0.0f;
+    const DOF_I front = rq < rp - DOF_FRONT_MARGIN;
+    const DOF_I behind = rq > rp + DOF_FRONT_MARGIN;
+    const DOF_I far = rq >= 0.0f;
     /* r = max(|rp|, 1/2) behind p (background clamp), else max(|rq|, 1/2) */
-    const float8 r = select(fmax(fabs(rq), 0.5f), arp, behind);
-    const float8 ir = select(iq, iarp, behind);
-    const float8 rr = r * select((float8)(rhon), (float8)(rhof), far);
-    const float8 cov = clamp((rr - dist) * inv_s + 0.5f, 0.0f, 1.0f);
-    float8 w = cov * (cell * ir * ir);
+    const DOF_F r = select(fmax(fabs(rq), 0.5f), arp, behind);
+    const DOF_F ir = select(iq, iarp, behind);
+    const DOF_F rr = r * select((DOF_F)(rhon), (DOF_F)(rhof), far);
+    const DOF_F cov = clamp((rr - dist) * inv_s + 0.5f, 0.0f, 1.0f);
+    DOF_F w = cov * (cell * ir * ir);
 #if DOF_TEXTURE
     {
-        const float8 t = fmin(dist * ir * select((float8)(irhon), (float8)(irhof), far), 1.0f);
-        const float8 a = select((float8)(sa), (float8)(-sa), far);
+        const DOF_F t = fmin(dist * ir * select((DOF_F)(irhon), (DOF_F)(irhof), far), 1.0f);
+        const DOF_F a = select((DOF_F)(sa), (DOF_F)(-sa), far);
         w *= 1.0f + a * (2.0f * t * t - 1.0f);
     }
 #endif
 #if DOF_VIGNETTING
     {
-        const float8 sir = select(-ir, ir, far);  /* 1 / (r sgn) */
-        const float8 ex = -(float)dx * sir - vig * hx, ey = -(float)dy * sir - vig * hy;
-        const float8 e = sqrt(ex * ex + ey * ey);
+        const DOF_F sir = select(-ir, ir, far);  /* 1 / (r sgn) */
+        const DOF_F ex = -(float)dx * sir - vig * hx, ey = -(float)dy * sir - vig * hy;
+        const DOF_F e = sqrt(ex * ex + ey * ey);
         /* per-source pupil area (pv = 1/area fraction): the clipped bokeh keeps its energy */
         w *= clamp((1.0f - e) * r + 0.5f, 0.0f, 1.0f) * pvq;
     }
 #endif
-    const float8 wfr = select((float8)(0.0f), w, front), wbk = w - wfr;
+    const DOF_F wfr = select((DOF_F)(0.0f), w, front), wbk = w - wfr;
     acc->fr += wfr * cr; acc->fg += wfr * cg; acc->fb += wfr * cb; acc->wf += wfr;
     acc->r += wbk * cr; acc->g += wbk * cg; acc->b += wbk * cb; acc->wb += wbk;
 }
@@ -81,48 +99,48 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     const size_t pn = (size_t)pw * DOF_PW(hw, pad);
     const size_t c0 = (size_t)(y + pad) * pw + (x + pad);
     __global const float *L = lv + (size_t)DOF_PLANES * lvl * pn;
-    const float8 rp = vload8(0, lv + 3 * pn + c0);
-    const float8 arp = fmax(fabs(rp), 0.5f), iarp = 1.0f / arp;
-    const float8 lane = (float8)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f);
-    const float8 hx0 = ((float)x + lane - cx) * inv_half;
+    const DOF_F rp = DOF_LOAD(lv + 3 * pn + c0);
+    const DOF_F arp = fmax(fabs(rp), 0.5f), iarp = 1.0f / arp;
+    const DOF_F lane = DOF_LANES;
+    const DOF_F hx0 = ((float)x + lane - cx) * inv_half;
     const float hy0 = ((float)y - cy) * inv_half;
-    DofAcc8 acc = {(float8)(0.0f), (float8)(0.0f), (float8)(0.0f), (float8)(0.0f),
-                   (float8)(0.0f), (float8)(0.0f), (float8)(0.0f), (float8)(0.0f)};
+    DofAccV acc = {(DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f),
+                   (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f)};
     {
         /* centre tap: own colour, blended toward the level's as p's own bokeh outgrows the
          * lattice spacing (a point light's centre must not stay a one-pixel spike) */
-        const float8 beta = clamp(fabs(rp) * inv_s, 0.0f, 1.0f);
-        const float8 ob = 1.0f - beta;
-        dof_tap8(&acc, vload8(0, lv + c0) * ob + vload8(0, L + c0) * beta,
-                 vload8(0, lv + pn + c0) * ob + vload8(0, L + pn + c0) * beta,
-                 vload8(0, lv + 2 * pn + c0) * ob + vload8(0, L + 2 * pn + c0) * beta,
-                 rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0], inv_s, cell, sa, hx0, (float8)(hy0), 0, 0,
-                 DOF_VIGNETTING ? vload8(0, pv + c0) : (float8)(1.0f), vig);
+        const DOF_F beta = clamp(fabs(rp) * inv_s, 0.0f, 1.0f);
+        const DOF_F ob = 1.0f - beta;
+        dof_tapv(&acc, DOF_LOAD(lv + c0) * ob + DOF_LOAD(L + c0) * beta,
+                 DOF_LOAD(lv + pn + c0) * ob + DOF_LOAD(L + pn + c0) * beta,
+                 DOF_LOAD(lv + 2 * pn + c0) * ob + DOF_LOAD(L + 2 * pn + c0) * beta,
+                 rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0], inv_s, cell, sa, hx0, (DOF_F)(hy0), 0, 0,
+                 DOF_VIGNETTING ? DOF_LOAD(pv + c0) : (DOF_F)(1.0f), vig);
     }
     for (int k = 1; k < count; ++k) {
         const int dx = s * tap_dx[k], dy = s * tap_dy[k];
         const size_t q = (size_t)((long)c0 + (long)dy * pw + dx);
-        dof_tap8(&acc, vload8(0, L + q), vload8(0, L + pn + q), vload8(0, L + 2 * pn + q),
-                 vload8(0, L + 3 * pn + q), vload8(0, L + 4 * pn + q), rp, arp, iarp, fs * tap_dist[k],
-                 rho_far[k], rho_near[k], inv_rho_far[k], inv_rho_near[k], inv_s, cell, sa, ((float)(x + dx) + lane - cx) * inv_half, (float8)(((float)(y + dy) - cy) * inv_half),
-                 dx, dy, DOF_VIGNETTING ? vload8(0, pv + q) : (float8)(1.0f), vig);
+        dof_tapv(&acc, DOF_LOAD(L + q), DOF_LOAD(L + pn + q), DOF_LOAD(L + 2 * pn + q),
+                 DOF_LOAD(L + 3 * pn + q), DOF_LOAD(L + 4 * pn + q), rp, arp, iarp, fs * tap_dist[k],
+                 rho_far[k], rho_near[k], inv_rho_far[k], inv_rho_near[k], inv_s, cell, sa, ((float)(x + dx) + lane - cx) * inv_half, (DOF_F)(((float)(y + dy) - cy) * inv_half),
+                 dx, dy, DOF_VIGNETTING ? DOF_LOAD(pv + q) : (DOF_F)(1.0f), vig);
     }
-    const float8 alpha = fmin(1.0f, acc.wf);
-    const float8 inv_wf = select((float8)(0.0f), 1.0f / acc.wf, acc.wf > 0.0f);
-    const float8 inv_wb = 1.0f / acc.wb;
-    const float8 ob = 1.0f - alpha, af = alpha * inv_wf;
-    const float8 o_r = af * acc.fr + ob * (acc.r * inv_wb);
-    const float8 o_g = af * acc.fg + ob * (acc.g * inv_wb);
-    const float8 o_b = af * acc.fb + ob * (acc.b * inv_wb);
+    const DOF_F alpha = fmin(1.0f, acc.wf);
+    const DOF_F inv_wf = select((DOF_F)(0.0f), 1.0f / acc.wf, acc.wf > 0.0f);
+    const DOF_F inv_wb = 1.0f / acc.wb;
+    const DOF_F ob = 1.0f - alpha, af = alpha * inv_wf;
+    const DOF_F o_r = af * acc.fr + ob * (acc.r * inv_wb);
+    const DOF_F o_g = af * acc.fg + ob * (acc.g * inv_wb);
+    const DOF_F o_b = af * acc.fb + ob * (acc.b * inv_wb);
     if (y >= hw || x >= ww) return;
     const size_t n = (size_t)ww * hw, i = (size_t)y * ww + x;
     if (x + DOF_VEC <= ww) {
-        vstore8(o_r, 0, out + i); vstore8(o_g, 0, out + n + i); vstore8(o_b, 0, out + 2 * n + i);
-        vstore8(alpha, 0, alpha_out + i);
+        DOF_STORE(o_r, out + i); DOF_STORE(o_g, out + n + i); DOF_STORE(o_b, out + 2 * n + i);
+        DOF_STORE(alpha, alpha_out + i);
     } else {
         /* the image's last, partial group of 8 */
         float tr[DOF_VEC], tg[DOF_VEC], tb[DOF_VEC], ta[DOF_VEC];
-        vstore8(o_r, 0, tr); vstore8(o_g, 0, tg); vstore8(o_b, 0, tb); vstore8(alpha, 0, ta);
+        DOF_STORE(o_r, tr); DOF_STORE(o_g, tg); DOF_STORE(o_b, tb); DOF_STORE(alpha, ta);
         for (int j = 0; j < ww - x; ++j) {
             out[i + j] = tr[j]; out[n + i + j] = tg[j]; out[2 * n + i + j] = tb[j];
             alpha_out[i + j] = ta[j];

@@ -47,6 +47,18 @@ def _launch_rows(q, kernel, size, per_item=8, local=(8, 1)):
     return cl.enqueue_nd_range_kernel(q, kernel, glob, local)
 
 
+def gather_vector_width(rt) -> int:
+    """Pixels per work-item of the gather: 16 where the device's native float vector is 16 wide
+    (AVX-512: 32 registers keep the 8 accumulators and the pixel's constants without spilling),
+    else 8. ``CLPOST_DOF_VEC`` overrides it (8 or 16; for measuring)."""
+    import os
+
+    env = os.environ.get("CLPOST_DOF_VEC")
+    if env in ("8", "16"):
+        return int(env)
+    return 16 if getattr(rt.device, "native_vector_width_float", 8) >= 16 else 8
+
+
 def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     import pyopencl as cl
 
@@ -59,7 +71,8 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     pad = D.gather_pad(rmax, budget)
     tw, th = -(-ww // T), -(-hw // T)
     pw, ph = tw * T + 2 * pad, th * T + 2 * pad  # DOF_PW in dof_common.cl: whole tiles + border
-    defines = stage.defines(camera)
+    vec = gather_vector_width(rt)
+    defines = {**stage.defines(camera), "DOF_VEC": vec}
     key = (id(rt), tuple(sorted(defines.items())), w, h, camera.blades, camera.blade_rotation_deg,
            camera.aperture_roundness)
     cache = getattr(stage, "_cl_cache", None)
@@ -112,8 +125,8 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     k["dof"].set_args(cache["lv"], cache["pv"], cache["tn"], *cache["taps"], target, cache["alpha"],
                              i32(ww), i32(hw), i32(pad), i32(tw), cache["inv_area"],
                              f32(camera.spherical_aberration), *field)
-    # one work-group per tile, DOF_VEC (8) pixels of a row per work-item (dof.cl)
-    evs.append(cl.enqueue_nd_range_kernel(q, k["dof"], (tw * T // 8, th * T), (T // 8, T)))
+    # one work-group per tile, DOF_VEC pixels of a row per work-item (dof.cl)
+    evs.append(cl.enqueue_nd_range_kernel(q, k["dof"], (tw * T // vec, th * T), (T // vec, T)))
     if scale > 1:
         k["dof_upsample"].set_args(src, cache["coc"], cache["blur"], cache["alpha"], cache["lv"], dst,
                                    i32(w), i32(h), i32(ww), i32(hw), i32(pad))
