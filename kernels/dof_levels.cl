@@ -4,11 +4,11 @@
  * window). Layout of `lv`: level l, channel c (R, G, B, CoC, 1/max(|CoC|, 1/2)) of padded pixel o
  * at (DOF_PLANES l + c) pn + o; `tmp` has the first four.
  * Reads beyond the padded buffer clamp (the reference does the same).
- * Each work-item does DOF_LVEC pixels of a row in explicit float8 (PoCL did not vectorise the
+ * Each work-item does DOF_LVEC pixels of a row in explicit float16 (PoCL did not vectorise the
  * per-pixel form: 25 ms per pass at 1080p, measured); the few groups of 8 that touch the
  * buffer's left/right end (where the clamp matters) or its partial last group go pixel by pixel.
  */
-#define DOF_LVEC 8
+#define DOF_LVEC 16
 
 /* x pass: level `lv_in` of lv -> tmp (4 planes) */
 __kernel void dof_levels_x(__global const float *restrict lv, __global float *restrict tmp,
@@ -22,10 +22,10 @@ __kernel void dof_levels_x(__global const float *restrict lv, __global float *re
         const size_t o = row + x;
         for (int c = 0; c < 3; ++c) {
             __global const float *p = src + c * pn + o;
-            vstore8(0.25f * (vload8(0, p - s) + 2.0f * vload8(0, p) + vload8(0, p + s)), 0, tmp + c * pn + o);
+            vstore16(0.25f * (vload16(0, p - s) + 2.0f * vload16(0, p) + vload16(0, p + s)), 0, tmp + c * pn + o);
         }
         __global const float *p = src + 3 * pn + o;
-        vstore8(fmin(fmin(vload8(0, p - s), vload8(0, p)), vload8(0, p + s)), 0, tmp + 3 * pn + o);
+        vstore16(fmin(fmin(vload16(0, p - s), vload16(0, p)), vload16(0, p + s)), 0, tmp + 3 * pn + o);
         return;
     }
     for (int xi = x; xi < min(x + DOF_LVEC, pw); ++xi) {
@@ -48,12 +48,12 @@ __kernel void dof_levels_y(__global const float *restrict tmp, __global float *r
     __global float *dst = lv + (size_t)DOF_PLANES * lv_out * pn;
     if (x + DOF_LVEC <= pw) {
         for (int c = 0; c < 3; ++c)
-            vstore8(0.25f * (vload8(0, tmp + c * pn + a) + 2.0f * vload8(0, tmp + c * pn + o)
-                             + vload8(0, tmp + c * pn + b)), 0, dst + c * pn + o);
-        const float8 r = fmin(fmin(vload8(0, tmp + 3 * pn + a), vload8(0, tmp + 3 * pn + o)),
-                              vload8(0, tmp + 3 * pn + b));
-        vstore8(r, 0, dst + 3 * pn + o);
-        vstore8(DOF_INV_R(r), 0, dst + 4 * pn + o);
+            vstore16(0.25f * (vload16(0, tmp + c * pn + a) + 2.0f * vload16(0, tmp + c * pn + o)
+                             + vload16(0, tmp + c * pn + b)), 0, dst + c * pn + o);
+        const float16 r = fmin(fmin(vload16(0, tmp + 3 * pn + a), vload16(0, tmp + 3 * pn + o)),
+                              vload16(0, tmp + 3 * pn + b));
+        vstore16(r, 0, dst + 3 * pn + o);
+        vstore16(DOF_INV_R(r), 0, dst + 4 * pn + o);
         return;
     }
     for (int j = 0; j < pw - x; ++j) {

@@ -114,9 +114,9 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     evs.append(_launch_rows(q, k["dof_prepare"], (pw, ph)))
     for lvl in range(nlev):
         k["dof_levels_x"].set_args(cache["lv"], cache["tmp"], i32(pw), i32(ph), i32(2 ** lvl), i32(lvl))
-        evs.append(_launch_rows(q, k["dof_levels_x"], (pw, ph)))
+        evs.append(_launch_rows(q, k["dof_levels_x"], (pw, ph), 16))
         k["dof_levels_y"].set_args(cache["tmp"], cache["lv"], i32(pw), i32(ph), i32(2 ** lvl), i32(lvl + 1))
-        evs.append(_launch_rows(q, k["dof_levels_y"], (pw, ph)))
+        evs.append(_launch_rows(q, k["dof_levels_y"], (pw, ph), 16))
     k["dof_tile_max"].set_args(cache["lv"], cache["tmax"], i32(ww), i32(hw), i32(pad), i32(tw), i32(th))
     evs.append(_launch(q, k["dof_tile_max"], (tw, th), 4))
     k["dof_tile_dilate"].set_args(cache["tmax"], cache["tn"], cache["ntaps"], i32(tw), i32(th))
