@@ -34,40 +34,40 @@ inline float dof_coc_px(__global const float *src, __global const float *depth, 
     return clamp(k * (inv_u - inv_s), -limit, limit);
 }
 
-inline float8 dof_luma8(__global const float *p, const size_t n) {
-    return 0.2126f * vload8(0, p) + 0.7152f * vload8(0, p + n) + 0.0722f * vload8(0, p + 2 * n);
+inline float16 dof_luma16(__global const float *p, const size_t n) {
+    return 0.2126f * vload16(0, p) + 0.7152f * vload16(0, p + n) + 0.0722f * vload16(0, p + 2 * n);
 }
 
-/* 8 pixels of a row per work-item in explicit float8 (PoCL did not vectorise the per-pixel
- * form, measured 18 ms at 1080p); groups of 8 touching the left/right edge or the image's end
- * take the per-pixel path (same formula). Launched over (ceil(width / 8), height). */
+/* 16 pixels of a row per work-item in explicit float16 (PoCL did not vectorise the per-pixel
+ * form, measured 18 ms at 1080p); groups of 16 touching the left/right edge or the image's end
+ * take the per-pixel path (same formula). Launched over (ceil(width / 16), height). */
 __kernel void dof_coc(__global const float *restrict src, __global const float *restrict depth,
                       __global float *restrict coc, const int width, const int height,
                       const float k, const float inv_u, const float limit)
 {
-    const int x = 8 * get_global_id(0), y = get_global_id(1);
+    const int x = 16 * get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
-    if (x >= 1 && x + 8 <= width - 1) {
-        const float8 d = vload8(0, depth + i);
-        const float8 lum = dof_luma8(src + i, n);
-        float8 nearest = d, brightest_same = (float8)(0.0f);
+    if (x >= 1 && x + 16 <= width - 1) {
+        const float16 d = vload16(0, depth + i);
+        const float16 lum = dof_luma16(src + i, n);
+        float16 nearest = d, brightest_same = (float16)(0.0f);
         const size_t rows[3] = {(size_t)max(y - 1, 0) * width + x, i, (size_t)min(y + 1, height - 1) * width + x};
 #pragma unroll
         for (int b = 0; b < 3; ++b)
 #pragma unroll
             for (int a = -1; a <= 1; ++a) {
-                const float8 dq = vload8(0, depth + rows[b] + a);
+                const float16 dq = vload16(0, depth + rows[b] + a);
                 nearest = fmin(nearest, dq);
-                const float8 lq = (a == 0 && b == 1) ? (float8)(0.0f) : dof_luma8(src + rows[b] + a, n);
-                brightest_same = fmax(brightest_same, select((float8)(0.0f), lq, dq >= DOF_MIXED_SAME_DEPTH * d));
+                const float16 lq = (a == 0 && b == 1) ? (float16)(0.0f) : dof_luma16(src + rows[b] + a, n);
+                brightest_same = fmax(brightest_same, select((float16)(0.0f), lq, dq >= DOF_MIXED_SAME_DEPTH * d));
             }
-        const float8 s = select(d, nearest, (lum > DOF_MIXED_BRIGHTER * brightest_same) & (nearest < d));
-        const float8 inv_s = select(1.0f / s, (float8)(0.0f), isinf(s));
-        vstore8(clamp(k * (inv_u - inv_s), -limit, limit), 0, coc + i);
+        const float16 s = select(d, nearest, (lum > DOF_MIXED_BRIGHTER * brightest_same) & (nearest < d));
+        const float16 inv_s = select(1.0f / s, (float16)(0.0f), isinf(s));
+        vstore16(clamp(k * (inv_u - inv_s), -limit, limit), 0, coc + i);
         return;
     }
-    for (int xi = x; xi < min(x + 8, width); ++xi)
+    for (int xi = x; xi < min(x + 16, width); ++xi)
         coc[(size_t)y * width + xi] = dof_coc_px(src, depth, xi, y, width, height, k, inv_u, limit);
 }
 

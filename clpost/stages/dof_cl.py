@@ -106,7 +106,7 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     evs = []
     k["dof_coc"].set_args(src, aux["depth"], cache["coc"], i32(w), i32(h), f32(kc), f32(inv_u),
                           f32(scale * rmax))
-    evs.append(_launch_rows(q, k["dof_coc"], (w, h)))
+    evs.append(_launch_rows(q, k["dof_coc"], (w, h), 16))
     half = math.hypot(ww / 2.0, hw / 2.0)
     field = (f32(camera.optical_vignetting), f32((ww - 1) / 2.0), f32((hw - 1) / 2.0), f32(1.0 / half))
     k["dof_prepare"].set_args(src, cache["coc"], cache["lv"], cache["pv"], i32(w), i32(h),
