@@ -183,40 +183,45 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
 }
 
 #if DOF_SCALE == 2
-/* working pixels m-1 .. m+6 of a row -> the left (x0) and right (x1) bilinear corners of output
- * pixels 2m .. 2m+7: x0 = m-1, m, m, m+1, m+1, m+2, m+2, m+3 with fx = 3/4, 1/4, 3/4, ... */
-#define DOF_LEFT(v) ((float8)((v).s0, (v).s1, (v).s1, (v).s2, (v).s2, (v).s3, (v).s3, (v).s4))
-#define DOF_RIGHT(v) ((float8)((v).s1, (v).s2, (v).s2, (v).s3, (v).s3, (v).s4, (v).s4, (v).s5))
+/* working pixels m-1 .. m+14 of a row (one vload16) -> the left (x0) and right (x1 = x0 + 1)
+ * bilinear corners of output pixels 2m .. 2m+15: x0 = m-1, m, m, m+1, m+1, ..., m+7 with
+ * fx = 3/4, 1/4, 3/4, ... */
+#define DOF_LEFT(v) ((float16)((v).s0, (v).s1, (v).s1, (v).s2, (v).s2, (v).s3, (v).s3, (v).s4, \
+                               (v).s4, (v).s5, (v).s5, (v).s6, (v).s6, (v).s7, (v).s7, (v).s8))
+#define DOF_RIGHT(v) ((float16)((v).s1, (v).s2, (v).s2, (v).s3, (v).s3, (v).s4, (v).s4, (v).s5, \
+                                (v).s5, (v).s6, (v).s6, (v).s7, (v).s7, (v).s8, (v).s8, (v).s9))
 #endif
 
-/* 8 output pixels of a row per work-item, float8 (PoCL did not vectorise the per-pixel form:
- * 22 ms at 1080p, measured); groups of 8 at the image's left/right end per pixel. */
+/* 16 output pixels of a row per work-item, float16 (PoCL did not vectorise the per-pixel form:
+ * 22 ms at 1080p, measured); groups of 16 at the image's left/right end (where the row load
+ * would leave the working row) per pixel. Launched over (ceil(width / 16), height). */
 __kernel void dof_upsample(__global const float *restrict src, __global const float *restrict coc,
                            __global const float *restrict blur, __global const float *restrict alpha,
                            __global const float *restrict lv, __global float *restrict dst,
                            const int width, const int height, const int ww, const int hw, const int pad)
 {
-    const int x = 8 * get_global_id(0), y = get_global_id(1);
+    const int x = 16 * get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
     const size_t n = (size_t)width * height, i = (size_t)y * width + x, nw = (size_t)ww * hw;
     const int pw = DOF_PW(ww, pad);
     __global const float *pr = lv + (size_t)3 * pw * DOF_PW(hw, pad);  /* level 0 CoC */
 #if DOF_SCALE == 2
     const int m = x / 2;
-    if (m >= 1 && m + 4 <= ww - 1 && x + 8 <= width) {
+    if (m >= 1 && m + 14 <= ww - 1 && x + 16 <= width) {
         const float sy = ((float)y + 0.5f) / DOF_SCALE - 0.5f;
         const int y0 = clamp((int)floor(sy), 0, hw - 1), y1 = min(y0 + 1, hw - 1);
         const float fy = clamp(sy - (float)y0, 0.0f, 1.0f);
-        const float8 fx = (float8)(0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f);
-        const float8 r = vload8(0, coc + i);
-        float8 ar = (float8)(0.0f), ag = ar, ab = ar, aa = ar, wsum = ar;
+        const float16 fx = (float16)(0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f,
+                                      0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f);
+        const float16 r = vload16(0, coc + i);
+        float16 ar = (float16)(0.0f), ag = ar, ab = ar, aa = ar, wsum = ar;
 #define DOF_ROW(YS, WL, WR) { \
             const size_t j = (size_t)(YS) * ww + m - 1; \
-            const float8 vr = vload8(0, blur + j), vg = vload8(0, blur + nw + j); \
-            const float8 vb = vload8(0, blur + 2 * nw + j), va = vload8(0, alpha + j); \
-            const float8 vc = DOF_SCALE * vload8(0, pr + (size_t)((YS) + pad) * pw + m - 1 + pad); \
-            const float8 dl = r - DOF_LEFT(vc), dr = r - DOF_RIGHT(vc); \
-            const float8 gl = (WL) / (0.25f + dl * dl), gr = (WR) / (0.25f + dr * dr); \
+            const float16 vr = vload16(0, blur + j), vg = vload16(0, blur + nw + j); \
+            const float16 vb = vload16(0, blur + 2 * nw + j), va = vload16(0, alpha + j); \
+            const float16 vc = DOF_SCALE * vload16(0, pr + (size_t)((YS) + pad) * pw + m - 1 + pad); \
+            const float16 dl = r - DOF_LEFT(vc), dr = r - DOF_RIGHT(vc); \
+            const float16 gl = (WL) / (0.25f + dl * dl), gr = (WR) / (0.25f + dr * dr); \
             ar += gl * DOF_LEFT(vr); ag += gl * DOF_LEFT(vg); ab += gl * DOF_LEFT(vb); aa += gl * DOF_LEFT(va); \
             wsum += gl; \
             ar += gr * DOF_RIGHT(vr); ag += gr * DOF_RIGHT(vg); ab += gr * DOF_RIGHT(vb); aa += gr * DOF_RIGHT(va); \
@@ -224,16 +229,16 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         DOF_ROW(y0, (1.0f - fx) * (1.0f - fy), fx * (1.0f - fy))
         DOF_ROW(y1, (1.0f - fx) * fy, fx * fy)
 #undef DOF_ROW
-        const float8 inv = 1.0f / wsum;
-        const float8 b = fmax(clamp(fabs(r) - 0.5f, 0.0f, 1.0f), aa * inv);
-        const float8 ob = 1.0f - b;
-        vstore8(vload8(0, src + i) * ob + ar * inv * b, 0, dst + i);
-        vstore8(vload8(0, src + n + i) * ob + ag * inv * b, 0, dst + n + i);
-        vstore8(vload8(0, src + 2 * n + i) * ob + ab * inv * b, 0, dst + 2 * n + i);
+        const float16 inv = 1.0f / wsum;
+        const float16 b = fmax(clamp(fabs(r) - 0.5f, 0.0f, 1.0f), aa * inv);
+        const float16 ob = 1.0f - b;
+        vstore16(vload16(0, src + i) * ob + ar * inv * b, 0, dst + i);
+        vstore16(vload16(0, src + n + i) * ob + ag * inv * b, 0, dst + n + i);
+        vstore16(vload16(0, src + 2 * n + i) * ob + ab * inv * b, 0, dst + 2 * n + i);
         return;
     }
 #endif
-    for (int xi = x; xi < min(x + 8, width); ++xi) {
+    for (int xi = x; xi < min(x + 16, width); ++xi) {
         const float3 o = dof_upsample_px(src, coc, blur, alpha, pr, xi, y, width, height, ww, hw, pad, pw);
         const size_t ii = (size_t)y * width + xi;
         dst[ii] = o.x; dst[n + ii] = o.y; dst[2 * n + ii] = o.z;

@@ -130,5 +130,5 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     if scale > 1:
         k["dof_upsample"].set_args(src, cache["coc"], cache["blur"], cache["alpha"], cache["lv"], dst,
                                    i32(w), i32(h), i32(ww), i32(hw), i32(pad))
-        evs.append(_launch_rows(q, k["dof_upsample"], (w, h)))
+        evs.append(_launch_rows(q, k["dof_upsample"], (w, h), 16))
     return evs
