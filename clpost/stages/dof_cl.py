@@ -2,7 +2,7 @@
 
 Kept apart from :mod:`clpost.stages.dof` (formulas + float64 reference) so the oracle reads
 without OpenCL plumbing. Launch sequence: ``dof_coc`` (full res) → ``dof_prepare`` (padded working
-buffers = level 0) → ``dof_levels_x``/``dof_levels_y`` per prefiltered level → ``dof_tile_max`` →
+buffers = level 0) → ``dof_levels`` per prefiltered level → ``dof_tile_max`` →
 ``dof_tile_dilate`` → ``dof`` (the gather) → (half res) ``dof_upsample``.
 """
 from __future__ import annotations
@@ -91,7 +91,6 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
                      const((1.0 / rn).astype(np.float32))],
             "ntaps": const(ntaps),
             "coc": rt.empty((h, w)), "lv": rt.empty((nlev + 1, 5, ph, pw)),
-            "tmp": rt.empty((4, ph, pw)) if nlev else None,
             "pv": rt.empty((ph, pw) if camera.optical_vignetting > 0 else (1,)),
             "tmax": rt.empty((th, tw)), "tn": rt.empty((th, tw), np.int32),
             "alpha": rt.empty((hw, ww)),
@@ -113,10 +112,8 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
                               i32(ww), i32(hw), i32(pad), *field)
     evs.append(_launch_rows(q, k["dof_prepare"], (pw, ph)))
     for lvl in range(nlev):
-        k["dof_levels_x"].set_args(cache["lv"], cache["tmp"], i32(pw), i32(ph), i32(2 ** lvl), i32(lvl))
-        evs.append(_launch_rows(q, k["dof_levels_x"], (pw, ph), 16))
-        k["dof_levels_y"].set_args(cache["tmp"], cache["lv"], i32(pw), i32(ph), i32(2 ** lvl), i32(lvl + 1))
-        evs.append(_launch_rows(q, k["dof_levels_y"], (pw, ph), 16))
+        k["dof_levels"].set_args(cache["lv"], i32(pw), i32(ph), i32(2 ** lvl), i32(lvl))
+        evs.append(_launch_rows(q, k["dof_levels"], (pw, ph), 16))
     k["dof_tile_max"].set_args(cache["lv"], cache["tmax"], i32(ww), i32(hw), i32(pad), i32(tw), i32(th))
     evs.append(_launch(q, k["dof_tile_max"], (tw, th), 4))
     k["dof_tile_dilate"].set_args(cache["tmax"], cache["tn"], cache["ntaps"], i32(tw), i32(th))
