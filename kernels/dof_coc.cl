@@ -98,43 +98,48 @@ inline float4 dof_prepare_px(__global const float *src, __global const float *co
     return (float4)(acc, r / DOF_SCALE);
 }
 
-/* 8 padded pixels of a row per work-item: the groups of 8 whose source is inside the image go
- * in float8 (vload16 + even/odd at half resolution), the rest (border, odd last column) per
- * pixel. Launched over (ceil(pw / 8), ph). */
+/* 16 padded pixels of a row per work-item: the groups of 16 whose source is inside the image go
+ * in float16 (at half resolution two vload16 per row, summed even + odd), the rest (border, odd
+ * last column) per pixel. Launched over (ceil(pw / 16), ph). */
 __kernel void dof_prepare(__global const float *restrict src, __global const float *restrict coc,
                           __global float *restrict lv, __global float *restrict pv,
                           const int width, const int height, const int ww, const int hw, const int pad,
                           const float vig, const float cx, const float cy, const float inv_half)
 {
-    const int gx = 8 * get_global_id(0), gy = get_global_id(1);
+    const int gx = 16 * get_global_id(0), gy = get_global_id(1);
     const int pw = DOF_PW(ww, pad), ph = DOF_PW(hw, pad);
     if (gx >= pw || gy >= ph) return;
     const size_t pn = (size_t)pw * ph, o = (size_t)gy * pw + gx;
     const int xw = gx - pad, yw = clamp(gy - pad, 0, hw - 1);
-    if (xw >= 0 && DOF_SCALE * (xw + 8) <= width && gx + 8 <= pw) {
+    if (xw >= 0 && DOF_SCALE * (xw + 16) <= width && gx + 16 <= pw) {
         const size_t n = (size_t)width * height;
 #if DOF_SCALE == 1
         const size_t j = (size_t)yw * width + xw;
-        vstore8(vload8(0, src + j), 0, lv + o);
-        vstore8(vload8(0, src + n + j), 0, lv + pn + o);
-        vstore8(vload8(0, src + 2 * n + j), 0, lv + 2 * pn + o);
-        const float8 r = vload8(0, coc + j);
-        vstore8(r, 0, lv + 3 * pn + o);
-        vstore8(DOF_INV_R(r), 0, lv + 4 * pn + o);
+        vstore16(vload16(0, src + j), 0, lv + o);
+        vstore16(vload16(0, src + n + j), 0, lv + pn + o);
+        vstore16(vload16(0, src + 2 * n + j), 0, lv + 2 * pn + o);
+        const float16 r = vload16(0, coc + j);
 #else
         const size_t j0 = (size_t)(2 * yw) * width + 2 * xw;
         const size_t j1 = (size_t)min(2 * yw + 1, height - 1) * width + 2 * xw;
         for (int c = 0; c < 3; ++c) {
-            const float16 a = vload16(0, src + c * n + j0), b = vload16(0, src + c * n + j1);
-            vstore8(0.25f * (((a.even + a.odd) + b.even) + b.odd), 0, lv + c * pn + o);
+            /* the 2x2 mean in the per-pixel form's order, ((p00 + p01) + p10) + p11: rows j0, j1
+             * as 32 floats each (two vload16), even = left column, odd = right column */
+            const float16 a0 = vload16(0, src + c * n + j0), a1 = vload16(1, src + c * n + j0);
+            const float16 b0 = vload16(0, src + c * n + j1), b1 = vload16(1, src + c * n + j1);
+            const float8 lo = ((a0.even + a0.odd) + b0.even) + b0.odd;
+            const float8 hi = ((a1.even + a1.odd) + b1.even) + b1.odd;
+            vstore16(0.25f * (float16)(lo, hi), 0, lv + c * pn + o);
         }
-        const float16 a = vload16(0, coc + j0), b = vload16(0, coc + j1);
-        const float8 r = fmin(fmin(a.even, a.odd), fmin(b.even, b.odd)) / DOF_SCALE;
-        vstore8(r, 0, lv + 3 * pn + o);
-        vstore8(DOF_INV_R(r), 0, lv + 4 * pn + o);
+        const float16 a0 = vload16(0, coc + j0), b0 = vload16(0, coc + j1);
+        const float16 a1 = vload16(1, coc + j0), b1 = vload16(1, coc + j1);
+        const float16 r = (float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)),
+                                    fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd))) / DOF_SCALE;
 #endif
+        vstore16(r, 0, lv + 3 * pn + o);
+        vstore16(DOF_INV_R(r), 0, lv + 4 * pn + o);
     } else {
-        for (int xi = gx; xi < min(gx + 8, pw); ++xi) {
+        for (int xi = gx; xi < min(gx + 16, pw); ++xi) {
             const float4 v = dof_prepare_px(src, coc, xi, gy, width, height, ww, hw, pad);
             const size_t oi = (size_t)gy * pw + xi;
             lv[oi] = v.x; lv[pn + oi] = v.y; lv[2 * pn + oi] = v.z; lv[3 * pn + oi] = v.w;
@@ -144,7 +149,7 @@ __kernel void dof_prepare(__global const float *restrict src, __global const flo
 #if DOF_VIGNETTING
     /* 1 / pupil area fraction of a source here (two-disc lens area, |h| capped at the corner):
      * once per pixel instead of an acos per tap */
-    for (int xi = gx; xi < min(gx + 8, pw); ++xi) {
+    for (int xi = gx; xi < min(gx + 16, pw); ++xi) {
         const float hx = ((float)(xi - pad) - cx) * inv_half, hy = ((float)(gy - pad) - cy) * inv_half;
         const float d = vig * fmin(sqrt(hx * hx + hy * hy), 1.0f);
         pv[(size_t)gy * pw + xi] = M_PI_F / (2.0f * acos(0.5f * d) - 0.5f * d * sqrt(4.0f - d * d));
