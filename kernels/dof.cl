@@ -2,7 +2,8 @@
  * s = 2^l over the tent-prefiltered level l (dof_levels.cl), near/far layers, bladed + textured +
  * cat's-eye bokeh; and the half-resolution composite. Every formula is in clpost/stages/dof.py
  * (the float64 reference mirrors this line by line).
- * Structural: DOF_TILE (tile = work-group of DOF_TILE/8 x DOF_TILE work-items), DOF_RMAX, DOF_SCALE, DOF_BUDGET, DOF_LEVELS, DOF_VIGNETTING,
+ * Structural: DOF_TILE (tile = work-group of DOF_TILE/DOF_VEC x DOF_TILE work-items), DOF_VEC,
+ * DOF_RMAX, DOF_SCALE, DOF_BUDGET, DOF_LEVELS, DOF_VIGNETTING,
  * DOF_TEXTURE (spherical aberration's texture on: σ ≠ 0).
  * The tap count and stride are uniform per work-group (one tile), tap offsets uniform across
  * work-items, and borders are padded, so no tap is clamped.
@@ -115,7 +116,8 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
         dof_tapv(&acc, DOF_LOAD(lv + c0) * ob + DOF_LOAD(L + c0) * beta,
                  DOF_LOAD(lv + pn + c0) * ob + DOF_LOAD(L + pn + c0) * beta,
                  DOF_LOAD(lv + 2 * pn + c0) * ob + DOF_LOAD(L + 2 * pn + c0) * beta,
-                 rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0], inv_s, cell, sa, hx0, (DOF_F)(hy0), 0, 0,
+                 rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0],
+                 inv_s, cell, sa, hx0, (DOF_F)(hy0), 0, 0,
                  DOF_VIGNETTING ? DOF_LOAD(pv + c0) : (DOF_F)(1.0f), vig);
     }
     for (int k = 1; k < count; ++k) {
@@ -123,7 +125,8 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
         const size_t q = (size_t)((long)c0 + (long)dy * pw + dx);
         dof_tapv(&acc, DOF_LOAD(L + q), DOF_LOAD(L + pn + q), DOF_LOAD(L + 2 * pn + q),
                  DOF_LOAD(L + 3 * pn + q), DOF_LOAD(L + 4 * pn + q), rp, arp, iarp, fs * tap_dist[k],
-                 rho_far[k], rho_near[k], inv_rho_far[k], inv_rho_near[k], inv_s, cell, sa, ((float)(x + dx) + lane - cx) * inv_half, (DOF_F)(((float)(y + dy) - cy) * inv_half),
+                 rho_far[k], rho_near[k], inv_rho_far[k], inv_rho_near[k], inv_s, cell, sa,
+                 ((float)(x + dx) + lane - cx) * inv_half, (DOF_F)(((float)(y + dy) - cy) * inv_half),
                  dx, dy, DOF_VIGNETTING ? DOF_LOAD(pv + q) : (DOF_F)(1.0f), vig);
     }
     const DOF_F alpha = fmin(1.0f, acc.wf);

@@ -61,7 +61,8 @@ def _launch_rows(q, kernel, size, per_item=16, local=(8, 1)):
 def gather_vector_width(rt) -> int:
     """Pixels per work-item of the gather: 16 where the device's native float vector is 16 wide
     (AVX-512: measured 1.26–1.36× faster than 8 at final; presumably its 32 registers hold the 8
-    accumulators and the pixel's constants without spilling), else 8. ``CLPOST_DOF_VEC`` overrides it (8 or 16; for measuring)."""
+    accumulators and the pixel's constants without spilling), else 8. ``CLPOST_DOF_VEC`` (8 or 16)
+    overrides it, for measuring and for the tests of both widths."""
     import os
 
     env = os.environ.get("CLPOST_DOF_VEC")
