@@ -21,7 +21,9 @@ error. The output has the calibration's size.
 
 Quality: ``draft``/``preview`` bilinear (4 taps); ``final`` Keys (1981) cubic convolution with
 a = −¾ (16 taps, OpenCV's ``INTER_CUBIC``), clamped below at 0 (no negative HDR values; edges
-overshoot by up to ~7 % of the step above). Measured on checkerboards (tools/distortion_calibration.py,
+overshoot by up to ~7 % of the step above). The bicubic reads a per-pixel tap table built with
+the map (:func:`tap_table`: first tap and 8 weights in float64, the edge repeat folded into the
+weights), so its kernel does no floor, clamp or polynomial per tap. Measured on checkerboards (tools/distortion_calibration.py,
 docs/distortion_calibration.md): corners detected on the output lie 0.038 px RMS from the true
 model — the detector's floor on the undistorted render itself — whereas a = −½ clamped to the 4
 nearest samples (the previous filter) gave 0.055 px and cost 10× in recovered k2.
