@@ -69,6 +69,8 @@ def fused_source(stages: list[PointwiseStage], src_layout: str, dst_layout: str)
             params.append(f"{'const ' if '*' not in cl_type else ''}{cl_type} {s.name}_{arg}")
             call_args.append(f"{s.name}_{arg}")
         body.append(f"    c = {s.name}_apply({', '.join(call_args)});")
+    if not stages and src_layout != dst_layout:
+        return name, kernel_source("common") + _convert_source(name, src_layout)
     load = "load_interleaved(src, i)" if src_layout == INTERLEAVED else "load_planar(src, i, n)"
     store = ("store_interleaved(dst, i, c);" if dst_layout == INTERLEAVED
              else "store_planar(dst, i, n, c);")
@@ -90,6 +92,54 @@ __kernel void {name}({", ".join(params)})
 }}
 """)
     return name, "\n".join(parts)
+
+
+CONVERT_PIXELS = 4
+"""Pixels per work-item of a plain layout conversion: three ``vload4`` of 4 interleaved pixels
+and one ``vstore4`` per plane (or the reverse). Measured at 1080p on the 2-core PoCL CPU (same
+run, best of 17): 1.8 ms vs 6.2 ms for one pixel per work-item with scalar loads, whose stride-3
+access PoCL does not vectorise."""
+
+
+def global_size(stages: list[PointwiseStage], src_layout: str, dst_layout: str, w: int, h: int) -> tuple[int, int]:
+    """NDRange of the kernel :func:`fused_source` generates for this group at ``w`` × ``h``."""
+    if not stages and src_layout != dst_layout:
+        return (w + CONVERT_PIXELS - 1) // CONVERT_PIXELS, h
+    return w, h
+
+
+def _convert_source(name: str, src_layout: str) -> str:
+    """Interleaved ↔ planar, :data:`CONVERT_PIXELS` pixels per work-item (a row's last 1–3 pixels
+    one by one)."""
+    if src_layout == INTERLEAVED:
+        whole = """const float4 a = vload4(0, src + 3 * i), b = vload4(1, src + 3 * i), c = vload4(2, src + 3 * i);
+        vstore4((float4)(a.x, a.w, b.z, c.y), 0, dst + i);
+        vstore4((float4)(a.y, b.x, b.w, c.z), 0, dst + n + i);
+        vstore4((float4)(a.z, b.y, c.x, c.w), 0, dst + 2 * n + i);"""
+        one = "store_planar(dst, j, n, load_interleaved(src, j));"
+    else:
+        whole = """const float4 r = vload4(0, src + i), g = vload4(0, src + n + i), b = vload4(0, src + 2 * n + i);
+        vstore4((float4)(r.x, g.x, b.x, r.y), 0, dst + 3 * i);
+        vstore4((float4)(g.y, b.y, r.z, g.z), 0, dst + 3 * i + 4);
+        vstore4((float4)(b.z, r.w, g.w, b.w), 0, dst + 3 * i + 8);"""
+        one = "store_interleaved(dst, j, load_planar(src, j, n));"
+    return f"""
+__kernel void {name}(__global const float *restrict src, __global float *restrict dst,
+                     const int width, const int height)
+{{
+    const int x = get_global_id(0) * {CONVERT_PIXELS};
+    const int y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t i = (size_t)y * (size_t)width + (size_t)x;
+    if (x + {CONVERT_PIXELS} <= width) {{
+        {whole}
+    }} else {{
+        for (size_t j = i; j < i + (size_t)(width - x); ++j)
+            {one}
+    }}
+}}
+"""
 
 
 def _check_calibration_focal(cam: Camera) -> None:
@@ -368,7 +418,8 @@ class Pipeline:
                 for s in node.stages:
                     args += self._arg_values(s, cam, view, bufs)
                 node.kernel.set_args(*args)
-                events.append((node.name, cl.enqueue_nd_range_kernel(q, node.kernel, (w, h), None)))
+                gsize = global_size(node.stages, node.src_layout, node.dst_layout, w, h)
+                events.append((node.name, cl.enqueue_nd_range_kernel(q, node.kernel, gsize, None)))
             src = dst
         w, h = size
         out = np.empty((h, w, 3), np.float32)

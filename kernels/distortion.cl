@@ -81,3 +81,41 @@ __kernel void distortion(__global const float *restrict src, __global float *res
         dst[(size_t)c * n + i] = v;
     }
 }
+
+/* The bicubic resampling (final) from a per-pixel tap table built once per map on the host
+ * (clpost/stages/distortion.py, tap_table): base[i] is the index of the top-left tap of the 4×4
+ * window in a source plane (-1: no preimage, colour 0) and wts holds the 4 horizontal then 4
+ * vertical weights (planes of n), computed in float64 with the edge repeat folded in (the window
+ * is moved inside the source and the weight of a tap beyond the edge is added to the edge tap).
+ * The loop has no floor, no clamp and no filter polynomial: 2.0× faster than `distortion` at
+ * 1080p (45 vs 108 ms, best of 10, same run, loaded machine). Bilinear stays in `distortion`:
+ * its table version was not faster (24.5 vs 17.5 ms). Needs a source of at least 4×4 px. */
+__kernel void distortion_table(__global const float *restrict src, __global float *restrict dst,
+                               __global const int *restrict base, __global const float *restrict wts,
+                               const int src_w, const int src_h, const int width, const int height)
+{
+    const int x = get_global_id(0);
+    const int y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    const int n = width * height, sn = src_w * src_h;
+    const int i = y * width + x;
+    const int b0 = base[i];
+    const int b = b0 < 0 ? 0 : b0;
+    float wx[4], wy[4];
+    for (int k = 0; k < 4; ++k) {
+        wx[k] = wts[k * n + i];
+        wy[k] = wts[(4 + k) * n + i];
+    }
+    for (int c = 0; c < 3; ++c) {
+        const int plane = c * sn + b;
+        float acc = 0.0f;
+        for (int m = 0; m < 4; ++m) {
+            float row = 0.0f;
+            for (int k = 0; k < 4; ++k)
+                row += wx[k] * src[plane + m * src_w + k];
+            acc += wy[m] * row;
+        }
+        acc = acc > 0.0f ? acc : 0.0f;
+        dst[c * n + i] = b0 < 0 ? 0.0f : acc;
+    }
+}

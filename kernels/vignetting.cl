@@ -16,8 +16,14 @@ inline float3 vignetting_apply(const float3 c, const PixelCtx p, const float sen
     const float pitch = sensor_w_mm / (float)p.width;
     const float dx = ((float)p.x - 0.5f * (float)(p.width - 1)) * pitch - off_x_mm;
     const float dy = ((float)p.y - 0.5f * (float)(p.height - 1)) * pitch - off_y_mm;
-    const float t = fmin(sqrt(dx * dx + dy * dy) / r_max_mm, 1.0f) * (float)(VIGNETTING_LUT_SIZE - 1);
-    const int k = min((int)t, VIGNETTING_LUT_SIZE - 2);
+    const float r2 = dx * dx + dy * dy;
+    /* no sqrt/fmin/min library calls: with them vignetting+exposure took 12.2 ms at 1080p on
+     * PoCL, 3.7 ms with native_sqrt and selects (same run); the index needs no correct rounding */
+    const float rr = native_sqrt(r2);
+    float t = rr * ((float)(VIGNETTING_LUT_SIZE - 1) / r_max_mm);
+    t = t < (float)(VIGNETTING_LUT_SIZE - 1) ? t : (float)(VIGNETTING_LUT_SIZE - 1);
+    int k = (int)t;
+    k = k < VIGNETTING_LUT_SIZE - 2 ? k : VIGNETTING_LUT_SIZE - 2;
     const float f = t - (float)k;
     const float ri = lut[k] * (1.0f - f) + lut[k + 1] * f;
     /* per channel: float3 arithmetic stops PoCL's vectorisation of the fused kernel */

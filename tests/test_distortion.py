@@ -74,6 +74,40 @@ def test_kernel_matches_reference_on_odd_sizes(rng, quality):
         assert np.all(np.isfinite(out.color)) and out.color.min() >= 0  # bicubic is clamped at 0: no negative ringing
 
 
+def test_tap_table_reproduces_the_clamping_bicubic_exactly(rng):
+    """The final filter's tap table (edge repeat folded into the weights) applied in float64 equals
+    the float64 oracle, on a map that runs past every edge of the source (barrel, rendered at the
+    calibration's own size: the borders sample outside the render)."""
+    from clpost.stages.distortion import distortion_map, resample, tap_table
+
+    m = OpenCVModel(41, 29, 30, 31, 20.2, 14.4, k1=-0.35, k2=0.1, p1=0.01)
+    src_k = (m.fx, m.fy, m.cx, m.cy)
+    base, w = tap_table(m, (41, 29), src_k)
+    plane = rng.uniform(0, 1e3, (29, 41))
+    flat, b = plane.ravel(), np.maximum(base, 0)
+    acc = np.zeros(base.shape)
+    for mm in range(4):
+        acc += w[4 + mm] * sum(w[j].astype(np.float64) * flat[b + mm * 41 + j] for j in range(4))
+    got = np.where(base >= 0, np.maximum(acc, 0), 0.0)
+    mp, ok = distortion_map(m, (41, 29), src_k)
+    ref = resample(plane, mp.astype(np.float32).astype(np.float64), 3)
+    assert (base < 0).sum() == (~ok).sum() > 0
+    assert ((mp[0] < 1) & ok).any() and ((mp[0] > 39) & ok).any()  # taps beyond both edges
+    # float32 weights (rel. 6e-8, Σ|w| < 1.3 per axis) of values up to 1e3; a folding error is O(1e2)
+    assert np.abs(got - ref).max() < 1e3 * 6e-8 * 1.3 * 1.3 * 2
+
+
+@pytest.mark.parametrize("size", [(3, 2), (1, 5), (4, 4)])
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_tiny_sources_use_the_clamping_kernel_and_match_the_reference(rng, size, quality):
+    w, h = size
+    m = OpenCVModel(w, h, 3.0, 3.0, (w - 1) / 2, (h - 1) / 2, k1=-0.2)
+    frame = Frame(rng.uniform(0, 1, (h, w, 3)).astype(np.float32))
+    pipe = Pipeline(Camera(distortion=m), quality=quality, stages=["distortion"])
+    out = pipe.run(frame)
+    assert np.abs(out.color - pipe.reference(frame)).max() < 1e-5
+
+
 def test_identity_is_not_planned_and_intrinsics_only_is(rng):
     frame = odd_frame(rng)
     m = OpenCVModel(37, 23, 30, 30, 18, 11)
