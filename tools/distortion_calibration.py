@@ -184,6 +184,21 @@ CALIB_FLAGS_DOC = "CALIB_FIX_K3 (the generating model has k3 = 0; k4–k6, s1–
 DETECTORS = ("fit", "subpix")
 
 
+def _corner_refine():
+    """tools/corner_refine.py, loaded from beside this file (tools/ is not a package, and this
+    module is also loaded by path from other tools)."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    if "corner_refine" not in sys.modules:
+        spec = importlib.util.spec_from_file_location("corner_refine", Path(__file__).with_name("corner_refine.py"))
+        module = importlib.util.module_from_spec(spec)
+        sys.modules["corner_refine"] = module
+        spec.loader.exec_module(module)
+    return sys.modules["corner_refine"]
+
+
 def detect_corners(frame, detector: str = "fit") -> np.ndarray | None:
     """Inner corners (N×2 px, OpenCV's order) of ``frame``: ``findChessboardCorners`` on 8 bits,
     then ``cornerSubPix`` on the float luminance (no quantisation in the sub-pixel fit), then
@@ -191,7 +206,7 @@ def detect_corners(frame, detector: str = "fit") -> np.ndarray | None:
     corner whose fit fails keeps its cornerSubPix position)."""
     import cv2
 
-    from corner_refine import refine_grid
+    refine_grid = _corner_refine().refine_grid
 
     ok, corners = cv2.findChessboardCorners(to_gray8(frame.color), PATTERN, flags=cv2.CALIB_CB_ADAPTIVE_THRESH)
     if not ok:
