@@ -132,6 +132,29 @@ def test_bent_lines_and_image_space_blur_versus_corner_subpix():
     assert rms["warp"] < 0.05 * rms_sub["warp"] and rms["area"] < 0.5 * rms_sub["area"], (rms, rms_sub)
 
 
+def test_a_whole_board_is_refined_in_one_batch(rng):
+    """refine_grid fits all corners at once (a damping per corner): a 5×4-corner board under an
+    affine map with separable Gaussian blur, every start 0.5 px off, each corner back to 1e-5."""
+    a = np.array([[21.3, 6.1], [-4.2, 19.7]])  # board units → px, skewed
+    org = np.array([30.4, 25.7])
+    yy, xx = np.mgrid[0:150, 0:170].astype(np.float64)
+    bu, bv = np.linalg.solve(a, np.stack([xx.ravel() - org[0], yy.ravel() - org[1]])).reshape(2, 150, 170)
+    sig = 0.05  # board units (≈ 1 px)
+
+    def filt(t):  # Gaussian-filtered square wave, nearest edge only
+        f = t - np.floor(t)
+        sign = np.where((t - 2.0 * np.floor(t / 2.0)) < 1.0, 1.0, -1.0)
+        return sign * erf(np.minimum(f, 1.0 - f) / (sig * math.sqrt(2.0)))
+
+    img = 0.1 + 0.8 * (0.5 + 0.5 * filt(bu) * filt(bv))
+    gu, gv = np.meshgrid(np.arange(1, 6), np.arange(1, 5))
+    truth = np.stack([gu.ravel(), gv.ravel()], 1) @ a.T + org
+    start = truth + rng.uniform(-0.5, 0.5, truth.shape)
+    out, ok = cr.refine_grid(img, start, (5, 4))
+    err = np.abs(out - truth).max(axis=1)
+    assert ok.all() and err.max() < 1e-5, (int(err.argmax()), err.max())
+
+
 def test_grid_directions_and_a_failed_fit_keeps_the_input_corner():
     g = np.stack(np.meshgrid(np.arange(4) * 20.0 + 10, np.arange(3) * 20.0 + 10), -1).reshape(-1, 2)
     rows, cols = cr.grid_directions(g, (4, 3))
