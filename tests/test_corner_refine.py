@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.ndimage import gaussian_filter
 from scipy.optimize import approx_fprime, fsolve
@@ -77,6 +77,8 @@ def test_jacobian_matches_finite_differences(rng):
 
 
 @settings(max_examples=40, deadline=None)
+# found by hypothesis: a corner on a pixel centre, started on it, stopped LM before θ converged
+@example(dx=0.0, dy=0.0, ang1=0.0, sep=1.0, sig1=1.0, sig2=1.0, start=(0.0, 0.0), tilt=0.25)
 @given(dx=st.floats(-0.5, 0.5), dy=st.floats(-0.5, 0.5), ang1=st.floats(0.0, math.pi),
        sep=st.floats(math.radians(35), math.radians(145)), sig1=st.floats(0.4, 1.6), sig2=st.floats(0.4, 1.6),
        start=st.tuples(st.floats(-0.6, 0.6), st.floats(-0.6, 0.6)), tilt=st.floats(-0.25, 0.25))

@@ -125,7 +125,8 @@ def _levenberg_marquardt(p, x, y, v, w, free, iters: int = 200):
         c_new, r_new = cost_of(q, act)
         ok = np.isfinite(c_new) & (c_new <= cost[act])
         i_ok = act[ok]
-        small = np.abs(step[ok, :2]).max(axis=1) < 1e-10
+        # every parameter, not only the position: a corner on a pixel centre can sit still while θ moves
+        small = np.abs(step[ok]).max(axis=1) < 1e-10
         flat = (cost[i_ok] - c_new[ok]) <= 1e-15 * np.maximum(cost[i_ok], 1e-300)
         p[i_ok], cost[i_ok], r[i_ok] = q[ok], c_new[ok], r_new[ok]
         lam[i_ok] = np.maximum(lam[i_ok] / 3.0, 1e-12)
