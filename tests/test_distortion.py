@@ -251,23 +251,44 @@ def test_cli_process_with_an_opencv_calibration(tmp_path):
 
 def test_checkerboards_calibrate_back_to_their_parameters():
     """The paper's verification on its hardest set (tangential, 17 views, 800×600; all three sets:
-    tools/distortion_calibration.py, docs/distortion_calibration.md): detected corners within
-    0.045 px RMS of the true model's projection, f, c, k1, p1 within 1 %; k2 and p2 are bounded by
-    that corner accuracy (floor 9 % and 1 % at 0.039 px), measured 3.2 % and 3.7 %."""
+    tools/distortion_calibration.py, docs/distortion_calibration.md). The board is Gaussian
+    anti-aliased and corners are saddle fits, exact to < 2e-3 px on the undistorted renders
+    (measured 4e-4), so the remaining error is the stage's: its final filter (Keys a = −¾,
+    first-order) moves edges by up to ~0.04 px with their sub-pixel phase (measured corner RMS
+    0.026 px; k2 8.0 %, p2 6.7 %; f, c, k1, p1 within 1 %). Through the same map with an exact
+    interpolator (cubic B-spline) the check recovers every parameter within 1 % (measured ≤ 0.2 %)."""
     sys.path.insert(0, str(ROOT / "tools"))
     import distortion_calibration as dc
 
     m = dc.parameter_sets((800, 600))["tangential"]
     raw, out = dc.render_views(m, 17)
     assert all(o.alpha.min() == 1 for o in out)  # the extended render leaves nothing unfilled
-    de = dc.detection_error(m, out)
-    assert len(de) == 17 * 117 and np.sqrt(np.mean(de**2)) < 0.045 and np.abs(de.mean(axis=0)).max() < 0.01
-    est, used, rms = dc.calibrate(out, (800, 600))
-    assert used == 17 and rms < 0.06
-    rows = dc.compare(m, est)
+    spec = required_render(m)
+    pin = OpenCVModel(spec.width, spec.height, spec.f, spec.f, spec.cx, spec.cy)
+    assert np.sqrt(np.mean(dc.detection_error(m, raw[:4], pin) ** 2)) < 2e-3  # 4 views: time
+    objp = np.zeros((117, 3))
+    objp[:, :2] = np.mgrid[0:13, 0:9].T.reshape(-1, 2) * dc.SQUARE_M  # OpenCV's detection order
+
+    def check(frames):
+        det = [dc.detect_corners(f) for f in frames]
+        assert all(d is not None for d in det)
+        err = []
+        for v, d in enumerate(det):
+            tru = dc.true_corners(m, v)
+            err.append(d - tru[np.linalg.norm(d[:, None] - tru[None], axis=-1).argmin(axis=1)])
+        err = np.concatenate(err)
+        est, rms = dc.calibrate_points([objp] * 17, det, (800, 600))
+        return float(np.sqrt(np.mean(err**2))), rms, dc.compare(m, est)
+
+    sigma, rms, rows = check(out)
+    assert sigma < 0.035 and rms < 0.05, (sigma, rms)
     for n in ("fx", "fy", "cx", "cy", "k1", "p1"):
         assert rows[n][2] < 0.01, (n, rows[n])
-    assert rows["k2"][2] < 0.04 and rows["p2"][2] < 0.045, (rows["k2"], rows["p2"])
+    assert rows["k2"][2] < 0.10 and rows["p2"][2] < 0.08, (rows["k2"], rows["p2"])
+    sigma, rms, rows = check(dc.resample_what_if(m, raw, "spline3"))
+    assert sigma < 0.003, sigma
+    for n, (t, e, err) in rows.items():
+        assert err < (0.01 if t else 1e-5), (n, rows[n])
 
 
 def test_a_traced_lens_distorts_by_its_own_curve():

@@ -7,11 +7,18 @@ fits, pushed into every image corner and edge) are rendered by the pyvista rende
 extended frustum of :func:`clpost.calibration.required_render` (no unfilled pixels), distorted by
 the clpost pipeline (``--stages distortion``, final = bicubic a = −¾), and fed to
 ``cv2.findChessboardCorners`` + ``cornerSubPix`` + ``cv2.calibrateCamera`` (k3 fixed at 0, as
-the paper). The error sources are separated: detected corners vs the analytic projection of the
+the paper). The board is anti-aliased by a Gaussian of :data:`BOARD_BLUR` px (an optical low-pass;
+``Material.board_blur``) and the corners are refined by a blurred-saddle least-squares fit
+(tools/corner_refine.py; ``--detector subpix`` keeps OpenCV's ``cornerSubPix``): on the
+undistorted renders this pair is exact to ≈ 2e-4 px, so what remains is the stage's. The error
+sources are separated: detected corners vs the analytic projection of the
 true model (:func:`detection_error`), and the conditioning floor of the pose set at that
 detection accuracy (:func:`conditioning_floor`: true corners + Gaussian noise). Also reports the
 residuals of both inverses and the round trip distort → ``cv2.undistort`` vs a direct render.
-Results: docs/distortion_calibration.md.
+``--what-if spline3`` also resamples the same renders through the stage's own map
+(:func:`clpost.stages.distortion.distortion_map`) with another interpolator in numpy (``spline3``:
+cubic B-spline with its prefilter, ``keys-0.5``, ``bilinear``, ``lanczos3``) to show what the
+stage would reach with it. Results: docs/distortion_calibration.md.
 
     PYTHONPATH=. /tmp/venv/bin/python tools/distortion_calibration.py --views 17 --size 800x600 \
         --png /tmp/distortion_check
@@ -25,7 +32,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from clpost import Camera, Pipeline
+from clpost import Camera, Frame, Pipeline
 from clpost.calibration import OpenCVModel, inverse_residual_px, required_render, undistort_newton
 from clpost.render import DemoScene, PyVistaRenderer
 from clpost.render.demo_scene import Material, Plane, RigidMotion, SceneObject
@@ -105,7 +112,14 @@ def board_pose(view: int, model: OpenCVModel, margin_px: float = 6.0) -> tuple[n
     return r, hi * ray
 
 
-def board_scene(view: int, n_views: int, model: OpenCVModel | None = None) -> DemoScene:
+BOARD_BLUR = 1.0
+"""σ of the board's Gaussian anti-aliasing in pixel footprints (``Material.board_blur``). The box
+filter (0) leaves edges ≈ 1 px wide, undersampled: fits and cornerSubPix then depend on where a
+corner falls within its pixel (0.035–0.04 px RMS on the undistorted render); at 1.0 the saddle
+fit is exact to ≈ 2e-4 px there (measured, docs/distortion_calibration.md)."""
+
+
+def board_scene(view: int, n_views: int, model: OpenCVModel | None = None, blur: float = BOARD_BLUR) -> DemoScene:
     """The board in the world xy plane (z up, world = board frame) seen from view ``view`` (see
     :func:`board_pose`; ``n_views`` is accepted for the caller's loop and not needed). Without
     ``model`` (callers that only need the objects to build a renderer) the 800×600 barrel set
@@ -113,7 +127,7 @@ def board_scene(view: int, n_views: int, model: OpenCVModel | None = None) -> De
     model = model or parameter_sets((800, 600))["barrel"]
     board = SceneObject("board", Plane(0.36), Material(albedo=(0.9, 0.9, 0.9), albedo2=(0.04, 0.04, 0.04),
                                                        texture="board", texture_scale_m=SQUARE_M,
-                                                       board_squares=SQUARES), casts_shadow=False)
+                                                       board_squares=SQUARES, board_blur=blur), casts_shadow=False)
     r, t = board_pose(view, model)
     # camera → world: rotation Rᵀ (columns right, down, forward), centre −Rᵀ t
     cam = RigidMotion(position_m=tuple(-r.T @ t), base_rotation=tuple(tuple(row) for row in r.T))
@@ -137,17 +151,17 @@ def true_corners(model: OpenCVModel, view: int, camera: OpenCVModel | None = Non
     return np.c_[u, v]
 
 
-def render_views(model: OpenCVModel, n_views: int, supersample: int = 1):
+def render_views(model: OpenCVModel, n_views: int, supersample: int = 1, blur: float = BOARD_BLUR):
     """(undistorted renders at the extended frustum, distorted outputs) for ``n_views`` poses."""
     spec = required_render(model)
     cam = Camera(distortion=model)
     pipe = Pipeline(cam, quality="final", stages=["distortion"])
-    renderer = PyVistaRenderer(board_scene(0, n_views, model), supersample=supersample)
+    renderer = PyVistaRenderer(board_scene(0, n_views, model, blur), supersample=supersample)
     raw, out = [], []
     try:
         for v in range(n_views):
             # the VTK actors depend only on the objects, identical in every view: swap the scene
-            renderer.scene = board_scene(v, n_views, model)
+            renderer.scene = board_scene(v, n_views, model, blur)
             f = renderer.render(cam, (spec.width, spec.height), 0, spec.intrinsics())
             raw.append(f)
             out.append(pipe.run(f))
@@ -167,17 +181,44 @@ SUBPIX_WINDOW = (7, 7)
 CALIB_FLAGS_DOC = "CALIB_FIX_K3 (the generating model has k3 = 0; k4–k6, s1–s4, τ are off by default)"
 
 
-def detect_corners(frame) -> np.ndarray | None:
+DETECTORS = ("fit", "subpix")
+
+
+def _corner_refine():
+    """tools/corner_refine.py, loaded from beside this file (tools/ is not a package, and this
+    module is also loaded by path from other tools)."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    if "corner_refine" not in sys.modules:
+        spec = importlib.util.spec_from_file_location("corner_refine", Path(__file__).with_name("corner_refine.py"))
+        module = importlib.util.module_from_spec(spec)
+        sys.modules["corner_refine"] = module
+        spec.loader.exec_module(module)
+    return sys.modules["corner_refine"]
+
+
+def detect_corners(frame, detector: str = "fit") -> np.ndarray | None:
     """Inner corners (N×2 px, OpenCV's order) of ``frame``: ``findChessboardCorners`` on 8 bits,
-    then ``cornerSubPix`` on the float luminance (no quantisation in the sub-pixel fit)."""
+    then ``cornerSubPix`` on the float luminance (no quantisation in the sub-pixel fit), then
+    (``detector="fit"``) the saddle-model fit of :mod:`corner_refine` started from there (a
+    corner whose fit fails keeps its cornerSubPix position)."""
     import cv2
+
+    refine_grid = _corner_refine().refine_grid
 
     ok, corners = cv2.findChessboardCorners(to_gray8(frame.color), PATTERN, flags=cv2.CALIB_CB_ADAPTIVE_THRESH)
     if not ok:
         return None
     y = (frame.color @ np.array([0.2126, 0.7152, 0.0722])).astype(np.float32)
     crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-5)
-    return cv2.cornerSubPix(y / y.max(), corners, SUBPIX_WINDOW, (-1, -1), crit).reshape(-1, 2).astype(np.float64)
+    sub = cv2.cornerSubPix(y / y.max(), corners, SUBPIX_WINDOW, (-1, -1), crit).reshape(-1, 2).astype(np.float64)
+    if detector == "subpix":
+        return sub
+    if detector != "fit":
+        raise ValueError(f"detector={detector!r} must be one of {DETECTORS}")
+    return refine_grid(y / y.max(), sub, PATTERN)[0]
 
 
 def calibrate_points(obj: list, img: list, size) -> tuple[dict, float]:
@@ -194,31 +235,92 @@ def calibrate_points(obj: list, img: list, size) -> tuple[dict, float]:
     return {n: float(v) for n, v in est.items()}, float(rms)
 
 
-def calibrate(frames, size) -> tuple[dict, int, float]:
+def calibrate(frames, size, detector: str = "fit") -> tuple[dict, int, float]:
     """cv2.calibrateCamera on the detected corners: (estimates, views used, RMS reprojection px)."""
     objp = np.zeros((PATTERN[0] * PATTERN[1], 3), np.float32)
     objp[:, :2] = np.mgrid[0:PATTERN[0], 0:PATTERN[1]].T.reshape(-1, 2) * SQUARE_M
-    img = [c for c in (detect_corners(fr) for fr in frames) if c is not None]
+    img = [c for c in (detect_corners(fr, detector) for fr in frames) if c is not None]
     if len(img) < 3:
         raise RuntimeError(f"only {len(img)} board(s) detected")
     est, rms = calibrate_points([objp] * len(img), img, size)
     return est, len(img), rms
 
 
-def detection_error(model: OpenCVModel, frames, camera: OpenCVModel | None = None) -> np.ndarray:
+def detection_error(model: OpenCVModel, frames, camera: OpenCVModel | None = None,
+                    detector: str = "fit") -> np.ndarray:
     """Detected minus true corner positions (M×2 px) over all views whose board was found; each
     detection is paired with the nearest true corner (squares are ≥ 20 px, errors ≪ 1 px).
     ``camera``: the frames' projection when they are not ``model``'s output (the undistorted
     renders: the pinhole of :func:`required_render`)."""
     out = []
     for v, fr in enumerate(frames):
-        det = detect_corners(fr)
+        det = detect_corners(fr, detector)
         if det is None:
             continue
         tru = true_corners(model, v, camera)
         j = np.linalg.norm(det[:, None] - tru[None], axis=-1).argmin(axis=1)
         out.append(det - tru[j])
     return np.concatenate(out)
+
+
+WHAT_IF = ("spline3", "keys-0.5", "bilinear", "lanczos3")
+
+
+def resample_what_if(model: OpenCVModel, raw: list, kind: str) -> list:
+    """The undistorted renders ``raw`` resampled through the stage's own map
+    (:func:`clpost.stages.distortion.distortion_map`, float64) by another interpolator, in numpy:
+    ``spline3`` cubic B-spline interpolation with its prefilter (Unser 1999; scipy
+    ``map_coordinates(order=3)``), ``keys-0.5`` Keys cubic convolution with a = −½ (third order),
+    ``bilinear``, ``lanczos3`` (normalised). What the stage would give with that final filter."""
+    from scipy.ndimage import map_coordinates
+
+    from clpost.stages.distortion import _keys, distortion_map, resample
+
+    spec = required_render(model)
+    m, ok = distortion_map(model, (spec.width, spec.height), spec.intrinsics())
+
+    def keys_half(t):
+        t = np.abs(t)
+        return np.where(t <= 1, (1.5 * t - 2.5) * t * t + 1, np.where(t < 2, ((-0.5 * t + 2.5) * t - 4) * t + 2, 0.0))
+
+    def lanczos3(plane):
+        x0, y0 = np.floor(m[0]).astype(np.int64), np.floor(m[1]).astype(np.int64)
+        h, w = plane.shape
+        taps = range(-2, 4)
+
+        def lz(t):
+            return np.where(np.abs(t) < 3, np.sinc(t) * np.sinc(t / 3), 0.0)
+
+        wx = [lz(m[0] - x0 - k) for k in taps]
+        wy = [lz(m[1] - y0 - k) for k in taps]
+        v = sum(wy[j] * sum(wx[i] * plane[np.clip(y0 + kj, 0, h - 1), np.clip(x0 + ki, 0, w - 1)]
+                            for i, ki in enumerate(taps)) for j, kj in enumerate(taps))
+        return v / (sum(wx) * sum(wy))
+
+    import clpost.stages.distortion as stage_module
+
+    out = []
+    for fr in raw:
+        planes = []
+        for c in range(3):
+            p = fr.color[..., c].astype(np.float64)
+            if kind == "spline3":
+                v = map_coordinates(p, [m[1], m[0]], order=3, mode="nearest")
+            elif kind == "keys-0.5":
+                stage_module._keys = keys_half  # the oracle's kernel, swapped for this call only
+                try:
+                    v = resample(p, m, 3)
+                finally:
+                    stage_module._keys = _keys
+            elif kind == "bilinear":
+                v = resample(p, m, 1)
+            elif kind == "lanczos3":
+                v = lanczos3(p)
+            else:
+                raise ValueError(f"what-if filter {kind!r} must be one of {WHAT_IF}")
+            planes.append(np.where(ok, v, 0.0))
+        out.append(Frame(np.maximum(np.stack(planes, -1), 0.0).astype(np.float32)))
+    return out
 
 
 def conditioning_floor(model: OpenCVModel, n_views: int, sigma_px: float, seeds: int = 8) -> dict:
@@ -278,27 +380,46 @@ def render_views_single(model: OpenCVModel, view: int, n_views: int):
     return raw, Pipeline(cam, quality="final", stages=["distortion"]).run(raw)
 
 
+def _cells(rows: dict, floor: dict | None) -> list[str]:
+    out = []
+    for n in PARAMS:
+        t, _, err = rows[n]
+        if t:
+            cell = f"{100 * err:.3f} %" + (f" ({100 * floor[n]:.2f} %)" if floor else "")
+            out.append(f"**{cell}**" if err >= 0.01 else cell)
+        else:
+            out.append(f"{err:.1e} abs" + (f" ({floor[n]:.0e})" if floor else ""))
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--views", type=int, default=17)
     ap.add_argument("--size", default="800x600")
+    ap.add_argument("--blur", type=float, default=BOARD_BLUR, help="board anti-aliasing σ in px (0: box filter)")
+    ap.add_argument("--detector", choices=DETECTORS, default="fit")
+    ap.add_argument("--what-if", default="spline3", help=f"comma list of numpy resamplers from {WHAT_IF} ('' for none)")
     ap.add_argument("--png", default=None, help="directory for PNGs of the first views")
     args = ap.parse_args()
     size = tuple(int(t) for t in args.size.split("x"))
-    print(f"calibrateCamera flags: {CALIB_FLAGS_DOC}; cornerSubPix window {SUBPIX_WINDOW}")
+    other = [d for d in DETECTORS if d != args.detector][0]
+    what_if = [w for w in args.what_if.split(",") if w]
+    print(f"calibrateCamera flags: {CALIB_FLAGS_DOC}; detector {args.detector} (cornerSubPix window {SUBPIX_WINDOW} "
+          f"first); board blur σ = {args.blur} px")
     table = []
     for name, model in parameter_sets(size).items():
         t0 = time.perf_counter()
-        raw, out = render_views(model, args.views)
+        raw, out = render_views(model, args.views, blur=args.blur)
         spec = required_render(model)
-        est, used, rms = calibrate(out, size)
+        est, used, rms = calibrate(out, size, args.detector)
         print(f"\n{name}: {used}/{args.views} views detected, reprojection RMS {rms:.4f} px, "
               f"render {spec.width}x{spec.height} (f={spec.f:.1f}) for {size[0]}x{size[1]}, {time.perf_counter() - t0:.1f} s")
-        de = detection_error(model, out)
+        de = detection_error(model, out, detector=args.detector)
         sigma = float(np.sqrt(np.mean(de**2)))
         pin = OpenCVModel(spec.width, spec.height, spec.f, spec.f, spec.cx, spec.cy)
-        de_raw = detection_error(model, raw, pin)
-        print(f"  the same detector on the undistorted renders (no stage): RMS {np.sqrt(np.mean(de_raw**2)):.4f} px per axis")
+        raw_err = {d: float(np.sqrt(np.mean(detection_error(model, raw, pin, d) ** 2))) for d in DETECTORS}
+        print("  the same detectors on the undistorted renders (no stage): "
+              + ", ".join(f"{d} RMS {e:.4f} px" for d, e in raw_err.items()))
         exact, _ = calibrate_points([board_points()] * args.views, [true_corners(model, v) for v in range(args.views)], size)
         exact_max = max(r[2] for r in compare(model, exact).values())
         floor = conditioning_floor(model, args.views, sigma)
@@ -309,7 +430,18 @@ def main() -> None:
         for n, (t, e, err) in compare(model, est).items():
             f = 100 * floor[n] if t else floor[n]
             print(f"  {n:<6}{t:>12.6g}{e:>14.6g}{err * (100 if t else 1):>11.4g}{'%' if t else ' abs'}{f:>10.3g}{'%' if t else ''}")
-        table.append((name, used, rms, sigma, compare(model, est), floor))
+        table.append((name, f"stage, {args.detector}", used, rms, sigma, raw_err[args.detector], compare(model, est), floor))
+        est2, used2, rms2 = calibrate(out, size, other)
+        sigma2 = float(np.sqrt(np.mean(detection_error(model, out, detector=other) ** 2)))
+        table.append((name, f"stage, {other}", used2, rms2, sigma2, raw_err[other], compare(model, est2), None))
+        for kind in what_if:
+            alt = resample_what_if(model, raw, kind)
+            est3, used3, rms3 = calibrate(alt, size, args.detector)
+            sigma3 = float(np.sqrt(np.mean(detection_error(model, alt, detector=args.detector) ** 2)))
+            table.append((name, f"what-if {kind}, {args.detector}", used3, rms3, sigma3, raw_err[args.detector],
+                          compare(model, est3), None))
+            print(f"  what-if {kind}: corner RMS {sigma3:.4f} px, "
+                  + ", ".join(f"{n} {100 * r[2]:.3f} %" for n, r in compare(model, est3).items() if r[0]))
         for meth in ("newton", "heikkila"):
             r = inverse_residual_px(model, meth)
             print(f"  inverse {meth:<9} max {r['max_px']:.3g} px at {r['argmax_xy']}, RMS {r['rms_px']:.3g} px")
@@ -322,12 +454,12 @@ def main() -> None:
             for k in range(2):
                 write_png(d / f"board_{name}_{k}_distorted.png", out[k].color / out[k].color.max())
                 write_png(d / f"board_{name}_{k}_render.png", raw[k].color / raw[k].color.max())
-    print("\n| set | views | RMS reproj. (px) | corner err. RMS (px) | " + " | ".join(PARAMS) + " |")
-    print("|---|---|---|---|" + "---|" * len(PARAMS))
-    for name, used, rms, sigma, rows, floor in table:
-        cells = [f"{100 * rows[n][2]:.3f} % ({100 * floor[n]:.2f} %)" if rows[n][0] else
-                 f"{rows[n][2]:.1e} abs ({floor[n]:.0e})" for n in PARAMS]
-        print(f"| {name} | {used}/{args.views} | {rms:.4f} | {sigma:.4f} | " + " | ".join(cells) + " |")
+    print("\n| set | resampling, detector | views | RMS reproj. (px) | corner err. RMS (px) | on the undistorted render | "
+          + " | ".join(PARAMS) + " |")
+    print("|---|---|---|---|---|---|" + "---|" * len(PARAMS))
+    for name, what, used, rms, sigma, raw_e, rows, floor in table:
+        print(f"| {name} | {what} | {used}/{args.views} | {rms:.4f} | {sigma:.4f} | {raw_e:.4f} | "
+              + " | ".join(_cells(rows, floor)) + " |")
     rt = undistort_roundtrip(parameter_sets(size)["barrel"])
     print(f"\ndistort → cv2.undistort vs direct render (barrel, fy=fx): mean |e| {rt['mean_abs_rel_white']:.4f}, "
           f"median {rt['median_abs_rel_white']:.4f}, p99 {rt['p99_abs_rel_white']:.4f} of white over {rt['pixels']} px")

@@ -284,6 +284,11 @@ class Material:
     """``board`` texture (a calibration target, distortion tests): squares (x, y) of side
     ``texture_scale_m`` centred on the local origin in the xy plane, ``albedo2`` in the corner
     squares, ``albedo`` between them and as the margin around the board."""
+    board_blur: float = 0.0
+    """``board`` texture only (the distortion calibration check): 0 box-filters the squares over
+    the pixel footprint (default); > 0 filters them with a Gaussian of σ = ``board_blur`` ×
+    footprint instead (≈ px; an optical low-pass), which is band-limited enough for sub-pixel
+    edge fits and bicubic resampling not to depend on where a corner falls within its pixel."""
 
     def __post_init__(self) -> None:
         if self.texture not in TEXTURES:
@@ -296,6 +301,10 @@ class Material:
             raise InputError(f"Material.emission={self.emission!r} must be finite radiance >= 0")
         if not self.texture_scale_m > 0:
             raise InputError(f"Material.texture_scale_m={self.texture_scale_m!r} must be > 0 metres")
+        # board_blur (distortion calibration check)
+        if not (math.isfinite(self.board_blur) and self.board_blur >= 0):
+            raise InputError(f"Material.board_blur={self.board_blur!r} must be a finite σ >= 0 in pixel "
+                             "footprints (0 = box filter, e.g. 0.6 for a Gaussian low-pass)")
 
     @property
     def is_emitter(self) -> bool:
