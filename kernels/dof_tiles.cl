@@ -42,3 +42,28 @@ __kernel void dof_tile_dilate(__global const float *restrict tmax, __global int 
     const int k = clamp((int)ceil(r / (float)(1 << lvl) - 0.5f), 0, DOF_BUDGET);
     tn[ty * tw + tx] = ntaps[k] | (lvl << 24);
 }
+
+/* Final's mixed resolution (clpost/stages/dof.py, mixed_mask): launched over the tiles of the
+ * half-resolution plan `tn_h`. A half tile with lattice level >= DOF_MIX_LEVEL is "big": its
+ * pixels come from the half-resolution gather, so its full-resolution child tiles gather only
+ * their centre tap (count 1: the result is overwritten by dof_upsample). The half-resolution
+ * gather is needed only in big tiles and their 8 neighbours (the upsampling's bilinear corners
+ * reach one working pixel beyond a tile): the others get count 1 in `tn_h_out`. Reads only the
+ * level bits of `tn_h` and writes other buffers, so no work-item reads what another writes. */
+__kernel void dof_tile_mix(__global const int *restrict tn_h, __global int *restrict tn_h_out,
+                           __global int *restrict tn_full, const int twh, const int thh,
+                           const int tw, const int th)
+{
+    const int tx = get_global_id(0), ty = get_global_id(1);
+    if (tx >= twh || ty >= thh) return;
+    const int own = tn_h[ty * twh + tx];
+    int needed = 0;
+    for (int ny = max(ty - 1, 0); ny <= min(ty + 1, thh - 1); ++ny)
+        for (int nx = max(tx - 1, 0); nx <= min(tx + 1, twh - 1); ++nx)
+            needed |= (tn_h[ny * twh + nx] >> 24) >= DOF_MIX_LEVEL;
+    tn_h_out[ty * twh + tx] = needed ? own : ((own & ~0xffffff) | 1);
+    if ((own >> 24) >= DOF_MIX_LEVEL)
+        for (int cy = 2 * ty; cy <= min(2 * ty + 1, th - 1); ++cy)
+            for (int cx = 2 * tx; cx <= min(2 * tx + 1, tw - 1); ++cx)
+                tn_full[cy * tw + cx] = (tn_full[cy * tw + cx] & ~0xffffff) | 1;
+}

@@ -126,6 +126,15 @@ QUALITY = {
     "final": (1, 64, 8),
 }
 
+MIXED = {
+    # name: (working-resolution divisor, max CoC radius in working px, R_b) of the half-resolution
+    # gather that final uses for its large-reach tiles (see "Mixed resolution" in the docstring)
+    "final": (2, 32, 8),
+}
+MIXED_LEVEL = 1
+"""A tile of the half-resolution plan whose lattice level is ≥ this (reach > R_b + ½ = 8.5
+working px, i.e. > 17 px) is gathered at half resolution at final."""
+
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 MIXED_BRIGHTER = 1.5
 MIXED_SAME_DEPTH = 0.8
@@ -462,21 +471,43 @@ def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.nda
     return acc / wsum[..., None], acc_a / wsum
 
 
+def _half_composite(camera, color, coc, scale, rmax, budget):
+    """The half-resolution path (draft, preview, and final's large-reach tiles): gather at the
+    working resolution, depth-aware upsampling, composite with the full-resolution colour.
+    Returns (output, working CoC)."""
+    cw, rw = _working(color, coc, scale)
+    out, alpha = gather_reference(cw, rw, rmax, budget, camera.blades, camera.blade_rotation_deg,
+                                  camera.aperture_roundness, camera.spherical_aberration,
+                                  camera.optical_vignetting)
+    up, up_alpha = _upsample(out, alpha, rw, coc, scale)
+    b = np.maximum(np.clip(np.abs(coc) - 0.5, 0.0, 1.0), up_alpha)
+    return color + (up - color) * b[..., None], rw
+
+
+def mixed_mask(rw: np.ndarray, shape: tuple[int, int], quality: str) -> np.ndarray:
+    r"""Full-resolution pixels that ``quality`` takes from the half-resolution path: those in a
+    working tile whose half-resolution plan (:func:`tile_plan`) has level ≥ :data:`MIXED_LEVEL`."""
+    scale, rmax, budget = MIXED[quality]
+    lvl, _ = tile_plan(rw, rmax, budget)
+    big = np.kron(lvl >= MIXED_LEVEL, np.ones((scale, scale), bool))
+    return big[:shape[0], :shape[1]]
+
+
 def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "final") -> np.ndarray:
     """float64 numpy implementation of the whole stage (the oracle of the OpenCL kernels)."""
     scale, rmax, budget = QUALITY[quality]
     color = np.asarray(color, dtype=np.float64)
     h, w = depth.shape
     coc = coc_px(camera, effective_depth(color, depth), w, limit_px=scale * rmax)
-    cw, rw = _working(color, coc, scale)
-    out, alpha = gather_reference(cw, rw, rmax, budget, camera.blades, camera.blade_rotation_deg,
-                                  camera.aperture_roundness, camera.spherical_aberration,
-                                  camera.optical_vignetting)
-    if scale == 1:
+    if scale > 1:
+        return _half_composite(camera, color, coc, scale, rmax, budget)[0]
+    out, _ = gather_reference(color, coc, rmax, budget, camera.blades, camera.blade_rotation_deg,
+                              camera.aperture_roundness, camera.spherical_aberration,
+                              camera.optical_vignetting)
+    if quality not in MIXED:
         return out
-    up, up_alpha = _upsample(out, alpha, rw, coc, scale)
-    b = np.maximum(np.clip(np.abs(coc) - 0.5, 0.0, 1.0), up_alpha)
-    return color + (up - color) * b[..., None]
+    half, rw = _half_composite(camera, color, coc, *MIXED[quality])
+    return np.where(mixed_mask(rw, (h, w), quality)[..., None], half, out)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -514,7 +545,8 @@ class Dof(GatherStage):
         return {"DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_TILE": TILE, "DOF_BUDGET": budget,
                 "DOF_LEVELS": levels_for(rmax, budget),
                 "DOF_VIGNETTING": int(camera.optical_vignetting > 0),
-                "DOF_TEXTURE": int(camera.spherical_aberration != 0)}
+                "DOF_TEXTURE": int(camera.spherical_aberration != 0),
+                "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL}
 
     def reference(self, camera, frame, color):
         return dof_reference(camera, color, frame.depth, self.quality)
