@@ -208,10 +208,11 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
     const int x = 16 * get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
 #if DOF_MIXED
-    /* final's mixed resolution: only the pixels of big working tiles (dof_tile_mix) take the
+    /* final's mixed resolution: only the pixels of big working tiles (`tn_mix` = dof_tile_mix's
+     * `mix`) take the
      * half-resolution blur; the rest keep the full-resolution gather already in dst. The 16
      * pixels lie in one working tile (x is a multiple of 16, a working tile 2 * DOF_TILE px). */
-    if ((tn_mix[(y / (DOF_SCALE * DOF_TILE)) * tw_mix + x / (DOF_SCALE * DOF_TILE)] >> 24) < DOF_MIX_LEVEL)
+    if (!tn_mix[(y / (DOF_SCALE * DOF_TILE)) * tw_mix + x / (DOF_SCALE * DOF_TILE)])
         return;
 #endif
     const size_t n = (size_t)width * height, i = (size_t)y * width + x, nw = (size_t)ww * hw;

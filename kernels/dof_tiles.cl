@@ -44,15 +44,28 @@ __kernel void dof_tile_dilate(__global const float *restrict tmax, __global int 
 }
 
 /* Final's mixed resolution (clpost/stages/dof.py, mixed_mask): launched over the tiles of the
- * half-resolution plan `tn_h`. A half tile with lattice level >= DOF_MIX_LEVEL is "big": its
- * pixels come from the half-resolution gather, so its full-resolution child tiles gather only
- * their centre tap (count 1: the result is overwritten by dof_upsample). The half-resolution
- * gather is needed only in big tiles and their 8 neighbours (the upsampling's bilinear corners
- * reach one working pixel beyond a tile): the others get count 1 in `tn_h_out`. Reads only the
- * level bits of `tn_h` and writes other buffers, so no work-item reads what another writes. */
-__kernel void dof_tile_mix(__global const int *restrict tn_h, __global int *restrict tn_h_out,
-                           __global int *restrict tn_full, const int twh, const int thh,
-                           const int tw, const int th)
+ * half-resolution plan `tn_h`. A half tile is "big" when its lattice level is >= DOF_MIX_LEVEL or
+ * one of its 2x2 full-resolution child tiles would need a level above DOF_MIX_FULL_LEVELS (final
+ * builds only those full-resolution levels). Big tiles take their pixels from the
+ * half-resolution gather (`mix` = 1, read by dof_upsample), so their full-resolution children
+ * gather only their centre tap at level 0 (`tn_full_out` = 1; the result is overwritten). The
+ * half-resolution gather is needed only in big tiles and their 8 neighbours (the upsampling's
+ * bilinear corners reach one working pixel beyond a tile): the others get count 1 in `tn_h_out`.
+ * Inputs and outputs are separate buffers, so no work-item reads what another writes. */
+inline int dof_tile_big(__global const int *tn_h, __global const int *tn_full, const int tx, const int ty,
+                        const int twh, const int tw, const int th)
+{
+    int big = (tn_h[ty * twh + tx] >> 24) >= DOF_MIX_LEVEL;
+    for (int cy = 2 * ty; cy <= min(2 * ty + 1, th - 1); ++cy)
+        for (int cx = 2 * tx; cx <= min(2 * tx + 1, tw - 1); ++cx)
+            big |= (tn_full[cy * tw + cx] >> 24) > DOF_MIX_FULL_LEVELS;
+    return big;
+}
+
+__kernel void dof_tile_mix(__global const int *restrict tn_h, __global const int *restrict tn_full,
+                           __global int *restrict tn_h_out, __global int *restrict tn_full_out,
+                           __global int *restrict mix, const int twh, const int thh, const int tw,
+                           const int th)
 {
     const int tx = get_global_id(0), ty = get_global_id(1);
     if (tx >= twh || ty >= thh) return;
@@ -60,10 +73,11 @@ __kernel void dof_tile_mix(__global const int *restrict tn_h, __global int *rest
     int needed = 0;
     for (int ny = max(ty - 1, 0); ny <= min(ty + 1, thh - 1); ++ny)
         for (int nx = max(tx - 1, 0); nx <= min(tx + 1, twh - 1); ++nx)
-            needed |= (tn_h[ny * twh + nx] >> 24) >= DOF_MIX_LEVEL;
+            needed |= dof_tile_big(tn_h, tn_full, nx, ny, twh, tw, th);
+    const int big = dof_tile_big(tn_h, tn_full, tx, ty, twh, tw, th);
     tn_h_out[ty * twh + tx] = needed ? own : ((own & ~0xffffff) | 1);
-    if ((own >> 24) >= DOF_MIX_LEVEL)
-        for (int cy = 2 * ty; cy <= min(2 * ty + 1, th - 1); ++cy)
-            for (int cx = 2 * tx; cx <= min(2 * tx + 1, tw - 1); ++cx)
-                tn_full[cy * tw + cx] = (tn_full[cy * tw + cx] & ~0xffffff) | 1;
+    mix[ty * twh + tx] = big;
+    for (int cy = 2 * ty; cy <= min(2 * ty + 1, th - 1); ++cy)
+        for (int cx = 2 * tx; cx <= min(2 * tx + 1, tw - 1); ++cx)
+            tn_full_out[cy * tw + cx] = big ? 1 : tn_full[cy * tw + cx];
 }

@@ -323,7 +323,7 @@ def test_final_mixed_resolution_matches_the_reference(rng, extra):
     cam = Camera(**CAM, **extra)
     out, pipe = run(cam, frame, "final")
     coc = D.coc_px(cam, D.effective_depth(color, depth), w, D.max_coc_px("final"))
-    mask = D.mixed_mask(D._working(color.astype(np.float64), coc, 2)[1], (h, w), "final")
+    mask = D.mixed_mask(D._working(color.astype(np.float64), coc, 2)[1], coc, "final")
     assert 0.2 < mask.mean() < 0.8
     assert np.isfinite(out).all() and (out >= 0).all()
     assert_matches_reference(pipe, frame, out)
@@ -331,6 +331,27 @@ def test_final_mixed_resolution_matches_the_reference(rng, extra):
     full, _ = D.gather_reference(color.astype(np.float64), coc, 64, 8, cam.blades, cam.blade_rotation_deg,
                                  cam.aperture_roundness, cam.spherical_aberration, cam.optical_vignetting)
     np.testing.assert_allclose(out[~mask], full[~mask], rtol=2e-4, atol=1e-3)
+
+
+def test_final_mixed_resolution_when_only_the_full_resolution_plan_is_coarse(rng):
+    """Far pixels (r = 24.4 px) on every other column among in-focus ones: the working CoC (the
+    2x2 min) is in focus, so the half-resolution plan is fine, but the full-resolution plan
+    wants stride 4, a level final does not build at full resolution: those tiles must go to the
+    half-resolution path too (else the gather would read past its levels)."""
+    w, h = 160, 40
+    color = (rng.random((h, w, 3)) * 10).astype(np.float32)
+    depth = np.full((h, w), 2.0, np.float32)
+    depth[:, 96::2] = np.inf
+    frame = Frame(color, depth=depth)
+    cam = Camera(**{**CAM, "f_number": 0.7}, blades=6)
+    out, pipe = run(cam, frame, "final")
+    coc = D.coc_px(cam, D.effective_depth(color, depth), w, D.max_coc_px("final"))
+    rw = D._working(color.astype(np.float64), coc, 2)[1]
+    assert D.tile_plan(rw, 32, 8)[0].max() < D.MIXED_LEVEL  # the half-resolution plan alone: no tile
+    mask = D.mixed_mask(rw, coc, "final")
+    assert 0.2 < mask.mean() < 0.8
+    assert np.isfinite(out).all()
+    assert_matches_reference(pipe, frame, out)
 
 
 def test_deterministic(rng):

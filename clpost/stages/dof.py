@@ -134,6 +134,9 @@ MIXED = {
 MIXED_LEVEL = 1
 """A tile of the half-resolution plan whose lattice level is ≥ this (reach > R_b + ½ = 8.5
 working px, i.e. > 17 px) is gathered at half resolution at final."""
+MIXED_FULL_LEVELS = 1
+"""Levels final builds at full resolution (strides 1, 2): a working tile with a full-resolution
+child tile that would need a coarser level is gathered at half resolution as well."""
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 MIXED_BRIGHTER = 1.5
@@ -484,13 +487,25 @@ def _half_composite(camera, color, coc, scale, rmax, budget):
     return color + (up - color) * b[..., None], rw
 
 
-def mixed_mask(rw: np.ndarray, shape: tuple[int, int], quality: str) -> np.ndarray:
+def mixed_mask(rw: np.ndarray, coc: np.ndarray, quality: str) -> np.ndarray:
     r"""Full-resolution pixels that ``quality`` takes from the half-resolution path: those in a
-    working tile whose half-resolution plan (:func:`tile_plan`) has level ≥ :data:`MIXED_LEVEL`."""
+    working tile whose half-resolution plan (:func:`tile_plan`) has level ≥ :data:`MIXED_LEVEL`,
+    or one of whose full-resolution child tiles has a level above :data:`MIXED_FULL_LEVELS` in
+    the full-resolution plan (so the full-resolution gather never reads a level it did not build)."""
     scale, rmax, budget = MIXED[quality]
+    _, full_rmax, full_budget = QUALITY[quality]
+    h, w = coc.shape
+    hw, ww = rw.shape
     lvl, _ = tile_plan(rw, rmax, budget)
-    big = np.kron(lvl >= MIXED_LEVEL, np.ones((scale, scale), bool))
-    return big[:shape[0], :shape[1]]
+    lvl_full, _ = tile_plan(coc, full_rmax, full_budget)
+    big = np.zeros((hw * scale, ww * scale), bool)
+    big[:h, :w] = lvl_full > MIXED_FULL_LEVELS
+    big = big.reshape(hw, scale, ww, scale).any(axis=(1, 3))  # per working pixel
+    th, tw = -(-hw // TILE), -(-ww // TILE)
+    tiles = np.zeros((th * TILE, tw * TILE), bool)
+    tiles[:hw, :ww] = big | (lvl >= MIXED_LEVEL)
+    tiles = tiles.reshape(th, TILE, tw, TILE).any(axis=(1, 3))
+    return np.kron(tiles, np.ones((scale * TILE, scale * TILE), bool))[:h, :w]
 
 
 def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "final") -> np.ndarray:
@@ -507,7 +522,7 @@ def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "
     if quality not in MIXED:
         return out
     half, rw = _half_composite(camera, color, coc, *MIXED[quality])
-    return np.where(mixed_mask(rw, (h, w), quality)[..., None], half, out)
+    return np.where(mixed_mask(rw, coc, quality)[..., None], half, out)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -546,7 +561,7 @@ class Dof(GatherStage):
                 "DOF_LEVELS": levels_for(rmax, budget),
                 "DOF_VIGNETTING": int(camera.optical_vignetting > 0),
                 "DOF_TEXTURE": int(camera.spherical_aberration != 0),
-                "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL}
+                "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS}
 
     def reference(self, camera, frame, color):
         return dof_reference(camera, color, frame.depth, self.quality)

@@ -71,18 +71,22 @@ def gather_vector_width(rt) -> int:
     return 16 if getattr(rt.device, "native_vector_width_float", 8) >= 16 else 8
 
 
-def _config(rt, defines, camera, w, h, scale, rmax, budget):
+def _config(rt, defines, camera, w, h, scale, rmax, budget, built=None):
     """Kernels and scratch buffers of one gather configuration (working resolution w/scale ×
-    h/scale, max CoC ``rmax`` working px, lattice budget ``budget``)."""
+    h/scale, max CoC ``rmax`` working px, lattice budget ``budget``). ``built``: levels to build
+    when fewer than the plan's (final's full resolution in mixed mode, where dof_tile_mix sends
+    every tile that would need a coarser level to the half-resolution gather)."""
     import pyopencl as cl
 
     nlev = D.levels_for(rmax, budget)
     T = D.TILE
     ww, hw = -(-w // scale), -(-h // scale)
-    pad = D.gather_pad(rmax, budget)
+    plan_levels, nlev = nlev, (nlev if built is None else built)
+    pad = 2 ** nlev * (budget + 1) + 1  # gather_pad for the levels built
     tw, th = -(-ww // T), -(-hw // T)
     pw, ph = tw * T + 2 * pad, th * T + 2 * pad  # DOF_PW in dof_common.cl: whole tiles + border
-    defines = {**defines, "DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_BUDGET": budget, "DOF_LEVELS": nlev}
+    defines = {**defines, "DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_BUDGET": budget,
+               "DOF_LEVELS": plan_levels}
     dx, dy, dist, rf, rn, ntaps = D.tap_table(budget, camera.blades, camera.blade_rotation_deg,
                                               camera.aperture_roundness)
     mf = cl.mem_flags
@@ -161,7 +165,9 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     cache = getattr(stage, "_cl_cache", None)
     if cache is None or cache["key"] != key:
         cache = {
-            "key": key, "main": _config(rt, defines, camera, w, h, scale, rmax, budget),
+            "key": key,
+            "main": _config(rt, defines, camera, w, h, scale, rmax, budget,
+                            built=D.MIXED_FULL_LEVELS if mixed else None),
             "coc": rt.empty((h, w)),
             "inv_area": np.float32(1.0 / D.aperture_area(camera.blades, camera.blade_rotation_deg,
                                                          camera.aperture_roundness)),
@@ -169,7 +175,9 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
         if mixed:
             hc = _config(rt, {**defines, "DOF_MIXED": 1}, camera, w, h, *mixed)
             hc["tn_gather"] = rt.empty((hc["th"], hc["tw"]), np.int32)
+            hc["mix"] = rt.empty((hc["th"], hc["tw"]), np.int32)
             cache["half"] = hc
+            cache["tn_full"] = rt.empty((cache["main"]["th"], cache["main"]["tw"]), np.int32)
         stage._cl_cache = cache
     c = cache["main"]
     kc, inv_u = D.coc_coefficients(camera, w)
@@ -182,13 +190,14 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     if mixed:
         hc = cache["half"]
         evs += _enqueue_plan(q, hc, src, cache["coc"], w, h)
-        hc["k"]["dof_tile_mix"].set_args(hc["tn"], hc["tn_gather"], c["tn"], i32(hc["tw"]), i32(hc["th"]),
-                                         i32(c["tw"]), i32(c["th"]))
+        hc["k"]["dof_tile_mix"].set_args(hc["tn"], c["tn"], hc["tn_gather"], cache["tn_full"], hc["mix"],
+                                         i32(hc["tw"]), i32(hc["th"]), i32(c["tw"]), i32(c["th"]))
         evs.append(_launch(q, hc["k"]["dof_tile_mix"], (hc["tw"], hc["th"]), 4))
-    evs.append(_enqueue_gather(q, c, dst if scale == 1 else c["blur"], c["tn"], camera, cache["inv_area"], vec))
+    evs.append(_enqueue_gather(q, c, dst if scale == 1 else c["blur"], cache["tn_full"] if mixed else c["tn"],
+                               camera, cache["inv_area"], vec))
     if scale > 1:
         evs.append(_enqueue_upsample(q, c, src, cache["coc"], dst, w, h, c["tn"]))
     if mixed:
         evs.append(_enqueue_gather(q, hc, hc["blur"], hc["tn_gather"], camera, cache["inv_area"], vec))
-        evs.append(_enqueue_upsample(q, hc, src, cache["coc"], dst, w, h, hc["tn"]))
+        evs.append(_enqueue_upsample(q, hc, src, cache["coc"], dst, w, h, hc["mix"]))
     return evs
