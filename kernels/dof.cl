@@ -95,6 +95,8 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
      * the padding (DOF_PW) and only skip the final write */
     const int packed = tn[get_group_id(1) * tw + get_group_id(0)];
     const int count = packed & 0xffffff, lvl = packed >> 24;
+    /* count 0: a tile whose output nobody reads (final's mixed resolution, dof_tile_mix) */
+    if (count == 0) return;
     const int s = 1 << lvl;
     const float fs = (float)s, inv_s = 1.0f / fs, cell = fs * fs * inv_area;
     const int pw = DOF_PW(ww, pad);

@@ -149,9 +149,9 @@ def _enqueue_upsample(q, c, src, coc, dst, w, h, tn_mix):
 
 def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     """Launch sequence (module docstring). Final with a mixed-resolution configuration
-    (:data:`dof.MIXED`) also plans and gathers at half resolution; ``dof_tile_mix`` reduces the
-    full-resolution gather of the big tiles to one tap and the half-resolution gather to the big
-    tiles and their neighbours, and ``dof_upsample`` writes only the big tiles' pixels."""
+    (:data:`dof.MIXED`) also plans and gathers at half resolution; ``dof_tile_mix`` skips the
+    full-resolution gather of the big tiles (count 0) and the half-resolution gather outside the
+    big tiles and their neighbours, and ``dof_upsample`` writes only the big tiles' pixels."""
     import pyopencl as cl
 
     q = rt.queue
