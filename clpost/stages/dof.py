@@ -98,11 +98,28 @@ level      working res        max CoC radius    R_b  taps per pixel (max)
 =========  =================  ================  ===  =====================================================
 draft      half (2×2 box)     32 px (16 work)   3    45 (dense up to 3 work px, then stride 2, 4, 8)
 preview    half               64 px (32 work)   5    109 (dense up to 5 work px, then stride 2, 4, 8)
-final      full               64 px             8    249 (dense up to 8 px, then stride 2, 4, 8)
+final      mixed (below)      64 px             8    249 (dense up to 8 px, stride 2 up to 17 px; beyond: half res)
 =========  =================  ================  ===  =====================================================
 Half-resolution levels composite with the full-resolution image by
 :math:`\mathrm{lerp}(c_{full}, \mathrm{up}(c_{blur}), \max(\mathrm{clamp}(|r|-0.5, 0, 1), \mathrm{up}(\alpha)))`
 (depth-aware bilinear upsampling, :func:`_upsample`), so in-focus pixels stay at full resolution.
+
+Mixed resolution (final, :data:`MIXED`): a working tile (16×16 at half resolution = 32×32 px) is
+*big* when its half-resolution plan (max CoC 32 working px, R_b = 8) needs lattice level ≥ 1
+(reach > 8.5 working px = 17 px), or when one of its 16×16 full-resolution tiles would need
+stride ≥ 4 at full resolution. Big tiles take the half-resolution composite above (the draft
+path with final's budget), the others the full-resolution gather, which then needs only strides
+1 and 2 (:data:`MIXED_FULL_LEVELS`):
+
+.. math::
+
+    \mathrm{out} = \begin{cases}\mathrm{lerp}(c, \mathrm{up}(c^{1/2}_{blur}), b) & \text{big tile}\\
+                   \text{full-resolution gather} & \text{else}\end{cases}
+
+Why it loses little: at reach > 17 px the full-resolution gather already used stride ≥ 4 over a
+tent-prefiltered level, i.e. it sampled the scene at ≤ ¼ of its pixels. Measured on the demo scene
+(docs/benchmarks.md, "dof: final at mixed resolution"): −0.00 dB at 640×360, −0.09 dB at
+1280×720 (FLIP 0.0269 → 0.0288, 0.0280 → 0.0296); worst scene 3.1–3.8× faster.
 
 Domain/range: colour ≥ 0 finite (HDR, nothing clipped); depth > 0 or +inf; output finite ≥ 0.
 """

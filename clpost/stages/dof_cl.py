@@ -3,7 +3,11 @@
 Kept apart from :mod:`clpost.stages.dof` (formulas + float64 reference) so the oracle reads
 without OpenCL plumbing. Launch sequence: ``dof_coc`` (full res) → ``dof_prepare`` (padded working
 buffers = level 0) → ``dof_levels`` per prefiltered level → ``dof_tile_max`` →
-``dof_tile_dilate`` → ``dof`` (the gather) → (half res) ``dof_upsample``.
+``dof_tile_dilate`` → ``dof`` (the gather) → (half res) ``dof_upsample``. Final (mixed
+resolution, :data:`dof.MIXED`): the same up to the tile plan at full resolution (one level
+pass), the same again at half resolution, ``dof_tile_mix`` (big tiles), the full-resolution
+gather (big tiles skipped), the half-resolution gather (big tiles and their neighbours only) and
+``dof_upsample`` writing only the big tiles' pixels.
 
 Vectorisation (issue 10, measured with ``POCL_VECTORIZER_REMARKS=1``): PoCL vectorised none of
 these kernels across work-items — the gather's tap loop has a per-tile trip count ("loop control
