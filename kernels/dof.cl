@@ -95,6 +95,8 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
      * the padding (DOF_PW) and only skip the final write */
     const int packed = tn[get_group_id(1) * tw + get_group_id(0)];
     const int count = packed & 0xffffff, lvl = packed >> 24;
+    /* count 0: a tile whose output nobody reads (final's mixed resolution, dof_tile_mix) */
+    if (count == 0) return;
     const int s = 1 << lvl;
     const float fs = (float)s, inv_s = 1.0f / fs, cell = fs * fs * inv_area;
     const int pw = DOF_PW(ww, pad);
@@ -202,10 +204,19 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
 __kernel void dof_upsample(__global const float *restrict src, __global const float *restrict coc,
                            __global const float *restrict blur, __global const float *restrict alpha,
                            __global const float *restrict lv, __global float *restrict dst,
-                           const int width, const int height, const int ww, const int hw, const int pad)
+                           const int width, const int height, const int ww, const int hw, const int pad,
+                           __global const int *restrict tn_mix, const int tw_mix)
 {
     const int x = 16 * get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
+#if DOF_MIXED
+    /* final's mixed resolution: only the pixels of big working tiles (`tn_mix` = dof_tile_mix's
+     * `mix`) take the
+     * half-resolution blur; the rest keep the full-resolution gather already in dst. The 16
+     * pixels lie in one working tile (x is a multiple of 16, a working tile 2 * DOF_TILE px). */
+    if (!tn_mix[(y / (DOF_SCALE * DOF_TILE)) * tw_mix + x / (DOF_SCALE * DOF_TILE)])
+        return;
+#endif
     const size_t n = (size_t)width * height, i = (size_t)y * width + x, nw = (size_t)ww * hw;
     const int pw = DOF_PW(ww, pad);
     __global const float *pr = lv + (size_t)3 * pw * DOF_PW(hw, pad);  /* level 0 CoC */

@@ -42,3 +42,42 @@ __kernel void dof_tile_dilate(__global const float *restrict tmax, __global int 
     const int k = clamp((int)ceil(r / (float)(1 << lvl) - 0.5f), 0, DOF_BUDGET);
     tn[ty * tw + tx] = ntaps[k] | (lvl << 24);
 }
+
+/* Final's mixed resolution (clpost/stages/dof.py, mixed_mask): launched over the tiles of the
+ * half-resolution plan `tn_h`. A half tile is "big" when its lattice level is >= DOF_MIX_LEVEL or
+ * one of its 2x2 full-resolution child tiles would need a level above DOF_MIX_FULL_LEVELS (final
+ * builds only those full-resolution levels). Big tiles take their pixels from the
+ * half-resolution gather (`mix` = 1, read by dof_upsample), so their full-resolution children
+ * skip the full-resolution gather (`tn_full_out` = 0: count 0, the gather returns at once). The
+ * half-resolution gather is needed only in big tiles and their 8 neighbours (the upsampling's
+ * bilinear corners reach one working pixel beyond a tile): the others get count 0 in `tn_h_out`.
+ * Inputs and outputs are separate buffers, so no work-item reads what another writes. */
+inline int dof_tile_big(__global const int *tn_h, __global const int *tn_full, const int tx, const int ty,
+                        const int twh, const int tw, const int th)
+{
+    int big = (tn_h[ty * twh + tx] >> 24) >= DOF_MIX_LEVEL;
+    for (int cy = 2 * ty; cy <= min(2 * ty + 1, th - 1); ++cy)
+        for (int cx = 2 * tx; cx <= min(2 * tx + 1, tw - 1); ++cx)
+            big |= (tn_full[cy * tw + cx] >> 24) > DOF_MIX_FULL_LEVELS;
+    return big;
+}
+
+__kernel void dof_tile_mix(__global const int *restrict tn_h, __global const int *restrict tn_full,
+                           __global int *restrict tn_h_out, __global int *restrict tn_full_out,
+                           __global int *restrict mix, const int twh, const int thh, const int tw,
+                           const int th)
+{
+    const int tx = get_global_id(0), ty = get_global_id(1);
+    if (tx >= twh || ty >= thh) return;
+    const int own = tn_h[ty * twh + tx];
+    int needed = 0;
+    for (int ny = max(ty - 1, 0); ny <= min(ty + 1, thh - 1); ++ny)
+        for (int nx = max(tx - 1, 0); nx <= min(tx + 1, twh - 1); ++nx)
+            needed |= dof_tile_big(tn_h, tn_full, nx, ny, twh, tw, th);
+    const int big = dof_tile_big(tn_h, tn_full, tx, ty, twh, tw, th);
+    tn_h_out[ty * twh + tx] = needed ? own : 0;
+    mix[ty * twh + tx] = big;
+    for (int cy = 2 * ty; cy <= min(2 * ty + 1, th - 1); ++cy)
+        for (int cx = 2 * tx; cx <= min(2 * tx + 1, tw - 1); ++cx)
+            tn_full_out[cy * tw + cx] = big ? 0 : tn_full[cy * tw + cx];
+}

@@ -99,8 +99,8 @@ def point_frame(depth_m, w=121, h=101, value=1000.0, at=None):
     return Frame(color, depth=np.full((h, w), depth_m, np.float32))
 
 
-@pytest.mark.parametrize("quality", ["final", "draft"])
-@pytest.mark.parametrize("depth_m", [0.9, 20.0])
+@pytest.mark.parametrize("quality, depth_m", [("final", 0.9), ("final", 20.0), ("final", 0.55),
+                                              ("draft", 0.9), ("draft", 20.0)])
 def test_point_light_keeps_its_energy_and_becomes_a_hexagon(quality, depth_m):
     cam = Camera(**CAM, blades=6, spherical_aberration=0.5)
     frame = point_frame(depth_m)
@@ -117,6 +117,10 @@ def test_point_light_keeps_its_energy_and_becomes_a_hexagon(quality, depth_m):
     # half-width s and the s-px coverage ramp spread each edge by up to 1.5 (s - 1) px (measured
     # +4.6 px at s = 2, +8.4 px at s = 4 on this frame)
     scale, _, budget = D.QUALITY[quality]
+    if quality in D.MIXED and D.lattice_stride(r / D.MIXED[quality][0], D.MIXED[quality][2]) >= 2 ** D.MIXED_LEVEL:
+        # final's large blurs (0.55 m: r = 24.6 px) take the half-resolution path
+        scale, _, budget = D.MIXED[quality]
+        tol = 6.0
     s = D.lattice_stride(r / scale, budget)
     tol += 3 * (s - 1) * scale
     assert height == pytest.approx(2 * r, abs=tol)
@@ -299,6 +303,54 @@ def test_both_gather_vector_widths_match_the_reference(rng, monkeypatch, vec, qu
     frame = odd_frame(rng, w=101, h=29)  # wide enough for every kernel's vector path at half res
     cam = Camera(**CAM, blades=5, spherical_aberration=-0.4, optical_vignetting=0.6)
     out, pipe = run(cam, frame, quality)
+    assert_matches_reference(pipe, frame, out)
+
+
+@pytest.mark.parametrize("extra", [dict(blades=6), dict(blades=5, spherical_aberration=0.5, optical_vignetting=0.7)])
+def test_final_mixed_resolution_matches_the_reference(rng, extra):
+    """Final gathers working tiles of large reach at half resolution and the rest at full
+    resolution: a frame whose left part is near focus and right part far behind has both, with
+    big tiles next to small ones (the upsampling's corners then read the neighbouring working
+    tile's half-resolution gather, which dof_tile_mix must keep)."""
+    w, h = 256, 70  # 8 working tiles across
+    color = (rng.random((h, w, 3)) * 10).astype(np.float32)
+    color[30, 200] = 1e4
+    depth = np.full((h, w), 2.1, np.float32)
+    depth[:, 150:192] = 3.0  # r = 6.5 px: a blurred working tile (x 64-79) beside a big one
+    depth[:, 192:] = np.inf  # r = 19.5 px > 17: half resolution there and in the tile beside it
+    depth[20:40, 120:140] = 1.3  # a near block (r = -10.5 px) over the sharp part, full resolution
+    frame = Frame(color, depth=depth)
+    cam = Camera(**CAM, **extra)
+    out, pipe = run(cam, frame, "final")
+    coc = D.coc_px(cam, D.effective_depth(color, depth), w, D.max_coc_px("final"))
+    mask = D.mixed_mask(D._working(color.astype(np.float64), coc, 2)[1], coc, "final")
+    assert 0.2 < mask.mean() < 0.8
+    assert np.isfinite(out).all() and (out >= 0).all()
+    assert_matches_reference(pipe, frame, out)
+    # outside the mixed tiles the output is the full-resolution gather, exactly as before
+    full, _ = D.gather_reference(color.astype(np.float64), coc, 64, 8, cam.blades, cam.blade_rotation_deg,
+                                 cam.aperture_roundness, cam.spherical_aberration, cam.optical_vignetting)
+    np.testing.assert_allclose(out[~mask], full[~mask], rtol=2e-4, atol=1e-3)
+
+
+def test_final_mixed_resolution_when_only_the_full_resolution_plan_is_coarse(rng):
+    """Far pixels (r = 24.4 px) on every other column among in-focus ones: the working CoC (the
+    2x2 min) is in focus, so the half-resolution plan is fine, but the full-resolution plan
+    wants stride 4, a level final does not build at full resolution: those tiles must go to the
+    half-resolution path too (else the gather would read past its levels)."""
+    w, h = 160, 40
+    color = (rng.random((h, w, 3)) * 10).astype(np.float32)
+    depth = np.full((h, w), 2.0, np.float32)
+    depth[:, 96::2] = np.inf
+    frame = Frame(color, depth=depth)
+    cam = Camera(**{**CAM, "f_number": 0.7}, blades=6)
+    out, pipe = run(cam, frame, "final")
+    coc = D.coc_px(cam, D.effective_depth(color, depth), w, D.max_coc_px("final"))
+    rw = D._working(color.astype(np.float64), coc, 2)[1]
+    assert D.tile_plan(rw, 32, 8)[0].max() < D.MIXED_LEVEL  # the half-resolution plan alone: no tile
+    mask = D.mixed_mask(rw, coc, "final")
+    assert 0.2 < mask.mean() < 0.8
+    assert np.isfinite(out).all()
     assert_matches_reference(pipe, frame, out)
 
 

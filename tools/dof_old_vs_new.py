@@ -9,7 +9,8 @@ The old tree is ``git archive``-d into a temporary folder and imported as the pa
 (:data:`clpost.bench.SCENES`), dof only; ms = the sum of the stage's OpenCL event times
 (``Pipeline.last_timings["dof"]``), median of the repeats after one warm-up. With
 ``--reference DIR`` (the ``--save`` folder of tools/dof_bench.py) it also prints both versions'
-PSNR/FLIP against the accumulation reference on the same pinhole inputs.
+PSNR/FLIP against the accumulation reference on the same pinhole inputs, and both versions' dof
+ms on that (demo) scene.
 """
 import argparse
 import shutil
@@ -64,7 +65,9 @@ def timing(old, sizes, qualities, repeats):
                   f"max |new - old| / max(old) {d:.1e}", flush=True)
 
 
-def accuracy(old, ref_dir: Path):
+def accuracy(old, ref_dir: Path, repeats: int):
+    """PSNR/FLIP of both versions against the reference, and their dof ms on this (demo) scene,
+    interleaved like :func:`timing`."""
     import clpost
     from clpost.dof_bench import BENCH_CAMERA, flip_ldr, psnr_linear
 
@@ -72,12 +75,22 @@ def accuracy(old, ref_dir: Path):
         z = np.load(path)
         ref = z["ref"].astype(np.float64)
         for q in ("draft", "preview", "final"):
-            outs = [mod.Pipeline(mod.Camera(**BENCH_CAMERA), quality=q, stages=["dof"]).run(
-                mod.Frame(z["pinhole"], depth=z["depth"])).color for mod in (old, clpost)]
+            pipes = [(mod.Pipeline(mod.Camera(**BENCH_CAMERA), quality=q, stages=["dof"]),
+                      mod.Frame(z["pinhole"], depth=z["depth"])) for mod in (old, clpost)]
+            times = [[], []]
+            for i in range(repeats + 1):
+                outs = []
+                for j, (pipe, frame) in enumerate(pipes):
+                    outs.append(pipe.run(frame).color)
+                    if i:
+                        times[j].append(pipe.last_timings["dof"])
             flips = [flip_ldr(ref, o) for o in outs]
             flip = "n/a" if None in flips else f"old {flips[0]:.4f}, new {flips[1]:.4f}"
+            ratio = statistics.median(o / n for o, n in zip(*times))
             print(f"{path.stem[10:]} {q}: PSNR old {psnr_linear(ref, outs[0]):.2f} dB, "
-                  f"new {psnr_linear(ref, outs[1]):.2f} dB; FLIP {flip}", flush=True)
+                  f"new {psnr_linear(ref, outs[1]):.2f} dB; FLIP {flip}; dof ms old "
+                  f"{statistics.median(times[0]):.1f}, new {statistics.median(times[1]):.1f} "
+                  f"(old/new median {ratio:.2f})", flush=True)
 
 
 def main(argv=None) -> int:
@@ -93,7 +106,7 @@ def main(argv=None) -> int:
         old = load_old(a.old, Path(tmp))
         timing(old, sizes, a.qualities.split(","), a.repeats)
         if a.reference:
-            accuracy(old, Path(a.reference))
+            accuracy(old, Path(a.reference), a.repeats)
     return 0
 
 

@@ -98,11 +98,28 @@ level      working res        max CoC radius    R_b  taps per pixel (max)
 =========  =================  ================  ===  =====================================================
 draft      half (2×2 box)     32 px (16 work)   3    45 (dense up to 3 work px, then stride 2, 4, 8)
 preview    half               64 px (32 work)   5    109 (dense up to 5 work px, then stride 2, 4, 8)
-final      full               64 px             8    249 (dense up to 8 px, then stride 2, 4, 8)
+final      mixed (below)      64 px             8    249 (dense up to 8 px, stride 2 up to 17 px; beyond: half res)
 =========  =================  ================  ===  =====================================================
 Half-resolution levels composite with the full-resolution image by
 :math:`\mathrm{lerp}(c_{full}, \mathrm{up}(c_{blur}), \max(\mathrm{clamp}(|r|-0.5, 0, 1), \mathrm{up}(\alpha)))`
 (depth-aware bilinear upsampling, :func:`_upsample`), so in-focus pixels stay at full resolution.
+
+Mixed resolution (final, :data:`MIXED`): a working tile (16×16 at half resolution = 32×32 px) is
+*big* when its half-resolution plan (max CoC 32 working px, R_b = 8) needs lattice level ≥ 1
+(reach > 8.5 working px = 17 px), or when one of its 16×16 full-resolution tiles would need
+stride ≥ 4 at full resolution. Big tiles take the half-resolution composite above (the draft
+path with final's budget), the others the full-resolution gather, which then needs only strides
+1 and 2 (:data:`MIXED_FULL_LEVELS`):
+
+.. math::
+
+    \mathrm{out} = \begin{cases}\mathrm{lerp}(c, \mathrm{up}(c^{1/2}_{blur}), b) & \text{big tile}\\
+                   \text{full-resolution gather} & \text{else}\end{cases}
+
+Why it loses little: at reach > 17 px the full-resolution gather already used stride ≥ 4 over a
+tent-prefiltered level, i.e. it sampled the scene at ≤ ¼ of its pixels. Measured on the demo scene
+(docs/benchmarks.md, "dof: final at mixed resolution"): −0.00 dB at 640×360, −0.09 dB at
+1280×720 (FLIP 0.0269 → 0.0288, 0.0280 → 0.0296); worst scene 3.1–3.8× faster.
 
 Domain/range: colour ≥ 0 finite (HDR, nothing clipped); depth > 0 or +inf; output finite ≥ 0.
 """
@@ -125,6 +142,18 @@ QUALITY = {
     "preview": (2, 32, 5),
     "final": (1, 64, 8),
 }
+
+MIXED = {
+    # name: (working-resolution divisor, max CoC radius in working px, R_b) of the half-resolution
+    # gather that final uses for its large-reach tiles (see "Mixed resolution" in the docstring)
+    "final": (2, 32, 8),
+}
+MIXED_LEVEL = 1
+"""A tile of the half-resolution plan whose lattice level is ≥ this (reach > R_b + ½ = 8.5
+working px, i.e. > 17 px) is gathered at half resolution at final."""
+MIXED_FULL_LEVELS = 1
+"""Levels final builds at full resolution (strides 1, 2): a working tile with a full-resolution
+child tile that would need a coarser level is gathered at half resolution as well."""
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 MIXED_BRIGHTER = 1.5
@@ -462,21 +491,55 @@ def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.nda
     return acc / wsum[..., None], acc_a / wsum
 
 
+def _half_composite(camera, color, coc, scale, rmax, budget):
+    """The half-resolution path (draft, preview, and final's large-reach tiles): gather at the
+    working resolution, depth-aware upsampling, composite with the full-resolution colour.
+    Returns (output, working CoC)."""
+    cw, rw = _working(color, coc, scale)
+    out, alpha = gather_reference(cw, rw, rmax, budget, camera.blades, camera.blade_rotation_deg,
+                                  camera.aperture_roundness, camera.spherical_aberration,
+                                  camera.optical_vignetting)
+    up, up_alpha = _upsample(out, alpha, rw, coc, scale)
+    b = np.maximum(np.clip(np.abs(coc) - 0.5, 0.0, 1.0), up_alpha)
+    return color + (up - color) * b[..., None], rw
+
+
+def mixed_mask(rw: np.ndarray, coc: np.ndarray, quality: str) -> np.ndarray:
+    r"""Full-resolution pixels that ``quality`` takes from the half-resolution path: those in a
+    working tile whose half-resolution plan (:func:`tile_plan`) has level ≥ :data:`MIXED_LEVEL`,
+    or one of whose full-resolution child tiles has a level above :data:`MIXED_FULL_LEVELS` in
+    the full-resolution plan (so the full-resolution gather never reads a level it did not build)."""
+    scale, rmax, budget = MIXED[quality]
+    _, full_rmax, full_budget = QUALITY[quality]
+    h, w = coc.shape
+    hw, ww = rw.shape
+    lvl, _ = tile_plan(rw, rmax, budget)
+    lvl_full, _ = tile_plan(coc, full_rmax, full_budget)
+    big = np.zeros((hw * scale, ww * scale), bool)
+    big[:h, :w] = lvl_full > MIXED_FULL_LEVELS
+    big = big.reshape(hw, scale, ww, scale).any(axis=(1, 3))  # per working pixel
+    th, tw = -(-hw // TILE), -(-ww // TILE)
+    tiles = np.zeros((th * TILE, tw * TILE), bool)
+    tiles[:hw, :ww] = big | (lvl >= MIXED_LEVEL)
+    tiles = tiles.reshape(th, TILE, tw, TILE).any(axis=(1, 3))
+    return np.kron(tiles, np.ones((scale * TILE, scale * TILE), bool))[:h, :w]
+
+
 def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "final") -> np.ndarray:
     """float64 numpy implementation of the whole stage (the oracle of the OpenCL kernels)."""
     scale, rmax, budget = QUALITY[quality]
     color = np.asarray(color, dtype=np.float64)
     h, w = depth.shape
     coc = coc_px(camera, effective_depth(color, depth), w, limit_px=scale * rmax)
-    cw, rw = _working(color, coc, scale)
-    out, alpha = gather_reference(cw, rw, rmax, budget, camera.blades, camera.blade_rotation_deg,
-                                  camera.aperture_roundness, camera.spherical_aberration,
-                                  camera.optical_vignetting)
-    if scale == 1:
+    if scale > 1:
+        return _half_composite(camera, color, coc, scale, rmax, budget)[0]
+    out, _ = gather_reference(color, coc, rmax, budget, camera.blades, camera.blade_rotation_deg,
+                              camera.aperture_roundness, camera.spherical_aberration,
+                              camera.optical_vignetting)
+    if quality not in MIXED:
         return out
-    up, up_alpha = _upsample(out, alpha, rw, coc, scale)
-    b = np.maximum(np.clip(np.abs(coc) - 0.5, 0.0, 1.0), up_alpha)
-    return color + (up - color) * b[..., None]
+    half, rw = _half_composite(camera, color, coc, *MIXED[quality])
+    return np.where(mixed_mask(rw, coc, quality)[..., None], half, out)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -514,7 +577,8 @@ class Dof(GatherStage):
         return {"DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_TILE": TILE, "DOF_BUDGET": budget,
                 "DOF_LEVELS": levels_for(rmax, budget),
                 "DOF_VIGNETTING": int(camera.optical_vignetting > 0),
-                "DOF_TEXTURE": int(camera.spherical_aberration != 0)}
+                "DOF_TEXTURE": int(camera.spherical_aberration != 0),
+                "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS}
 
     def reference(self, camera, frame, color):
         return dof_reference(camera, color, frame.depth, self.quality)

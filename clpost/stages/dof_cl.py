@@ -3,7 +3,11 @@
 Kept apart from :mod:`clpost.stages.dof` (formulas + float64 reference) so the oracle reads
 without OpenCL plumbing. Launch sequence: ``dof_coc`` (full res) → ``dof_prepare`` (padded working
 buffers = level 0) → ``dof_levels`` per prefiltered level → ``dof_tile_max`` →
-``dof_tile_dilate`` → ``dof`` (the gather) → (half res) ``dof_upsample``.
+``dof_tile_dilate`` → ``dof`` (the gather) → (half res) ``dof_upsample``. Final (mixed
+resolution, :data:`dof.MIXED`): the same up to the tile plan at full resolution (one level
+pass), the same again at half resolution, ``dof_tile_mix`` (big tiles), the full-resolution
+gather (big tiles skipped), the half-resolution gather (big tiles and their neighbours only) and
+``dof_upsample`` writing only the big tiles' pixels.
 
 Vectorisation (issue 10, measured with ``POCL_VECTORIZER_REMARKS=1``): PoCL vectorised none of
 these kernels across work-items — the gather's tap loop has a per-tile trip count ("loop control
@@ -71,73 +75,133 @@ def gather_vector_width(rt) -> int:
     return 16 if getattr(rt.device, "native_vector_width_float", 8) >= 16 else 8
 
 
+def _config(rt, defines, camera, w, h, scale, rmax, budget, built=None):
+    """Kernels and scratch buffers of one gather configuration (working resolution w/scale ×
+    h/scale, max CoC ``rmax`` working px, lattice budget ``budget``). ``built``: levels to build
+    when fewer than the plan's (final's full resolution in mixed mode, where dof_tile_mix sends
+    every tile that would need a coarser level to the half-resolution gather)."""
+    import pyopencl as cl
+
+    nlev = D.levels_for(rmax, budget)
+    T = D.TILE
+    ww, hw = -(-w // scale), -(-h // scale)
+    plan_levels, nlev = nlev, (nlev if built is None else built)
+    pad = 2 ** nlev * (budget + 1) + 1  # gather_pad for the levels built
+    tw, th = -(-ww // T), -(-hw // T)
+    pw, ph = tw * T + 2 * pad, th * T + 2 * pad  # DOF_PW in dof_common.cl: whole tiles + border
+    defines = {**defines, "DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_BUDGET": budget,
+               "DOF_LEVELS": plan_levels}
+    dx, dy, dist, rf, rn, ntaps = D.tap_table(budget, camera.blades, camera.blade_rotation_deg,
+                                              camera.aperture_roundness)
+    mf = cl.mem_flags
+
+    def const(a):
+        return cl.Buffer(rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
+
+    half = math.hypot(ww / 2.0, hw / 2.0)
+    return {
+        "k": _kernels(rt, defines), "scale": scale, "nlev": nlev, "ww": ww, "hw": hw, "pad": pad,
+        "tw": tw, "th": th, "pw": pw, "ph": ph,
+        "taps": [const(dx), const(dy), const(dist.astype(np.float32)), const(rf.astype(np.float32)),
+                 const(rn.astype(np.float32)), const((1.0 / rf).astype(np.float32)),
+                 const((1.0 / rn).astype(np.float32))],
+        "ntaps": const(ntaps),
+        "lv": rt.empty((nlev + 1, 5, ph, pw)),
+        "pv": rt.empty((ph, pw) if camera.optical_vignetting > 0 else (1,)),
+        "tmax": rt.empty((th, tw)), "tn": rt.empty((th, tw), np.int32),
+        "alpha": rt.empty((hw, ww)),
+        "blur": rt.empty((3, hw, ww)) if scale > 1 else None,
+        "field": (np.float32(camera.optical_vignetting), np.float32((ww - 1) / 2.0),
+                  np.float32((hw - 1) / 2.0), np.float32(1.0 / half)),
+    }
+
+
+def _enqueue_plan(q, c, src, coc, w, h):
+    """Working buffers, prefiltered levels and the tile plan of configuration ``c``."""
+    i32 = np.int32
+    k, evs = c["k"], []
+    k["dof_prepare"].set_args(src, coc, c["lv"], c["pv"], i32(w), i32(h), i32(c["ww"]), i32(c["hw"]),
+                              i32(c["pad"]), *c["field"])
+    evs.append(_launch_rows(q, k["dof_prepare"], (c["pw"], c["ph"])))
+    for lvl in range(c["nlev"]):
+        k["dof_levels"].set_args(c["lv"], i32(c["pw"]), i32(c["ph"]), i32(2 ** lvl), i32(lvl))
+        evs.append(_launch_rows(q, k["dof_levels"], (c["pw"], c["ph"])))
+    k["dof_tile_max"].set_args(c["lv"], c["tmax"], i32(c["ww"]), i32(c["hw"]), i32(c["pad"]), i32(c["tw"]),
+                               i32(c["th"]))
+    evs.append(_launch(q, k["dof_tile_max"], (c["tw"], c["th"]), 4))
+    k["dof_tile_dilate"].set_args(c["tmax"], c["tn"], c["ntaps"], i32(c["tw"]), i32(c["th"]))
+    evs.append(_launch(q, k["dof_tile_dilate"], (c["tw"], c["th"]), 4))
+    return evs
+
+
+def _enqueue_gather(q, c, target, tn, camera, inv_area, vec):
+    import pyopencl as cl
+
+    T, i32, f32 = D.TILE, np.int32, np.float32
+    c["k"]["dof"].set_args(c["lv"], c["pv"], tn, *c["taps"], target, c["alpha"], i32(c["ww"]), i32(c["hw"]),
+                           i32(c["pad"]), i32(c["tw"]), inv_area, f32(camera.spherical_aberration), *c["field"])
+    # one work-group per tile, DOF_VEC pixels of a row per work-item (dof.cl)
+    return cl.enqueue_nd_range_kernel(q, c["k"]["dof"], (c["tw"] * T // vec, c["th"] * T), (T // vec, T))
+
+
+def _enqueue_upsample(q, c, src, coc, dst, w, h, tn_mix):
+    i32 = np.int32
+    c["k"]["dof_upsample"].set_args(src, coc, c["blur"], c["alpha"], c["lv"], dst, i32(w), i32(h), i32(c["ww"]),
+                                    i32(c["hw"]), i32(c["pad"]), tn_mix, i32(c["tw"]))
+    return _launch_rows(q, c["k"]["dof_upsample"], (w, h))
+
+
 def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
+    """Launch sequence (module docstring). Final with a mixed-resolution configuration
+    (:data:`dof.MIXED`) also plans and gathers at half resolution; ``dof_tile_mix`` skips the
+    full-resolution gather of the big tiles (count 0) and the half-resolution gather outside the
+    big tiles and their neighbours, and ``dof_upsample`` writes only the big tiles' pixels."""
     import pyopencl as cl
 
     q = rt.queue
     scale, rmax, budget = D.QUALITY[stage.quality]
-    nlev = D.levels_for(rmax, budget)
-    T = D.TILE
+    mixed = D.MIXED.get(stage.quality)
     w, h = frame.width, frame.height
-    ww, hw = -(-w // scale), -(-h // scale)
-    pad = D.gather_pad(rmax, budget)
-    tw, th = -(-ww // T), -(-hw // T)
-    pw, ph = tw * T + 2 * pad, th * T + 2 * pad  # DOF_PW in dof_common.cl: whole tiles + border
     vec = gather_vector_width(rt)
     defines = {**stage.defines(camera), "DOF_VEC": vec}
     key = (id(rt), tuple(sorted(defines.items())), w, h, camera.blades, camera.blade_rotation_deg,
            camera.aperture_roundness)
     cache = getattr(stage, "_cl_cache", None)
     if cache is None or cache["key"] != key:
-        dx, dy, dist, rf, rn, ntaps = D.tap_table(budget, camera.blades, camera.blade_rotation_deg,
-                                                  camera.aperture_roundness)
-        mf = cl.mem_flags
-
-        def const(a):
-            return cl.Buffer(rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
-
         cache = {
-            "key": key, "k": _kernels(rt, defines),
-            "taps": [const(dx), const(dy), const(dist.astype(np.float32)), const(rf.astype(np.float32)),
-                     const(rn.astype(np.float32)), const((1.0 / rf).astype(np.float32)),
-                     const((1.0 / rn).astype(np.float32))],
-            "ntaps": const(ntaps),
-            "coc": rt.empty((h, w)), "lv": rt.empty((nlev + 1, 5, ph, pw)),
-            "pv": rt.empty((ph, pw) if camera.optical_vignetting > 0 else (1,)),
-            "tmax": rt.empty((th, tw)), "tn": rt.empty((th, tw), np.int32),
-            "alpha": rt.empty((hw, ww)),
-            "blur": rt.empty((3, hw, ww)) if scale > 1 else None,
+            "key": key,
+            "main": _config(rt, defines, camera, w, h, scale, rmax, budget,
+                            built=D.MIXED_FULL_LEVELS if mixed else None),
+            "coc": rt.empty((h, w)),
             "inv_area": np.float32(1.0 / D.aperture_area(camera.blades, camera.blade_rotation_deg,
                                                          camera.aperture_roundness)),
         }
+        if mixed:
+            hc = _config(rt, {**defines, "DOF_MIXED": 1}, camera, w, h, *mixed)
+            hc["tn_gather"] = rt.empty((hc["th"], hc["tw"]), np.int32)
+            hc["mix"] = rt.empty((hc["th"], hc["tw"]), np.int32)
+            cache["half"] = hc
+            cache["tn_full"] = rt.empty((cache["main"]["th"], cache["main"]["tw"]), np.int32)
         stage._cl_cache = cache
-    k = cache["k"]
+    c = cache["main"]
     kc, inv_u = D.coc_coefficients(camera, w)
     i32, f32 = np.int32, np.float32
     evs = []
-    k["dof_coc"].set_args(src, aux["depth"], cache["coc"], i32(w), i32(h), f32(kc), f32(inv_u),
-                          f32(scale * rmax))
-    evs.append(_launch_rows(q, k["dof_coc"], (w, h)))
-    half = math.hypot(ww / 2.0, hw / 2.0)
-    field = (f32(camera.optical_vignetting), f32((ww - 1) / 2.0), f32((hw - 1) / 2.0), f32(1.0 / half))
-    k["dof_prepare"].set_args(src, cache["coc"], cache["lv"], cache["pv"], i32(w), i32(h),
-                              i32(ww), i32(hw), i32(pad), *field)
-    evs.append(_launch_rows(q, k["dof_prepare"], (pw, ph)))
-    for lvl in range(nlev):
-        k["dof_levels"].set_args(cache["lv"], i32(pw), i32(ph), i32(2 ** lvl), i32(lvl))
-        evs.append(_launch_rows(q, k["dof_levels"], (pw, ph)))
-    k["dof_tile_max"].set_args(cache["lv"], cache["tmax"], i32(ww), i32(hw), i32(pad), i32(tw), i32(th))
-    evs.append(_launch(q, k["dof_tile_max"], (tw, th), 4))
-    k["dof_tile_dilate"].set_args(cache["tmax"], cache["tn"], cache["ntaps"], i32(tw), i32(th))
-    evs.append(_launch(q, k["dof_tile_dilate"], (tw, th), 4))
-    target = dst if scale == 1 else cache["blur"]
-    k["dof"].set_args(cache["lv"], cache["pv"], cache["tn"], *cache["taps"], target, cache["alpha"],
-                             i32(ww), i32(hw), i32(pad), i32(tw), cache["inv_area"],
-                             f32(camera.spherical_aberration), *field)
-    # one work-group per tile, DOF_VEC pixels of a row per work-item (dof.cl)
-    evs.append(cl.enqueue_nd_range_kernel(q, k["dof"], (tw * T // vec, th * T), (T // vec, T)))
+    c["k"]["dof_coc"].set_args(src, aux["depth"], cache["coc"], i32(w), i32(h), f32(kc), f32(inv_u),
+                               f32(scale * rmax))
+    evs.append(_launch_rows(q, c["k"]["dof_coc"], (w, h)))
+    evs += _enqueue_plan(q, c, src, cache["coc"], w, h)
+    if mixed:
+        hc = cache["half"]
+        evs += _enqueue_plan(q, hc, src, cache["coc"], w, h)
+        hc["k"]["dof_tile_mix"].set_args(hc["tn"], c["tn"], hc["tn_gather"], cache["tn_full"], hc["mix"],
+                                         i32(hc["tw"]), i32(hc["th"]), i32(c["tw"]), i32(c["th"]))
+        evs.append(_launch(q, hc["k"]["dof_tile_mix"], (hc["tw"], hc["th"]), 4))
+    evs.append(_enqueue_gather(q, c, dst if scale == 1 else c["blur"], cache["tn_full"] if mixed else c["tn"],
+                               camera, cache["inv_area"], vec))
     if scale > 1:
-        k["dof_upsample"].set_args(src, cache["coc"], cache["blur"], cache["alpha"], cache["lv"], dst,
-                                   i32(w), i32(h), i32(ww), i32(hw), i32(pad))
-        evs.append(_launch_rows(q, k["dof_upsample"], (w, h)))
+        evs.append(_enqueue_upsample(q, c, src, cache["coc"], dst, w, h, c["tn"]))
+    if mixed:
+        evs.append(_enqueue_gather(q, hc, hc["blur"], hc["tn_gather"], camera, cache["inv_area"], vec))
+        evs.append(_enqueue_upsample(q, hc, src, cache["coc"], dst, w, h, hc["mix"]))
     return evs
