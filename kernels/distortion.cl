@@ -65,10 +65,11 @@ __kernel void distortion(__global const float *restrict src, __global float *res
 #define DISTORTION_HORIZON 32
 #define DISTORTION_POLE (-0.267949192431122706f)
 
+/* c[0], c[stride], ... <- the B-spline coefficients of 6 * (the values there): two sweeps, the
+ * gain folded into the causal one */
 inline void distortion_bspline_line(__global float *c, const int n, const int stride)
 {
     const float z = DISTORTION_POLE;
-    for (int i = 0; i < n; ++i) c[i * stride] *= 6.0f;
     const float zn1 = pown(z, n - 1);
     const int m = n - 1 < DISTORTION_HORIZON ? n - 1 : DISTORTION_HORIZON;
     float c0 = c[0] + zn1 * c[(n - 1) * stride], zi = z;
@@ -76,10 +77,18 @@ inline void distortion_bspline_line(__global float *c, const int n, const int st
         c0 += zi * (c[i * stride] + zn1 * c[(n - 1 - i) * stride]);
         zi *= z;
     }
-    c[0] = c0 / (1.0f - zn1 * zn1);
-    for (int i = 1; i < n; ++i) c[i * stride] += z * c[(i - 1) * stride];
-    c[(n - 1) * stride] = (z * c[(n - 2) * stride] + c[(n - 1) * stride]) * z / (z * z - 1.0f);
-    for (int i = n - 2; i >= 0; --i) c[i * stride] = z * (c[(i + 1) * stride] - c[i * stride]);
+    float prev = 6.0f * c0 / (1.0f - zn1 * zn1);
+    c[0] = prev;
+    for (int i = 1; i < n; ++i) {
+        prev = mad(z, prev, 6.0f * c[i * stride]);
+        c[i * stride] = prev;
+    }
+    prev = (z * c[(n - 2) * stride] + prev) * z / (z * z - 1.0f);
+    c[(n - 1) * stride] = prev;
+    for (int i = n - 2; i >= 0; --i) {
+        prev = z * (prev - c[i * stride]);
+        c[i * stride] = prev;
+    }
 }
 
 /* one work-item per (padded row, channel): copy the row with DISTORTION_PAD edge pixels on each
@@ -92,7 +101,11 @@ __kernel void distortion_bspline_rows(__global const float *restrict src, __glob
     const int sy = clamp(j - DISTORTION_PAD, 0, src_h - 1);
     __global const float *s = src + (size_t)ch * src_w * src_h + (size_t)sy * src_w;
     __global float *c = coef + (size_t)ch * pw * ph + (size_t)j * pw;
-    for (int i = 0; i < pw; ++i) c[i] = s[clamp(i - DISTORTION_PAD, 0, src_w - 1)];
+    for (int i = 0; i < DISTORTION_PAD; ++i) {
+        c[i] = s[0];
+        c[pw - 1 - i] = s[src_w - 1];
+    }
+    for (int i = 0; i < src_w; ++i) c[DISTORTION_PAD + i] = s[i];
     distortion_bspline_line(c, pw, 1);
 }
 
