@@ -6,32 +6,23 @@
  * a pixel with no preimage (outside the render, beyond the fold, no convergence) has x = -1e30
  * and gets color 0 (its alpha, written on the host, is 0).
  *
- * DISTORTION_FILTER 1: bilinear (4 taps, draft/preview). 3: cubic convolution, a = -3/4 (16 taps,
- * final; OpenCV's INTER_CUBIC), clamped below at 0 so HDR edges cannot ring to negative values.
- * a = -3/4 and no range clamp because they keep edges where they are: checkerboard corners
- * detected on the output are 0.038 px RMS from the true model (the detector's floor on the
- * undistorted render) vs 0.055 px with a = -1/2 clamped to the 4 nearest samples
- * (docs/distortion_calibration.md). Taps outside the render repeat its edge (index clamp): the map is arbitrary, so tap
- * offsets are not uniform and padding would not make addresses affine anyway.
+ * DISTORTION_FILTER 1: bilinear (4 taps, draft/preview), kernel `distortion`.
+ * DISTORTION_FILTER 3: cubic B-spline interpolation (final): the B-spline coefficients of the
+ * source (`distortion_bspline_rows` then `_cols`, Unser 1999) and 16 taps with B-spline weights
+ * from a per-pixel table (`distortion_table`), clamped below at 0 so HDR edges cannot ring to
+ * negative values. Why not Keys' cubic convolution (OpenCV's INTER_CUBIC): it is only first-order
+ * and moves an edge by up to ~0.03 px depending on its sub-pixel phase, which cost 5-8 % in the
+ * recovered k2/p2 of the checkerboard calibration; the B-spline is exact for cubics and keeps
+ * every parameter within 1 % (docs/distortion_calibration.md). Taps outside the render repeat its
+ * edge (the coefficients are computed on a copy padded by DISTORTION_PAD edge pixels, as scipy's
+ * map_coordinates(order=3, mode="nearest") does, which is the reference).
  */
-#ifndef DISTORTION_FILTER
-#define DISTORTION_FILTER 1
-#endif
 
 inline float distortion_tap(__global const float *src, const size_t plane, int x, int y,
                             const int sw, const int sh) {
     x = clamp(x, 0, sw - 1);
     y = clamp(y, 0, sh - 1);
     return src[plane + (size_t)y * (size_t)sw + (size_t)x];
-}
-
-/* Keys (1981) cubic convolution kernel, a = -3/4:
- * (a+2)|t|^3 - (a+3)|t|^2 + 1 on [0, 1], a(|t|^3 - 5|t|^2 + 8|t| - 4) on [1, 2) */
-inline float distortion_keys(float t) {
-    t = fabs(t);
-    if (t <= 1.0f) return (1.25f * t - 2.25f) * t * t + 1.0f;
-    if (t < 2.0f) return ((-0.75f * t + 3.75f) * t - 6.0f) * t + 3.0f;
-    return 0.0f;
 }
 
 __kernel void distortion(__global const float *restrict src, __global float *restrict dst,
@@ -61,35 +52,78 @@ __kernel void distortion(__global const float *restrict src, __global float *res
         const float b = distortion_tap(src, plane, x0 + 1, y0, src_w, src_h);
         const float d = distortion_tap(src, plane, x0, y0 + 1, src_w, src_h);
         const float e = distortion_tap(src, plane, x0 + 1, y0 + 1, src_w, src_h);
-#if DISTORTION_FILTER == 1
         const float v = (a * (1.0f - tx) + b * tx) * (1.0f - ty) + (d * (1.0f - tx) + e * tx) * ty;
-#else
-        float wx[4], wy[4];
-        for (int k = 0; k < 4; ++k) {
-            wx[k] = distortion_keys(tx - (float)(k - 1));
-            wy[k] = distortion_keys(ty - (float)(k - 1));
-        }
-        float acc = 0.0f;
-        for (int m = 0; m < 4; ++m) {
-            float row = 0.0f;
-            for (int k = 0; k < 4; ++k)
-                row += wx[k] * distortion_tap(src, plane, x0 + k - 1, y0 + m - 1, src_w, src_h);
-            acc += wy[m] * row;
-        }
-        const float v = fmax(acc, 0.0f);
-#endif
         dst[(size_t)c * n + i] = v;
     }
 }
 
-/* The bicubic resampling (final) from a per-pixel tap table built once per map on the host
- * (clpost/stages/distortion.py, tap_table): base[i] is the index of the top-left tap of the 4×4
- * window in a source plane (-1: no preimage, colour 0) and wts holds the 4 horizontal then 4
- * vertical weights (planes of n), computed in float64 with the edge repeat folded in (the window
- * is moved inside the source and the weight of a tap beyond the edge is added to the edge tap).
- * The loop has no floor, no clamp and no filter polynomial: 2.0× faster than `distortion` at
- * 1080p (45 vs 108 ms, best of 10, same run, loaded machine). Bilinear stays in `distortion`:
- * its table version was not faster (24.5 vs 17.5 ms). Needs a source of at least 4×4 px. */
+/* Cubic B-spline prefilter (Unser, "Splines: a perfect fit for signal and image processing",
+ * IEEE SPM 1999): gain (1 - z)(1 - 1/z) = 6, then a causal and an anticausal first-order recursion
+ * with the pole z = sqrt(3) - 2, mirror-boundary initialisations as scipy.ndimage (ni_splines.c).
+ * The causal sum is truncated after DISTORTION_HORIZON terms (|z|^32 < 1e-18; exact for n <= 33). */
+#define DISTORTION_PAD 12
+#define DISTORTION_HORIZON 32
+#define DISTORTION_POLE (-0.267949192431122706f)
+
+/* c[0], c[stride], ... <- the B-spline coefficients of 6 * (the values there): two sweeps, the
+ * gain folded into the causal one */
+inline void distortion_bspline_line(__global float *c, const int n, const int stride)
+{
+    const float z = DISTORTION_POLE;
+    const float zn1 = pown(z, n - 1);
+    const int m = n - 1 < DISTORTION_HORIZON ? n - 1 : DISTORTION_HORIZON;
+    float c0 = c[0] + zn1 * c[(n - 1) * stride], zi = z;
+    for (int i = 1; i < m; ++i) {
+        c0 += zi * (c[i * stride] + zn1 * c[(n - 1 - i) * stride]);
+        zi *= z;
+    }
+    float prev = 6.0f * c0 / (1.0f - zn1 * zn1);
+    c[0] = prev;
+    for (int i = 1; i < n; ++i) {
+        prev = mad(z, prev, 6.0f * c[i * stride]);
+        c[i * stride] = prev;
+    }
+    prev = (z * c[(n - 2) * stride] + prev) * z / (z * z - 1.0f);
+    c[(n - 1) * stride] = prev;
+    for (int i = n - 2; i >= 0; --i) {
+        prev = z * (prev - c[i * stride]);
+        c[i * stride] = prev;
+    }
+}
+
+/* one work-item per (padded row, channel): copy the row with DISTORTION_PAD edge pixels on each
+ * side (edge repeat), then filter it along x */
+__kernel void distortion_bspline_rows(__global const float *restrict src, __global float *restrict coef,
+                                      const int src_w, const int src_h, const int pw, const int ph)
+{
+    const int j = get_global_id(0), ch = get_global_id(1);
+    if (j >= ph) return;
+    const int sy = clamp(j - DISTORTION_PAD, 0, src_h - 1);
+    __global const float *s = src + (size_t)ch * src_w * src_h + (size_t)sy * src_w;
+    __global float *c = coef + (size_t)ch * pw * ph + (size_t)j * pw;
+    for (int i = 0; i < DISTORTION_PAD; ++i) {
+        c[i] = s[0];
+        c[pw - 1 - i] = s[src_w - 1];
+    }
+    for (int i = 0; i < src_w; ++i) c[DISTORTION_PAD + i] = s[i];
+    distortion_bspline_line(c, pw, 1);
+}
+
+/* one work-item per (padded column, channel): filter along y (neighbouring work-items walk
+ * neighbouring columns, so PoCL can vectorise across them) */
+__kernel void distortion_bspline_cols(__global float *restrict coef, const int pw, const int ph)
+{
+    const int i = get_global_id(0), ch = get_global_id(1);
+    if (i >= pw) return;
+    distortion_bspline_line(coef + (size_t)ch * pw * ph + i, ph, pw);
+}
+
+/* The 16-tap gather of the final filter from a per-pixel tap table built once per map on the host
+ * (clpost/stages/distortion.py, tap_table): base[i] is the index of the top-left tap of the 4x4
+ * window in a coefficient plane (-1: no preimage, colour 0) and wts holds the 4 horizontal then
+ * 4 vertical B-spline weights (planes of n), computed in float64. No floor, clamp or polynomial
+ * per tap (a table was 2x faster than computing Keys weights per pixel at 1080p; bilinear computes
+ * its taps: its table version was not faster). */
 __kernel void distortion_table(__global const float *restrict src, __global float *restrict dst,
                                __global const int *restrict base, __global const float *restrict wts,
                                const int src_w, const int src_h, const int width, const int height)

@@ -263,41 +263,44 @@ def detection_error(model: OpenCVModel, frames, camera: OpenCVModel | None = Non
     return np.concatenate(out)
 
 
-WHAT_IF = ("spline3", "keys-0.5", "bilinear", "lanczos3")
+WHAT_IF = ("spline3", "keys-0.75", "keys-0.5", "bilinear", "lanczos3")
+
+
+def keys(a: float):
+    """Keys (1981) cubic convolution kernel with parameter ``a`` (−¾: OpenCV's INTER_CUBIC)."""
+    def k(t):
+        t = np.abs(t)
+        return np.where(t <= 1, ((a + 2) * t - (a + 3)) * t * t + 1,
+                        np.where(t < 2, a * (((t - 5) * t + 8) * t - 4), 0.0))
+    return k
 
 
 def resample_what_if(model: OpenCVModel, raw: list, kind: str) -> list:
     """The undistorted renders ``raw`` resampled through the stage's own map
     (:func:`clpost.stages.distortion.distortion_map`, float64) by another interpolator, in numpy:
     ``spline3`` cubic B-spline interpolation with its prefilter (Unser 1999; scipy
-    ``map_coordinates(order=3)``), ``keys-0.5`` Keys cubic convolution with a = −½ (third order),
-    ``bilinear``, ``lanczos3`` (normalised). What the stage would give with that final filter."""
+    ``map_coordinates(order=3)`` — the stage's final filter since this check found the Keys
+    filter's error), ``keys-0.75`` Keys cubic convolution with a = −¾ (OpenCV's INTER_CUBIC, the
+    stage's previous final filter), ``keys-0.5`` a = −½ (third order), ``bilinear``, ``lanczos3``
+    (normalised). Edge repeated. What the stage would give with that final filter."""
     from scipy.ndimage import map_coordinates
 
-    from clpost.stages.distortion import _keys, distortion_map, resample
+    from clpost.stages.distortion import distortion_map, resample
 
     spec = required_render(model)
     m, ok = distortion_map(model, (spec.width, spec.height), spec.intrinsics())
 
-    def keys_half(t):
-        t = np.abs(t)
-        return np.where(t <= 1, (1.5 * t - 2.5) * t * t + 1, np.where(t < 2, ((-0.5 * t + 2.5) * t - 4) * t + 2, 0.0))
-
-    def lanczos3(plane):
+    def convolve(plane, kern, taps, normalise):
         x0, y0 = np.floor(m[0]).astype(np.int64), np.floor(m[1]).astype(np.int64)
         h, w = plane.shape
-        taps = range(-2, 4)
-
-        def lz(t):
-            return np.where(np.abs(t) < 3, np.sinc(t) * np.sinc(t / 3), 0.0)
-
-        wx = [lz(m[0] - x0 - k) for k in taps]
-        wy = [lz(m[1] - y0 - k) for k in taps]
+        wx = [kern(m[0] - x0 - k) for k in taps]
+        wy = [kern(m[1] - y0 - k) for k in taps]
         v = sum(wy[j] * sum(wx[i] * plane[np.clip(y0 + kj, 0, h - 1), np.clip(x0 + ki, 0, w - 1)]
                             for i, ki in enumerate(taps)) for j, kj in enumerate(taps))
-        return v / (sum(wx) * sum(wy))
+        return v / (sum(wx) * sum(wy)) if normalise else v
 
-    import clpost.stages.distortion as stage_module
+    def lz(t):
+        return np.where(np.abs(t) < 3, np.sinc(t) * np.sinc(t / 3), 0.0)
 
     out = []
     for fr in raw:
@@ -306,16 +309,12 @@ def resample_what_if(model: OpenCVModel, raw: list, kind: str) -> list:
             p = fr.color[..., c].astype(np.float64)
             if kind == "spline3":
                 v = map_coordinates(p, [m[1], m[0]], order=3, mode="nearest")
-            elif kind == "keys-0.5":
-                stage_module._keys = keys_half  # the oracle's kernel, swapped for this call only
-                try:
-                    v = resample(p, m, 3)
-                finally:
-                    stage_module._keys = _keys
+            elif kind in ("keys-0.75", "keys-0.5"):
+                v = convolve(p, keys(-float(kind.split("-")[1])), range(-1, 3), False)
             elif kind == "bilinear":
                 v = resample(p, m, 1)
             elif kind == "lanczos3":
-                v = lanczos3(p)
+                v = convolve(p, lz, range(-2, 4), True)
             else:
                 raise ValueError(f"what-if filter {kind!r} must be one of {WHAT_IF}")
             planes.append(np.where(ok, v, 0.0))
