@@ -8,7 +8,7 @@
 #define DOF_MIXED_SAME_DEPTH 0.8f
 
 inline float dof_luma(__global const float *src, const size_t i, const size_t n) {
-    return 0.2126f * src[i] + 0.7152f * src[n + i] + 0.0722f * src[2 * n + i];
+    return DOF_LUMA_R * src[i] + DOF_LUMA_G * src[n + i] + DOF_LUMA_B * src[2 * n + i];
 }
 
 /* Full-resolution signed CoC radius (px) of one pixel. A pixel brighter than 1.5x every
@@ -35,7 +35,7 @@ inline float dof_coc_px(__global const float *src, __global const float *depth, 
 }
 
 inline float16 dof_luma16(__global const float *p, const size_t n) {
-    return 0.2126f * vload16(0, p) + 0.7152f * vload16(0, p + n) + 0.0722f * vload16(0, p + 2 * n);
+    return DOF_LUMA_R * vload16(0, p) + DOF_LUMA_G * vload16(0, p + n) + DOF_LUMA_B * vload16(0, p + 2 * n);
 }
 
 /* 16 pixels of a row per work-item in explicit float16 (PoCL did not vectorise the per-pixel

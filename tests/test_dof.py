@@ -251,6 +251,25 @@ def test_antialiased_light_edge_takes_the_lights_depth():
     assert out[20, 21, 0] == pytest.approx(200.0, rel=1e-3)
 
 
+@pytest.mark.parametrize("space", ["rec709", "acescg"])
+def test_highlight_edge_test_uses_the_working_spaces_luminance(space):
+    """A reddish edge pixel on a blue sky is 'brighter than its same-depth neighbours' in ACEScg
+    (Y weights 0.272 / 0.674 / 0.054) but not in Rec. 709 (0.213 / 0.715 / 0.072): the kernel
+    and its reference decide with the camera's working space."""
+    h, w = 41, 41
+    color = np.zeros((h, w, 3), np.float32)
+    color[..., 2] = 1.0
+    depth = np.full((h, w), np.inf, np.float32)
+    color[20, 20], depth[20, 20] = (500.0, 500.0, 500.0), 20.0
+    color[20, 21] = (0.4, 0.0, 0.0)
+    cam = Camera(**{**CAM, "focus_distance_m": 20.0}, working_space=space)
+    eff = D.effective_depth(color.astype(np.float64), depth, D.luma_weights(cam))
+    assert (eff[20, 21] == 20.0) == (space == "acescg")
+    frame = Frame(color, depth=depth)
+    out, pipe = run(cam, frame)
+    assert_matches_reference(pipe, frame, out)
+
+
 # -- extremes, plan, determinism ---------------------------------------------------------------
 
 @pytest.mark.parametrize("n", [0.7, 1.4, 64.0])

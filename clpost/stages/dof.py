@@ -155,7 +155,14 @@ MIXED_FULL_LEVELS = 1
 """Levels final builds at full resolution (strides 1, 2): a working tile with a full-resolution
 child tile that would need a coarser level is gathered at half resolution as well."""
 
-LUMA = np.array([0.2126, 0.7152, 0.0722])
+def luma_weights(camera=None) -> np.ndarray:
+    """Relative-luminance weights of the camera's working space (colour-science), for the
+    highlight test below (Rec. 709 without a camera)."""
+    from ..colorspace import WORKING_SPACES, luminance_weights
+
+    return luminance_weights(WORKING_SPACES[getattr(camera, "working_space", "rec709")])
+
+
 MIXED_BRIGHTER = 1.5
 MIXED_SAME_DEPTH = 0.8
 FRONT_MARGIN_PX = 1.0
@@ -219,10 +226,11 @@ def _neighbourhood(a: np.ndarray):
     return [p[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy, dx in offs]
 
 
-def effective_depth(color: np.ndarray, depth: np.ndarray) -> np.ndarray:
-    """Depth with the colour/depth disagreement at edges resolved (see the module docstring)."""
+def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | None = None) -> np.ndarray:
+    """Depth with the colour/depth disagreement at edges resolved (see the module docstring);
+    ``luma``: the working space's luminance weights (:func:`luma_weights`)."""
     d = np.asarray(depth, dtype=np.float64)
-    lum = np.asarray(color, dtype=np.float64)[..., :3] @ LUMA
+    lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
     dn, ln = _neighbourhood(d), _neighbourhood(lum)
     nearest = np.minimum.reduce(dn)
     brightest_same = np.zeros_like(d)
@@ -530,7 +538,7 @@ def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "
     scale, rmax, budget = QUALITY[quality]
     color = np.asarray(color, dtype=np.float64)
     h, w = depth.shape
-    coc = coc_px(camera, effective_depth(color, depth), w, limit_px=scale * rmax)
+    coc = coc_px(camera, effective_depth(color, depth, luma_weights(camera)), w, limit_px=scale * rmax)
     if scale > 1:
         return _half_composite(camera, color, coc, scale, rmax, budget)[0]
     out, _ = gather_reference(color, coc, rmax, budget, camera.blades, camera.blade_rotation_deg,
@@ -578,7 +586,8 @@ class Dof(GatherStage):
                 "DOF_LEVELS": levels_for(rmax, budget),
                 "DOF_VIGNETTING": int(camera.optical_vignetting > 0),
                 "DOF_TEXTURE": int(camera.spherical_aberration != 0),
-                "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS}
+                "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
+                **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
 
     def reference(self, camera, frame, color):
         return dof_reference(camera, color, frame.depth, self.quality)
