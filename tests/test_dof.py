@@ -260,11 +260,11 @@ def test_highlight_edge_test_uses_the_working_spaces_luminance(space):
     color = np.zeros((h, w, 3), np.float32)
     color[..., 2] = 1.0
     depth = np.full((h, w), np.inf, np.float32)
-    color[20, 20], depth[20, 20] = (500.0, 500.0, 500.0), 20.0
+    color[20, 20], depth[20, 20] = (500.0, 500.0, 500.0), 1.0   # a defocused lamp (CoC ≈ 6 px)
     color[20, 21] = (0.4, 0.0, 0.0)
     cam = Camera(**{**CAM, "focus_distance_m": 20.0}, working_space=space)
     eff = D.effective_depth(color.astype(np.float64), depth, D.luma_weights(cam))
-    assert (eff[20, 21] == 20.0) == (space == "acescg")
+    assert (eff[20, 21] == 1.0) == (space == "acescg")
     frame = Frame(color, depth=depth)
     out, pipe = run(cam, frame)
     assert_matches_reference(pipe, frame, out)
