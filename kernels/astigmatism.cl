@@ -8,7 +8,11 @@
  * are affine in the work-item id. Each pixel keeps its own ellipse through the tap weights. The
  * loop body has no library calls (floor, fabs, clamp, sqrt), no float2 and no per-tap selects
  * (the SLP pass would pack them across the unrolled taps into vectors that block it); the taps
- * are a program-scope literal table that Astigmatism prepends to this source.
+ * are a program-scope literal table that Astigmatism prepends to this source. The tap offsets
+ * are computed in the kernel from the tile's four floats and those literals: values that depend
+ * only on the group are hoisted out of PoCL's work-item loop, so the addresses stay affine. (A
+ * per-tile table of tap records read from a buffer was not: those loads stay in the loop, the
+ * addresses become data-dependent and every read a vector gather, 2.2-2.6x slower.)
  *
  * Buffers: colour planar (c*n + i); padded = 3 planes of pw × ph (pw = tiles_x * TILE_W +
  * 2 PAD, ph likewise), edge values repeated (no clamp per tap; the rounded-up work-items read
@@ -114,30 +118,6 @@ __kernel void astigmatism_tiles(__global const float *restrict axes, __global fl
     flags[ty * tiles_x + tx] = (turn || mixed) ? 1 : 0;
 }
 
-/* one work-item per (tap, tile): the tile's tap record, ASTIGMATISM_REC floats — the bilinear
- * corner and the nearest pixel as index offsets in the padded planes (int bits), the bilinear
- * fractions and the tap's squared coordinates (a_s u_x)^2, (a_t u_y)^2 in the tile's ellipse */
-#define ASTIGMATISM_REC 6
-__kernel void astigmatism_taptable(__global const float *restrict tiles, __global float *restrict rec,
-                                   const int tiles_x, const int tiles_y)
-{
-    const int k = get_global_id(0), t = get_global_id(1);
-    if (k >= ASTIGMATISM_TAPS || t >= tiles_x * tiles_y) return;
-    const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
-    __global const float *tile = tiles + 4 * t;
-    const float ex = tile[0], ey = tile[1];
-    const float us = tile[2] * astigmatism_taps[2 * k], ut = tile[3] * astigmatism_taps[2 * k + 1];
-    const float ox = -ey * us + ex * ut, oy = ex * us + ey * ut;
-    const float fx0 = floor(ox), fy0 = floor(oy);
-    __global float *r = rec + ((size_t)t * ASTIGMATISM_TAPS + k) * ASTIGMATISM_REC;
-    r[0] = as_float((int)fy0 * pw + (int)fx0);
-    r[1] = as_float((int)floor(oy + 0.5f) * pw + (int)floor(ox + 0.5f));
-    r[2] = ox - fx0;
-    r[3] = oy - fy0;
-    r[4] = us * us;
-    r[5] = ut * ut;
-}
-
 #define ASTIGMATISM_ABS(v) as_float(as_uint(v) & 0x7fffffffu)
 /* clamp(v, 0, 1) without a call or a select: m = min(v, 1) = (v + 1 - |v - 1|) / 2, then
  * max(m, 0) = (m + |m|) / 2 — two dependent steps, so the SLP pass finds no pair of |.| to pack
@@ -149,7 +129,7 @@ inline float astigmatism_sat(float v)
 }
 
 __kernel void astigmatism(__global const float *restrict padded, __global const float *restrict axes,
-                 __global float *restrict dst, __global const float *restrict rec,
+                 __global float *restrict dst, __global const float *restrict tiles,
                  const int width, const int height)
 {
     const int tx = get_group_id(0), ty = get_group_id(1);
@@ -162,34 +142,41 @@ __kernel void astigmatism(__global const float *restrict padded, __global const 
      * a = 0 finite and the weights' argument below 4e6, where astigmatism_sat is exact in float */
     const float as = axes[jc], at = axes[pn + jc];
     const float is2 = 1.0f / (as * as + 1e-3f), it2 = 1.0f / (1e-3f + at * at);
-    /* the tile's taps (group-uniform records; the per-tap constants come from memory, not from
-     * literals, so the SLP pass cannot pack the unrolled taps into vectors that would stop the
-     * vectorisation across pixels) */
-    __global const float *tr = rec + (size_t)(ty * (int)get_num_groups(0) + tx) * ASTIGMATISM_TAPS * ASTIGMATISM_REC;
+    /* the tile's bounding ellipse and direction (group-uniform: the tap offsets below are
+     * computed from them and the literal spiral, so they are loop-invariant in PoCL's work-item
+     * loop and the addresses affine in the work-item id) */
+    __global const float *tile = tiles + 4 * (ty * (int)get_num_groups(0) + tx);
+    const float tex = tile[0], tey = tile[1], bs = tile[2], bt = tile[3];
     float ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
 #pragma unroll
     for (int k = 0; k < ASTIGMATISM_TAPS; ++k) {
-        __global const float *r = tr + k * ASTIGMATISM_REC;
-        const int j = jc + as_int(r[0]), jn = jc + as_int(r[1]);
+        const float us = bs * astigmatism_taps[2 * k], ut = bt * astigmatism_taps[2 * k + 1];
+        const float ox = -tey * us + tex * ut, oy = tex * us + tey * ut;
+        /* floor and round by truncating positive numbers (|offset| < PAD): no library call */
+        const int ix = (int)(ox + (float)ASTIGMATISM_PAD) - ASTIGMATISM_PAD;
+        const int iy = (int)(oy + (float)ASTIGMATISM_PAD) - ASTIGMATISM_PAD;
+        const int nx = (int)(ox + ((float)ASTIGMATISM_PAD + 0.5f)) - ASTIGMATISM_PAD;
+        const int ny = (int)(oy + ((float)ASTIGMATISM_PAD + 0.5f)) - ASTIGMATISM_PAD;
+        const float fx = ox - (float)ix, fy = oy - (float)iy;
         /* z = 0 (wsum is finite), but a dependency on the previous tap: the SLP pass cannot pack
-         * taps k and k+1 into 2-wide vectors, which would stop the vectorisation across pixels.
-         * It serialises the taps' weights (a latency chain); the shorter chains tried (through
-         * us2 only) let SLP pack again. */
+         * the weights of taps k and k+1 into 2-wide vectors, which would stop the vectorisation
+         * across pixels (the offsets above stay group-uniform and are hoisted out of the loop) */
         const float z = 0.0f * wsum;
-        const float fx = r[2], fy = r[3], us2 = r[4] + z, ut2 = r[5] + z;
+        const float us2 = us * us + z, ut2 = ut * ut + z;
+        __global const float *an = axes + jc + ny * pw + nx;
         /* does the source pixel's own ellipse (+ half a pixel) reach back to the target? weight 1
          * inside, 0 from 1.25 times its size (in q^2: 1 .. 1.5625). Is the tap inside the
          * target's own ellipse? weight 1 inside, 0 from q^2 = 1.125. The paired s/t terms and the
          * two saturations are written in different forms on purpose: identical ones get packed
          * into 2-wide vectors by the SLP pass, which stops the vectorisation across pixels. */
-        const float q2 = us2 * axes[2 * pn + jn] + ut2 * axes[3 * pn + jn];
+        const float q2 = us2 * an[2 * pn] + ut2 * an[3 * pn];
         const float reach = astigmatism_sat((1.5625f - q2) * (1.0f / 0.5625f));
         const float vo = 9.0f - 8.0f * (us2 * is2 + ut2 * it2);
         const float own = 0.5f * (vo + ASTIGMATISM_ABS(vo) - ASTIGMATISM_ABS(vo - 1.0f) - (vo - 1.0f));
         const float w = reach * own;
         const float w00 = w * (1.0f - fx) * (1.0f - fy), w01 = w * fx * (1.0f - fy);
         const float w10 = w * (1.0f - fx) * fy, w11 = w * fx * fy;
-        __global const float *p = padded + j;
+        __global const float *p = padded + jc + iy * pw + ix;
         ar += w00 * p[0] + w01 * p[1] + w10 * p[pw] + w11 * p[pw + 1];
         p += pn;
         ag += w00 * p[0] + w01 * p[1] + w10 * p[pw] + w11 * p[pw + 1];
