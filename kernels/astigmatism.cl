@@ -128,74 +128,90 @@ inline float astigmatism_sat(float v)
     return 0.5f * (m + ASTIGMATISM_ABS(m));
 }
 
+#define ASTIGMATISM_ABS8(v) as_float8(as_uint8(v) & (uint8)0x7fffffffu)
+/* clamp(v, 0, 1) = max(min(v, 1), 0) with |.| (no call): see astigmatism_sat */
+inline float8 astigmatism_sat8(float8 v)
+{
+    const float8 m = 0.5f * (v + 1.0f - ASTIGMATISM_ABS8(v - 1.0f));
+    return 0.5f * (m + ASTIGMATISM_ABS8(m));
+}
+
+/* One work-item = 8 consecutive pixels of a row of the tile, as explicit float8 vectors (a
+ * work-group = a tile = ASTIGMATISM_TILE_W / 8 x ASTIGMATISM_TILE_H work-items). Written with
+ * vectors rather than left to PoCL's work-item-loop vectoriser because that one needs the taps'
+ * weights chained through a zero dependency on the running sum (or the SLP pass packs pairs of
+ * taps and it gives up), and that chain made the loop latency-bound: the taps' weights are now
+ * independent and overlap. */
 __kernel void astigmatism(__global const float *restrict padded, __global const float *restrict axes,
                  __global float *restrict dst, __global const float *restrict tiles,
                  const int width, const int height)
 {
     const int tx = get_group_id(0), ty = get_group_id(1);
-    const int x = tx * ASTIGMATISM_TILE_W + (int)get_local_id(0);
+    const int x = tx * ASTIGMATISM_TILE_W + 8 * (int)get_local_id(0);
     const int y = ty * ASTIGMATISM_TILE_H + (int)get_local_id(1);
     const int pw = (int)get_num_groups(0) * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
     const size_t pn = (size_t)pw * ((int)get_num_groups(1) * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
     const int jc = (y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
-    /* the pixel's own ellipse: 1/a^2 (a tap outside it gets no weight). The 1e-3 px^2 keeps
-     * a = 0 finite and the weights' argument below 4e6, where astigmatism_sat is exact in float */
-    const float as = axes[jc], at = axes[pn + jc];
-    const float is2 = 1.0f / (as * as + 1e-3f), it2 = 1.0f / (1e-3f + at * at);
-    /* the tile's bounding ellipse and direction (group-uniform: the tap offsets below are
-     * computed from them and the literal spiral, so they are loop-invariant in PoCL's work-item
-     * loop and the addresses affine in the work-item id) */
+    /* the pixels' own ellipses: 1/a^2 (a tap outside gets no weight). The 1e-3 px^2 keeps
+     * a = 0 finite and the weights' argument below 4e6, where astigmatism_sat8 is exact in float */
+    const float8 as = vload8(0, axes + jc), at = vload8(0, axes + pn + jc);
+    const float8 is2 = 1.0f / (as * as + 1e-3f), it2 = 1.0f / (at * at + 1e-3f);
+    /* the tile's bounding ellipse and direction: the tap offsets are the same for all its pixels */
     __global const float *tile = tiles + 4 * (ty * (int)get_num_groups(0) + tx);
     const float tex = tile[0], tey = tile[1], bs = tile[2], bt = tile[3];
-    float ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
+    float8 ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
 #pragma unroll
     for (int k = 0; k < ASTIGMATISM_TAPS; ++k) {
         const float us = bs * astigmatism_taps[2 * k], ut = bt * astigmatism_taps[2 * k + 1];
         const float ox = -tey * us + tex * ut, oy = tex * us + tey * ut;
-        /* floor and round by truncating positive numbers (|offset| < PAD): no library call */
+        /* floor and round by truncating positive numbers (|offset| < PAD) */
         const int ix = (int)(ox + (float)ASTIGMATISM_PAD) - ASTIGMATISM_PAD;
         const int iy = (int)(oy + (float)ASTIGMATISM_PAD) - ASTIGMATISM_PAD;
         const int nx = (int)(ox + ((float)ASTIGMATISM_PAD + 0.5f)) - ASTIGMATISM_PAD;
         const int ny = (int)(oy + ((float)ASTIGMATISM_PAD + 0.5f)) - ASTIGMATISM_PAD;
         const float fx = ox - (float)ix, fy = oy - (float)iy;
-        /* z = 0 (wsum is finite), but a dependency on the previous tap: the SLP pass cannot pack
-         * the weights of taps k and k+1 into 2-wide vectors, which would stop the vectorisation
-         * across pixels (the offsets above stay group-uniform and are hoisted out of the loop) */
-        const float z = 0.0f * wsum;
-        const float us2 = us * us + z, ut2 = ut * ut + z;
-        __global const float *an = axes + jc + ny * pw + nx;
+        const float us2 = us * us, ut2 = ut * ut;
         /* does the source pixel's own ellipse (+ half a pixel) reach back to the target? weight 1
          * inside, 0 from 1.25 times its size (in q^2: 1 .. 1.5625). Is the tap inside the
-         * target's own ellipse? weight 1 inside, 0 from q^2 = 1.125. The paired s/t terms and the
-         * two saturations are written in different forms on purpose: identical ones get packed
-         * into 2-wide vectors by the SLP pass, which stops the vectorisation across pixels. */
-        const float q2 = us2 * an[2 * pn] + ut2 * an[3 * pn];
-        const float reach = astigmatism_sat((1.5625f - q2) * (1.0f / 0.5625f));
-        const float vo = 9.0f - 8.0f * (us2 * is2 + ut2 * it2);
-        const float own = 0.5f * (vo + ASTIGMATISM_ABS(vo) - ASTIGMATISM_ABS(vo - 1.0f) - (vo - 1.0f));
-        const float w = reach * own;
-        const float w00 = w * (1.0f - fx) * (1.0f - fy), w01 = w * fx * (1.0f - fy);
-        const float w10 = w * (1.0f - fx) * fy, w11 = w * fx * fy;
+         * target's own ellipse? weight 1 inside, 0 from q^2 = 1.125 */
+        __global const float *an = axes + jc + ny * pw + nx;
+        const float8 q2 = us2 * vload8(0, an + 2 * pn) + ut2 * vload8(0, an + 3 * pn);
+        const float8 reach = astigmatism_sat8((1.5625f - q2) * (1.0f / 0.5625f));
+        const float8 own = astigmatism_sat8(9.0f - 8.0f * (us2 * is2 + ut2 * it2));
+        const float8 w = reach * own;
+        const float8 w00 = w * ((1.0f - fx) * (1.0f - fy)), w01 = w * (fx * (1.0f - fy));
+        const float8 w10 = w * ((1.0f - fx) * fy), w11 = w * (fx * fy);
         __global const float *p = padded + jc + iy * pw + ix;
-        ar += w00 * p[0] + w01 * p[1] + w10 * p[pw] + w11 * p[pw + 1];
+        ar += w00 * vload8(0, p) + w01 * vload8(0, p + 1) + w10 * vload8(0, p + pw) + w11 * vload8(0, p + pw + 1);
         p += pn;
-        ag += w00 * p[0] + w01 * p[1] + w10 * p[pw] + w11 * p[pw + 1];
+        ag += w00 * vload8(0, p) + w01 * vload8(0, p + 1) + w10 * vload8(0, p + pw) + w11 * vload8(0, p + pw + 1);
         p += pn;
-        ab += w00 * p[0] + w01 * p[1] + w10 * p[pw] + w11 * p[pw + 1];
+        ab += w00 * vload8(0, p) + w01 * vload8(0, p + 1) + w10 * vload8(0, p + pw) + w11 * vload8(0, p + pw + 1);
         wsum += w;
     }
-    const bool keep = (as < ASTIGMATISM_MIN_SEMI && at < ASTIGMATISM_MIN_SEMI) || !(wsum > 0.0f);
-    const float inv = keep ? 0.0f : 1.0f / wsum;
-    const float r = keep ? padded[jc] : ar * inv, g = keep ? padded[pn + jc] : ag * inv;
-    const float b = keep ? padded[2 * pn + jc] : ab * inv;
-#if !ASTIGMATISM_WHOLE_TILES
-    if (x >= width || y >= height) return;
-#endif
+    /* copy where both semi-axes are below 1e-3 px or no tap has weight */
+    const int8 keep = ((as < ASTIGMATISM_MIN_SEMI) & (at < ASTIGMATISM_MIN_SEMI)) | !(wsum > 0.0f);
+    const float8 inv = 1.0f / select(wsum, (float8)1.0f, keep);
+    const float8 r = select(ar * inv, vload8(0, padded + jc), keep);
+    const float8 g = select(ag * inv, vload8(0, padded + pn + jc), keep);
+    const float8 b = select(ab * inv, vload8(0, padded + 2 * pn + jc), keep);
     const size_t n = (size_t)width * height;
     const size_t i = (size_t)y * width + x;
-    dst[i] = r;
-    dst[n + i] = g;
-    dst[2 * n + i] = b;
+#if ASTIGMATISM_WHOLE_TILES
+    vstore8(r, 0, dst + i);
+    vstore8(g, 0, dst + n + i);
+    vstore8(b, 0, dst + 2 * n + i);
+#else
+    if (y >= height) return;
+    const float rr[8] = {r.s0, r.s1, r.s2, r.s3, r.s4, r.s5, r.s6, r.s7};
+    const float gg[8] = {g.s0, g.s1, g.s2, g.s3, g.s4, g.s5, g.s6, g.s7};
+    const float bb[8] = {b.s0, b.s1, b.s2, b.s3, b.s4, b.s5, b.s6, b.s7};
+    for (int e = 0; e < 8 && x + e < width; ++e) {
+        dst[i + e] = rr[e];
+        dst[n + i + e] = gg[e];
+        dst[2 * n + i + e] = bb[e];
+    }
+#endif
 }
 
 /* the per-pixel model (each pixel's own ellipse and direction; per-pixel addresses, so it does
