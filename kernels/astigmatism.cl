@@ -24,6 +24,9 @@
  * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE, ASTIGMATISM_TILE_W,
  * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch).
  */
+#if ASTIGMATISM_TILE_W % 8
+#error "the gather and the tile pass read rows of a tile as float8: ASTIGMATISM_TILE_W must be a multiple of 8"
+#endif
 #define ASTIGMATISM_MAX_SEMI ((float)(ASTIGMATISM_PAD - 1))
 #define ASTIGMATISM_MIN_SEMI 1e-3f
 #define ASTIGMATISM_MIN_DEPTH_MM 1e-3f
@@ -91,23 +94,51 @@ __kernel void astigmatism_tiles(__global const float *restrict axes, __global fl
     const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
     const size_t pn = (size_t)pw * (tiles_y * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
     const int x1 = min((tx + 1) * ASTIGMATISM_TILE_W, width), y1 = min((ty + 1) * ASTIGMATISM_TILE_H, height);
-    float ms = 0.0f, mt = 0.0f;
-    for (int y = ty * ASTIGMATISM_TILE_H; y < y1; ++y)
-        for (int x = tx * ASTIGMATISM_TILE_W; x < x1; ++x) {
-            const size_t j = (size_t)(y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
-            ms = fmax(ms, axes[j]);
-            mt = fmax(mt, axes[pn + j]);
-        }
+    float ms = 0.0f, mt = 0.0f, mn_s, mn_t;
+    if (x1 - tx * ASTIGMATISM_TILE_W == ASTIGMATISM_TILE_W && y1 - ty * ASTIGMATISM_TILE_H == ASTIGMATISM_TILE_H) {
+        /* a whole tile: rows as float8 vectors (the scalar loops below cost as much as the
+         * gather's pad pass) */
+        float8 vs = 0.0f, vt = 0.0f, ws = MAXFLOAT, wt = MAXFLOAT;
+        for (int y = ty * ASTIGMATISM_TILE_H; y < y1; ++y)
+            for (int x = tx * ASTIGMATISM_TILE_W; x < x1; x += 8) {
+                const size_t j = (size_t)(y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
+                const float8 a = vload8(0, axes + j), b = vload8(0, axes + pn + j);
+                vs = fmax(vs, a);
+                vt = fmax(vt, b);
+                ws = fmin(ws, a);
+                wt = fmin(wt, b);
+            }
+        float4 h4 = fmax(vs.lo, vs.hi);
+        float2 h2 = fmax(h4.lo, h4.hi);
+        ms = fmax(h2.lo, h2.hi);
+        h4 = fmax(vt.lo, vt.hi);
+        h2 = fmax(h4.lo, h4.hi);
+        mt = fmax(h2.lo, h2.hi);
+        h4 = fmin(ws.lo, ws.hi);
+        h2 = fmin(h4.lo, h4.hi);
+        mn_s = fmin(h2.lo, h2.hi);
+        h4 = fmin(wt.lo, wt.hi);
+        h2 = fmin(h4.lo, h4.hi);
+        mn_t = fmin(h2.lo, h2.hi);
+    } else {
+        for (int y = ty * ASTIGMATISM_TILE_H; y < y1; ++y)
+            for (int x = tx * ASTIGMATISM_TILE_W; x < x1; ++x) {
+                const size_t j = (size_t)(y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
+                ms = fmax(ms, axes[j]);
+                mt = fmax(mt, axes[pn + j]);
+            }
+        mn_s = ms;
+        mn_t = mt;
+        for (int y = ty * ASTIGMATISM_TILE_H; y < y1; ++y)
+            for (int x = tx * ASTIGMATISM_TILE_W; x < x1; ++x) {
+                const size_t j = (size_t)(y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
+                mn_s = fmin(mn_s, axes[j]);
+                mn_t = fmin(mn_t, axes[pn + j]);
+            }
+    }
     /* exact (per-pixel) path for tiles where the shared ellipse would be wrong by more than
      * about half a pixel: the tile centre's direction is off by up to (half diagonal)/r rad, or
      * some pixel's ellipse is less than ASTIGMATISM_MIXED of the bound (a depth edge) */
-    float mn_s = ms, mn_t = mt;
-    for (int y = ty * ASTIGMATISM_TILE_H; y < y1; ++y)
-        for (int x = tx * ASTIGMATISM_TILE_W; x < x1; ++x) {
-            const size_t j = (size_t)(y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
-            mn_s = fmin(mn_s, axes[j]);
-            mn_t = fmin(mn_t, axes[pn + j]);
-        }
     const float r = tiles[4 * (ty * tiles_x + tx) + 2];  /* the host put the tile centre's r here */
     const float half_diag = 0.5f * sqrt((float)(ASTIGMATISM_TILE_W * ASTIGMATISM_TILE_W + ASTIGMATISM_TILE_H * ASTIGMATISM_TILE_H));
     const bool turn = fmax(ms, mt) * half_diag > ASTIGMATISM_EXACT_PX * r;
