@@ -14,7 +14,7 @@
  * Buffers: colour planar (c*n + i); padded = 3 planes of pw × ph, pw = tiles_x * COMA_TILE_W +
  * 2 COMA_PAD (ph likewise), edge values repeated, so no tap clamps and the rounded-up work-items
  * read inside the buffer; shape = 4 planes of (tiles_y * COMA_TILE_H) × (tiles_x * COMA_TILE_W),
- * per pixel C e_r (x, y) in px, C' = dC/dr and C/r (written by coma_pad from the LUT); lut = 2 planes of COMA_LUT_SIZE values over image height [0, r_max]:
+ * per pixel C e_r (x, y) in px, C' = dC/dr and C/r (written by coma_shape from the LUT, once per camera and frame size); lut = 2 planes of COMA_LUT_SIZE values over image height [0, r_max]:
  * C (mm) and dC/dr; tiles = per tile (row-major) the tile centre's -C e_s, -C e_r (px; from the
  * host, float64 exact C); coma_taps = COMA_TAPS landing offsets (sagittal, radial) in units of C
  * of a Vogel spiral over the pupil, a program-scope __constant table that Coma prepends to this
@@ -28,10 +28,9 @@
 #endif
 #define COMA_MAX_C ((float)(COMA_PAD - 1) / 3.0f)
 
+/* the padded copy of the colour planes (edge values repeated) */
 __kernel void coma_pad(__global const float *restrict src, __global float *restrict padded,
-                       __global float *restrict shape, __global const float *restrict lut,
-                       const int width, const int height, const int pw, const int ph,
-                       const float cx, const float cy, const float pitch_mm, const float lut_scale)
+                       const int width, const int height, const int pw, const int ph)
 {
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= pw || y >= ph) return;
@@ -41,11 +40,16 @@ __kernel void coma_pad(__global const float *restrict src, __global float *restr
     padded[j] = src[i];
     padded[pn + j] = src[n + i];
     padded[2 * pn + j] = src[2 * n + i];
+}
 
-    /* the comet of output pixel (ox, oy) of the rounded-up frame */
-    const int ow = pw - 2 * COMA_PAD, oh = ph - 2 * COMA_PAD;
-    const int ox = x - COMA_PAD, oy = y - COMA_PAD;
-    if (ox < 0 || oy < 0 || ox >= ow || oy >= oh) return;
+/* the comet of output pixel (x, y) of the rounded-up frame (ow x oh), from the LUT; it depends
+ * on the camera and the frame size only, so Coma runs this once per camera and size */
+__kernel void coma_shape(__global float *restrict shape, __global const float *restrict lut,
+                         const int ow, const int oh, const float cx, const float cy,
+                         const float pitch_mm, const float lut_scale)
+{
+    const int ox = get_global_id(0), oy = get_global_id(1);
+    if (ox >= ow || oy >= oh) return;
     const float dx = (float)ox - cx, dy = (float)oy - cy;
     const float r = sqrt(dx * dx + dy * dy);
     const float ex = r > 0.0f ? dx / r : 1.0f, ey = r > 0.0f ? dy / r : 0.0f;

@@ -136,3 +136,15 @@ def test_uniform_tiles_bound_the_per_pixel_landing_points():
             worst = max(worst, float(d[mask].max()))
         assert worst <= coma.UNIFORM_PX, (w, h, worst)
     assert st.tile_uniform(Camera(coma_mm=0.087), 1920, 1080).all()
+
+
+def test_device_comet_is_recomputed_when_the_camera_changes(rng):
+    """The per-pixel comet stays on the device between frames (it depends on the camera and the
+    size only): a new coefficient or frame size must not reuse it."""
+    frame = Frame(odd_frame(rng, w=67, h=45, scale=10.0).color)
+    pipe = Pipeline(Camera(coma_mm=0.9), stages=["coma"])
+    for cam, f in ((Camera(coma_mm=0.9), frame), (Camera(coma_mm=-2.0), frame),
+                   (Camera(coma_mm=-2.0), Frame(odd_frame(rng, w=45, h=67, scale=10.0).color))):
+        pipe.camera = cam
+        out, ref = pipe.run(f).color, pipe.reference(f)
+        assert np.abs(out - ref).max() < 2e-3 * np.abs(ref).max(), cam.coma_mm

@@ -210,17 +210,25 @@ class Coma(GatherStage):
         w, h = frame.width, frame.height
         b = self._buffers(rt, w, h)
         cx, cy = fld.principal_point_px(camera, w, h)
-        events = [cl.enqueue_copy(q, b["lut"], self._lut(camera), is_blocking=False),
-                  cl.enqueue_copy(q, b["tiles"], self.tile_axes_px(camera, w, h).astype(np.float32),
-                                  is_blocking=False)]
         ntx, nty = fld.tiles(w, h)
         ow, oh = ntx * fld.TILE_W, nty * fld.TILE_H
         whole = (ow, oh) == (w, h)
         pitch = fld.pitch_mm(camera, w)
+        events = []
+        shape_key = (id(rt.context), self._uniform_key(camera, w, h))
+        if b.get("shape_key") != shape_key:
+            # the comet of every pixel depends on the camera and the frame size only (not on the
+            # frame's content): computed once, kept on the device for the next frames
+            events += [cl.enqueue_copy(q, b["lut"], self._lut(camera), is_blocking=False),
+                       cl.enqueue_copy(q, b["tiles"], self.tile_axes_px(camera, w, h).astype(np.float32),
+                                       is_blocking=False)]
+            k = self._kernel(rt, camera, "coma_shape", whole)
+            k.set_args(b["shape"], b["lut"], np.int32(ow), np.int32(oh), np.float32(cx), np.float32(cy),
+                       np.float32(pitch), np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
+            events.append(cl.enqueue_nd_range_kernel(q, k, (ow, oh), None))
+            b["shape_key"] = shape_key
         k = self._kernel(rt, camera, "coma_pad", whole)
-        k.set_args(src, b["pad"], b["shape"], b["lut"], np.int32(w), np.int32(h),
-                   np.int32(ow + 2 * fld.PAD), np.int32(oh + 2 * fld.PAD), np.float32(cx), np.float32(cy),
-                   np.float32(pitch), np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
+        k.set_args(src, b["pad"], np.int32(w), np.int32(h), np.int32(ow + 2 * fld.PAD), np.int32(oh + 2 * fld.PAD))
         events.append(cl.enqueue_nd_range_kernel(q, k, (ow + 2 * fld.PAD, oh + 2 * fld.PAD), None))
         lists = self._tile_lists(rt, camera, w, h)
         for name, ids, n_ids, vec in (("coma_uniform", lists["uniform"], lists["n_uniform"], 8),
