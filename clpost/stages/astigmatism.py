@@ -262,9 +262,9 @@ class Astigmatism(GatherStage):
         events.append(cl.enqueue_nd_range_kernel(q, k, (ntx, nty), None))
         k = self._kernel(rt, camera, "astigmatism", whole)
         k.set_args(b["pad"], b["axes"], dst, b["tiles"], np.int32(w), np.int32(h))
-        # 8 pixels (a float8) per work-item
-        events.append(cl.enqueue_nd_range_kernel(q, k, (ntx * fld.TILE_W // 8, nty * fld.TILE_H),
-                                                 (fld.TILE_W // 8, fld.TILE_H)))
+        # 16 pixels (a float16) per work-item
+        events.append(cl.enqueue_nd_range_kernel(q, k, (ntx * fld.TILE_W // 16, nty * fld.TILE_H),
+                                                 (fld.TILE_W // 16, fld.TILE_H)))
         k = self._kernel(rt, camera, "astigmatism_exact", whole)
         k.set_args(b["pad"], b["axes"], dst, b["flags"], np.int32(w), np.int32(h), np.float32(cx), np.float32(cy))
         events.append(cl.enqueue_nd_range_kernel(q, k, (ntx * fld.TILE_W, nty * fld.TILE_H),
