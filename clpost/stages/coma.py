@@ -64,7 +64,7 @@ centre's, :math:`\max_k \| |t_{k,s}|\,m_s + |t_{k,r}|\,m_r \|` (m the largest de
 pixels' :math:`-C e_s, -C e_r` from the centre's, per axis), is at most ``UNIFORM_PX`` = 0.05 px,
 every pixel of the tile takes the tile centre's comet: each tap is one bilinear sample at a
 tile-uniform offset with tile-uniform weights, times the pixel's own Jacobian (``coma_uniform``,
-explicit float8 vectors; 12 reads per tap instead of 27). A linear coefficient makes the comet
+explicit float16 vectors; 12 reads per tap instead of 27). A linear coefficient makes the comet
 field affine, so all tiles deviate alike: the benchmark's ``coma_mm`` 0.087 mm at 1080p stays
 below 0.035 px everywhere; the flagship wide open (0.22 px) keeps the window kernel. The
 reference takes the same tile plan (``tile_uniform``).
@@ -231,14 +231,14 @@ class Coma(GatherStage):
         k.set_args(src, b["pad"], np.int32(w), np.int32(h), np.int32(ow + 2 * fld.PAD), np.int32(oh + 2 * fld.PAD))
         events.append(cl.enqueue_nd_range_kernel(q, k, (ow + 2 * fld.PAD, oh + 2 * fld.PAD), None))
         lists = self._tile_lists(rt, camera, w, h)
-        for name, ids, n_ids, vec in (("coma_uniform", lists["uniform"], lists["n_uniform"], 8),
+        for name, ids, n_ids, vec in (("coma_uniform", lists["uniform"], lists["n_uniform"], 16),
                                       ("coma", lists["window"], lists["n_window"], 1)):
             if not n_ids:
                 continue
             k = self._kernel(rt, camera, name, whole)
             k.set_args(b["pad"], b["shape"], dst, b["tiles"], ids, np.int32(ntx), np.int32(nty),
                        np.int32(w), np.int32(h))
-            # coma_uniform: 8 pixels (a float8) per work-item
+            # coma_uniform: 16 pixels (a float16) per work-item
             events.append(cl.enqueue_nd_range_kernel(q, k, (fld.TILE_W // vec * n_ids, fld.TILE_H),
                                                      (fld.TILE_W // vec, fld.TILE_H)))
         return events
