@@ -53,6 +53,9 @@ def main() -> None:
     ap.add_argument("--scene", default="no_defocus", choices=sorted(bench.SCENES))
     ap.add_argument("--size", default="1920x1080")
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--lens", default=None,
+                    help="a traced lens instead of the scene's parametric coefficients (e.g. zeiss-planar-50-f1.4)")
+    ap.add_argument("--f-number", type=float, default=None)
     args = ap.parse_args()
     w, h = (int(v) for v in args.size.split("x"))
 
@@ -66,6 +69,9 @@ def main() -> None:
                                           else new_source(name))
 
     cam, _ = bench.SCENES[args.scene].camera(w, h)
+    if args.lens is not None:
+        cam = cam.with_(lens=args.lens, field_curvature_mm=None, astigmatism_mm=None, coma_mm=None,
+                        lateral_color_mm=None, **({} if args.f_number is None else {"f_number": args.f_number}))
     frame = bench.synthetic_frame(w, h)
     rt = Pipeline(cam).runtime
     q = rt.queue
