@@ -232,13 +232,13 @@ class Coma(GatherStage):
         events.append(cl.enqueue_nd_range_kernel(q, k, (ow + 2 * fld.PAD, oh + 2 * fld.PAD), None))
         lists = self._tile_lists(rt, camera, w, h)
         for name, ids, n_ids, vec in (("coma_uniform", lists["uniform"], lists["n_uniform"], 16),
-                                      ("coma", lists["window"], lists["n_window"], 1)):
+                                      ("coma", lists["window"], lists["n_window"], 16)):
             if not n_ids:
                 continue
             k = self._kernel(rt, camera, name, whole)
             k.set_args(b["pad"], b["shape"], dst, b["tiles"], ids, np.int32(ntx), np.int32(nty),
                        np.int32(w), np.int32(h))
-            # coma_uniform: 16 pixels (a float16) per work-item
+            # 16 pixels (a float16) per work-item
             events.append(cl.enqueue_nd_range_kernel(q, k, (fld.TILE_W // vec * n_ids, fld.TILE_H),
                                                      (fld.TILE_W // vec, fld.TILE_H)))
         return events
