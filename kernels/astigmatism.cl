@@ -1,18 +1,17 @@
 /* astigmatism: field curvature + astigmatism as an elliptical gather on tiles.
  * clpost/stages/astigmatism.py documents the formulas; its reference() is the oracle.
  *
- * Vectorisation (PERFORMANCE.md; what stops PoCL's work-item-loop vectoriser was found with
- * POCL_VECTORIZER_REMARKS): work-groups are tiles of ASTIGMATISM_TILE_W × ASTIGMATISM_TILE_H
- * pixels and every tap offset is group-uniform — the tile's bounding ellipse (largest semi-axes
- * of its pixels, the tile centre's directions) sampled by the Vogel spiral — so the addresses
- * are affine in the work-item id. Each pixel keeps its own ellipse through the tap weights. The
- * loop body has no library calls (floor, fabs, clamp, sqrt), no float2 and no per-tap selects
- * (the SLP pass would pack them across the unrolled taps into vectors that block it); the taps
- * are a program-scope literal table that Astigmatism prepends to this source. The tap offsets
- * are computed in the kernel from the tile's four floats and those literals: values that depend
- * only on the group are hoisted out of PoCL's work-item loop, so the addresses stay affine. (A
- * per-tile table of tap records read from a buffer was not: those loads stay in the loop, the
- * addresses become data-dependent and every read a vector gather, 2.2-2.6x slower.)
+ * Vectorisation (PERFORMANCE.md): work-groups are tiles of ASTIGMATISM_TILE_W ×
+ * ASTIGMATISM_TILE_H pixels and every tap offset is group-uniform — the tile's bounding ellipse
+ * (largest semi-axes of its pixels, the tile centre's directions) sampled by the Vogel spiral, a
+ * program-scope literal table that Astigmatism prepends to this source — so each tap reads rows
+ * of the tile at one offset. Each pixel keeps its own ellipse through the tap weights. The gather
+ * computes 16 pixels per work-item as explicit float16 vectors: PoCL's vectoriser across
+ * work-items (found with POCL_VECTORIZER_REMARKS and objdump) needed the offsets hoisted (a
+ * per-tile table of tap records read from a buffer was not: every read became a vector gather)
+ * and the taps' weights chained through a zero dependency on the running sum so the SLP pass
+ * would not pack pairs of taps, which made the loop latency-bound. The explicit vectors need
+ * neither.
  *
  * Buffers: colour planar (c*n + i); padded = 3 planes of pw × ph (pw = tiles_x * TILE_W +
  * 2 PAD, ph likewise), edge values repeated (no clamp per tap; the rounded-up work-items read
@@ -173,7 +172,7 @@ inline float16 astigmatism_sat16(float16 v)
  * weights chained through a zero dependency on the running sum (or the SLP pass packs pairs of
  * taps and it gives up), and that chain made the loop latency-bound: the taps' weights are now
  * independent and overlap. float16 rather than float8: same speed at 16 taps, 1.35-1.6x faster
- * at 64 (measured in one process); the cost is a longer cold build (PoCL caches it). */
+ * at 64 (measured in one process); the tap loop is unrolled by 4 (see below), not fully. */
 __kernel void astigmatism(__global const float *restrict padded, __global const float *restrict axes,
                  __global float *restrict dst, __global const float *restrict tiles,
                  const int width, const int height)
