@@ -1,34 +1,36 @@
 /* coma: third-order coma as a gather with the comet PSF of the pixel's field height.
  * clpost/stages/coma.py documents the formulas; its reference() is the oracle.
  *
- * Vectorisation (PERFORMANCE.md: PoCL widens the implicit work-item loop only when the addresses
- * are affine in the work-item id and the loop body has no library calls, float2 arithmetic or
- * branches): work-groups are tiles of COMA_TILE_W × COMA_TILE_H pixels. Each tap reads a 3 × 3
- * window at an integer offset b_k that is the same for the whole tile (the tile centre's landing
- * point, rounded), and interpolates inside it with tent weights at the pixel's *own* landing
- * point: exactly the bilinear tap of the per-pixel comet while that point lies within 1 px of
- * b_k (the comet changes by < 0.5 px across a tile for the lenses and coefficients in the tests
- * and benchmarks: Coma.shape_error_px), clamped to the window beyond (the reference does the
- * same).
+ * Vectorisation: work-groups are tiles of COMA_TILE_W × COMA_TILE_H pixels (over lists of
+ * tiles), each work-item computes 16 consecutive pixels of a tile row as explicit float16 vectors
+ * (PoCL's own vectoriser across work-items needs fully unrolled, carefully written scalar code;
+ * explicit vectors are as fast or faster and build in a second). Each tap reads a 3 × 3 window at
+ * an integer offset b_k that is the same for the whole tile (the tile centre's landing point,
+ * rounded), and interpolates inside it with tent weights at the pixel's *own* landing point:
+ * exactly the bilinear tap of the per-pixel comet while that point lies within 1 px of b_k (the
+ * comet changes by < 0.5 px across a tile for the lenses and coefficients in the tests and
+ * benchmarks: Coma.shape_error_px), clamped to the window beyond (the reference does the same).
+ * Tiles where the comet changes by at most Coma.UNIFORM_PX take coma_uniform (one bilinear tap).
  *
  * Buffers: colour planar (c*n + i); padded = 3 planes of pw × ph, pw = tiles_x * COMA_TILE_W +
  * 2 COMA_PAD (ph likewise), edge values repeated, so no tap clamps and the rounded-up work-items
  * read inside the buffer; shape = 4 planes of (tiles_y * COMA_TILE_H) × (tiles_x * COMA_TILE_W),
- * per pixel C e_r (x, y) in px, C' = dC/dr and C/r (written by coma_pad from the LUT); lut = 2 planes of COMA_LUT_SIZE values over image height [0, r_max]:
+ * per pixel C e_r (x, y) in px, C' = dC/dr and C/r (written by coma_shape from the LUT, once per camera and frame size); lut = 2 planes of COMA_LUT_SIZE values over image height [0, r_max]:
  * C (mm) and dC/dr; tiles = per tile (row-major) the tile centre's -C e_s, -C e_r (px; from the
  * host, float64 exact C); coma_taps = COMA_TAPS landing offsets (sagittal, radial) in units of C
  * of a Vogel spiral over the pupil, a program-scope __constant table that Coma prepends to this
- * source (so the unrolled loop folds them to literals; read from a buffer, the SLP pass packs
- * them into vector gathers that stop the work-item loop's vectorisation).
+ * source.
  * Defines: COMA_TAPS, COMA_PAD, COMA_LUT_SIZE, COMA_TILE_W, COMA_TILE_H, COMA_WHOLE_TILES (the
  * frame is a whole number of tiles, so every work-item stores without a branch).
  */
+#if COMA_TILE_W % 16
+#error "the gathers read rows of a tile as float16: COMA_TILE_W must be a multiple of 16"
+#endif
 #define COMA_MAX_C ((float)(COMA_PAD - 1) / 3.0f)
 
+/* the padded copy of the colour planes (edge values repeated) */
 __kernel void coma_pad(__global const float *restrict src, __global float *restrict padded,
-                       __global float *restrict shape, __global const float *restrict lut,
-                       const int width, const int height, const int pw, const int ph,
-                       const float cx, const float cy, const float pitch_mm, const float lut_scale)
+                       const int width, const int height, const int pw, const int ph)
 {
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= pw || y >= ph) return;
@@ -38,11 +40,16 @@ __kernel void coma_pad(__global const float *restrict src, __global float *restr
     padded[j] = src[i];
     padded[pn + j] = src[n + i];
     padded[2 * pn + j] = src[2 * n + i];
+}
 
-    /* the comet of output pixel (ox, oy) of the rounded-up frame */
-    const int ow = pw - 2 * COMA_PAD, oh = ph - 2 * COMA_PAD;
-    const int ox = x - COMA_PAD, oy = y - COMA_PAD;
-    if (ox < 0 || oy < 0 || ox >= ow || oy >= oh) return;
+/* the comet of output pixel (x, y) of the rounded-up frame (ow x oh), from the LUT; it depends
+ * on the camera and the frame size only, so Coma runs this once per camera and size */
+__kernel void coma_shape(__global float *restrict shape, __global const float *restrict lut,
+                         const int ow, const int oh, const float cx, const float cy,
+                         const float pitch_mm, const float lut_scale)
+{
+    const int ox = get_global_id(0), oy = get_global_id(1);
+    if (ox >= ow || oy >= oh) return;
     const float dx = (float)ox - cx, dy = (float)oy - cy;
     const float r = sqrt(dx * dx + dy * dy);
     const float ex = r > 0.0f ? dx / r : 1.0f, ey = r > 0.0f ? dy / r : 0.0f;
@@ -61,67 +68,146 @@ __kernel void coma_pad(__global const float *restrict src, __global float *restr
     shape[3 * on + o] = r > 0.0f ? c / r : dc;
 }
 
-/* tent weights of the 3 window samples at -1, 0, 1 for a position f in [-1, 1] (linear
- * interpolation between the two neighbours of f). |v| by clearing the sign bit (integer code the
- * vectoriser widens) and clamps/max written with it: OpenCL's fabs/fmin/clamp are library calls in PoCL and selects get packed by
- * the SLP pass across the unrolled taps into <N x i1> vectors that block it. */
-#define COMA_ABS(v) as_float(as_uint(v) & 0x7fffffffu)
-#define COMA_CLAMP1(v) (0.5f * (COMA_ABS((v) + 1.0f) - COMA_ABS((v) - 1.0f)))
-#define COMA_TENT(f, wm, w0, wp) \
-    const float wm = 0.5f * (COMA_ABS(f) - (f)), wp = 0.5f * (COMA_ABS(f) + (f)), w0 = 1.0f - COMA_ABS(f)
+#define COMA_ABS16(v) as_float16(as_uint16(v) & (uint16)0x7fffffffu)
+#define COMA_CLAMP116(v) (0.5f * (COMA_ABS16((v) + 1.0f) - COMA_ABS16((v) - 1.0f)))
 
+/* One work-item = 16 consecutive pixels of a tile row as explicit float16 vectors (a work-group
+ * = a tile = COMA_TILE_W / 16 x COMA_TILE_H work-items; work-group g = tile list[g], the tiles
+ * whose comet varies too much for coma_uniform). Each tap reads a 3 x 3 window at the tile-uniform
+ * offset b and weights it with tent weights at each pixel's own landing point. */
 __kernel void coma(__global const float *restrict padded, __global const float *restrict shape,
           __global float *restrict dst, __global const float *restrict tiles,
+          __global const int *restrict list, const int tiles_x, const int tiles_y,
           const int width, const int height)
 {
-    const int tx = get_group_id(0), ty = get_group_id(1);
-    const int x = tx * COMA_TILE_W + (int)get_local_id(0), y = ty * COMA_TILE_H + (int)get_local_id(1);
-    const int ow = (int)get_num_groups(0) * COMA_TILE_W, oh = (int)get_num_groups(1) * COMA_TILE_H;
+    const int tile_id = list[get_group_id(0)];
+    const int tx = tile_id % tiles_x, ty = tile_id / tiles_x;
+    const int x = tx * COMA_TILE_W + 16 * (int)get_local_id(0), y = ty * COMA_TILE_H + (int)get_local_id(1);
+    const int ow = tiles_x * COMA_TILE_W, oh = tiles_y * COMA_TILE_H;
     const int pw = ow + 2 * COMA_PAD;
     const size_t pn = (size_t)pw * (oh + 2 * COMA_PAD), on = (size_t)ow * oh;
     const int o = y * ow + x;
-    const float cex = shape[o], cey = shape[on + o], dc = shape[2 * on + o], q = shape[3 * on + o];
+    const float16 cex = vload16(0, shape + o), cey = vload16(0, shape + on + o);
+    const float16 dc = vload16(0, shape + 2 * on + o), q = vload16(0, shape + 3 * on + o);
     /* the tile centre's comet (group-uniform): each tap's window offset */
-    __global const float *tile = tiles + 4 * (ty * (int)get_num_groups(0) + tx);
+    __global const float *tile = tiles + 4 * tile_id;
     const float tsxx = tile[0], tsxy = tile[1], trxx = tile[2], trxy = tile[3];
     const int base = (y + COMA_PAD) * pw + x + COMA_PAD;
-    float ar = 0.0f, ag = 0.0f, ab = 0.0f;
-    /* fully unrolled: PoCL vectorises the implicit work-item loop only when it is innermost */
-#pragma unroll
+    float16 ar = 0.0f, ag = 0.0f, ab = 0.0f;
+    /* unrolled by 4: as fast as fully unrolled with explicit vectors, and builds in a second */
+#pragma unroll 4
     for (int k = 0; k < COMA_TAPS; ++k) {
         const float ux = coma_taps[2 * k], uy = coma_taps[2 * k + 1];
         /* window centre b: round(tile offset), by truncating a positive number (|offset| < PAD) */
         const int bx = (int)(tsxx * ux + trxx * uy + ((float)COMA_PAD + 0.5f)) - COMA_PAD;
         const int by = (int)(tsxy * ux + trxy * uy + ((float)COMA_PAD + 0.5f)) - COMA_PAD;
-        /* the pixel's own landing point: -C (ux e_s + uy e_r), e_s = (-ey, ex), e_r = (ex, ey) */
-        float fx = cey * ux - cex * uy - (float)bx, fy = -(cex * ux + cey * uy) - (float)by;
-        fx = COMA_CLAMP1(fx);
-        fy = COMA_CLAMP1(fy);
-        COMA_TENT(fx, hm, h0, hp);
-        COMA_TENT(fy, vm, v0, vp);
-        float jac = (1.0f - dc * uy) * (1.0f - q * uy) + q * dc * ux * ux;
-        jac = 0.5f * (jac + COMA_ABS(jac));
-        const float wm = vm * jac, w0 = v0 * jac, wp = vp * jac;
+        /* the pixels' own landing points: -C (ux e_s + uy e_r), e_s = (-ey, ex), e_r = (ex, ey),
+         * clamped to the window */
+        const float16 fx = COMA_CLAMP116(cey * ux - cex * uy - (float)bx);
+        const float16 fy = COMA_CLAMP116(-(cex * ux + cey * uy) - (float)by);
+        /* tent weights of the window samples at -1, 0, 1 */
+        const float16 hm = 0.5f * (COMA_ABS16(fx) - fx), hp = 0.5f * (COMA_ABS16(fx) + fx);
+        const float16 h0 = 1.0f - COMA_ABS16(fx);
+        float16 jac = (1.0f - dc * uy) * (1.0f - q * uy) + q * dc * (ux * ux);
+        jac = 0.5f * (jac + COMA_ABS16(jac));
+        const float16 wm = jac * (0.5f * (COMA_ABS16(fy) - fy)), w0 = jac * (1.0f - COMA_ABS16(fy));
+        const float16 wp = jac * (0.5f * (COMA_ABS16(fy) + fy));
         __global const float *p = padded + base + by * pw + bx;
-#define COMA_WIN(p) (wm * (hm * p[-pw - 1] + h0 * p[-pw] + hp * p[-pw + 1]) \
-                   + w0 * (hm * p[-1] + h0 * p[0] + hp * p[1]) \
-                   + wp * (hm * p[pw - 1] + h0 * p[pw] + hp * p[pw + 1]))
-        ar += COMA_WIN(p);
+#define COMA_ROW16(p) (hm * vload16(0, (p) - 1) + h0 * vload16(0, (p)) + hp * vload16(0, (p) + 1))
+#define COMA_WIN16(p) (wm * COMA_ROW16((p) - pw) + w0 * COMA_ROW16(p) + wp * COMA_ROW16((p) + pw))
+        ar += COMA_WIN16(p);
         p += pn;
-        ag += COMA_WIN(p);
+        ag += COMA_WIN16(p);
         p += pn;
-        ab += COMA_WIN(p);
-#undef COMA_WIN
+        ab += COMA_WIN16(p);
+#undef COMA_WIN16
+#undef COMA_ROW16
     }
     const float inv = 1.0f / (float)COMA_TAPS;
-#if !COMA_WHOLE_TILES
-    /* frames that are not whole tiles: the rounded-up work-items compute but do not store
-     * (a branch, so this variant does not vectorise; 1280×720 and 1920×1080 are whole tiles) */
-    if (x >= width || y >= height) return;
-#endif
     const size_t n = (size_t)width * height;
     const size_t i = (size_t)y * width + x;
-    dst[i] = ar * inv;
-    dst[n + i] = ag * inv;
-    dst[2 * n + i] = ab * inv;
+#if COMA_WHOLE_TILES
+    vstore16(ar * inv, 0, dst + i);
+    vstore16(ag * inv, 0, dst + n + i);
+    vstore16(ab * inv, 0, dst + 2 * n + i);
+#else
+    /* frames that are not whole tiles: the rounded-up pixels are computed but not stored */
+    if (y >= height) return;
+    float rr[16], gg[16], bb[16];
+    vstore16(ar * inv, 0, rr);
+    vstore16(ag * inv, 0, gg);
+    vstore16(ab * inv, 0, bb);
+    for (int e = 0; e < 16 && x + e < width; ++e) {
+        dst[i + e] = rr[e];
+        dst[n + i + e] = gg[e];
+        dst[2 * n + i + e] = bb[e];
+    }
+#endif
+}
+
+/* The tiles whose pixels' landing points all lie within Coma.UNIFORM_PX of the tile centre's
+ * (Coma.tile_uniform): every pixel of the tile takes the tile centre's comet, so each tap is one
+ * bilinear sample at a tile-uniform offset with tile-uniform weights, times the pixel's own
+ * Jacobian. One work-item = 16 consecutive pixels of a tile row as explicit float16 vectors (a
+ * work-group = a tile = COMA_TILE_W / 16 x COMA_TILE_H work-items); work-group g = tile list[g]. */
+__kernel void coma_uniform(__global const float *restrict padded, __global const float *restrict shape,
+                           __global float *restrict dst, __global const float *restrict tiles,
+                           __global const int *restrict list, const int tiles_x, const int tiles_y,
+                           const int width, const int height)
+{
+    const int tile_id = list[get_group_id(0)];
+    const int tx = tile_id % tiles_x, ty = tile_id / tiles_x;
+    const int x = tx * COMA_TILE_W + 16 * (int)get_local_id(0), y = ty * COMA_TILE_H + (int)get_local_id(1);
+    const int ow = tiles_x * COMA_TILE_W, oh = tiles_y * COMA_TILE_H;
+    const int pw = ow + 2 * COMA_PAD;
+    const size_t pn = (size_t)pw * (oh + 2 * COMA_PAD), on = (size_t)ow * oh;
+    const int o = y * ow + x;
+    const float16 dc = vload16(0, shape + 2 * on + o), q = vload16(0, shape + 3 * on + o);
+    __global const float *tile = tiles + 4 * tile_id;
+    const float tsxx = tile[0], tsxy = tile[1], trxx = tile[2], trxy = tile[3];
+    const int base = (y + COMA_PAD) * pw + x + COMA_PAD;
+    float16 ar = 0.0f, ag = 0.0f, ab = 0.0f;
+    /* unrolled by 4: as fast as fully unrolled with explicit vectors, and builds in a second */
+#pragma unroll 4
+    for (int k = 0; k < COMA_TAPS; ++k) {
+        const float ux = coma_taps[2 * k], uy = coma_taps[2 * k + 1];
+        /* the tile centre's landing point, its cell (floor by truncating a positive number) and
+         * bilinear fractions: the same for the whole tile */
+        const float lx = tsxx * ux + trxx * uy, ly = tsxy * ux + trxy * uy;
+        const int ix = (int)(lx + (float)COMA_PAD) - COMA_PAD, iy = (int)(ly + (float)COMA_PAD) - COMA_PAD;
+        const float fx = lx - (float)ix, fy = ly - (float)iy;
+        const float c00 = (1.0f - fx) * (1.0f - fy), c01 = fx * (1.0f - fy), c10 = (1.0f - fx) * fy, c11 = fx * fy;
+        /* the pixel's own Jacobian (clamped at 0 where a comet folds over) */
+        float16 jac = (1.0f - dc * uy) * (1.0f - q * uy) + q * dc * (ux * ux);
+        jac = 0.5f * (jac + COMA_ABS16(jac));
+        __global const float *p = padded + base + iy * pw + ix;
+#define COMA_BIL16(p) (c00 * vload16(0, (p)) + c01 * vload16(0, (p) + 1) + c10 * vload16(0, (p) + pw) + c11 * vload16(0, (p) + pw + 1))
+        ar += jac * COMA_BIL16(p);
+        p += pn;
+        ag += jac * COMA_BIL16(p);
+        p += pn;
+        ab += jac * COMA_BIL16(p);
+#undef COMA_BIL16
+    }
+    const float inv = 1.0f / (float)COMA_TAPS;
+    const size_t n = (size_t)width * height;
+    const size_t i = (size_t)y * width + x;
+#if COMA_WHOLE_TILES
+    vstore16(ar * inv, 0, dst + i);
+    vstore16(ag * inv, 0, dst + n + i);
+    vstore16(ab * inv, 0, dst + 2 * n + i);
+#else
+    /* frames that are not whole tiles: the rounded-up pixels are computed but not stored */
+    if (y >= height) return;
+    const float16 r = ar * inv, g = ag * inv, b = ab * inv;
+    float rr[16], gg[16], bb[16];
+    vstore16(r, 0, rr);
+    vstore16(g, 0, gg);
+    vstore16(b, 0, bb);
+    for (int e = 0; e < 16 && x + e < width; ++e) {
+        dst[i + e] = rr[e];
+        dst[n + i + e] = gg[e];
+        dst[2 * n + i + e] = bb[e];
+    }
+#endif
 }

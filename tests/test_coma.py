@@ -22,7 +22,8 @@ def test_not_planned_without_coma_and_identity_when_skipped(rng):
 
 
 @pytest.mark.parametrize("w,h,kw", [(37, 23, dict(coma_mm=0.9)), (23, 37, dict(coma_mm=-40.0)),
-                                    (41, 29, dict(lens=FLAGSHIP, f_number=1.4))])
+                                    (41, 29, dict(lens=FLAGSHIP, f_number=1.4)),
+                                    (133, 77, dict(coma_mm=0.1)), (131, 85, dict(coma_mm=-0.15))])
 def test_kernel_matches_reference(rng, w, h, kw):
     frame = odd_frame(rng, w=w, h=h, scale=10.0)
     color = frame.color.copy()
@@ -113,3 +114,37 @@ def test_tile_windows_hold_the_per_pixel_comet():
         assert 0.0 < err < 0.5, (w, h, err, where)
     err, where = coma.Coma().shape_error_px(Camera(coma_mm=1.2), 301, 201)  # the point-source test's
     assert err < 0.5, (err, where)
+
+
+def test_uniform_tiles_bound_the_per_pixel_landing_points():
+    """Tiles whose landing points stay within UNIFORM_PX of the tile centre's take the tile's
+    comet (the fast kernel); the bound holds against the per-pixel landing points
+    (shape_error_px over those tiles), and the benchmark's coma uses it everywhere."""
+    st = coma.Coma("draft")
+    # a linear coma is an affine comet field: every tile deviates alike (all or none uniform)
+    assert st.tile_uniform(Camera(coma_mm=0.1), 133, 77).all()
+    assert not st.tile_uniform(Camera(coma_mm=-0.15), 131, 85).any()
+    for cam, w, h in ((Camera(coma_mm=0.1), 133, 77), (Camera(coma_mm=0.087), 1280, 720)):
+        uni = st.tile_uniform(cam, w, h)
+        c, _, _, ex, ey = st.c_px(cam, w, h)
+        t = fld.per_pixel(st.tile_axes_px(cam, w, h), w, h)
+        mask = fld.per_pixel(uni, w, h)
+        worst = 0.0
+        for ts, tr in coma.comet_offsets(fld.vogel_disc(st.taps).astype(np.float64)):
+            d = np.hypot(c * (ts * ey - tr * ex) - (t[..., 0] * ts + t[..., 2] * tr),
+                         c * (-ts * ex - tr * ey) - (t[..., 1] * ts + t[..., 3] * tr))
+            worst = max(worst, float(d[mask].max()))
+        assert worst <= coma.UNIFORM_PX, (w, h, worst)
+    assert st.tile_uniform(Camera(coma_mm=0.087), 1920, 1080).all()
+
+
+def test_device_comet_is_recomputed_when_the_camera_changes(rng):
+    """The per-pixel comet stays on the device between frames (it depends on the camera and the
+    size only): a new coefficient or frame size must not reuse it."""
+    frame = Frame(odd_frame(rng, w=67, h=45, scale=10.0).color)
+    pipe = Pipeline(Camera(coma_mm=0.9), stages=["coma"])
+    for cam, f in ((Camera(coma_mm=0.9), frame), (Camera(coma_mm=-2.0), frame),
+                   (Camera(coma_mm=-2.0), Frame(odd_frame(rng, w=45, h=67, scale=10.0).color))):
+        pipe.camera = cam
+        out, ref = pipe.run(f).color, pipe.reference(f)
+        assert np.abs(out - ref).max() < 2e-3 * np.abs(ref).max(), cam.coma_mm

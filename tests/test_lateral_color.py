@@ -30,7 +30,8 @@ def test_not_planned_without_lateral_color_and_identity_when_skipped(rng):
 
 
 @pytest.mark.parametrize("w,h,kw", [(37, 23, dict(lateral_color_mm=0.5)), (23, 37, dict(lateral_color_mm=-30.0)),
-                                    (41, 29, dict(lens=FLAGSHIP, f_number=1.4))])
+                                    (41, 29, dict(lens=FLAGSHIP, f_number=1.4)),
+                                    (133, 77, dict(lateral_color_mm=0.5)), (131, 83, dict(lateral_color_mm=-0.9))])
 def test_kernel_matches_reference(rng, w, h, kw):
     frame = odd_frame(rng, w=w, h=h, scale=10.0)
     pipe = Pipeline(Camera(**kw), stages=["lateral_color"])
@@ -77,3 +78,20 @@ def test_flagship_fringe_is_sub_pixel_at_1280():
 def test_bad_coefficient():
     with pytest.raises(InputError, match="lateral_color_mm"):
         Camera(lateral_color_mm=float("nan"))
+
+
+def test_tile_model_matches_the_exact_map_and_most_tiles_are_fast():
+    """The per-tile affine model (the vectorised path) against the exact per-pixel map: a linear L
+    is a pure scale (affine to rounding); a traced lens within the tolerances at 1080p."""
+    st = lc.LateralColor()
+    for cam, w, h in ((Camera(lateral_color_mm=0.007), 960, 540), (Camera(lens=FLAGSHIP, f_number=1.4), 960, 540),
+                      (Camera(lateral_color_mm=0.5), 133, 77)):
+        pos, jac, where = st.model_error_px(cam, w, h)
+        assert pos <= 2 * lc.AFFINE_TOL_PX, (pos, where)
+        assert jac <= 2 * lc.AFFINE_TOL_JAC, (jac, where)
+    for cam, w, h, fast_min in ((Camera(lateral_color_mm=0.007), 1920, 1080, 0.95),
+                                (Camera(lens=FLAGSHIP, f_number=1.4), 1920, 1080, 0.9),
+                                (Camera(lateral_color_mm=0.5), 133, 77, 0.3)):
+        assert st.tile_plan(cam, w, h)["fast"].mean() >= fast_min
+    # strong lateral colour: no tile fits one bilinear cell, all take the per-pixel map
+    assert not st.tile_plan(Camera(lateral_color_mm=-30.0), 64, 48)["fast"].any()

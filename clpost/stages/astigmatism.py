@@ -227,8 +227,7 @@ class Astigmatism(GatherStage):
             pw, ph = ntx * fld.TILE_W + 2 * fld.PAD, nty * fld.TILE_H + 2 * fld.PAD
             self._scratch = {key: dict(
                 pad=rt.empty((3, ph, pw)), axes=rt.empty((4, ph, pw)), lut=rt.empty((2, fld.LUT_SIZE)),
-                tiles=rt.empty((nty, ntx, 4)), flags=rt.empty((nty, ntx), np.int32),
-                rec=rt.empty((nty * ntx, self.taps, 6)))}
+                tiles=rt.empty((nty, ntx, 4)), flags=rt.empty((nty, ntx), np.int32))}
         return self._scratch[key]
 
     def tile_directions(self, w: int, h: int, cx: float, cy: float) -> np.ndarray:
@@ -261,13 +260,11 @@ class Astigmatism(GatherStage):
         k = self._kernel(rt, camera, "astigmatism_tiles", whole)
         k.set_args(b["axes"], b["tiles"], b["flags"], np.int32(w), np.int32(h), np.int32(ntx), np.int32(nty))
         events.append(cl.enqueue_nd_range_kernel(q, k, (ntx, nty), None))
-        k = self._kernel(rt, camera, "astigmatism_taptable", whole)
-        k.set_args(b["tiles"], b["rec"], np.int32(ntx), np.int32(nty))
-        events.append(cl.enqueue_nd_range_kernel(q, k, (self.taps, ntx * nty), None))
         k = self._kernel(rt, camera, "astigmatism", whole)
-        k.set_args(b["pad"], b["axes"], dst, b["rec"], np.int32(w), np.int32(h))
-        events.append(cl.enqueue_nd_range_kernel(q, k, (ntx * fld.TILE_W, nty * fld.TILE_H),
-                                                 (fld.TILE_W, fld.TILE_H)))
+        k.set_args(b["pad"], b["axes"], dst, b["tiles"], np.int32(w), np.int32(h))
+        # 16 pixels (a float16) per work-item
+        events.append(cl.enqueue_nd_range_kernel(q, k, (ntx * fld.TILE_W // 16, nty * fld.TILE_H),
+                                                 (fld.TILE_W // 16, fld.TILE_H)))
         k = self._kernel(rt, camera, "astigmatism_exact", whole)
         k.set_args(b["pad"], b["axes"], dst, b["flags"], np.int32(w), np.int32(h), np.float32(cx), np.float32(cy))
         events.append(cl.enqueue_nd_range_kernel(q, k, (ntx * fld.TILE_W, nty * fld.TILE_H),

@@ -30,8 +30,26 @@ same radius, scaled by the Jacobian of the radial map so the channel's flux is c
 
     C'_c(\rho\,\hat e) = C_c(r\,\hat e)\;\frac{r}{\rho}\,\frac{\mathrm{d}r}{\mathrm{d}\rho}
 
-Bilinear interpolation with the image's edge values continued beyond it. The map is sampled into
-a LUT of (r/ρ, Jacobian) per channel over image height, interpolated linearly in the kernel.
+Bilinear interpolation with the image's edge values continued beyond it.
+
+**Tiles (speed).** Per 16 × 8 tile (:mod:`clpost.stages._field`) and channel, the host evaluates
+the exact map (float64) at three corners of the tile and takes the source displacement
+:math:`d(x) = x_{src}(x) - x` and the Jacobian as affine in the pixel's position within the
+tile, :math:`d = d_{00} + (d_{10} - d_{00})\,l_x/(W_t-1) + (d_{01} - d_{00})\,l_y/(H_t-1)`. Where
+
+* that plane misses the exact map at the fourth corner and at the centre by at most
+  ``AFFINE_TOL_PX`` (10⁻³ px; Jacobian: ``AFFINE_TOL_JAC``, 10⁻⁴) — a radial scale is affine wherever
+  r/ρ is constant, so this holds everywhere for a linear L and almost everywhere for a traced one;
+* the displacement over the tile stays within one bilinear cell :math:`[b, b + 1]` (b an integer
+  per axis and tile), and that cell stays inside the frame,
+
+the tile's pixels read the four samples at the *same* offset b with per-pixel fractions
+:math:`d - b` (affine in the work-item id: the kernel vectorises across pixels). The other tiles
+(the frame's border, partial tiles, the row and column of tiles where a displacement changes sign
+or crosses an integer, strong lateral colour) take the per-pixel map, sampled into a LUT of
+(r/ρ, Jacobian) per channel over image height and interpolated linearly. The reference
+implements both paths and the same tile plan (``tile_plan``); ``model_error_px`` measures the
+tile model against the exact map at every pixel.
 
 Domain/range: colour ≥ 0 → ≥ 0; for an identity L = 0 the stage is not planned.
 """
@@ -47,6 +65,11 @@ from .base import GatherStage
 
 FIXED_POINT_STEPS = 4
 DERIVATIVE_STEP_MM = 1e-3
+AFFINE_TOL_PX = 1e-3
+AFFINE_TOL_JAC = 1e-4
+REC = 32
+"""Floats per fast tile's record: the tile origin, then per channel the cell offset and the
+affine fx, fy and Jacobian (1 + 3 × 10), padded to 32."""
 
 
 @lru_cache(maxsize=1)
@@ -108,6 +131,8 @@ class LateralColor(GatherStage):
         super().__init__(quality)
         self._kernels: dict = {}
         self._scratch: dict = {}
+        self._plan_key = None
+        self._plan: dict = {}
 
     def _lut(self, camera) -> np.ndarray:
         r = np.linspace(0.0, fld.lut_range_mm(camera), fld.LUT_SIZE)
@@ -131,47 +156,142 @@ class LateralColor(GatherStage):
                 f"channels at {', '.join(f'{w:g}' for w in channel_wavelengths_nm())} nm")
 
     def defines(self, camera):
-        return {"LATERAL_COLOR_LUT_SIZE": fld.LUT_SIZE}
+        return {"LATERAL_COLOR_LUT_SIZE": fld.LUT_SIZE, "LATERAL_COLOR_TILE_W": fld.TILE_W,
+                "LATERAL_COLOR_TILE_H": fld.TILE_H, "LATERAL_COLOR_REC": REC}
 
-    def _kernel(self, rt, camera):
-        import pyopencl as cl
-
+    def _kernel(self, rt, camera, name):
         from ..runtime import kernel_source
 
-        prog = rt.program(kernel_source("lateral_color"), "lateral_color", self.defines(camera))
-        if id(prog) not in self._kernels:
-            self._kernels[id(prog)] = cl.Kernel(prog, "lateral_color")
-        return self._kernels[id(prog)]
+        return fld.cached_kernel(self._kernels, rt, kernel_source("lateral_color"), "lateral_color",
+                                 self.defines(camera), name)
+
+    # -- the tile plan (host, float64) -----------------------------------------------------
+    def tile_plan(self, camera, w: int, h: int) -> dict:
+        """Per tile (tiles_y, tiles_x): ``fast`` (bool) and, per channel (3, tiles_y, tiles_x),
+        the cell offset ``b`` (x, y; int), the affine fractions ``f`` (x, y) × (a0, ax, ay) and
+        Jacobian ``jac`` (a0, ax, ay) of the module docstring (memoised per camera map and size)."""
+        lut = self._lut(camera)
+        pitch = fld.pitch_mm(camera, w)
+        key = (lut.tobytes(), w, h, pitch)
+        if self._plan_key != key:
+            self._plan_key, self._plan = key, self._tile_plan(camera, w, h)
+        return self._plan
+
+    def _tile_plan(self, camera, w, h) -> dict:
+        tw, th = fld.TILE_W, fld.TILE_H
+        ntx, nty = fld.tiles(w, h)
+        cx, cy = fld.principal_point_px(camera, w, h)
+        pitch = fld.pitch_mm(camera, w)
+        ty, tx = np.mgrid[0:nty, 0:ntx].astype(np.float64)
+        x0, y0 = tx * tw, ty * th
+
+        def at(lx, ly):  # displacement (x, y) and Jacobian per channel at a pixel of every tile
+            dx, dy = x0 + lx - cx, y0 + ly - cy
+            ratio, jac = inverse_map(camera, np.hypot(dx, dy) * pitch)
+            return np.stack([dx * (ratio - 1.0), dy * (ratio - 1.0), jac])  # (3 quantities, 3 ch, ...)
+
+        v00, v10, v01 = at(0.0, 0.0), at(tw - 1.0, 0.0), at(0.0, th - 1.0)
+        ax, ay = (v10 - v00) / (tw - 1.0), (v01 - v00) / (th - 1.0)
+        plane = lambda lx, ly: v00 + ax * lx + ay * ly  # noqa: E731
+        err = np.maximum(np.abs(plane(tw - 1.0, th - 1.0) - at(tw - 1.0, th - 1.0)),
+                         np.abs(plane(0.5 * (tw - 1), 0.5 * (th - 1)) - at(0.5 * (tw - 1), 0.5 * (th - 1))))
+        corners = np.stack([v00, v10, v01, plane(tw - 1.0, th - 1.0)])[:, :2]  # (4, 2 axes, 3, ...)
+        b = np.floor(corners.min(0))
+        one_cell = corners.max(0) - b <= 1.0
+        inside = ((x0 + b[0] >= 0) & (x0 + tw + b[0] <= w - 1) & (y0 + b[1] >= 0) & (y0 + th + b[1] <= h - 1))
+        fast = (np.all(one_cell, axis=(0, 1)) & np.all(inside, axis=0) & (x0 + tw <= w) & (y0 + th <= h)
+                & np.all(err[:2] <= AFFINE_TOL_PX, axis=(0, 1)) & np.all(err[2] <= AFFINE_TOL_JAC, axis=0))
+        f = np.stack([v00[:2] - b, ax[:2], ay[:2]], -1)  # (2 axes, 3 ch, ty, tx, 3 coeffs)
+        jac = np.stack([v00[2], ax[2], ay[2]], -1)
+        return dict(fast=fast, b=np.moveaxis(b, 0, 1).astype(np.int64), f=np.moveaxis(f, 0, 1), jac=jac)
+
+    def records(self, plan: dict, w: int) -> tuple[np.ndarray, np.ndarray]:
+        """(fast tiles' records (n, REC) float32, the other tiles' indices int32), row-major."""
+        fast = plan["fast"]
+        ty, tx = np.nonzero(fast)
+        rec = np.zeros((ty.size, REC), np.float32)
+        iv = rec.view(np.int32)
+        iv[:, 0] = ty * fld.TILE_H * w + tx * fld.TILE_W
+        for c in range(3):
+            o = 1 + 10 * c
+            bx, by = plan["b"][c, 0][ty, tx], plan["b"][c, 1][ty, tx]
+            iv[:, o] = by * w + bx
+            rec[:, o + 1:o + 4] = plan["f"][c, 0][ty, tx]
+            rec[:, o + 4:o + 7] = plan["f"][c, 1][ty, tx]
+            rec[:, o + 7:o + 10] = plan["jac"][c][ty, tx]
+        return rec, np.flatnonzero(~fast.ravel()).astype(np.int32)
 
     def enqueue(self, rt, camera, frame, src, dst, aux):
         import pyopencl as cl
 
         q = rt.queue
         w, h = frame.width, frame.height
-        key = id(rt.context)
-        if key not in self._scratch:
-            self._scratch = {key: rt.empty((6, fld.LUT_SIZE))}
-        lut = self._scratch[key]
         cx, cy = fld.principal_point_px(camera, w, h)
-        events = [cl.enqueue_copy(q, lut, self._lut(camera), is_blocking=False)]
-        k = self._kernel(rt, camera)
-        k.set_args(src, dst, lut, np.int32(w), np.int32(h), np.float32(cx), np.float32(cy),
-                   np.float32(fld.pitch_mm(camera, w) * (fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
-        events.append(cl.enqueue_nd_range_kernel(q, k, (w, h), None))
+        plan = self.tile_plan(camera, w, h)
+        key = (id(rt.context), w, h, self._plan_key)
+        if key not in self._scratch:
+            # the records depend only on the camera's map and the frame size: uploaded once
+            rec, rest = self.records(plan, w)
+            mk = lambda a: cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,  # noqa: E731
+                                     hostbuf=a if a.size else np.zeros(1, a.dtype))
+            self._scratch = {key: dict(rec=mk(rec), rest=mk(rest), n_fast=len(rec), n_rest=len(rest),
+                                       lut=mk(self._lut(camera)))}
+        b = self._scratch[key]
+        events = []
+        tile = (fld.TILE_W, fld.TILE_H)
+        if b["n_fast"]:
+            k = self._kernel(rt, camera, "lateral_color_tiles")
+            k.set_args(src, dst, b["rec"], np.int32(w), np.int32(h))
+            events.append(cl.enqueue_nd_range_kernel(q, k, (fld.TILE_W * b["n_fast"], fld.TILE_H), tile))
+        if b["n_rest"]:
+            k = self._kernel(rt, camera, "lateral_color")
+            k.set_args(src, dst, b["lut"], b["rest"], np.int32(w), np.int32(h), np.float32(cx), np.float32(cy),
+                       np.float32(fld.pitch_mm(camera, w) * (fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
+            events.append(cl.enqueue_nd_range_kernel(q, k, (fld.TILE_W * b["n_rest"], fld.TILE_H), tile))
         return events
 
-    def reference(self, camera, frame, color):
-        """float64 numpy implementation of the module docstring (exact map, no LUT)."""
-        color = np.asarray(color, np.float64)
-        h, w = color.shape[:2]
+    # -- the oracle -------------------------------------------------------------------------
+    def exact_positions(self, camera, w: int, h: int):
+        """Per pixel and channel (3, h, w) float64: source x, y of the exact map, and its Jacobian."""
         cx, cy = fld.principal_point_px(camera, w, h)
         xs, ys, r, _, _ = fld.radial_frame(w, h, cx, cy)
         ratio, jac = inverse_map(camera, r * fld.pitch_mm(camera, w))
+        return cx + (xs - cx) * ratio, cy + (ys - cy) * ratio, jac
+
+    def model_positions(self, camera, w: int, h: int):
+        """As ``exact_positions``, with the tile model on the fast tiles (what the kernels do)."""
+        sx, sy, jac = self.exact_positions(camera, w, h)
+        plan = self.tile_plan(camera, w, h)
+        ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+        lx, ly = xs % fld.TILE_W, ys % fld.TILE_H
+        fast = fld.per_pixel(plan["fast"], w, h)
+        for c in range(3):
+            bx, by = (fld.per_pixel(plan["b"][c, a], w, h) for a in range(2))
+            fx, fy = (fld.per_pixel(plan["f"][c, a], w, h) for a in range(2))
+            jc = fld.per_pixel(plan["jac"][c], w, h)
+            sx[c] = np.where(fast, xs + bx + fx[..., 0] + fx[..., 1] * lx + fx[..., 2] * ly, sx[c])
+            sy[c] = np.where(fast, ys + by + fy[..., 0] + fy[..., 1] * lx + fy[..., 2] * ly, sy[c])
+            jac[c] = np.where(fast, jc[..., 0] + jc[..., 1] * lx + jc[..., 2] * ly, jac[c])
+        return sx, sy, jac
+
+    def model_error_px(self, camera, w: int, h: int) -> tuple[float, float, tuple[int, int, int]]:
+        """Largest |tile model − exact map| over all pixels and channels: source position (px),
+        Jacobian, and the (x, y, channel) of the largest position error."""
+        ex, ey, ej = self.exact_positions(camera, w, h)
+        mx, my, mj = self.model_positions(camera, w, h)
+        d = np.hypot(mx - ex, my - ey)
+        c, y, x = np.unravel_index(int(np.argmax(d)), d.shape)
+        return float(d.max()), float(np.abs(mj - ej).max()), (int(x), int(y), int(c))
+
+    def reference(self, camera, frame, color):
+        """float64 numpy implementation of the module docstring (the tile model on the fast tiles,
+        the exact map, no LUT, elsewhere)."""
+        color = np.asarray(color, np.float64)
+        h, w = color.shape[:2]
+        sx, sy, jac = self.model_positions(camera, w, h)
         out = np.empty_like(color)
         for c in range(3):
-            sx = cx + (xs - cx) * ratio[c]
-            sy = cy + (ys - cy) * ratio[c]
-            out[..., c] = fld.bilinear_padded(color[..., c:c + 1], sx, sy)[..., 0] * jac[c]
+            out[..., c] = fld.bilinear_padded(color[..., c:c + 1], sx[c], sy[c])[..., 0] * jac[c]
         return out
 
 
