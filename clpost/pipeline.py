@@ -245,8 +245,10 @@ class Pipeline:
                 cam = cam.with_(distortion=model)
         return cam
 
-    def explain(self, frame: Frame, camera: Camera | None = None) -> list[PlanEntry]:
-        """Every known stage, in physical order, with whether it runs and why."""
+    def explain(self, frame: Frame, camera: Camera | None = None, reasons: bool = True) -> list[PlanEntry]:
+        """Every known stage, in physical order, with whether it runs and why (``reasons=False``:
+        a planned stage's reason is left empty — some cost a pass over the frame on the host,
+        e.g. dof's CoC range, and running a frame does not need them)."""
         cam = camera or self.camera_for(frame)
         out = []
         for st in self._stages:
@@ -261,7 +263,7 @@ class Pipeline:
                         f"stage '{st.name}' needs the frame's {' and '.join(missing)} buffer; "
                         f"provide it or leave the stage out with --stages"
                     )
-                out.append(PlanEntry(st.name, True, st.reason_needed(cam, frame)))
+                out.append(PlanEntry(st.name, True, st.reason_needed(cam, frame) if reasons else ""))
             else:
                 out.append(PlanEntry(st.name, False, why))
         return out
@@ -271,7 +273,7 @@ class Pipeline:
         return [e.stage for e in self.explain(frame) if e.planned]
 
     def _planned(self, frame: Frame, cam: Camera) -> list[Stage]:
-        names = {e.stage for e in self.explain(frame, cam) if e.planned}
+        names = {e.stage for e in self.explain(frame, cam, reasons=False) if e.planned}
         return [s for s in self._stages if s.name in names]
 
     def kernels(self, frame: Frame) -> list[str]:

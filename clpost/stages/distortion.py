@@ -90,8 +90,8 @@ def distortion_map(model: OpenCVModel, src_size: tuple[int, int],
 
 class _MapGeometry(NamedTuple):
     alpha: np.ndarray   # float32 (H, W): 1 where the map has data
-    xi: np.ndarray      # nearest source column per output pixel (clamped, int64)
-    yi: np.ndarray      # nearest source row
+    flat: np.ndarray    # (H, W) flat index of the nearest source pixel (clamped, intp)
+    invalid: np.ndarray # flat output indices without a preimage
     inv: np.ndarray     # (4, H, W): inverse Jacobian of the map, row-major (identity on the rim)
 
 
@@ -118,11 +118,12 @@ def _map_geometry(model: OpenCVModel, src_size: tuple[int, int],
         inv = np.stack([j22 / det, -j12 / det, -j21 / det, j11 / det])
     good = np.isfinite(inv).all(axis=0)
     inv = np.where(good, inv, np.array([1.0, 0.0, 0.0, 1.0])[:, None, None])
-    for a in (xi, yi, inv):
-        a.setflags(write=False)
+    flat = (yi * sw + xi).astype(np.intp)
+    invalid = np.flatnonzero(~ok)
     alpha = ok.astype(np.float32)
-    alpha.setflags(write=False)
-    return _MapGeometry(alpha, xi, yi, inv)
+    for a in (flat, invalid, inv, alpha):
+        a.setflags(write=False)
+    return _MapGeometry(alpha, flat, invalid, inv)
 
 
 def _taps(plane: np.ndarray, xi: np.ndarray, yi: np.ndarray) -> np.ndarray:
@@ -289,10 +290,13 @@ class Distortion(GatherStage):
         if frame.alpha is not None:
             alpha = alpha * np.clip(resample(frame.alpha.astype(np.float64), m, 1), 0.0, 1.0).astype(np.float32)
         out = {"alpha": alpha}
+        # flat np.take with a cached index: 1-D gathers are ~3× faster than 2-D fancy indexing
         if frame.depth is not None:
-            out["depth"] = np.where(ok, frame.depth[g.yi, g.xi], np.inf).astype(np.float32)
+            d = np.ascontiguousarray(frame.depth, np.float32).ravel().take(g.flat)
+            d.ravel()[g.invalid] = np.inf
+            out["depth"] = d
         if frame.velocity is not None:
-            vin = frame.velocity[g.yi, g.xi].astype(np.float64)
+            vin = np.ascontiguousarray(frame.velocity).reshape(-1, 2).take(g.flat, axis=0).astype(np.float64)
             vx = g.inv[0] * vin[..., 0] + g.inv[1] * vin[..., 1]
             vy = g.inv[2] * vin[..., 0] + g.inv[3] * vin[..., 1]
             out["velocity"] = np.stack([np.where(ok, vx, 0.0), np.where(ok, vy, 0.0)], -1).astype(np.float32)
