@@ -48,9 +48,20 @@ def cached_kernel(cache: dict, rt, source: str, program: str, defines: dict, nam
 
 
 def principal_point_px(camera, w: int, h: int) -> tuple[float, float]:
-    """The optical centre in the (undistorted) frame these stages see: its centre. (With a
-    calibration the render may be an extended frustum; its off-centre principal point is not
-    modelled here.)"""
+    """The optical centre (px) in the undistorted frame these stages see (they run before
+    ``distortion``). A calibrated camera's render has the calibration's principal point: at the
+    calibration's own size its (c_x, c_y), at the extended frustum of
+    :func:`clpost.calibration.required_render` that frustum's (the sizes
+    :func:`clpost.stages.distortion.source_intrinsics` accepts); otherwise the frame's centre."""
+    model = getattr(camera, "distortion", None)
+    if model is not None:
+        if (w, h) == (model.width, model.height):
+            return float(model.cx), float(model.cy)
+        from ..calibration import required_render
+
+        spec = required_render(model)
+        if (w, h) == (spec.width, spec.height):
+            return float(spec.cx), float(spec.cy)
     return 0.5 * (w - 1), 0.5 * (h - 1)
 
 
