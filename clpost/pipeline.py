@@ -48,7 +48,35 @@ AUX_BUFFERS = {
 }
 
 
-def fused_source(stages: list[PointwiseStage], src_layout: str, dst_layout: str) -> tuple[str, str]:
+VECTOR_PIXELS = 16
+"""Pixels per work-item of a fused kernel whose stages all have an explicit-vector form
+(``PointwiseStage.vector``: ``<name>_apply16`` on float16 channels of 16 pixels of a row). PoCL
+does not vectorise the one-pixel-per-work-item form of the fused stage code (its vectoriser
+remarks: float3 values, library calls, selects), and explicit float16 is what it compiles to
+AVX-512 (the dof and astigmatism gathers found the same)."""
+
+
+def vector_path(stages: list[PointwiseStage]) -> bool:
+    """Whether :func:`fused_source` generates the :data:`VECTOR_PIXELS`-wide kernel for ``stages``
+    (every stage has the vector form and none reads depth or velocity)."""
+    return bool(stages) and all(getattr(s, "vector", False) and not s.reads for s in stages)
+
+
+def _lanes(vec: str, first: int) -> str:
+    """``(float16)(vec[first], vec[first + 3], …)`` from three float16 ``vec0..vec2`` holding 48
+    consecutive interleaved floats: channel ``first`` of 16 pixels."""
+    comps = [f"{vec}{(first + 3 * k) // 16}.s{(first + 3 * k) % 16:x}" for k in range(16)]
+    return f"(float16)({', '.join(comps)})"
+
+
+def _interleave(part: int) -> str:
+    """The float16 holding interleaved floats 16·part … 16·part + 15 of channels r, g, b."""
+    comps = [f"{'rgb'[f % 3]}.s{f // 3:x}" for f in range(16 * part, 16 * part + 16)]
+    return f"(float16)({', '.join(comps)})"
+
+
+def fused_source(stages: list[PointwiseStage], src_layout: str, dst_layout: str,
+                 vector: bool | None = None) -> tuple[str, str]:
     """Generate one OpenCL kernel applying ``stages`` in order to each pixel.
 
     Returns ``(kernel_name, source)``. The kernel is named after its stages joined by ``__``
@@ -76,6 +104,51 @@ def fused_source(stages: list[PointwiseStage], src_layout: str, dst_layout: str)
              else "store_planar(dst, i, n, c);")
     parts = [kernel_source("common")] + [s.source() for s in stages]
     nl = "\n"
+    if vector_path(stages) if vector is None else vector:
+        calls16 = []
+        for s in stages:
+            extra = "".join(f", {s.name}_{arg}" for _, arg in s.args)
+            calls16.append(f"        {s.name}_apply16(&r, &g, &b, p16{extra});")
+        if src_layout == INTERLEAVED:
+            load16 = ("const float16 v0 = vload16(0, src + 3 * i), v1 = vload16(1, src + 3 * i), "
+                      "v2 = vload16(2, src + 3 * i);\n"
+                      f"        float16 r = {_lanes('v', 0)};\n        float16 g = {_lanes('v', 1)};\n"
+                      f"        float16 b = {_lanes('v', 2)};")
+        else:
+            load16 = "float16 r = vload16(0, src + i), g = vload16(0, src + n + i), b = vload16(0, src + 2 * n + i);"
+        if dst_layout == INTERLEAVED:
+            store16 = "\n".join(f"        vstore16({_interleave(k)}, {k}, dst + 3 * i);" for k in range(3))
+        else:
+            store16 = ("        vstore16(r, 0, dst + i);\n        vstore16(g, 0, dst + n + i);\n"
+                       "        vstore16(b, 0, dst + 2 * n + i);")
+        tail = "\n".join("    " + line for line in body)
+        parts.append(f"""
+__kernel void {name}({", ".join(params)})
+{{
+    const int x0 = get_global_id(0) * {VECTOR_PIXELS};
+    const int y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
+    (void)n;
+    if (x0 + {VECTOR_PIXELS} <= width) {{
+        const size_t i = i0;
+        const PixelCtx16 p16 = {{x0, y, width, height, i0}};
+        {load16}
+{nl.join(calls16)}
+{store16}
+    }} else {{  /* the row's last 1–15 pixels, one by one */
+        for (int x = x0; x < width; ++x) {{
+            const size_t i = i0 + (size_t)(x - x0);
+            const PixelCtx p = {{x, y, width, height, i}};
+            float3 c = {load};
+{tail}
+            {store}
+        }}
+    }}
+}}
+""")
+        return name, "\n".join(parts)
     parts.append(f"""
 __kernel void {name}({", ".join(params)})
 {{
@@ -105,6 +178,8 @@ def global_size(stages: list[PointwiseStage], src_layout: str, dst_layout: str, 
     """NDRange of the kernel :func:`fused_source` generates for this group at ``w`` × ``h``."""
     if not stages and src_layout != dst_layout:
         return (w + CONVERT_PIXELS - 1) // CONVERT_PIXELS, h
+    if vector_path(stages):
+        return (w + VECTOR_PIXELS - 1) // VECTOR_PIXELS, h
     return w, h
 
 

@@ -15,6 +15,26 @@ typedef struct {
     size_t i;     /* y * width + x: index into depth[], and velocity[2i], velocity[2i+1] */
 } PixelCtx;
 
+/* 16 consecutive pixels of one row (pixel k at x0 + k, index i0 + k): the context of the
+ * explicit-vector form <name>_apply16 of a pointwise stage (clpost/pipeline.py, VECTOR_PIXELS). */
+typedef struct {
+    int x0;
+    int y;
+    int width;
+    int height;
+    size_t i0;
+} PixelCtx16;
+
+#define CLP_LANES16 ((float16)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f, \
+                               8.0f, 9.0f, 10.0f, 11.0f, 12.0f, 13.0f, 14.0f, 15.0f))
+
+/* table[idx] per lane (a data-dependent gather has no vector builtin) */
+#define CLP_GATHER16(table, idx) ((float16)( \
+    (table)[(idx).s0], (table)[(idx).s1], (table)[(idx).s2], (table)[(idx).s3], \
+    (table)[(idx).s4], (table)[(idx).s5], (table)[(idx).s6], (table)[(idx).s7], \
+    (table)[(idx).s8], (table)[(idx).s9], (table)[(idx).sa], (table)[(idx).sb], \
+    (table)[(idx).sc], (table)[(idx).sd], (table)[(idx).se], (table)[(idx).sf]))
+
 /* Scalar loads and stores, not vload3/vstore3: on PoCL 3.0 a vload3/vstore3 stops the
  * vectorisation across work-items of the whole kernel (measured at 1080p: an exp2 per channel
  * 25 ms with vload3/vstore3, 13.6 ms with these, 7.2 ms planar). */

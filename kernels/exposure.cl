@@ -6,3 +6,9 @@ inline float3 exposure_apply(const float3 c, const PixelCtx p, const float gain)
     /* per channel: float3 arithmetic stops PoCL's vectorisation of the fused kernel */
     return (float3)(c.x * gain, c.y * gain, c.z * gain);
 }
+
+inline void exposure_apply16(float16 *r, float16 *g, float16 *b, const PixelCtx16 p, const float gain) {
+    *r *= gain;
+    *g *= gain;
+    *b *= gain;
+}

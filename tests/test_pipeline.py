@@ -218,3 +218,38 @@ def test_gathers_get_planar_buffers_and_aux_uploads(rng, monkeypatch, names, ker
     out = pipe.run(frame)
     np.testing.assert_allclose(out.color, pipe.reference(frame), rtol=2e-6, atol=1e-7)
     assert set(kernels) <= set(pipe.last_timings)
+
+
+@pytest.mark.parametrize("w", [16, 37, 53])
+@pytest.mark.parametrize("layouts", [("interleaved", "interleaved"), ("planar", "planar"),
+                                     ("planar", "interleaved"), ("interleaved", "planar")])
+def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts):
+    """Stages with an ``_apply16`` form run 16 pixels per work-item (rows' last 1–15 pixels one by
+    one); the result is bit for bit the one-pixel kernel's, for every layout pair."""
+    import pyopencl as cl
+
+    from clpost.pipeline import global_size, vector_path
+
+    h = 5
+    frame = odd_frame(rng, w=w, h=h, scale=50.0)
+    pipe = Pipeline(Camera(f_number=2.0, vignetting="natural"), stages=["vignetting", "exposure"])
+    pipe.run(frame)
+    cam = pipe.camera_for(frame)
+    stages = pipe._planned(frame, cam)
+    assert vector_path(stages) and global_size(stages, *layouts, w, h) == ((w + 15) // 16, h)
+    rt, bufs = pipe.runtime, pipe._buffers_for(w, h)
+    cl.enqueue_copy(rt.queue, bufs.color_in, np.ascontiguousarray(frame.color))
+    defines = {k: v for s in stages for k, v in s.defines(cam).items()}
+    args = [np.int32(w), np.int32(h)] + [a for s in stages for a in pipe._arg_values(s, cam, frame, bufs)]
+    outs = []
+    for vec, gsize in ((False, (w, h)), (True, ((w + 15) // 16, h))):
+        name, src = fused_source(stages, *layouts, vector=vec)
+        kern = cl.Kernel(rt.program(src, name, defines), name)
+        dst = rt.empty((h, w, 3))
+        kern.set_args(bufs.color_in, dst, *args)
+        cl.enqueue_nd_range_kernel(rt.queue, kern, gsize, None)
+        out = np.empty((h, w, 3), np.float32)
+        cl.enqueue_copy(rt.queue, out, dst)
+        outs.append(out)
+    assert np.array_equal(outs[0], outs[1])
+    assert not vector_path(stages + [registry()["film"]("final")])  # film has no vector form

@@ -128,6 +128,7 @@ def principal_offset_mm(camera) -> tuple[float, float]:
 class Vignetting(PointwiseStage):
     name = "vignetting"
     order = 60.0
+    vector = True  # also defines <name>_apply16 (clpost.pipeline.VECTOR_PIXELS)
     args = (("float", "sensor_w_mm"), ("float", "off_x_mm"), ("float", "off_y_mm"),
             ("float", "r_max_mm"), ("__global const float *", "lut"))
 
