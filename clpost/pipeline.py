@@ -266,6 +266,8 @@ class _Buffers:
     planar: list = field(default_factory=list)
     aux: dict = field(default_factory=dict)
     args: dict = field(default_factory=dict)
+    uploaded: dict = field(default_factory=dict)
+    """(stage, arg) → the read-only host array last copied into its buffer (not copied again)."""
 
 
 class Pipeline:
@@ -435,7 +437,11 @@ class Pipeline:
                 buf = bufs.args.get(key)
                 if buf is None or buf.size != max(a.nbytes, 4):
                     buf = bufs.args[key] = self.runtime.empty(a.shape, a.dtype)
-                cl.enqueue_copy(self.runtime.queue, buf, a)
+                    bufs.uploaded.pop(key, None)
+                # a stage's static table (read-only, the same object) is uploaded once
+                if not (bufs.uploaded.get(key) is a and not a.flags.writeable):
+                    cl.enqueue_copy(self.runtime.queue, buf, a)
+                    bufs.uploaded[key] = a
                 vals.append(buf)
             else:
                 vals.append(v)

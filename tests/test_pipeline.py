@@ -253,3 +253,30 @@ def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts):
         outs.append(out)
     assert np.array_equal(outs[0], outs[1])
     assert not vector_path(stages + [registry()["film"]("final")])  # film has no vector form
+
+
+def test_static_tables_are_uploaded_once_and_changed_ones_again(rng, monkeypatch):
+    """vignetting's per-pixel RI plane is read-only and cached: the second frame does not copy it
+    again; a camera with another curve (focus moves the exit pupil) uploads its new plane."""
+    import pyopencl as cl
+
+    frame = odd_frame(rng, w=37, h=23)
+    pipe = Pipeline(Camera(vignetting="natural"), stages=["vignetting", "exposure"])
+    pipe.run(frame)
+    plane_bytes = 37 * 23 * 4
+    copies = []
+    real = cl.enqueue_copy
+
+    def spy(queue, dst, src, **kw):
+        copies.append(getattr(src, "nbytes", None))
+        return real(queue, dst, src, **kw)
+
+    monkeypatch.setattr(cl, "enqueue_copy", spy)
+    first = pipe.run(frame).color
+    assert plane_bytes not in copies  # colour in/out (37·23·12 bytes) only
+    pipe2 = Pipeline(Camera(vignetting="natural", focus_distance_m=0.3), stages=["vignetting", "exposure"])
+    pipe2._buffers = pipe._buffers  # same device buffers, new curve
+    copies.clear()
+    second = pipe2.run(frame).color
+    assert plane_bytes in copies and not np.array_equal(first, second)
+    np.testing.assert_allclose(second, pipe2.reference(frame), rtol=2e-5)

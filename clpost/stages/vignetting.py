@@ -24,10 +24,11 @@ Other sources of RI(r) (all normalised to 1 on the axis):
   with a ``# source:`` provenance comment; linear interpolation. The table must reach the sensor's
   half diagonal.
 
-The curve is sampled on the host into a LUT of ``VIGNETTING_LUT_SIZE`` entries over
+The curve is sampled on the host into a LUT of ``LUT_SIZE`` entries over
 :math:`[0, \sqrt{w^2 + h^2}]` of the sensor (twice the half diagonal, so an off-centre principal
-point stays inside) and interpolated linearly in the kernel (max error < 1e-5 for cos⁴ of a 12 mm
-lens). Fused with exposure (both linear, pointwise).
+point stays inside), interpolated linearly (max error < 1e-5 for cos⁴ of a 12 mm lens) at every
+pixel's image height once per curve and size (:meth:`Vignetting.ri_plane`); the kernel multiplies
+by that plane. Fused with exposure (both linear, pointwise).
 
 Default: ``off`` (opt-in). A real camera always vignettes, but turning it on by default would
 change every existing output and plan (exposure-only plans, metered levels); ``--vignetting
@@ -129,8 +130,11 @@ class Vignetting(PointwiseStage):
     name = "vignetting"
     order = 60.0
     vector = True  # also defines <name>_apply16 (clpost.pipeline.VECTOR_PIXELS)
-    args = (("float", "sensor_w_mm"), ("float", "off_x_mm"), ("float", "off_y_mm"),
-            ("float", "r_max_mm"), ("__global const float *", "lut"))
+    args = (("__global const float *", "ri"),)
+
+    def __init__(self, quality: str = "final") -> None:
+        super().__init__(quality)
+        self._plane: tuple = (None, None)
 
     def skip_reason(self, camera, frame):
         ri = relative_illumination(camera)
@@ -154,12 +158,30 @@ class Vignetting(PointwiseStage):
         return np.clip(relative_illumination(camera)(r), 0.0, 1.0).astype(np.float32)
 
     def defines(self, camera):
-        return {"VIGNETTING_LUT_SIZE": LUT_SIZE}
+        return {}
+
+    def ri_plane(self, camera, w: int, h: int) -> np.ndarray:
+        """RI at every pixel (float32 (h, w), read-only): the LUT interpolated in float64 at the
+        pixel's image height. Built once per curve, principal point and size and uploaded once
+        (the pipeline does not re-copy an unchanged read-only table); the kernel reads one float
+        per pixel — a per-pixel LUT lookup in the kernel was the stage's whole cost (2 of every
+        3 ms at 1080p) because PoCL cannot vectorise data-dependent loads."""
+        lut = self._lut(camera)
+        ox, oy = principal_offset_mm(camera)
+        key = (lut.tobytes(), float(camera.sensor_mm[0]), ox, oy, w, h)
+        if self._plane[0] != key:
+            pitch = camera.sensor_mm[0] / w
+            x = (np.arange(w) - 0.5 * (w - 1)) * pitch - ox
+            y = (np.arange(h) - 0.5 * (h - 1)) * pitch - oy
+            r = np.hypot(x[None, :], y[:, None])
+            grid = np.linspace(0.0, self._r_max(camera), LUT_SIZE)
+            plane = np.interp(r, grid, lut.astype(np.float64)).astype(np.float32)
+            plane.setflags(write=False)
+            self._plane = (key, plane)
+        return self._plane[1]
 
     def values(self, camera, frame):
-        ox, oy = principal_offset_mm(camera)
-        return (np.float32(camera.sensor_mm[0]), np.float32(ox), np.float32(oy),
-                np.float32(self._r_max(camera)), self._lut(camera))
+        return (self.ri_plane(camera, frame.width, frame.height),)
 
     def reference(self, camera, frame, color):
         color = np.asarray(color, np.float64)
