@@ -18,24 +18,20 @@
  * map_coordinates(order=3, mode="nearest") does, which is the reference).
  */
 
-/* Bilinear, one pixel per work-item. No floor/clamp calls and one select per store instead of an
- * early return: 8.4 vs 11.0 ms at 1080p (same run, quiet machine); a per-pixel tap table like the
- * final filter's was slower for 4 taps. */
-__kernel void distortion(__global const float *restrict src, __global float *restrict dst,
-                         __global const float *restrict map, const int src_w, const int src_h,
-                         const int width, const int height)
+/* Bilinear. One output pixel of the map: taps beyond the render repeat its edge, no preimage ->
+ * colour 0. No floor/clamp calls and a select instead of an early return (8.4 vs 11.0 ms at
+ * 1080p, one pixel per work-item, same run). */
+inline void distortion_pixel(__global const float *restrict src, __global float *restrict dst,
+                             __global const float *restrict map, const int src_w, const int src_h,
+                             const size_t n, const size_t i)
 {
-    const int x = get_global_id(0);
-    const int y = get_global_id(1);
-    if (x >= width || y >= height) return;
-    const size_t n = (size_t)width * height, sn = (size_t)src_w * src_h, i = (size_t)y * width + x;
+    const size_t sn = (size_t)src_w * src_h;
     const float sx = map[i], sy = map[n + i];
     const int ok = sx > -1.0e29f;
     const float cx = ok ? sx : 0.0f, cy = ok ? sy : 0.0f;
     /* floor for valid positions (>= -1/2): truncation of a positive number */
     const int x0 = (int)(cx + 1.0f) - 1, y0 = (int)(cy + 1.0f) - 1;
     const float tx = cx - (float)x0, ty = cy - (float)y0;
-    /* taps beyond the render repeat its edge */
     const int xa = x0 < 0 ? 0 : x0, ya = y0 < 0 ? 0 : y0;
     const int xb = x0 + 1 > src_w - 1 ? src_w - 1 : x0 + 1, yb = y0 + 1 > src_h - 1 ? src_h - 1 : y0 + 1;
     for (int c = 0; c < 3; ++c) {
@@ -45,6 +41,60 @@ __kernel void distortion(__global const float *restrict src, __global float *res
         const float v = (a * (1.0f - tx) + b * tx) * (1.0f - ty) + (d * (1.0f - tx) + e * tx) * ty;
         dst[c * n + i] = ok ? v : 0.0f;
     }
+}
+
+__kernel void distortion(__global const float *restrict src, __global float *restrict dst,
+                         __global const float *restrict map, const int src_w, const int src_h,
+                         const int width, const int height)
+{
+    const int x = get_global_id(0);
+    const int y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    distortion_pixel(src, dst, map, src_w, src_h, (size_t)width * height, (size_t)y * width + x);
+}
+
+/* Bilinear on the tiles of DISTORTION_TILE x DISTORTION_TILE output pixels where the map's
+ * integer displacement floor(s) - x takes at most two neighbouring values (host:
+ * clpost/stages/distortion.py, bilinear_tiles): the 2x2 taps of every pixel of a tile row lie in
+ * the 3x3 window at (x + ox, y + oy), so the loads are vload16 at addresses affine in the lane,
+ * and bilinear weights are tent weights max(0, 1 - |f - k|) on that window. One work-item: one
+ * row of one tile. tiles: (x0, y0, ox, oy) per tile. */
+#define DISTORTION_TILE 16
+__kernel void distortion_tiles(__global const float *restrict src, __global float *restrict dst,
+                               __global const float *restrict map, __global const int *restrict tiles,
+                               const int src_w, const int src_h, const int width, const int height)
+{
+    const int row = get_global_id(0), tile = get_global_id(1);
+    const int4 t = vload4(tile, tiles);
+    const int y = t.y + row;
+    const size_t n = (size_t)width * height, sn = (size_t)src_w * src_h;
+    const size_t i = (size_t)y * width + t.x;
+    const float16 fx = vload16(0, map + i) - ((float)(t.x + t.z) + CLP_LANES16);
+    const float16 fy = vload16(0, map + n + i) - (float)(y + t.w);
+    const float16 wx0 = fmax(1.0f - fx, 0.0f), wx2 = fmax(fx - 1.0f, 0.0f), wx1 = 1.0f - wx0 - wx2;
+    const float16 wy0 = fmax(1.0f - fy, 0.0f), wy2 = fmax(fy - 1.0f, 0.0f), wy1 = 1.0f - wy0 - wy2;
+    const size_t base = (size_t)(y + t.w) * src_w + (size_t)(t.x + t.z);
+    for (int c = 0; c < 3; ++c) {
+        __global const float *p = src + c * sn + base;
+        float16 acc = (float16)(0.0f);
+        for (int m = 0; m < 3; ++m) {
+            __global const float *q = p + (size_t)m * src_w;
+            const float16 rowv = wx0 * vload16(0, q) + wx1 * vload16(0, q + 1) + wx2 * vload16(0, q + 2);
+            acc += (m == 0 ? wy0 : (m == 1 ? wy1 : wy2)) * rowv;
+        }
+        vstore16(acc, 0, dst + c * n + i);
+    }
+}
+
+/* the other tiles (a listed tile x0, y0 per work-group of DISTORTION_TILE^2), one pixel each */
+__kernel void distortion_rest(__global const float *restrict src, __global float *restrict dst,
+                              __global const float *restrict map, __global const int *restrict tiles,
+                              const int src_w, const int src_h, const int width, const int height)
+{
+    const int2 t = vload2(get_global_id(2), tiles);
+    const int x = t.x + get_global_id(0), y = t.y + get_global_id(1);
+    if (x >= width || y >= height) return;
+    distortion_pixel(src, dst, map, src_w, src_h, (size_t)width * height, (size_t)y * width + x);
 }
 
 /* Cubic B-spline prefilter (Unser, "Splines: a perfect fit for signal and image processing",

@@ -131,6 +131,48 @@ def _taps(plane: np.ndarray, xi: np.ndarray, yi: np.ndarray) -> np.ndarray:
     return plane[np.clip(yi, 0, h - 1), np.clip(xi, 0, w - 1)]
 
 
+TILE = 16
+"""Output tile of the draft/preview kernels (kernels/distortion.cl DISTORTION_TILE)."""
+
+
+@lru_cache(maxsize=4)
+def bilinear_tiles(model: OpenCVModel, src_size: tuple[int, int],
+                   src_k: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The bilinear kernels' tile lists: (x0, y0, ox, oy) int32 for the whole
+    :data:`TILE` × :data:`TILE` output tiles whose pixels all have a preimage, whose integer
+    displacement floor(s) − x (and y) takes at most two neighbouring values ox, ox + 1 and whose
+    3 × 3 window at (x + ox, y + oy) stays inside the source — ``distortion_tiles`` reads them
+    with vector loads; (x0, y0) int32 for the other tiles (``distortion_rest``, per pixel)."""
+    m, ok = distortion_map(model, src_size, src_k)
+    m = m.astype(np.float32).astype(np.float64)
+    sw, sh = src_size
+    h, w = ok.shape
+    nty, ntx = -(-h // TILE), -(-w // TILE)
+    ph, pw = nty * TILE, ntx * TILE
+    yy, xx = np.mgrid[0:ph, 0:pw]
+    okp = np.zeros((ph, pw), bool)
+    okp[:h, :w] = ok
+    dx = np.zeros((ph, pw), np.int64)
+    dy = np.zeros((ph, pw), np.int64)
+    dx[:h, :w] = np.floor(np.where(ok, m[0], 0.0)).astype(np.int64) - xx[:h, :w]
+    dy[:h, :w] = np.floor(np.where(ok, m[1], 0.0)).astype(np.int64) - yy[:h, :w]
+
+    def per_tile(a, fn):
+        return fn(fn(a.reshape(nty, TILE, ntx, TILE), axis=3), axis=1)
+
+    ox, oy = per_tile(dx, np.min), per_tile(dy, np.min)
+    ty, tx = np.mgrid[0:nty, 0:ntx]
+    x0, y0 = tx * TILE, ty * TILE
+    fast = (per_tile(okp, np.all) & (per_tile(dx, np.max) - ox <= 1) & (per_tile(dy, np.max) - oy <= 1)
+            & (x0 + ox >= 0) & (x0 + TILE - 1 + ox + 2 <= sw - 1)
+            & (y0 + oy >= 0) & (y0 + TILE - 1 + oy + 2 <= sh - 1))
+    tiles = np.stack([x0[fast], y0[fast], ox[fast], oy[fast]], -1).astype(np.int32)
+    rest = np.stack([x0[~fast], y0[~fast]], -1).astype(np.int32)
+    for a in (tiles, rest):
+        a.setflags(write=False)
+    return tiles, rest
+
+
 PAD = 12
 """Edge pixels around the B-spline coefficients (kernels/distortion.cl DISTORTION_PAD; scipy's
 ``map_coordinates`` pads ``mode="nearest"`` by the same 12 before its mirror-boundary prefilter)."""
@@ -250,8 +292,9 @@ class Distortion(GatherStage):
         if bufs is None:
             if bspline:  # the tap table, then scratch for the B-spline coefficients
                 host = tap_table(model, frame.size, kkey)
-            else:
-                host = (np.ascontiguousarray(self._host_map(camera, frame)[0], dtype=np.float32),)
+            else:  # the map and the two tile lists
+                host = (np.ascontiguousarray(self._host_map(camera, frame)[0], dtype=np.float32),
+                        *bilinear_tiles(model, frame.size, kkey))
             bufs = tuple(rt.empty(a.shape, a.dtype) for a in host)
             for b, a in zip(bufs, host):
                 cl.enqueue_copy(rt.queue, b, np.ascontiguousarray(a))
@@ -262,9 +305,15 @@ class Distortion(GatherStage):
         out = (np.int32(model.width), np.int32(model.height))
         q = rt.queue
         if not bspline:
-            kern = cl.Kernel(prog, "distortion")
-            kern.set_args(src, dst, bufs[0], np.int32(sw), np.int32(sh), *out)
-            return [cl.enqueue_nd_range_kernel(q, kern, (model.width, model.height), None)]
+            tiles, rest = bilinear_tiles(model, frame.size, kkey)
+            events = []
+            for name, buf, n, gsize in (("distortion_tiles", bufs[1], len(tiles), (TILE, len(tiles))),
+                                        ("distortion_rest", bufs[2], len(rest), (TILE, TILE, len(rest)))):
+                if n:
+                    kern = cl.Kernel(prog, name)
+                    kern.set_args(src, dst, bufs[0], buf, np.int32(sw), np.int32(sh), *out)
+                    events.append(cl.enqueue_nd_range_kernel(q, kern, gsize, None))
+            return events
         base, wts, coef = bufs
         rows, cols, gather = (cl.Kernel(prog, k) for k in
                               ("distortion_bspline_rows", "distortion_bspline_cols", "distortion_table"))
