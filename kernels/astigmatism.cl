@@ -212,12 +212,13 @@ inline void astigmatism_store16(__global float *restrict dst, float16 r, float16
  * taps and it gives up), and that chain made the loop latency-bound: the taps' weights are now
  * independent and overlap. float16 rather than float8: same speed at 16 taps, 1.35-1.6x faster
  * at 64 (measured in one process); the tap loop is unrolled by 4 (see below), not fully. */
-__kernel void astigmatism(__global const float *restrict padded, __global const float *restrict axes,
+inline void astigmatism_gather(__global const float *restrict padded, __global const float *restrict axes,
                  __global float *restrict dst, __global const float *restrict tiles,
                  __global const int *restrict list, const int list0, const int tiles_x, const int tiles_y,
                  const int width, const int height, const int ntaps, const int tap0)
 {
-    /* work-group g = the g-th tile of this class's list; ntaps spiral points from tap0 */
+    /* work-group g = the g-th tile of this class's list; ntaps spiral points from tap0 (both
+     * compile-time constants after inlining: with a run-time count the loop ran 2x slower) */
     const int tile_id = list[list0 + (int)get_group_id(0)];
     const int tx = tile_id % tiles_x, ty = tile_id / tiles_x;
     const int x = tx * ASTIGMATISM_TILE_W + 16 * (int)get_local_id(0);
@@ -273,6 +274,31 @@ __kernel void astigmatism(__global const float *restrict padded, __global const 
     const float16 b = select(ab * inv, vload16(0, padded + 2 * pn + jc), keep);
     astigmatism_store16(dst, r, g, b, x, y, width, height);
 }
+
+#define ASTIGMATISM_GATHER_ARGS __global const float *restrict padded, __global const float *restrict axes, \
+    __global float *restrict dst, __global const float *restrict tiles, __global const int *restrict list, \
+    const int list0, const int tiles_x, const int tiles_y, const int width, const int height
+#define ASTIGMATISM_GATHER_CALL(n, t0) \
+    astigmatism_gather(padded, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0)
+
+/* the quality's ASTIGMATISM_TAPS (its spiral is the table's last) */
+__kernel void astigmatism(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(ASTIGMATISM_TAPS, ASTIGMATISM_FULL_TAP0); }
+/* the smaller classes: astigmatism_t<n>, the spiral of n points at table offset n - 4 */
+#if ASTIGMATISM_TAPS > 4
+__kernel void astigmatism_t4(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(4, 0); }
+#endif
+#if ASTIGMATISM_TAPS > 8
+__kernel void astigmatism_t8(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(8, 4); }
+#endif
+#if ASTIGMATISM_TAPS > 16
+__kernel void astigmatism_t16(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(16, 12); }
+#endif
+#if ASTIGMATISM_TAPS > 32
+__kernel void astigmatism_t32(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(32, 28); }
+#endif
+#if ASTIGMATISM_TAPS > 64
+#error "tap classes above 64: add astigmatism_t64"
+#endif
 
 /* the tiles whose bounding semi-axis is below ASTIGMATISM_COPY_PX: copied through (16 pixels per
  * work-item, the gather's geometry) */

@@ -112,7 +112,7 @@ TAPS = {"draft": 16, "preview": 32, "final": 64}
 # tile classes (module docstring, "Tile classes"): copied below COPY_PX; otherwise the fewest of
 # 4, 8, ... TAPS[quality] taps with B <= n * FULL_AT_PX / TAPS[quality]
 COPY_PX = 0.02
-FULL_AT_PX = 2.0
+FULL_AT_PX = 4.0
 MIN_TILE_TAPS = 4
 MAX_SEMI_PX = fld.PAD - 1
 MIN_SEMI_PX = 1e-3
@@ -303,10 +303,11 @@ class Astigmatism(GatherStage):
                                                          (fld.TILE_W, fld.TILE_H)))
                 continue
             else:
-                classes = self.tap_classes()
-                k = self._kernel(rt, camera, "astigmatism", whole)
-                k.set_args(b["pad"], b["axes"], dst, b["tiles"], *sub, *args,
-                           np.int32(classes[c - 1]), np.int32(sum(classes[:c - 1])))
+                n_taps = self.tap_classes()[c - 1]
+                # one kernel per tap count (compile-time loop; offsets n - 4 in the table)
+                name = "astigmatism" if n_taps == self.taps else f"astigmatism_t{n_taps}"
+                k = self._kernel(rt, camera, name, whole)
+                k.set_args(b["pad"], b["axes"], dst, b["tiles"], *sub, *args)
             events.append(cl.enqueue_nd_range_kernel(q, k, (int(n) * group[0], group[1]), group))
         return events
 
