@@ -20,8 +20,15 @@
  * tangential; mm) over image height [0, r_max]; tiles = per tile (row-major) the tile centre's
  * unit radial vector (e_x, e_y) from the host and the tile's largest (a_s, a_t) from
  * astigmatism_tiles.
+ * Tile classes: astigmatism_tiles appends each tile to one list per class (copy, 4, 8, ...
+ * ASTIGMATISM_TAPS taps, exact); the host reads the counts and launches astigmatism_copy, the
+ * gather kernels (astigmatism_t<n> and astigmatism for the full count; one compile-time tap count
+ * each) and astigmatism_exact on their lists, one work-group per listed tile. The tap table holds
+ * the spirals of 4, 8, ..., ASTIGMATISM_TAPS points one after the other.
  * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE, ASTIGMATISM_TILE_W,
- * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch).
+ * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch),
+ * ASTIGMATISM_CLASSES, ASTIGMATISM_COPY_PX, ASTIGMATISM_TAPS_PER_PX (FULL_AT_PX / TAPS),
+ * ASTIGMATISM_FULL_TAP0 (table offset of the full spiral).
  */
 #if ASTIGMATISM_TILE_W % 16
 #error "the gather reads rows of a tile as float16 (the tile pass as float8): ASTIGMATISM_TILE_W must be a multiple of 16"
