@@ -108,8 +108,9 @@ one tile list per class and each class is its own launch, so no branch enters th
   already has at 4 px.
 * tiles flagged for the exact path keep the quality's N.
 
-Draft at 1920×1080 on the benchmark's no_defocus frame: 9 % of the tiles copied, 25 % at 4 or 8
-taps; 1.2× faster (final 1.3–1.5×) in one process (``tools/ab_gathers.py``). The draft result
+Draft at 1920×1080 on the benchmark's no_defocus frame: 9 % of the tiles copied, 23 % at 4 or 8
+taps; 1.05–1.2× faster (final 1.26×) in one process (``tools/ab_gathers.py``, loaded box; the
+pad and tiles passes are the fixed rest). The draft result
 moves further from the dense (final) one: 99.9th percentile of |draft − final| 5.3 instead of 3.6
 on values 0.08–500 (mean 0.018 instead of 0.011).
 
