@@ -20,11 +20,21 @@
  * tangential; mm) over image height [0, r_max]; tiles = per tile (row-major) the tile centre's
  * unit radial vector (e_x, e_y) from the host and the tile's largest (a_s, a_t) from
  * astigmatism_tiles.
+ * Tile classes: astigmatism_tiles appends each tile to one list per class (copy, 4, 8, ...
+ * ASTIGMATISM_TAPS taps, exact); the host reads the counts and launches astigmatism_copy, the
+ * gather kernels (astigmatism_t<n> and astigmatism for the full count; one compile-time tap count
+ * each) and astigmatism_exact on their lists, one work-group per listed tile. The tap table holds
+ * the spirals of 4, 8, ..., ASTIGMATISM_TAPS points one after the other.
  * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE, ASTIGMATISM_TILE_W,
- * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch).
+ * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch),
+ * ASTIGMATISM_CLASSES, ASTIGMATISM_COPY_PX, ASTIGMATISM_TAPS_PER_PX (FULL_AT_PX / TAPS),
+ * ASTIGMATISM_FULL_TAP0 (table offset of the full spiral).
  */
 #if ASTIGMATISM_TILE_W % 16
 #error "the gather reads rows of a tile as float16 (the tile pass as float8): ASTIGMATISM_TILE_W must be a multiple of 16"
+#endif
+#if ASTIGMATISM_TAPS % 4
+#error "the gather's tap loop is unrolled by 4: ASTIGMATISM_TAPS must be a multiple of 4"
 #endif
 #define ASTIGMATISM_MAX_SEMI ((float)(ASTIGMATISM_PAD - 1))
 #define ASTIGMATISM_MIN_SEMI 1e-3f
@@ -83,9 +93,12 @@ __kernel void astigmatism_pad(__global const float *restrict src, __global const
     axes[3 * pn + j] = 1.0f / ((at + 0.5f) * (at + 0.5f));
 }
 
-/* one work-item per tile: the largest semi-axes of the tile's pixels (inside the frame) */
+/* one work-item per tile: the largest semi-axes of the tile's pixels (inside the frame), and the
+ * tile's class appended to that class's tile list (lists: ASTIGMATISM_CLASSES rows of
+ * tiles_x * tiles_y tile indices; counts: one counter per class, zeroed by the host). The order
+ * within a list depends on the atomics' order; the result does not (each tile is independent). */
 __kernel void astigmatism_tiles(__global const float *restrict axes, __global float *restrict tiles,
-                                __global int *restrict flags,
+                                __global int *restrict counts, __global int *restrict lists,
                                 const int width, const int height, const int tiles_x, const int tiles_y)
 {
     const int tx = get_global_id(0), ty = get_global_id(1);
@@ -145,7 +158,19 @@ __kernel void astigmatism_tiles(__global const float *restrict axes, __global fl
                     || (mt > ASTIGMATISM_EXACT_PX && mn_t < ASTIGMATISM_MIXED * mt);
     tiles[4 * (ty * tiles_x + tx) + 2] = ms;
     tiles[4 * (ty * tiles_x + tx) + 3] = mt;
-    flags[ty * tiles_x + tx] = (turn || mixed) ? 1 : 0;
+    /* class: copy below ASTIGMATISM_COPY_PX; else the fewest taps n = 4, 8, ... ASTIGMATISM_TAPS
+     * with B <= n * ASTIGMATISM_TAPS_PER_PX (B the bounding semi-axis); exact path last */
+    const float bound = fmax(ms, mt);
+    int c;
+    if (turn || mixed) {
+        c = ASTIGMATISM_CLASSES - 1;
+    } else if (bound < ASTIGMATISM_COPY_PX) {
+        c = 0;
+    } else {
+        c = 1;
+        while (c < ASTIGMATISM_CLASSES - 2 && bound > (float)(2 << c) * ASTIGMATISM_TAPS_PER_PX) ++c;
+    }
+    lists[c * tiles_x * tiles_y + atomic_inc(counts + c)] = ty * tiles_x + tx;
 }
 
 #define ASTIGMATISM_ABS(v) as_float(as_uint(v) & 0x7fffffffu)
@@ -166,6 +191,30 @@ inline float16 astigmatism_sat16(float16 v)
     return 0.5f * (m + ASTIGMATISM_ABS16(m));
 }
 
+/* 16 pixels of a tile row into the planar output (partial tiles at the frame's edges: per pixel) */
+inline void astigmatism_store16(__global float *restrict dst, float16 r, float16 g, float16 b,
+                                int x, int y, int width, int height)
+{
+    const size_t n = (size_t)width * height;
+    const size_t i = (size_t)y * width + x;
+#if ASTIGMATISM_WHOLE_TILES
+    vstore16(r, 0, dst + i);
+    vstore16(g, 0, dst + n + i);
+    vstore16(b, 0, dst + 2 * n + i);
+#else
+    if (y >= height) return;
+    float rr[16], gg[16], bb[16];
+    vstore16(r, 0, rr);
+    vstore16(g, 0, gg);
+    vstore16(b, 0, bb);
+    for (int e = 0; e < 16 && x + e < width; ++e) {
+        dst[i + e] = rr[e];
+        dst[n + i + e] = gg[e];
+        dst[2 * n + i + e] = bb[e];
+    }
+#endif
+}
+
 /* One work-item = 16 consecutive pixels of a row of the tile, as explicit float16 vectors (a
  * work-group = a tile = ASTIGMATISM_TILE_W / 16 x ASTIGMATISM_TILE_H work-items). Written with
  * vectors rather than left to PoCL's work-item-loop vectoriser because that one needs the taps'
@@ -173,29 +222,37 @@ inline float16 astigmatism_sat16(float16 v)
  * taps and it gives up), and that chain made the loop latency-bound: the taps' weights are now
  * independent and overlap. float16 rather than float8: same speed at 16 taps, 1.35-1.6x faster
  * at 64 (measured in one process); the tap loop is unrolled by 4 (see below), not fully. */
-__kernel void astigmatism(__global const float *restrict padded, __global const float *restrict axes,
+inline void astigmatism_gather(__global const float *restrict padded, __global const float *restrict axes,
                  __global float *restrict dst, __global const float *restrict tiles,
-                 const int width, const int height)
+                 __global const int *restrict list, const int list0, const int tiles_x, const int tiles_y,
+                 const int width, const int height, const int ntaps, const int tap0)
 {
-    const int tx = get_group_id(0), ty = get_group_id(1);
+    /* work-group g = the g-th tile of this class's list; ntaps spiral points from tap0 (both
+     * compile-time constants after inlining: with a run-time count the loop ran 2x slower) */
+    const int tile_id = list[list0 + (int)get_group_id(0)];
+    const int tx = tile_id % tiles_x, ty = tile_id / tiles_x;
     const int x = tx * ASTIGMATISM_TILE_W + 16 * (int)get_local_id(0);
     const int y = ty * ASTIGMATISM_TILE_H + (int)get_local_id(1);
-    const int pw = (int)get_num_groups(0) * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
-    const size_t pn = (size_t)pw * ((int)get_num_groups(1) * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
+    const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
+    const size_t pn = (size_t)pw * (tiles_y * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
     const int jc = (y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
     /* the pixels' own ellipses: 1/a^2 (a tap outside gets no weight). The 1e-3 px^2 keeps
      * a = 0 finite and the weights' argument below 4e6, where astigmatism_sat16 is exact in float */
     const float16 as = vload16(0, axes + jc), at = vload16(0, axes + pn + jc);
     const float16 is2 = 1.0f / (as * as + 1e-3f), it2 = 1.0f / (at * at + 1e-3f);
     /* the tile's bounding ellipse and direction: the tap offsets are the same for all its pixels */
-    __global const float *tile = tiles + 4 * (ty * (int)get_num_groups(0) + tx);
+    __global const float *tile = tiles + 4 * tile_id;
+    __constant const float *taps = astigmatism_taps + 2 * tap0;
     const float tex = tile[0], tey = tile[1], bs = tile[2], bt = tile[3];
     float16 ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
     /* unrolled by 4, not fully: 64 fully unrolled float16 taps build for 37 s cold (4 taps:
-     * about the same speed, within 10 % at 64 taps) */
-#pragma unroll 4
-    for (int k = 0; k < ASTIGMATISM_TAPS; ++k) {
-        const float us = bs * astigmatism_taps[2 * k], ut = bt * astigmatism_taps[2 * k + 1];
+     * about the same speed, within 10 % at 64 taps). By hand (a constant 4-trip inner loop):
+     * '#pragma unroll 4' in this inlined function was refused for one of the kernels ("loop not
+     * unrolled") and the 16-tap gather ran 8 % slower. Every tap count is a multiple of 4. */
+    for (int k4 = 0; k4 < ntaps; k4 += 4)
+#pragma unroll
+    for (int k = k4; k < k4 + 4; ++k) {
+        const float us = bs * taps[2 * k], ut = bt * taps[2 * k + 1];
         const float ox = -tey * us + tex * ut, oy = tex * us + tey * ut;
         /* floor and round by truncating positive numbers (|offset| < PAD) */
         const int ix = (int)(ox + (float)ASTIGMATISM_PAD) - ASTIGMATISM_PAD;
@@ -228,37 +285,64 @@ __kernel void astigmatism(__global const float *restrict padded, __global const 
     const float16 r = select(ar * inv, vload16(0, padded + jc), keep);
     const float16 g = select(ag * inv, vload16(0, padded + pn + jc), keep);
     const float16 b = select(ab * inv, vload16(0, padded + 2 * pn + jc), keep);
-    const size_t n = (size_t)width * height;
-    const size_t i = (size_t)y * width + x;
-#if ASTIGMATISM_WHOLE_TILES
-    vstore16(r, 0, dst + i);
-    vstore16(g, 0, dst + n + i);
-    vstore16(b, 0, dst + 2 * n + i);
-#else
-    if (y >= height) return;
-    float rr[16], gg[16], bb[16];
-    vstore16(r, 0, rr);
-    vstore16(g, 0, gg);
-    vstore16(b, 0, bb);
-    for (int e = 0; e < 16 && x + e < width; ++e) {
-        dst[i + e] = rr[e];
-        dst[n + i + e] = gg[e];
-        dst[2 * n + i + e] = bb[e];
-    }
+    astigmatism_store16(dst, r, g, b, x, y, width, height);
+}
+
+#define ASTIGMATISM_GATHER_ARGS __global const float *restrict padded, __global const float *restrict axes, \
+    __global float *restrict dst, __global const float *restrict tiles, __global const int *restrict list, \
+    const int list0, const int tiles_x, const int tiles_y, const int width, const int height
+#define ASTIGMATISM_GATHER_CALL(n, t0) \
+    astigmatism_gather(padded, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0)
+
+/* the quality's ASTIGMATISM_TAPS (its spiral is the table's last) */
+__kernel void astigmatism(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(ASTIGMATISM_TAPS, ASTIGMATISM_FULL_TAP0); }
+/* the smaller classes: astigmatism_t<n>, the spiral of n points at table offset n - 4 */
+#if ASTIGMATISM_TAPS > 4
+__kernel void astigmatism_t4(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(4, 0); }
 #endif
+#if ASTIGMATISM_TAPS > 8
+__kernel void astigmatism_t8(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(8, 4); }
+#endif
+#if ASTIGMATISM_TAPS > 16
+__kernel void astigmatism_t16(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(16, 12); }
+#endif
+#if ASTIGMATISM_TAPS > 32
+__kernel void astigmatism_t32(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(32, 28); }
+#endif
+#if ASTIGMATISM_TAPS > 64
+#error "tap classes above 64: add astigmatism_t64"
+#endif
+
+/* the tiles whose bounding semi-axis is below ASTIGMATISM_COPY_PX: copied through (16 pixels per
+ * work-item, the gather's geometry) */
+__kernel void astigmatism_copy(__global const float *restrict padded, __global float *restrict dst,
+                               __global const int *restrict list, const int list0, const int tiles_x, const int tiles_y,
+                               const int width, const int height)
+{
+    const int tile_id = list[list0 + (int)get_group_id(0)];
+    const int x = (tile_id % tiles_x) * ASTIGMATISM_TILE_W + 16 * (int)get_local_id(0);
+    const int y = (tile_id / tiles_x) * ASTIGMATISM_TILE_H + (int)get_local_id(1);
+    const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
+    const size_t pn = (size_t)pw * (tiles_y * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
+    const int jc = (y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
+    astigmatism_store16(dst, vload16(0, padded + jc), vload16(0, padded + pn + jc), vload16(0, padded + 2 * pn + jc),
+                        x, y, width, height);
 }
 
 /* the per-pixel model (each pixel's own ellipse and direction; per-pixel addresses, so it does
- * not vectorise) for the tiles astigmatism_tiles flagged; the other groups return at once */
+ * not vectorise) for the tiles of the exact list (one work-group per listed tile), all
+ * ASTIGMATISM_TAPS spiral points */
 __kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict axes,
-                       __global float *restrict dst, __global const int *restrict flags,
+                       __global float *restrict dst, __global const int *restrict list, const int list0,
+                       const int tiles_x, const int tiles_y,
                        const int width, const int height, const float cx, const float cy)
 {
-    if (!flags[get_group_id(1) * get_num_groups(0) + get_group_id(0)]) return;
-    const int x = get_global_id(0), y = get_global_id(1);
+    const int tile_id = list[list0 + (int)get_group_id(0)];
+    const int x = (tile_id % tiles_x) * ASTIGMATISM_TILE_W + (int)get_local_id(0);
+    const int y = (tile_id / tiles_x) * ASTIGMATISM_TILE_H + (int)get_local_id(1);
     if (x >= width || y >= height) return;
-    const int pw = (int)get_num_groups(0) * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
-    const size_t pn = (size_t)pw * ((int)get_num_groups(1) * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
+    const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
+    const size_t pn = (size_t)pw * (tiles_y * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
     const size_t n = (size_t)width * height;
     const size_t i = (size_t)y * width + x;
     const int jc = (y + ASTIGMATISM_PAD) * pw + (x + ASTIGMATISM_PAD);
@@ -275,7 +359,8 @@ __kernel void astigmatism_exact(__global const float *restrict padded, __global 
     const float bx = (float)(x + ASTIGMATISM_PAD), by = (float)(y + ASTIGMATISM_PAD);
     float ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
     for (int k = 0; k < ASTIGMATISM_TAPS; ++k) {
-        const float ux = astigmatism_taps[2 * k], uy = astigmatism_taps[2 * k + 1];
+        const float ux = astigmatism_taps[2 * (ASTIGMATISM_FULL_TAP0 + k)];
+        const float uy = astigmatism_taps[2 * (ASTIGMATISM_FULL_TAP0 + k) + 1];
         const float us = as * ux, ut = at * uy;
         const float px = bx - ey * us + ex * ut, py = by + ex * us + ey * ut;
         /* does the source pixel's own ellipse (+ half a pixel) reach back to the target? */

@@ -5,7 +5,9 @@ archive`` into a temporary folder and loaded beside the working tree's; both run
 OpenCL queue, the same planar input and depth buffers, interleaved (old, new, old, new, …), so
 machine load hits both alike. Device time = the sum of the stage's kernel events (uploads
 excluded), median of ``--repeats`` after 2 warm-ups; the ratio is the median of the per-repeat
-ratios (min and max printed too). ``max|old-new|`` compares the outputs of the first run.
+ratios (min and max printed too). ``max|old-new|`` compares the outputs of the first run; with
+``--truth QUALITY`` each output is also compared with the old stage at that quality (e.g. final:
+how far a cheaper model is from the dense one — max and 99.9th percentile of |difference|).
 
     PYTHONPATH=. python tools/ab_gathers.py --old a46f6c0 --scene no_defocus --size 1920x1080 \\
         --qualities draft,final --repeats 5
@@ -56,6 +58,7 @@ def main() -> None:
     ap.add_argument("--lens", default=None,
                     help="a traced lens instead of the scene's parametric coefficients (e.g. zeiss-planar-50-f1.4)")
     ap.add_argument("--f-number", type=float, default=None)
+    ap.add_argument("--truth", default=None, help="compare every output with the old stage at this quality")
     args = ap.parse_args()
     w, h = (int(v) for v in args.size.split("x"))
 
@@ -84,6 +87,13 @@ def main() -> None:
     for name in args.stages.split(","):
         new_mod = importlib.import_module(f"clpost.stages.{name}")
         old_mod = load_old_module(root, name)
+        truth = None
+        if args.truth is not None:
+            use_old["on"] = True
+            stage = getattr(old_mod, CLASSES[name])(args.truth)
+            stage.enqueue(rt, cam, frame, src, dst, aux)
+            truth = np.empty((3, h, w), np.float32)
+            cl.enqueue_copy(q, truth, dst)
         for quality in args.qualities.split(","):
             stages = {"old": getattr(old_mod, CLASSES[name])(quality), "new": getattr(new_mod, CLASSES[name])(quality)}
             times = {"old": [], "new": []}
@@ -105,6 +115,11 @@ def main() -> None:
                   f"new {statistics.median(times['new']):8.2f} ms  ratio {statistics.median(ratios):5.2f} "
                   f"(min {min(ratios):.2f}, max {max(ratios):.2f})  max|old-new| {diff.max():.3g} "
                   f"(input {planar.min():.3g}..{planar.max():.3g})")
+            if truth is not None:
+                for v in ("old", "new"):
+                    d = np.abs(outs[v] - truth)
+                    print(f"{'':13s} {quality:5s} {v} vs old {args.truth}: max {d.max():.3g}, "
+                          f"99.9 % {np.percentile(d, 99.9):.3g}, mean {d.mean():.3g}")
 
 
 if __name__ == "__main__":
