@@ -8,14 +8,15 @@
  *
  * DISTORTION_FILTER 1: bilinear (4 taps, draft/preview), kernel `distortion`.
  * DISTORTION_FILTER 3: cubic B-spline interpolation (final): the B-spline coefficients of the
- * source (`distortion_bspline_rows` then `_cols`, Unser 1999) and 16 taps with B-spline weights
- * from a per-pixel table (`distortion_table`), clamped below at 0 so HDR edges cannot ring to
- * negative values. Why not Keys' cubic convolution (OpenCV's INTER_CUBIC): it is only first-order
- * and moves an edge by up to ~0.03 px depending on its sub-pixel phase, which cost 5-8 % in the
- * recovered k2/p2 of the checkerboard calibration; the B-spline is exact for cubics and keeps
- * every parameter within 1 % (docs/distortion_calibration.md). Taps outside the render repeat its
- * edge (the coefficients are computed on a copy padded by DISTORTION_PAD edge pixels, as scipy's
- * map_coordinates(order=3, mode="nearest") does, which is the reference).
+ * source (`distortion_fir_rows` then `_cols`: the prefilter of Unser 1999 as a separable FIR,
+ * |k| <= DISTORTION_FIR_K) and 16 taps with B-spline weights from a per-pixel table
+ * (`distortion_table`), clamped below at 0 so HDR edges cannot ring to negative values. Why not
+ * Keys' cubic convolution (OpenCV's INTER_CUBIC): it is only first-order and moves an edge by up
+ * to ~0.03 px depending on its sub-pixel phase, which cost 5-8 % in the recovered k2/p2 of the
+ * checkerboard calibration; the B-spline is exact for cubics and keeps every parameter within 1 %
+ * (docs/distortion_calibration.md). Taps outside the render repeat its edge (the coefficients are
+ * those of the edge-extended source, as scipy's map_coordinates(order=3, mode="nearest"), the
+ * reference, computes them), stored with DISTORTION_PAD pixels around the render.
  */
 
 /* Bilinear. One output pixel of the map: taps beyond the render repeat its edge, no preimage ->
@@ -97,65 +98,71 @@ __kernel void distortion_rest(__global const float *restrict src, __global float
     distortion_pixel(src, dst, map, src_w, src_h, (size_t)width * height, (size_t)y * width + x);
 }
 
-/* Cubic B-spline prefilter (Unser, "Splines: a perfect fit for signal and image processing",
- * IEEE SPM 1999): gain (1 - z)(1 - 1/z) = 6, then a causal and an anticausal first-order recursion
- * with the pole z = sqrt(3) - 2, mirror-boundary initialisations as scipy.ndimage (ni_splines.c).
- * The causal sum is truncated after DISTORTION_HORIZON terms (|z|^32 < 1e-18; exact for n <= 33). */
+/* Cubic B-spline prefilter as a separable FIR (formula, derivation and error bound: the docstring
+ * of clpost/stages/distortion.py, fir_taps). The coefficient plane (DISTORTION_PAD edge pixels
+ * around the source, row pitch a multiple of 16) is
+ *     C = h (*) (h (*) f)^T,   h_k = -6z/(1 - z^2) z^|k| = sqrt(3) z^|k|,  z = sqrt(3) - 2,  |k| <= K
+ * on the source f extended by edge repeat, i.e. scipy's map_coordinates(order=3, mode="nearest")
+ * prefilter up to the truncation (sum_{|k|>K} |h_k| = 1.7e-7 at K = 12).
+ * Why not the recursion (Unser 1999, as scipy): a causal + anticausal sweep is one sequential
+ * chain per row/column: along rows neighbouring work-items walk different rows (no vectorisation),
+ * along columns it is latency-bound (30+ ms at 1080p). The FIR gives every work-item 16
+ * neighbouring pixels and 2K + 1 vload16 at offsets uniform across lanes, on buffers padded so no
+ * tap is clamped. */
 #define DISTORTION_PAD 12
-#define DISTORTION_HORIZON 32
-#define DISTORTION_POLE (-0.267949192431122706f)
+#define DISTORTION_FIR_K 12
+/* h_0 ... h_K in float64 printed to float precision (tests/test_distortion.py checks them against
+ * fir_taps and the impulse response of scipy.ndimage.spline_filter1d) */
+__constant float distortion_fir[DISTORTION_FIR_K + 1] = {
+    1.732050807568878f, -0.464101615137755f, 0.1243556529821412f, -0.03332099679080968f,
+    0.008928334181097489f, -0.002392339933580263f, 0.0006410255532235573f, -0.00017176227931396592f,
+    4.6023564032306114e-05f, -1.2331976815258494e-05f, 3.304343228727843e-06f, -8.853960996528744e-07f,
+    2.3724116988365365e-07f};
 
-/* c[0], c[stride], ... <- the B-spline coefficients of 6 * (the values there): two sweeps, the
- * gain folded into the causal one */
-inline void distortion_bspline_line(__global float *c, const int n, const int stride)
+/* 16 outputs from the 16 + 2K values at p[0 ... 15 + 2K] (p: global or private, hence a macro);
+ * the symmetric pairs are added first: K + 1 multiplies instead of 2K + 1 */
+#define DISTORTION_FIR16(p, acc) do { \
+    acc = distortion_fir[0] * vload16(0, (p) + DISTORTION_FIR_K); \
+    _Pragma("unroll") for (int k = 1; k <= DISTORTION_FIR_K; ++k) \
+        acc = mad(distortion_fir[k], vload16(0, (p) + DISTORTION_FIR_K - k) + vload16(0, (p) + DISTORTION_FIR_K + k), acc); \
+} while (0)
+
+/* Row pass. Work-item (g, r, ch): tmp row r, padded columns 16g ... 16g + 15, the source row
+ * clamp(r - PAD - K) (rows repeat the edge, so the column pass needs no clamp either); source
+ * column of padded column p: p - PAD. Work-items whose window x0 ... x0 + 15 + 2K lies inside the
+ * row read it directly; the few at the edges (5 of 122 per row at 1080p) copy it with clamped
+ * indices to a private array first. tmp: 3 planes of th = src_h + 2 (PAD + K) rows of pitch. */
+__kernel void distortion_fir_rows(__global const float *restrict src, __global float *restrict tmp,
+                                  const int src_w, const int src_h, const int pitch, const int th)
 {
-    const float z = DISTORTION_POLE;
-    const float zn1 = pown(z, n - 1);
-    const int m = n - 1 < DISTORTION_HORIZON ? n - 1 : DISTORTION_HORIZON;
-    float c0 = c[0] + zn1 * c[(n - 1) * stride], zi = z;
-    for (int i = 1; i < m; ++i) {
-        c0 += zi * (c[i * stride] + zn1 * c[(n - 1 - i) * stride]);
-        zi *= z;
+    const int g = get_global_id(0), r = get_global_id(1), ch = get_global_id(2);
+    const int sy = clamp(r - DISTORTION_PAD - DISTORTION_FIR_K, 0, src_h - 1);
+    __global const float *s = src + ((size_t)ch * src_h + sy) * src_w;
+    const int x0 = 16 * g - DISTORTION_PAD - DISTORTION_FIR_K;
+    float16 acc;
+    if (x0 >= 0 && x0 + 15 + 2 * DISTORTION_FIR_K <= src_w - 1) {
+        DISTORTION_FIR16(s + x0, acc);
+    } else {
+        float win[16 + 2 * DISTORTION_FIR_K];
+        for (int i = 0; i < 16 + 2 * DISTORTION_FIR_K; ++i) win[i] = s[clamp(x0 + i, 0, src_w - 1)];
+        DISTORTION_FIR16(win, acc);
     }
-    float prev = 6.0f * c0 / (1.0f - zn1 * zn1);
-    c[0] = prev;
-    for (int i = 1; i < n; ++i) {
-        prev = mad(z, prev, 6.0f * c[i * stride]);
-        c[i * stride] = prev;
-    }
-    prev = (z * c[(n - 2) * stride] + prev) * z / (z * z - 1.0f);
-    c[(n - 1) * stride] = prev;
-    for (int i = n - 2; i >= 0; --i) {
-        prev = z * (prev - c[i * stride]);
-        c[i * stride] = prev;
-    }
+    vstore16(acc, 0, tmp + ((size_t)ch * th + r) * pitch + 16 * g);
 }
 
-/* one work-item per (padded row, channel): copy the row with DISTORTION_PAD edge pixels on each
- * side (edge repeat), then filter it along x */
-__kernel void distortion_bspline_rows(__global const float *restrict src, __global float *restrict coef,
-                                      const int src_w, const int src_h, const int pw, const int ph)
+/* Column pass. Work-item (g, q, ch): coefficient row q (source row q - PAD), columns 16g ... 16g
+ * + 15, from tmp rows q ... q + 2K. coef: 3 planes of src_h + 2 PAD rows of pitch. */
+__kernel void distortion_fir_cols(__global const float *restrict tmp, __global float *restrict coef,
+                                  const int pitch, const int th, const int ch_rows)
 {
-    const int j = get_global_id(0), ch = get_global_id(1);
-    if (j >= ph) return;
-    const int sy = clamp(j - DISTORTION_PAD, 0, src_h - 1);
-    __global const float *s = src + (size_t)ch * src_w * src_h + (size_t)sy * src_w;
-    __global float *c = coef + (size_t)ch * pw * ph + (size_t)j * pw;
-    for (int i = 0; i < DISTORTION_PAD; ++i) {
-        c[i] = s[0];
-        c[pw - 1 - i] = s[src_w - 1];
-    }
-    for (int i = 0; i < src_w; ++i) c[DISTORTION_PAD + i] = s[i];
-    distortion_bspline_line(c, pw, 1);
-}
-
-/* one work-item per (padded column, channel): filter along y (neighbouring work-items walk
- * neighbouring columns, so PoCL can vectorise across them) */
-__kernel void distortion_bspline_cols(__global float *restrict coef, const int pw, const int ph)
-{
-    const int i = get_global_id(0), ch = get_global_id(1);
-    if (i >= pw) return;
-    distortion_bspline_line(coef + (size_t)ch * pw * ph + i, ph, pw);
+    const int g = get_global_id(0), q = get_global_id(1), ch = get_global_id(2);
+    __global const float *t = tmp + ((size_t)ch * th + q) * pitch + 16 * g;
+    float16 acc = distortion_fir[0] * vload16(0, t + (size_t)DISTORTION_FIR_K * pitch);
+#pragma unroll
+    for (int k = 1; k <= DISTORTION_FIR_K; ++k)
+        acc = mad(distortion_fir[k], vload16(0, t + (size_t)(DISTORTION_FIR_K - k) * pitch)
+                                     + vload16(0, t + (size_t)(DISTORTION_FIR_K + k) * pitch), acc);
+    vstore16(acc, 0, coef + ((size_t)ch * ch_rows + q) * pitch + 16 * g);
 }
 
 /* The 16-tap gather of the final filter from a per-pixel tap table built once per map on the host

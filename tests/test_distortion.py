@@ -80,14 +80,17 @@ def test_tap_table_samples_the_padded_bspline_coefficients_as_scipy_does(rng):
     rendered at the calibration's own size: the borders sample outside the render)."""
     from scipy.ndimage import spline_filter
 
-    from clpost.stages.distortion import PAD, distortion_map, resample, tap_table
+    from clpost.stages.distortion import PAD, coef_pitch, distortion_map, resample, tap_table
 
     m = OpenCVModel(41, 29, 30, 31, 20.2, 14.4, k1=-0.35, k2=0.1, p1=0.01)
     src_k = (m.fx, m.fy, m.cx, m.cy)
     base, w = tap_table(m, (41, 29), src_k)
     plane = rng.uniform(0, 1e3, (29, 41))
-    coef = spline_filter(np.pad(plane, PAD, mode="edge"), order=3, mode="mirror").ravel()
-    b, pw = np.maximum(base, 0), 41 + 2 * PAD
+    sc = spline_filter(np.pad(plane, PAD, mode="edge"), order=3, mode="mirror")
+    b, pw = np.maximum(base, 0), coef_pitch(41)
+    coef = np.zeros((sc.shape[0], pw))  # the kernels' row pitch: a multiple of 16
+    coef[:, :sc.shape[1]] = sc
+    coef = coef.ravel()
     acc = np.zeros(base.shape)
     for mm in range(4):
         acc += w[4 + mm] * sum(w[j].astype(np.float64) * coef[b + mm * pw + j] for j in range(4))
