@@ -150,19 +150,32 @@ __kernel void distortion_fir_rows(__global const float *restrict src, __global f
     vstore16(acc, 0, tmp + ((size_t)ch * th + r) * pitch + 16 * g);
 }
 
-/* Column pass. Work-item (g, q, ch): coefficient row q (source row q - PAD), columns 16g ... 16g
- * + 15, from tmp rows q ... q + 2K. coef: 3 planes of src_h + 2 PAD rows of pitch. */
+/* Column pass. Work-item (g, q0, ch): coefficient rows q = DISTORTION_FIR_ROWS q0 + o (source
+ * row q - PAD), columns 16g ... 16g + 15, from tmp rows q ... q + 2K: the ROWS outputs share their
+ * loads (ROWS + 2K vload16 instead of ROWS (2K + 1); the unrolled loops leave only the taps with
+ * |k| <= K). coef: 3 planes of ch_rows (a multiple of ROWS) rows of pitch. */
+#define DISTORTION_FIR_ROWS 4
 __kernel void distortion_fir_cols(__global const float *restrict tmp, __global float *restrict coef,
                                   const int pitch, const int th, const int ch_rows)
 {
-    const int g = get_global_id(0), q = get_global_id(1), ch = get_global_id(2);
+    const int g = get_global_id(0), q = DISTORTION_FIR_ROWS * get_global_id(1), ch = get_global_id(2);
     __global const float *t = tmp + ((size_t)ch * th + q) * pitch + 16 * g;
-    float16 acc = distortion_fir[0] * vload16(0, t + (size_t)DISTORTION_FIR_K * pitch);
+    float16 acc[DISTORTION_FIR_ROWS];
 #pragma unroll
-    for (int k = 1; k <= DISTORTION_FIR_K; ++k)
-        acc = mad(distortion_fir[k], vload16(0, t + (size_t)(DISTORTION_FIR_K - k) * pitch)
-                                     + vload16(0, t + (size_t)(DISTORTION_FIR_K + k) * pitch), acc);
-    vstore16(acc, 0, coef + ((size_t)ch * ch_rows + q) * pitch + 16 * g);
+    for (int o = 0; o < DISTORTION_FIR_ROWS; ++o) acc[o] = (float16)(0.0f);
+#pragma unroll
+    for (int j = 0; j < DISTORTION_FIR_ROWS + 2 * DISTORTION_FIR_K; ++j) {
+        const float16 v = vload16(0, t + (size_t)j * pitch);
+#pragma unroll
+        for (int o = 0; o < DISTORTION_FIR_ROWS; ++o) {
+            const int k = j - o - DISTORTION_FIR_K;
+            if (k >= -DISTORTION_FIR_K && k <= DISTORTION_FIR_K)
+                acc[o] = mad(distortion_fir[k < 0 ? -k : k], v, acc[o]);
+        }
+    }
+#pragma unroll
+    for (int o = 0; o < DISTORTION_FIR_ROWS; ++o)
+        vstore16(acc[o], 0, coef + ((size_t)ch * ch_rows + q + o) * pitch + 16 * g);
 }
 
 /* The 16-tap gather of the final filter from a per-pixel tap table built once per map on the host

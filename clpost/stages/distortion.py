@@ -181,6 +181,9 @@ The 4×4 window of a valid position (in [−½, size − ½]) needs 2 of them.""
 FIR_K = 12
 """Half-length of the prefilter FIR (kernels/distortion.cl DISTORTION_FIR_K), see :func:`fir_taps`."""
 
+FIR_ROWS = 4
+"""Coefficient rows per work-item of the column pass (kernels/distortion.cl DISTORTION_FIR_ROWS)."""
+
 
 def fir_taps(k_max: int = FIR_K) -> np.ndarray:
     r"""h_0 … h_K (float64) of the cubic B-spline prefilter as a symmetric FIR truncated at |k| ≤ K.
@@ -323,7 +326,7 @@ class Distortion(GatherStage):
         kkey = source_intrinsics(model, frame)
         bspline = self.filter_taps == 3
         sw, sh = frame.size
-        pw, ph = coef_pitch(sw), sh + 2 * PAD  # coefficient planes
+        pw, ph = coef_pitch(sw), -(-(sh + 2 * PAD) // FIR_ROWS) * FIR_ROWS  # coefficient planes
         th = ph + 2 * FIR_K  # the row pass's planes: the column FIR reads K rows beyond
         if bspline and 3 * max(pw * th, model.width * model.height) >= 2**31:
             raise InputError(f"distortion: {sw}x{sh} is too large for the final filter's 32-bit tap "
@@ -362,7 +365,7 @@ class Distortion(GatherStage):
         cols.set_args(tmp, coef, np.int32(pw), np.int32(th), np.int32(ph))
         gather.set_args(coef, dst, base, wts, np.int32(pw), np.int32(ph), *out)
         return [cl.enqueue_nd_range_kernel(q, rows, (pw // 16, th, 3), None),
-                cl.enqueue_nd_range_kernel(q, cols, (pw // 16, ph, 3), None),
+                cl.enqueue_nd_range_kernel(q, cols, (pw // 16, ph // FIR_ROWS, 3), None),
                 cl.enqueue_nd_range_kernel(q, gather, (model.width, model.height), None)]
 
     def reference(self, camera, frame, color):
