@@ -209,7 +209,8 @@ def fir_taps(k_max: int = FIR_K) -> np.ndarray:
     times :math:`\max|f|` at worst; float32 rounding adds about 3 half-ulps of the largest
     coefficient (:math:`\le 9\max|f|`): the test bound is :math:`(6\varepsilon_K +
     27 \cdot 2^{-24}) \max|f| = 2.6\cdot10^{-6}\max|f|`, measured 0.6–0.7e-6 with 1e8 spikes
-    (about what the recursion's float32 rounding gave). The interpolated value has the same bound
+    (end to end at 720p with 1 % spikes of 1e8: 3.6e-7·1e8; the recursion kernels 4.2e-7·1e8 in
+    the same run). The interpolated value has the same bound
     (B-spline weights ≥ 0, sum 1). scipy's mirror boundary on its 12-pixel padding differs from
     the infinite edge repeat only ≥ 22 pixels away from any coefficient the 4×4 windows read
     (:math:`|z_1|^{22} < 10^{-12}`)."""
