@@ -9,8 +9,8 @@
  * DISTORTION_FILTER 1: bilinear (4 taps, draft/preview), kernel `distortion`.
  * DISTORTION_FILTER 3: cubic B-spline interpolation (final): the B-spline coefficients of the
  * source (`distortion_fir_rows` then `_cols`: the prefilter of Unser 1999 as a separable FIR,
- * |k| <= DISTORTION_FIR_K) and 16 taps with B-spline weights from a per-pixel table
- * (`distortion_table`), clamped below at 0 so HDR edges cannot ring to negative values. Why not
+ * |k| <= DISTORTION_FIR_K) and 16 taps with B-spline weights (`distortion_bspline_tiles` on the
+ * tiles whose taps fit a tile-uniform window, `distortion_table` elsewhere), clamped below at 0 so HDR edges cannot ring to negative values. Why not
  * Keys' cubic convolution (OpenCV's INTER_CUBIC): it is only first-order and moves an edge by up
  * to ~0.03 px depending on its sub-pixel phase, which cost 5-8 % in the recovered k2/p2 of the
  * checkerboard calibration; the B-spline is exact for cubics and keeps every parameter within 1 %
@@ -197,18 +197,20 @@ __kernel void distortion_fir_cols(__global const float *restrict tmp, __global f
         vstore16(acc[o], 0, coef + ((size_t)ch * ch_rows + q + o) * pitch + 16 * g);
 }
 
-/* The 16-tap gather of the final filter from a per-pixel tap table built once per map on the host
- * (clpost/stages/distortion.py, tap_table): base[i] is the index of the top-left tap of the 4x4
- * window in a coefficient plane (-1: no preimage, colour 0) and wts holds the 4 horizontal then
- * 4 vertical B-spline weights (planes of n), computed in float64. No floor, clamp or polynomial
- * per tap (a table was 2x faster than computing Keys weights per pixel at 1080p; bilinear computes
- * its taps: its table version was not faster). */
+/* The 16-tap gather of the final filter, on the tiles that `distortion_bspline_tiles` does not
+ * take, from a per-pixel tap table built once per map on the host (clpost/stages/distortion.py,
+ * tap_table): base[i] is the index of the top-left tap of the 4x4 window in a coefficient plane
+ * (-1: no preimage, colour 0) and wts holds the 4 horizontal then 4 vertical B-spline weights
+ * (planes of n), computed in float64. No floor, clamp or polynomial per tap (a table was 2x
+ * faster than computing Keys weights per pixel at 1080p). One work-group of DISTORTION_TILE^2 per
+ * listed tile (x0, y0). */
 __kernel void distortion_table(__global const float *restrict src, __global float *restrict dst,
                                __global const int *restrict base, __global const float *restrict wts,
+                               __global const int *restrict tiles,
                                const int src_w, const int src_h, const int width, const int height)
 {
-    const int x = get_global_id(0);
-    const int y = get_global_id(1);
+    const int2 t = vload2(get_global_id(2), tiles);
+    const int x = t.x + get_global_id(0), y = t.y + get_global_id(1);
     if (x >= width || y >= height) return;
     const int n = width * height, sn = src_w * src_h;
     const int i = y * width + x;
@@ -230,5 +232,56 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
         }
         acc = acc > 0.0f ? acc : 0.0f;
         dst[c * n + i] = b0 < 0 ? 0.0f : acc;
+    }
+}
+
+/* The centred cubic B-spline beta3(d) = (4 - 6d^2 + 3|d|^3)/6 for |d| < 1, (2 - |d|)^3/6 for
+ * 1 <= |d| < 2, 0 beyond: the weight of a coefficient at distance d (the same polynomials as the
+ * host's bspline3, which the tap table uses). */
+inline float16 distortion_beta3(const float16 d)
+{
+    const float16 a = fabs(d), s = fmax(2.0f - a, 0.0f);
+    const float16 inner = (4.0f + a * a * (3.0f * a - 6.0f)) * (1.0f / 6.0f);
+    return select(s * s * s * (1.0f / 6.0f), inner, a < 1.0f);
+}
+
+/* The final filter on the tiles of DISTORTION_TILE x DISTORTION_TILE output pixels whose integer
+ * displacement floor(s) - x takes at most two neighbouring values (host: bspline_tiles), as the
+ * bilinear distortion_tiles: the 4x4 windows of a tile row lie in the 5x5 window of coefficients
+ * at (x + ox - 1, y + oy - 1), read by vload16 at addresses affine in the lane, with weights
+ * beta3(f + 1 - m) for window column m and the lane's fraction f = s - (x + ox) in [0, 2) (one of
+ * the five is 0). Weights are computed here in float32 from the float32 map (the table's are
+ * float64-derived float32; both within a few ulps). One work-item: one row of one tile; tiles:
+ * (x0, y0, ox, oy); coef planes of pitch x ch_rows with DISTORTION_PAD pixels around the render. */
+__kernel void distortion_bspline_tiles(__global const float *restrict coef, __global float *restrict dst,
+                                       __global const float *restrict map, __global const int *restrict tiles,
+                                       const int pitch, const int ch_rows, const int width, const int height)
+{
+    const int row = get_global_id(0), tile = get_global_id(1);
+    const int4 t = vload4(tile, tiles);
+    const int y = t.y + row;
+    const size_t n = (size_t)width * height, sn = (size_t)pitch * ch_rows;
+    const size_t i = (size_t)y * width + t.x;
+    const float16 fx = vload16(0, map + i) - ((float)(t.x + t.z) + CLP_LANES16);
+    const float16 fy = vload16(0, map + n + i) - (float)(y + t.w);
+    float16 wx[5], wy[5];
+#pragma unroll
+    for (int m = 0; m < 5; ++m) {
+        wx[m] = distortion_beta3(fx + (float)(1 - m));
+        wy[m] = distortion_beta3(fy + (float)(1 - m));
+    }
+    const size_t base = (size_t)(y + t.w - 1 + DISTORTION_PAD) * pitch + (size_t)(t.x + t.z - 1 + DISTORTION_PAD);
+    for (int c = 0; c < 3; ++c) {
+        __global const float *p = coef + c * sn + base;
+        float16 acc = (float16)(0.0f);
+#pragma unroll
+        for (int r = 0; r < 5; ++r) {
+            __global const float *q = p + (size_t)r * pitch;
+            float16 rowv = wx[0] * vload16(0, q);
+#pragma unroll
+            for (int m = 1; m < 5; ++m) rowv = mad(wx[m], vload16(0, q + m), rowv);
+            acc = mad(wy[r], rowv, acc);
+        }
+        vstore16(fmax(acc, 0.0f), 0, dst + c * n + i);
     }
 }

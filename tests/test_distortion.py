@@ -338,25 +338,34 @@ def test_final_filter_is_bspline_interpolation_exact_for_cubics_and_never_negati
     assert resample(spike, np.stack(np.meshgrid(np.linspace(2, 6, 17), np.linspace(2, 6, 17))), 3).min() == 0.0
 
 
-def test_bilinear_tile_lists_cover_the_image_and_both_kernels_match_the_reference(rng):
-    """Draft/preview run the vector kernel on tiles whose taps fit a 3×3 window at a tile-uniform
-    offset and the per-pixel kernel on the rest; together they cover every tile once and the
-    output is the bilinear reference's."""
-    from clpost.stages.distortion import TILE, bilinear_tiles, source_intrinsics
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_tile_lists_cover_the_image_and_both_kernels_match_the_reference(rng, quality):
+    """Draft/preview (final) run the vector kernel on tiles whose taps fit a 3×3 (5×5) window at a
+    tile-uniform offset and the per-pixel kernel on the rest; together they cover every tile once
+    and the output is the bilinear (B-spline) reference's."""
+    from clpost.stages.distortion import TILE, bilinear_tiles, bspline_tiles, source_intrinsics
 
     w, h = 133, 77
     m = OpenCVModel(w, h, 120, 118, 66.3, 38.1, k1=-0.08, k2=0.01, p1=0.001)
     frame = odd_frame(rng, w=w, h=h, scale=1e3)
-    tiles, rest = bilinear_tiles(m, (w, h), source_intrinsics(m, frame))
+    lists = bilinear_tiles if quality == "draft" else bspline_tiles
+    tiles, rest = lists(m, (w, h), source_intrinsics(m, frame))
     assert len(tiles) > 0 and len(rest) > 0
     covered = {tuple(t[:2]) for t in tiles} | {tuple(t) for t in rest}
     assert len(covered) == len(tiles) + len(rest) == (-(-w // TILE)) * (-(-h // TILE))
-    pipe = Pipeline(Camera(distortion=m), quality="draft", stages=["distortion"])
+    pipe = Pipeline(Camera(distortion=m), quality=quality, stages=["distortion"])
     out = pipe.run(frame).color
     ref = pipe.reference(frame)
     err = np.abs(out - ref) - 1e-5 * np.abs(ref)
     j = np.unravel_index(int(np.argmax(err)), err.shape)
     assert err.max() < 1e-3, f"max error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
+    # 1e8 highlights: weights computed in float32 per lane (vector tiles) vs the float64 table
+    spiky = frame.replace(color=np.where(rng.random((h, w, 1)) < 0.05, 1e8, frame.color).astype(np.float32))
+    out, ref = pipe.run(spiky).color, pipe.reference(spiky)
+    err = np.abs(out - ref) - 1e-5 * np.abs(ref)
+    j = np.unravel_index(int(np.argmax(err)), err.shape)
+    assert err.max() < 1e-7 * 16 * 1e8, f"max error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
+    assert np.all(np.isfinite(out)) and out.min() >= 0
 
 
 def _device_coefficients(planes: np.ndarray) -> np.ndarray:

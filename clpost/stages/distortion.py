@@ -22,8 +22,10 @@ error. The output has the calibration's size.
 Quality: ``draft``/``preview`` bilinear (4 taps); ``final`` cubic B-spline *interpolation*
 (Unser, "Splines: a perfect fit for signal and image processing", IEEE SPM 1999): the render's
 B-spline coefficients (the prefilter as a separable FIR along rows, then columns, :func:`fir_taps`,
-stored with :data:`PAD` edge pixels around the render) sampled by 16 taps with B-spline weights from a per-pixel table built
-with the map (:func:`tap_table`), clamped below at 0 (no negative HDR values). It passes
+stored with :data:`PAD` edge pixels around the render) sampled by 16 taps with B-spline weights —
+computed per lane on the tiles whose taps fit a tile-uniform 5 × 5 window (:func:`bspline_tiles`,
+vector loads), from a per-pixel table built with the map elsewhere (:func:`tap_table`) — clamped
+below at 0 (no negative HDR values). It passes
 through the samples and reproduces cubics exactly, so an edge stays where it is whatever its
 sub-pixel phase. Keys' cubic convolution (OpenCV's ``INTER_CUBIC``, the previous final filter)
 is only first-order — a ramp is off by up to 0.048 × its slope — and moved checkerboard corners
@@ -135,17 +137,12 @@ TILE = 16
 """Output tile of the draft/preview kernels (kernels/distortion.cl DISTORTION_TILE)."""
 
 
-@lru_cache(maxsize=4)
-def bilinear_tiles(model: OpenCVModel, src_size: tuple[int, int],
-                   src_k: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
-    """The bilinear kernels' tile lists: (x0, y0, ox, oy) int32 for the whole
-    :data:`TILE` × :data:`TILE` output tiles whose pixels all have a preimage, whose integer
-    displacement floor(s) − x (and y) takes at most two neighbouring values ox, ox + 1 and whose
-    3 × 3 window at (x + ox, y + oy) stays inside the source — ``distortion_tiles`` reads them
-    with vector loads; (x0, y0) int32 for the other tiles (``distortion_rest``, per pixel)."""
+def _tile_offsets(model: OpenCVModel, src_size: tuple[int, int], src_k: tuple[float, float, float, float]):
+    """Per :data:`TILE` × :data:`TILE` output tile: its corner (x0, y0), the least integer
+    displacement (ox, oy) of floor(s) − x (and y) over its pixels, and whether every pixel has a
+    preimage and the displacement takes at most the two values ox, ox + 1 (oy, oy + 1)."""
     m, ok = distortion_map(model, src_size, src_k)
     m = m.astype(np.float32).astype(np.float64)
-    sw, sh = src_size
     h, w = ok.shape
     nty, ntx = -(-h // TILE), -(-w // TILE)
     ph, pw = nty * TILE, ntx * TILE
@@ -162,15 +159,43 @@ def bilinear_tiles(model: OpenCVModel, src_size: tuple[int, int],
 
     ox, oy = per_tile(dx, np.min), per_tile(dy, np.min)
     ty, tx = np.mgrid[0:nty, 0:ntx]
-    x0, y0 = tx * TILE, ty * TILE
-    fast = (per_tile(okp, np.all) & (per_tile(dx, np.max) - ox <= 1) & (per_tile(dy, np.max) - oy <= 1)
-            & (x0 + ox >= 0) & (x0 + TILE - 1 + ox + 2 <= sw - 1)
-            & (y0 + oy >= 0) & (y0 + TILE - 1 + oy + 2 <= sh - 1))
+    uniform = per_tile(okp, np.all) & (per_tile(dx, np.max) - ox <= 1) & (per_tile(dy, np.max) - oy <= 1)
+    return tx * TILE, ty * TILE, ox, oy, uniform
+
+
+def _split_tiles(x0, y0, ox, oy, fast) -> tuple[np.ndarray, np.ndarray]:
     tiles = np.stack([x0[fast], y0[fast], ox[fast], oy[fast]], -1).astype(np.int32)
     rest = np.stack([x0[~fast], y0[~fast]], -1).astype(np.int32)
     for a in (tiles, rest):
         a.setflags(write=False)
     return tiles, rest
+
+
+@lru_cache(maxsize=4)
+def bilinear_tiles(model: OpenCVModel, src_size: tuple[int, int],
+                   src_k: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The bilinear kernels' tile lists: (x0, y0, ox, oy) int32 for the whole
+    :data:`TILE` × :data:`TILE` output tiles whose pixels all have a preimage, whose integer
+    displacement floor(s) − x (and y) takes at most two neighbouring values ox, ox + 1 and whose
+    3 × 3 window at (x + ox, y + oy) stays inside the source — ``distortion_tiles`` reads them
+    with vector loads; (x0, y0) int32 for the other tiles (``distortion_rest``, per pixel)."""
+    x0, y0, ox, oy, uniform = _tile_offsets(model, src_size, src_k)
+    sw, sh = src_size
+    fast = (uniform & (x0 + ox >= 0) & (x0 + TILE - 1 + ox + 2 <= sw - 1)
+            & (y0 + oy >= 0) & (y0 + TILE - 1 + oy + 2 <= sh - 1))
+    return _split_tiles(x0, y0, ox, oy, fast)
+
+
+@lru_cache(maxsize=4)
+def bspline_tiles(model: OpenCVModel, src_size: tuple[int, int],
+                  src_k: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The final filter's tile lists: (x0, y0, ox, oy) int32 for the tiles whose pixels all have a
+    preimage and whose displacement takes at most two neighbouring values —
+    ``distortion_bspline_tiles`` reads their 5 × 5 coefficient window at (x + ox − 1, y + oy − 1)
+    with vector loads (it stays inside the :data:`PAD` border: valid positions are in
+    [−½, size − ½]); (x0, y0) int32 for the other tiles (``distortion_table``, per pixel)."""
+    x0, y0, ox, oy, uniform = _tile_offsets(model, src_size, src_k)
+    return _split_tiles(x0, y0, ox, oy, uniform)
 
 
 PAD = 12
@@ -337,8 +362,10 @@ class Distortion(GatherStage):
         key = (id(rt), model, frame.size, kkey, self.filter_taps)
         bufs = self._dev_maps.get(key)
         if bufs is None:
-            if bspline:  # the tap table, then scratch for the B-spline coefficients
-                host = tap_table(model, frame.size, kkey)
+            if bspline:  # the tap table, the map, the two tile lists, then scratch for the coefficients
+                host = (*tap_table(model, frame.size, kkey),
+                        np.ascontiguousarray(self._host_map(camera, frame)[0], dtype=np.float32),
+                        *bspline_tiles(model, frame.size, kkey))
             else:  # the map and the two tile lists
                 host = (np.ascontiguousarray(self._host_map(camera, frame)[0], dtype=np.float32),
                         *bilinear_tiles(model, frame.size, kkey))
@@ -361,15 +388,22 @@ class Distortion(GatherStage):
                     kern.set_args(src, dst, bufs[0], buf, np.int32(sw), np.int32(sh), *out)
                     events.append(cl.enqueue_nd_range_kernel(q, kern, gsize, None))
             return events
-        base, wts, coef, tmp = bufs
-        rows, cols, gather = (cl.Kernel(prog, k) for k in
-                              ("distortion_fir_rows", "distortion_fir_cols", "distortion_table"))
+        base, wts, fmap, tiles_b, rest_b, coef, tmp = bufs
+        tiles, rest = bspline_tiles(model, frame.size, kkey)
+        rows, cols = cl.Kernel(prog, "distortion_fir_rows"), cl.Kernel(prog, "distortion_fir_cols")
         rows.set_args(src, tmp, np.int32(sw), np.int32(sh), np.int32(pw), np.int32(th))
         cols.set_args(tmp, coef, np.int32(pw), np.int32(th), np.int32(ph))
-        gather.set_args(coef, dst, base, wts, np.int32(pw), np.int32(ph), *out)
-        return [cl.enqueue_nd_range_kernel(q, rows, (pw // 16, th, 3), None),
-                cl.enqueue_nd_range_kernel(q, cols, (pw // 16, ph // FIR_ROWS, 3), None),
-                cl.enqueue_nd_range_kernel(q, gather, (model.width, model.height), None)]
+        events = [cl.enqueue_nd_range_kernel(q, rows, (pw // 16, th, 3), None),
+                  cl.enqueue_nd_range_kernel(q, cols, (pw // 16, ph // FIR_ROWS, 3), None)]
+        if len(tiles):
+            kern = cl.Kernel(prog, "distortion_bspline_tiles")
+            kern.set_args(coef, dst, fmap, tiles_b, np.int32(pw), np.int32(ph), *out)
+            events.append(cl.enqueue_nd_range_kernel(q, kern, (TILE, len(tiles)), None))
+        if len(rest):
+            kern = cl.Kernel(prog, "distortion_table")
+            kern.set_args(coef, dst, base, wts, rest_b, np.int32(pw), np.int32(ph), *out)
+            events.append(cl.enqueue_nd_range_kernel(q, kern, (TILE, TILE, len(rest)), None))
+        return events
 
     def reference(self, camera, frame, color):
         m, _ = self._host_map(camera, frame)
