@@ -246,7 +246,8 @@ inline float16 distortion_beta3(const float16 d)
 }
 
 /* The final filter on the tiles of DISTORTION_TILE x DISTORTION_TILE output pixels whose integer
- * displacement floor(s) - x takes at most two neighbouring values (host: bspline_tiles), as the
+ * displacement floor(s) - x takes at most two neighbouring values where there is a preimage (the
+ * others get colour 0; host: bspline_tiles), as the
  * bilinear distortion_tiles: the 4x4 windows of a tile row lie in the 5x5 window of coefficients
  * at (x + ox - 1, y + oy - 1), read by vload16 at addresses affine in the lane, with weights
  * beta3(f + 1 - m) for window column m and the lane's fraction f = s - (x + ox) in [0, 2) (one of
@@ -262,8 +263,10 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
     const int y = t.y + row;
     const size_t n = (size_t)width * height, sn = (size_t)pitch * ch_rows;
     const size_t i = (size_t)y * width + t.x;
-    const float16 fx = vload16(0, map + i) - ((float)(t.x + t.z) + CLP_LANES16);
-    const float16 fy = vload16(0, map + n + i) - (float)(y + t.w);
+    const float16 sx = vload16(0, map + i);
+    const int16 ok = sx > -1.0e29f;  /* no preimage (-1e30): colour 0 */
+    const float16 fx = select((float16)(0.0f), sx - ((float)(t.x + t.z) + CLP_LANES16), ok);
+    const float16 fy = select((float16)(0.0f), vload16(0, map + n + i) - (float)(y + t.w), ok);
     float16 wx[5], wy[5];
 #pragma unroll
     for (int m = 0; m < 5; ++m) {
@@ -282,6 +285,6 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
             for (int m = 1; m < 5; ++m) rowv = mad(wx[m], vload16(0, q + m), rowv);
             acc = mad(wy[r], rowv, acc);
         }
-        vstore16(fmax(acc, 0.0f), 0, dst + c * n + i);
+        vstore16(select((float16)(0.0f), fmax(acc, 0.0f), ok), 0, dst + c * n + i);
     }
 }

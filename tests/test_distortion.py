@@ -359,6 +359,13 @@ def test_tile_lists_cover_the_image_and_both_kernels_match_the_reference(rng, qu
     err = np.abs(out - ref) - 1e-5 * np.abs(ref)
     j = np.unravel_index(int(np.argmax(err)), err.shape)
     assert err.max() < 1e-3, f"max error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
+    if quality == "final":  # vector tiles also take pixels without a preimage (colour 0)
+        from clpost.stages.distortion import distortion_map
+
+        _, ok = distortion_map(m, (w, h), source_intrinsics(m, frame))
+        mixed = [t for t in tiles if not ok[t[1]:t[1] + TILE, t[0]:t[0] + TILE].all()]
+        assert mixed and all(np.all(out[t[1]:t[1] + TILE, t[0]:t[0] + TILE][~ok[t[1]:t[1] + TILE, t[0]:t[0] + TILE]] == 0)
+                             for t in mixed)
     # 1e8 highlights: weights computed in float32 per lane (vector tiles) vs the float64 table
     spiky = frame.replace(color=np.where(rng.random((h, w, 1)) < 0.05, 1e8, frame.color).astype(np.float32))
     out, ref = pipe.run(spiky).color, pipe.reference(spiky)

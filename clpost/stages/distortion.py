@@ -139,8 +139,9 @@ TILE = 16
 
 def _tile_offsets(model: OpenCVModel, src_size: tuple[int, int], src_k: tuple[float, float, float, float]):
     """Per :data:`TILE` × :data:`TILE` output tile: its corner (x0, y0), the least integer
-    displacement (ox, oy) of floor(s) − x (and y) over its pixels, and whether every pixel has a
-    preimage and the displacement takes at most the two values ox, ox + 1 (oy, oy + 1)."""
+    displacement (ox, oy) of floor(s) − x (and y) over its pixels with a preimage, whether the
+    displacement takes at most the two values ox, ox + 1 (oy, oy + 1) there, and how many of its
+    pixels have a preimage (TILE² for a whole tile with data everywhere)."""
     m, ok = distortion_map(model, src_size, src_k)
     m = m.astype(np.float32).astype(np.float64)
     h, w = ok.shape
@@ -157,10 +158,13 @@ def _tile_offsets(model: OpenCVModel, src_size: tuple[int, int], src_k: tuple[fl
     def per_tile(a, fn):
         return fn(fn(a.reshape(nty, TILE, ntx, TILE), axis=3), axis=1)
 
-    ox, oy = per_tile(dx, np.min), per_tile(dy, np.min)
+    big = 1 << 40  # pixels without a preimage take no part in the displacement's range
+    ox, oy = per_tile(np.where(okp, dx, big), np.min), per_tile(np.where(okp, dy, big), np.min)
+    uniform = ((per_tile(np.where(okp, dx, -big), np.max) - ox <= 1)
+               & (per_tile(np.where(okp, dy, -big), np.max) - oy <= 1))
+    valid = per_tile(okp.astype(np.int64), np.sum)
     ty, tx = np.mgrid[0:nty, 0:ntx]
-    uniform = per_tile(okp, np.all) & (per_tile(dx, np.max) - ox <= 1) & (per_tile(dy, np.max) - oy <= 1)
-    return tx * TILE, ty * TILE, ox, oy, uniform
+    return tx * TILE, ty * TILE, ox, oy, uniform, valid
 
 
 def _split_tiles(x0, y0, ox, oy, fast) -> tuple[np.ndarray, np.ndarray]:
@@ -179,9 +183,9 @@ def bilinear_tiles(model: OpenCVModel, src_size: tuple[int, int],
     displacement floor(s) − x (and y) takes at most two neighbouring values ox, ox + 1 and whose
     3 × 3 window at (x + ox, y + oy) stays inside the source — ``distortion_tiles`` reads them
     with vector loads; (x0, y0) int32 for the other tiles (``distortion_rest``, per pixel)."""
-    x0, y0, ox, oy, uniform = _tile_offsets(model, src_size, src_k)
+    x0, y0, ox, oy, uniform, valid = _tile_offsets(model, src_size, src_k)
     sw, sh = src_size
-    fast = (uniform & (x0 + ox >= 0) & (x0 + TILE - 1 + ox + 2 <= sw - 1)
+    fast = (uniform & (valid == TILE * TILE) & (x0 + ox >= 0) & (x0 + TILE - 1 + ox + 2 <= sw - 1)
             & (y0 + oy >= 0) & (y0 + TILE - 1 + oy + 2 <= sh - 1))
     return _split_tiles(x0, y0, ox, oy, fast)
 
@@ -189,13 +193,17 @@ def bilinear_tiles(model: OpenCVModel, src_size: tuple[int, int],
 @lru_cache(maxsize=4)
 def bspline_tiles(model: OpenCVModel, src_size: tuple[int, int],
                   src_k: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
-    """The final filter's tile lists: (x0, y0, ox, oy) int32 for the tiles whose pixels all have a
-    preimage and whose displacement takes at most two neighbouring values —
-    ``distortion_bspline_tiles`` reads their 5 × 5 coefficient window at (x + ox − 1, y + oy − 1)
+    """The final filter's tile lists: (x0, y0, ox, oy) int32 for the tiles inside the image with at
+    least one pixel with a preimage, whose displacement there takes at most two neighbouring values
+    — ``distortion_bspline_tiles`` reads their 5 × 5 coefficient window at (x + ox − 1, y + oy − 1)
     with vector loads (it stays inside the :data:`PAD` border: valid positions are in
-    [−½, size − ½]); (x0, y0) int32 for the other tiles (``distortion_table``, per pixel)."""
-    x0, y0, ox, oy, uniform = _tile_offsets(model, src_size, src_k)
-    return _split_tiles(x0, y0, ox, oy, uniform)
+    [−½, size − ½]) and writes 0 where there is no preimage; (x0, y0) int32 for the other tiles
+    (``distortion_table``, per pixel: partial tiles at the image's edge, tiles without data,
+    strongly magnifying or minifying ones)."""
+    x0, y0, ox, oy, uniform, valid = _tile_offsets(model, src_size, src_k)
+    h, w = model.height, model.width
+    fast = uniform & (valid > 0) & (x0 + TILE <= w) & (y0 + TILE <= h)
+    return _split_tiles(x0, y0, ox, oy, fast)
 
 
 PAD = 12
