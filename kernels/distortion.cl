@@ -261,6 +261,7 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
     const int row = get_global_id(0), tile = get_global_id(1);
     const int4 t = vload4(tile, tiles);
     const int y = t.y + row;
+    if (y >= height) return;  /* a tile across the bottom edge (whole in x: host) */
     const size_t n = (size_t)width * height, sn = (size_t)pitch * ch_rows;
     const size_t i = (size_t)y * width + t.x;
     const float16 sx = vload16(0, map + i);

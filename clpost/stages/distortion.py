@@ -198,11 +198,11 @@ def bspline_tiles(model: OpenCVModel, src_size: tuple[int, int],
     — ``distortion_bspline_tiles`` reads their 5 × 5 coefficient window at (x + ox − 1, y + oy − 1)
     with vector loads (it stays inside the :data:`PAD` border: valid positions are in
     [−½, size − ½]) and writes 0 where there is no preimage; (x0, y0) int32 for the other tiles
-    (``distortion_table``, per pixel: partial tiles at the image's edge, tiles without data,
+    (``distortion_table``, per pixel: partial tiles at the image's right edge, tiles without data,
     strongly magnifying or minifying ones)."""
     x0, y0, ox, oy, uniform, valid = _tile_offsets(model, src_size, src_k)
     h, w = model.height, model.width
-    fast = uniform & (valid > 0) & (x0 + TILE <= w) & (y0 + TILE <= h)
+    fast = uniform & (valid > 0) & (x0 + TILE <= w)  # rows below the image: the kernel skips them
     return _split_tiles(x0, y0, ox, oy, fast)
 
 
