@@ -83,6 +83,9 @@ from .base import GatherStage
 TAPS = {"draft": 16, "preview": 32, "final": 64}
 MAX_TAIL_PX = fld.PAD - 1
 UNIFORM_PX = 0.05
+STENCIL_SIZES = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256)
+"""Stencil sizes of the uniform tiles (one kernel each, ``coma_s<S>``): N taps of 4 bilinear
+corners each reach at most 4N ≤ 256 integer offsets (fewer where the comet is short)."""
 """Tiles whose pixels' landing points are all within this (px) of the tile centre's take the
 tile centre's comet (``Coma.tile_uniform``)."""
 RHO_FIT = 0.7
@@ -231,43 +234,110 @@ class Coma(GatherStage):
         k.set_args(src, b["pad"], np.int32(w), np.int32(h), np.int32(ow + 2 * fld.PAD), np.int32(oh + 2 * fld.PAD))
         events.append(cl.enqueue_nd_range_kernel(q, k, (ow + 2 * fld.PAD, oh + 2 * fld.PAD), None))
         lists = self._tile_lists(rt, camera, w, h)
-        for name, ids, n_ids, vec in (("coma_uniform", lists["uniform"], lists["n_uniform"], 16),
-                                      ("coma", lists["window"], lists["n_window"], 16)):
-            if not n_ids:
-                continue
-            k = self._kernel(rt, camera, name, whole)
-            k.set_args(b["pad"], b["shape"], dst, b["tiles"], ids, np.int32(ntx), np.int32(nty),
-                       np.int32(w), np.int32(h))
-            # 16 pixels (a float16) per work-item
-            events.append(cl.enqueue_nd_range_kernel(q, k, (fld.TILE_W // vec * n_ids, fld.TILE_H),
-                                                     (fld.TILE_W // vec, fld.TILE_H)))
+        group = (fld.TILE_W // 16, fld.TILE_H)  # 16 pixels (a float16) per work-item
+        args = (np.int32(ntx), np.int32(nty), np.int32(w), np.int32(h))
+        if lists["n_window"]:
+            k = self._kernel(rt, camera, "coma", whole)
+            k.set_args(b["pad"], b["shape"], dst, b["tiles"], lists["window"], *args)
+            events.append(cl.enqueue_nd_range_kernel(q, k, (group[0] * lists["n_window"], group[1]), group))
+        for size, ids, n_ids, offs, wts in lists["stencils"]:
+            # one kernel per stencil size: a compile-time loop count
+            k = self._kernel(rt, camera, f"coma_s{size}", whole)
+            k.set_args(b["pad"], b["shape"], dst, ids, offs, wts, *args)
+            events.append(cl.enqueue_nd_range_kernel(q, k, (group[0] * n_ids, group[1]), group))
         return events
 
     def _tile_lists(self, rt, camera, w, h) -> dict:
-        """Device lists of the tiles for coma_uniform and for the window kernel (uploaded once
-        per camera map, frame size and tap count: coma does not depend on the frame's content)."""
+        """Device lists of the tiles for the window kernel and, per stencil size, the uniform
+        tiles with their stencils (uploaded once per camera map, frame size and tap count: coma
+        does not depend on the frame's content)."""
         import pyopencl as cl
 
         key = (id(rt.context), self._uniform_key(camera, w, h))
         if self._lists_key != key:
-            uni = self.tile_uniform(camera, w, h).ravel()
             mk = lambda a: cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,  # noqa: E731
-                                     hostbuf=a if a.size else np.zeros(1, np.int32))
-            a, b = np.flatnonzero(uni).astype(np.int32), np.flatnonzero(~uni).astype(np.int32)
-            self._lists_key, self._lists = key, dict(uniform=mk(a), n_uniform=a.size, window=mk(b), n_window=b.size)
+                                     hostbuf=np.ascontiguousarray(a) if a.size else np.zeros(1, np.int32))
+            window = np.flatnonzero(~self.tile_uniform(camera, w, h).ravel()).astype(np.int32)
+            ntx, _ = fld.tiles(w, h)
+            stencils = [(size, mk(ids), ids.size, mk((dy * (ntx * fld.TILE_W + 2 * fld.PAD) + dx).astype(np.int32)),
+                         mk(wts.astype(np.float32)))
+                        for size, ids, dx, dy, wts in self.uniform_stencils(camera, w, h)]
+            self._lists_key, self._lists = key, dict(window=mk(window), n_window=window.size, stencils=stencils)
         return self._lists
 
     def _uniform_key(self, camera, w, h):
         return (self._lut(camera).tobytes(), w, h, fld.pitch_mm(camera, w), self.taps)
 
     def tile_uniform(self, camera, w: int, h: int) -> np.ndarray:
-        """Per tile (tiles_y, tiles_x) bool: a bound on the distance between any pixel's landing
-        point and the tile centre's, over its pixels and the taps, is ≤ ``UNIFORM_PX`` — those
-        tiles take the tile centre's comet for every pixel (memoised)."""
+        r"""Per tile (tiles_y, tiles_x) bool: a bound on the distance between any pixel's landing
+        point and the tile centre's, over its pixels and the taps, is ≤ ``UNIFORM_PX``, and no
+        tap's Jacobian can reach its clamp at 0 (:math:`1 - A\max_k t_{k,r} - B\max_k(t_{k,r}^2
+        + t_{k,s}^2) \ge 0`, A and B the tile's largest :math:`|C' + C/r|` and :math:`|C'\,C/r|`,
+        so the Jacobian is linear in the taps' moments) — those tiles take the tile centre's comet
+        for every pixel, as a stencil (memoised)."""
         key = self._uniform_key(camera, w, h)
         if self._uniform[0] != key:
-            self._uniform = (key, self.uniform_bound_px(camera, w, h) <= UNIFORM_PX)
+            _, dc, q, _, _ = self.c_px(camera, w, h)
+            ntx, nty = fld.tiles(w, h)
+            big = np.zeros((2, nty * fld.TILE_H, ntx * fld.TILE_W))
+            big[0, :h, :w], big[1, :h, :w] = np.abs(dc + q), np.abs(dc * q)
+            a, b = big.reshape(2, nty, fld.TILE_H, ntx, fld.TILE_W).max(axis=(2, 4))
+            t = comet_offsets(fld.vogel_disc(self.taps).astype(np.float64))
+            no_clamp = 1.0 - a * t[:, 1].max() - b * (t * t).sum(1).max() >= 0.0
+            self._uniform = (key, (self.uniform_bound_px(camera, w, h) <= UNIFORM_PX) & no_clamp)
         return self._uniform[1]
+
+    def uniform_stencils(self, camera, w: int, h: int) -> list:
+        r"""The uniform tiles' taps merged per integer offset, grouped by stencil size: a list of
+        (S, tile ids, dx, dy, weights) with dx, dy (tiles, S) int offsets and weights (tiles, S, 4)
+        float64: per offset the sums over the taps k of the bilinear weight c_k of the tile
+        centre's landing point times :math:`(1, t_{k,r}, t_{k,r}^2 + t_{k,s}^2)/N` and a 0, padded
+        with zero weights to S, the smallest of ``STENCIL_SIZES`` that holds the tile's offsets.
+        A pixel's output is :math:`\sum_s (W_0 - a W_1 + b W_2)\,C_{in}(x + d_s)`, a = C' + C/r,
+        b = C' C/r: the tap-by-tap sum of the reference regrouped."""
+        uni = self.tile_uniform(camera, w, h).ravel()
+        ids = np.flatnonzero(uni)
+        if not ids.size:
+            return []
+        ax = self.tile_axes_px(camera, w, h).reshape(-1, 4)[ids]
+        t = comet_offsets(fld.vogel_disc(self.taps).astype(np.float64))
+        lx = ax[:, 0:1] * t[:, 0] + ax[:, 2:3] * t[:, 1]  # (tiles, taps): the tile's landing points
+        ly = ax[:, 1:2] * t[:, 0] + ax[:, 3:4] * t[:, 1]
+        ix, iy = np.floor(lx), np.floor(ly)
+        fx, fy = lx - ix, ly - iy
+        mom = np.stack([np.ones(len(t)), t[:, 1], (t * t).sum(1)], -1) / len(t)  # (taps, 3)
+        g = 2 * fld.PAD + 2  # offsets lie in [-PAD, PAD]: a key per (tile, dy, dx)
+        keys, wsum = [], []
+        for ox, oy, c in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)), (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
+            keys.append((np.arange(ids.size)[:, None] * g + (iy + oy + fld.PAD)) * g + (ix + ox + fld.PAD))
+            wsum.append(c[..., None] * mom)
+        keys = np.concatenate(keys, 1).astype(np.int64).ravel()
+        wsum = np.concatenate(wsum, 1).reshape(-1, 3)
+        uniq, inv = np.unique(keys, return_inverse=True)
+        wts = np.stack([np.bincount(inv, weights=wsum[:, j], minlength=uniq.size) for j in range(3)], -1)
+        keep = np.any(wts != 0.0, axis=1)  # corners with bilinear weight 0 read nothing
+        uniq, wts = uniq[keep], wts[keep]
+        tile, rem = np.divmod(uniq, g * g)
+        dy, dx = np.divmod(rem, g)
+        count = np.bincount(tile, minlength=ids.size)
+        start = np.concatenate([[0], np.cumsum(count)[:-1]])
+        rank = np.arange(uniq.size) - start[tile]
+        sizes = np.asarray(STENCIL_SIZES)
+        cls = np.searchsorted(sizes, count)  # the smallest size >= count
+        out = []
+        for ci in np.unique(cls):
+            size = int(sizes[ci])
+            sel_t = np.flatnonzero(cls == ci)
+            row = np.full(ids.size, -1)
+            row[sel_t] = np.arange(sel_t.size)
+            e = row[tile] >= 0
+            sdx, sdy = np.zeros((sel_t.size, size), np.int64), np.zeros((sel_t.size, size), np.int64)
+            sw = np.zeros((sel_t.size, size, 4))
+            sdx[row[tile[e]], rank[e]] = dx[e] - fld.PAD
+            sdy[row[tile[e]], rank[e]] = dy[e] - fld.PAD
+            sw[row[tile[e]], rank[e], :3] = wts[e]
+            out.append((size, ids[sel_t].astype(np.int32), sdx, sdy, sw))
+        return out
 
     def uniform_bound_px(self, camera, w: int, h: int) -> np.ndarray:
         """Per tile: :math:`\\max_k \\| (|t_{k,s}| m_{sx} + |t_{k,r}| m_{rx},\\ |t_{k,s}| m_{sy} +
