@@ -232,7 +232,8 @@ class Coma(GatherStage):
             b["shape_key"] = shape_key
         k = self._kernel(rt, camera, "coma_pad", whole)
         k.set_args(src, b["pad"], np.int32(w), np.int32(h), np.int32(ow + 2 * fld.PAD), np.int32(oh + 2 * fld.PAD))
-        events.append(cl.enqueue_nd_range_kernel(q, k, (ow + 2 * fld.PAD, oh + 2 * fld.PAD), None))
+        # 16 pixels of a padded row per work-item
+        events.append(cl.enqueue_nd_range_kernel(q, k, ((ow + 2 * fld.PAD) // 16, oh + 2 * fld.PAD), None))
         lists = self._tile_lists(rt, camera, w, h)
         group = (fld.TILE_W // 16, fld.TILE_H)  # 16 pixels (a float16) per work-item
         args = (np.int32(ntx), np.int32(nty), np.int32(w), np.int32(h))
