@@ -62,12 +62,37 @@ reference does the same). ≈ 10× faster than per-pixel addresses on the 2-core
 **Uniform tiles.** Where a bound on the distance between any pixel's landing point and the tile
 centre's, :math:`\max_k \| |t_{k,s}|\,m_s + |t_{k,r}|\,m_r \|` (m the largest deviation of the
 pixels' :math:`-C e_s, -C e_r` from the centre's, per axis), is at most ``UNIFORM_PX`` = 0.05 px,
-every pixel of the tile takes the tile centre's comet: each tap is one bilinear sample at a
-tile-uniform offset with tile-uniform weights, times the pixel's own Jacobian (``coma_uniform``,
-explicit float16 vectors; 12 reads per tap instead of 27). A linear coefficient makes the comet
-field affine, so all tiles deviate alike: the benchmark's ``coma_mm`` 0.087 mm at 1080p stays
-below 0.035 px everywhere; the flagship wide open (0.22 px) keeps the window kernel. The
-reference takes the same tile plan (``tile_uniform``).
+every pixel of the tile takes the tile centre's comet, times the pixel's own Jacobian. A linear
+coefficient makes the comet field affine, so all tiles deviate alike: the benchmark's ``coma_mm``
+0.087 mm at 1080p stays below 0.035 px everywhere; the flagship wide open (0.22 px) keeps the
+window kernel. The reference takes the same tile plan (``tile_uniform``).
+
+**Stencils (speed of the uniform tiles).** There every pixel's N bilinear taps land on the same
+integer offsets :math:`d`, and the Jacobian is linear in three moments of the tap,
+
+.. math::
+
+    J_k = 1 - a\,t_{k,r} + b\,(t_{k,r}^2 + t_{k,s}^2), \qquad a = C' + C/r,\ b = C'\,C/r,
+
+so the gather regroups exactly into a per-tile stencil (``uniform_stencils``, built on the host
+once per camera and frame size):
+
+.. math::
+
+    C'(x) = \sum_d \big(W_0(d) - a(x)\,W_1(d) + b(x)\,W_2(d)\big)\,C_{in}(x + d), \qquad
+    W_j(d) = \frac1N\sum_{k:\ \text{corner of } k \text{ at } d} c_k\,m_{j,k}
+
+(:math:`c_k` the bilinear corner weight, :math:`m_k = (1, t_{k,r}, t_{k,r}^2 + t_{k,s}^2)`),
+valid where the clamp of J at 0 cannot act — ``tile_uniform`` also requires :math:`1 -
+A\max_k t_{k,r} - B\max_k(t_{k,r}^2 + t_{k,s}^2) \ge 0` with A, B the tile's largest |a|, |b|.
+It reads 3 values per offset instead of 12 per tap, and the number of offsets follows the comet's
+area, not N: at most 4N, 4 for a comet inside one pixel cell (where a copy would save nothing
+measurable but would drop the comet and the Jacobian's dimming), 6–24 for the benchmark's
+(≤ 4.4 px) comets at both draft and final. One kernel per stencil size (``STENCIL_SIZES``,
+zero-weight padding, a compile-time loop). Same model as the tap-by-tap gather (float32
+rounding only): 1080p no_defocus, one process, interleaved (``tools/ab_gathers.py``): draft
+1.9×, final 3.8× faster than the 16-pixel tap-by-tap kernel, max|old − new| 1.5e-4 on values
+0.08–500.
 
 Domain/range: colour ≥ 0 → convex combination of input colours.
 """
