@@ -34,10 +34,14 @@
  * pixels lie inside the frame, per pixel with a clamp only in the vectors that touch a side
  * (a scalar clamp on every pixel ran at half the memory bandwidth) */
 __kernel void coma_pad(__global const float *restrict src, __global float *restrict padded,
-                       const int width, const int height, const int pw, const int ph)
+                       const int width, const int height, const int pw, const int ph,
+                       const int skip_x0, const int skip_x1, const int skip_y0, const int skip_y1)
 {
     const int x0 = 16 * (int)get_global_id(0), y = get_global_id(1);
     if (x0 >= pw || y >= ph) return;
+    /* [skip_x0, skip_x1) x [skip_y0, skip_y1) (padded coordinates; empty when the window kernel
+     * runs): no tile reads the padded copy there (the inner tiles read the source) */
+    if (x0 >= skip_x0 && x0 + 16 <= skip_x1 && y >= skip_y0 && y < skip_y1) return;
     const int sy = clamp(y - COMA_PAD, 0, height - 1);
     const size_t n = (size_t)width * height, pn = (size_t)pw * ph;
     __global const float *s = src + (size_t)sy * width;
@@ -195,12 +199,14 @@ inline void coma_store16(__global float *restrict dst, float16 r, float16 g, flo
  * offset instead of 12 per tap, and the count of offsets follows the comet's area (4 for a
  * comet that stays inside one pixel cell) rather than N.
  * One work-item = 16 consecutive pixels of a tile row (float16); work-group g = tile list[g],
- * its stencil at offs/wts + g * S (offsets into the padded planes; weights W0, W1, W2, 0, the
- * unused entries of a shorter stencil zero). S is a compile-time constant per kernel
+ * its stencil at offs/wts + g * S (offsets (dx, dy); weights W0, W1, W2, 0, the unused entries
+ * of a shorter stencil zero). Tiles whose reads (|d| <= COMA_PAD) stay inside the frame
+ * (inner[g]) read the source planes directly, so coma_pad only fills the ring the others read. S is a compile-time constant per kernel
  * (coma_s<S>): with a run-time count the astigmatism tap loop ran 2x slower. */
-inline void coma_stencil(__global const float *restrict padded, __global const float *restrict shape,
-                         __global float *restrict dst, __global const int *restrict list,
-                         __global const int *restrict offs, __global const float4 *restrict wts,
+inline void coma_stencil(__global const float *restrict padded, __global const float *restrict src,
+                         __global const float *restrict shape, __global float *restrict dst,
+                         __global const int *restrict list, __global const int *restrict inner,
+                         __global const int2 *restrict offs, __global const float4 *restrict wts,
                          const int tiles_x, const int tiles_y, const int width, const int height, const int S)
 {
     const int g = (int)get_group_id(0);
@@ -213,8 +219,12 @@ inline void coma_stencil(__global const float *restrict padded, __global const f
     const int o = y * ow + x;
     const float16 dc = vload16(0, shape + 2 * on + o), q = vload16(0, shape + 3 * on + o);
     const float16 a = dc + q, b = dc * q;
-    __global const float *base = padded + (y + COMA_PAD) * pw + x + COMA_PAD;
-    __global const int *so = offs + g * S;
+    /* group-uniform choice of the planes read: the source (inner tiles) or the padded copy */
+    const int in = inner[g];
+    __global const float *base = in ? src + (size_t)y * width + x : padded + (y + COMA_PAD) * pw + x + COMA_PAD;
+    const int pitch = in ? width : pw;
+    const size_t plane = in ? (size_t)width * height : pn;
+    __global const int2 *so = offs + g * S;
     __global const float4 *sw = wts + g * S;
     float16 ar = 0.0f, ag = 0.0f, ab = 0.0f;
     /* unrolled by 4 by hand (a constant 4-trip inner loop; every S is a multiple of 4) */
@@ -223,18 +233,21 @@ inline void coma_stencil(__global const float *restrict padded, __global const f
     for (int s = s4; s < s4 + 4; ++s) {
         const float4 wv = sw[s];
         const float16 wgt = wv.x - a * wv.y + b * wv.z;
-        __global const float *p = base + so[s];
+        const int2 d = so[s];
+        __global const float *p = base + d.y * pitch + d.x;
         ar += wgt * vload16(0, p);
-        ag += wgt * vload16(0, p + pn);
-        ab += wgt * vload16(0, p + 2 * pn);
+        ag += wgt * vload16(0, p + plane);
+        ab += wgt * vload16(0, p + 2 * plane);
     }
     coma_store16(dst, ar, ag, ab, x, y, width, height);
 }
 
-#define COMA_STENCIL_ARGS __global const float *restrict padded, __global const float *restrict shape, \
-    __global float *restrict dst, __global const int *restrict list, __global const int *restrict offs, \
-    __global const float4 *restrict wts, const int tiles_x, const int tiles_y, const int width, const int height
-#define COMA_STENCIL_CALL(S) coma_stencil(padded, shape, dst, list, offs, wts, tiles_x, tiles_y, width, height, S)
+#define COMA_STENCIL_ARGS __global const float *restrict padded, __global const float *restrict src, \
+    __global const float *restrict shape, __global float *restrict dst, __global const int *restrict list, \
+    __global const int *restrict inner, __global const int2 *restrict offs, __global const float4 *restrict wts, \
+    const int tiles_x, const int tiles_y, const int width, const int height
+#define COMA_STENCIL_CALL(S) \
+    coma_stencil(padded, src, shape, dst, list, inner, offs, wts, tiles_x, tiles_y, width, height, S)
 /* one kernel per stencil size class (Coma.STENCIL_SIZES; N taps of 4 bilinear corners reach at
  * most 4 N <= 256 offsets) */
 __kernel void coma_s4(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(4); }

@@ -209,3 +209,21 @@ def test_uniform_tiles_never_clamp_the_jacobian():
             jac = (1.0 - dc * tr) * (1.0 - q * tr) + q * dc * ts * ts
             assert jac[uni].min(initial=1.0) >= 0.0, (cam.coma_mm, w, h)
     assert not coma.Coma("final").tile_uniform(Camera(coma_mm=-40.0), 23, 37).any()
+
+
+def test_inner_tiles_read_the_source_and_the_pad_fills_only_the_ring(rng):
+    """Uniform tiles whose reads stay inside the frame read the source; coma_pad then leaves the
+    padded copy's inside unwritten (stale from the previous frame): a second, different frame
+    must still match the reference everywhere (odd size, so partial tiles border the ring)."""
+    w, h = 197, 121
+    st = coma.Coma("final")
+    cam = Camera(coma_mm=0.1)
+    inner = st.inner_tiles(w, h)
+    assert st.tile_uniform(cam, w, h).all() and 0.2 < inner.mean() < 0.8
+    pipe = Pipeline(cam, stages=["coma"])
+    for scale in (1e4, 3.0):  # a bright frame first: stale values would show in the second
+        frame = Frame(odd_frame(rng, w=w, h=h, scale=scale).color)
+        out, ref = pipe.run(frame).color, pipe.reference(frame)
+        err = np.abs(out - ref) / np.maximum(np.abs(ref), 1.0)
+        j = np.unravel_index(int(np.argmax(err)), err.shape)
+        assert err.max() < 2e-4, f"max rel error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"

@@ -255,21 +255,22 @@ class Coma(GatherStage):
                        np.float32(pitch), np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
             events.append(cl.enqueue_nd_range_kernel(q, k, (ow, oh), None))
             b["shape_key"] = shape_key
+        lists = self._tile_lists(rt, camera, w, h)
         k = self._kernel(rt, camera, "coma_pad", whole)
-        k.set_args(src, b["pad"], np.int32(w), np.int32(h), np.int32(ow + 2 * fld.PAD), np.int32(oh + 2 * fld.PAD))
+        k.set_args(src, b["pad"], np.int32(w), np.int32(h), np.int32(ow + 2 * fld.PAD), np.int32(oh + 2 * fld.PAD),
+                   *(np.int32(v) for v in lists["skip"]))
         # 16 pixels of a padded row per work-item
         events.append(cl.enqueue_nd_range_kernel(q, k, ((ow + 2 * fld.PAD) // 16, oh + 2 * fld.PAD), None))
-        lists = self._tile_lists(rt, camera, w, h)
         group = (fld.TILE_W // 16, fld.TILE_H)  # 16 pixels (a float16) per work-item
         args = (np.int32(ntx), np.int32(nty), np.int32(w), np.int32(h))
         if lists["n_window"]:
             k = self._kernel(rt, camera, "coma", whole)
             k.set_args(b["pad"], b["shape"], dst, b["tiles"], lists["window"], *args)
             events.append(cl.enqueue_nd_range_kernel(q, k, (group[0] * lists["n_window"], group[1]), group))
-        for size, ids, n_ids, offs, wts in lists["stencils"]:
+        for size, ids, n_ids, inner, offs, wts in lists["stencils"]:
             # one kernel per stencil size: a compile-time loop count
             k = self._kernel(rt, camera, f"coma_s{size}", whole)
-            k.set_args(b["pad"], b["shape"], dst, ids, offs, wts, *args)
+            k.set_args(b["pad"], src, b["shape"], dst, ids, inner, offs, wts, *args)
             events.append(cl.enqueue_nd_range_kernel(q, k, (group[0] * n_ids, group[1]), group))
         return events
 
@@ -284,12 +285,28 @@ class Coma(GatherStage):
             mk = lambda a: cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,  # noqa: E731
                                      hostbuf=np.ascontiguousarray(a) if a.size else np.zeros(1, np.int32))
             window = np.flatnonzero(~self.tile_uniform(camera, w, h).ravel()).astype(np.int32)
-            ntx, _ = fld.tiles(w, h)
-            stencils = [(size, mk(ids), ids.size, mk((dy * (ntx * fld.TILE_W + 2 * fld.PAD) + dx).astype(np.int32)),
-                         mk(wts.astype(np.float32)))
+            inner = self.inner_tiles(w, h).ravel()
+            stencils = [(size, mk(ids), ids.size, mk(inner[ids].astype(np.int32)),
+                         mk(np.stack([dx, dy], -1).astype(np.int32)), mk(wts.astype(np.float32)))
                         for size, ids, dx, dy, wts in self.uniform_stencils(camera, w, h)]
-            self._lists_key, self._lists = key, dict(window=mk(window), n_window=window.size, stencils=stencils)
+            # the padded copy's inside that no tile reads (padded coordinates, x0, x1, y0, y1): the
+            # inner tiles read the source, and the border tiles' reads (|d| <= PAD) stay within
+            # 2 PAD + tile of the frame's edge; the window kernel reads the padded copy everywhere
+            p, tw, th = fld.PAD, fld.TILE_W, fld.TILE_H
+            skip = (0, 0, 0, 0) if window.size else (3 * p + tw, w - p - tw, 3 * p + th, h - p - th)
+            self._lists_key, self._lists = key, dict(window=mk(window), n_window=window.size, stencils=stencils,
+                                                     skip=skip)
         return self._lists
+
+    @staticmethod
+    def inner_tiles(w: int, h: int) -> np.ndarray:
+        """Per tile: whether every read of a stencil (offsets |d| ≤ PAD) lies inside the frame, so
+        the tile reads the source planes rather than the padded copy."""
+        ntx, nty = fld.tiles(w, h)
+        ty, tx = np.mgrid[0:nty, 0:ntx]
+        x0, y0 = tx * fld.TILE_W, ty * fld.TILE_H
+        return ((x0 >= fld.PAD) & (x0 + fld.TILE_W + fld.PAD <= w)
+                & (y0 >= fld.PAD) & (y0 + fld.TILE_H + fld.PAD <= h))
 
     def _uniform_key(self, camera, w, h):
         return (self._lut(camera).tobytes(), w, h, fld.pitch_mm(camera, w), self.taps)
