@@ -130,7 +130,7 @@ def test_uniform_tiles_bound_the_per_pixel_landing_points():
         t = fld.per_pixel(st.tile_axes_px(cam, w, h), w, h)
         mask = fld.per_pixel(uni, w, h)
         worst = 0.0
-        for ts, tr in coma.comet_offsets(fld.vogel_disc(st.taps).astype(np.float64)):
+        for ts, tr in coma.comet_offsets(fld.vogel_disc(st.uniform_taps).astype(np.float64)):
             d = np.hypot(c * (ts * ey - tr * ex) - (t[..., 0] * ts + t[..., 2] * tr),
                          c * (-ts * ex - tr * ey) - (t[..., 1] * ts + t[..., 3] * tr))
             worst = max(worst, float(d[mask].max()))
@@ -190,7 +190,7 @@ def test_uniform_stencils_regroup_the_taps_exactly(rng, quality):
     for size, ids, dx, dy, wts in st.uniform_stencils(Camera(coma_mm=0.087), 640, 360):
         np.testing.assert_allclose(wts[..., 0].sum(1), 1.0, rtol=1e-12)
         n_used = (wts[..., 0] > 0).sum(1)
-        assert n_used.max() <= min(size, 4 * st.taps)
+        assert n_used.max() <= min(size, 4 * st.uniform_taps)
         sizes[size] = ids.size
     # the benchmark's comets (<= 1.5 px at 640 px wide) need at most 16 offsets, whatever N
     assert max(sizes) <= 16 and min(sizes) == 4, sizes

@@ -46,7 +46,7 @@ every source point is conserved (a scatter's property) up to the bilinear resamp
 A uniform field is therefore *not* left exactly uniform: coma moves the energy centroid outward by
 C(r), which dims it by :math:`\langle J\rangle \approx 1 - 2C/r`, as a magnification would. The
 comet length is capped at 15 px (C' = 0 where capped). Quality sets N: draft 16, preview 32,
-final 64.
+final 64 (on the window tiles; the uniform tiles take 64 at every quality, "Stencils" below).
 
 **Tiles (speed).** PoCL vectorises a gather across pixels only when every work-item of a group
 reads at the same offsets (PERFORMANCE.md). The comet changes slowly with field height, so the
@@ -108,6 +108,8 @@ from .base import GatherStage
 TAPS = {"draft": 16, "preview": 32, "final": 64}
 MAX_TAIL_PX = fld.PAD - 1
 UNIFORM_PX = 0.05
+UNIFORM_TAPS = TAPS["final"]
+"""Pupil samples of the uniform tiles at every quality (their stencil merges the taps)."""
 STENCIL_SIZES = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256)
 """Stencil sizes of the uniform tiles (one kernel each, ``coma_s<S>``): N taps of 4 bilinear
 corners each reach at most 4N ≤ 256 integer offsets (fewer where the comet is short)."""
@@ -183,6 +185,12 @@ class Coma(GatherStage):
     @property
     def taps(self) -> int:
         return TAPS[self.quality]
+
+    @property
+    def uniform_taps(self) -> int:
+        """Taps of the uniform tiles: always the densest spiral (their stencil's cost follows the
+        comet's area, not the tap count: module docstring, "Stencils")."""
+        return max(self.taps, UNIFORM_TAPS)
 
     def _lut(self, camera) -> np.ndarray:
         fn = coma_curve(camera)
@@ -325,7 +333,7 @@ class Coma(GatherStage):
             big = np.zeros((2, nty * fld.TILE_H, ntx * fld.TILE_W))
             big[0, :h, :w], big[1, :h, :w] = np.abs(dc + q), np.abs(dc * q)
             a, b = big.reshape(2, nty, fld.TILE_H, ntx, fld.TILE_W).max(axis=(2, 4))
-            t = comet_offsets(fld.vogel_disc(self.taps).astype(np.float64))
+            t = comet_offsets(fld.vogel_disc(self.uniform_taps).astype(np.float64))
             no_clamp = 1.0 - a * t[:, 1].max() - b * (t * t).sum(1).max() >= 0.0
             self._uniform = (key, (self.uniform_bound_px(camera, w, h) <= UNIFORM_PX) & no_clamp)
         return self._uniform[1]
@@ -343,7 +351,7 @@ class Coma(GatherStage):
         if not ids.size:
             return []
         ax = self.tile_axes_px(camera, w, h).reshape(-1, 4)[ids]
-        t = comet_offsets(fld.vogel_disc(self.taps).astype(np.float64))
+        t = comet_offsets(fld.vogel_disc(self.uniform_taps).astype(np.float64))
         lx = ax[:, 0:1] * t[:, 0] + ax[:, 2:3] * t[:, 1]  # (tiles, taps): the tile's landing points
         ly = ax[:, 1:2] * t[:, 0] + ax[:, 3:4] * t[:, 1]
         ix, iy = np.floor(lx), np.floor(ly)
@@ -393,7 +401,7 @@ class Coma(GatherStage):
         big = np.zeros((4, nty * fld.TILE_H, ntx * fld.TILE_W))
         big[:, :h, :w] = dev
         m = big.reshape(4, nty, fld.TILE_H, ntx, fld.TILE_W).max(axis=(2, 4))
-        t = np.abs(comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)))[:, :, None, None]
+        t = np.abs(comet_offsets(fld.vogel_disc(self.uniform_taps).astype(np.float64)))[:, :, None, None]
         return np.hypot(t[:, 0] * m[0] + t[:, 1] * m[2], t[:, 0] * m[1] + t[:, 1] * m[3]).max(0)
 
     # -- the oracle -------------------------------------------------------------------------
@@ -436,30 +444,35 @@ class Coma(GatherStage):
 
     def reference(self, camera, frame, color):
         """float64 numpy implementation of the module docstring (exact C(r), no LUT; the landing
-        point clamped to the tile's 3 × 3 window as the kernel does, the tile centre's landing
-        point on the ``tile_uniform`` tiles)."""
+        point clamped to the tile's 3 × 3 window as the kernel does; the tile centre's landing
+        point and ``uniform_taps`` taps on the ``tile_uniform`` tiles)."""
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
         c, dc, q, ex, ey = self.c_px(camera, w, h)
         tsxx, tsxy, trxx, trxy = np.moveaxis(fld.per_pixel(self.tile_axes_px(camera, w, h), w, h), -1, 0)
         xs, ys = np.mgrid[0:h, 0:w].astype(np.float64)[::-1]
         uniform = fld.per_pixel(self.tile_uniform(camera, w, h), w, h)
-        acc = np.zeros_like(color)
-        for ts, tr in comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)):
-            # sagittal e_s = (-ey, ex), radial e_r = (ex, ey); gather from x - ε
-            ox = c * (ts * -ey + tr * ex)
-            oy = c * (ts * ex + tr * ey)
-            # the tile's window: centre b = round(tile centre's -ε), the landing point within ±1 px
-            bx = np.floor(tsxx * ts + trxx * tr + 0.5)
-            by = np.floor(tsxy * ts + trxy * tr + 0.5)
-            px = xs + bx + np.clip(-ox - bx, -1.0, 1.0)
-            py = ys + by + np.clip(-oy - by, -1.0, 1.0)
-            # uniform tiles: the tile centre's landing point for every pixel
-            px = np.where(uniform, xs + tsxx * ts + trxx * tr, px)
-            py = np.where(uniform, ys + tsxy * ts + trxy * tr, py)
-            jac = np.maximum((1.0 - dc * tr) * (1.0 - q * tr) + q * dc * ts * ts, 0.0)
-            acc += fld.bilinear_padded(color, px, py) * jac[..., None]
-        return acc / self.taps
+        out = np.zeros_like(color)
+        for uni, n in ((False, self.taps), (True, self.uniform_taps)):
+            if not np.any(uniform == uni):
+                continue
+            acc = np.zeros_like(color)
+            for ts, tr in comet_offsets(fld.vogel_disc(n).astype(np.float64)):
+                if uni:  # uniform tiles: the tile centre's landing point for every pixel
+                    px, py = xs + tsxx * ts + trxx * tr, ys + tsxy * ts + trxy * tr
+                else:
+                    # sagittal e_s = (-ey, ex), radial e_r = (ex, ey); gather from x - ε
+                    ox = c * (ts * -ey + tr * ex)
+                    oy = c * (ts * ex + tr * ey)
+                    # the tile's window: centre b = round(tile centre's -ε), the landing point within ±1 px
+                    bx = np.floor(tsxx * ts + trxx * tr + 0.5)
+                    by = np.floor(tsxy * ts + trxy * tr + 0.5)
+                    px = xs + bx + np.clip(-ox - bx, -1.0, 1.0)
+                    py = ys + by + np.clip(-oy - by, -1.0, 1.0)
+                jac = np.maximum((1.0 - dc * tr) * (1.0 - q * tr) + q * dc * ts * ts, 0.0)
+                acc += fld.bilinear_padded(color, px, py) * jac[..., None]
+            out[uniform == uni] = (acc / n)[uniform == uni]
+        return out
 
 
 def derivative(fn, r_mm, step_mm: float = 1e-3) -> np.ndarray:
