@@ -92,7 +92,7 @@ __kernel void coma_shape(__global float *restrict shape, __global const float *r
 
 /* One work-item = 16 consecutive pixels of a tile row as explicit float16 vectors (a work-group
  * = a tile = COMA_TILE_W / 16 x COMA_TILE_H work-items; work-group g = tile list[g], the tiles
- * whose comet varies too much for coma_uniform). Each tap reads a 3 x 3 window at the tile-uniform
+ * whose comet varies too much for the stencils, coma_s<S>). Each tap reads a 3 x 3 window at the tile-uniform
  * offset b and weights it with tent weights at each pixel's own landing point. */
 __kernel void coma(__global const float *restrict padded, __global const float *restrict shape,
           __global float *restrict dst, __global const float *restrict tiles,
@@ -201,8 +201,8 @@ inline void coma_store16(__global float *restrict dst, float16 r, float16 g, flo
  * One work-item = 16 consecutive pixels of a tile row (float16); work-group g = tile list[g],
  * its stencil at offs/wts + g * S (offsets (dx, dy); weights W0, W1, W2, 0, the unused entries
  * of a shorter stencil zero). Tiles whose reads (|d| <= COMA_PAD) stay inside the frame
- * (inner[g]) read the source planes directly, so coma_pad only fills the ring the others read. S is a compile-time constant per kernel
- * (coma_s<S>): with a run-time count the astigmatism tap loop ran 2x slower. */
+ * (inner[g]) read the source planes directly, so coma_pad only fills the ring the others read.
+ * S is a compile-time constant per kernel (coma_s<S>): with a run-time count the astigmatism tap loop ran 2x slower. */
 inline void coma_stencil(__global const float *restrict padded, __global const float *restrict src,
                          __global const float *restrict shape, __global float *restrict dst,
                          __global const int *restrict list, __global const int *restrict inner,

@@ -89,12 +89,13 @@ It reads 3 values per offset instead of 12 per tap, and the number of offsets fo
 area, not N: at most 4N, 4 for a comet inside one pixel cell (where a copy would save nothing
 measurable but would drop the comet and the Jacobian's dimming), 4–24 for the benchmark's
 (≤ 4.4 px) comets. Tiles whose reads (|d| ≤ 16 px) stay inside the frame read the source
-(``inner_tiles``), so the pad pass only fills the border ring when no window tile runs. One kernel per stencil size (``STENCIL_SIZES``,
-zero-weight padding, a compile-time loop). Same model as the tap-by-tap gather (float32
-rounding only); as N no longer sets the cost there, the uniform tiles take ``UNIFORM_TAPS`` (64)
-at every quality. 1080p no_defocus, old (tap-by-tap, 16 pixels per work-item) vs new in one
-process, interleaved (``tools/ab_gathers.py --truth final``): draft ×2.1 with final's accuracy
-(99.9th percentile |draft − final| 3.3 → 2e-6 on values 0.08–500), final ×4.7.
+(``inner_tiles``), so the pad pass only fills the border ring when no window tile runs. One
+kernel per stencil size (``STENCIL_SIZES``, zero-weight padding, a compile-time loop). Same
+model as the tap-by-tap gather (float32 rounding only); as N no longer sets the cost there, the
+uniform tiles take ``UNIFORM_TAPS`` (64) at every quality. 1080p no_defocus, old (tap-by-tap, 16
+pixels per work-item) vs new in one process, interleaved (``tools/ab_gathers.py --truth
+final``): draft ×2.1 with final's accuracy (99.9th percentile |draft − final| 3.3 → 2e-6 on
+values 0.08–500), final ×4.7.
 
 Domain/range: colour ≥ 0 → convex combination of input colours.
 """
