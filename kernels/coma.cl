@@ -207,7 +207,8 @@ inline void coma_stencil(__global const float *restrict padded, __global const f
                          __global const float *restrict shape, __global float *restrict dst,
                          __global const int *restrict list, __global const int *restrict inner,
                          __global const int2 *restrict offs, __global const float4 *restrict wts,
-                         const int tiles_x, const int tiles_y, const int width, const int height, const int S)
+                         const int tiles_x, const int tiles_y, const int width, const int height, const int S,
+                         const int jac_px)
 {
     const int g = (int)get_group_id(0);
     const int tile_id = list[g];
@@ -217,8 +218,14 @@ inline void coma_stencil(__global const float *restrict padded, __global const f
     const int pw = ow + 2 * COMA_PAD;
     const size_t pn = (size_t)pw * (oh + 2 * COMA_PAD), on = (size_t)ow * oh;
     const int o = y * ow + x;
-    const float16 dc = vload16(0, shape + 2 * on + o), q = vload16(0, shape + 3 * on + o);
-    const float16 a = dc + q, b = dc * q;
+    /* jac_px (compile-time after inlining): each pixel's own Jacobian from its C' and C/r;
+     * otherwise the tile's one Jacobian is folded into W0 (coma_c<S>: no shape reads) */
+    float16 a = 0.0f, b = 0.0f;
+    if (jac_px) {
+        const float16 dc = vload16(0, shape + 2 * on + o), q = vload16(0, shape + 3 * on + o);
+        a = dc + q;
+        b = dc * q;
+    }
     /* group-uniform choice of the planes read: the source (inner tiles) or the padded copy */
     const int in = inner[g];
     __global const float *base = in ? src + (size_t)y * width + x : padded + (y + COMA_PAD) * pw + x + COMA_PAD;
@@ -232,12 +239,18 @@ inline void coma_stencil(__global const float *restrict padded, __global const f
 #pragma unroll
     for (int s = s4; s < s4 + 4; ++s) {
         const float4 wv = sw[s];
-        const float16 wgt = wv.x - a * wv.y + b * wv.z;
         const int2 d = so[s];
         __global const float *p = base + d.y * pitch + d.x;
-        ar += wgt * vload16(0, p);
-        ag += wgt * vload16(0, p + plane);
-        ab += wgt * vload16(0, p + 2 * plane);
+        if (jac_px) {
+            const float16 wgt = wv.x - a * wv.y + b * wv.z;
+            ar += wgt * vload16(0, p);
+            ag += wgt * vload16(0, p + plane);
+            ab += wgt * vload16(0, p + 2 * plane);
+        } else {
+            ar += wv.x * vload16(0, p);
+            ag += wv.x * vload16(0, p + plane);
+            ab += wv.x * vload16(0, p + 2 * plane);
+        }
     }
     coma_store16(dst, ar, ag, ab, x, y, width, height);
 }
@@ -246,19 +259,32 @@ inline void coma_stencil(__global const float *restrict padded, __global const f
     __global const float *restrict shape, __global float *restrict dst, __global const int *restrict list, \
     __global const int *restrict inner, __global const int2 *restrict offs, __global const float4 *restrict wts, \
     const int tiles_x, const int tiles_y, const int width, const int height
-#define COMA_STENCIL_CALL(S) \
-    coma_stencil(padded, src, shape, dst, list, inner, offs, wts, tiles_x, tiles_y, width, height, S)
+#define COMA_STENCIL_CALL(S, J) \
+    coma_stencil(padded, src, shape, dst, list, inner, offs, wts, tiles_x, tiles_y, width, height, S, J)
 /* one kernel per stencil size class (Coma.STENCIL_SIZES; N taps of 4 bilinear corners reach at
- * most 4 N <= 256 offsets) */
-__kernel void coma_s4(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(4); }
-__kernel void coma_s8(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(8); }
-__kernel void coma_s12(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(12); }
-__kernel void coma_s16(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(16); }
-__kernel void coma_s24(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(24); }
-__kernel void coma_s32(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(32); }
-__kernel void coma_s48(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(48); }
-__kernel void coma_s64(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(64); }
-__kernel void coma_s96(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(96); }
-__kernel void coma_s128(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(128); }
-__kernel void coma_s192(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(192); }
-__kernel void coma_s256(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(256); }
+ * most 4 N <= 256 offsets): coma_s<S> with each pixel's Jacobian, coma_c<S> with the tile's one
+ * (Coma.tile_jacobian) */
+__kernel void coma_s4(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(4, 1); }
+__kernel void coma_s8(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(8, 1); }
+__kernel void coma_s12(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(12, 1); }
+__kernel void coma_s16(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(16, 1); }
+__kernel void coma_s24(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(24, 1); }
+__kernel void coma_s32(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(32, 1); }
+__kernel void coma_s48(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(48, 1); }
+__kernel void coma_s64(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(64, 1); }
+__kernel void coma_s96(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(96, 1); }
+__kernel void coma_s128(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(128, 1); }
+__kernel void coma_s192(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(192, 1); }
+__kernel void coma_s256(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(256, 1); }
+__kernel void coma_c4(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(4, 0); }
+__kernel void coma_c8(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(8, 0); }
+__kernel void coma_c12(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(12, 0); }
+__kernel void coma_c16(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(16, 0); }
+__kernel void coma_c24(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(24, 0); }
+__kernel void coma_c32(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(32, 0); }
+__kernel void coma_c48(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(48, 0); }
+__kernel void coma_c64(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(64, 0); }
+__kernel void coma_c96(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(96, 0); }
+__kernel void coma_c128(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(128, 0); }
+__kernel void coma_c192(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(192, 0); }
+__kernel void coma_c256(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(256, 0); }

@@ -23,7 +23,8 @@ def test_not_planned_without_coma_and_identity_when_skipped(rng):
 
 @pytest.mark.parametrize("w,h,kw", [(37, 23, dict(coma_mm=0.9)), (23, 37, dict(coma_mm=-40.0)),
                                     (41, 29, dict(lens=FLAGSHIP, f_number=1.4)),
-                                    (133, 77, dict(coma_mm=0.1)), (131, 85, dict(coma_mm=-0.15))])
+                                    (133, 77, dict(coma_mm=0.1)), (131, 85, dict(coma_mm=-0.15)),
+                                    (160, 90, dict(lens=FLAGSHIP, f_number=2.0))])
 def test_kernel_matches_reference(rng, w, h, kw):
     frame = odd_frame(rng, w=w, h=h, scale=10.0)
     color = frame.color.copy()
@@ -157,7 +158,7 @@ def _apply_stencils(st, cam, color):
     a, b = dc + q, dc * q
     ntx, _ = fld.tiles(w, h)
     out = np.full_like(color, np.nan)
-    for size, ids, dx, dy, wts in st.uniform_stencils(cam, w, h):
+    for size, _, ids, dx, dy, wts in st.uniform_stencils(cam, w, h):
         assert size in coma.STENCIL_SIZES and dx.shape == (ids.size, size) and wts.shape == (ids.size, size, 4)
         for t, sx, sy, sw in zip(ids, dx, dy, wts):
             x0, y0 = (t % ntx) * fld.TILE_W, (t // ntx) * fld.TILE_H
@@ -174,21 +175,29 @@ def _apply_stencils(st, cam, color):
 @pytest.mark.parametrize("quality", ["draft", "final"])
 def test_uniform_stencils_regroup_the_taps_exactly(rng, quality):
     """The uniform tiles' stencils (taps merged per integer offset, the Jacobian through three
-    tap moments) give the reference's tap-by-tap sum to float64 rounding; each tile's W0 sums
-    to 1 (the taps' bilinear weights), it has at most 4N offsets, and short comets need few."""
+    tap moments, or folded into W0 where the tile has one) give the reference's tap-by-tap sum to
+    float64 rounding, with per-pixel Jacobians (traced lens) and folded ones (linear coma); a
+    folded W0 sums to the mean Jacobian; at most 4N offsets, and short comets need few."""
     st = coma.Coma(quality)
-    cam, w, h = Camera(coma_mm=0.1), 133, 77
-    assert st.tile_uniform(cam, w, h).all()
-    color = rng.uniform(0.0, 10.0, (h, w, 3))
-    color[5, 7] = 1e8
-    ref = st.reference(cam, Frame(color.astype(np.float32)), color)
-    got = _apply_stencils(st, cam, color)
-    err = np.abs(got - ref) / np.maximum(np.abs(ref), 1.0)
-    j = np.unravel_index(int(np.argmax(err)), err.shape)
-    assert err.max() < 1e-9, f"max rel error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
+    for cam, w, h in ((Camera(coma_mm=0.1), 133, 77), (Camera(lens=FLAGSHIP, f_number=2.0), 160, 90)):
+        uni = st.tile_uniform(cam, w, h)
+        const = st.tile_jacobian(cam, w, h)[2]
+        assert uni.all() and const.all() if cam.coma_mm else uni.any() and not const[uni].any()
+        color = rng.uniform(0.0, 10.0, (h, w, 3))
+        color[5, 7] = 1e8
+        ref = st.reference(cam, Frame(color.astype(np.float32)), color)
+        mask = fld.per_pixel(uni, w, h)[..., None]
+        got = np.where(mask, _apply_stencils(st, cam, color), ref)  # the window tiles are not stencils
+        err = np.abs(got - ref) / np.maximum(np.abs(ref), 1.0)
+        j = np.unravel_index(int(np.argmax(err)), err.shape)
+        assert err.max() < 1e-9, f"max rel error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
     sizes = {}
-    for size, ids, dx, dy, wts in st.uniform_stencils(Camera(coma_mm=0.087), 640, 360):
-        np.testing.assert_allclose(wts[..., 0].sum(1), 1.0, rtol=1e-12)
+    for size, const, ids, dx, dy, wts in st.uniform_stencils(Camera(coma_mm=0.087), 640, 360):
+        assert const  # a linear coefficient: one Jacobian per tile (a = 2k, b = k²), folded into W0
+        k = 0.087 / 3 / (np.hypot(36, 24) / 2)
+        t = coma.comet_offsets(fld.vogel_disc(st.uniform_taps).astype(np.float64))
+        mean_jac = np.mean(1 - 2 * k * t[:, 1] + k * k * (t * t).sum(1))
+        np.testing.assert_allclose(wts[..., 0].sum(1), mean_jac, rtol=1e-12)
         n_used = (wts[..., 0] > 0).sum(1)
         assert n_used.max() <= min(size, 4 * st.uniform_taps)
         sizes[size] = ids.size

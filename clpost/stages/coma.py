@@ -92,10 +92,13 @@ measurable but would drop the comet and the Jacobian's dimming), 4–24 for the 
 (``inner_tiles``), so the pad pass only fills the border ring when no window tile runs. One
 kernel per stencil size (``STENCIL_SIZES``, zero-weight padding, a compile-time loop). Same
 model as the tap-by-tap gather (float32 rounding only); as N no longer sets the cost there, the
-uniform tiles take ``UNIFORM_TAPS`` (64) at every quality. 1080p no_defocus, old (tap-by-tap, 16
-pixels per work-item) vs new in one process, interleaved (``tools/ab_gathers.py --truth
-final``): draft ×2.1 with final's accuracy (99.9th percentile |draft − final| 3.3 → 2e-6 on
-values 0.08–500), final ×4.7.
+uniform tiles take ``UNIFORM_TAPS`` (64) at every quality. Where all pixels of a uniform tile
+have the same a and b within ``CONST_JAC_TOL`` (a linear coefficient: a = 2k, b = k²
+everywhere), the Jacobian is folded into W0 on the host (``tile_jacobian``; coma_c<S>: no
+per-pixel reads of C', C/r, one scalar weight per offset; ×1.05–1.16 in one process). 1080p
+no_defocus, old (tap-by-tap, 16 pixels per work-item) vs new in one process, interleaved
+(``tools/ab_gathers.py --truth final``, two runs): draft ×2.1–2.4 with final's accuracy (99.9th
+percentile |draft − final| 3.3 → 2e-6 on values 0.08–500), final ×4.7–5.3.
 
 Domain/range: colour ≥ 0 → convex combination of input colours.
 """
@@ -113,6 +116,9 @@ MAX_TAIL_PX = fld.PAD - 1
 UNIFORM_PX = 0.05
 UNIFORM_TAPS = TAPS["final"]
 """Pupil samples of the uniform tiles at every quality (their stencil merges the taps)."""
+CONST_JAC_TOL = 1e-6
+"""Uniform tiles whose pixels' Jacobians all lie within this of the tile's mean one take the mean
+(``Coma.tile_jacobian``; coma_c<S>: no per-pixel shape reads, one scalar weight per offset)."""
 STENCIL_SIZES = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256)
 """Stencil sizes of the uniform tiles (one kernel each, ``coma_s<S>``): N taps of 4 bilinear
 corners each reach at most 4N ≤ 256 integer offsets (fewer where the comet is short)."""
@@ -278,9 +284,9 @@ class Coma(GatherStage):
             k = self._kernel(rt, camera, "coma", whole)
             k.set_args(b["pad"], b["shape"], dst, b["tiles"], lists["window"], *args)
             events.append(cl.enqueue_nd_range_kernel(q, k, (group[0] * lists["n_window"], group[1]), group))
-        for size, ids, n_ids, inner, offs, wts in lists["stencils"]:
-            # one kernel per stencil size: a compile-time loop count
-            k = self._kernel(rt, camera, f"coma_s{size}", whole)
+        for name, ids, n_ids, inner, offs, wts in lists["stencils"]:
+            # one kernel per stencil size (a compile-time loop count) and Jacobian kind
+            k = self._kernel(rt, camera, name, whole)
             k.set_args(b["pad"], src, b["shape"], dst, ids, inner, offs, wts, *args)
             events.append(cl.enqueue_nd_range_kernel(q, k, (group[0] * n_ids, group[1]), group))
         return events
@@ -297,9 +303,9 @@ class Coma(GatherStage):
                                      hostbuf=np.ascontiguousarray(a) if a.size else np.zeros(1, np.int32))
             window = np.flatnonzero(~self.tile_uniform(camera, w, h).ravel()).astype(np.int32)
             inner = self.inner_tiles(w, h).ravel()
-            stencils = [(size, mk(ids), ids.size, mk(inner[ids].astype(np.int32)),
+            stencils = [(f"coma_{'c' if const else 's'}{size}", mk(ids), ids.size, mk(inner[ids].astype(np.int32)),
                          mk(np.stack([dx, dy], -1).astype(np.int32)), mk(wts.astype(np.float32)))
-                        for size, ids, dx, dy, wts in self.uniform_stencils(camera, w, h)]
+                        for size, const, ids, dx, dy, wts in self.uniform_stencils(camera, w, h)]
             # the padded copy's inside that no tile reads (padded coordinates, x0, x1, y0, y1): the
             # inner tiles read the source, and the border tiles' reads (|d| <= PAD) stay within
             # 2 PAD + tile of the frame's edge; the window kernel reads the padded copy everywhere
@@ -343,12 +349,13 @@ class Coma(GatherStage):
 
     def uniform_stencils(self, camera, w: int, h: int) -> list:
         r"""The uniform tiles' taps merged per integer offset, grouped by stencil size: a list of
-        (S, tile ids, dx, dy, weights) with dx, dy (tiles, S) int offsets and weights (tiles, S, 4)
+        (S, constant Jacobian, tile ids, dx, dy, weights) with dx, dy (tiles, S) int offsets and weights (tiles, S, 4)
         float64: per offset the sums over the taps k of the bilinear weight c_k of the tile
         centre's landing point times :math:`(1, t_{k,r}, t_{k,r}^2 + t_{k,s}^2)/N` and a 0, padded
         with zero weights to S, the smallest of ``STENCIL_SIZES`` that holds the tile's offsets.
         A pixel's output is :math:`\sum_s (W_0 - a W_1 + b W_2)\,C_{in}(x + d_s)`, a = C' + C/r,
-        b = C' C/r: the tap-by-tap sum of the reference regrouped."""
+        b = C' C/r: the tap-by-tap sum of the reference regrouped. On the tiles ``tile_jacobian``
+        gives one Jacobian, W0 holds :math:`W_0 - \bar a W_1 + \bar b W_2` and W1 = W2 = 0."""
         uni = self.tile_uniform(camera, w, h).ravel()
         ids = np.flatnonzero(uni)
         if not ids.size:
@@ -376,11 +383,16 @@ class Coma(GatherStage):
         count = np.bincount(tile, minlength=ids.size)
         start = np.concatenate([[0], np.cumsum(count)[:-1]])
         rank = np.arange(uniq.size) - start[tile]
+        # tiles with one Jacobian for all pixels: its moments folded into W0 (W1 = W2 = 0)
+        a_t, b_t, const = (v.ravel()[ids] for v in self.tile_jacobian(camera, w, h))
+        fold = const[tile]
+        wts[fold, 0] = wts[fold, 0] - a_t[tile[fold]] * wts[fold, 1] + b_t[tile[fold]] * wts[fold, 2]
+        wts[fold, 1:] = 0.0
         sizes = np.asarray(STENCIL_SIZES)
-        cls = np.searchsorted(sizes, count)  # the smallest size >= count
+        cls = np.searchsorted(sizes, count) + len(sizes) * const  # the smallest size >= count
         out = []
         for ci in np.unique(cls):
-            size = int(sizes[ci])
+            size = int(sizes[ci % len(sizes)])
             sel_t = np.flatnonzero(cls == ci)
             row = np.full(ids.size, -1)
             row[sel_t] = np.arange(sel_t.size)
@@ -390,8 +402,24 @@ class Coma(GatherStage):
             sdx[row[tile[e]], rank[e]] = dx[e] - fld.PAD
             sdy[row[tile[e]], rank[e]] = dy[e] - fld.PAD
             sw[row[tile[e]], rank[e], :3] = wts[e]
-            out.append((size, ids[sel_t].astype(np.int32), sdx, sdy, sw))
+            out.append((size, bool(ci >= len(sizes)), ids[sel_t].astype(np.int32), sdx, sdy, sw))
         return out
+
+    def tile_jacobian(self, camera, w: int, h: int):
+        r"""Per tile (tiles_y, tiles_x): the mean of a = C' + C/r and b = C' C/r over its pixels,
+        and whether a Jacobian with them differs from every pixel's own by at most
+        ``CONST_JAC_TOL`` (:math:`\max|a - \bar a|\,\max_k t_{k,r} + \max|b - \bar b|\,
+        \max_k (t_{k,r}^2 + t_{k,s}^2)`): exact for a linear coefficient (a = 2k, b = k²)."""
+        _, dc, q, _, _ = self.c_px(camera, w, h)
+        ntx, nty = fld.tiles(w, h)
+        big = np.full((2, nty * fld.TILE_H, ntx * fld.TILE_W), np.nan)
+        big[0, :h, :w], big[1, :h, :w] = dc + q, dc * q
+        blk = big.reshape(2, nty, fld.TILE_H, ntx, fld.TILE_W)
+        mean = np.nanmean(blk, axis=(2, 4))
+        dev = np.nanmax(np.abs(blk - mean[:, :, None, :, None]), axis=(2, 4))
+        t = comet_offsets(fld.vogel_disc(self.uniform_taps).astype(np.float64))
+        const = dev[0] * t[:, 1].max() + dev[1] * (t * t).sum(1).max() <= CONST_JAC_TOL
+        return mean[0], mean[1], const
 
     def uniform_bound_px(self, camera, w: int, h: int) -> np.ndarray:
         """Per tile: :math:`\\max_k \\| (|t_{k,s}| m_{sx} + |t_{k,r}| m_{rx},\\ |t_{k,s}| m_{sy} +
@@ -448,13 +476,16 @@ class Coma(GatherStage):
     def reference(self, camera, frame, color):
         """float64 numpy implementation of the module docstring (exact C(r), no LUT; the landing
         point clamped to the tile's 3 × 3 window as the kernel does; the tile centre's landing
-        point and ``uniform_taps`` taps on the ``tile_uniform`` tiles)."""
+        point and ``uniform_taps`` taps on the ``tile_uniform`` tiles, with the tile's mean
+        Jacobian where ``tile_jacobian`` allows)."""
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
         c, dc, q, ex, ey = self.c_px(camera, w, h)
         tsxx, tsxy, trxx, trxy = np.moveaxis(fld.per_pixel(self.tile_axes_px(camera, w, h), w, h), -1, 0)
         xs, ys = np.mgrid[0:h, 0:w].astype(np.float64)[::-1]
         uniform = fld.per_pixel(self.tile_uniform(camera, w, h), w, h)
+        a_t, b_t, const = (fld.per_pixel(v, w, h) for v in self.tile_jacobian(camera, w, h))
+        a_px, b_px = np.where(const, a_t, dc + q), np.where(const, b_t, dc * q)
         out = np.zeros_like(color)
         for uni, n in ((False, self.taps), (True, self.uniform_taps)):
             if not np.any(uniform == uni):
@@ -472,7 +503,10 @@ class Coma(GatherStage):
                     by = np.floor(tsxy * ts + trxy * tr + 0.5)
                     px = xs + bx + np.clip(-ox - bx, -1.0, 1.0)
                     py = ys + by + np.clip(-oy - by, -1.0, 1.0)
-                jac = np.maximum((1.0 - dc * tr) * (1.0 - q * tr) + q * dc * ts * ts, 0.0)
+                if uni:  # 1 - a t_r + b (t_r² + t_s²), the tile's mean a, b where tile_jacobian says so
+                    jac = np.maximum(1.0 - a_px * tr + b_px * (tr * tr + ts * ts), 0.0)
+                else:
+                    jac = np.maximum((1.0 - dc * tr) * (1.0 - q * tr) + q * dc * ts * ts, 0.0)
                 acc += fld.bilinear_padded(color, px, py) * jac[..., None]
             out[uniform == uni] = (acc / n)[uniform == uni]
         return out
