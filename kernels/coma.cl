@@ -10,7 +10,8 @@
  * exactly the bilinear tap of the per-pixel comet while that point lies within 1 px of b_k (the
  * comet changes by < 0.5 px across a tile for the lenses and coefficients in the tests and
  * benchmarks: Coma.shape_error_px), clamped to the window beyond (the reference does the same).
- * Tiles where the comet changes by at most Coma.UNIFORM_PX take coma_uniform (one bilinear tap).
+ * Tiles where the comet changes by at most Coma.UNIFORM_PX take the tile centre's comet, whose taps
+ * collapse into a per-tile stencil of integer offsets (coma_s<S>, below).
  *
  * Buffers: colour planar (c*n + i); padded = 3 planes of pw × ph, pw = tiles_x * COMA_TILE_W +
  * 2 COMA_PAD (ph likewise), edge values repeated, so no tap clamps and the rounded-up work-items
@@ -28,18 +29,36 @@
 #endif
 #define COMA_MAX_C ((float)(COMA_PAD - 1) / 3.0f)
 
-/* the padded copy of the colour planes (edge values repeated) */
+/* the padded copy of the colour planes (edge values repeated). One work-item = 16 consecutive
+ * pixels of a padded row (pw is a multiple of 16): whole vectors where the row's 16 source
+ * pixels lie inside the frame, per pixel with a clamp only in the vectors that touch a side
+ * (a scalar clamp on every pixel ran at half the memory bandwidth) */
 __kernel void coma_pad(__global const float *restrict src, __global float *restrict padded,
-                       const int width, const int height, const int pw, const int ph)
+                       const int width, const int height, const int pw, const int ph,
+                       const int skip_x0, const int skip_x1, const int skip_y0, const int skip_y1)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= pw || y >= ph) return;
-    const int sx = clamp(x - COMA_PAD, 0, width - 1), sy = clamp(y - COMA_PAD, 0, height - 1);
+    const int x0 = 16 * (int)get_global_id(0), y = get_global_id(1);
+    if (x0 >= pw || y >= ph) return;
+    /* [skip_x0, skip_x1) x [skip_y0, skip_y1) (padded coordinates; empty when the window kernel
+     * runs): no tile reads the padded copy there (the inner tiles read the source) */
+    if (x0 >= skip_x0 && x0 + 16 <= skip_x1 && y >= skip_y0 && y < skip_y1) return;
+    const int sy = clamp(y - COMA_PAD, 0, height - 1);
     const size_t n = (size_t)width * height, pn = (size_t)pw * ph;
-    const size_t i = (size_t)sy * width + sx, j = (size_t)y * pw + x;
-    padded[j] = src[i];
-    padded[pn + j] = src[n + i];
-    padded[2 * pn + j] = src[2 * n + i];
+    __global const float *s = src + (size_t)sy * width;
+    __global float *d = padded + (size_t)y * pw + x0;
+    const int sx0 = x0 - COMA_PAD;
+    if (sx0 >= 0 && sx0 + 16 <= width) {
+        vstore16(vload16(0, s + sx0), 0, d);
+        vstore16(vload16(0, s + n + sx0), 0, d + pn);
+        vstore16(vload16(0, s + 2 * n + sx0), 0, d + 2 * pn);
+    } else {
+        for (int e = 0; e < 16; ++e) {
+            const int sx = clamp(sx0 + e, 0, width - 1);
+            d[e] = s[sx];
+            d[pn + e] = s[n + sx];
+            d[2 * pn + e] = s[2 * n + sx];
+        }
+    }
 }
 
 /* the comet of output pixel (x, y) of the rounded-up frame (ow x oh), from the LUT; it depends
@@ -73,7 +92,7 @@ __kernel void coma_shape(__global float *restrict shape, __global const float *r
 
 /* One work-item = 16 consecutive pixels of a tile row as explicit float16 vectors (a work-group
  * = a tile = COMA_TILE_W / 16 x COMA_TILE_H work-items; work-group g = tile list[g], the tiles
- * whose comet varies too much for coma_uniform). Each tap reads a 3 x 3 window at the tile-uniform
+ * whose comet varies too much for the stencils, coma_s<S>). Each tap reads a 3 x 3 window at the tile-uniform
  * offset b and weights it with tent weights at each pixel's own landing point. */
 __kernel void coma(__global const float *restrict padded, __global const float *restrict shape,
           __global float *restrict dst, __global const float *restrict tiles,
@@ -145,61 +164,19 @@ __kernel void coma(__global const float *restrict padded, __global const float *
 #endif
 }
 
-/* The tiles whose pixels' landing points all lie within Coma.UNIFORM_PX of the tile centre's
- * (Coma.tile_uniform): every pixel of the tile takes the tile centre's comet, so each tap is one
- * bilinear sample at a tile-uniform offset with tile-uniform weights, times the pixel's own
- * Jacobian. One work-item = 16 consecutive pixels of a tile row as explicit float16 vectors (a
- * work-group = a tile = COMA_TILE_W / 16 x COMA_TILE_H work-items); work-group g = tile list[g]. */
-__kernel void coma_uniform(__global const float *restrict padded, __global const float *restrict shape,
-                           __global float *restrict dst, __global const float *restrict tiles,
-                           __global const int *restrict list, const int tiles_x, const int tiles_y,
-                           const int width, const int height)
+/* 16 pixels of a tile row into the planar output (partial tiles at the frame's edges: per pixel) */
+inline void coma_store16(__global float *restrict dst, float16 r, float16 g, float16 b,
+                         int x, int y, int width, int height)
 {
-    const int tile_id = list[get_group_id(0)];
-    const int tx = tile_id % tiles_x, ty = tile_id / tiles_x;
-    const int x = tx * COMA_TILE_W + 16 * (int)get_local_id(0), y = ty * COMA_TILE_H + (int)get_local_id(1);
-    const int ow = tiles_x * COMA_TILE_W, oh = tiles_y * COMA_TILE_H;
-    const int pw = ow + 2 * COMA_PAD;
-    const size_t pn = (size_t)pw * (oh + 2 * COMA_PAD), on = (size_t)ow * oh;
-    const int o = y * ow + x;
-    const float16 dc = vload16(0, shape + 2 * on + o), q = vload16(0, shape + 3 * on + o);
-    __global const float *tile = tiles + 4 * tile_id;
-    const float tsxx = tile[0], tsxy = tile[1], trxx = tile[2], trxy = tile[3];
-    const int base = (y + COMA_PAD) * pw + x + COMA_PAD;
-    float16 ar = 0.0f, ag = 0.0f, ab = 0.0f;
-    /* unrolled by 4: as fast as fully unrolled with explicit vectors, and builds in a second */
-#pragma unroll 4
-    for (int k = 0; k < COMA_TAPS; ++k) {
-        const float ux = coma_taps[2 * k], uy = coma_taps[2 * k + 1];
-        /* the tile centre's landing point, its cell (floor by truncating a positive number) and
-         * bilinear fractions: the same for the whole tile */
-        const float lx = tsxx * ux + trxx * uy, ly = tsxy * ux + trxy * uy;
-        const int ix = (int)(lx + (float)COMA_PAD) - COMA_PAD, iy = (int)(ly + (float)COMA_PAD) - COMA_PAD;
-        const float fx = lx - (float)ix, fy = ly - (float)iy;
-        const float c00 = (1.0f - fx) * (1.0f - fy), c01 = fx * (1.0f - fy), c10 = (1.0f - fx) * fy, c11 = fx * fy;
-        /* the pixel's own Jacobian (clamped at 0 where a comet folds over) */
-        float16 jac = (1.0f - dc * uy) * (1.0f - q * uy) + q * dc * (ux * ux);
-        jac = 0.5f * (jac + COMA_ABS16(jac));
-        __global const float *p = padded + base + iy * pw + ix;
-#define COMA_BIL16(p) (c00 * vload16(0, (p)) + c01 * vload16(0, (p) + 1) + c10 * vload16(0, (p) + pw) + c11 * vload16(0, (p) + pw + 1))
-        ar += jac * COMA_BIL16(p);
-        p += pn;
-        ag += jac * COMA_BIL16(p);
-        p += pn;
-        ab += jac * COMA_BIL16(p);
-#undef COMA_BIL16
-    }
-    const float inv = 1.0f / (float)COMA_TAPS;
     const size_t n = (size_t)width * height;
     const size_t i = (size_t)y * width + x;
 #if COMA_WHOLE_TILES
-    vstore16(ar * inv, 0, dst + i);
-    vstore16(ag * inv, 0, dst + n + i);
-    vstore16(ab * inv, 0, dst + 2 * n + i);
+    vstore16(r, 0, dst + i);
+    vstore16(g, 0, dst + n + i);
+    vstore16(b, 0, dst + 2 * n + i);
 #else
     /* frames that are not whole tiles: the rounded-up pixels are computed but not stored */
     if (y >= height) return;
-    const float16 r = ar * inv, g = ag * inv, b = ab * inv;
     float rr[16], gg[16], bb[16];
     vstore16(r, 0, rr);
     vstore16(g, 0, gg);
@@ -211,3 +188,103 @@ __kernel void coma_uniform(__global const float *restrict padded, __global const
     }
 #endif
 }
+
+/* The uniform tiles (Coma.tile_uniform): every pixel of the tile takes the tile centre's comet,
+ * so the N bilinear taps land on the same integer offsets for all its pixels and collapse into a
+ * stencil (Coma.uniform_stencils, built once per camera and frame size on the host): per distinct
+ * offset s the sums over the taps of their bilinear weights c times (1, t_r, t_r^2 + t_s^2) / N.
+ * The pixel's own Jacobian J_k = 1 - (C' + C/r) t_r + C' C/r (t_r^2 + t_s^2) is linear in
+ * those three, so sum_k J_k c_k = W0 - a W1 + b W2 with a = C' + C/r, b = C' C/r per pixel:
+ * the same sum as tap by tap (the clamp of J at 0 never acts on these tiles), but 3 reads per
+ * offset instead of 12 per tap, and the count of offsets follows the comet's area (4 for a
+ * comet that stays inside one pixel cell) rather than N.
+ * One work-item = 16 consecutive pixels of a tile row (float16); work-group g = tile list[g],
+ * its stencil at offs/wts + g * S (offsets (dx, dy); weights W0, W1, W2, 0, the unused entries
+ * of a shorter stencil zero). Tiles whose reads (|d| <= COMA_PAD) stay inside the frame
+ * (inner[g]) read the source planes directly, so coma_pad only fills the ring the others read.
+ * S is a compile-time constant per kernel (coma_s<S>): with a run-time count the astigmatism tap loop ran 2x slower. */
+inline void coma_stencil(__global const float *restrict padded, __global const float *restrict src,
+                         __global const float *restrict shape, __global float *restrict dst,
+                         __global const int *restrict list, __global const int *restrict inner,
+                         __global const int2 *restrict offs, __global const float4 *restrict wts,
+                         const int tiles_x, const int tiles_y, const int width, const int height, const int S,
+                         const int jac_px)
+{
+    const int g = (int)get_group_id(0);
+    const int tile_id = list[g];
+    const int tx = tile_id % tiles_x, ty = tile_id / tiles_x;
+    const int x = tx * COMA_TILE_W + 16 * (int)get_local_id(0), y = ty * COMA_TILE_H + (int)get_local_id(1);
+    const int ow = tiles_x * COMA_TILE_W, oh = tiles_y * COMA_TILE_H;
+    const int pw = ow + 2 * COMA_PAD;
+    const size_t pn = (size_t)pw * (oh + 2 * COMA_PAD), on = (size_t)ow * oh;
+    const int o = y * ow + x;
+    /* jac_px (compile-time after inlining): each pixel's own Jacobian from its C' and C/r;
+     * otherwise the tile's one Jacobian is folded into W0 (coma_c<S>: no shape reads) */
+    float16 a = 0.0f, b = 0.0f;
+    if (jac_px) {
+        const float16 dc = vload16(0, shape + 2 * on + o), q = vload16(0, shape + 3 * on + o);
+        a = dc + q;
+        b = dc * q;
+    }
+    /* group-uniform choice of the planes read: the source (inner tiles) or the padded copy */
+    const int in = inner[g];
+    __global const float *base = in ? src + (size_t)y * width + x : padded + (y + COMA_PAD) * pw + x + COMA_PAD;
+    const int pitch = in ? width : pw;
+    const size_t plane = in ? (size_t)width * height : pn;
+    __global const int2 *so = offs + g * S;
+    __global const float4 *sw = wts + g * S;
+    float16 ar = 0.0f, ag = 0.0f, ab = 0.0f;
+    /* unrolled by 4 by hand (a constant 4-trip inner loop; every S is a multiple of 4) */
+    for (int s4 = 0; s4 < S; s4 += 4)
+#pragma unroll
+    for (int s = s4; s < s4 + 4; ++s) {
+        const float4 wv = sw[s];
+        const int2 d = so[s];
+        __global const float *p = base + d.y * pitch + d.x;
+        if (jac_px) {
+            const float16 wgt = wv.x - a * wv.y + b * wv.z;
+            ar += wgt * vload16(0, p);
+            ag += wgt * vload16(0, p + plane);
+            ab += wgt * vload16(0, p + 2 * plane);
+        } else {
+            ar += wv.x * vload16(0, p);
+            ag += wv.x * vload16(0, p + plane);
+            ab += wv.x * vload16(0, p + 2 * plane);
+        }
+    }
+    coma_store16(dst, ar, ag, ab, x, y, width, height);
+}
+
+#define COMA_STENCIL_ARGS __global const float *restrict padded, __global const float *restrict src, \
+    __global const float *restrict shape, __global float *restrict dst, __global const int *restrict list, \
+    __global const int *restrict inner, __global const int2 *restrict offs, __global const float4 *restrict wts, \
+    const int tiles_x, const int tiles_y, const int width, const int height
+#define COMA_STENCIL_CALL(S, J) \
+    coma_stencil(padded, src, shape, dst, list, inner, offs, wts, tiles_x, tiles_y, width, height, S, J)
+/* one kernel per stencil size class (Coma.STENCIL_SIZES; N taps of 4 bilinear corners reach at
+ * most 4 N <= 256 offsets): coma_s<S> with each pixel's Jacobian, coma_c<S> with the tile's one
+ * (Coma.tile_jacobian) */
+__kernel void coma_s4(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(4, 1); }
+__kernel void coma_s8(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(8, 1); }
+__kernel void coma_s12(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(12, 1); }
+__kernel void coma_s16(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(16, 1); }
+__kernel void coma_s24(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(24, 1); }
+__kernel void coma_s32(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(32, 1); }
+__kernel void coma_s48(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(48, 1); }
+__kernel void coma_s64(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(64, 1); }
+__kernel void coma_s96(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(96, 1); }
+__kernel void coma_s128(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(128, 1); }
+__kernel void coma_s192(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(192, 1); }
+__kernel void coma_s256(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(256, 1); }
+__kernel void coma_c4(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(4, 0); }
+__kernel void coma_c8(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(8, 0); }
+__kernel void coma_c12(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(12, 0); }
+__kernel void coma_c16(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(16, 0); }
+__kernel void coma_c24(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(24, 0); }
+__kernel void coma_c32(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(32, 0); }
+__kernel void coma_c48(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(48, 0); }
+__kernel void coma_c64(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(64, 0); }
+__kernel void coma_c96(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(96, 0); }
+__kernel void coma_c128(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(128, 0); }
+__kernel void coma_c192(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(192, 0); }
+__kernel void coma_c256(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(256, 0); }

@@ -23,7 +23,8 @@ def test_not_planned_without_coma_and_identity_when_skipped(rng):
 
 @pytest.mark.parametrize("w,h,kw", [(37, 23, dict(coma_mm=0.9)), (23, 37, dict(coma_mm=-40.0)),
                                     (41, 29, dict(lens=FLAGSHIP, f_number=1.4)),
-                                    (133, 77, dict(coma_mm=0.1)), (131, 85, dict(coma_mm=-0.15))])
+                                    (133, 77, dict(coma_mm=0.1)), (131, 85, dict(coma_mm=-0.15)),
+                                    (160, 90, dict(lens=FLAGSHIP, f_number=2.0))])
 def test_kernel_matches_reference(rng, w, h, kw):
     frame = odd_frame(rng, w=w, h=h, scale=10.0)
     color = frame.color.copy()
@@ -130,7 +131,7 @@ def test_uniform_tiles_bound_the_per_pixel_landing_points():
         t = fld.per_pixel(st.tile_axes_px(cam, w, h), w, h)
         mask = fld.per_pixel(uni, w, h)
         worst = 0.0
-        for ts, tr in coma.comet_offsets(fld.vogel_disc(st.taps).astype(np.float64)):
+        for ts, tr in coma.comet_offsets(fld.vogel_disc(st.uniform_taps).astype(np.float64)):
             d = np.hypot(c * (ts * ey - tr * ex) - (t[..., 0] * ts + t[..., 2] * tr),
                          c * (-ts * ex - tr * ey) - (t[..., 1] * ts + t[..., 3] * tr))
             worst = max(worst, float(d[mask].max()))
@@ -148,3 +149,90 @@ def test_device_comet_is_recomputed_when_the_camera_changes(rng):
         pipe.camera = cam
         out, ref = pipe.run(f).color, pipe.reference(f)
         assert np.abs(out - ref).max() < 2e-3 * np.abs(ref).max(), cam.coma_mm
+
+
+def _apply_stencils(st, cam, color):
+    """float64 numpy application of Coma.uniform_stencils (what coma_s<S> computes)."""
+    h, w = color.shape[:2]
+    _, dc, q, _, _ = st.c_px(cam, w, h)
+    a, b = dc + q, dc * q
+    ntx, _ = fld.tiles(w, h)
+    out = np.full_like(color, np.nan)
+    for size, _, ids, dx, dy, wts in st.uniform_stencils(cam, w, h):
+        assert size in coma.STENCIL_SIZES and dx.shape == (ids.size, size) and wts.shape == (ids.size, size, 4)
+        for t, sx, sy, sw in zip(ids, dx, dy, wts):
+            x0, y0 = (t % ntx) * fld.TILE_W, (t // ntx) * fld.TILE_H
+            ys, xs = np.mgrid[y0:min(y0 + fld.TILE_H, h), x0:min(x0 + fld.TILE_W, w)].astype(np.float64)
+            blk = (slice(y0, y0 + fld.TILE_H), slice(x0, x0 + fld.TILE_W))
+            acc = 0.0
+            for ox, oy, (w0, w1, w2, w3) in zip(sx, sy, sw):
+                assert w3 == 0.0
+                acc = acc + (w0 - a[blk] * w1 + b[blk] * w2)[..., None] * fld.bilinear_padded(color, xs + ox, ys + oy)
+            out[blk] = acc
+    return out
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_uniform_stencils_regroup_the_taps_exactly(rng, quality):
+    """The uniform tiles' stencils (taps merged per integer offset, the Jacobian through three
+    tap moments, or folded into W0 where the tile has one) give the reference's tap-by-tap sum to
+    float64 rounding, with per-pixel Jacobians (traced lens) and folded ones (linear coma); a
+    folded W0 sums to the mean Jacobian; at most 4N offsets, and short comets need few."""
+    st = coma.Coma(quality)
+    for cam, w, h in ((Camera(coma_mm=0.1), 133, 77), (Camera(lens=FLAGSHIP, f_number=2.0), 160, 90)):
+        uni = st.tile_uniform(cam, w, h)
+        const = st.tile_jacobian(cam, w, h)[2]
+        assert uni.all() and const.all() if cam.coma_mm else uni.any() and not const[uni].any()
+        color = rng.uniform(0.0, 10.0, (h, w, 3))
+        color[5, 7] = 1e8
+        ref = st.reference(cam, Frame(color.astype(np.float32)), color)
+        mask = fld.per_pixel(uni, w, h)[..., None]
+        got = np.where(mask, _apply_stencils(st, cam, color), ref)  # the window tiles are not stencils
+        err = np.abs(got - ref) / np.maximum(np.abs(ref), 1.0)
+        j = np.unravel_index(int(np.argmax(err)), err.shape)
+        assert err.max() < 1e-9, f"max rel error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
+    sizes = {}
+    for size, const, ids, dx, dy, wts in st.uniform_stencils(Camera(coma_mm=0.087), 640, 360):
+        assert const  # a linear coefficient: one Jacobian per tile (a = 2k, b = k²), folded into W0
+        k = 0.087 / 3 / (np.hypot(36, 24) / 2)
+        t = coma.comet_offsets(fld.vogel_disc(st.uniform_taps).astype(np.float64))
+        mean_jac = np.mean(1 - 2 * k * t[:, 1] + k * k * (t * t).sum(1))
+        np.testing.assert_allclose(wts[..., 0].sum(1), mean_jac, rtol=1e-12)
+        n_used = (wts[..., 0] > 0).sum(1)
+        assert n_used.max() <= min(size, 4 * st.uniform_taps)
+        sizes[size] = ids.size
+    # the benchmark's comets (<= 1.5 px at 640 px wide) need at most 16 offsets, whatever N
+    assert max(sizes) <= 16 and min(sizes) == 4, sizes
+
+
+def test_uniform_tiles_never_clamp_the_jacobian():
+    """The stencil is exact only where no tap's Jacobian reaches its clamp at 0: on every tile
+    tile_uniform accepts, the unclamped J of every tap and pixel is >= 0 (steep coefficients and
+    the traced lens; a huge coma is capped and takes the window kernel)."""
+    for cam, w, h in ((Camera(coma_mm=0.1), 133, 77), (Camera(coma_mm=-40.0), 23, 37),
+                      (Camera(coma_mm=3.0), 61, 41), (Camera(lens=FLAGSHIP, f_number=2.0), 320, 180)):
+        st = coma.Coma("final")
+        uni = fld.per_pixel(st.tile_uniform(cam, w, h), w, h)
+        _, dc, q, _, _ = st.c_px(cam, w, h)
+        for ts, tr in coma.comet_offsets(fld.vogel_disc(st.taps).astype(np.float64)):
+            jac = (1.0 - dc * tr) * (1.0 - q * tr) + q * dc * ts * ts
+            assert jac[uni].min(initial=1.0) >= 0.0, (cam.coma_mm, w, h)
+    assert not coma.Coma("final").tile_uniform(Camera(coma_mm=-40.0), 23, 37).any()
+
+
+def test_inner_tiles_read_the_source_and_the_pad_fills_only_the_ring(rng):
+    """Uniform tiles whose reads stay inside the frame read the source; coma_pad then leaves the
+    padded copy's inside unwritten (stale from the previous frame): a second, different frame
+    must still match the reference everywhere (odd size, so partial tiles border the ring)."""
+    w, h = 197, 121
+    st = coma.Coma("final")
+    cam = Camera(coma_mm=0.1)
+    inner = st.inner_tiles(w, h)
+    assert st.tile_uniform(cam, w, h).all() and 0.2 < inner.mean() < 0.8
+    pipe = Pipeline(cam, stages=["coma"])
+    for scale in (1e4, 3.0):  # a bright frame first: stale values would show in the second
+        frame = Frame(odd_frame(rng, w=w, h=h, scale=scale).color)
+        out, ref = pipe.run(frame).color, pipe.reference(frame)
+        err = np.abs(out - ref) / np.maximum(np.abs(ref), 1.0)
+        j = np.unravel_index(int(np.argmax(err)), err.shape)
+        assert err.max() < 2e-4, f"max rel error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"

@@ -46,7 +46,7 @@ every source point is conserved (a scatter's property) up to the bilinear resamp
 A uniform field is therefore *not* left exactly uniform: coma moves the energy centroid outward by
 C(r), which dims it by :math:`\langle J\rangle \approx 1 - 2C/r`, as a magnification would. The
 comet length is capped at 15 px (C' = 0 where capped). Quality sets N: draft 16, preview 32,
-final 64.
+final 64 (on the window tiles; the uniform tiles take 64 at every quality, "Stencils" below).
 
 **Tiles (speed).** PoCL vectorises a gather across pixels only when every work-item of a group
 reads at the same offsets (PERFORMANCE.md). The comet changes slowly with field height, so the
@@ -62,12 +62,43 @@ reference does the same). ≈ 10× faster than per-pixel addresses on the 2-core
 **Uniform tiles.** Where a bound on the distance between any pixel's landing point and the tile
 centre's, :math:`\max_k \| |t_{k,s}|\,m_s + |t_{k,r}|\,m_r \|` (m the largest deviation of the
 pixels' :math:`-C e_s, -C e_r` from the centre's, per axis), is at most ``UNIFORM_PX`` = 0.05 px,
-every pixel of the tile takes the tile centre's comet: each tap is one bilinear sample at a
-tile-uniform offset with tile-uniform weights, times the pixel's own Jacobian (``coma_uniform``,
-explicit float16 vectors; 12 reads per tap instead of 27). A linear coefficient makes the comet
-field affine, so all tiles deviate alike: the benchmark's ``coma_mm`` 0.087 mm at 1080p stays
-below 0.035 px everywhere; the flagship wide open (0.22 px) keeps the window kernel. The
-reference takes the same tile plan (``tile_uniform``).
+every pixel of the tile takes the tile centre's comet, times the pixel's own Jacobian. A linear
+coefficient makes the comet field affine, so all tiles deviate alike: the benchmark's ``coma_mm``
+0.087 mm at 1080p stays below 0.035 px everywhere; the flagship wide open (0.22 px) keeps the
+window kernel. The reference takes the same tile plan (``tile_uniform``).
+
+**Stencils (speed of the uniform tiles).** There every pixel's N bilinear taps land on the same
+integer offsets :math:`d`, and the Jacobian is linear in three moments of the tap,
+
+.. math::
+
+    J_k = 1 - a\,t_{k,r} + b\,(t_{k,r}^2 + t_{k,s}^2), \qquad a = C' + C/r,\ b = C'\,C/r,
+
+so the gather regroups exactly into a per-tile stencil (``uniform_stencils``, built on the host
+once per camera and frame size):
+
+.. math::
+
+    C'(x) = \sum_d \big(W_0(d) - a(x)\,W_1(d) + b(x)\,W_2(d)\big)\,C_{in}(x + d), \qquad
+    W_j(d) = \frac1N\sum_{k:\ \text{corner of } k \text{ at } d} c_k\,m_{j,k}
+
+(:math:`c_k` the bilinear corner weight, :math:`m_k = (1, t_{k,r}, t_{k,r}^2 + t_{k,s}^2)`),
+valid where the clamp of J at 0 cannot act — ``tile_uniform`` also requires :math:`1 -
+A\max_k t_{k,r} - B\max_k(t_{k,r}^2 + t_{k,s}^2) \ge 0` with A, B the tile's largest |a|, |b|.
+It reads 3 values per offset instead of 12 per tap, and the number of offsets follows the comet's
+area, not N: at most 4N, 4 for a comet inside one pixel cell (where a copy would save nothing
+measurable but would drop the comet and the Jacobian's dimming), 4–24 for the benchmark's
+(≤ 4.4 px) comets. Tiles whose reads (|d| ≤ 16 px) stay inside the frame read the source
+(``inner_tiles``), so the pad pass only fills the border ring when no window tile runs. One
+kernel per stencil size (``STENCIL_SIZES``, zero-weight padding, a compile-time loop). Same
+model as the tap-by-tap gather (float32 rounding only); as N no longer sets the cost there, the
+uniform tiles take ``UNIFORM_TAPS`` (64) at every quality. Where all pixels of a uniform tile
+have the same a and b within ``CONST_JAC_TOL`` (a linear coefficient: a = 2k, b = k²
+everywhere), the Jacobian is folded into W0 on the host (``tile_jacobian``; coma_c<S>: no
+per-pixel reads of C', C/r, one scalar weight per offset; ×1.05–1.16 in one process). 1080p
+no_defocus, old (tap-by-tap, 16 pixels per work-item) vs new in one process, interleaved
+(``tools/ab_gathers.py --truth final``, two runs): draft ×2.1–2.4 with final's accuracy (99.9th
+percentile |draft − final| 3.3 → 2e-6 on values 0.08–500), final ×4.7–5.3.
 
 Domain/range: colour ≥ 0 → convex combination of input colours.
 """
@@ -83,6 +114,14 @@ from .base import GatherStage
 TAPS = {"draft": 16, "preview": 32, "final": 64}
 MAX_TAIL_PX = fld.PAD - 1
 UNIFORM_PX = 0.05
+UNIFORM_TAPS = TAPS["final"]
+"""Pupil samples of the uniform tiles at every quality (their stencil merges the taps)."""
+CONST_JAC_TOL = 1e-6
+"""Uniform tiles whose pixels' Jacobians all lie within this of the tile's mean one take the mean
+(``Coma.tile_jacobian``; coma_c<S>: no per-pixel shape reads, one scalar weight per offset)."""
+STENCIL_SIZES = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256)
+"""Stencil sizes of the uniform tiles (one kernel each, ``coma_s<S>``): N taps of 4 bilinear
+corners each reach at most 4N ≤ 256 integer offsets (fewer where the comet is short)."""
 """Tiles whose pixels' landing points are all within this (px) of the tile centre's take the
 tile centre's comet (``Coma.tile_uniform``)."""
 RHO_FIT = 0.7
@@ -156,6 +195,12 @@ class Coma(GatherStage):
     def taps(self) -> int:
         return TAPS[self.quality]
 
+    @property
+    def uniform_taps(self) -> int:
+        """Taps of the uniform tiles: always the densest spiral (their stencil's cost follows the
+        comet's area, not the tap count: module docstring, "Stencils")."""
+        return max(self.taps, UNIFORM_TAPS)
+
     def _lut(self, camera) -> np.ndarray:
         fn = coma_curve(camera)
         return fld.sample_lut(lambda r: (fn(r), derivative(fn, r)), camera, 2)
@@ -227,47 +272,154 @@ class Coma(GatherStage):
                        np.float32(pitch), np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
             events.append(cl.enqueue_nd_range_kernel(q, k, (ow, oh), None))
             b["shape_key"] = shape_key
-        k = self._kernel(rt, camera, "coma_pad", whole)
-        k.set_args(src, b["pad"], np.int32(w), np.int32(h), np.int32(ow + 2 * fld.PAD), np.int32(oh + 2 * fld.PAD))
-        events.append(cl.enqueue_nd_range_kernel(q, k, (ow + 2 * fld.PAD, oh + 2 * fld.PAD), None))
         lists = self._tile_lists(rt, camera, w, h)
-        for name, ids, n_ids, vec in (("coma_uniform", lists["uniform"], lists["n_uniform"], 16),
-                                      ("coma", lists["window"], lists["n_window"], 16)):
-            if not n_ids:
-                continue
+        k = self._kernel(rt, camera, "coma_pad", whole)
+        k.set_args(src, b["pad"], np.int32(w), np.int32(h), np.int32(ow + 2 * fld.PAD), np.int32(oh + 2 * fld.PAD),
+                   *(np.int32(v) for v in lists["skip"]))
+        # 16 pixels of a padded row per work-item
+        events.append(cl.enqueue_nd_range_kernel(q, k, ((ow + 2 * fld.PAD) // 16, oh + 2 * fld.PAD), None))
+        group = (fld.TILE_W // 16, fld.TILE_H)  # 16 pixels (a float16) per work-item
+        args = (np.int32(ntx), np.int32(nty), np.int32(w), np.int32(h))
+        if lists["n_window"]:
+            k = self._kernel(rt, camera, "coma", whole)
+            k.set_args(b["pad"], b["shape"], dst, b["tiles"], lists["window"], *args)
+            events.append(cl.enqueue_nd_range_kernel(q, k, (group[0] * lists["n_window"], group[1]), group))
+        for name, ids, n_ids, inner, offs, wts in lists["stencils"]:
+            # one kernel per stencil size (a compile-time loop count) and Jacobian kind
             k = self._kernel(rt, camera, name, whole)
-            k.set_args(b["pad"], b["shape"], dst, b["tiles"], ids, np.int32(ntx), np.int32(nty),
-                       np.int32(w), np.int32(h))
-            # 16 pixels (a float16) per work-item
-            events.append(cl.enqueue_nd_range_kernel(q, k, (fld.TILE_W // vec * n_ids, fld.TILE_H),
-                                                     (fld.TILE_W // vec, fld.TILE_H)))
+            k.set_args(b["pad"], src, b["shape"], dst, ids, inner, offs, wts, *args)
+            events.append(cl.enqueue_nd_range_kernel(q, k, (group[0] * n_ids, group[1]), group))
         return events
 
     def _tile_lists(self, rt, camera, w, h) -> dict:
-        """Device lists of the tiles for coma_uniform and for the window kernel (uploaded once
-        per camera map, frame size and tap count: coma does not depend on the frame's content)."""
+        """Device lists of the tiles for the window kernel and, per stencil size, the uniform
+        tiles with their stencils (uploaded once per camera map, frame size and tap count: coma
+        does not depend on the frame's content)."""
         import pyopencl as cl
 
         key = (id(rt.context), self._uniform_key(camera, w, h))
         if self._lists_key != key:
-            uni = self.tile_uniform(camera, w, h).ravel()
             mk = lambda a: cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,  # noqa: E731
-                                     hostbuf=a if a.size else np.zeros(1, np.int32))
-            a, b = np.flatnonzero(uni).astype(np.int32), np.flatnonzero(~uni).astype(np.int32)
-            self._lists_key, self._lists = key, dict(uniform=mk(a), n_uniform=a.size, window=mk(b), n_window=b.size)
+                                     hostbuf=np.ascontiguousarray(a) if a.size else np.zeros(1, np.int32))
+            window = np.flatnonzero(~self.tile_uniform(camera, w, h).ravel()).astype(np.int32)
+            inner = self.inner_tiles(w, h).ravel()
+            stencils = [(f"coma_{'c' if const else 's'}{size}", mk(ids), ids.size, mk(inner[ids].astype(np.int32)),
+                         mk(np.stack([dx, dy], -1).astype(np.int32)), mk(wts.astype(np.float32)))
+                        for size, const, ids, dx, dy, wts in self.uniform_stencils(camera, w, h)]
+            # the padded copy's inside that no tile reads (padded coordinates, x0, x1, y0, y1): the
+            # inner tiles read the source, and the border tiles' reads (|d| <= PAD) stay within
+            # 2 PAD + tile of the frame's edge; the window kernel reads the padded copy everywhere
+            p, tw, th = fld.PAD, fld.TILE_W, fld.TILE_H
+            skip = (0, 0, 0, 0) if window.size else (3 * p + tw, w - p - tw, 3 * p + th, h - p - th)
+            self._lists_key, self._lists = key, dict(window=mk(window), n_window=window.size, stencils=stencils,
+                                                     skip=skip)
         return self._lists
+
+    @staticmethod
+    def inner_tiles(w: int, h: int) -> np.ndarray:
+        """Per tile: whether every read of a stencil (offsets |d| ≤ PAD) lies inside the frame, so
+        the tile reads the source planes rather than the padded copy."""
+        ntx, nty = fld.tiles(w, h)
+        ty, tx = np.mgrid[0:nty, 0:ntx]
+        x0, y0 = tx * fld.TILE_W, ty * fld.TILE_H
+        return ((x0 >= fld.PAD) & (x0 + fld.TILE_W + fld.PAD <= w)
+                & (y0 >= fld.PAD) & (y0 + fld.TILE_H + fld.PAD <= h))
 
     def _uniform_key(self, camera, w, h):
         return (self._lut(camera).tobytes(), w, h, fld.pitch_mm(camera, w), self.taps)
 
     def tile_uniform(self, camera, w: int, h: int) -> np.ndarray:
-        """Per tile (tiles_y, tiles_x) bool: a bound on the distance between any pixel's landing
-        point and the tile centre's, over its pixels and the taps, is ≤ ``UNIFORM_PX`` — those
-        tiles take the tile centre's comet for every pixel (memoised)."""
+        r"""Per tile (tiles_y, tiles_x) bool: a bound on the distance between any pixel's landing
+        point and the tile centre's, over its pixels and the taps, is ≤ ``UNIFORM_PX``, and no
+        tap's Jacobian can reach its clamp at 0 (:math:`1 - A\max_k t_{k,r} - B\max_k(t_{k,r}^2
+        + t_{k,s}^2) \ge 0`, A and B the tile's largest :math:`|C' + C/r|` and :math:`|C'\,C/r|`,
+        so the Jacobian is linear in the taps' moments) — those tiles take the tile centre's comet
+        for every pixel, as a stencil (memoised)."""
         key = self._uniform_key(camera, w, h)
         if self._uniform[0] != key:
-            self._uniform = (key, self.uniform_bound_px(camera, w, h) <= UNIFORM_PX)
+            _, dc, q, _, _ = self.c_px(camera, w, h)
+            ntx, nty = fld.tiles(w, h)
+            big = np.zeros((2, nty * fld.TILE_H, ntx * fld.TILE_W))
+            big[0, :h, :w], big[1, :h, :w] = np.abs(dc + q), np.abs(dc * q)
+            a, b = big.reshape(2, nty, fld.TILE_H, ntx, fld.TILE_W).max(axis=(2, 4))
+            t = comet_offsets(fld.vogel_disc(self.uniform_taps).astype(np.float64))
+            no_clamp = 1.0 - a * t[:, 1].max() - b * (t * t).sum(1).max() >= 0.0
+            self._uniform = (key, (self.uniform_bound_px(camera, w, h) <= UNIFORM_PX) & no_clamp)
         return self._uniform[1]
+
+    def uniform_stencils(self, camera, w: int, h: int) -> list:
+        r"""The uniform tiles' taps merged per integer offset, grouped by stencil size: a list of
+        (S, constant Jacobian, tile ids, dx, dy, weights) with dx, dy (tiles, S) int offsets and weights (tiles, S, 4)
+        float64: per offset the sums over the taps k of the bilinear weight c_k of the tile
+        centre's landing point times :math:`(1, t_{k,r}, t_{k,r}^2 + t_{k,s}^2)/N` and a 0, padded
+        with zero weights to S, the smallest of ``STENCIL_SIZES`` that holds the tile's offsets.
+        A pixel's output is :math:`\sum_s (W_0 - a W_1 + b W_2)\,C_{in}(x + d_s)`, a = C' + C/r,
+        b = C' C/r: the tap-by-tap sum of the reference regrouped. On the tiles ``tile_jacobian``
+        gives one Jacobian, W0 holds :math:`W_0 - \bar a W_1 + \bar b W_2` and W1 = W2 = 0."""
+        uni = self.tile_uniform(camera, w, h).ravel()
+        ids = np.flatnonzero(uni)
+        if not ids.size:
+            return []
+        ax = self.tile_axes_px(camera, w, h).reshape(-1, 4)[ids]
+        t = comet_offsets(fld.vogel_disc(self.uniform_taps).astype(np.float64))
+        lx = ax[:, 0:1] * t[:, 0] + ax[:, 2:3] * t[:, 1]  # (tiles, taps): the tile's landing points
+        ly = ax[:, 1:2] * t[:, 0] + ax[:, 3:4] * t[:, 1]
+        ix, iy = np.floor(lx), np.floor(ly)
+        fx, fy = lx - ix, ly - iy
+        mom = np.stack([np.ones(len(t)), t[:, 1], (t * t).sum(1)], -1) / len(t)  # (taps, 3)
+        g = 2 * fld.PAD + 2  # offsets lie in [-PAD, PAD]: a key per (tile, dy, dx)
+        keys, wsum = [], []
+        for ox, oy, c in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)), (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
+            keys.append((np.arange(ids.size)[:, None] * g + (iy + oy + fld.PAD)) * g + (ix + ox + fld.PAD))
+            wsum.append(c[..., None] * mom)
+        keys = np.concatenate(keys, 1).astype(np.int64).ravel()
+        wsum = np.concatenate(wsum, 1).reshape(-1, 3)
+        uniq, inv = np.unique(keys, return_inverse=True)
+        wts = np.stack([np.bincount(inv, weights=wsum[:, j], minlength=uniq.size) for j in range(3)], -1)
+        keep = np.any(wts != 0.0, axis=1)  # corners with bilinear weight 0 read nothing
+        uniq, wts = uniq[keep], wts[keep]
+        tile, rem = np.divmod(uniq, g * g)
+        dy, dx = np.divmod(rem, g)
+        count = np.bincount(tile, minlength=ids.size)
+        start = np.concatenate([[0], np.cumsum(count)[:-1]])
+        rank = np.arange(uniq.size) - start[tile]
+        # tiles with one Jacobian for all pixels: its moments folded into W0 (W1 = W2 = 0)
+        a_t, b_t, const = (v.ravel()[ids] for v in self.tile_jacobian(camera, w, h))
+        fold = const[tile]
+        wts[fold, 0] = wts[fold, 0] - a_t[tile[fold]] * wts[fold, 1] + b_t[tile[fold]] * wts[fold, 2]
+        wts[fold, 1:] = 0.0
+        sizes = np.asarray(STENCIL_SIZES)
+        cls = np.searchsorted(sizes, count) + len(sizes) * const  # the smallest size >= count
+        out = []
+        for ci in np.unique(cls):
+            size = int(sizes[ci % len(sizes)])
+            sel_t = np.flatnonzero(cls == ci)
+            row = np.full(ids.size, -1)
+            row[sel_t] = np.arange(sel_t.size)
+            e = row[tile] >= 0
+            sdx, sdy = np.zeros((sel_t.size, size), np.int64), np.zeros((sel_t.size, size), np.int64)
+            sw = np.zeros((sel_t.size, size, 4))
+            sdx[row[tile[e]], rank[e]] = dx[e] - fld.PAD
+            sdy[row[tile[e]], rank[e]] = dy[e] - fld.PAD
+            sw[row[tile[e]], rank[e], :3] = wts[e]
+            out.append((size, bool(ci >= len(sizes)), ids[sel_t].astype(np.int32), sdx, sdy, sw))
+        return out
+
+    def tile_jacobian(self, camera, w: int, h: int):
+        r"""Per tile (tiles_y, tiles_x): the mean of a = C' + C/r and b = C' C/r over its pixels,
+        and whether a Jacobian with them differs from every pixel's own by at most
+        ``CONST_JAC_TOL`` (:math:`\max|a - \bar a|\,\max_k t_{k,r} + \max|b - \bar b|\,
+        \max_k (t_{k,r}^2 + t_{k,s}^2)`): exact for a linear coefficient (a = 2k, b = k²)."""
+        _, dc, q, _, _ = self.c_px(camera, w, h)
+        ntx, nty = fld.tiles(w, h)
+        big = np.full((2, nty * fld.TILE_H, ntx * fld.TILE_W), np.nan)
+        big[0, :h, :w], big[1, :h, :w] = dc + q, dc * q
+        blk = big.reshape(2, nty, fld.TILE_H, ntx, fld.TILE_W)
+        mean = np.nanmean(blk, axis=(2, 4))
+        dev = np.nanmax(np.abs(blk - mean[:, :, None, :, None]), axis=(2, 4))
+        t = comet_offsets(fld.vogel_disc(self.uniform_taps).astype(np.float64))
+        const = dev[0] * t[:, 1].max() + dev[1] * (t * t).sum(1).max() <= CONST_JAC_TOL
+        return mean[0], mean[1], const
 
     def uniform_bound_px(self, camera, w: int, h: int) -> np.ndarray:
         """Per tile: :math:`\\max_k \\| (|t_{k,s}| m_{sx} + |t_{k,r}| m_{rx},\\ |t_{k,s}| m_{sy} +
@@ -280,7 +432,7 @@ class Coma(GatherStage):
         big = np.zeros((4, nty * fld.TILE_H, ntx * fld.TILE_W))
         big[:, :h, :w] = dev
         m = big.reshape(4, nty, fld.TILE_H, ntx, fld.TILE_W).max(axis=(2, 4))
-        t = np.abs(comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)))[:, :, None, None]
+        t = np.abs(comet_offsets(fld.vogel_disc(self.uniform_taps).astype(np.float64)))[:, :, None, None]
         return np.hypot(t[:, 0] * m[0] + t[:, 1] * m[2], t[:, 0] * m[1] + t[:, 1] * m[3]).max(0)
 
     # -- the oracle -------------------------------------------------------------------------
@@ -323,30 +475,41 @@ class Coma(GatherStage):
 
     def reference(self, camera, frame, color):
         """float64 numpy implementation of the module docstring (exact C(r), no LUT; the landing
-        point clamped to the tile's 3 × 3 window as the kernel does, the tile centre's landing
-        point on the ``tile_uniform`` tiles)."""
+        point clamped to the tile's 3 × 3 window as the kernel does; the tile centre's landing
+        point and ``uniform_taps`` taps on the ``tile_uniform`` tiles, with the tile's mean
+        Jacobian where ``tile_jacobian`` allows)."""
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
         c, dc, q, ex, ey = self.c_px(camera, w, h)
         tsxx, tsxy, trxx, trxy = np.moveaxis(fld.per_pixel(self.tile_axes_px(camera, w, h), w, h), -1, 0)
         xs, ys = np.mgrid[0:h, 0:w].astype(np.float64)[::-1]
         uniform = fld.per_pixel(self.tile_uniform(camera, w, h), w, h)
-        acc = np.zeros_like(color)
-        for ts, tr in comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)):
-            # sagittal e_s = (-ey, ex), radial e_r = (ex, ey); gather from x - ε
-            ox = c * (ts * -ey + tr * ex)
-            oy = c * (ts * ex + tr * ey)
-            # the tile's window: centre b = round(tile centre's -ε), the landing point within ±1 px
-            bx = np.floor(tsxx * ts + trxx * tr + 0.5)
-            by = np.floor(tsxy * ts + trxy * tr + 0.5)
-            px = xs + bx + np.clip(-ox - bx, -1.0, 1.0)
-            py = ys + by + np.clip(-oy - by, -1.0, 1.0)
-            # uniform tiles: the tile centre's landing point for every pixel
-            px = np.where(uniform, xs + tsxx * ts + trxx * tr, px)
-            py = np.where(uniform, ys + tsxy * ts + trxy * tr, py)
-            jac = np.maximum((1.0 - dc * tr) * (1.0 - q * tr) + q * dc * ts * ts, 0.0)
-            acc += fld.bilinear_padded(color, px, py) * jac[..., None]
-        return acc / self.taps
+        a_t, b_t, const = (fld.per_pixel(v, w, h) for v in self.tile_jacobian(camera, w, h))
+        a_px, b_px = np.where(const, a_t, dc + q), np.where(const, b_t, dc * q)
+        out = np.zeros_like(color)
+        for uni, n in ((False, self.taps), (True, self.uniform_taps)):
+            if not np.any(uniform == uni):
+                continue
+            acc = np.zeros_like(color)
+            for ts, tr in comet_offsets(fld.vogel_disc(n).astype(np.float64)):
+                if uni:  # uniform tiles: the tile centre's landing point for every pixel
+                    px, py = xs + tsxx * ts + trxx * tr, ys + tsxy * ts + trxy * tr
+                else:
+                    # sagittal e_s = (-ey, ex), radial e_r = (ex, ey); gather from x - ε
+                    ox = c * (ts * -ey + tr * ex)
+                    oy = c * (ts * ex + tr * ey)
+                    # the tile's window: centre b = round(tile centre's -ε), the landing point within ±1 px
+                    bx = np.floor(tsxx * ts + trxx * tr + 0.5)
+                    by = np.floor(tsxy * ts + trxy * tr + 0.5)
+                    px = xs + bx + np.clip(-ox - bx, -1.0, 1.0)
+                    py = ys + by + np.clip(-oy - by, -1.0, 1.0)
+                if uni:  # 1 - a t_r + b (t_r² + t_s²), the tile's mean a, b where tile_jacobian says so
+                    jac = np.maximum(1.0 - a_px * tr + b_px * (tr * tr + ts * ts), 0.0)
+                else:
+                    jac = np.maximum((1.0 - dc * tr) * (1.0 - q * tr) + q * dc * ts * ts, 0.0)
+                acc += fld.bilinear_padded(color, px, py) * jac[..., None]
+            out[uniform == uni] = (acc / n)[uniform == uni]
+        return out
 
 
 def derivative(fn, r_mm, step_mm: float = 1e-3) -> np.ndarray:
