@@ -42,8 +42,8 @@ import numpy as np
 from .atomic import atomic_path
 from .camera import Camera
 from .frame import Frame
-from .pipeline import AUX_BUFFERS, Pipeline
-from .stages import GatherStage, registry
+from .pipeline import AUX_BUFFERS, Pipeline, resized_view
+from .stages import GatherStage, PointwiseStage, registry
 
 SCHEMA_VERSION = 1
 DEFAULT_SIZES = ((640, 360), (1280, 720), (1920, 1080), (3840, 2160))
@@ -158,7 +158,7 @@ SCENES: dict[str, Scene] = {s.name: s for s in (
 def launch_bytes(stages, camera: Camera, frame: Frame, in_size: tuple[int, int],
                  out_size: tuple[int, int]) -> int:
     """Bytes one kernel launch moves: RGB read once at ``in_size`` and written once at
-    ``out_size``, plus each auxiliary buffer its stages read (once). A stage with
+    ``out_size``, plus each auxiliary buffer and pointwise table its stages read (once). A stage with
     ``bench_bytes(camera, frame)`` declares its own (a gather launch only)."""
     if len(stages) == 1 and hasattr(stages[0], "bench_bytes"):
         return int(stages[0].bench_bytes(camera, frame))
@@ -167,6 +167,10 @@ def launch_bytes(stages, camera: Camera, frame: Frame, in_size: tuple[int, int],
     for aux in AUX_BUFFERS:
         if any(aux in s.reads for s in stages):
             b += BYTES_PER_PIXEL[aux] * n_in
+    view = frame if frame.size == tuple(in_size) else resized_view(frame, tuple(in_size), {}, "bench")
+    for s in stages:  # a pointwise stage's tables (vignetting's per-pixel RI plane, film's LUT)
+        if isinstance(s, PointwiseStage):
+            b += sum(np.asarray(v).nbytes for (t, _), v in zip(s.args, s.values(camera, view)) if "*" in t)
     return b
 
 

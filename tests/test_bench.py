@@ -16,7 +16,7 @@ def test_launch_bytes_counts_each_buffer_once():
     pipe = Pipeline(cam)
     (L,) = bench.launches(pipe, f, pipe.camera_for(f))
     assert L["kernel"] == "vignetting__exposure" and L["kind"] == "pointwise"
-    assert L["bytes"] == 37 * 23 * (12 + 12)  # RGB in + RGB out, no aux buffer read
+    assert L["bytes"] == 37 * 23 * (12 + 12 + 4)  # RGB in + RGB out + the RI plane, no aux buffer
 
 
 def test_launch_bytes_with_aux_and_taps():
