@@ -298,7 +298,8 @@ class Astigmatism(GatherStage):
                    np.float32(cx), np.float32(cy), np.float32(fld.pitch_mm(camera, w)),
                    np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)),
                    np.float32(aperture), np.float32(v), np.float32(1.0 / f))
-        events.append(cl.enqueue_nd_range_kernel(q, k, (pw, ph), None))
+        # 16 pixels of a padded row per work-item (pw is a multiple of 16)
+        events.append(cl.enqueue_nd_range_kernel(q, k, (pw // 16, ph), None))
         nclass = len(self.tap_classes()) + 2
         events.append(cl.enqueue_copy(q, b["counts"], np.zeros(nclass, np.int32), is_blocking=False))
         k = self._kernel(rt, camera, "astigmatism_tiles", whole)
