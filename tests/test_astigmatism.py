@@ -253,3 +253,31 @@ def test_copy_threshold_error_bound():
         worst[kind] = np.abs(out - col).max()
     assert max(worst["edge"], worst["edge45"]) < 0.01 and worst["point"] < 0.02, worst
     assert worst["point"] > 0.005  # a real (small) blur: the bound is not vacuous
+
+
+@pytest.mark.parametrize("fn,fc,a,kinds", [(2.0, -0.3, 0.25, {"copy", "gather"}),
+                                         (1.4, -0.5, 0.6, {"gather", "exact"})])
+def test_inner_tiles_read_the_source_and_the_pad_fills_only_the_ring(rng, fn, fc, a, kinds):
+    """Tiles whose reads stay inside the frame read the source planes, and astigmatism_pad leaves
+    the padded copy's inside unwritten (stale from the previous frame): a second, different frame
+    must still match the reference everywhere, with inner tiles of every kind (copied, gathered,
+    exact; two cameras) and partial tiles beside the ring (odd size)."""
+    w, h = 131, 101
+    cam = Camera(lens="thin:50", f_number=fn, focus_distance_m=3.0, field_curvature_mm=fc, astigmatism_mm=a)
+    depth = np.full((h, w), 3.0, np.float32)
+    depth[:, 70:] = np.geomspace(1.0, 50.0, w - 70)  # defocused columns inside the ring
+    depth[40:60, 75:90] = 3.0  # and a depth edge there
+    stage = ast.Astigmatism("final")
+    inner = stage.inner_tiles(w, h)
+    x0, x1, y0, y1 = stage.ring(w, h)
+    assert 0 < x0 < x1 <= w and 0 < y0 < y1 <= h and 0.1 < inner.mean() < 0.9
+    pipe = Pipeline(cam, stages=["astigmatism"], quality="final")
+    for scale in (1e4, 3.0):  # a bright frame first: stale values would show in the second
+        frame = Frame(odd_frame(rng, w=w, h=h, scale=scale).color, depth=depth)
+        *_, exact, taps = stage.tile_plan(cam, frame)
+        got = {"exact" if e else ("copy" if t == 0 else "gather") for e, t in zip(exact[inner], taps[inner])}
+        assert kinds <= got, got
+        out, ref = pipe.run(frame).color, pipe.reference(frame)
+        err = np.abs(out - ref) / np.maximum(np.abs(ref), 1.0)
+        j = np.unravel_index(int(np.argmax(err)), err.shape)
+        assert err.max() < 1e-3, f"scale {scale}: max rel error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
