@@ -152,6 +152,7 @@ __kernel void astigmatism_pad(__global const float *restrict src, __global const
  * tiles_x * tiles_y tile indices; counts: one counter per class, zeroed by the host). The order
  * within a list depends on the atomics' order; the result does not (each tile is independent). */
 __kernel void astigmatism_tiles(__global const float *restrict axes, __global float *restrict tiles,
+                                __global float *restrict tmin,
                                 __global int *restrict counts, __global int *restrict lists,
                                 const int width, const int height, const int tiles_x, const int tiles_y)
 {
@@ -212,6 +213,8 @@ __kernel void astigmatism_tiles(__global const float *restrict axes, __global fl
                     || (mt > ASTIGMATISM_EXACT_PX && mn_t < ASTIGMATISM_MIXED * mt);
     tiles[4 * (ty * tiles_x + tx) + 2] = ms;
     tiles[4 * (ty * tiles_x + tx) + 3] = mt;
+    tmin[2 * (ty * tiles_x + tx)] = mn_s;  /* for astigmatism_reach */
+    tmin[2 * (ty * tiles_x + tx) + 1] = mn_t;
     /* class: copy below ASTIGMATISM_COPY_PX; else the fewest taps n = 4, 8, ... ASTIGMATISM_TAPS
      * with B <= n * ASTIGMATISM_TAPS_PER_PX (B the bounding semi-axis); exact path last */
     const float bound = fmax(ms, mt);
@@ -225,6 +228,30 @@ __kernel void astigmatism_tiles(__global const float *restrict axes, __global fl
         while (c < ASTIGMATISM_CLASSES - 2 && bound > (float)(2 << c) * ASTIGMATISM_TAPS_PER_PX) ++c;
     }
     lists[c * tiles_x * tiles_y + atomic_inc(counts + c)] = ty * tiles_x + tx;
+}
+
+/* one work-item per tile: does the gather need its reach test? A tap's reach weight is 1 when
+ * q^2 = u_s^2/(a_s' + 1/2)^2 + u_t^2/(a_t' + 1/2)^2 <= 1 (a' the semi-axes of the pixel the tap
+ * lands on); the taps have |u_s| <= B_s |v_x|, |u_t| <= B_t |v_y| with v a spiral point (|v| < 1)
+ * and land within PAD px of the tile, in the tiles at most ASTIGMATISM_REACH_TX / _TY away (the
+ * padded border repeats the edge tiles' pixels). So if every such pixel has a_s' + 1/2 >= B_s and
+ * a_t' + 1/2 >= B_t, every weight is 1 and the test is skipped (reach[tile] = 0): most tiles of a
+ * smooth depth map, whose ellipses vary by far less than half a pixel over 2 PAD px. */
+#define ASTIGMATISM_REACH_TX ((ASTIGMATISM_PAD + ASTIGMATISM_TILE_W - 1) / ASTIGMATISM_TILE_W)
+#define ASTIGMATISM_REACH_TY ((ASTIGMATISM_PAD + ASTIGMATISM_TILE_H - 1) / ASTIGMATISM_TILE_H)
+__kernel void astigmatism_reach(__global const float *restrict tiles, __global const float *restrict tmin,
+                                __global int *restrict reach, const int tiles_x, const int tiles_y)
+{
+    const int tx = get_global_id(0), ty = get_global_id(1);
+    if (tx >= tiles_x || ty >= tiles_y) return;
+    float ns = MAXFLOAT, nt = MAXFLOAT;
+    for (int y = max(ty - ASTIGMATISM_REACH_TY, 0); y <= min(ty + ASTIGMATISM_REACH_TY, tiles_y - 1); ++y)
+        for (int x = max(tx - ASTIGMATISM_REACH_TX, 0); x <= min(tx + ASTIGMATISM_REACH_TX, tiles_x - 1); ++x) {
+            ns = fmin(ns, tmin[2 * (y * tiles_x + x)]);
+            nt = fmin(nt, tmin[2 * (y * tiles_x + x) + 1]);
+        }
+    const int id = ty * tiles_x + tx;
+    reach[id] = !(ns + 0.5f >= tiles[4 * id + 2] && nt + 0.5f >= tiles[4 * id + 3]);
 }
 
 #define ASTIGMATISM_ABS(v) as_float(as_uint(v) & 0x7fffffffu)
@@ -277,7 +304,7 @@ inline void astigmatism_store16(__global float *restrict dst, float16 r, float16
  * independent and overlap. float16 rather than float8: same speed at 16 taps, 1.35-1.6x faster
  * at 64 (measured in one process); the tap loop is unrolled by 4 (see below), not fully. */
 inline void astigmatism_gather(__global const float *restrict padded, __global const float *restrict src,
-                 __global const int *restrict inner, __global const float *restrict axes,
+                 __global const int *restrict inner, const int test_reach, __global const float *restrict axes,
                  __global float *restrict dst, __global const float *restrict tiles,
                  __global const int *restrict list, const int list0, const int tiles_x, const int tiles_y,
                  const int width, const int height, const int ntaps, const int tap0)
@@ -325,11 +352,13 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
         /* does the source pixel's own ellipse (+ half a pixel) reach back to the target? weight 1
          * inside, 0 from 1.25 times its size (in q^2: 1 .. 1.5625). Is the tap inside the
          * target's own ellipse? weight 1 inside, 0 from q^2 = 1.125 */
-        __global const float *an = axes + jc + ny * pw + nx;
-        const float16 q2 = us2 * vload16(0, an + 2 * pn) + ut2 * vload16(0, an + 3 * pn);
-        const float16 reach = astigmatism_sat16((1.5625f - q2) * (1.0f / 0.5625f));
         const float16 own = astigmatism_sat16(9.0f - 8.0f * (us2 * is2 + ut2 * it2));
-        const float16 w = reach * own;
+        float16 w = own;
+        if (test_reach) {  /* compile-time after inlining: 1 on the tiles astigmatism_reach flags */
+            __global const float *an = axes + jc + ny * pw + nx;
+            const float16 q2 = us2 * vload16(0, an + 2 * pn) + ut2 * vload16(0, an + 3 * pn);
+            w *= astigmatism_sat16((1.5625f - q2) * (1.0f / 0.5625f));
+        }
         const float16 w00 = w * ((1.0f - fx) * (1.0f - fy)), w01 = w * (fx * (1.0f - fy));
         const float16 w10 = w * ((1.0f - fx) * fy), w11 = w * (fx * fy);
         __global const float *p = col + iy * stride + ix;
@@ -350,11 +379,15 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
 }
 
 #define ASTIGMATISM_GATHER_ARGS __global const float *restrict padded, __global const float *restrict src, \
-    __global const int *restrict inner, __global const float *restrict axes, \
+    __global const int *restrict inner, __global const int *restrict reach, __global const float *restrict axes, \
     __global float *restrict dst, __global const float *restrict tiles, __global const int *restrict list, \
     const int list0, const int tiles_x, const int tiles_y, const int width, const int height
+/* the reach test is group-uniform (one tile per work-group): two inlined copies of the loop */
 #define ASTIGMATISM_GATHER_CALL(n, t0) \
-    astigmatism_gather(padded, src, inner, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0)
+    if (reach[list[list0 + (int)get_group_id(0)]]) \
+        astigmatism_gather(padded, src, inner, 1, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0); \
+    else \
+        astigmatism_gather(padded, src, inner, 0, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0)
 
 /* the quality's ASTIGMATISM_TAPS (its spiral is the table's last) */
 __kernel void astigmatism(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(ASTIGMATISM_TAPS, ASTIGMATISM_FULL_TAP0); }

@@ -271,6 +271,7 @@ class Astigmatism(GatherStage):
             self._scratch = {key: dict(
                 pad=rt.empty((3, ph, pw)), axes=rt.empty((4, ph, pw)), lut=rt.empty((2, fld.LUT_SIZE)),
                 offs=rt.empty((2, ph, pw)), offs_key=None,
+                tmin=rt.empty((nty, ntx, 2)), reach=rt.empty((nty, ntx), np.int32),
                 tiles=rt.empty((nty, ntx, 4)), counts=rt.empty((len(self.tap_classes()) + 2,), np.int32),
                 inner=cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                                 hostbuf=np.ascontiguousarray(self.inner_tiles(w, h), np.int32)),
@@ -341,8 +342,12 @@ class Astigmatism(GatherStage):
         nclass = len(self.tap_classes()) + 2
         events.append(cl.enqueue_copy(q, b["counts"], np.zeros(nclass, np.int32), is_blocking=False))
         k = self._kernel(rt, camera, "astigmatism_tiles", whole)
-        k.set_args(b["axes"], b["tiles"], b["counts"], b["lists"], np.int32(w), np.int32(h),
+        k.set_args(b["axes"], b["tiles"], b["tmin"], b["counts"], b["lists"], np.int32(w), np.int32(h),
                    np.int32(ntx), np.int32(nty))
+        events.append(cl.enqueue_nd_range_kernel(q, k, (ntx, nty), None))
+        # which tiles' gathers can skip the reach test (every weight of it is 1 there)
+        k = self._kernel(rt, camera, "astigmatism_reach", whole)
+        k.set_args(b["tiles"], b["tmin"], b["reach"], np.int32(ntx), np.int32(nty))
         events.append(cl.enqueue_nd_range_kernel(q, k, (ntx, nty), None))
         # the tile lists' lengths set the launch sizes: a 4-int read, the one sync of this stage
         counts = np.empty(nclass, np.int32)
@@ -367,7 +372,7 @@ class Astigmatism(GatherStage):
                 # one kernel per tap count (compile-time loop; offsets n - 4 in the table)
                 name = "astigmatism" if n_taps == self.taps else f"astigmatism_t{n_taps}"
                 k = self._kernel(rt, camera, name, whole)
-                k.set_args(b["pad"], src, b["inner"], b["axes"], dst, b["tiles"], *sub, *args)
+                k.set_args(b["pad"], src, b["inner"], b["reach"], b["axes"], dst, b["tiles"], *sub, *args)
             events.append(cl.enqueue_nd_range_kernel(q, k, (int(n) * group[0], group[1]), group))
         return events
 
