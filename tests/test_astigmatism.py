@@ -281,3 +281,42 @@ def test_inner_tiles_read_the_source_and_the_pad_fills_only_the_ring(rng, fn, fc
         err = np.abs(out - ref) / np.maximum(np.abs(ref), 1.0)
         j = np.unravel_index(int(np.argmax(err)), err.shape)
         assert err.max() < 1e-3, f"scale {scale}: max rel error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
+
+
+def test_reach_test_is_skipped_only_where_every_reach_weight_is_one(rng):
+    """astigmatism_reach's per-tile flag vs numpy: a tile may skip the reach test only if every
+    pixel within PAD px (edge-repeated) has a_s + 1/2 >= the tile's B_s and a_t + 1/2 >= B_t —
+    then each tap's q^2 <= |v|^2 < 1 and its reach weight is 1. A smooth depth ramp with a near
+    block: most tiles skip, the tiles around the block do not, and the output matches the
+    reference."""
+    import pyopencl as cl
+
+    w, h = 131, 101
+    cam = Camera(lens="thin:50", f_number=1.4, focus_distance_m=3.0, field_curvature_mm=-0.5, astigmatism_mm=0.6)
+    depth = np.tile(np.geomspace(1.0, 50.0, w).astype(np.float32), (h, 1))
+    depth[40:60, 60:80] = 0.4  # near block: large ellipses beside small ones
+    frame = Frame(odd_frame(rng, w=w, h=h, scale=10.0).color, depth=depth)
+    stage = ast.Astigmatism("draft")
+    pipe = Pipeline(cam, stages=["astigmatism"], quality="draft")
+    err, where = _max_err(pipe.run(frame).color, pipe.reference(frame))
+    assert err < 1e-3 * 10.0, where
+    rt = pipe.runtime
+    flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+    planar = np.ascontiguousarray(np.moveaxis(frame.color[..., :3], -1, 0), np.float32)
+    src = cl.Buffer(rt.context, flags, hostbuf=planar)
+    aux = {"depth": cl.Buffer(rt.context, flags, hostbuf=depth)}
+    stage.enqueue(rt, cam, frame, src, rt.empty((3, h, w)), aux)
+    ntx, nty = fld.tiles(w, h)
+    reach = np.empty((nty, ntx), np.int32)
+    cl.enqueue_copy(rt.queue, reach, stage._scratch[next(iter(stage._scratch))]["reach"], is_blocking=True)
+    a_s, a_t, _, _ = stage.semi_axes_px(cam, frame)
+    bs, bt, *_ = stage.tile_plan(cam, frame)
+    ps, pt = np.pad(a_s, fld.PAD, mode="edge"), np.pad(a_t, fld.PAD, mode="edge")
+    need = np.zeros((nty, ntx), bool)
+    for ty in range(nty):
+        for tx in range(ntx):
+            win = np.s_[ty * fld.TILE_H:min((ty + 1) * fld.TILE_H, h) + 2 * fld.PAD,
+                        tx * fld.TILE_W:min((tx + 1) * fld.TILE_W, w) + 2 * fld.PAD]
+            need[ty, tx] = ps[win].min() + 0.5 < bs[ty, tx] - 1e-4 or pt[win].min() + 0.5 < bt[ty, tx] - 1e-4
+    assert not np.any(need & (reach == 0)), np.argwhere(need & (reach == 0))
+    assert 0.3 < (reach == 0).mean() and need.any() and reach.any()
