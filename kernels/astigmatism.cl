@@ -15,7 +15,9 @@
  *
  * Buffers: colour planar (c*n + i); padded = 3 planes of pw × ph (pw = tiles_x * TILE_W +
  * 2 PAD, ph likewise), edge values repeated (no clamp per tap; the rounded-up work-items read
- * inside); axes = 4 planes pw × ph: the ellipse semi-axes (a_s, a_t) in px of the pixel each
+ * inside), filled only in the ring that the border tiles read: inner tiles (inner = one int per
+ * tile, from the host) read the colour planes src directly; offs = 2 planes pw × ph, the focal
+ * offsets (mm) of the pixel each padded pixel continues (per camera and size); axes = 4 planes pw × ph: the ellipse semi-axes (a_s, a_t) in px of the pixel each
  * padded pixel continues, and 1/(a_s + 1/2)^2, 1/(a_t + 1/2)^2 for the reach test; lut = 2 planes of ASTIGMATISM_LUT_SIZE focal offsets (sagittal,
  * tangential; mm) over image height [0, r_max]; tiles = per tile (row-major) the tile centre's
  * unit radial vector (e_x, e_y) from the host and the tile's largest (a_s, a_t) from
@@ -42,55 +44,107 @@
 #define ASTIGMATISM_EXACT_PX 0.5f
 #define ASTIGMATISM_MIXED 0.5f
 
-inline float astigmatism_semi(float e0, float g, float d, float c0, float aperture, float half_inv_pitch)
+/* semi-axis (px) of this stage's ellipse on 16 lanes: sqrt(max(c^2 - c0^2, 0)) / 2p, capped (the
+ * cap also where the astigmatic focus is at or beyond infinity, den <= 1e-6, or a is not finite) */
+inline float16 astigmatism_semi16(float16 e0, float16 g, float16 d, float16 c0, float aperture, float half_inv_pitch)
 {
-    /* semi-axis (px) of this stage's ellipse: sqrt(max(c^2 - c0^2, 0)) / 2p, capped */
-    const float den = 1.0f + d * g;
-    if (!(den > 1e-6f)) return ASTIGMATISM_MAX_SEMI;
-    const float c = aperture * fabs(e0 + d * g) / den;
-    const float q = (c - c0) * (c + c0);
-    const float a = sqrt(fmax(q, 0.0f)) * half_inv_pitch;
-    return isfinite(a) ? fmin(a, ASTIGMATISM_MAX_SEMI) : ASTIGMATISM_MAX_SEMI;
+    const float16 den = 1.0f + d * g;
+    const float16 c = aperture * fabs(e0 + d * g) / den;
+    const float16 q = (c - c0) * (c + c0);
+    const float16 a = sqrt(fmax(q, 0.0f)) * half_inv_pitch;
+    const int16 ok = (den > 1e-6f) & isfinite(a);
+    return select((float16)ASTIGMATISM_MAX_SEMI, fmin(a, ASTIGMATISM_MAX_SEMI), ok);
+}
+
+/* 16 per-lane loads (the LUT index differs per lane; kernels/common.cl CLP_GATHER16) */
+#define ASTIGMATISM_GATHER16(table, idx) ((float16)( \
+    (table)[(idx).s0], (table)[(idx).s1], (table)[(idx).s2], (table)[(idx).s3], \
+    (table)[(idx).s4], (table)[(idx).s5], (table)[(idx).s6], (table)[(idx).s7], \
+    (table)[(idx).s8], (table)[(idx).s9], (table)[(idx).sa], (table)[(idx).sb], \
+    (table)[(idx).sc], (table)[(idx).sd], (table)[(idx).se], (table)[(idx).sf]))
+
+/* The padded copy of the colour planes (edge values repeated) and every padded pixel's ellipse
+ * (that of the frame pixel it continues). One work-item = 16 consecutive pixels of a padded row
+ * (pw is a multiple of 16) as float16 vectors: whole-vector loads where the row's 16 source
+ * pixels lie inside the frame, per-lane clamped loads only in the vectors that touch a side
+ * (one pixel per work-item with a clamp on every pixel cost 4-8 ms at 1080p, as coma_pad did);
+ * the axes are computed on the 16 lanes either way. */
+/* The focal offsets (sagittal, tangential; mm) at every padded pixel's image height: 2 planes pw x
+ * ph (those of the frame pixel it continues), from the LUT. They depend on the camera and frame
+ * size only, so the host runs this once per camera and size, not per frame (the 64 per-lane LUT
+ * loads of 16 pixels were most of astigmatism_pad's time). */
+__kernel void astigmatism_offsets(__global const float *restrict lut, __global float *restrict offs,
+                                  const int width, const int height, const int pw, const int ph,
+                                  const float cx, const float cy, const float pitch_mm, const float lut_scale)
+{
+    const int x0 = 16 * (int)get_global_id(0), y = get_global_id(1);
+    if (x0 >= pw || y >= ph) return;
+    const int sy = clamp(y - ASTIGMATISM_PAD, 0, height - 1);
+    const size_t j = (size_t)y * pw + x0, pn = (size_t)pw * ph;
+    const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const int16 sx = clamp(x0 - ASTIGMATISM_PAD + lane, 0, width - 1);
+    const float16 dx = convert_float16(sx) - cx;
+    const float dy = (float)sy - cy;
+    const float16 r = sqrt(dx * dx + dy * dy);
+    /* linear LUT over image height */
+    const float16 t = fmin(r * pitch_mm * lut_scale, (float)(ASTIGMATISM_LUT_SIZE - 1));
+    const int16 k0 = min(convert_int16(t), ASTIGMATISM_LUT_SIZE - 2);
+    const float16 ft = t - convert_float16(k0);
+    const int16 k1 = k0 + 1;
+    __global const float *lt = lut + ASTIGMATISM_LUT_SIZE;
+    vstore16(mix(ASTIGMATISM_GATHER16(lut, k0), ASTIGMATISM_GATHER16(lut, k1), ft), 0, offs + j);
+    vstore16(mix(ASTIGMATISM_GATHER16(lt, k0), ASTIGMATISM_GATHER16(lt, k1), ft), 0, offs + pn + j);
 }
 
 __kernel void astigmatism_pad(__global const float *restrict src, __global const float *restrict depth,
-                              __global const float *restrict lut, __global float *restrict padded,
+                              __global const float *restrict offs, __global float *restrict padded,
                               __global float *restrict axes, const int width, const int height,
-                              const int pw, const int ph,
-                              const float cx, const float cy, const float pitch_mm, const float lut_scale,
-                              const float aperture_mm, const float v_mm, const float inv_f_mm)
+                              const int pw, const int ph, const float pitch_mm,
+                              const float aperture_mm, const float v_mm, const float inv_f_mm,
+                              const int ring_x0, const int ring_x1, const int ring_y0, const int ring_y1)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= pw || y >= ph) return;
-    const int sx = clamp(x - ASTIGMATISM_PAD, 0, width - 1), sy = clamp(y - ASTIGMATISM_PAD, 0, height - 1);
+    const int x0 = 16 * (int)get_global_id(0), y = get_global_id(1);
+    if (x0 >= pw || y >= ph) return;
+    const int sy = clamp(y - ASTIGMATISM_PAD, 0, height - 1);
     const size_t n = (size_t)width * height, pn = (size_t)pw * ph;
-    const size_t i = (size_t)sy * width + sx, j = (size_t)y * pw + x;
-    padded[j] = src[i];
-    padded[pn + j] = src[n + i];
-    padded[2 * pn + j] = src[2 * n + i];
+    __global const float *s = src + (size_t)sy * width;
+    __global const float *zs = depth + (size_t)sy * width;
+    const size_t j = (size_t)y * pw + x0;
+    const int sx0 = x0 - ASTIGMATISM_PAD;
+    const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const int16 sx = clamp(sx0 + lane, 0, width - 1);
+    float16 z;
+    if (sx0 >= ring_x0 && sx0 + 16 <= ring_x1 && y - ASTIGMATISM_PAD >= ring_y0 && y - ASTIGMATISM_PAD < ring_y1) {
+        /* read only by inner tiles, which read the source: no colour copy */
+        z = vload16(0, zs + sx0);
+    } else if (sx0 >= 0 && sx0 + 16 <= width) {
+        vstore16(vload16(0, s + sx0), 0, padded + j);
+        vstore16(vload16(0, s + n + sx0), 0, padded + pn + j);
+        vstore16(vload16(0, s + 2 * n + sx0), 0, padded + 2 * pn + j);
+        z = vload16(0, zs + sx0);
+    } else {
+        vstore16(ASTIGMATISM_GATHER16(s, sx), 0, padded + j);
+        vstore16(ASTIGMATISM_GATHER16(s + n, sx), 0, padded + pn + j);
+        vstore16(ASTIGMATISM_GATHER16(s + 2 * n, sx), 0, padded + 2 * pn + j);
+        z = ASTIGMATISM_GATHER16(zs, sx);
+    }
 
-    const float dx = (float)sx - cx, dy = (float)sy - cy;
-    const float r = sqrt(dx * dx + dy * dy);
-    /* focal offsets at this image height (linear LUT) */
-    const float t = fmin(r * pitch_mm * lut_scale, (float)(ASTIGMATISM_LUT_SIZE - 1));
-    const int k0 = min((int)t, ASTIGMATISM_LUT_SIZE - 2);
-    const float ft = t - (float)k0;
-    const float ds = mix(lut[k0], lut[k0 + 1], ft);
-    const float dt = mix(lut[ASTIGMATISM_LUT_SIZE + k0], lut[ASTIGMATISM_LUT_SIZE + k0 + 1], ft);
+    /* focal offsets at this image height (astigmatism_offsets) */
+    const float16 ds = vload16(0, offs + j), dt = vload16(0, offs + pn + j);
     /* thin-lens defocus terms: g = 1/f - 1/z, e0 = 1 - v g = (1 - v/f) + v/z */
-    const float zmm = fmax(depth[i] * 1000.0f, ASTIGMATISM_MIN_DEPTH_MM);
-    const float inv_z = isinf(zmm) ? 0.0f : 1.0f / zmm;
-    const float g = inv_f_mm - inv_z;
-    const float e0 = (1.0f - v_mm * inv_f_mm) + v_mm * inv_z;
-    const float c0 = aperture_mm * fabs(e0);
+    const float16 zmm = fmax(z * 1000.0f, ASTIGMATISM_MIN_DEPTH_MM);
+    const float16 inv_z = select(1.0f / zmm, (float16)0.0f, isinf(zmm));
+    const float16 g = inv_f_mm - inv_z;
+    const float16 e0 = (1.0f - v_mm * inv_f_mm) + v_mm * inv_z;
+    const float16 c0 = aperture_mm * fabs(e0);
     const float hip = 0.5f / pitch_mm;
-    const float as = astigmatism_semi(e0, g, ds, c0, aperture_mm, hip);
-    const float at = astigmatism_semi(e0, g, dt, c0, aperture_mm, hip);
-    axes[j] = as;
-    axes[pn + j] = at;
+    const float16 as = astigmatism_semi16(e0, g, ds, c0, aperture_mm, hip);
+    const float16 at = astigmatism_semi16(e0, g, dt, c0, aperture_mm, hip);
+    vstore16(as, 0, axes + j);
+    vstore16(at, 0, axes + pn + j);
     /* 1/(a + 1/2)^2 for the reach test of the taps that land here (no division per tap) */
-    axes[2 * pn + j] = 1.0f / ((as + 0.5f) * (as + 0.5f));
-    axes[3 * pn + j] = 1.0f / ((at + 0.5f) * (at + 0.5f));
+    vstore16(1.0f / ((as + 0.5f) * (as + 0.5f)), 0, axes + 2 * pn + j);
+    vstore16(1.0f / ((at + 0.5f) * (at + 0.5f)), 0, axes + 3 * pn + j);
 }
 
 /* one work-item per tile: the largest semi-axes of the tile's pixels (inside the frame), and the
@@ -98,6 +152,7 @@ __kernel void astigmatism_pad(__global const float *restrict src, __global const
  * tiles_x * tiles_y tile indices; counts: one counter per class, zeroed by the host). The order
  * within a list depends on the atomics' order; the result does not (each tile is independent). */
 __kernel void astigmatism_tiles(__global const float *restrict axes, __global float *restrict tiles,
+                                __global float *restrict tmin,
                                 __global int *restrict counts, __global int *restrict lists,
                                 const int width, const int height, const int tiles_x, const int tiles_y)
 {
@@ -158,6 +213,8 @@ __kernel void astigmatism_tiles(__global const float *restrict axes, __global fl
                     || (mt > ASTIGMATISM_EXACT_PX && mn_t < ASTIGMATISM_MIXED * mt);
     tiles[4 * (ty * tiles_x + tx) + 2] = ms;
     tiles[4 * (ty * tiles_x + tx) + 3] = mt;
+    tmin[2 * (ty * tiles_x + tx)] = mn_s;  /* for astigmatism_reach */
+    tmin[2 * (ty * tiles_x + tx) + 1] = mn_t;
     /* class: copy below ASTIGMATISM_COPY_PX; else the fewest taps n = 4, 8, ... ASTIGMATISM_TAPS
      * with B <= n * ASTIGMATISM_TAPS_PER_PX (B the bounding semi-axis); exact path last */
     const float bound = fmax(ms, mt);
@@ -171,6 +228,30 @@ __kernel void astigmatism_tiles(__global const float *restrict axes, __global fl
         while (c < ASTIGMATISM_CLASSES - 2 && bound > (float)(2 << c) * ASTIGMATISM_TAPS_PER_PX) ++c;
     }
     lists[c * tiles_x * tiles_y + atomic_inc(counts + c)] = ty * tiles_x + tx;
+}
+
+/* one work-item per tile: does the gather need its reach test? A tap's reach weight is 1 when
+ * q^2 = u_s^2/(a_s' + 1/2)^2 + u_t^2/(a_t' + 1/2)^2 <= 1 (a' the semi-axes of the pixel the tap
+ * lands on); the taps have |u_s| <= B_s |v_x|, |u_t| <= B_t |v_y| with v a spiral point (|v| < 1)
+ * and land within PAD px of the tile, in the tiles at most ASTIGMATISM_REACH_TX / _TY away (the
+ * padded border repeats the edge tiles' pixels). So if every such pixel has a_s' + 1/2 >= B_s and
+ * a_t' + 1/2 >= B_t, every weight is 1 and the test is skipped (reach[tile] = 0): most tiles of a
+ * smooth depth map, whose ellipses vary by far less than half a pixel over 2 PAD px. */
+#define ASTIGMATISM_REACH_TX ((ASTIGMATISM_PAD + ASTIGMATISM_TILE_W - 1) / ASTIGMATISM_TILE_W)
+#define ASTIGMATISM_REACH_TY ((ASTIGMATISM_PAD + ASTIGMATISM_TILE_H - 1) / ASTIGMATISM_TILE_H)
+__kernel void astigmatism_reach(__global const float *restrict tiles, __global const float *restrict tmin,
+                                __global int *restrict reach, const int tiles_x, const int tiles_y)
+{
+    const int tx = get_global_id(0), ty = get_global_id(1);
+    if (tx >= tiles_x || ty >= tiles_y) return;
+    float ns = MAXFLOAT, nt = MAXFLOAT;
+    for (int y = max(ty - ASTIGMATISM_REACH_TY, 0); y <= min(ty + ASTIGMATISM_REACH_TY, tiles_y - 1); ++y)
+        for (int x = max(tx - ASTIGMATISM_REACH_TX, 0); x <= min(tx + ASTIGMATISM_REACH_TX, tiles_x - 1); ++x) {
+            ns = fmin(ns, tmin[2 * (y * tiles_x + x)]);
+            nt = fmin(nt, tmin[2 * (y * tiles_x + x) + 1]);
+        }
+    const int id = ty * tiles_x + tx;
+    reach[id] = !(ns + 0.5f >= tiles[4 * id + 2] && nt + 0.5f >= tiles[4 * id + 3]);
 }
 
 #define ASTIGMATISM_ABS(v) as_float(as_uint(v) & 0x7fffffffu)
@@ -222,7 +303,8 @@ inline void astigmatism_store16(__global float *restrict dst, float16 r, float16
  * taps and it gives up), and that chain made the loop latency-bound: the taps' weights are now
  * independent and overlap. float16 rather than float8: same speed at 16 taps, 1.35-1.6x faster
  * at 64 (measured in one process); the tap loop is unrolled by 4 (see below), not fully. */
-inline void astigmatism_gather(__global const float *restrict padded, __global const float *restrict axes,
+inline void astigmatism_gather(__global const float *restrict padded, __global const float *restrict src,
+                 __global const int *restrict inner, const int test_reach, __global const float *restrict axes,
                  __global float *restrict dst, __global const float *restrict tiles,
                  __global const int *restrict list, const int list0, const int tiles_x, const int tiles_y,
                  const int width, const int height, const int ntaps, const int tap0)
@@ -236,6 +318,12 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
     const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
     const size_t pn = (size_t)pw * (tiles_y * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
     const int jc = (y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
+    /* colour: an inner tile (all its reads inside the frame) reads the source planes, the others
+     * the padded copy (astigmatism_pad fills only the ring they read) */
+    const int in = inner[tile_id];
+    __global const float *col = in ? src + ((size_t)y * width + x) : padded + jc;
+    const int stride = in ? width : pw;
+    const size_t plane = in ? (size_t)width * height : pn;
     /* the pixels' own ellipses: 1/a^2 (a tap outside gets no weight). The 1e-3 px^2 keeps
      * a = 0 finite and the weights' argument below 4e6, where astigmatism_sat16 is exact in float */
     const float16 as = vload16(0, axes + jc), at = vload16(0, axes + pn + jc);
@@ -264,35 +352,42 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
         /* does the source pixel's own ellipse (+ half a pixel) reach back to the target? weight 1
          * inside, 0 from 1.25 times its size (in q^2: 1 .. 1.5625). Is the tap inside the
          * target's own ellipse? weight 1 inside, 0 from q^2 = 1.125 */
-        __global const float *an = axes + jc + ny * pw + nx;
-        const float16 q2 = us2 * vload16(0, an + 2 * pn) + ut2 * vload16(0, an + 3 * pn);
-        const float16 reach = astigmatism_sat16((1.5625f - q2) * (1.0f / 0.5625f));
         const float16 own = astigmatism_sat16(9.0f - 8.0f * (us2 * is2 + ut2 * it2));
-        const float16 w = reach * own;
+        float16 w = own;
+        if (test_reach) {  /* compile-time after inlining: 1 on the tiles astigmatism_reach flags */
+            __global const float *an = axes + jc + ny * pw + nx;
+            const float16 q2 = us2 * vload16(0, an + 2 * pn) + ut2 * vload16(0, an + 3 * pn);
+            w *= astigmatism_sat16((1.5625f - q2) * (1.0f / 0.5625f));
+        }
         const float16 w00 = w * ((1.0f - fx) * (1.0f - fy)), w01 = w * (fx * (1.0f - fy));
         const float16 w10 = w * ((1.0f - fx) * fy), w11 = w * (fx * fy);
-        __global const float *p = padded + jc + iy * pw + ix;
-        ar += w00 * vload16(0, p) + w01 * vload16(0, p + 1) + w10 * vload16(0, p + pw) + w11 * vload16(0, p + pw + 1);
-        p += pn;
-        ag += w00 * vload16(0, p) + w01 * vload16(0, p + 1) + w10 * vload16(0, p + pw) + w11 * vload16(0, p + pw + 1);
-        p += pn;
-        ab += w00 * vload16(0, p) + w01 * vload16(0, p + 1) + w10 * vload16(0, p + pw) + w11 * vload16(0, p + pw + 1);
+        __global const float *p = col + iy * stride + ix;
+        ar += w00 * vload16(0, p) + w01 * vload16(0, p + 1) + w10 * vload16(0, p + stride) + w11 * vload16(0, p + stride + 1);
+        p += plane;
+        ag += w00 * vload16(0, p) + w01 * vload16(0, p + 1) + w10 * vload16(0, p + stride) + w11 * vload16(0, p + stride + 1);
+        p += plane;
+        ab += w00 * vload16(0, p) + w01 * vload16(0, p + 1) + w10 * vload16(0, p + stride) + w11 * vload16(0, p + stride + 1);
         wsum += w;
     }
     /* copy where both semi-axes are below 1e-3 px or no tap has weight */
     const int16 keep = ((as < ASTIGMATISM_MIN_SEMI) & (at < ASTIGMATISM_MIN_SEMI)) | !(wsum > 0.0f);
     const float16 inv = 1.0f / select(wsum, (float16)1.0f, keep);
-    const float16 r = select(ar * inv, vload16(0, padded + jc), keep);
-    const float16 g = select(ag * inv, vload16(0, padded + pn + jc), keep);
-    const float16 b = select(ab * inv, vload16(0, padded + 2 * pn + jc), keep);
+    const float16 r = select(ar * inv, vload16(0, col), keep);
+    const float16 g = select(ag * inv, vload16(0, col + plane), keep);
+    const float16 b = select(ab * inv, vload16(0, col + 2 * plane), keep);
     astigmatism_store16(dst, r, g, b, x, y, width, height);
 }
 
-#define ASTIGMATISM_GATHER_ARGS __global const float *restrict padded, __global const float *restrict axes, \
+#define ASTIGMATISM_GATHER_ARGS __global const float *restrict padded, __global const float *restrict src, \
+    __global const int *restrict inner, __global const int *restrict reach, __global const float *restrict axes, \
     __global float *restrict dst, __global const float *restrict tiles, __global const int *restrict list, \
     const int list0, const int tiles_x, const int tiles_y, const int width, const int height
+/* the reach test is group-uniform (one tile per work-group): two inlined copies of the loop */
 #define ASTIGMATISM_GATHER_CALL(n, t0) \
-    astigmatism_gather(padded, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0)
+    if (reach[list[list0 + (int)get_group_id(0)]]) \
+        astigmatism_gather(padded, src, inner, 1, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0); \
+    else \
+        astigmatism_gather(padded, src, inner, 0, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0)
 
 /* the quality's ASTIGMATISM_TAPS (its spiral is the table's last) */
 __kernel void astigmatism(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(ASTIGMATISM_TAPS, ASTIGMATISM_FULL_TAP0); }
@@ -315,7 +410,8 @@ __kernel void astigmatism_t32(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL
 
 /* the tiles whose bounding semi-axis is below ASTIGMATISM_COPY_PX: copied through (16 pixels per
  * work-item, the gather's geometry) */
-__kernel void astigmatism_copy(__global const float *restrict padded, __global float *restrict dst,
+__kernel void astigmatism_copy(__global const float *restrict padded, __global const float *restrict src,
+                               __global const int *restrict inner, __global float *restrict dst,
                                __global const int *restrict list, const int list0, const int tiles_x, const int tiles_y,
                                const int width, const int height)
 {
@@ -325,14 +421,18 @@ __kernel void astigmatism_copy(__global const float *restrict padded, __global f
     const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
     const size_t pn = (size_t)pw * (tiles_y * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
     const int jc = (y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
-    astigmatism_store16(dst, vload16(0, padded + jc), vload16(0, padded + pn + jc), vload16(0, padded + 2 * pn + jc),
+    const int in = inner[tile_id];  /* see astigmatism_gather */
+    __global const float *col = in ? src + ((size_t)y * width + x) : padded + jc;
+    const size_t plane = in ? (size_t)width * height : pn;
+    astigmatism_store16(dst, vload16(0, col), vload16(0, col + plane), vload16(0, col + 2 * plane),
                         x, y, width, height);
 }
 
 /* the per-pixel model (each pixel's own ellipse and direction; per-pixel addresses, so it does
  * not vectorise) for the tiles of the exact list (one work-group per listed tile), all
  * ASTIGMATISM_TAPS spiral points */
-__kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict axes,
+__kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict src,
+                       __global const int *restrict inner, __global const float *restrict axes,
                        __global float *restrict dst, __global const int *restrict list, const int list0,
                        const int tiles_x, const int tiles_y,
                        const int width, const int height, const float cx, const float cy)
@@ -346,11 +446,18 @@ __kernel void astigmatism_exact(__global const float *restrict padded, __global 
     const size_t n = (size_t)width * height;
     const size_t i = (size_t)y * width + x;
     const int jc = (y + ASTIGMATISM_PAD) * pw + (x + ASTIGMATISM_PAD);
+    /* colour: an inner tile reads the source planes (see astigmatism_gather); padded coordinates
+     * (px, py) map to col[(py - off) * stride + px - off] */
+    const int in = inner[tile_id];
+    __global const float *col = in ? src : padded;
+    const int stride = in ? width : pw, off = in ? ASTIGMATISM_PAD : 0;
+    const size_t plane = in ? n : pn;
+    const int jo = (y + ASTIGMATISM_PAD - off) * stride + (x + ASTIGMATISM_PAD - off);
     const float as = axes[jc], at = axes[pn + jc];
     if (as < ASTIGMATISM_MIN_SEMI && at < ASTIGMATISM_MIN_SEMI) {
-        dst[i] = padded[jc];
-        dst[n + i] = padded[pn + jc];
-        dst[2 * n + i] = padded[2 * pn + jc];
+        dst[i] = col[jo];
+        dst[n + i] = col[plane + jo];
+        dst[2 * n + i] = col[2 * plane + jo];
         return;
     }
     const float dx = (float)x - cx, dy = (float)y - cy;
@@ -369,14 +476,17 @@ __kernel void astigmatism_exact(__global const float *restrict padded, __global 
         const float w = clamp((1.5625f - (qs * qs + qt * qt)) * (1.0f / 0.5625f), 0.0f, 1.0f);
         const float fx0 = floor(px), fy0 = floor(py);
         const float fx = px - fx0, fy = py - fy0;
-        const int j = (int)fy0 * pw + (int)fx0;
-        ar += w * mix(mix(padded[j], padded[j + 1], fx), mix(padded[j + pw], padded[j + pw + 1], fx), fy);
-        ag += w * mix(mix(padded[pn + j], padded[pn + j + 1], fx), mix(padded[pn + j + pw], padded[pn + j + pw + 1], fx), fy);
-        ab += w * mix(mix(padded[2 * pn + j], padded[2 * pn + j + 1], fx), mix(padded[2 * pn + j + pw], padded[2 * pn + j + pw + 1], fx), fy);
+        const int j = ((int)fy0 - off) * stride + (int)fx0 - off;
+        __global const float *c = col + j;
+        ar += w * mix(mix(c[0], c[1], fx), mix(c[stride], c[stride + 1], fx), fy);
+        c += plane;
+        ag += w * mix(mix(c[0], c[1], fx), mix(c[stride], c[stride + 1], fx), fy);
+        c += plane;
+        ab += w * mix(mix(c[0], c[1], fx), mix(c[stride], c[stride + 1], fx), fy);
         wsum += w;
     }
     const bool keep = !(wsum > 0.0f);
-    dst[i] = keep ? padded[jc] : ar / wsum;
-    dst[n + i] = keep ? padded[pn + jc] : ag / wsum;
-    dst[2 * n + i] = keep ? padded[2 * pn + jc] : ab / wsum;
+    dst[i] = keep ? col[jo] : ar / wsum;
+    dst[n + i] = keep ? col[plane + jo] : ag / wsum;
+    dst[2 * n + i] = keep ? col[2 * plane + jo] : ab / wsum;
 }

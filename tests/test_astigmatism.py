@@ -253,3 +253,70 @@ def test_copy_threshold_error_bound():
         worst[kind] = np.abs(out - col).max()
     assert max(worst["edge"], worst["edge45"]) < 0.01 and worst["point"] < 0.02, worst
     assert worst["point"] > 0.005  # a real (small) blur: the bound is not vacuous
+
+
+@pytest.mark.parametrize("fn,fc,a,kinds", [(2.0, -0.3, 0.25, {"copy", "gather"}),
+                                         (1.4, -0.5, 0.6, {"gather", "exact"})])
+def test_inner_tiles_read_the_source_and_the_pad_fills_only_the_ring(rng, fn, fc, a, kinds):
+    """Tiles whose reads stay inside the frame read the source planes, and astigmatism_pad leaves
+    the padded copy's inside unwritten (stale from the previous frame): a second, different frame
+    must still match the reference everywhere, with inner tiles of every kind (copied, gathered,
+    exact; two cameras) and partial tiles beside the ring (odd size)."""
+    w, h = 131, 101
+    cam = Camera(lens="thin:50", f_number=fn, focus_distance_m=3.0, field_curvature_mm=fc, astigmatism_mm=a)
+    depth = np.full((h, w), 3.0, np.float32)
+    depth[:, 70:] = np.geomspace(1.0, 50.0, w - 70)  # defocused columns inside the ring
+    depth[40:60, 75:90] = 3.0  # and a depth edge there
+    stage = ast.Astigmatism("final")
+    inner = stage.inner_tiles(w, h)
+    x0, x1, y0, y1 = stage.ring(w, h)
+    assert 0 < x0 < x1 <= w and 0 < y0 < y1 <= h and 0.1 < inner.mean() < 0.9
+    pipe = Pipeline(cam, stages=["astigmatism"], quality="final")
+    for scale in (1e4, 3.0):  # a bright frame first: stale values would show in the second
+        frame = Frame(odd_frame(rng, w=w, h=h, scale=scale).color, depth=depth)
+        *_, exact, taps = stage.tile_plan(cam, frame)
+        got = {"exact" if e else ("copy" if t == 0 else "gather") for e, t in zip(exact[inner], taps[inner])}
+        assert kinds <= got, got
+        out, ref = pipe.run(frame).color, pipe.reference(frame)
+        err = np.abs(out - ref) / np.maximum(np.abs(ref), 1.0)
+        j = np.unravel_index(int(np.argmax(err)), err.shape)
+        assert err.max() < 1e-3, f"scale {scale}: max rel error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
+
+
+def test_reach_test_is_skipped_only_where_every_reach_weight_is_one(rng):
+    """astigmatism_reach's per-tile flag vs numpy: a tile may skip the reach test only if every
+    pixel within PAD px (edge-repeated) has a_s + 1/2 >= the tile's B_s and a_t + 1/2 >= B_t —
+    then each tap's q^2 <= |v|^2 < 1 and its reach weight is 1. A smooth depth ramp with a near
+    block: most tiles skip, the tiles around the block do not, and the output matches the
+    reference."""
+    import pyopencl as cl
+
+    w, h = 131, 101
+    cam = Camera(lens="thin:50", f_number=1.4, focus_distance_m=3.0, field_curvature_mm=-0.5, astigmatism_mm=0.6)
+    depth = np.tile(np.geomspace(1.0, 50.0, w).astype(np.float32), (h, 1))
+    depth[40:60, 60:80] = 0.4  # near block: large ellipses beside small ones
+    frame = Frame(odd_frame(rng, w=w, h=h, scale=10.0).color, depth=depth)
+    stage = ast.Astigmatism("draft")
+    pipe = Pipeline(cam, stages=["astigmatism"], quality="draft")
+    err, where = _max_err(pipe.run(frame).color, pipe.reference(frame))
+    assert err < 1e-3 * 10.0, where
+    rt = pipe.runtime
+    flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+    planar = np.ascontiguousarray(np.moveaxis(frame.color[..., :3], -1, 0), np.float32)
+    src = cl.Buffer(rt.context, flags, hostbuf=planar)
+    aux = {"depth": cl.Buffer(rt.context, flags, hostbuf=depth)}
+    stage.enqueue(rt, cam, frame, src, rt.empty((3, h, w)), aux)
+    ntx, nty = fld.tiles(w, h)
+    reach = np.empty((nty, ntx), np.int32)
+    cl.enqueue_copy(rt.queue, reach, stage._scratch[next(iter(stage._scratch))]["reach"], is_blocking=True)
+    a_s, a_t, _, _ = stage.semi_axes_px(cam, frame)
+    bs, bt, *_ = stage.tile_plan(cam, frame)
+    ps, pt = np.pad(a_s, fld.PAD, mode="edge"), np.pad(a_t, fld.PAD, mode="edge")
+    need = np.zeros((nty, ntx), bool)
+    for ty in range(nty):
+        for tx in range(ntx):
+            win = np.s_[ty * fld.TILE_H:min((ty + 1) * fld.TILE_H, h) + 2 * fld.PAD,
+                        tx * fld.TILE_W:min((tx + 1) * fld.TILE_W, w) + 2 * fld.PAD]
+            need[ty, tx] = ps[win].min() + 0.5 < bs[ty, tx] - 1e-4 or pt[win].min() + 0.5 < bt[ty, tx] - 1e-4
+    assert not np.any(need & (reach == 0)), np.argwhere(need & (reach == 0))
+    assert 0.3 < (reach == 0).mean() and need.any() and reach.any()
