@@ -56,12 +56,6 @@ inline float16 astigmatism_semi16(float16 e0, float16 g, float16 d, float16 c0, 
     return select((float16)ASTIGMATISM_MAX_SEMI, fmin(a, ASTIGMATISM_MAX_SEMI), ok);
 }
 
-/* 16 per-lane loads (the LUT index differs per lane; kernels/common.cl CLP_GATHER16) */
-#define ASTIGMATISM_GATHER16(table, idx) ((float16)( \
-    (table)[(idx).s0], (table)[(idx).s1], (table)[(idx).s2], (table)[(idx).s3], \
-    (table)[(idx).s4], (table)[(idx).s5], (table)[(idx).s6], (table)[(idx).s7], \
-    (table)[(idx).s8], (table)[(idx).s9], (table)[(idx).sa], (table)[(idx).sb], \
-    (table)[(idx).sc], (table)[(idx).sd], (table)[(idx).se], (table)[(idx).sf]))
 
 /* The padded copy of the colour planes (edge values repeated) and every padded pixel's ellipse
  * (that of the frame pixel it continues). One work-item = 16 consecutive pixels of a padded row
@@ -92,8 +86,8 @@ __kernel void astigmatism_offsets(__global const float *restrict lut, __global f
     const float16 ft = t - convert_float16(k0);
     const int16 k1 = k0 + 1;
     __global const float *lt = lut + ASTIGMATISM_LUT_SIZE;
-    vstore16(mix(ASTIGMATISM_GATHER16(lut, k0), ASTIGMATISM_GATHER16(lut, k1), ft), 0, offs + j);
-    vstore16(mix(ASTIGMATISM_GATHER16(lt, k0), ASTIGMATISM_GATHER16(lt, k1), ft), 0, offs + pn + j);
+    vstore16(mix(CLP_GATHER16(lut, k0), CLP_GATHER16(lut, k1), ft), 0, offs + j);
+    vstore16(mix(CLP_GATHER16(lt, k0), CLP_GATHER16(lt, k1), ft), 0, offs + pn + j);
 }
 
 __kernel void astigmatism_pad(__global const float *restrict src, __global const float *restrict depth,
@@ -123,10 +117,10 @@ __kernel void astigmatism_pad(__global const float *restrict src, __global const
         vstore16(vload16(0, s + 2 * n + sx0), 0, padded + 2 * pn + j);
         z = vload16(0, zs + sx0);
     } else {
-        vstore16(ASTIGMATISM_GATHER16(s, sx), 0, padded + j);
-        vstore16(ASTIGMATISM_GATHER16(s + n, sx), 0, padded + pn + j);
-        vstore16(ASTIGMATISM_GATHER16(s + 2 * n, sx), 0, padded + 2 * pn + j);
-        z = ASTIGMATISM_GATHER16(zs, sx);
+        vstore16(CLP_GATHER16(s, sx), 0, padded + j);
+        vstore16(CLP_GATHER16(s + n, sx), 0, padded + pn + j);
+        vstore16(CLP_GATHER16(s + 2 * n, sx), 0, padded + 2 * pn + j);
+        z = CLP_GATHER16(zs, sx);
     }
 
     /* focal offsets at this image height (astigmatism_offsets) */
@@ -272,29 +266,9 @@ inline float16 astigmatism_sat16(float16 v)
     return 0.5f * (m + ASTIGMATISM_ABS16(m));
 }
 
-/* 16 pixels of a tile row into the planar output (partial tiles at the frame's edges: per pixel) */
-inline void astigmatism_store16(__global float *restrict dst, float16 r, float16 g, float16 b,
-                                int x, int y, int width, int height)
-{
-    const size_t n = (size_t)width * height;
-    const size_t i = (size_t)y * width + x;
-#if ASTIGMATISM_WHOLE_TILES
-    vstore16(r, 0, dst + i);
-    vstore16(g, 0, dst + n + i);
-    vstore16(b, 0, dst + 2 * n + i);
-#else
-    if (y >= height) return;
-    float rr[16], gg[16], bb[16];
-    vstore16(r, 0, rr);
-    vstore16(g, 0, gg);
-    vstore16(b, 0, bb);
-    for (int e = 0; e < 16 && x + e < width; ++e) {
-        dst[i + e] = rr[e];
-        dst[n + i + e] = gg[e];
-        dst[2 * n + i + e] = bb[e];
-    }
-#endif
-}
+/* 16 pixels of a tile row into the planar output (kernels/common.cl; partial tiles: per pixel) */
+#define astigmatism_store16(dst, r, g, b, x, y, width, height) \
+    clp_store16_planar(dst, r, g, b, x, y, width, height, ASTIGMATISM_WHOLE_TILES)
 
 /* One work-item = 16 consecutive pixels of a row of the tile, as explicit float16 vectors (a
  * work-group = a tile = ASTIGMATISM_TILE_W / 16 x ASTIGMATISM_TILE_H work-items). Written with

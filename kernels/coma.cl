@@ -164,30 +164,9 @@ __kernel void coma(__global const float *restrict padded, __global const float *
 #endif
 }
 
-/* 16 pixels of a tile row into the planar output (partial tiles at the frame's edges: per pixel) */
-inline void coma_store16(__global float *restrict dst, float16 r, float16 g, float16 b,
-                         int x, int y, int width, int height)
-{
-    const size_t n = (size_t)width * height;
-    const size_t i = (size_t)y * width + x;
-#if COMA_WHOLE_TILES
-    vstore16(r, 0, dst + i);
-    vstore16(g, 0, dst + n + i);
-    vstore16(b, 0, dst + 2 * n + i);
-#else
-    /* frames that are not whole tiles: the rounded-up pixels are computed but not stored */
-    if (y >= height) return;
-    float rr[16], gg[16], bb[16];
-    vstore16(r, 0, rr);
-    vstore16(g, 0, gg);
-    vstore16(b, 0, bb);
-    for (int e = 0; e < 16 && x + e < width; ++e) {
-        dst[i + e] = rr[e];
-        dst[n + i + e] = gg[e];
-        dst[2 * n + i + e] = bb[e];
-    }
-#endif
-}
+/* 16 pixels of a tile row into the planar output (kernels/common.cl; partial tiles: per pixel) */
+#define coma_store16(dst, r, g, b, x, y, width, height) \
+    clp_store16_planar(dst, r, g, b, x, y, width, height, COMA_WHOLE_TILES)
 
 /* The uniform tiles (Coma.tile_uniform): every pixel of the tile takes the tile centre's comet,
  * so the N bilinear taps land on the same integer offsets for all its pixels and collapse into a

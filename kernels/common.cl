@@ -35,6 +35,33 @@ typedef struct {
     (table)[(idx).s8], (table)[(idx).s9], (table)[(idx).sa], (table)[(idx).sb], \
     (table)[(idx).sc], (table)[(idx).sd], (table)[(idx).se], (table)[(idx).sf]))
 
+/* 16 pixels of a row (x .. x + 15) into a planar RGB image. `whole` (a compile-time constant at
+ * the call site): the frame is whole tiles, every vector lies inside; otherwise rows below the
+ * frame and pixels right of it are computed by the caller but not stored. */
+inline void clp_store16_planar(__global float *restrict dst, const float16 r, const float16 g,
+                               const float16 b, const int x, const int y, const int width,
+                               const int height, const int whole)
+{
+    const size_t n = (size_t)width * height;
+    const size_t i = (size_t)y * width + x;
+    if (whole) {
+        vstore16(r, 0, dst + i);
+        vstore16(g, 0, dst + n + i);
+        vstore16(b, 0, dst + 2 * n + i);
+        return;
+    }
+    if (y >= height) return;
+    float rr[16], gg[16], bb[16];
+    vstore16(r, 0, rr);
+    vstore16(g, 0, gg);
+    vstore16(b, 0, bb);
+    for (int e = 0; e < 16 && x + e < width; ++e) {
+        dst[i + e] = rr[e];
+        dst[n + i + e] = gg[e];
+        dst[2 * n + i + e] = bb[e];
+    }
+}
+
 /* Scalar loads and stores, not vload3/vstore3: on PoCL 3.0 a vload3/vstore3 stops the
  * vectorisation across work-items of the whole kernel (measured at 1080p: an exp2 per channel
  * 25 ms with vload3/vstore3, 13.6 ms with these, 7.2 ms planar). */

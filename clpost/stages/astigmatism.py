@@ -262,7 +262,7 @@ class Astigmatism(GatherStage):
         from ..runtime import kernel_source
 
         # ASTIGMATISM_WHOLE_TILES is a property of the frame size, not of the camera
-        return fld.cached_kernel(self._kernels, rt, self._tap_table() + kernel_source("astigmatism"), "astigmatism",
+        return fld.cached_kernel(self._kernels, rt, kernel_source("common") + self._tap_table() + kernel_source("astigmatism"), "astigmatism",
                                  {**self.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole_tiles)}, name)
 
     def _tap_table(self) -> str:

@@ -229,7 +229,7 @@ class Coma(GatherStage):
 
         # COMA_WHOLE_TILES (the frame is whole tiles: stores need no branch) is a property of the
         # frame size, not of the camera, so it is added here rather than in defines()
-        return fld.cached_kernel(self._kernels, rt, self._tap_table() + kernel_source("coma"), "coma",
+        return fld.cached_kernel(self._kernels, rt, kernel_source("common") + self._tap_table() + kernel_source("coma"), "coma",
                                  {**self.defines(camera), "COMA_WHOLE_TILES": int(whole_tiles)}, name)
 
     def _tap_table(self) -> str:
