@@ -435,6 +435,17 @@ def required_render(model: OpenCVModel, margin_px: float = 2.0) -> RenderSpec:
     return RenderSpec(rw, rh, float(f), float(-x0 * f - 0.5), float(-y0 * f - 0.5))
 
 
+def render_intrinsics(model: OpenCVModel, size: tuple[int, int]) -> tuple[float, float, float, float] | None:
+    """(f_x, f_y, c_x, c_y) of an undistorted render of ``size`` made for this calibration: its own
+    K at the calibration's size, :func:`required_render`'s frustum at that size; None otherwise."""
+    if tuple(size) == (model.width, model.height):
+        return float(model.fx), float(model.fy), float(model.cx), float(model.cy)
+    spec = required_render(model)
+    if tuple(size) == (spec.width, spec.height):
+        return spec.intrinsics()
+    return None
+
+
 # ---------------------------------------------------------------------------------------------
 # Calibration files
 # ---------------------------------------------------------------------------------------------

@@ -51,17 +51,15 @@ def principal_point_px(camera, w: int, h: int) -> tuple[float, float]:
     """The optical centre (px) in the undistorted frame these stages see (they run before
     ``distortion``). A calibrated camera's render has the calibration's principal point: at the
     calibration's own size its (c_x, c_y), at the extended frustum of
-    :func:`clpost.calibration.required_render` that frustum's (the sizes
-    :func:`clpost.stages.distortion.source_intrinsics` accepts); otherwise the frame's centre."""
+    :func:`clpost.calibration.required_render` that frustum's
+    (:func:`clpost.calibration.render_intrinsics`, as the distortion stage); otherwise the centre."""
     model = getattr(camera, "distortion", None)
     if model is not None:
-        if (w, h) == (model.width, model.height):
-            return float(model.cx), float(model.cy)
-        from ..calibration import required_render
+        from ..calibration import render_intrinsics
 
-        spec = required_render(model)
-        if (w, h) == (spec.width, spec.height):
-            return float(spec.cx), float(spec.cy)
+        k = render_intrinsics(model, (w, h))
+        if k is not None:
+            return k[2], k[3]
     return 0.5 * (w - 1), 0.5 * (h - 1)
 
 

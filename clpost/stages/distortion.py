@@ -49,7 +49,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..calibration import OpenCVModel, required_render, undistort
+from ..calibration import OpenCVModel, render_intrinsics, required_render, undistort
 from ..errors import InputError
 from .base import GatherStage
 
@@ -62,11 +62,10 @@ def source_intrinsics(model: OpenCVModel, frame) -> tuple[float, float, float, f
     k = frame.metadata.get("intrinsics") if isinstance(frame.metadata, dict) else None
     if k is not None:
         return tuple(float(t) for t in k)
-    if frame.size == (model.width, model.height):
-        return model.fx, model.fy, model.cx, model.cy
+    k = render_intrinsics(model, frame.size)
+    if k is not None:
+        return k
     spec = required_render(model)
-    if frame.size == (spec.width, spec.height):
-        return spec.intrinsics()
     raise InputError(
         f"distortion: the frame is {frame.width}x{frame.height} but the calibration{model._where()} is "
         f"{model.width}x{model.height}; render at {model.width}x{model.height} (the calibration's K) or at "
