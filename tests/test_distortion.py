@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 
 from clpost import Camera, Frame, InputError, Pipeline
-from clpost.calibration import (HeikkilaInverse, OpenCVModel, inverse_residual_px, load_calibration,
+from clpost.calibration import (OpenCVModel, inverse_residual_px, load_calibration,
                                 required_render, undistort_newton)
-from clpost.stages.distortion import Distortion
 
 from conftest import odd_frame
 

@@ -200,7 +200,7 @@ def bspline_tiles(model: OpenCVModel, src_size: tuple[int, int],
     (``distortion_table``, per pixel: partial tiles at the image's right edge, tiles without data,
     strongly magnifying or minifying ones)."""
     x0, y0, ox, oy, uniform, valid = _tile_offsets(model, src_size, src_k)
-    h, w = model.height, model.width
+    w = model.width
     fast = uniform & (valid > 0) & (x0 + TILE <= w)  # rows below the image: the kernel skips them
     return _split_tiles(x0, y0, ox, oy, fast)
 

@@ -156,8 +156,6 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     (:data:`dof.MIXED`) also plans and gathers at half resolution; ``dof_tile_mix`` skips the
     full-resolution gather of the big tiles (count 0) and the half-resolution gather outside the
     big tiles and their neighbours, and ``dof_upsample`` writes only the big tiles' pixels."""
-    import pyopencl as cl
-
     q = rt.queue
     scale, rmax, budget = D.QUALITY[stage.quality]
     mixed = D.MIXED.get(stage.quality)
