@@ -51,6 +51,7 @@ import numpy as np
 
 from ..calibration import OpenCVModel, render_intrinsics, required_render, undistort
 from ..errors import InputError
+from . import _field as fld
 from .base import GatherStage
 
 INVALID = -1.0e30
@@ -311,6 +312,7 @@ class Distortion(GatherStage):
     def __init__(self, quality: str = "final") -> None:
         super().__init__(quality)
         self._dev_maps: dict = {}
+        self._kernels: dict = {}
 
     @property
     def filter_taps(self) -> int:
@@ -382,7 +384,11 @@ class Distortion(GatherStage):
             if bspline:
                 bufs += (rt.empty((3, ph, pw)), rt.empty((3, th, pw)))
             self._dev_maps = {key: bufs}  # one camera and size at a time: the map is static
-        prog = rt.program(kernel_source("common") + kernel_source("distortion"), "distortion", {})
+        source = kernel_source("common") + kernel_source("distortion")
+
+        def kernel(name):  # built once per device, one kernel object per name (not per frame)
+            return fld.cached_kernel(self._kernels, rt, source, "distortion", {}, name)
+
         out = (np.int32(model.width), np.int32(model.height))
         q = rt.queue
         if not bspline:
@@ -391,23 +397,23 @@ class Distortion(GatherStage):
             for name, buf, n, gsize in (("distortion_tiles", bufs[1], len(tiles), (TILE, len(tiles))),
                                         ("distortion_rest", bufs[2], len(rest), (TILE, TILE, len(rest)))):
                 if n:
-                    kern = cl.Kernel(prog, name)
+                    kern = kernel(name)
                     kern.set_args(src, dst, bufs[0], buf, np.int32(sw), np.int32(sh), *out)
                     events.append(cl.enqueue_nd_range_kernel(q, kern, gsize, None))
             return events
         base, wts, fmap, tiles_b, rest_b, coef, tmp = bufs
         tiles, rest = bspline_tiles(model, frame.size, kkey)
-        rows, cols = cl.Kernel(prog, "distortion_fir_rows"), cl.Kernel(prog, "distortion_fir_cols")
+        rows, cols = kernel("distortion_fir_rows"), kernel("distortion_fir_cols")
         rows.set_args(src, tmp, np.int32(sw), np.int32(sh), np.int32(pw), np.int32(th))
         cols.set_args(tmp, coef, np.int32(pw), np.int32(th), np.int32(ph))
         events = [cl.enqueue_nd_range_kernel(q, rows, (pw // 16, th, 3), None),
                   cl.enqueue_nd_range_kernel(q, cols, (pw // 16, ph // FIR_ROWS, 3), None)]
         if len(tiles):
-            kern = cl.Kernel(prog, "distortion_bspline_tiles")
+            kern = kernel("distortion_bspline_tiles")
             kern.set_args(coef, dst, fmap, tiles_b, np.int32(pw), np.int32(ph), *out)
             events.append(cl.enqueue_nd_range_kernel(q, kern, (TILE, len(tiles)), None))
         if len(rest):
-            kern = cl.Kernel(prog, "distortion_table")
+            kern = kernel("distortion_table")
             kern.set_args(coef, dst, base, wts, rest_b, np.int32(pw), np.int32(ph), *out)
             events.append(cl.enqueue_nd_range_kernel(q, kern, (TILE, TILE, len(rest)), None))
         return events
