@@ -7,7 +7,7 @@ import pytest
 
 import clpost.pipeline as pipeline_mod
 from clpost import Camera, Frame, InputError, Pipeline
-from clpost.pipeline import fused_source
+from clpost.codegen import fused_source
 from clpost.runtime import kernels_dir
 from clpost.stages import GatherStage, PointwiseStage, registry
 from clpost.stages.exposure import Exposure, exposure_gain
@@ -228,7 +228,7 @@ def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts):
     one); the result is bit for bit the one-pixel kernel's, for every layout pair."""
     import pyopencl as cl
 
-    from clpost.pipeline import global_size, vector_path
+    from clpost.codegen import global_size, vector_path
 
     h = 5
     frame = odd_frame(rng, w=w, h=h, scale=50.0)

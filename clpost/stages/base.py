@@ -84,7 +84,7 @@ class PointwiseStage(Stage):
     vector: ClassVar[bool] = False
     """True if the source also defines ``<name>_apply16(float16 *r, float16 *g, float16 *b,
     const PixelCtx16 p, <args>)`` for 16 pixels of a row; a fused group whose stages all have it
-    runs 16 pixels per work-item (:data:`clpost.pipeline.VECTOR_PIXELS`)."""
+    runs 16 pixels per work-item (:data:`clpost.codegen.VECTOR_PIXELS`)."""
 
     def source(self) -> str:
         """OpenCL C defining ``<name>_apply`` (default: ``kernels/<name>.cl``)."""
