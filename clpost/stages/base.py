@@ -7,6 +7,10 @@ A stage is one physical effect. Its module (``clpost/stages/<name>.py``) holds o
 - ``order`` — its place in the physical order of light through the camera (see
   :data:`clpost.stages.PHYSICAL_ORDER`);
 - ``reads`` — the Frame buffers it needs besides color (``"depth"``, ``"velocity"``);
+- ``params`` — the frozen dataclass declaring the camera parameters it owns (fields made with
+  :func:`clpost.params.param`: unit, flag, help, default, check, header key, scalar or
+  structural); :class:`clpost.camera.Camera`, its validation and ``describe()`` and the CLI
+  options are generated from it. None: the stage reads only the camera core's parameters;
 - ``skip_reason(camera, frame)`` — why it is an identity for this camera and frame, or None;
 - ``reference(camera, frame, color)`` — a readable float64 numpy implementation (the oracle);
 - its OpenCL implementation: a :class:`PointwiseStage` supplies an inline per-pixel function
@@ -50,6 +54,7 @@ class Stage(ABC):
     order: ClassVar[float]
     reads: ClassVar[tuple[str, ...]] = ()
     kind: ClassVar[str] = "stage"
+    params: ClassVar[type | None] = None
 
     def __init__(self, quality: str = "final") -> None:
         self.quality = quality

@@ -131,7 +131,44 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..errors import InputError
+from ..params import boolean, finite, in_range, param, parse_fraction, parse_on_off
 from .base import GatherStage
+
+
+def _check_blades(name, value):
+    if int(value) != value or value < 0 or value in (1, 2):
+        raise InputError(f"Camera.{name}={value!r} must be 0 (round) or an integer >= 3")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class DofParams:
+    """dof: the thin lens's defocus and the aperture's shape; defaults keep the pinhole image."""
+
+    depth_of_field: bool = param(False, unit="on/off", flag="--depth-of-field", parse=parse_on_off,
+                                 check=boolean, header="clpost.depthOfField", scalar=False,
+                                 help="thin-lens defocus from the depth buffer: on/off (off: pinhole)")
+    blades: int = param(0, unit="blades", flag="--blades", parse=int, check=_check_blades, header="clpost.blades",
+                        scalar=False, help="aperture blades (0 = round)")
+    blade_rotation_deg: float = param(0.0, unit="degrees", flag="--blade-rotation", parse=parse_fraction,
+                                      check=finite("degrees", "e.g. 0"), header="clpost.bladeRotation_deg",
+                                      scalar=True, help="aperture blade rotation in degrees")
+    aperture_roundness: float = param(0.0, unit="unitless", flag="--roundness", parse=float,
+                                      check=in_range(0.0, 1.0, "unitless", "0 (polygon) … 1 (circle)"),
+                                      header="clpost.apertureRoundness", scalar=True,
+                                      help="aperture blade roundness 0 (polygon) … 1 (circle); corners stay on "
+                                           "the f/N circle")
+    spherical_aberration: float = param(0.0, unit="unitless", flag="--spherical-aberration", parse=float,
+                                        check=in_range(-1.0, 1.0, "unitless", "0.5 (undercorrected) or -0.5"),
+                                        header="clpost.sphericalAberration", scalar=False,
+                                        help="bokeh texture -1 … 1 (> 0: undercorrected; near: bright rim, far: "
+                                             "bright core)")
+    optical_vignetting: float = param(0.0, unit="unitless", flag="--cats-eye", parse=float,
+                                      check=in_range(0.0, 1.0, "unitless", "0.5 for visible cat's-eye bokeh"),
+                                      header="clpost.opticalVignetting", scalar=False,
+                                      help="optical vignetting (cat's-eye bokeh) strength 0 … 1: barrel-clip "
+                                           "displacement in aperture radii at the corner")
 
 TILE = 16
 """Work-group / tile edge in working pixels."""
@@ -558,6 +595,7 @@ def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "
 class Dof(GatherStage):
     name = "dof"
     order = 10.0
+    params = DofParams
     reads = ("depth",)
 
     def skip_reason(self, camera, frame):
