@@ -32,29 +32,29 @@ def _size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT in pixels (e.g. 1280x720)") from None
 
 
-def camera_options(camera_cls=Camera) -> list[tuple[str, str, object, str]]:
+def camera_options(camera_cls=None) -> list[tuple[str, str, object, str]]:
     """``(flag, Camera field, parser, help with the default)`` of every declared camera
     parameter that has a flag (:meth:`clpost.camera.Camera.param_specs`)."""
     out = []
-    for s in camera_cls.param_specs():
+    for s in (camera_cls or Camera).param_specs():
         if s.meta.flag is not None:
             help_ = f"{s.meta.help} (default: {s.help_default()})".replace("%", "%%")
             out.append((s.meta.flag, s.name, s.meta.parse or str, help_))
     return out
 
 
-def _add_camera_options(p: argparse.ArgumentParser, camera_cls=Camera) -> None:
+def _add_camera_options(p: argparse.ArgumentParser, camera_cls=None) -> None:
     g = p.add_argument_group("camera (defaults: clpost.Camera's)")
     for flag, dest, typ, help_ in camera_options(camera_cls):
         g.add_argument(flag, dest=f"cam_{dest}", type=typ, default=argparse.SUPPRESS, help=help_)
 
 
-def camera_from_args(args: argparse.Namespace, camera_cls=Camera, /, **defaults) -> Camera:
+def camera_from_args(args: argparse.Namespace, camera_cls=None, /, **defaults) -> Camera:
     """Camera from the options given; ``defaults`` overrides Camera's own defaults (demo). The
     rules about given options (e.g. --metering only in auto-exposure) are the declarations' own
     (:meth:`clpost.camera.Camera.from_options`)."""
     given = {k[4:]: v for k, v in vars(args).items() if k.startswith("cam_")}
-    return camera_cls.from_options(given, defaults)
+    return (camera_cls or Camera).from_options(given, defaults)
 
 
 def _add_pipeline_options(p: argparse.ArgumentParser) -> None:

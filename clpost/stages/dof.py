@@ -137,7 +137,11 @@ from .base import GatherStage
 
 
 def _check_blades(name, value):
-    if int(value) != value or value < 0 or value in (1, 2):
+    try:
+        ok = int(value) == value and value >= 0 and value not in (1, 2)
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
         raise InputError(f"Camera.{name}={value!r} must be 0 (round) or an integer >= 3")
     return int(value)
 

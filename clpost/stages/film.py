@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..film_stock import load_stock
 from ..photometry import SATURATION_EXPOSURE_ISO
 from ..params import param, show_none
@@ -32,8 +33,14 @@ from .base import PointwiseStage
 
 
 def _check_film(name, value):
-    if value is not None:
+    if value is None:
+        return None
+    if not isinstance(value, str):
+        raise InputError(f"Camera.{name}={value!r} must be a film stock name or a stock .toml path")
+    try:
         load_stock(value)
+    except InputError as exc:
+        raise InputError(f"Camera.{name}: {exc}") from None
     return value
 
 

@@ -60,7 +60,7 @@ SENSOR_PRESETS = {
 
 
 def _check_preset(name, value):
-    if value is not None and value not in SENSOR_PRESETS:
+    if value is not None and (not isinstance(value, str) or value not in SENSOR_PRESETS):
         raise InputError(f"Camera.{name}={value!r} is unknown: use one of {', '.join(SENSOR_PRESETS)}")
     return value
 
