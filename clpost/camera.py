@@ -40,8 +40,8 @@ from dataclasses import dataclass, replace
 from typing import Any, Mapping
 
 from .errors import InputError
-from .params import (ParamSpec, finite, in_range, integer, one_of, param, parse_auto_or_fraction, parse_fraction,
-                     parse_wxh_mm, positive, show_auto, specs_of, to_float)
+from .params import (META_KEY, ParamSpec, in_range, integer, one_of, param, parse_auto_or_fraction,
+                     parse_fraction, parse_wxh_mm, positive, show_auto, specs_of, to_float)
 
 
 def parse_lens(name: str) -> float:
@@ -168,7 +168,9 @@ class _CameraBase:
 
     _param_groups: tuple = ()
     _param_specs: tuple = ()
-    _input_names: tuple = ()
+    _field_checks: tuple = ()
+    _input_checks: tuple = ()
+    _validators: tuple = ()
 
     # -- derived quantities -------------------------------------------------------------------
     @property
@@ -279,8 +281,9 @@ class _CameraBase:
         return cls._param_specs
 
     def structure_key(self) -> tuple:
-        """The structural parameters as a hashable ``((name, value), ...)``: equal keys give equal
-        programs, tables and stage lists for the same frame (cache plans by it)."""
+        """The structural parameters as a hashable ``((name, value), ...)``: the values that choose
+        programs, ``#define``s, stage tables and which stages exist; cache plans by it (with the
+        frame size and quality). What the scalars change is per-frame work (:meth:`scalars`)."""
         return tuple((s.name, getattr(self, s.name)) for s in self._param_specs
                      if not s.meta.scalar and not s.meta.input_only)
 
@@ -310,20 +313,14 @@ class _CameraBase:
 def _post_init(self, *input_values) -> None:
     """Validate every declared field (its ``check``), then each params class's ``validate`` rules."""
     cls = type(self)
+    setattr_ = object.__setattr__
+    for name, check in cls._field_checks:
+        setattr_(self, name, check(name, getattr(self, name)))
     inputs = {}
-    for s in cls._param_specs:
-        if s.meta.input_only:
-            continue
-        if s.meta.check is not None:
-            object.__setattr__(self, s.name, s.meta.check(s.name, getattr(self, s.name)))
-    by_name = {s.name: s for s in cls._param_specs}
-    for name, value in zip(cls._input_names, input_values):
-        check = by_name[name].meta.check
+    for (name, check), value in zip(cls._input_checks, input_values):
         inputs[name] = check(name, value) if check is not None and value is not None else value
-    for pcls, _ in cls._param_groups:
-        hook = getattr(pcls, "validate", None)
-        if hook is not None:
-            hook(self, inputs)
+    for hook in cls._validators:
+        hook(self, inputs)
 
 
 CAMERA_DOC = """A physical camera. All fields carry their unit in the name or their declaration.
@@ -358,11 +355,15 @@ def build_camera_class(stages: Mapping[str, type] | None = None, name: str = "Ca
             raise TypeError(f"camera parameter {s.name!r} is declared by both {seen[s.name]} and {s.owner}")
         seen[s.name] = s.owner
     fields = [(s.name, dataclasses.InitVar[Any] if s.meta.input_only else s.type,
-               dataclasses.field(default=s.default, metadata=dict(s.params.__dataclass_fields__[s.name].metadata)))
+               dataclasses.field(default=s.default, metadata={META_KEY: s.meta}))
               for s in specs]
     namespace = {"__post_init__": _post_init, "__doc__": CAMERA_DOC, "__module__": __name__, "__qualname__": name,
                  "_param_groups": tuple(groups), "_param_specs": specs,
-                 "_input_names": tuple(s.name for s in specs if s.meta.input_only)}
+                 # precomputed for __post_init__ (a camera is built per frame by the meter)
+                 "_field_checks": tuple((s.name, s.meta.check) for s in specs
+                                        if s.meta.check is not None and not s.meta.input_only),
+                 "_input_checks": tuple((s.name, s.meta.check) for s in specs if s.meta.input_only),
+                 "_validators": tuple(h for pcls, _ in groups if (h := getattr(pcls, "validate", None)) is not None)}
     cls = dataclasses.make_dataclass(name, fields, bases=(_CameraBase,), namespace=namespace, frozen=True)
     cls.__module__, cls.__qualname__ = __name__, name
     return cls

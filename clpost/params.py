@@ -68,11 +68,6 @@ class ParamSpec:
     meta: ParamMeta
     params: type
 
-    def __getattr__(self, item):  # spec.unit, spec.flag, ... read through to the metadata
-        if item == "meta":
-            raise AttributeError(item)
-        return getattr(self.meta, item)
-
     def header_text(self, value: Any) -> str | None:
         """The EXR header value of ``value`` (None: the key is omitted)."""
         return (self.meta.show or show_default)(value)

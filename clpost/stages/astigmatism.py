@@ -153,11 +153,13 @@ class AstigmatismParams:
     lens); a number replaces the traced curve (0 turns the effect off)."""
 
     field_curvature_mm: float | None = param(
-        None, unit="mm", flag="--field-curvature", parse=parse_fraction, check=CORNER_MM, header="clpost.field_curvature_mm",
-        scalar=False, help="mean sagittal/tangential focal offset at the image corner in mm (+ = behind the film)")
+        None, unit="mm", flag="--field-curvature", parse=parse_fraction, check=CORNER_MM,
+        header="clpost.field_curvature_mm", scalar=False,
+        help="mean sagittal/tangential focal offset at the image corner in mm (+ = behind the film)")
     astigmatism_mm: float | None = param(
         None, unit="mm", flag="--astigmatism", parse=parse_fraction, check=CORNER_MM, header="clpost.astigmatism_mm",
         scalar=False, help="tangential minus sagittal focal offset at the image corner in mm")
+
 
 TAPS = {"draft": 16, "preview": 32, "final": 64}
 # tile classes (module docstring, "Tile classes"): copied below COPY_PX; otherwise the fewest of

@@ -120,7 +120,9 @@ class ComaParams:
 
     coma_mm: float | None = param(
         None, unit="mm", flag="--coma", parse=parse_fraction, check=CORNER_MM, header="clpost.coma_mm",
-        scalar=False, help="comet length (tangential coma, 3C) at the image corner in mm (+ = tail away from the centre)")
+        scalar=False,
+        help="comet length (tangential coma, 3C) at the image corner in mm (+ = tail away from the centre)")
+
 
 TAPS = {"draft": 16, "preview": 32, "final": 64}
 MAX_TAIL_PX = fld.PAD - 1

@@ -95,6 +95,7 @@ class DistortionParams:
         True, unit="on/off", flag="--lens-distortion", parse=parse_on_off, check=boolean, scalar=False,
         help="a lens_data lens without --calibration distorts by its traced curve: on/off")
 
+
 INVALID = -1.0e30
 """Map value marking an output pixel without a preimage (the kernel writes 0, alpha is 0)."""
 

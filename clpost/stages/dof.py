@@ -174,6 +174,7 @@ class DofParams:
                                       help="optical vignetting (cat's-eye bokeh) strength 0 … 1: barrel-clip "
                                            "displacement in aperture radii at the corner")
 
+
 TILE = 16
 """Work-group / tile edge in working pixels."""
 

@@ -53,6 +53,7 @@ class FilmParams:
                              help="film stock: neutral-100, kodak-ektar-100, kodak-gold-200, fuji-superia-400, "
                                   "or a stock .toml")
 
+
 FILM_LUT_SIZE = 1024
 
 

@@ -54,6 +54,7 @@ class GrainParams:
                                header="clpost.grainScale", scalar=False,
                                help="grain radius multiplier (0 = no grain)")
 
+
 GRAIN_NS = 8
 """Samples per pixel side of the final Boolean model (64 samples)."""
 RESOLVED_MIN_PX = 1.0 / 8.0

@@ -71,8 +71,10 @@ class LateralColorParams:
     """Parametric lateral colour at the image corner (None: the traced lens's, or none for a thin lens)."""
 
     lateral_color_mm: float | None = param(
-        None, unit="mm", flag="--lateral-color", parse=parse_fraction, check=CORNER_MM, header="clpost.lateral_color_mm",
-        scalar=False, help="chief-ray height at F (486.1 nm) minus at C (656.3 nm) at the image corner in mm")
+        None, unit="mm", flag="--lateral-color", parse=parse_fraction, check=CORNER_MM,
+        header="clpost.lateral_color_mm", scalar=False,
+        help="chief-ray height at F (486.1 nm) minus at C (656.3 nm) at the image corner in mm")
+
 
 FIXED_POINT_STEPS = 4
 DERIVATIVE_STEP_MM = 1e-3

@@ -103,6 +103,7 @@ class MotionBlurParams:
                              f"{fps:g} fps (a 360° shutter is {1 / fps:.4g} s); "
                              "use a shorter --shutter or --shutter-angle <= 360")
 
+
 TILE = 20
 """K: tile size and the largest blur half-length in px."""
 SAMPLES = {"draft": 7, "preview": 15, "final": 31}

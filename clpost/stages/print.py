@@ -49,6 +49,7 @@ class PrintParams:
                              help="negative film output: print (display-referred paper print), linear "
                                   "(re-linearised scene-linear), negative (the densities)")
 
+
 PAPER_GAMMA = 2.0
 PAPER_RANGE = 2.2
 GREY_REFLECTANCE = 0.18

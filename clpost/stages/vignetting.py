@@ -66,6 +66,7 @@ class VignettingParams:
                             show=lambda v: None if v == "off" else v, scalar=False,
                             help="off, natural (cos^4), lens (traced) or table:<file>")
 
+
 LUT_SIZE = 1024
 
 RelativeIllumination = Callable[[np.ndarray], np.ndarray]
