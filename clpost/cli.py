@@ -32,20 +32,22 @@ def _size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT in pixels (e.g. 1280x720)") from None
 
 
-def camera_options(camera_cls=None) -> list[tuple[str, str, object, str]]:
+def camera_options(camera_cls=None, defaults=None) -> list[tuple[str, str, object, str]]:
     """``(flag, Camera field, parser, help with the default)`` of every declared camera
-    parameter that has a flag (:meth:`clpost.camera.Camera.param_specs`)."""
+    parameter that has a flag (:meth:`clpost.camera.Camera.param_specs`); ``defaults`` replaces
+    Camera's own defaults in the help (the demo camera's)."""
     out = []
     for s in (camera_cls or Camera).param_specs():
         if s.meta.flag is not None:
-            help_ = f"{s.meta.help} (default: {s.help_default()})".replace("%", "%%")
+            shown = s.help_default(*([defaults[s.name]] if defaults and s.name in defaults else []))
+            help_ = f"{s.meta.help} (default: {shown})".replace("%", "%%")
             out.append((s.meta.flag, s.name, s.meta.parse or str, help_))
     return out
 
 
-def _add_camera_options(p: argparse.ArgumentParser, camera_cls=None) -> None:
-    g = p.add_argument_group("camera (defaults: clpost.Camera's)")
-    for flag, dest, typ, help_ in camera_options(camera_cls):
+def _add_camera_options(p: argparse.ArgumentParser, camera_cls=None, defaults=None) -> None:
+    g = p.add_argument_group("camera (defaults: the demo camera's)" if defaults else "camera (defaults: clpost.Camera's)")
+    for flag, dest, typ, help_ in camera_options(camera_cls, defaults):
         g.add_argument(flag, dest=f"cam_{dest}", type=typ, default=argparse.SUPPRESS, help=help_)
 
 
@@ -285,6 +287,8 @@ def cmd_lens(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .demo import DEMO_CAMERA_DEFAULTS  # the demo and bench cameras' defaults, shown in their --help
+
     p = argparse.ArgumentParser(prog="clpost", description="A realistic camera for rendered images.")
     p.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     p.add_argument("--device", default=None,
@@ -308,7 +312,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(Lambers et al. 3.2; docs/geometry_distortion.md); image-based: the --lens "
                         "prescription as perspective projections per pupil sample (Heidrich et al.; "
                         "docs/image_based_lens.md)")
-    _add_camera_options(d)
+    _add_camera_options(d, defaults=DEMO_CAMERA_DEFAULTS)
     _add_pipeline_options(d)
     d.set_defaults(func=cmd_demo)
 
@@ -372,7 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--cache", default=None, help="where the rendered demo frames are cached (EXR)")
     b.add_argument("--markdown", default=None,
                    help="also regenerate the generated section of this file (docs/benchmarks.md)")
-    _add_camera_options(b)
+    _add_camera_options(b, defaults=DEMO_CAMERA_DEFAULTS)
     _add_pipeline_options(b)
     b.set_defaults(func=cmd_bench)
 

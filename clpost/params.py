@@ -72,13 +72,15 @@ class ParamSpec:
         """The EXR header value of ``value`` (None: the key is omitted)."""
         return (self.meta.show or show_default)(value)
 
-    def help_default(self) -> str:
-        """The default as the command line spells it."""
-        if self.meta.cli_default is not None:
-            return self.meta.cli_default
-        d = self.default
+    def help_default(self, value: Any = dataclasses.MISSING) -> str:
+        """The default (or ``value``, e.g. the demo camera's) as the command line spells it."""
+        if value is dataclasses.MISSING or value == self.default:
+            if self.meta.cli_default is not None:
+                return self.meta.cli_default
+            value = self.default
+        d = value
         if d is None:
-            return "none"
+            return (self.meta.show(None) if self.meta.show is not None else None) or "none"
         if isinstance(d, bool):
             return "on" if d else "off"
         if isinstance(d, tuple):

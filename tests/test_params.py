@@ -83,6 +83,17 @@ def test_every_flag_is_in_process_help_with_its_default(monkeypatch, capsys):
     assert "(default: 1/50)" in out and "(default: thin:50)" in out and "(default: off)" in out
 
 
+def test_demo_and_bench_help_show_the_demo_cameras_defaults(monkeypatch, capsys):
+    from clpost.demo import DEMO_CAMERA_DEFAULTS
+
+    for command in ("demo", "bench"):
+        _print_help(monkeypatch, [command, "--help"])
+        blocks = {b.split()[0]: b for b in _option_blocks(capsys.readouterr().out)}
+        assert blocks["--lens"].endswith(f"(default: {DEMO_CAMERA_DEFAULTS['lens']})")
+        assert blocks["--shutter"].endswith("(default: auto)") and DEMO_CAMERA_DEFAULTS["shutter_s"] is None
+        assert blocks["--iso"].endswith("(default: 100)")  # not in the demo defaults: Camera's
+
+
 def test_every_header_key_is_in_describe():
     for s in STORED:
         if s.meta.header is None:
