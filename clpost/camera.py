@@ -70,10 +70,18 @@ def _lens_data_names() -> list[str]:
     return available_lenses()
 
 
+_LENS_DATA_FOUND: set[str] = set()  # names found once (get_lens keeps them for the process, too)
+
+
 def _is_lens_data(name: str) -> bool:
+    if name in _LENS_DATA_FOUND:  # a camera is validated per frame (the meter): no file system look-up
+        return True
     from .optics.prescription import lens_data_dir
 
-    return (lens_data_dir() / f"{name}.toml").is_file()
+    found = (lens_data_dir() / f"{name}.toml").is_file()
+    if found:
+        _LENS_DATA_FOUND.add(name)
+    return found
 
 
 def _check_lens(name: str, value: Any) -> str:
