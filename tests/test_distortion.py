@@ -297,7 +297,7 @@ def test_a_traced_lens_distorts_by_its_own_curve():
     import math
 
     from clpost.calibration import lens_distortion_model
-    from clpost.optics.curves import lens_curves
+    from clpost.optics import lens_curves
 
     cam = Camera(lens="zeiss-planar-50-f1.4", f_number=2.0, focus_distance_m=3.0)
     model = lens_distortion_model(cam, (960, 640))

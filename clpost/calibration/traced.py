@@ -14,7 +14,7 @@ from .model import OpenCVModel
 def _radial_fit(lens: str, focus_distance_m: float, f_number: float, r_max_mm: float):
     """k1, k2, k3 least-squares fitted to the traced distortion curve over image heights up to
     ``r_max_mm``, and the fit's worst residual in percent."""
-    from ..optics.curves import lens_curves
+    from ..optics import lens_curves
 
     c = lens_curves(lens, focus_distance_m, f_number)
     keep = c.image_height_mm <= r_max_mm + 1e-9
