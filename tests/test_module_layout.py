@@ -115,3 +115,30 @@ def test_the_curves_cache_is_bounded(monkeypatch):
     lens.curves(1.0, 2.8)
     assert len(calls) == 5  # the oldest went first
     assert calls[0][1:] == (1.0, 2.8, pytest.approx(math.hypot(36, 24) / 2))
+
+
+LAYERS = {
+    # each job module imports only the layers before it
+    "clpost.render": ["ibl_rays", "ibl_build", "ibl_warp", "image_based_lens"],
+    "clpost.calibration": ["model", "frustum", "traced", "formats"],
+}
+
+
+@pytest.mark.parametrize("package", sorted(LAYERS))
+def test_job_modules_import_only_the_layers_below(package):
+    graph = import_graph()
+    layers = [f"{package}.{m}" for m in LAYERS[package]]
+    for i, m in enumerate(layers):
+        above = set(layers[i + 1:])
+        assert m in graph and not graph[m] & above, (m, graph[m] & above)
+
+
+def test_the_image_based_lens_facade_exports_the_job_modules_objects():
+    from clpost.render import ibl_build, ibl_rays, ibl_warp, image_based_lens
+
+    for name in image_based_lens.__all__:
+        obj = getattr(image_based_lens, name)
+        homes = [m for m in (ibl_rays, ibl_build, ibl_warp, image_based_lens) if getattr(m, name, None) is obj]
+        assert homes, name
+        if callable(obj):  # defined in the first (lowest) module that has it, not copied
+            assert obj.__module__ == homes[0].__name__, name
