@@ -2,7 +2,7 @@
  *
  * map holds, for every output pixel i, the source position in the render (planar: x at map[i],
  * y at map[n + i], render pixel centres at integers). It is computed once per (camera, size) on
- * the host in float64 by the exact Newton inverse of the OpenCV model (clpost/calibration.py);
+ * the host in float64 by the exact Newton inverse of the OpenCV model (clpost/calibration/model.py);
  * a pixel with no preimage (outside the render, beyond the fold, no convergence) has x = -1e30
  * and gets color 0 (its alpha, written on the host, is 0).
  *
