@@ -183,3 +183,15 @@ def test_film_and_sensor_options_reach_the_camera(tmp_path, capsys):
     assert run_cli("process", src, "-o", tmp_path / "x.exr", "--film", "kodak-gold-200",
                    "--sensor-preset", "smartphone", *CAM_ARGS) == 2
     assert "one medium" in capsys.readouterr().err
+
+
+def test_meter_options_without_auto_exposure_are_an_error(tmp_path, capsys):
+    exr.write_frame(tmp_path / "a.exr", Frame(np.ones((4, 6, 3), np.float32)))
+    assert main(["process", str(tmp_path / "a.exr"), "-o", str(tmp_path / "b.exr"), "--ev", "2"]) == 2
+    assert "only in auto-exposure" in capsys.readouterr().err
+    assert main(["process", str(tmp_path / "a.exr"), "-o", str(tmp_path / "b.exr"), "--ev", "2",
+                 "--shutter", "auto", "--explain"]) == 0
+    with pytest.raises(SystemExit) as exc:
+        main(["demo", str(tmp_path / "d"), "--depth-of-field", "enabled"])
+    assert exc.value.code == 2
+    assert "is not on/off" in capsys.readouterr().err
