@@ -32,11 +32,6 @@ def test_stage_names_match_kernel_files_functions_and_tests():
         assert (TESTS / f"test_{name}.py").is_file(), f"stage {name} needs tests/test_{name}.py"
 
 
-def test_registry_is_in_physical_order():
-    orders = [cls.order for cls in registry().values()]
-    assert orders == sorted(orders)
-
-
 def test_unknown_stage_and_quality_are_refused():
     with pytest.raises(InputError, match="unknown stage.*bokeh.*known: .*exposure"):
         Pipeline(Camera(), stages=["bokeh"])

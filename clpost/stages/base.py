@@ -4,8 +4,8 @@ A stage is one physical effect. Its module (``clpost/stages/<name>.py``) holds o
 :class:`Stage` with:
 
 - ``name`` — used alike in ``--stages``, ``kernels/<name>.cl`` and ``tests/test_<name>.py``;
-- ``order`` — its place in the physical order of light through the camera (see
-  :data:`clpost.stages.PHYSICAL_ORDER`);
+- ``order`` — its place in the physical order of light through the camera: it must follow the
+  explicit list :data:`clpost.stages.PHYSICAL_ORDER`, where a new stage is added;
 - ``reads`` — the Frame buffers it needs besides color (``"depth"``, ``"velocity"``);
 - ``skip_reason(camera, frame)`` — why it is an identity for this camera and frame, or None;
 - ``reference(camera, frame, color)`` — a readable float64 numpy implementation (the oracle);
