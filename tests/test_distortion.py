@@ -265,8 +265,7 @@ def test_checkerboards_calibrate_back_to_their_parameters():
     B-spline interpolation every parameter comes back within 1 % (the previous Keys a = −¾ filter,
     first-order, moved corners by 0.026 px RMS: k2 8.0 %, p2 6.7 % off). The stage's output and
     scipy's B-spline through the same map must agree on the corners too."""
-    sys.path.insert(0, str(ROOT / "tools"))
-    import distortion_calibration as dc
+    from clpost.calib_check import checkerboard as dc
 
     m = dc.parameter_sets((800, 600))["tangential"]
     raw, out = dc.render_views(m, 17)

@@ -23,7 +23,7 @@ Why not ``cv2.cornerSubPix``: it solves for the point to which every image gradi
 window is orthogonal, which is exact for two straight ideal edges but biased by blur near the
 crossing when the lines are not perpendicular (perspective), by the discrete gradient, and by
 bent lines: 0.012–0.027 px RMS on exact synthetic corners (tests/test_corner_refine.py), 0.014
-px on the Gaussian-filtered board renders of tools/distortion_calibration.py, where this fit is
+px on the Gaussian-filtered board renders of :mod:`clpost.calib_check.checkerboard`, where this fit is
 at 0.0004 px.
 
 Where it is exact, and where not (measured): exact (to the solver's tolerance) when the blur is
