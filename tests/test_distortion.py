@@ -155,6 +155,7 @@ def test_input_alpha_is_resampled_and_multiplied(rng):
     assert out.alpha[11, 5] == 0 and out.alpha[11, 30] == 1 and out.alpha.max() <= 1
 
 
+@pytest.mark.slow
 def test_renderer_principal_point_matches_a_crop_of_a_wider_centred_render():
     from clpost.render import DemoScene, PyVistaRenderer
 
@@ -235,6 +236,7 @@ def test_calibration_files(tmp_path):
         load_calibration(col)
 
 
+@pytest.mark.slow
 def test_cli_process_with_an_opencv_calibration(tmp_path):
     from clpost import exr
 
@@ -257,6 +259,7 @@ def test_cli_process_with_an_opencv_calibration(tmp_path):
     assert r.returncode == 2 and "not found" in r.stderr
 
 
+@pytest.mark.slow
 def test_checkerboards_calibrate_back_to_their_parameters():
     """The paper's verification on its hardest set (tangential, 17 views, 800×600; all three sets:
     tools/distortion_calibration.py, docs/distortion_calibration.md). The board is Gaussian
