@@ -1,5 +1,6 @@
 """The stage registry: every module here that defines a :class:`~clpost.stages.base.Stage`
-subclass contributes one stage — adding a stage touches no other stage.
+subclass contributes one stage — adding a stage touches no other stage; it adds one line to
+:data:`STAGE_ROLES` (where light reaches it) and regenerates the table below.
 
 Physical order (light from the scene through the lens to the recorded image): the explicit list
 :data:`PHYSICAL_ORDER`, which each stage's ``order`` must follow (``tests/test_stage_order.py``).

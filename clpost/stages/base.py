@@ -27,7 +27,9 @@ How the planner calls a stage (:mod:`clpost.pipeline`):
   (channel c of pixel i at ``c*W*H + i``), ``aux["depth"]`` / ``aux["velocity"]`` device
   buffers for what it ``reads``; it builds its programs through ``rt.program`` (memoised) and
   caches its own scratch buffers per resolution. Returns the events it enqueued (profiled).
-- ``reference()`` gets float64 color and the host Frame; tests compare the two on odd sizes.
+- ``reference()`` gets float64 color and the host Frame; tests compare the two on odd sizes,
+  after asserting that the stage is planned (``tests/conftest.py``: ``assert_planned``; an
+  unplanned stage is the identity on both sides).
 """
 from __future__ import annotations
 
