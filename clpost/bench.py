@@ -42,8 +42,10 @@ import numpy as np
 from .atomic import atomic_path
 from .camera import Camera
 from .frame import Frame
-from .pipeline import AUX_BUFFERS, Pipeline, resized_view
-from .stages import GatherStage, PointwiseStage, registry
+from .codegen import AUX_BUFFERS
+from .pipeline import Pipeline
+from .plan import resized_view
+from .stages import PointwiseStage, registry
 
 SCHEMA_VERSION = 1
 DEFAULT_SIZES = ((640, 360), (1280, 720), (1920, 1080), (3840, 2160))
@@ -176,21 +178,16 @@ def launch_bytes(stages, camera: Camera, frame: Frame, in_size: tuple[int, int],
 
 def launches(pipe: Pipeline, frame: Frame, cam: Camera) -> list[dict]:
     """The plan's kernel launches in order: name, stages, kind, input/output size, bytes, taps/px."""
-    planned = pipe._planned(frame, cam)
-    nodes = pipe._build_nodes(planned, cam, build=False)
-    size, out = frame.size, []
-    for node in nodes:
-        gather = bool(node.stages) and isinstance(node.stages[0], GatherStage)
-        out_size = node.stages[0].output_size(cam, frame) if gather else size
+    plan = pipe.plan_for(frame, cam)
+    out = []
+    for node, L in zip(plan.nodes, plan.launches):
         taps = None
-        if gather and hasattr(node.stages[0], "taps_per_pixel"):
+        if L.kind == "gather" and hasattr(node.stages[0], "taps_per_pixel"):
             taps = node.stages[0].taps_per_pixel(cam, frame)
-        out.append(dict(kernel=node.name, stages=[s.name for s in node.stages],
-                        kind="gather" if gather else ("pointwise" if node.stages else "convert"),
-                        in_size=list(size), out_size=list(out_size),
-                        bytes=launch_bytes(node.stages, cam, frame, size, out_size),
+        out.append(dict(kernel=L.name, stages=list(L.stages), kind=L.kind,
+                        in_size=list(L.in_size), out_size=list(L.out_size),
+                        bytes=launch_bytes(node.stages, cam, frame, L.in_size, L.out_size),
                         taps_per_pixel=taps))
-        size = out_size
     return out
 
 
@@ -286,7 +283,7 @@ def bench_case(scene: Scene, width: int, height: int, *, quality: str = "final",
         pipe.reference(frame)
         numpy_ms = (time.perf_counter() - t0) * 1e3
     cv2_ms = kernel_ms = None
-    dist = next((s for s in pipe._planned(frame, rcam) if s.name == "distortion"), None)
+    dist = next((s for s in pipe.plan_for(frame, rcam).stages if s.name == "distortion"), None)
     if dist is not None:
         cv2_ms = cv2_remap_ms(dist, rcam, frame, max(3, repeats // 2))
         kernel_ms = med.get("distortion")

@@ -199,7 +199,11 @@ def cmd_process(args) -> int:
         print(f"plan for {jobs[0].src} ({first.width}x{first.height}, quality {args.quality}):")
         for e in pipe.explain(first):
             print(f"  {e}")
-        print(f"kernels: {', '.join(pipe.kernels(first)) or '(none)'}")
+        plan = pipe.plan_for(first, cam)
+        print(f"kernels: {', '.join(plan.kernel_names) or '(none)'}")
+        if plan.output_size != plan.size:
+            print(f"output size: {plan.output_size[0]}x{plan.output_size[1]} (resampled by "
+                  f"{', '.join(L.name for L in plan.launches if L.out_size != L.in_size)})")
         if cam != camera:
             print(f"auto-exposure: f/{cam.f_number:.3g}, {cam.shutter_s:.4g} s")
         return 0
