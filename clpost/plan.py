@@ -13,6 +13,7 @@ Plans are made by :meth:`clpost.pipeline.Pipeline.plan_for`, which caches them b
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -145,6 +146,9 @@ class Plan:
         self.buffers = buffers
         self.last_timings: dict[str, float] = {}
         """Device milliseconds of the last :meth:`run`, per kernel and for upload/download."""
+        self.last_host_ms = 0.0
+        """CPU time of the calling thread in the last :meth:`run` (host work: planning checks,
+        tables, argument setting, enqueueing; the device's threads and waits are not in it)."""
         if build:
             self._build(camera)
 
@@ -268,11 +272,17 @@ class Plan:
         """Process one frame with this plan. ``camera``: this frame's camera (same structure as the
         plan's; its scalars — focus, f-number, shutter, exposure … — may differ per frame).
         Returns a new Frame whose color is the camera's output."""
+        t0 = time.thread_time()
+        try:
+            return self._run(frame, self.camera if camera is None else camera)
+        finally:
+            self.last_host_ms = (time.thread_time() - t0) * 1e3
+
+    def _run(self, frame: Frame, cam) -> Frame:
         import pyopencl as cl
 
         from .runtime import event_ms
 
-        cam = self.camera if camera is None else camera
         self.check(frame, cam)
         self.last_timings = {}
         meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
