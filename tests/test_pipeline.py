@@ -112,7 +112,7 @@ def test_auto_exposure_changes_only_scalars(rng):
     f1 = odd_frame(rng, scale=1.0)
     f2 = odd_frame(rng, scale=100.0)
     o1, o2 = pipe.run(f1), pipe.run(f2)
-    assert len(pipe._nodes) == 1
+    assert len(pipe._plans) == 1  # per-frame scalars: one plan, no rebuild
     # the meter brings both to the same mean exposure level
     assert o1.color.mean() == pytest.approx(o2.color.mean(), rel=0.05)
     assert exposure_gain(pipe.camera_for(f1)) == pytest.approx(100 * exposure_gain(pipe.camera_for(f2)), rel=0.1)
@@ -232,12 +232,13 @@ def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts):
     pipe = Pipeline(Camera(f_number=2.0, vignetting="natural"), stages=["vignetting", "exposure"])
     pipe.run(frame)
     cam = pipe.camera_for(frame)
-    stages = pipe._planned(frame, cam)
+    plan = pipe.plan_for(frame, cam)
+    stages = plan.stages
     assert vector_path(stages) and global_size(stages, *layouts, w, h) == ((w + 15) // 16, h)
-    rt, bufs = pipe.runtime, pipe._buffers_for(w, h)
+    rt, bufs = pipe.runtime, plan.buffers
     cl.enqueue_copy(rt.queue, bufs.color_in, np.ascontiguousarray(frame.color))
     defines = {k: v for s in stages for k, v in s.defines(cam).items()}
-    args = [np.int32(w), np.int32(h)] + [a for s in stages for a in pipe._arg_values(s, cam, frame, bufs)]
+    args = [np.int32(w), np.int32(h)] + [a for s in stages for a in plan.arg_values(s, cam, frame)]
     outs = []
     for vec, gsize in ((False, (w, h)), (True, ((w + 15) // 16, h))):
         name, src = fused_source(stages, *layouts, vector=vec)
