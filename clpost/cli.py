@@ -118,7 +118,11 @@ def cmd_process(args) -> int:
         print(f"plan for {jobs[0].src} ({first.width}x{first.height}, quality {args.quality}):")
         for e in pipe.explain(first):
             print(f"  {e}")
-        print(f"kernels: {', '.join(pipe.kernels(first)) or '(none)'}")
+        plan = pipe.plan_for(first, cam)
+        print(f"kernels: {', '.join(plan.kernel_names) or '(none)'}")
+        if plan.output_size != plan.size:
+            print(f"output size: {plan.output_size[0]}x{plan.output_size[1]} (resampled by "
+                  f"{', '.join(L.name for L in plan.launches if L.out_size != L.in_size)})")
         if cam != camera:
             print(f"auto-exposure: f/{cam.f_number:.3g}, {cam.shutter_s:.4g} s")
         return 0
@@ -255,6 +259,13 @@ def cmd_bench(args) -> int:
     if unknown:
         raise InputError(f"--scenes: unknown scene(s) {', '.join(unknown)}; known: {', '.join(SCENES)}")
     qualities = args.qualities.split(",") if args.qualities else [args.quality]
+    if args.against:
+        from .bench_ab import compare, format_rows
+
+        rows = compare(args.against, scenes, args.sizes or list(DEFAULT_SIZES), qualities, device=args.device,
+                       repeats=args.repeats, warmup=args.warmup, log=lambda m: print(m, file=sys.stderr))
+        print(json.dumps(rows, indent=2) if args.json else format_rows(rows, args.against))
+        return 0
     # the demo scene uses the demo camera with the command line's camera options on top
     base = camera_from_args(args, **DEMO_CAMERA_DEFAULTS)
     doc = run(scenes, args.sizes or list(DEFAULT_SIZES), qualities, device=args.device,
@@ -376,6 +387,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--cache", default=None, help="where the rendered demo frames are cached (EXR)")
     b.add_argument("--markdown", default=None,
                    help="also regenerate the generated section of this file (docs/benchmarks.md)")
+    b.add_argument("--against", default=None, metavar="REV",
+                   help="also run git revision REV of clpost in this process, interleaved, and print "
+                        "per-kernel ms of both and new/old (run from a clpost checkout)")
     _add_camera_options(b, defaults=DEMO_CAMERA_DEFAULTS)
     _add_pipeline_options(b)
     b.set_defaults(func=cmd_bench)

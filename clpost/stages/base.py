@@ -4,8 +4,8 @@ A stage is one physical effect. Its module (``clpost/stages/<name>.py``) holds o
 :class:`Stage` with:
 
 - ``name`` — used alike in ``--stages``, ``kernels/<name>.cl`` and ``tests/test_<name>.py``;
-- ``order`` — its place in the physical order of light through the camera (see
-  :data:`clpost.stages.PHYSICAL_ORDER`);
+- ``order`` — its place in the physical order of light through the camera: it must follow the
+  explicit list :data:`clpost.stages.PHYSICAL_ORDER`, where a new stage is added;
 - ``reads`` — the Frame buffers it needs besides color (``"depth"``, ``"velocity"``);
 - ``params`` — the frozen dataclass declaring the camera parameters it owns (fields made with
   :func:`clpost.params.param`: unit, flag, help, default, check, header key, scalar or
@@ -31,7 +31,9 @@ How the planner calls a stage (:mod:`clpost.pipeline`):
   (channel c of pixel i at ``c*W*H + i``), ``aux["depth"]`` / ``aux["velocity"]`` device
   buffers for what it ``reads``; it builds its programs through ``rt.program`` (memoised) and
   caches its own scratch buffers per resolution. Returns the events it enqueued (profiled).
-- ``reference()`` gets float64 color and the host Frame; tests compare the two on odd sizes.
+- ``reference()`` gets float64 color and the host Frame; tests compare the two on odd sizes,
+  after asserting that the stage is planned (``tests/conftest.py``: ``assert_planned``; an
+  unplanned stage is the identity on both sides).
 """
 from __future__ import annotations
 

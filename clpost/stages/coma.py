@@ -146,8 +146,8 @@ would turn into a far too long comet."""
 @lru_cache(maxsize=32)
 def _traced(lens_name: str, focus_distance_m: float, f_number: float) -> tuple[np.ndarray, np.ndarray]:
     """(image_height_mm, C_mm) of a traced lens from its meridional fans."""
-    from ..optics import get_lens
-    from ..optics.curves import _Field, lens_curves
+    from ..optics import get_lens, lens_curves
+    from ..optics.curves import _Field
 
     lens = get_lens(lens_name)
     curves = lens_curves(lens_name, focus_distance_m, f_number)

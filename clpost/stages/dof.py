@@ -609,10 +609,10 @@ class Dof(GatherStage):
         if frame.depth is None:
             return None  # the planner then asks for the depth buffer
         k, inv_u = coc_coefficients(camera, frame.width)
-        finite = frame.depth[np.isfinite(frame.depth)].astype(np.float64)
-        inv = [0.0] if finite.size < frame.depth.size else []
-        if finite.size:
-            inv += [1.0 / finite.min(), 1.0 / finite.max()]
+        near, far, sky = frame.depth_range
+        inv = [0.0] if sky else []
+        if math.isfinite(far):
+            inv += [1.0 / near, 1.0 / far]
         worst = max(abs(k * (inv_u - i)) for i in inv)
         if worst <= 0.5:
             return f"all pixels in focus (largest CoC radius {worst:.3g} px <= 0.5 px)"
