@@ -232,8 +232,7 @@ def at_least(lo: float, unit: str, fix: str, note: str) -> Check:
     def check(name, value):
         v = finite_value(name, value, unit, fix)
         if v < lo:
-            raise InputError(f"Camera.{name}={value!r} must be >= {lo:g}{' ' + unit if unit[0].isalpha() else ''} "
-                             f"({note})")
+            raise InputError(f"Camera.{name}={value!r} must be >= {lo:g} {unit} ({note})")
         return v
     return check
 
