@@ -46,7 +46,8 @@ def camera_options(camera_cls=None, defaults=None) -> list[tuple[str, str, objec
 
 
 def _add_camera_options(p: argparse.ArgumentParser, camera_cls=None, defaults=None) -> None:
-    g = p.add_argument_group("camera (defaults: the demo camera's)" if defaults else "camera (defaults: clpost.Camera's)")
+    g = p.add_argument_group("camera (defaults: the demo camera's)" if defaults
+                             else "camera (defaults: clpost.Camera's)")
     for flag, dest, typ, help_ in camera_options(camera_cls, defaults):
         g.add_argument(flag, dest=f"cam_{dest}", type=typ, default=argparse.SUPPRESS, help=help_)
 
