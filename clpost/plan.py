@@ -14,7 +14,7 @@ Plans are made by :meth:`clpost.pipeline.Pipeline.plan_for`, which caches them b
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -115,17 +115,11 @@ def group_nodes(stages: list[Stage]) -> list[_Node]:
     return nodes
 
 
-_SCALARS = ("f_number", "shutter_s", "focus_distance_m", "iso", "transmittance", "luminance_scale",
-            "exposure_compensation_ev")
-
-
 def structure_key(camera) -> object:
-    """What of a camera decides programs and buffers: ``Camera.structure_key()`` where the camera
-    declares it, else every field but the per-frame scalars (focus, f-number, shutter, exposure)."""
-    key = getattr(camera, "structure_key", None)
-    if callable(key):
-        return key()
-    return tuple((f.name, getattr(camera, f.name)) for f in fields(camera) if f.name not in _SCALARS)
+    """What of a camera decides programs and buffers: its structural parameters
+    (:meth:`clpost.camera.Camera.structure_key`); per-frame scalars (focus, f-number, shutter,
+    exposure …) are not in it."""
+    return camera.structure_key()
 
 
 class Plan:
