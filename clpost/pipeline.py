@@ -90,6 +90,10 @@ class _Buffers:
     """(stage, arg) → the read-only host array last copied into its buffer (not copied again)."""
 
 
+# How to turn off a stage that lacks a buffer it reads (the CLI option, not --stages).
+_MISSING_FIX = {"dof": "turn depth of field off with --depth-of-field off",
+                "motion_blur": "leave out --fps/--shutter-angle/--readout (no motion blur)"}
+
 class Pipeline:
     """A camera's chain of stages, planned per frame and run with OpenCL.
 
@@ -156,9 +160,11 @@ class Pipeline:
             if why is None:
                 missing = [b for b in st.reads if getattr(frame, b) is None]
                 if missing:
+                    src = frame.metadata.get("path")
                     raise InputError(
+                        (f"{src}: " if src else "") +
                         f"stage '{st.name}' needs the frame's {' and '.join(missing)} buffer; "
-                        f"provide it or leave the stage out with --stages"
+                        f"re-render with that pass, or {_MISSING_FIX.get(st.name, 'leave the stage out with --stages')}"
                     )
                 out.append(PlanEntry(st.name, True, st.reason_needed(cam, frame) if reasons else ""))
             else:
@@ -270,6 +276,9 @@ class Pipeline:
     def run(self, frame: Frame) -> Frame:
         """Process one frame; returns a new Frame whose color is the camera's output
         (normalised sensor signal; later stages: the film/sensor's recorded values)."""
+        if not isinstance(frame, Frame):
+            raise InputError(f"Pipeline.run takes a clpost.Frame, got {type(frame).__name__}; wrap arrays "
+                             "with Frame(color=...)")
         import pyopencl as cl
 
         from .runtime import event_ms

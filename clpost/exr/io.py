@@ -399,7 +399,7 @@ def _frame_from_parts(path: Path, parts: Sequence[_Part], layout: str | None, de
     metadata = {"path": str(path), "layout": layout, "header": _str_attrs(parts[0].header),
                 "depth_kind": kind_out}
     try:
-        return Frame(color=color, depth=depth_m, velocity=vel, alpha=alpha, metadata=metadata)
+        return Frame(color=color, depth=depth_m, velocity=vel, alpha=alpha, metadata=metadata, copy=False)
     except InputError as e:
         raise InputError(f"{path} (layout {layout}): {e}") from None
 
