@@ -115,6 +115,7 @@ class OutputLock:
         self.output = str(output)
         self.path = out.with_name(f".{out.name}.lock")
         self.held = False
+        self.created_dirs: list[Path] = []
 
     def _record(self) -> dict:
         pid = os.getpid()
@@ -136,7 +137,10 @@ class OutputLock:
 
     def acquire(self) -> None:
         try:
+            # Directories this run creates are removed again at release if nothing was written.
+            missing = [d for d in [self.path.parent, *self.path.parent.parents] if not d.exists()]
             self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.created_dirs = missing
         except OSError as e:
             from .errors import OutputError
 
@@ -197,6 +201,11 @@ class OutputLock:
             with contextlib.suppress(FileNotFoundError):
                 self.path.unlink()
         self.held = False
+        for d in self.created_dirs:  # innermost first
+            try:
+                d.rmdir()
+            except OSError:
+                break
 
     def __enter__(self) -> "OutputLock":
         self.acquire()

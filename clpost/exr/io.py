@@ -6,7 +6,7 @@ name ending each header, an empty header ending a multi-part list) and :func:`ch
 refuses sizes that cannot be a frame we can hold: window sides, channel counts, and the bytes
 the read would allocate against the memory this process may use. A damaged or hostile header is
 one :class:`~clpost.errors.InputError` line, never an allocation of gigabytes. OpenEXR's own
-messages on stderr are swallowed during the read (the error we raise says what happened).
+messages (stdout and stderr) are swallowed during the read; the error we raise says what happened.
 
 Reference: OpenEXR file layout, https://openexr.com/en/latest/OpenEXRFileLayout.html
 """
@@ -216,22 +216,30 @@ def check_header(path: Path, parts: Sequence[PartHeader]) -> None:
 
 
 @contextlib.contextmanager
-def quiet_stderr() -> Iterator[None]:
-    """Send file descriptor 2 to /dev/null meanwhile: OpenEXR prints its own diagnostics on
-    damaged files, and the caller reports the error as one line of its own."""
+def quiet_openexr() -> Iterator[None]:
+    """Send file descriptors 1 and 2 to /dev/null meanwhile: OpenEXR prints its own diagnostics
+    on damaged files (the Python bindings' warnings to stdout, the library's to stderr), and the
+    caller reports the error as one line of its own."""
+    saved = []
     try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError, AttributeError):
+        for stream, fd in ((sys.stdout, 1), (sys.stderr, 2)):
+            with contextlib.suppress(AttributeError, ValueError, OSError):
+                stream.flush()
+            saved.append((fd, os.dup(fd)))
+    except OSError:
+        for _, dup in saved:
+            os.close(dup)
         yield
         return
     try:
         with open(os.devnull, "wb") as null:
-            os.dup2(null.fileno(), 2)
+            for fd, _ in saved:
+                os.dup2(null.fileno(), fd)
         yield
     finally:
-        os.dup2(saved, 2)
-        os.close(saved)
+        for fd, dup in saved:
+            os.dup2(dup, fd)
+            os.close(dup)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -277,7 +285,7 @@ def _load(path: str | os.PathLike) -> list[_Part]:
         raise InputError(f"{p}: cannot read ({e.strerror}); check the file's permissions") from None
     check_header(p, headers)
     try:
-        with quiet_stderr():
+        with quiet_openexr():
             f = OpenEXR.File(str(p), separate_channels=True)
             raw_parts = list(f.parts)
     except MemoryError:
@@ -289,6 +297,10 @@ def _load(path: str | os.PathLike) -> list[_Part]:
     if not raw_parts:
         # A damaged chunk table makes the bindings drop every part instead of raising.
         raise InputError(f"{p}: cannot read any image part; the file is corrupt or truncated — re-render or re-copy it")
+    if len(raw_parts) != len(headers):
+        # ... or drop only the damaged parts (a truncated Blender file loses its last passes).
+        raise InputError(f"{p}: {len(headers) - len(raw_parts)} of its {len(headers)} parts cannot be read; the "
+                         "file is corrupt or truncated — re-render or re-copy it")
     return [_part(p, i, rp) for i, rp in enumerate(raw_parts)]
 
 
