@@ -6,7 +6,7 @@ beside its destination ``<name>`` and registered while it exists:
 
 - an exception or Ctrl-C removes it (``atomic_path``);
 - SIGTERM removes the registered ones, then raises :class:`Terminated` in the main thread so the
-  run unwinds (locks released) — :func:`install_signal_cleanup`;
+  run unwinds (locks released) — :func:`signal_cleanup`;
 - SIGKILL cannot be caught: the next run on the same outputs removes the stale ones of that
   naming pattern (:func:`remove_stale_temps`, called under the output lock), never other files.
 """
@@ -87,14 +87,21 @@ def _on_sigterm(signum, frame):  # pragma: no cover - exercised by the soak test
     raise Terminated(f"signal {signum}")
 
 
-def install_signal_cleanup() -> None:
-    """SIGTERM (and SIGHUP) remove this process's temporary files and raise :class:`Terminated`
-    (main thread only; SIGINT already raises KeyboardInterrupt, which ``atomic_path`` handles)."""
+@contextlib.contextmanager
+def signal_cleanup() -> Iterator[None]:
+    """Meanwhile, SIGTERM (and SIGHUP) remove this process's temporary files and raise
+    :class:`Terminated`; the previous handlers come back afterwards. Main thread only (elsewhere
+    a no-op); SIGINT already raises KeyboardInterrupt, which ``atomic_path`` handles."""
     if threading.current_thread() is not threading.main_thread():
+        yield
         return
-    for sig in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
-        if sig is not None:
-            signal.signal(sig, _on_sigterm)
+    sigs = [s for s in (signal.SIGTERM, getattr(signal, "SIGHUP", None)) if s is not None]
+    previous = {s: signal.signal(s, _on_sigterm) for s in sigs}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
 
 
 @contextlib.contextmanager

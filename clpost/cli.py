@@ -549,14 +549,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .atomic import Terminated, install_signal_cleanup
+    from .atomic import Terminated, signal_cleanup
 
     parser = build_parser()
     args = parser.parse_args(argv)
-    # SIGTERM removes the temporary file being written and unwinds (releasing the output lock).
-    install_signal_cleanup()
     try:
-        return args.func(args)
+        # SIGTERM removes the temporary file being written and unwinds (releasing the output lock).
+        with signal_cleanup():
+            return args.func(args)
     except (ClpostError, ValueError, OSError) as exc:
         if args.debug:
             raise

@@ -345,3 +345,21 @@ def test_sigterm_mid_sequence_leaves_no_temp_and_a_rerun_completes(tmp_path):
     r = subprocess.run(cmd + ["--quiet"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert sorted(x.name for x in (tmp_path / "out").iterdir()) == [f"o.{i:04d}.exr" for i in range(1, 7)]
+
+
+def test_two_concurrent_runs_into_one_output_never_mix_frames(tmp_path):
+    for i in range(1, 5):
+        exr.write_frame(tmp_path / f"in.{i:04d}.exr", frame(160, 90, seed=i))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    base = [sys.executable, "-m", "clpost.cli", "process", "in.####.exr", "-o", "out/o.####.exr", "--quiet",
+            "--shutter", "1/60", "--iso", "200", "--luminance-scale", "50"]
+    runs = [subprocess.Popen(base + ["--f-number", fn], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True) for fn in ("2.8", "8")]
+    results = [(p.wait(timeout=180), *p.communicate()) for p in runs]
+    fnumbers = {exr.read_frame(p).metadata["header"]["clpost.fNumber"] for p in (tmp_path / "out").glob("o.*.exr")}
+    assert len(fnumbers) == 1, f"frames of both runs mixed: {fnumbers}"
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [f"o.{i:04d}.exr" for i in range(1, 5)]
+    for code, out, err in results:
+        assert "Traceback" not in err
+        # Either refused while the other held the lock (naming it), or done / all skipped after it.
+        assert (code == 2 and "another clpost run (pid" in err) or code == 0, err
