@@ -173,7 +173,14 @@ def _limit_bytes() -> int:
         with contextlib.suppress(ValueError, OSError, AttributeError):
             avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-    limits = [x for x in (avail, None if soft == resource.RLIM_INFINITY else soft) if x]
+    room = None
+    if soft != resource.RLIM_INFINITY:
+        used = 0
+        with contextlib.suppress(OSError, ValueError, IndexError):
+            with open("/proc/self/status") as f:
+                used = next(int(ln.split()[1]) * 1024 for ln in f if ln.startswith("VmSize:"))
+        room = max(soft - used, 1)
+    limits = [x for x in (avail, room) if x]
     return min(limits) if limits else 1 << 40
 
 
