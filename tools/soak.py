@@ -8,7 +8,7 @@ whole process group (the job is gone, nothing can clean up), or SIGTERM to the m
 
 - every output frame that exists under its final name is bit-identical to the reference run
   (never half-written, never another run's);
-- after a SIGTERM of a serial run, no temporary file and no lock file is left;
+- after a SIGTERM of a serial run, no new temporary file and no lock file is left;
 - anything else in the folder is one of clpost's own temporary or lock files (a SIGKILL's), which
   the next run must remove.
 
@@ -137,6 +137,7 @@ def main(argv=None) -> int:
         span = t_workers if workers else t_serial
         sig = rng.choice([signal.SIGKILL, signal.SIGTERM])
         delay = rng.uniform(0.2, span * 1.05)
+        before = set(os.listdir(out)) if out.exists() else set()
         code, err, killed = run(command(work, str(out / "o.####.exr"), workers), env, delay, sig)
         name = signal.Signals(sig).name if killed else "finished"
         counts[name] += 1
@@ -150,8 +151,10 @@ def main(argv=None) -> int:
             problems.append(f"frames differ from the reference: {bad}")
         if [n for n in others if not OURS_RE.match(n)]:
             problems.append(f"foreign files: {others}")
-        if killed and sig == signal.SIGTERM and not workers and others:
-            problems.append(f"SIGTERM left {others}")
+        # (A SIGTERM during start-up, before the handler exists, kills the run before it touched
+        # anything: an earlier SIGKILL's leftovers may still be there, but nothing new.)
+        if killed and sig == signal.SIGTERM and not workers and set(others) - before:
+            problems.append(f"SIGTERM left {sorted(set(others) - before)}")
         if "Traceback" in err:
             problems.append("traceback: " + err.strip().splitlines()[-1])
         if not killed and code != 0:
