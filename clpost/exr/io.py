@@ -44,6 +44,8 @@ Window = tuple[tuple[int, int], tuple[int, int]]
 MAGIC = b"\x76\x2f\x31\x01"
 MAX_SIDE = 1 << 17
 """Largest window side read (131072 px; 16K renders are 15360 wide)."""
+MAX_PIXELS = 1 << 30
+"""Largest window area read (32768², 1.07 Gpx), whatever the memory."""
 MAX_CHANNELS = 1024
 """Channels per part (Blender's busiest multilayer files have a few hundred)."""
 MAX_PARTS = 1024
@@ -212,14 +214,16 @@ def check_header(path: Path, parts: Sequence[PartHeader]) -> None:
         ow, oh = _side(ph.display_window)
         total += dw * dh * sum(_PIXEL_BYTES[t] for t in ph.channels.values())
         total += ow * oh * _FRAME_BYTES_PER_PX if i == 0 else 0
+    ow, oh = _side(parts[0].display_window)  # type: ignore[arg-type]
+    dw, dh = _side(parts[0].data_window)  # type: ignore[arg-type]
     limit = _limit_bytes()
-    if total > limit:
-        ow, oh = _side(parts[0].display_window)  # type: ignore[arg-type]
-        dw, dh = _side(parts[0].data_window)  # type: ignore[arg-type]
+    if total > limit or max(ow * oh, dw * dh) > MAX_PIXELS:
+        why = (f"clpost's limit of {MAX_PIXELS} pixels a frame" if max(ow * oh, dw * dh) > MAX_PIXELS
+               else f"the {limit / 2**30:.1f} GiB available")
         raise InputError(f"{path}: reading it needs {total / 2**30:.1f} GiB ({ow}x{oh} display window, "
-                         f"{dw}x{dh} data window, {sum(len(p.channels) for p in parts)} channel(s)) but only "
-                         f"{limit / 2**30:.1f} GiB is available; the header is corrupt, or free memory "
-                         "(or crop the frame) before processing it")
+                         f"{dw}x{dh} data window, {sum(len(p.channels) for p in parts)} channel(s)), more than "
+                         f"{why}; the header is corrupt — re-render or re-copy it — or, for a real frame this "
+                         "big, free memory or crop it first")
 
 
 @contextlib.contextmanager
