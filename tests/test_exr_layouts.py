@@ -53,3 +53,12 @@ def test_header_check_compares_the_read_with_available_memory(tmp_path, monkeypa
     monkeypatch.setattr(io, "_limit_bytes", lambda: 64 * 64 * 4)  # less than 3 float planes of 64²
     with pytest.raises(InputError, match=r"x\.exr: reading it needs .* more than the 0\.0 GiB available"):
         exr.check_header(p, headers)
+
+
+def test_header_longer_than_the_first_read_is_parsed(tmp_path):
+    p = tmp_path / "x.exr"
+    exr.write_frame(p, Frame(np.zeros((4, 4, 3), np.float32)), header={f"clpost.k{i}": "x" * 1000 for i in range(200)})
+    assert p.stat().st_size > 1 << 17
+    (h,) = read_header(p)
+    assert set(h.channels) == {"R", "G", "B"} and h.data_window == ((0, 0), (3, 3))
+    assert exr.read_frame(p).metadata["header"]["clpost.k199"] == "x" * 1000

@@ -71,11 +71,17 @@ class PartHeader:
     type: str = ""
 
 
-class _Reader:
-    def __init__(self, data: bytes, path: Path):
-        self.b, self.i, self.path = data, 0, path
+class _NeedMore(Exception):
+    """The header goes on past the bytes read so far (the file has more)."""
 
-    def corrupt(self, what: str) -> InputError:
+
+class _Reader:
+    def __init__(self, data: bytes, path: Path, complete: bool = True):
+        self.b, self.i, self.path, self.complete = data, 0, path, complete
+
+    def corrupt(self, what: str) -> Exception:
+        if not self.complete:
+            return _NeedMore()
         return InputError(f"{self.path}: EXR header is damaged ({what} at byte {self.i}); the file is corrupt "
                           "or truncated — re-render or re-copy it")
 
@@ -125,11 +131,24 @@ def _chlist(r: _Reader, size: int, limit: int) -> dict[str, int]:
 
 
 def read_header(path: str | os.PathLike, max_bytes: int = 64 << 20) -> list[PartHeader]:
-    """The headers of all parts of ``path`` (only the fields :func:`check_header` uses)."""
+    """The headers of all parts of ``path`` (only the fields :func:`check_header` uses); reads
+    64 KiB, more only while the headers go on (at most ``max_bytes``)."""
     p = Path(path)
+    n = 1 << 16
     with open(p, "rb") as f:
-        data = f.read(max_bytes)
-    r = _Reader(data, p)
+        data = f.read(n)
+        while True:
+            complete = len(data) < n or n >= max_bytes
+            try:
+                return _parse_headers(_Reader(data, p, complete))
+            except _NeedMore:
+                n *= 4
+                f.seek(0)
+                data = f.read(min(n, max_bytes))
+
+
+def _parse_headers(r: _Reader) -> list[PartHeader]:
+    p, data = r.path, r.b
     if data[:4] != MAGIC:
         raise InputError(f"{p}: not an OpenEXR file (bad magic number); clpost reads .exr images only")
     r.i = 4
