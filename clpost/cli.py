@@ -188,7 +188,8 @@ def camera_from_args(args: argparse.Namespace, **defaults) -> Camera:
 
 def _add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quality", choices=QUALITIES, default="final", help="speed/accuracy level")
-    p.add_argument("--stages", type=_stage_list, default=None, help="only these stages, comma separated (e.g. exposure)")
+    p.add_argument("--stages", type=_stage_list, default=None,
+                   help="only these stages, comma separated (e.g. exposure)")
     # Also accepted after the subcommand (`clpost bench --device nvidia`); SUPPRESS keeps the
     # top-level value when it is not given here.
     p.add_argument("--device", default=argparse.SUPPRESS,
