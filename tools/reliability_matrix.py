@@ -40,7 +40,6 @@ def main(argv=None) -> int:
              "| case | command | exit | stderr lines | verdict | message (last line) |", "|---|---|---|---|---|---|"]
     for row in table:
         msg = row["message"].replace("|", "\\|")
-        msg = msg if len(msg) <= 160 else msg[:157] + "…"
         cmd = row["command"].replace("|", "\\|")
         lines.append(f"| {row['case']} | `{cmd}` | {row['exit']} | {row['lines']} | {row['verdict']} | {msg} |")
     if args.soak_json:
