@@ -249,12 +249,13 @@ def test_bad_frame_under_workers_is_one_line_exit_2_not_retried(tmp_path):
              "verdict": "held" if code == 2 and len(lines) <= 3 else "FAILED",
              "message": (lines[0] if lines else "").replace(str(d) + "/", "")})
     assert code == 2, err
-    assert "Traceback" not in err and "Compute Failed" not in err
-    assert "frame 3 failed" in err and "in.0003.exr" in err
+    assert "Traceback" not in err and "Compute Failed" not in err, err
+    assert "frame 3 failed" in err and "in.0003.exr" in err, err
     assert len(lines) <= 3, err
     after = snapshot(d)
     assert {k: after[k] for k in inputs} == inputs
-    assert sorted(k for k in after if k.startswith("out/")) == ["out/o.0001.exr", "out/o.0002.exr", "out/o.0004.exr"]
+    assert sorted(k for k in after if k.startswith("out/")) == ["out/o.0001.exr", "out/o.0002.exr",
+                                                                 "out/o.0004.exr"], (sorted(after), err)
 
 
 # -- the pieces, as a library -----------------------------------------------------------------
