@@ -79,8 +79,10 @@ def connect(scheduler: str | None = None, workers: int | None = None):
                              "check the address (tcp://HOST:8786) and that it is running") from None
     if not workers or workers < 1:
         raise InputError(f"--workers {workers!r} must be a positive number of worker processes")
+    # No dashboard; its HTTP server (health routes) still starts, on a free port: the default
+    # 8787 may be another cluster's, which would print a "Port 8787 is already in use" warning.
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None)
+                           dashboard_address=None, scheduler_kwargs={"dashboard_address": ":0"})
     return Client(cluster)
 
 
