@@ -34,6 +34,9 @@ class BatchReport:
     """Wall time per processed frame: read + process + write."""
     failed: dict[int, str] = field(default_factory=dict)
     """Frames that could not be processed (distributed runs go on past them), with the error."""
+    user_errors: list[int] = field(default_factory=list)
+    """The failed frames whose error is the input's (:class:`~clpost.errors.ClpostError`: a bad
+    file or parameter, never retried), as opposed to a crash or a lost worker."""
 
 
 def output_header(frame: Frame) -> dict[str, str]:
@@ -79,7 +82,8 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
 def pending(jobs: list[FrameJob], overwrite: bool, report: BatchReport,
             progress: Callable[[FrameJob, float | None], None] | None = None) -> list[FrameJob]:
     """The jobs to run: those whose output exists are recorded as skipped (resume) unless
-    ``overwrite``. Shared by the serial and the distributed loop."""
+    ``overwrite``. Shared by the serial and the distributed loop; the CLI calls it while holding
+    the output lock (:mod:`clpost.outputs`), so no other run writes these outputs meanwhile."""
     todo = []
     for job in jobs:
         if job.dst.exists() and not overwrite:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -19,6 +20,51 @@ from .stages import QUALITIES
 
 _positive_float = parse_fraction  # a number, a fraction like 1/50, or inf
 _sensor = parse_wxh_mm
+
+
+def _one_line(msg: str) -> str:
+    """A message as one line: a multi-line one (a YAML parser's dump) keeps its first line and
+    the first "line N, column M" it names."""
+    lines = [ln.strip() for ln in str(msg).splitlines() if ln.strip()]
+    if len(lines) <= 1:
+        return lines[0] if lines else str(msg)
+    m = re.search(r"line (\d+), column (\d+)", str(msg))
+    head = lines[0] + (f" at line {m[1]}, column {m[2]}" if m else "")
+    if head.count("(") > head.count(")"):
+        head += ")"
+    return head
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors as one line plus where to look, not the whole usage block."""
+
+    def error(self, message: str):  # noqa: D401 - argparse's signature
+        self.exit(2, f"{self.prog}: error: {_one_line(message)}; see {self.prog} --help\n")
+
+
+def _count(flag: str, minimum: int):
+    """An integer option of at least ``minimum`` (``--workers 0`` is refused, not ignored)."""
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        if n < minimum:
+            raise argparse.ArgumentTypeError(f"{n} is below {minimum}; {flag} takes {minimum} or more")
+        return n
+    return parse
+
+
+def _frames_spec(text: str) -> str:
+    if not text.strip():
+        raise argparse.ArgumentTypeError("empty frame range; give e.g. 1-100, 1-100x2 or 1,5,9")
+    return text
+
+
+def _stage_list(text: str) -> list[str]:
+    """Comma-separated stage names; an empty selection is [] (cmd_process refuses it unless
+    --explain, where it shows every stage as not selected)."""
+    return [x.strip() for x in text.split(",") if x.strip()]
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -62,8 +108,8 @@ def camera_from_args(args: argparse.Namespace, camera_cls=None, /, **defaults) -
 
 def _add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quality", choices=QUALITIES, default="final", help="speed/accuracy level")
-    p.add_argument("--stages", type=lambda s: [x.strip() for x in s.split(",") if x.strip()],
-                   default=None, help="only these stages, comma separated (e.g. exposure)")
+    p.add_argument("--stages", type=_stage_list, default=None,
+                   help="only these stages, comma separated (e.g. exposure)")
     # Also accepted after the subcommand (`clpost bench --device nvidia`); SUPPRESS keeps the
     # top-level value when it is not given here.
     p.add_argument("--device", default=argparse.SUPPRESS,
@@ -85,6 +131,7 @@ def cmd_demo(args) -> int:
 
 def _jobs(args):
     from .batch import FrameJob
+    from .outputs import check_input, check_paths
     from .sequence import expand, find_frames, has_pattern, parse_frames
 
     src, dst = args.input, args.output
@@ -97,10 +144,9 @@ def _jobs(args):
     elif args.frames:
         raise InputError(f"--frames given but the input {src!r} has no frame pattern (####, %04d or @)")
     else:
+        check_input(Path(src))
         jobs = [FrameJob(0, Path(src), Path(dst))]
-    for j in jobs:
-        if not j.src.is_file():
-            raise InputError(f"{j.src}: input frame does not exist; check the path, pattern and --frames")
+    check_paths([(j.src, j.dst) for j in jobs], dst)
     return jobs
 
 
@@ -108,6 +154,9 @@ def cmd_process(args) -> int:
     from .batch import process_sequence, read_input
     from .pipeline import Pipeline
 
+    if args.stages == [] and not args.explain:
+        raise InputError("--stages names no stage, so every output would be its input unchanged; give "
+                         "stages (e.g. --stages exposure,dof; --explain lists them) or leave --stages out")
     camera = camera_from_args(args)
     pipe = Pipeline(camera, quality=args.quality, stages=args.stages, device=args.device)
     jobs = _jobs(args)
@@ -142,16 +191,20 @@ def cmd_process(args) -> int:
         elif not args.quiet:
             print(f"frame {job.frame}: {what} -> {job.dst}")
 
+    from .outputs import writing
+
     try:
-        if args.workers or args.scheduler:
-            rep = _process_distributed(args, camera, jobs, progress)
-        else:
-            rep = process_sequence(pipe, jobs, layout=args.channels, overwrite=args.overwrite,
-                                   half=args.half, compression=args.compression, progress=progress)
+        # The lock is held for the whole run: each frame's "exists, skip" check is made under it.
+        with writing(args.output, [j.dst for j in jobs]):
+            if args.workers or args.scheduler:
+                rep = _process_distributed(args, camera, jobs, progress)
+            else:
+                rep = process_sequence(pipe, jobs, layout=args.channels, overwrite=args.overwrite,
+                                       half=args.half, compression=args.compression, progress=progress)
     finally:
         bar.close()
     for frame, err in sorted(rep.failed.items()):
-        print(f"clpost: frame {frame} failed: {err}", file=sys.stderr)
+        print(f"clpost: frame {frame} failed: {_one_line(err)}", file=sys.stderr)
     if rep.seconds:
         ms = sorted(rep.seconds)[len(rep.seconds) // 2] * 1e3
         print(f"processed {len(rep.done)} frame(s), median {ms:.1f} ms/frame (read+process+write); "
@@ -160,7 +213,8 @@ def cmd_process(args) -> int:
         print(f"nothing to do: all {len(rep.skipped)} output frame(s) exist (use --overwrite)")
     if rep.failed:
         print(f"clpost: {len(rep.failed)} of {len(jobs)} frame(s) failed; the others are complete", file=sys.stderr)
-        return 1
+        # Bad input frames are the user's to fix (exit 2, as the serial loop); anything else is 1.
+        return 2 if set(rep.failed) <= set(rep.user_errors) else 1
     return 0
 
 
@@ -179,19 +233,34 @@ def _process_distributed(args, camera, jobs, progress):
         if cluster is not None:
             cluster.close()
 def cmd_expose(args) -> int:
-    from . import exr
-    from .atomic import write_png
-    from .expose import expose, frames_needed
+    from .expose import frames_needed
+    from .outputs import check_paths, writing
     from .sequence import expand, find_frames, has_pattern, parse_frames
 
     if not has_pattern(args.input):
-        raise InputError(f"{args.input!r}: expose needs a frame sequence pattern (in.####.exr, in.%%04d.exr)")
+        if Path(args.input).is_dir():
+            raise InputError(f"{args.input}: is a directory; expose needs a frame sequence pattern such as "
+                             f"{Path(args.input) / 'render.####.exr'}")
+        raise InputError(f"{args.input!r}: expose needs a frame sequence pattern (in.####.exr, in.%04d.exr)")
     out = Path(args.output)
-    if out.exists() and not args.overwrite:
-        raise InputError(f"{out} exists; choose another -o or pass --overwrite")
     found = parse_frames(args.frames) if args.frames else find_frames(args.input)
     want = set(frames_needed(args.fps, args.open, args.close))
     frames = [n for n in found if n in want]
+    sources = [Path(expand(args.input, n)) for n in (frames or found)]
+    check_paths([(src, out) for src in sources], args.output)
+    if args.png:
+        check_paths([(src, Path(args.png)) for src in sources], args.png)
+    if out.exists() and not args.overwrite:
+        raise InputError(f"{out} exists; choose another -o or pass --overwrite")
+    with writing(out, [out] + ([Path(args.png)] if args.png else [])):
+        return _expose(args, out, frames, found)
+
+
+def _expose(args, out, frames, found) -> int:
+    from . import exr
+    from .atomic import write_png
+    from .expose import expose
+    from .sequence import expand
 
     def read(n):
         return exr.read_frame(expand(args.input, n), args.channels)
@@ -301,7 +370,7 @@ def cmd_lens(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     from .demo import DEMO_CAMERA_DEFAULTS  # the demo and bench cameras' defaults, shown in their --help
 
-    p = argparse.ArgumentParser(prog="clpost", description="A realistic camera for rendered images.")
+    p = _Parser(prog="clpost", description="A realistic camera for rendered images.")
     p.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     p.add_argument("--device", default=None,
                    help="OpenCL device: substring of platform/device name (default: $CLPOST_DEVICE, else GPU, else PoCL CPU)")
@@ -309,7 +378,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("demo", help="render the built-in scene and process it (EXR + PNG previews)")
     d.add_argument("outdir", help="output directory")
-    d.add_argument("--frames", type=int, default=3, help="number of frames (default 3)")
+    d.add_argument("--frames", type=_count("--frames", 1), default=3, help="number of frames (default 3)")
     d.add_argument("--size", type=_size, default=None, help="WIDTHxHEIGHT (default 960 wide, sensor aspect)")
     d.add_argument("--static-camera", action="store_true", help="no camera motion")
     d.add_argument("--overwrite", action="store_true", help="replace existing outputs")
@@ -331,7 +400,8 @@ def build_parser() -> argparse.ArgumentParser:
     pr = sub.add_parser("process", help="process an EXR sequence")
     pr.add_argument("input", help="input EXR or pattern (in.####.exr, in.%%04d.exr, in.@@@@.exr)")
     pr.add_argument("-o", "--output", required=True, help="output EXR or pattern")
-    pr.add_argument("--frames", default=None, help="frame range, e.g. 1-100, 1-100x2, 1,5,9 (default: all found)")
+    pr.add_argument("--frames", type=_frames_spec, default=None,
+                    help="frame range, e.g. 1-100, 1-100x2, 1,5,9 (default: all found)")
     pr.add_argument("--channels", default=None, help="input channel layout: clpost, blender, nuke, arnold (default: detect)")
     pr.add_argument("--explain", action="store_true", help="print the plan for the first frame and why each stage is in or out, then exit")
     pr.add_argument("--overwrite", action="store_true", help="replace existing outputs (default: skip them)")
@@ -340,9 +410,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="lossless EXR compression of outputs (default zip; none is ~10x faster to write)")
     pr.add_argument("--quiet", action="store_true", help="no progress bar")
     dist = pr.add_argument_group("distributed (Dask)")
-    dist.add_argument("--workers", type=int, default=None, help="run on a local Dask cluster of N worker processes")
+    dist.add_argument("--workers", type=_count("--workers", 1), default=None,
+                      help="run on a local Dask cluster of N worker processes")
     dist.add_argument("--scheduler", default=None, help="run on an existing Dask cluster, e.g. tcp://HOST:8786")
-    dist.add_argument("--retries", type=int, default=2, help="retries of a failing frame before it is reported (default 2)")
+    dist.add_argument("--retries", type=_count("--retries", 0), default=2, help="retries of a failing frame before it is reported (default 2)")
     _add_camera_options(pr)
     _add_pipeline_options(pr)
     pr.set_defaults(func=cmd_process)
@@ -353,14 +424,14 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--open", required=True, help="shutter opens at this time in seconds (e.g. 0.5 or 1/48)")
     e.add_argument("--close", required=True, help="shutter closes at this time in seconds")
     e.add_argument("--fps", required=True, help="frame rate of the sequence (24, 25, 24000/1001)")
-    e.add_argument("--frames", default=None, help="frame range to consider (default: all found)")
+    e.add_argument("--frames", type=_frames_spec, default=None, help="frame range to consider (default: all found)")
     e.add_argument("--channels", default=None, help="input channel layout (default: detect)")
     e.add_argument("--sum", action="store_true", help="write H = ∫E dt (input × seconds) instead of the time average")
     e.add_argument("--png", default=None, help="also write an sRGB preview PNG here")
     e.add_argument("--png-gain", type=_positive_float, default=None, help="scale before the PNG encoding")
     e.add_argument("--overwrite", action="store_true", help="replace an existing output")
     e.add_argument("--quiet", action="store_true")
-    e.add_argument("--workers", type=int, default=None, help="tree-reduce on a local Dask cluster of N worker processes")
+    e.add_argument("--workers", type=_count("--workers", 1), default=None, help="tree-reduce on a local Dask cluster of N worker processes")
     e.add_argument("--scheduler", default=None, help="tree-reduce on an existing Dask cluster, e.g. tcp://HOST:8786")
     e.set_defaults(func=cmd_expose)
 
@@ -415,19 +486,31 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .atomic import Terminated, signal_cleanup
+
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return args.func(args)
+        # SIGTERM removes the temporary file being written and unwinds (releasing the output lock).
+        with signal_cleanup():
+            return args.func(args)
     except (ClpostError, ValueError, OSError) as exc:
         if args.debug:
             raise
         msg = str(exc) if isinstance(exc, ClpostError) else f"{type(exc).__name__}: {exc}"
-        print(f"clpost: error: {msg}", file=sys.stderr)
+        print(f"clpost: error: {_one_line(msg)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("clpost: interrupted", file=sys.stderr)
+        print("clpost: interrupted; complete outputs are kept, rerun to resume", file=sys.stderr)
         return 130
+    except Terminated:
+        print("clpost: terminated; complete outputs are kept, rerun to resume", file=sys.stderr)
+        return 143
+    except MemoryError:
+        if args.debug:
+            raise
+        print("clpost: error: out of memory; process smaller frames or free memory", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

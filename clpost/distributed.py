@@ -11,8 +11,11 @@ on workers.
 - Frames are independent tasks reading and writing paths on a shared filesystem. Outputs are
   written atomically (temporary file + rename, :mod:`clpost.atomic`), so a retried or duplicated
   task can never leave a corrupt or half-written frame; existing outputs are skipped (resume).
-- A task that raises is retried ``retries`` times; a frame that keeps failing is reported with
-  its error while the others continue. A worker that dies is replaced by its nanny and its
+- A frame whose input is bad (a :class:`~clpost.errors.ClpostError`: deterministic, the
+  user's to fix) is reported as the task's *result*, so Dask neither retries it nor logs a
+  traceback; the run exits 2 like the serial loop. A task that raises anything else (a crash)
+  is retried ``retries`` times; a frame that keeps failing is reported with its error while the
+  others continue. A worker that dies is replaced by its nanny and its
   tasks rescheduled by the scheduler (up to ``distributed.scheduler.allowed-failures`` times).
 
 Scaling beyond one machine (SLURM via dask-jobqueue, Kubernetes via dask-kubernetes) only changes
@@ -27,7 +30,7 @@ from typing import Callable
 
 from .batch import BatchReport, FrameJob, pending, process_one
 from .camera import Camera
-from .errors import InputError
+from .errors import ClpostError, InputError
 
 
 @dataclass(frozen=True)
@@ -56,7 +59,11 @@ def process_frame_task(spec: PipelineSpec, job: FrameJob, layout: str | None, ha
     if job.dst.exists() and not overwrite:
         return {"frame": job.frame, "skipped": True, "seconds": 0.0}
     t0 = time.perf_counter()
-    process_one(worker_pipeline(spec), job, layout, half, expect_size, compression)
+    try:
+        process_one(worker_pipeline(spec), job, layout, half, expect_size, compression)
+    except ClpostError as exc:
+        # Deterministic and the user's to fix: a result, not an exception Dask would retry.
+        return {"frame": job.frame, "skipped": False, "seconds": 0.0, "error": str(exc)}
     return {"frame": job.frame, "skipped": False, "seconds": time.perf_counter() - t0}
 
 
@@ -72,8 +79,10 @@ def connect(scheduler: str | None = None, workers: int | None = None):
                              "check the address (tcp://HOST:8786) and that it is running") from None
     if not workers or workers < 1:
         raise InputError(f"--workers {workers!r} must be a positive number of worker processes")
+    # No dashboard; its HTTP server (health routes) still starts, on a free port: the default
+    # 8787 may be another cluster's, which would print a "Port 8787 is already in use" warning.
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None)
+                           dashboard_address=None, scheduler_kwargs={"dashboard_address": ":0"})
     return Client(cluster)
 
 
@@ -103,7 +112,13 @@ def process_sequence_dask(client, spec: PipelineSpec, jobs: list[FrameJob], *,
         job = by_key[fut.key][1]
         if fut.status == "finished":
             res = fut.result()
-            if res["skipped"]:
+            if res.get("error"):
+                msg = res["error"]
+                report.failed[job.frame] = msg if str(job.src) in msg else f"{job.src}: {msg}"
+                report.user_errors.append(job.frame)
+                if progress:
+                    progress(job, float("nan"))
+            elif res["skipped"]:
                 report.skipped.append(job.frame)
                 if progress:
                     progress(job, None)
@@ -148,16 +163,34 @@ def expose_chunk(pattern: str, items: list, fps, layout: str | None, device: str
     from .sequence import expand
 
     acc = None
-    for n, seconds in items:
-        frame = exr.read_frame(expand(pattern, n), layout)
-        if acc is None:
-            acc = ExposureAccumulator(frame.size, fps, device)
-        acc.add(frame.color, seconds)
+    try:
+        for n, seconds in items:
+            path = expand(pattern, n)
+            frame = exr.read_frame(path, layout)
+            if acc is None:
+                acc = ExposureAccumulator(frame.size, fps, device)
+            try:
+                acc.add(frame.color, seconds)
+            except InputError as exc:
+                raise InputError(f"{path}: {exc}") from None
+    except ClpostError as exc:
+        return UserFailure(str(exc))  # not retried: the input is bad
     return acc.partial()
+
+
+@dataclass(frozen=True)
+class UserFailure:
+    """A task result standing for a user error (bad input), passed up the reduction tree."""
+
+    message: str
 
 
 def combine_partials(a, b):
     """One node of the reduction tree (associative: weights exact, sums in float64)."""
+    if isinstance(a, UserFailure):
+        return a
+    if isinstance(b, UserFailure):
+        return b
     return a.combine(b)
 
 
@@ -183,4 +216,7 @@ def expose_dask(client, pattern: str, frames, fps, t_open, t_close, *, layout: s
         if len(futs) % 2:
             paired.append(futs[-1])
         futs = paired
-    return futs[0].result()
+    out = futs[0].result()
+    if isinstance(out, UserFailure):
+        raise InputError(out.message)
+    return out

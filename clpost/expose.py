@@ -157,8 +157,10 @@ class ExposureAccumulator:
 
         c = np.ascontiguousarray(color, dtype=np.float32)
         if c.shape != (self.height, self.width, 3):
-            raise InputError(f"frame of shape {c.shape} does not match the exposure's "
-                             f"{(self.height, self.width, 3)}; all frames of an exposure need one size")
+            size = f"{c.shape[1]}x{c.shape[0]}" if c.ndim == 3 else str(c.shape)
+            raise InputError(f"size {size} differs from the exposure's {self.width}x{self.height} (its first "
+                             "frame); all frames of an exposure need one size — re-render this frame at that "
+                             "size or leave it out with --frames")
         sec = as_time(seconds, "seconds")
         w = np.float32(float(sec * self.fps))      # weight in frames, in [0, 1] for frame input
         q = self.rt.queue
@@ -208,11 +210,15 @@ def expose(read, frames, fps, t_open, t_close, device: str | None = None,
     weights = exposure_plan(frames, fps, t_open, t_close)
     acc = None
     for n, w in weights:
-        img = read(n)
-        img = getattr(img, "color", img)
+        frame = read(n)
+        img = getattr(frame, "color", frame)
         if acc is None:
             acc = ExposureAccumulator((img.shape[1], img.shape[0]), fps, device)
-        acc.add(img, w)
+        try:
+            acc.add(img, w)
+        except InputError as exc:
+            src = getattr(frame, "metadata", {}).get("path") or f"frame {n}"
+            raise InputError(f"{src}: {exc}") from None
         if progress:
             progress(n, w)
     if acc is None:

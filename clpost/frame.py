@@ -13,7 +13,9 @@ buffer        shape       unit / meaning
 ============  ==========  ====================================================================
 
 A 4-channel ``color`` is split into ``color`` and ``alpha``. float16/32/64 input is converted
-once to float32 (explicitly, here); any other dtype is refused rather than silently cast.
+once to float32 (explicitly, here); any other dtype is refused rather than silently cast. A
+Frame never keeps the caller's arrays: float32 input is copied, so writing into the caller's
+array afterwards cannot slip unvalidated values (NaN) into the frame.
 NaN is never valid; ±inf only as ``+inf`` in depth.
 
 ``metadata["frame_index"]`` (int, default 0) is the frame number of a sequence; the renderer and
@@ -21,7 +23,7 @@ the batch loop set it, and the grain and sensor stages hash it into their noise.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -31,14 +33,18 @@ from .errors import InputError
 _FLOAT_DTYPES = (np.float16, np.float32, np.float64)
 
 
-def _as_float32(name: str, a: Any) -> np.ndarray:
+def _as_float32(name: str, a: Any, copy: bool = True) -> np.ndarray:
     a = np.asarray(a)
     if a.dtype.type not in _FLOAT_DTYPES:
         raise InputError(
             f"Frame.{name}: dtype {a.dtype} is not a float type; clpost takes linear float data "
             f"(float16/32/64) — convert integer images to linear float yourself, e.g. decode sRGB first"
         )
-    return np.ascontiguousarray(a, dtype=np.float32)
+    out = np.ascontiguousarray(a, dtype=np.float32)
+    if copy and np.may_share_memory(out, a):
+        # Keep our own copy: a later write into the caller's array must not bypass validation.
+        out = out.copy()
+    return out
 
 
 def _first_bad(name: str, bad: np.ndarray, what: str, fix: str) -> None:
@@ -60,9 +66,12 @@ class Frame:
     velocity: np.ndarray | None = None
     alpha: np.ndarray | None = None
     metadata: dict = field(default_factory=dict)
+    copy: InitVar[bool] = True
+    """``False``: the Frame takes the caller's float32 arrays over instead of copying them (a
+    reader's fresh buffers); the caller must not write them afterwards."""
 
-    def __post_init__(self) -> None:
-        color = _as_float32("color", self.color)
+    def __post_init__(self, copy: bool = True) -> None:
+        color = _as_float32("color", self.color, copy)
         if color.ndim != 3 or color.shape[2] not in (3, 4):
             raise InputError(
                 f"Frame.color: shape {color.shape} is not (H, W, 3) or (H, W, 4); "
@@ -82,7 +91,7 @@ class Frame:
         object.__setattr__(self, "color", color)
 
         if self.depth is not None:
-            depth = _as_float32("depth", self.depth)
+            depth = _as_float32("depth", self.depth, copy)
             if depth.ndim == 3 and depth.shape[2] == 1:
                 depth = np.ascontiguousarray(depth[:, :, 0])
             if depth.shape != (h, w):
@@ -94,7 +103,7 @@ class Frame:
             self.depth_range  # noqa: B018 — computed with the validation scans, not per plan run
 
         if self.velocity is not None:
-            vel = _as_float32("velocity", self.velocity)
+            vel = _as_float32("velocity", self.velocity, copy)
             if vel.shape != (h, w, 2):
                 raise InputError(f"Frame.velocity: shape {vel.shape} is not (H, W, 2) = {(h, w, 2)}")
             _first_bad("velocity", np.isnan(vel).any(axis=2), "are NaN", "fix the renderer's vector pass")
@@ -102,7 +111,7 @@ class Frame:
             object.__setattr__(self, "velocity", vel)
 
         if alpha is not None:
-            a = _as_float32("alpha", alpha)
+            a = _as_float32("alpha", alpha, copy)
             if a.shape != (h, w):
                 raise InputError(f"Frame.alpha: shape {a.shape} does not match color {(h, w)}")
             _first_bad("alpha", np.isnan(a), "are NaN", "alpha is coverage in [0, 1]")

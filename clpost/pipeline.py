@@ -38,6 +38,11 @@ def _check_calibration_focal(cam: Camera) -> None:
                       "--lens/--sensor to match the calibration", stacklevel=3)
 
 
+# How to turn off a stage that lacks a buffer it reads (the CLI option, not --stages).
+_MISSING_FIX = {"dof": "turn depth of field off with --depth-of-field off",
+                "motion_blur": "leave out --fps/--shutter-angle/--readout (no motion blur)"}
+
+
 class Pipeline:
     """A camera's chain of stages, planned per frame and run with OpenCL.
 
@@ -105,9 +110,11 @@ class Pipeline:
             if why is None:
                 missing = [b for b in st.reads if getattr(frame, b) is None]
                 if missing:
+                    src = frame.metadata.get("path")
                     raise InputError(
+                        (f"{src}: " if src else "") +
                         f"stage '{st.name}' needs the frame's {' and '.join(missing)} buffer; "
-                        f"provide it or leave the stage out with --stages"
+                        f"re-render with that pass, or {_MISSING_FIX.get(st.name, 'leave the stage out with --stages')}"
                     )
                 out.append(PlanEntry(st.name, True, st.reason_needed(cam, frame) if reasons else ""))
             else:

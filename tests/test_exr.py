@@ -398,7 +398,7 @@ def test_write_is_atomic_on_failure(tmp_path, monkeypatch):
         Path(tmp).write_bytes(b"\x76\x2f\x31\x01 partial")
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(exr, "_write_exr", half_written_then_fail)
+    monkeypatch.setattr(exr.io, "_write_exr", half_written_then_fail)
     with pytest.raises(OutputError, match=r"out\.exr: cannot write EXR \(disk full\)"):
         exr.write_frame(path, _frame(alpha=False))
     assert path.read_bytes() == before
@@ -409,7 +409,7 @@ def test_write_is_atomic_on_interrupt(tmp_path, monkeypatch):
     def interrupted(exr_file, tmp):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(exr, "_write_exr", interrupted)
+    monkeypatch.setattr(exr.io, "_write_exr", interrupted)
     with pytest.raises(KeyboardInterrupt):
         exr.write_frame(tmp_path / "out.exr", _frame())
     assert list(tmp_path.iterdir()) == []
