@@ -8,6 +8,7 @@ import pytest
 from clpost import Camera, Frame, InputError, Pipeline
 from clpost.stages import _field as fld
 from clpost.stages import astigmatism as ast
+from clpost.stages.astigmatism_cl import device_plan
 
 from conftest import odd_frame
 
@@ -308,7 +309,7 @@ def test_reach_test_is_skipped_only_where_every_reach_weight_is_one(rng):
     stage.enqueue(rt, cam, frame, src, rt.empty((3, h, w)), aux)
     ntx, nty = fld.tiles(w, h)
     reach = np.empty((nty, ntx), np.int32)
-    cl.enqueue_copy(rt.queue, reach, stage._scratch[next(iter(stage._scratch))]["reach"], is_blocking=True)
+    cl.enqueue_copy(rt.queue, reach, device_plan(stage, rt, cam, w, h)["reach"], is_blocking=True)
     a_s, a_t, _, _ = stage.semi_axes_px(cam, frame)
     bs, bt, *_ = stage.tile_plan(cam, frame)
     ps, pt = np.pad(a_s, fld.PAD, mode="edge"), np.pad(a_t, fld.PAD, mode="edge")

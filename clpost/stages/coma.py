@@ -185,7 +185,6 @@ class Coma(GatherStage):
 
     def __init__(self, quality: str = "final") -> None:
         super().__init__(quality)
-        self._kernels: dict = {}
         self._scratch: dict = {}
         self._lists_key = None
         self._lists: dict = {}
@@ -229,8 +228,8 @@ class Coma(GatherStage):
 
         # COMA_WHOLE_TILES (the frame is whole tiles: stores need no branch) is a property of the
         # frame size, not of the camera, so it is added here rather than in defines()
-        return fld.cached_kernel(self._kernels, rt, kernel_source("common") + self._tap_table() + kernel_source("coma"), "coma",
-                                 {**self.defines(camera), "COMA_WHOLE_TILES": int(whole_tiles)}, name)
+        return rt.kernel(kernel_source("common") + self._tap_table() + kernel_source("coma"), name,
+                         {**self.defines(camera), "COMA_WHOLE_TILES": int(whole_tiles)}, "coma")
 
     def _tap_table(self) -> str:
         """OpenCL source of the ``coma_taps`` table (float32 literals, exact round trip)."""
@@ -295,12 +294,9 @@ class Coma(GatherStage):
         """Device lists of the tiles for the window kernel and, per stencil size, the uniform
         tiles with their stencils (uploaded once per camera map, frame size and tap count: coma
         does not depend on the frame's content)."""
-        import pyopencl as cl
-
         key = (id(rt.context), self._uniform_key(camera, w, h))
         if self._lists_key != key:
-            mk = lambda a: cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,  # noqa: E731
-                                     hostbuf=np.ascontiguousarray(a) if a.size else np.zeros(1, np.int32))
+            mk = rt.constant
             window = np.flatnonzero(~self.tile_uniform(camera, w, h).ravel()).astype(np.int32)
             inner = self.inner_tiles(w, h).ravel()
             stencils = [(f"coma_{'c' if const else 's'}{size}", mk(ids), ids.size, mk(inner[ids].astype(np.int32)),
