@@ -37,4 +37,17 @@ inline float rnd_normal(const uint h1, const uint h2) {
     return sqrt(-1.38629436f * clp_log2(u1)) * clp_cos2pi(u2);
 }
 
+/* Poisson(mean) by inversion with uniform u: the smallest n with u <= F(n; mean), by the
+ * sequential search over the pmf (at most 128 steps; for small means — callers switch to a
+ * normal approximation above theirs). clpost/random.py poisson_inversion is the numpy twin. */
+inline float rnd_poisson_inversion(const float mean, const float u) {
+    float prob = exp(-mean), cdf = prob, n = 0.0f;
+    for (int k = 1; k <= 128 && u > cdf; ++k) {
+        prob *= mean / (float)k;
+        cdf += prob;
+        n = (float)k;
+    }
+    return n;
+}
+
 #endif

@@ -4,16 +4,6 @@
  */
 #define SENSOR_POISSON_EXACT_MAX 32.0f
 
-inline float sensor_poisson_inversion(const float mean, const float u) {
-    float prob = exp(-mean), cdf = prob, n = 0.0f;
-    for (int k = 1; k <= 128 && u > cdf; ++k) {
-        prob *= mean / (float)k;
-        cdf += prob;
-        n = (float)k;
-    }
-    return n;
-}
-
 /* The read-noise normal has its own counter; its second uniform is a re-mix of the first hash
  * (a constant XOR alone would leave the two normals correlated). */
 inline float sensor_read_normal(const uint h3) {
@@ -31,7 +21,7 @@ inline float sensor_channel(const float s, const uint ch, const PixelCtx p, cons
         const float g = rnd_normal(rnd_hash4(seed, frame, i, 4u * ch + 1u), h2);
         e = fmax(rint(mean + sqrt(mean) * g), 0.0f);
     } else {
-        e = sensor_poisson_inversion(mean, rnd_uniform(rnd_hash4(seed, frame, i, 4u * ch)));
+        e = rnd_poisson_inversion(mean, rnd_uniform(rnd_hash4(seed, frame, i, 4u * ch)));
     }
     e = fmin(e, full_well) + read_noise * sensor_read_normal(rnd_hash4(seed, frame, i, 4u * ch + 3u));
     const float dn = clamp(rint(black + e * ((white - black) / e_sat)), 0.0f, white);

@@ -203,9 +203,7 @@ def boolean_clear_fraction(d_img, r, seed, fr):
         pyl = np.clip(np.floor_divide(cy, k), 0, h - 1)
         lam = d_img[pyl, pxl, c] * LN10 / (math.pi * r * r) / (k * k)
         hc = rnd.hash4(seed, fr, (cx + 64).astype(np.uint32), (((cy + 64) << 2) | c).astype(np.uint32))
-        from .sensor import _poisson_inversion
-
-        n = _poisson_inversion(lam, rnd.uniform(hc)).astype(int)
+        n = rnd.poisson_inversion(lam, rnd.uniform(hc)).astype(int)
         kmax = max(int(n.max()), 1)
         kk = np.arange(kmax, dtype=np.uint32)
         with np.errstate(over="ignore"):

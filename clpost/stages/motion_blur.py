@@ -63,6 +63,7 @@ import math
 
 import numpy as np
 
+from .. import random as rnd
 from ..errors import InputError
 from .base import GatherStage
 
@@ -150,7 +151,7 @@ class MotionBlur(GatherStage):
     def _kernel(self, rt, camera, name):
         from ..runtime import kernel_source
 
-        src = kernel_source("common") + "\n" + kernel_source("motion_blur")
+        src = kernel_source("common") + "\n" + kernel_source("random") + kernel_source("motion_blur")
         return rt.kernel(src, name, self.defines(camera), "motion_blur")
 
     def _buffers(self, rt, w, h):
@@ -211,21 +212,9 @@ class MotionBlur(GatherStage):
 
 # -- numpy reference ---------------------------------------------------------------------------
 
-def _mix32(x: np.ndarray) -> np.ndarray:
-    x = np.asarray(x, dtype=np.uint32)
-    with np.errstate(over="ignore"):
-        x = x ^ (x >> np.uint32(16))
-        x = x * np.uint32(0x7FEB352D)
-        x = x ^ (x >> np.uint32(15))
-        x = x * np.uint32(0x846CA68B)
-        x = x ^ (x >> np.uint32(16))
-    return x
-
-
 def jitter(seed: int, frame: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Per-pixel jitter j ∈ [−½, ½) — the kernel's ``motion_blur_jitter`` (float32)."""
-    inner = _mix32(np.uint32(frame) ^ _mix32(np.uint32(seed)))
-    h = _mix32(x.astype(np.uint32) ^ _mix32(y.astype(np.uint32) ^ inner))
+    h = rnd.hash4(seed, frame, np.asarray(x).astype(np.uint32), np.asarray(y).astype(np.uint32))
     return ((h >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0) - np.float32(0.5))
 
 
