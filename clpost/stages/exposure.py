@@ -30,7 +30,6 @@ def exposure_gain(camera) -> float:
 class Exposure(PointwiseStage):
     name = "exposure"
     order = 70.0
-    vector = True  # also defines <name>_apply16 (clpost.codegen.VECTOR_PIXELS)
     args = (("float", "gain"),)
 
     def skip_reason(self, camera, frame):

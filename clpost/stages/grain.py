@@ -126,6 +126,7 @@ class Grain(GatherStage):
         return 3 * (1 if a == 0.0 else 9)
 
     def enqueue(self, rt, camera, frame, src, dst, aux):
+        from ..codegen import library
         from ..runtime import kernel_source
 
         stock, d_min, d_max, span, r, boolean = self._setup(camera, frame.width)
@@ -140,8 +141,7 @@ class Grain(GatherStage):
             sigma, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
         defines = {"GRAIN_BOOLEAN": int(boolean), "GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k,
                    "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE, "GRAIN_TAPS": 1 if a == 0.0 else 3}
-        knl = rt.kernel(kernel_source("common") + kernel_source("random") + kernel_source("grain"),
-                        "grain", defines)
+        knl = rt.kernel(library() + kernel_source("grain"), "grain", defines)
         return [rt.launch(knl, (w, h), None, src, dst, np.int32(w), np.int32(h), rt.constant(params),
                           rt.constant(sigma.astype(np.float32)), np.float32((GRAIN_LUT_SIZE - 1) / span),
                           np.float32(a), np.float32(b), np.float32(r), seed, fr)]

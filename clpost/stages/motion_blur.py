@@ -149,9 +149,10 @@ class MotionBlur(GatherStage):
 
     # -- OpenCL -----------------------------------------------------------------------------
     def _kernel(self, rt, camera, name):
+        from ..codegen import library
         from ..runtime import kernel_source
 
-        src = kernel_source("common") + "\n" + kernel_source("random") + kernel_source("motion_blur")
+        src = library() + "\n" + kernel_source("motion_blur")
         return rt.kernel(src, name, self.defines(camera), "motion_blur")
 
     def _buffers(self, rt, w, h):

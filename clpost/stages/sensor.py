@@ -83,11 +83,6 @@ class Sensor(PointwiseStage):
         return (f"{camera.sensor_preset}: {e_sat:.0f} e⁻ at saturation (FW {p.full_well_e:g}, ISO {camera.iso:g}/"
                 f"{p.base_iso:g}), read noise {p.read_noise_e:g} e⁻, {p.bits} bit, black {p.black_level_dn}")
 
-    def source(self):
-        from ..runtime import kernel_source
-
-        return kernel_source("random") + kernel_source("sensor")
-
     def values(self, camera, frame):
         p, e_sat, white = sensor_scalars(camera)
         return (np.float32(e_sat), np.float32(p.full_well_e), np.float32(p.read_noise_e),

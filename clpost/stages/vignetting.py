@@ -129,7 +129,6 @@ def principal_offset_mm(camera) -> tuple[float, float]:
 class Vignetting(PointwiseStage):
     name = "vignetting"
     order = 60.0
-    vector = True  # also defines <name>_apply16 (clpost.codegen.VECTOR_PIXELS)
     args = (("__global const float *", "ri"),)
 
     def __init__(self, quality: str = "final") -> None:
