@@ -37,6 +37,33 @@ typedef struct {
     (table)[(idx).s8], (table)[(idx).s9], (table)[(idx).sa], (table)[(idx).sb], \
     (table)[(idx).sc], (table)[(idx).sd], (table)[(idx).se], (table)[(idx).sf]))
 
+/* The tile of a tiled gather (astigmatism, coma; clpost/stages/_field.py "Tiles"): work-group g
+ * takes tile `tile_id` (from its list); a work-item does `lanes` consecutive pixels of a tile row
+ * from (x, y). The padded planes hold whole tiles plus `pad` on every side: row pitch pw, plane
+ * size pn, and pixel (x, y) at index jc. */
+typedef struct {
+    int id, tx, ty;
+    int x, y;
+    int pw;
+    size_t pn;
+    int jc;
+} ClpTile;
+
+inline ClpTile clp_tile(const int tile_id, const int tiles_x, const int tiles_y, const int tile_w,
+                        const int tile_h, const int pad, const int lanes)
+{
+    ClpTile t;
+    t.id = tile_id;
+    t.tx = tile_id % tiles_x;
+    t.ty = tile_id / tiles_x;
+    t.x = t.tx * tile_w + lanes * (int)get_local_id(0);
+    t.y = t.ty * tile_h + (int)get_local_id(1);
+    t.pw = tiles_x * tile_w + 2 * pad;
+    t.pn = (size_t)t.pw * (size_t)(tiles_y * tile_h + 2 * pad);
+    t.jc = (t.y + pad) * t.pw + t.x + pad;
+    return t;
+}
+
 /* 16 pixels of a row (x .. x + 15) into a planar RGB image. `whole` (a compile-time constant at
  * the call site): the frame is whole tiles, every vector lies inside; otherwise rows below the
  * frame and pixels right of it are computed by the caller but not stored. */

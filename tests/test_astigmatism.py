@@ -321,3 +321,28 @@ def test_reach_test_is_skipped_only_where_every_reach_weight_is_one(rng):
             need[ty, tx] = ps[win].min() + 0.5 < bs[ty, tx] - 1e-4 or pt[win].min() + 0.5 < bt[ty, tx] - 1e-4
     assert not np.any(need & (reach == 0)), np.argwhere(need & (reach == 0))
     assert 0.3 < (reach == 0).mean() and need.any() and reach.any()
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_program_has_one_gather_per_tap_class_and_the_plan_is_built_once(rng, quality):
+    """Tap-class kernels and the kernels' constants are generated from Python; the device plan
+    (source, tables, buffers) is made once per camera and size, not per frame."""
+    from clpost.stages.astigmatism_cl import program_source
+
+    stage = ast.Astigmatism(quality)
+    cam = Camera(field_curvature_mm=0.05, astigmatism_mm=0.1, f_number=2.0)
+    src = program_source(tuple(stage.tap_classes()))
+    for n in stage.tap_classes()[:-1]:
+        assert f"__kernel void astigmatism_t{n}(" in src
+    assert f"#define ASTIGMATISM_MIN_SEMI {float(np.float32(ast.MIN_SEMI_PX))!r}f" in src
+    w, h = 37, 23
+    pipe = Pipeline(cam, stages=["astigmatism"], quality=quality)
+    depth = np.full((h, w), 1.5, np.float32)
+    frame = Frame(rng.random((h, w, 3), dtype=np.float32), depth=depth)
+    pipe.run(frame)
+    st = next(s for s in pipe._stages if s.name == "astigmatism")
+    plan = device_plan(st, pipe.runtime, cam, w, h)
+    pipe.run(frame)
+    assert device_plan(st, pipe.runtime, cam, w, h) is plan and plan["offsets_done"]
+    assert {f"astigmatism_t{n}" for n in stage.tap_classes()[:-1]} <= {
+        k.function_name for k in pipe.runtime.program(src, "astigmatism", {**stage.defines(cam), "ASTIGMATISM_WHOLE_TILES": 0}).all_kernels()}

@@ -20,20 +20,37 @@ import numpy as np
 from . import _field as fld
 
 
+def _f(v: float) -> str:
+    """A float32 literal of ``v`` (exact round trip)."""
+    return f"{float(np.float32(v))!r}f"
+
+
 @lru_cache(maxsize=8)
 def program_source(classes: tuple[int, ...]) -> str:
-    """kernels/common.cl + the ``astigmatism_taps`` table + kernels/astigmatism.cl, per tap classes.
+    """The astigmatism program for tap classes ``classes`` (4, 8, ..., N), generated so the kernels
+    cannot drift from their Python twins: kernels/common.cl, the stage's constants as
+    ``#define``s, the ``astigmatism_taps`` table, kernels/astigmatism.cl, and one gather kernel
+    ``astigmatism_t<n>`` per class below N (table offset: the classes before it).
 
     The table (float32 literals, exact round trip) holds the Vogel spirals of every tap class one
-    after the other (4, 8, ..., N points), a program-scope constant (from a buffer, PoCL's SLP
-    pass packed the loads of the work-item vectoriser into vector gathers; the explicit float16
-    loop reads them as scalars)."""
+    after the other, a program-scope constant (from a buffer, PoCL's SLP pass packed the loads of
+    the work-item vectoriser into vector gathers; the explicit float16 loop reads them as
+    scalars)."""
     from ..runtime import kernel_source
+    from .astigmatism import MAX_SEMI_PX, MIN_DEPTH_MM, MIN_SEMI_PX, Astigmatism
 
+    consts = {"ASTIGMATISM_MAX_SEMI": MAX_SEMI_PX, "ASTIGMATISM_MIN_SEMI": MIN_SEMI_PX,
+              "ASTIGMATISM_MIN_DEPTH_MM": MIN_DEPTH_MM, "ASTIGMATISM_EXACT_PX": Astigmatism.EXACT_PX,
+              "ASTIGMATISM_MIXED": Astigmatism.MIXED}
+    head = "".join(f"#define {k} {_f(v)}\n" for k, v in consts.items())
     taps = np.concatenate([fld.vogel_disc(n) for n in classes]).ravel()
     vals = ", ".join(f"{float(v)!r}f" for v in taps)
     table = f"__constant float astigmatism_taps[{taps.size}] = {{{vals}}};\n"
-    return kernel_source("common") + table + kernel_source("astigmatism")
+    offsets = np.concatenate([[0], np.cumsum(classes)])
+    kernels = "".join(f"__kernel void astigmatism_t{n}(ASTIGMATISM_GATHER_ARGS) "
+                      f"{{ ASTIGMATISM_GATHER_CALL({n}, {offsets[k]}); }}\n"
+                      for k, n in enumerate(classes[:-1]))
+    return kernel_source("common") + head + table + kernel_source("astigmatism") + kernels
 
 
 def _plan(stage, rt, camera, w, h, cx, cy, lut):

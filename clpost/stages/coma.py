@@ -179,6 +179,22 @@ def comet_offsets(u: np.ndarray) -> np.ndarray:
     return np.stack([2.0 * px * py, px * px + 3.0 * py * py], -1)
 
 
+@lru_cache(maxsize=8)
+def program_source(taps: int) -> str:
+    """The coma program for ``taps`` spiral points, generated so its kernel list cannot drift from
+    :data:`STENCIL_SIZES`: kernels/common.cl, the ``coma_taps`` table (the comet offsets of the
+    Vogel spiral, float32 literals, exact round trip), kernels/coma.cl, and per stencil size S
+    the kernels ``coma_s<S>`` (each pixel's Jacobian) and ``coma_c<S>`` (the tile's one)."""
+    from ..runtime import kernel_source
+
+    off = comet_offsets(fld.vogel_disc(taps).astype(np.float64)).astype(np.float32).ravel()
+    vals = ", ".join(f"{float(v)!r}f" for v in off)
+    table = f"__constant float coma_taps[{off.size}] = {{{vals}}};\n"
+    kernels = "".join(f"__kernel void coma_{kind}{size}(COMA_STENCIL_ARGS) {{ COMA_STENCIL_CALL({size}, {jac}); }}\n"
+                      for kind, jac in (("s", 1), ("c", 0)) for size in STENCIL_SIZES)
+    return kernel_source("common") + table + kernel_source("coma") + kernels
+
+
 class Coma(GatherStage):
     name = "coma"
     order = 25.0
@@ -224,18 +240,10 @@ class Coma(GatherStage):
 
     # -- OpenCL -----------------------------------------------------------------------------
     def _kernel(self, rt, camera, name, whole_tiles: bool):
-        from ..runtime import kernel_source
-
         # COMA_WHOLE_TILES (the frame is whole tiles: stores need no branch) is a property of the
         # frame size, not of the camera, so it is added here rather than in defines()
-        return rt.kernel(kernel_source("common") + self._tap_table() + kernel_source("coma"), name,
+        return rt.kernel(program_source(self.taps), name,
                          {**self.defines(camera), "COMA_WHOLE_TILES": int(whole_tiles)}, "coma")
-
-    def _tap_table(self) -> str:
-        """OpenCL source of the ``coma_taps`` table (float32 literals, exact round trip)."""
-        off = comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)).astype(np.float32).ravel()
-        vals = ", ".join(f"{float(v)!r}f" for v in off)
-        return f"__constant float coma_taps[{off.size}] = {{{vals}}};\n"
 
     def _buffers(self, rt, w, h):
         key = (id(rt.context), w, h, self.taps)
