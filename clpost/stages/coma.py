@@ -124,44 +124,6 @@ STENCIL_SIZES = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256)
 corners each reach at most 4N ≤ 256 integer offsets (fewer where the comet is short)."""
 """Tiles whose pixels' landing points are all within this (px) of the tile centre's take the
 tile centre's comet (``Coma.tile_uniform``)."""
-RHO_FIT = 0.7
-"""C is fitted over ρ ≤ 0.7 (half of the pupil's area), where the third-order ρ² law holds; the
-rim zone of a fast lens is dominated by high-order flare (spherical aberration's), which a ρ² fit
-would turn into a far too long comet."""
-
-
-@lru_cache(maxsize=32)
-def _traced(lens_name: str, focus_distance_m: float, f_number: float) -> tuple[np.ndarray, np.ndarray]:
-    """(image_height_mm, C_mm) of a traced lens from its meridional fans."""
-    from ..optics import get_lens
-    from ..optics.curves import _Field, lens_curves
-
-    lens = get_lens(lens_name)
-    curves = lens_curves(lens_name, focus_distance_m, f_number)
-    focus_mm = focus_distance_m * 1000.0
-    pres = lens.focused(focus_mm, f_number)
-    field = _Field(lens, pres, focus_mm, lens.stop_radius_mm(f_number))
-    r_e = curves.entrance_pupil_radius_mm
-    th = np.radians(np.asarray(curves.field_angle_deg, np.float64))
-    aim = field.chief_aim(th)
-    rho = np.linspace(0.07, RHO_FIT, 10)
-    fan = np.concatenate([-rho[::-1], [0.0], rho])
-    t = np.repeat(th, fan.size)
-    ay = np.repeat(aim, fan.size) + np.tile(fan, th.size) * r_e / np.cos(t)
-    res = field.trace(t, 0.0, ay, clip=False)
-    y = res.pos[:, 1].reshape(th.size, fan.size)
-    ok = (res.status == 0).reshape(th.size, fan.size)
-    eps = y - y[:, rho.size][:, None]
-    even = 0.5 * (eps[:, rho.size + 1:] + eps[:, :rho.size][:, ::-1])
-    good = ok[:, rho.size + 1:] & ok[:, :rho.size][:, ::-1] & ok[:, rho.size][:, None]
-    w = np.where(good, rho ** 3, 0.0)  # least squares of 3Cρ² with the pupil-area weight ρ dρ
-    with np.errstate(invalid="ignore", divide="ignore"):
-        c = np.where(w.sum(1) > 0, np.sum(w * np.where(good, even, 0.0), 1) / (3.0 * np.sum(w * rho ** 2, 1)), 0.0)
-    c = np.nan_to_num(c)
-    c[0] = 0.0  # on axis the fan is symmetric: no coma
-    return np.asarray(curves.image_height_mm), c
-
-
 def coma_curve(camera):
     """``fn(r_mm) -> C`` in mm (+ = tail away from the centre), or None (no source)."""
     if camera.coma_mm is not None:
@@ -169,7 +131,9 @@ def coma_curve(camera):
         return lambda r: k * np.asarray(r, np.float64)
     if camera.optics is None:
         return None
-    r, c = _traced(camera.lens, camera.focus_distance_m, camera.lens_curves().f_number)
+    from ..optics.coma_fit import traced_coma
+
+    r, c = traced_coma(camera.lens, camera.focus_distance_m, camera.lens_curves().f_number)
     return lambda x: np.interp(np.abs(np.asarray(x, np.float64)), r, c)
 
 
