@@ -241,7 +241,9 @@ def test_inner_tiles_read_the_source_and_the_pad_fills_only_the_ring(rng):
 def test_program_has_one_stencil_kernel_pair_per_stencil_size():
     """The kernel list is generated from STENCIL_SIZES: every size the planner can pick builds."""
     from clpost.runtime import get_runtime
-    from clpost.stages.coma import STENCIL_SIZES, Coma, program_source
+    from clpost.stages.coma import Coma
+    from clpost.stages.coma import STENCIL_SIZES
+    from clpost.stages.coma_cl import program_source
 
     st = Coma("draft")
     rt = get_runtime()

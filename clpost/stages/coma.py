@@ -104,8 +104,6 @@ Domain/range: colour ≥ 0 → convex combination of input colours.
 """
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
 
 from . import _field as fld
@@ -143,31 +141,12 @@ def comet_offsets(u: np.ndarray) -> np.ndarray:
     return np.stack([2.0 * px * py, px * px + 3.0 * py * py], -1)
 
 
-@lru_cache(maxsize=8)
-def program_source(taps: int) -> str:
-    """The coma program for ``taps`` spiral points, generated so its kernel list cannot drift from
-    :data:`STENCIL_SIZES`: kernels/common.cl, the ``coma_taps`` table (the comet offsets of the
-    Vogel spiral, float32 literals, exact round trip), kernels/coma.cl, and per stencil size S
-    the kernels ``coma_s<S>`` (each pixel's Jacobian) and ``coma_c<S>`` (the tile's one)."""
-    from ..runtime import kernel_source
-
-    off = comet_offsets(fld.vogel_disc(taps).astype(np.float64)).astype(np.float32).ravel()
-    vals = ", ".join(f"{float(v)!r}f" for v in off)
-    table = f"__constant float coma_taps[{off.size}] = {{{vals}}};\n"
-    kernels = "".join(f"__kernel void coma_{kind}{size}(COMA_STENCIL_ARGS) {{ COMA_STENCIL_CALL({size}, {jac}); }}\n"
-                      for kind, jac in (("s", 1), ("c", 0)) for size in STENCIL_SIZES)
-    return kernel_source("common") + table + kernel_source("coma") + kernels
-
-
 class Coma(GatherStage):
     name = "coma"
     order = 25.0
 
     def __init__(self, quality: str = "final") -> None:
         super().__init__(quality)
-        self._scratch: dict = {}
-        self._lists_key = None
-        self._lists: dict = {}
         self._uniform: tuple = (None, None)
 
     @property
@@ -202,86 +181,10 @@ class Coma(GatherStage):
         return {"COMA_TAPS": self.taps, "COMA_PAD": fld.PAD, "COMA_LUT_SIZE": fld.LUT_SIZE,
                 "COMA_TILE_W": fld.TILE_W, "COMA_TILE_H": fld.TILE_H}
 
-    # -- OpenCL -----------------------------------------------------------------------------
-    def _kernel(self, rt, camera, name, whole_tiles: bool):
-        # COMA_WHOLE_TILES (the frame is whole tiles: stores need no branch) is a property of the
-        # frame size, not of the camera, so it is added here rather than in defines()
-        return rt.kernel(program_source(self.taps), name,
-                         {**self.defines(camera), "COMA_WHOLE_TILES": int(whole_tiles)}, "coma")
-
-    def _buffers(self, rt, w, h):
-        key = (id(rt.context), w, h, self.taps)
-        if key not in self._scratch:
-            ntx, nty = fld.tiles(w, h)
-            ow, oh = ntx * fld.TILE_W, nty * fld.TILE_H
-            self._scratch = {key: dict(
-                pad=rt.empty((3, oh + 2 * fld.PAD, ow + 2 * fld.PAD)), shape=rt.empty((4, oh, ow)),
-                tiles=rt.empty((nty, ntx, 4)), lut=rt.empty((2, fld.LUT_SIZE)))}
-        return self._scratch[key]
-
     def enqueue(self, rt, camera, frame, src, dst, aux):
-        import pyopencl as cl
+        from .coma_cl import enqueue_coma
 
-        q = rt.queue
-        w, h = frame.width, frame.height
-        b = self._buffers(rt, w, h)
-        cx, cy = fld.principal_point_px(camera, w, h)
-        ntx, nty = fld.tiles(w, h)
-        ow, oh = ntx * fld.TILE_W, nty * fld.TILE_H
-        whole = (ow, oh) == (w, h)
-        pitch = fld.pitch_mm(camera, w)
-        events = []
-        shape_key = (id(rt.context), self._uniform_key(camera, w, h))
-        if b.get("shape_key") != shape_key:
-            # the comet of every pixel depends on the camera and the frame size only (not on the
-            # frame's content): computed once, kept on the device for the next frames
-            events += [cl.enqueue_copy(q, b["lut"], self._lut(camera), is_blocking=False),
-                       cl.enqueue_copy(q, b["tiles"], self.tile_axes_px(camera, w, h).astype(np.float32),
-                                       is_blocking=False)]
-            k = self._kernel(rt, camera, "coma_shape", whole)
-            k.set_args(b["shape"], b["lut"], np.int32(ow), np.int32(oh), np.float32(cx), np.float32(cy),
-                       np.float32(pitch), np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
-            events.append(cl.enqueue_nd_range_kernel(q, k, (ow, oh), None))
-            b["shape_key"] = shape_key
-        lists = self._tile_lists(rt, camera, w, h)
-        k = self._kernel(rt, camera, "coma_pad", whole)
-        k.set_args(src, b["pad"], np.int32(w), np.int32(h), np.int32(ow + 2 * fld.PAD), np.int32(oh + 2 * fld.PAD),
-                   *(np.int32(v) for v in lists["skip"]))
-        # 16 pixels of a padded row per work-item
-        events.append(cl.enqueue_nd_range_kernel(q, k, ((ow + 2 * fld.PAD) // 16, oh + 2 * fld.PAD), None))
-        group = (fld.TILE_W // 16, fld.TILE_H)  # 16 pixels (a float16) per work-item
-        args = (np.int32(ntx), np.int32(nty), np.int32(w), np.int32(h))
-        if lists["n_window"]:
-            k = self._kernel(rt, camera, "coma", whole)
-            k.set_args(b["pad"], b["shape"], dst, b["tiles"], lists["window"], *args)
-            events.append(cl.enqueue_nd_range_kernel(q, k, (group[0] * lists["n_window"], group[1]), group))
-        for name, ids, n_ids, inner, offs, wts in lists["stencils"]:
-            # one kernel per stencil size (a compile-time loop count) and Jacobian kind
-            k = self._kernel(rt, camera, name, whole)
-            k.set_args(b["pad"], src, b["shape"], dst, ids, inner, offs, wts, *args)
-            events.append(cl.enqueue_nd_range_kernel(q, k, (group[0] * n_ids, group[1]), group))
-        return events
-
-    def _tile_lists(self, rt, camera, w, h) -> dict:
-        """Device lists of the tiles for the window kernel and, per stencil size, the uniform
-        tiles with their stencils (uploaded once per camera map, frame size and tap count: coma
-        does not depend on the frame's content)."""
-        key = (id(rt.context), self._uniform_key(camera, w, h))
-        if self._lists_key != key:
-            mk = rt.constant
-            window = np.flatnonzero(~self.tile_uniform(camera, w, h).ravel()).astype(np.int32)
-            inner = self.inner_tiles(w, h).ravel()
-            stencils = [(f"coma_{'c' if const else 's'}{size}", mk(ids), ids.size, mk(inner[ids].astype(np.int32)),
-                         mk(np.stack([dx, dy], -1).astype(np.int32)), mk(wts.astype(np.float32)))
-                        for size, const, ids, dx, dy, wts in self.uniform_stencils(camera, w, h)]
-            # the padded copy's inside that no tile reads (padded coordinates, x0, x1, y0, y1): the
-            # inner tiles read the source, and the border tiles' reads (|d| <= PAD) stay within
-            # 2 PAD + tile of the frame's edge; the window kernel reads the padded copy everywhere
-            p, tw, th = fld.PAD, fld.TILE_W, fld.TILE_H
-            skip = (0, 0, 0, 0) if window.size else (3 * p + tw, w - p - tw, 3 * p + th, h - p - th)
-            self._lists_key, self._lists = key, dict(window=mk(window), n_window=window.size, stencils=stencils,
-                                                     skip=skip)
-        return self._lists
+        return enqueue_coma(self, rt, camera, frame, src, dst, aux)
 
     @staticmethod
     def inner_tiles(w: int, h: int) -> np.ndarray:
