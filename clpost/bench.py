@@ -205,7 +205,7 @@ def copy_kernel_gbps(rt, nbytes: int, repeats: int) -> float:
     n4 = max(1, nbytes // 16)
     a, b = rt.empty((n4 * 4,)), rt.empty((n4 * 4,))
     cl.enqueue_fill_buffer(rt.queue, a, np.float32(1), 0, n4 * 16).wait()
-    k = cl.Kernel(rt.program(_COPY_SRC, "bench_copy"), "bench_copy")
+    k = rt.kernel(_COPY_SRC, "bench_copy")
     k.set_args(a, b)
     times = []
     for i in range(repeats + 2):

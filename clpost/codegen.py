@@ -27,17 +27,89 @@ AUX_BUFFERS = {
 
 
 VECTOR_PIXELS = 16
-"""Pixels per work-item of a fused kernel whose stages all have an explicit-vector form
-(``PointwiseStage.vector``: ``<name>_apply16`` on float16 channels of 16 pixels of a row). PoCL
-does not vectorise the one-pixel-per-work-item form of the fused stage code (its vectoriser
-remarks: float3 values, library calls, selects), and explicit float16 is what it compiles to
-AVX-512 (the dof and astigmatism gathers found the same)."""
+"""Pixels per work-item of a fused pointwise kernel: PoCL does not vectorise the one-pixel-per-
+work-item form of the fused stage code (its vectoriser remarks: float3 values, library calls,
+selects), and explicit float16 is what it compiles to AVX-512 (the dof and astigmatism gathers
+found the same)."""
+
+# -- Width-generic code -------------------------------------------------------------------------
+# A pointwise stage writes its per-pixel math once, in kernels/<name>.cl, as
+#
+#     inline void <name>_apply(CLP_F *r, CLP_F *g, CLP_F *b, const CLP_CTX p, <args>)
+#
+# on the three channels of CLP_W pixels of a row (helpers named CLP_FN(helper)), and the generator
+# instantiates it at one pixel (float, PixelCtx: a row's last 1-15 pixels) and at VECTOR_PIXELS
+# (float16 lanes, PixelCtx16) — so every fused group runs 16 pixels per work-item and a new stage
+# is fast without a hand-written twin; both instantiations do the same float operations, so they
+# agree bit for bit (tests/test_pipeline.py). kernels/fastmath.cl and kernels/random.cl are written
+# the same way. The macros (the style of dof's DOF_F / DOF_LOAD in kernels/dof.cl):
+
+WIDTH_MACROS: dict[int, dict[str, str]] = {
+    1: {
+        "CLP_W": "1", "CLP_F": "float", "CLP_I": "int", "CLP_U": "uint", "CLP_CTX": "PixelCtx",
+        "CLP_TO_F(x)": "convert_float(x)", "CLP_TO_I(x)": "convert_int(x)", "CLP_TO_U(x)": "convert_uint(x)",
+        "CLP_AS_F(x)": "as_float(x)", "CLP_AS_I(x)": "as_int(x)", "CLP_AS_U(x)": "as_uint(x)",
+        "CLP_ANY(c)": "(c)",
+        "CLP_X(p)": "((float)(p).x)", "CLP_Y(p)": "((float)(p).y)", "CLP_INDEX(p)": "((uint)(p).i)",
+        "CLP_PLANE(buf, p)": "((buf)[(p).i])",
+        "CLP_PLANE2(buf, p, k)": "((buf)[2 * (p).i + (k)])",
+        "CLP_GATHER(table, idx)": "((table)[idx])",
+    },
+    VECTOR_PIXELS: {
+        "CLP_W": "16", "CLP_F": "float16", "CLP_I": "int16", "CLP_U": "uint16", "CLP_CTX": "PixelCtx16",
+        "CLP_TO_F(x)": "convert_float16(x)", "CLP_TO_I(x)": "convert_int16(x)", "CLP_TO_U(x)": "convert_uint16(x)",
+        "CLP_AS_F(x)": "as_float16(x)", "CLP_AS_I(x)": "as_int16(x)", "CLP_AS_U(x)": "as_uint16(x)",
+        "CLP_ANY(c)": "any(c)",
+        "CLP_X(p)": "((float)(p).x0 + CLP_LANES16)", "CLP_Y(p)": "((float16)((float)(p).y))",
+        "CLP_INDEX(p)": "((uint16)((uint)(p).i0) + CLP_ULANES16)",
+        "CLP_PLANE(buf, p)": "vload16(0, (buf) + (p).i0)",
+        # component k of 16 interleaved pairs (velocity): the even or odd lanes of 32 floats
+        "CLP_PLANE2(buf, p, k)": "((k) ? (float16)(vload16(0, (buf) + 2 * (p).i0).odd, vload16(1, (buf) + 2 * (p).i0).odd) "
+                                 ": (float16)(vload16(0, (buf) + 2 * (p).i0).even, vload16(1, (buf) + 2 * (p).i0).even))",
+        "CLP_GATHER(table, idx)": "CLP_GATHER16(table, idx)",
+    },
+}
+"""Per width: the types (``CLP_F`` float, ``CLP_I`` int — also what a comparison gives —,
+``CLP_U`` uint, ``CLP_CTX`` the pixel context), conversions (``CLP_TO_*`` value, ``CLP_AS_*``
+bits), ``CLP_ANY`` (any lane true), and what a pixel reads: ``CLP_X``/``CLP_Y`` its coordinates,
+``CLP_INDEX`` its index (a counter for random.cl), ``CLP_PLANE`` one float per pixel of a W×H
+plane, ``CLP_PLANE2`` component k of an interleaved pair (velocity), ``CLP_GATHER`` a table entry
+per lane (data-dependent: one load per lane)."""
+
+LIBRARIES = ("fastmath", "random")
+"""Width-generic kernels/*.cl every fused kernel instantiates, in this order, before its stages."""
+
+
+def width_block(width: int, suffix: str | None = None) -> str:
+    """``#define``s of :data:`WIDTH_MACROS` for ``width`` with ``CLP_FN(name)`` →
+    ``name<suffix>`` (default ``_w<width>``; ``""``: plain names)."""
+    sfx = f"_w{width}" if suffix is None else suffix
+    macros = {**WIDTH_MACROS[width], "CLP_FN(name)": f"name##{sfx}" if sfx else "name"}
+    lines = []
+    for k, v in macros.items():
+        lines.append(f"#undef {k.split('(')[0]}")
+        lines.append(f"#define {k} {v}")
+    return "\n".join(lines) + "\n"
+
+
+def library(width: int = 1, suffix: str = "") -> str:
+    """kernels/common.cl and the width-generic libraries (fastmath, random) at ``width`` with
+    plain names (``clp_log2``, ``rnd_hash4``, ...): the head of a gather's program."""
+    return kernel_source("common") + width_block(width, suffix) + "".join(kernel_source(n) for n in LIBRARIES)
+
+
+def _instantiate(stages: "list[PointwiseStage]", width: int) -> str:
+    """The libraries and every stage's source at ``width``; entry points ``<name>_apply_w<width>``."""
+    parts = [width_block(width)] + [kernel_source(n) for n in LIBRARIES]
+    for s in stages:
+        parts.append(f"#define {s.name}_apply {s.name}_apply_w{width}\n{s.source()}\n#undef {s.name}_apply\n")
+    return "\n".join(parts)
 
 
 def vector_path(stages: "list[PointwiseStage]") -> bool:
-    """Whether :func:`fused_source` generates the :data:`VECTOR_PIXELS`-wide kernel for ``stages``
-    (every stage has the vector form and none reads depth or velocity)."""
-    return bool(stages) and all(getattr(s, "vector", False) and not s.reads for s in stages)
+    """Whether :func:`fused_source` generates the :data:`VECTOR_PIXELS`-wide kernel for ``stages``:
+    every non-empty group (each stage's math is width-generic)."""
+    return bool(stages)
 
 
 def _lanes(vec: str, first: int) -> str:
@@ -61,32 +133,36 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     (a single stage's kernel is named like the stage); with no stages it only converts layouts.
     Parameters: ``src, dst, width, height``, then ``depth`` / ``velocity`` if any stage reads
     them, then each stage's ``args`` prefixed ``<stage>_``. A stage that reads depth or velocity
-    receives those pointers right after ``p``, in that order.
+    receives those pointers right after ``p``, in that order. ``vector`` (default
+    :func:`vector_path`): :data:`VECTOR_PIXELS` pixels per work-item, else one.
     """
     name = "__".join(s.name for s in stages) or f"convert_{src_layout}_to_{dst_layout}"
     params = ["__global const float *restrict src", "__global float *restrict dst",
               "const int width", "const int height"]
     aux = [b for b in AUX_BUFFERS if any(b in s.reads for s in stages)]
     params += [AUX_BUFFERS[b] for b in aux]
-    body = []
-    for s in stages:
-        call_args = ["c", "p"] + [b for b in AUX_BUFFERS if b in s.reads]
-        for cl_type, arg in s.args:
-            params.append(f"{'const ' if '*' not in cl_type else ''}{cl_type} {s.name}_{arg}")
-            call_args.append(f"{s.name}_{arg}")
-        body.append(f"    c = {s.name}_apply({', '.join(call_args)});")
     if not stages and src_layout != dst_layout:
         return name, kernel_source("common") + _convert_source(name, src_layout)
-    load = "load_interleaved(src, i)" if src_layout == INTERLEAVED else "load_planar(src, i, n)"
-    store = ("store_interleaved(dst, i, c);" if dst_layout == INTERLEAVED
-             else "store_planar(dst, i, n, c);")
-    parts = [kernel_source("common")] + [s.source() for s in stages]
-    nl = "\n"
-    if vector_path(stages) if vector is None else vector:
-        calls16 = []
+
+    def calls(width: int, ctx: str, indent: str) -> list[str]:
+        out = []
         for s in stages:
-            extra = "".join(f", {s.name}_{arg}" for _, arg in s.args)
-            calls16.append(f"        {s.name}_apply16(&r, &g, &b, p16{extra});")
+            extra = "".join(f", {b}" for b in AUX_BUFFERS if b in s.reads)
+            extra += "".join(f", {s.name}_{arg}" for _, arg in s.args)
+            out.append(f"{indent}{s.name}_apply_w{width}(&r, &g, &b, {ctx}{extra});")
+        return out
+
+    for s in stages:
+        for cl_type, arg in s.args:
+            params.append(f"{'const ' if '*' not in cl_type else ''}{cl_type} {s.name}_{arg}")
+    load = "load_interleaved(src, i)" if src_layout == INTERLEAVED else "load_planar(src, i, n)"
+    store = ("store_interleaved(dst, i, (float3)(r, g, b));" if dst_layout == INTERLEAVED
+             else "store_planar(dst, i, n, (float3)(r, g, b));")
+    vec = vector_path(stages) if vector is None else vector
+    parts = [kernel_source("common"), _instantiate(stages, 1)]
+    nl = "\n"
+    if vec:
+        parts.append(_instantiate(stages, VECTOR_PIXELS))
         if src_layout == INTERLEAVED:
             load16 = ("const float16 v0 = vload16(0, src + 3 * i), v1 = vload16(1, src + 3 * i), "
                       "v2 = vload16(2, src + 3 * i);\n"
@@ -99,7 +175,6 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
         else:
             store16 = ("        vstore16(r, 0, dst + i);\n        vstore16(g, 0, dst + n + i);\n"
                        "        vstore16(b, 0, dst + 2 * n + i);")
-        tail = "\n".join("    " + line for line in body)
         parts.append(f"""
 __kernel void {name}({", ".join(params)})
 {{
@@ -113,14 +188,15 @@ __kernel void {name}({", ".join(params)})
         const size_t i = i0;
         const PixelCtx16 p16 = {{x0, y, width, height, i0}};
         {load16}
-{nl.join(calls16)}
+{nl.join(calls(VECTOR_PIXELS, "p16", "        "))}
 {store16}
     }} else {{  /* the row's last 1–15 pixels, one by one */
         for (int x = x0; x < width; ++x) {{
             const size_t i = i0 + (size_t)(x - x0);
             const PixelCtx p = {{x, y, width, height, i}};
-            float3 c = {load};
-{tail}
+            const float3 c = {load};
+            float r = c.x, g = c.y, b = c.z;
+{nl.join(calls(1, "p", "            "))}
             {store}
         }}
     }}
@@ -137,8 +213,9 @@ __kernel void {name}({", ".join(params)})
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
     const PixelCtx p = {{x, y, width, height, i}};
     (void)n; (void)p;
-    float3 c = {load};
-{nl.join(body)}
+    const float3 c = {load};
+    float r = c.x, g = c.y, b = c.z;
+{nl.join(calls(1, "p", "    "))}
     {store}
 }}
 """)

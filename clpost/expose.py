@@ -144,8 +144,7 @@ class ExposureAccumulator:
         zero = np.zeros(n3, np.float32)
         cl.enqueue_copy(self.rt.queue, self._sum, zero)
         cl.enqueue_copy(self.rt.queue, self._comp, zero)
-        prog = self.rt.program(kernel_source("motion_blur_expose"), "motion_blur_expose")
-        self._kernel = cl.Kernel(prog, "motion_blur_expose")
+        self._kernel = self.rt.kernel(kernel_source("motion_blur_expose"), "motion_blur_expose")
         self.applied = Fraction(0)
         self.seconds = Fraction(0)
         self.count = 0

@@ -36,6 +36,25 @@ def uniform(h):
     return ((np.asarray(h, np.uint32) >> _M(8)).astype(np.float64) + 0.5) / 16777216.0
 
 
+def poisson_inversion(mean, u):
+    """Poisson(mean) by inversion, as ``rnd_poisson_inversion``: the smallest n with
+    u ≤ F(n; mean), the same sequential search over the pmf (at most 128 steps), float64."""
+    mean = np.asarray(mean, np.float64)
+    u = np.asarray(u, np.float64)
+    n = np.zeros(np.broadcast(mean, u).shape)
+    prob = np.exp(-mean)
+    cdf = prob.copy()
+    active = u > cdf
+    k = 0
+    while active.any() and k < 128:
+        k += 1
+        prob = prob * mean / k
+        cdf = cdf + prob
+        n = np.where(active, k, n)
+        active &= u > cdf
+    return n
+
+
 def normal(h1, h2):
     """Box-Muller as ``rnd_normal`` (float64 here; the kernel's float32 differs by ~1e-6)."""
     return np.sqrt(-2.0 * np.log(uniform(h1))) * np.cos(2.0 * np.pi * uniform(h2))

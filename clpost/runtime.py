@@ -26,8 +26,11 @@ no ``-cl-fast-relaxed-math``, ``-cl-finite-math-only`` or ``-cl-denorms-are-zero
 """
 from __future__ import annotations
 
+import functools
 import os
 import threading
+import weakref
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -56,6 +59,7 @@ _SMOKE_KERNEL = "__kernel void clpost_smoke(__global float *a) { a[get_global_id
 _smoke_results: dict[int, str | None] = {}
 
 
+@functools.lru_cache(maxsize=None)
 def kernels_dir() -> Path:
     """Directory holding the ``.cl`` sources: packaged as ``clpost/kernels`` in a wheel,
     ``<repo>/kernels`` in a source checkout."""
@@ -69,8 +73,12 @@ def kernels_dir() -> Path:
 
 
 def kernel_source(name: str) -> str:
-    """Text of ``kernels/<name>.cl``."""
-    path = kernels_dir() / f"{name}.cl"
+    """Text of ``kernels/<name>.cl`` (read once per process: stages ask for it every frame)."""
+    return _read_source(kernels_dir() / f"{name}.cl")
+
+
+@functools.lru_cache(maxsize=None)
+def _read_source(path: Path) -> str:
     try:
         return path.read_text()
     except FileNotFoundError:
@@ -151,14 +159,39 @@ def choose_device(spec: str | None = None) -> "cl.Device":
     )
 
 
+def round_up(n: int, multiple: int) -> int:
+    """``n`` rounded up to a whole number of ``multiple`` (a launch's global size in work-groups)."""
+    return -(-int(n) // int(multiple)) * int(multiple)
+
+
+CONSTANT_CACHE_ENTRIES = 256
+"""Read-only buffers :meth:`Runtime.constant` keeps per runtime (least recently used dropped):
+enough for every table of a plan, bounded when an animated parameter makes a new table per frame."""
+
+
 @dataclass
 class Runtime:
-    """A context and an in-order profiling queue on one device, plus the program cache."""
+    """A context and an in-order profiling queue on one device, and the device-work toolkit every
+    stage uses (plan-time work done once, call-time work per frame):
+
+    - :meth:`program` / :meth:`kernel` / :meth:`kernels`: programs built once per (source,
+      defines); ``cl.Kernel`` objects cached per (program, kernel name) and thread — a kernel
+      object holds its arguments, so two threads never share one;
+    - :meth:`constant`: a read-only buffer uploaded once per content key;
+    - :meth:`scratch`: a work buffer per (owner, name), reused across frames while its shape and
+      dtype stay the same; :meth:`cached`: a plan-time object per (owner, name) rebuilt only when
+      its structural key changes;
+    - :meth:`launch`: enqueue with the global size rounded up to whole work-groups.
+    """
 
     device: "cl.Device"
     context: "cl.Context" = field(init=False)
     queue: "cl.CommandQueue" = field(init=False)
     _programs: dict = field(default_factory=dict, init=False, repr=False)
+    _local: threading.local = field(default_factory=threading.local, init=False, repr=False)
+    _constants: "OrderedDict" = field(default_factory=lambda: OrderedDict(), init=False, repr=False)
+    _scratch: "weakref.WeakKeyDictionary" = field(default_factory=lambda: weakref.WeakKeyDictionary(),
+                                                  init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.context = cl.Context([self.device])
@@ -187,6 +220,83 @@ class Runtime:
                 ) from None
             self._programs[key] = prog
         return prog
+
+    def kernel(self, source: str, name: str, defines: dict[str, object] | None = None,
+               program: str | None = None) -> "cl.Kernel":
+        """The ``cl.Kernel`` ``name`` of ``source`` built with ``defines``, one object per
+        (program, name) and thread; ``program`` names the program in build errors (default
+        ``name``). Set its arguments right before each launch."""
+        prog = self.program(source, program or name, defines)
+        cache = self._local.__dict__.setdefault("kernels", {})
+        key = (id(prog), name)
+        knl = cache.get(key)
+        if knl is None:
+            knl = cache[key] = cl.Kernel(prog, name)
+        return knl
+
+    def kernels(self, source: str, program: str, defines: dict[str, object] | None = None) -> dict:
+        """Every kernel of ``source`` by name (cached as :meth:`kernel`)."""
+        prog = self.program(source, program, defines)
+        return {k.function_name: self.kernel(source, k.function_name, defines, program)
+                for k in prog.all_kernels()}
+
+    def constant(self, host, key=None) -> "cl.Buffer":
+        """A read-only device copy of ``host`` (an array, or a callable making it), uploaded once
+        per content key and shared by everything that asks for the same content. ``key``: any
+        hashable that determines the content (e.g. the structural parameters the table is built
+        from; a callable ``host`` is called only when the key is new); default: the array's
+        dtype, shape and bytes — fine for small tables, pass a key for large ones."""
+        if key is None:
+            if callable(host):
+                raise TypeError("Runtime.constant: a callable needs a key")
+            a = np.ascontiguousarray(host)
+            key = (a.dtype.str, a.shape, a.tobytes())
+        buf = self._constants.get(key)
+        if buf is not None:
+            self._constants.move_to_end(key)
+            return buf
+        a = np.ascontiguousarray(host() if callable(host) else host)
+        if a.nbytes == 0:
+            a = np.zeros(1, a.dtype if a.dtype.itemsize >= 4 else np.float32)
+        mf = cl.mem_flags
+        buf = cl.Buffer(self.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
+        self._constants[key] = buf
+        while len(self._constants) > CONSTANT_CACHE_ENTRIES:
+            self._constants.popitem(last=False)
+        return buf
+
+    def scratch(self, owner, name: str, shape: tuple[int, ...], dtype=np.float32) -> "cl.Buffer":
+        """Work buffer ``name`` of ``owner`` (e.g. a stage; held weakly) with ``shape``/``dtype``:
+        the same buffer every frame while they stay the same, a new one when they change."""
+        shape = tuple(int(v) for v in shape)
+        bufs = self._scratch.setdefault(owner, {})
+        want = (shape, np.dtype(dtype).str)
+        have = bufs.get(name)
+        if have is None or have[0] != want:
+            have = bufs[name] = (want, self.empty(shape, dtype))
+        return have[1]
+
+    def cached(self, owner, name: str, key, make):
+        """Plan-time object ``name`` of ``owner`` (held weakly): ``make()`` when ``key`` (the
+        structure it depends on: camera fields, size, quality) differs from last call's, else the
+        object made then. For tables and launch plans a stage would otherwise rebuild per frame."""
+        slot = self._scratch.setdefault(owner, {})
+        have = slot.get(("cached", name))
+        if have is None or have[0] != key:
+            have = slot[("cached", name)] = (key, make())
+        return have[1]
+
+    def launch(self, kernel: "cl.Kernel", global_size, local_size=None, *args) -> "cl.Event":
+        """Enqueue ``kernel`` (with ``args`` set first, if given) over ``global_size`` rounded up
+        to whole ``local_size`` work-groups (the kernel guards its bounds). Why round: left to
+        itself PoCL picks tiny work-groups for sizes like 706×426 and runs 10–50× slower."""
+        if args:
+            kernel.set_args(*args)
+        glob = tuple(int(g) for g in global_size)
+        if local_size is not None:
+            local_size = tuple(int(v) for v in local_size)
+            glob = tuple(round_up(g, l) for g, l in zip(glob, local_size))
+        return cl.enqueue_nd_range_kernel(self.queue, kernel, glob, local_size)
 
     def empty(self, shape: tuple[int, ...], dtype=np.float32) -> "cl.Buffer":
         nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize

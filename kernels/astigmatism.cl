@@ -38,11 +38,11 @@
 #if ASTIGMATISM_TAPS % 4
 #error "the gather's tap loop is unrolled by 4: ASTIGMATISM_TAPS must be a multiple of 4"
 #endif
-#define ASTIGMATISM_MAX_SEMI ((float)(ASTIGMATISM_PAD - 1))
-#define ASTIGMATISM_MIN_SEMI 1e-3f
-#define ASTIGMATISM_MIN_DEPTH_MM 1e-3f
-#define ASTIGMATISM_EXACT_PX 0.5f
-#define ASTIGMATISM_MIXED 0.5f
+/* ASTIGMATISM_MAX_SEMI, _MIN_SEMI, _MIN_DEPTH_MM, _EXACT_PX, _MIXED: the Python constants of
+ * clpost/stages/astigmatism.py, #defined before this file by clpost/stages/astigmatism_cl.py */
+#ifndef ASTIGMATISM_MIXED
+#error "build through clpost.stages.astigmatism_cl.program_source (it defines the stage's constants)"
+#endif
 
 /* semi-axis (px) of this stage's ellipse on 16 lanes: sqrt(max(c^2 - c0^2, 0)) / 2p, capped (the
  * cap also where the astigmatic focus is at or beyond infinity, den <= 1e-6, or a is not finite) */
@@ -285,13 +285,10 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
 {
     /* work-group g = the g-th tile of this class's list; ntaps spiral points from tap0 (both
      * compile-time constants after inlining: with a run-time count the loop ran 2x slower) */
-    const int tile_id = list[list0 + (int)get_group_id(0)];
-    const int tx = tile_id % tiles_x, ty = tile_id / tiles_x;
-    const int x = tx * ASTIGMATISM_TILE_W + 16 * (int)get_local_id(0);
-    const int y = ty * ASTIGMATISM_TILE_H + (int)get_local_id(1);
-    const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
-    const size_t pn = (size_t)pw * (tiles_y * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
-    const int jc = (y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
+    const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
+                               ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 16);
+    const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;
+    const size_t pn = t.pn;
     /* colour: an inner tile (all its reads inside the frame) reads the source planes, the others
      * the padded copy (astigmatism_pad fills only the ring they read) */
     const int in = inner[tile_id];
@@ -365,22 +362,8 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
 
 /* the quality's ASTIGMATISM_TAPS (its spiral is the table's last) */
 __kernel void astigmatism(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(ASTIGMATISM_TAPS, ASTIGMATISM_FULL_TAP0); }
-/* the smaller classes: astigmatism_t<n>, the spiral of n points at table offset n - 4 */
-#if ASTIGMATISM_TAPS > 4
-__kernel void astigmatism_t4(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(4, 0); }
-#endif
-#if ASTIGMATISM_TAPS > 8
-__kernel void astigmatism_t8(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(8, 4); }
-#endif
-#if ASTIGMATISM_TAPS > 16
-__kernel void astigmatism_t16(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(16, 12); }
-#endif
-#if ASTIGMATISM_TAPS > 32
-__kernel void astigmatism_t32(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(32, 28); }
-#endif
-#if ASTIGMATISM_TAPS > 64
-#error "tap classes above 64: add astigmatism_t64"
-#endif
+/* the smaller classes: astigmatism_t<n>, the spiral of n points at its table offset — generated
+ * after this file from Astigmatism.tap_classes() (clpost/stages/astigmatism_cl.py) */
 
 /* the tiles whose bounding semi-axis is below ASTIGMATISM_COPY_PX: copied through (16 pixels per
  * work-item, the gather's geometry) */
@@ -389,12 +372,10 @@ __kernel void astigmatism_copy(__global const float *restrict padded, __global c
                                __global const int *restrict list, const int list0, const int tiles_x, const int tiles_y,
                                const int width, const int height)
 {
-    const int tile_id = list[list0 + (int)get_group_id(0)];
-    const int x = (tile_id % tiles_x) * ASTIGMATISM_TILE_W + 16 * (int)get_local_id(0);
-    const int y = (tile_id / tiles_x) * ASTIGMATISM_TILE_H + (int)get_local_id(1);
-    const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
-    const size_t pn = (size_t)pw * (tiles_y * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
-    const int jc = (y + ASTIGMATISM_PAD) * pw + x + ASTIGMATISM_PAD;
+    const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
+                               ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 16);
+    const int tile_id = t.id, x = t.x, y = t.y, jc = t.jc;
+    const size_t pn = t.pn;
     const int in = inner[tile_id];  /* see astigmatism_gather */
     __global const float *col = in ? src + ((size_t)y * width + x) : padded + jc;
     const size_t plane = in ? (size_t)width * height : pn;
@@ -411,15 +392,13 @@ __kernel void astigmatism_exact(__global const float *restrict padded, __global 
                        const int tiles_x, const int tiles_y,
                        const int width, const int height, const float cx, const float cy)
 {
-    const int tile_id = list[list0 + (int)get_group_id(0)];
-    const int x = (tile_id % tiles_x) * ASTIGMATISM_TILE_W + (int)get_local_id(0);
-    const int y = (tile_id / tiles_x) * ASTIGMATISM_TILE_H + (int)get_local_id(1);
+    const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
+                               ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 1);
+    const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;
     if (x >= width || y >= height) return;
-    const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
-    const size_t pn = (size_t)pw * (tiles_y * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
+    const size_t pn = t.pn;
     const size_t n = (size_t)width * height;
     const size_t i = (size_t)y * width + x;
-    const int jc = (y + ASTIGMATISM_PAD) * pw + (x + ASTIGMATISM_PAD);
     /* colour: an inner tile reads the source planes (see astigmatism_gather); padded coordinates
      * (px, py) map to col[(py - off) * stride + px - off] */
     const int in = inner[tile_id];

@@ -99,19 +99,17 @@ __kernel void coma(__global const float *restrict padded, __global const float *
           __global const int *restrict list, const int tiles_x, const int tiles_y,
           const int width, const int height)
 {
-    const int tile_id = list[get_group_id(0)];
-    const int tx = tile_id % tiles_x, ty = tile_id / tiles_x;
-    const int x = tx * COMA_TILE_W + 16 * (int)get_local_id(0), y = ty * COMA_TILE_H + (int)get_local_id(1);
+    const ClpTile t = clp_tile(list[get_group_id(0)], tiles_x, tiles_y, COMA_TILE_W, COMA_TILE_H, COMA_PAD, 16);
+    const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw;
     const int ow = tiles_x * COMA_TILE_W, oh = tiles_y * COMA_TILE_H;
-    const int pw = ow + 2 * COMA_PAD;
-    const size_t pn = (size_t)pw * (oh + 2 * COMA_PAD), on = (size_t)ow * oh;
+    const size_t pn = t.pn, on = (size_t)ow * oh;
     const int o = y * ow + x;
     const float16 cex = vload16(0, shape + o), cey = vload16(0, shape + on + o);
     const float16 dc = vload16(0, shape + 2 * on + o), q = vload16(0, shape + 3 * on + o);
     /* the tile centre's comet (group-uniform): each tap's window offset */
     __global const float *tile = tiles + 4 * tile_id;
     const float tsxx = tile[0], tsxy = tile[1], trxx = tile[2], trxy = tile[3];
-    const int base = (y + COMA_PAD) * pw + x + COMA_PAD;
+    const int base = t.jc;
     float16 ar = 0.0f, ag = 0.0f, ab = 0.0f;
     /* unrolled by 4: as fast as fully unrolled with explicit vectors, and builds in a second */
 #pragma unroll 4
@@ -190,12 +188,10 @@ inline void coma_stencil(__global const float *restrict padded, __global const f
                          const int jac_px)
 {
     const int g = (int)get_group_id(0);
-    const int tile_id = list[g];
-    const int tx = tile_id % tiles_x, ty = tile_id / tiles_x;
-    const int x = tx * COMA_TILE_W + 16 * (int)get_local_id(0), y = ty * COMA_TILE_H + (int)get_local_id(1);
+    const ClpTile t = clp_tile(list[g], tiles_x, tiles_y, COMA_TILE_W, COMA_TILE_H, COMA_PAD, 16);
+    const int x = t.x, y = t.y, pw = t.pw;
     const int ow = tiles_x * COMA_TILE_W, oh = tiles_y * COMA_TILE_H;
-    const int pw = ow + 2 * COMA_PAD;
-    const size_t pn = (size_t)pw * (oh + 2 * COMA_PAD), on = (size_t)ow * oh;
+    const size_t pn = t.pn, on = (size_t)ow * oh;
     const int o = y * ow + x;
     /* jac_px (compile-time after inlining): each pixel's own Jacobian from its C' and C/r;
      * otherwise the tile's one Jacobian is folded into W0 (coma_c<S>: no shape reads) */
@@ -207,7 +203,7 @@ inline void coma_stencil(__global const float *restrict padded, __global const f
     }
     /* group-uniform choice of the planes read: the source (inner tiles) or the padded copy */
     const int in = inner[g];
-    __global const float *base = in ? src + (size_t)y * width + x : padded + (y + COMA_PAD) * pw + x + COMA_PAD;
+    __global const float *base = in ? src + (size_t)y * width + x : padded + t.jc;
     const int pitch = in ? width : pw;
     const size_t plane = in ? (size_t)width * height : pn;
     __global const int2 *so = offs + g * S;
@@ -243,27 +239,5 @@ inline void coma_stencil(__global const float *restrict padded, __global const f
 /* one kernel per stencil size class (Coma.STENCIL_SIZES; N taps of 4 bilinear corners reach at
  * most 4 N <= 256 offsets): coma_s<S> with each pixel's Jacobian, coma_c<S> with the tile's one
  * (Coma.tile_jacobian) */
-__kernel void coma_s4(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(4, 1); }
-__kernel void coma_s8(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(8, 1); }
-__kernel void coma_s12(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(12, 1); }
-__kernel void coma_s16(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(16, 1); }
-__kernel void coma_s24(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(24, 1); }
-__kernel void coma_s32(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(32, 1); }
-__kernel void coma_s48(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(48, 1); }
-__kernel void coma_s64(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(64, 1); }
-__kernel void coma_s96(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(96, 1); }
-__kernel void coma_s128(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(128, 1); }
-__kernel void coma_s192(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(192, 1); }
-__kernel void coma_s256(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(256, 1); }
-__kernel void coma_c4(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(4, 0); }
-__kernel void coma_c8(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(8, 0); }
-__kernel void coma_c12(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(12, 0); }
-__kernel void coma_c16(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(16, 0); }
-__kernel void coma_c24(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(24, 0); }
-__kernel void coma_c32(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(32, 0); }
-__kernel void coma_c48(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(48, 0); }
-__kernel void coma_c64(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(64, 0); }
-__kernel void coma_c96(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(96, 0); }
-__kernel void coma_c128(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(128, 0); }
-__kernel void coma_c192(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(192, 0); }
-__kernel void coma_c256(COMA_STENCIL_ARGS) { COMA_STENCIL_CALL(256, 0); }
+/* coma_s<S> and coma_c<S> for every S of Coma.STENCIL_SIZES are generated after this file
+ * (clpost/stages/coma.py, program_source) */

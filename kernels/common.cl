@@ -16,7 +16,7 @@ typedef struct {
 } PixelCtx;
 
 /* 16 consecutive pixels of one row (pixel k at x0 + k, index i0 + k): the context of the
- * explicit-vector form <name>_apply16 of a pointwise stage (clpost/pipeline.py, VECTOR_PIXELS). */
+ * 16-pixel instantiation of a pointwise stage's width-generic <name>_apply (clpost/codegen.py). */
 typedef struct {
     int x0;
     int y;
@@ -28,12 +28,41 @@ typedef struct {
 #define CLP_LANES16 ((float16)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f, \
                                8.0f, 9.0f, 10.0f, 11.0f, 12.0f, 13.0f, 14.0f, 15.0f))
 
+#define CLP_ULANES16 ((uint16)(0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u, 9u, 10u, 11u, 12u, 13u, 14u, 15u))
+
 /* table[idx] per lane (a data-dependent gather has no vector builtin) */
 #define CLP_GATHER16(table, idx) ((float16)( \
     (table)[(idx).s0], (table)[(idx).s1], (table)[(idx).s2], (table)[(idx).s3], \
     (table)[(idx).s4], (table)[(idx).s5], (table)[(idx).s6], (table)[(idx).s7], \
     (table)[(idx).s8], (table)[(idx).s9], (table)[(idx).sa], (table)[(idx).sb], \
     (table)[(idx).sc], (table)[(idx).sd], (table)[(idx).se], (table)[(idx).sf]))
+
+/* The tile of a tiled gather (astigmatism, coma; clpost/stages/_field.py "Tiles"): work-group g
+ * takes tile `tile_id` (from its list); a work-item does `lanes` consecutive pixels of a tile row
+ * from (x, y). The padded planes hold whole tiles plus `pad` on every side: row pitch pw, plane
+ * size pn, and pixel (x, y) at index jc. */
+typedef struct {
+    int id, tx, ty;
+    int x, y;
+    int pw;
+    size_t pn;
+    int jc;
+} ClpTile;
+
+inline ClpTile clp_tile(const int tile_id, const int tiles_x, const int tiles_y, const int tile_w,
+                        const int tile_h, const int pad, const int lanes)
+{
+    ClpTile t;
+    t.id = tile_id;
+    t.tx = tile_id % tiles_x;
+    t.ty = tile_id / tiles_x;
+    t.x = t.tx * tile_w + lanes * (int)get_local_id(0);
+    t.y = t.ty * tile_h + (int)get_local_id(1);
+    t.pw = tiles_x * tile_w + 2 * pad;
+    t.pn = (size_t)t.pw * (size_t)(tiles_y * tile_h + 2 * pad);
+    t.jc = (t.y + pad) * t.pw + t.x + pad;
+    return t;
+}
 
 /* 16 pixels of a row (x .. x + 15) into a planar RGB image. `whole` (a compile-time constant at
  * the call site): the frame is whole tiles, every vector lies inside; otherwise rows below the
@@ -84,79 +113,3 @@ inline void store_planar(__global float *buf, const size_t i, const size_t n, co
     buf[n + i] = c.y;
     buf[2 * n + i] = c.z;
 }
-
-/* Elementary functions for hot per-pixel code (issue "performance"). PoCL 3.0's log/log2/log10
- * and cospi cost 10-20 ns per call on these CPUs (measured on a 1080p RGB frame: log 124 ms,
- * cospi 54 ms, exp 6-8 ms, a copy 1.5 ms) because they do not vectorise; these are built from
- * integer bit operations, fma and short polynomials and vectorise across work-items
- * (clp_log2 5 ms, clp_exp2 8 ms, clp_cos2pi 6 ms on the same frame). Every select costs: the
- * domains are restricted to what the callers pass, and the callers clamp first.
- * Accuracy (tests/test_fastmath.py, against float64):
- *   clp_log2(x), x normal and finite (FLT_MIN <= x <= FLT_MAX): |error| <= max(2e-7, 2 ulp);
- *   clp_exp2(x), any non-NaN x: <= 2 ulp (exp2(-inf) = 0, exp2(x >= 128) = +inf);
- *   clp_cos2pi(u) = cos(2 pi u), finite u: |error| < 2.5e-7.
- */
-#ifndef CLPOST_FASTMATH_CL
-#define CLPOST_FASTMATH_CL
-
-/* log2 x = e + log2 m with x = m 2^e, m in [sqrt(1/2), sqrt(2)); ln m = 2 atanh t,
- * t = (m - 1)/(m + 1), |t| <= 0.1716, series to t^11 (truncation < 3e-10). */
-inline float clp_log2(const float x) {
-    const uint bits = as_uint(x);
-    int e = (int)((bits >> 23) & 0xffu) - 127;
-    float m = as_float((bits & 0x007fffffu) | 0x3f800000u);   /* [1, 2) */
-    const int big = m > 1.41421356f;
-    m = big ? 0.5f * m : m;
-    e += big;
-    const float t = (m - 1.0f) / (m + 1.0f);
-    const float t2 = t * t;
-    float p = fma(t2, 0.18181818f, 0.22222222f);          /* 2/11, 2/9 */
-    p = fma(t2, p, 0.28571429f);                          /* 2/7 */
-    p = fma(t2, p, 0.4f);
-    p = fma(t2, p, 0.66666667f);
-    p = fma(t2, p, 2.0f);
-    return fma(t * p, 1.44269504f, (float)e);             /* ln m / ln 2 + e */
-}
-
-inline float3 clp_log2_3(const float3 x) {
-    return (float3)(clp_log2(x.x), clp_log2(x.y), clp_log2(x.z));
-}
-
-/* 2^x = 2^k 2^f, k = round(x), |f| <= 1/2; 2^f = e^(f ln 2) by Taylor to degree 7 (< 5e-9
- * relative); 2^k applied in two halves so subnormal results and k = 128 come out right.
- * floor(x + 0.5) rather than rint: rint does not vectorise on PoCL (7 ms vs 4 ms a frame). */
-inline float clp_exp2(const float x) {
-    const float xc = clamp(x, -151.0f, 129.0f);
-    const float k = floor(xc + 0.5f);
-    const float f = (xc - k) * 0.69314718f;
-    float p = fma(f, 1.98412698e-4f, 1.38888889e-3f);    /* 1/7!, 1/6! */
-    p = fma(f, p, 8.33333333e-3f);
-    p = fma(f, p, 4.16666667e-2f);
-    p = fma(f, p, 0.16666667f);
-    p = fma(f, p, 0.5f);
-    p = fma(f, p, 1.0f);
-    p = fma(f, p, 1.0f);
-    const int ki = (int)k;
-    const int k1 = ki >> 1, k2 = ki - k1;                 /* each in [-76, 65]: normal scales */
-    return p * as_float((uint)(k1 + 127) << 23) * as_float((uint)(k2 + 127) << 23);
-}
-
-inline float3 clp_exp2_3(const float3 x) {
-    return (float3)(clp_exp2(x.x), clp_exp2(x.y), clp_exp2(x.z));
-}
-
-/* cos(2 pi u): r = u - round(u), cos 2 pi r = sin(2 pi (1/4 - |r|)) with the argument in
- * [-pi/2, pi/2]; odd Taylor series to z^13 (truncation < 1e-9). */
-inline float clp_cos2pi(const float u) {
-    const float r = u - floor(u + 0.5f);
-    const float z = (0.25f - fabs(r)) * 6.28318531f;
-    const float z2 = z * z;
-    float p = fma(z2, -1.60590438e-10f, 2.50521084e-8f);   /* -1/13!, 1/11! */
-    p = fma(z2, p, -2.75573192e-6f);
-    p = fma(z2, p, 1.98412698e-4f);
-    p = fma(z2, p, -8.33333333e-3f);
-    p = fma(z2, p, 0.16666667f);
-    return fma(-z * z2, p, z);
-}
-
-#endif

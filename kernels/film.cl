@@ -1,24 +1,31 @@
 /* film: normalised signal -> dye density per layer via a LUT uniform in log10 exposure.
  * lut: 3 x FILM_LUT_SIZE densities (layer-major); x = log10(signal) + log10(78/S) is log10 H in
  * lux*s; indices outside the table clamp to its ends (D_min / D_max). clpost/stages/film.py has
- * the formula and sources.
+ * the formula and sources. Width-generic (clpost/codegen.py): CLP_W pixels of a row per call; the
+ * table is read per lane (CLP_GATHER).
  */
-inline float film_lookup(__global const float *lut, const int layer, const float x,
-                         const float lo, const float inv_step) {
+inline CLP_F CLP_FN(film_lookup)(__global const float *lut, const int layer, const CLP_F x,
+                                 const float lo, const float inv_step) {
     /* fmax/fmin also map -inf (signal 0) to the first entry without NaN. */
-    const float u = fmin(fmax((x - lo) * inv_step, 0.0f), (float)(FILM_LUT_SIZE - 1));
-    const int i = min((int)u, FILM_LUT_SIZE - 2);
-    const float f = u - (float)i;
+    const CLP_F u = fmin(fmax((x - lo) * inv_step, 0.0f), (float)(FILM_LUT_SIZE - 1));
+    const CLP_I i = min(CLP_TO_I(u), FILM_LUT_SIZE - 2);
+    const CLP_F f = u - CLP_TO_F(i);
     __global const float *t = lut + layer * FILM_LUT_SIZE;
-    return mad(f, t[i + 1] - t[i], t[i]);
+    const CLP_F t0 = CLP_GATHER(t, i);
+    return mad(f, CLP_GATHER(t, i + 1) - t0, t0);
 }
 
-inline float3 film_apply(const float3 c, const PixelCtx p, __global const float *lut,
-                         const float log_offset, const float lo, const float inv_step) {
-    /* log10 = log2 * log10(2) with the vectorising clp_log2 (kernels/common.cl), per channel in
-     * scalar code: on PoCL, PoCL's log10 and float3 arithmetic both stop the vectorisation across
-     * work-items. fmax keeps the argument a normal float (clp_log2's domain). */
-    return (float3)(film_lookup(lut, 0, mad(clp_log2(fmax(c.x, 1e-37f)), 0.30102999566f, log_offset), lo, inv_step),
-                    film_lookup(lut, 1, mad(clp_log2(fmax(c.y, 1e-37f)), 0.30102999566f, log_offset), lo, inv_step),
-                    film_lookup(lut, 2, mad(clp_log2(fmax(c.z, 1e-37f)), 0.30102999566f, log_offset), lo, inv_step));
+/* log10 = log2 * log10(2) with the vectorising clp_log2 (kernels/fastmath.cl): PoCL's log10 does
+ * not vectorise. fmax keeps the argument a normal float (clp_log2's domain). */
+inline CLP_F CLP_FN(film_layer)(const CLP_F s, __global const float *lut, const int layer,
+                                const float log_offset, const float lo, const float inv_step) {
+    return CLP_FN(film_lookup)(lut, layer, mad(CLP_FN(clp_log2)(fmax(s, 1e-37f)), 0.30102999566f, log_offset),
+                               lo, inv_step);
+}
+
+inline void film_apply(CLP_F *r, CLP_F *g, CLP_F *b, const CLP_CTX p, __global const float *lut,
+                       const float log_offset, const float lo, const float inv_step) {
+    *r = CLP_FN(film_layer)(*r, lut, 0, log_offset, lo, inv_step);
+    *g = CLP_FN(film_layer)(*g, lut, 1, log_offset, lo, inv_step);
+    *b = CLP_FN(film_layer)(*b, lut, 2, log_offset, lo, inv_step);
 }

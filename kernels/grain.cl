@@ -46,16 +46,6 @@ inline void grain_gaussian(__global const float *restrict src, __global float *r
     }
 }
 
-inline float grain_poisson(const float mean, const float u) {
-    float prob = exp(-mean), cdf = prob, k = 0.0f;
-    for (int j = 1; j <= 128 && u > cdf; ++j) {
-        prob *= mean / (float)j;
-        cdf += prob;
-        k = (float)j;
-    }
-    return k;
-}
-
 /* final, resolved grains: the Boolean model (Newson et al. 2017). GRAIN_CELLS^2 cells per pixel,
  * each cell's grains a pure function of (seed, frame, cell, layer); GRAIN_NS^2 jittered samples. */
 inline void grain_boolean(__global const float *restrict src, __global float *restrict dst,
@@ -87,7 +77,7 @@ inline void grain_boolean(__global const float *restrict src, __global float *re
                 const int px = clamp((cx >= 0 ? cx : cx - K + 1) / K, 0, width - 1);
                 const float d_img = fmax(src[c * n + (size_t)py * width + px] - dmin, 0.0f);
                 const uint hc = rnd_hash4(seed, frame, (uint)(cx + 64), ((uint)(cy + 64) << 2) | c);
-                const int count = (int)grain_poisson(d_img * lam_per_d, rnd_uniform(hc));
+                const int count = (int)rnd_poisson_inversion(d_img * lam_per_d, rnd_uniform(hc));
                 for (int g = 0; g < count; ++g) {
                     const uint hk = rnd_mix(hc + 0x9e3779b9u * (uint)(g + 1));
                     const float gx = ((float)cx + rnd_uniform(hk)) / (float)K;

@@ -16,15 +16,10 @@
 
 #define MOTION_BLUR_SOFT_Z 0.05f   /* relative depth difference over which fore/background blend */
 
-inline uint motion_blur_mix(uint x) {
-    /* lowbias32 (C. Wellons, "Hash Prospector"): a counter-based hash, same on every device. */
-    x ^= x >> 16; x *= 0x7feb352dU; x ^= x >> 15; x *= 0x846ca68bU; x ^= x >> 16;
-    return x;
-}
-
 inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
-    /* j in [-0.5, 0.5): hash of (seed, frame, pixel, sample 0) per CONVENTIONS "Randomness". */
-    uint h = motion_blur_mix((uint)x ^ motion_blur_mix((uint)y ^ motion_blur_mix(frame ^ motion_blur_mix(seed))));
+    /* j in [-0.5, 0.5): the counter hash of (seed, frame, x, y) of kernels/random.cl, per
+     * CONVENTIONS "Randomness"; 24 high bits, exact in float. */
+    const uint h = rnd_hash4(seed, frame, (uint)x, (uint)y);
     return (float)(h >> 8) * (1.0f / 16777216.0f) - 0.5f;
 }
 

@@ -2,12 +2,13 @@
  * (seed, frame, pixel, sample), so results are identical on any device and any work-group size,
  * and frames are independent. Hash: Chris Wellons' "lowbias32" integer finaliser (bias 0.17),
  * chained over the counter words. clpost/random.py is the bit-exact numpy twin.
- * Included by several stages; the guard lets a fused program contain it once.
+ *
+ * Width-generic (clpost/codegen.py "Width-generic code"), after kernels/fastmath.cl: one pixel
+ * (rnd_hash4, ... in gathers through codegen.library()) or 16 lanes (rnd_hash4_w16 on uint16
+ * counters) in fused pointwise kernels; the counter words that vary per pixel are CLP_U.
  */
-#ifndef CLPOST_RANDOM_CL
-#define CLPOST_RANDOM_CL
 
-inline uint rnd_mix(uint x) {
+inline CLP_U CLP_FN(rnd_mix)(CLP_U x) {
     x ^= x >> 16; x *= 0x7feb352du;
     x ^= x >> 15; x *= 0x846ca68bu;
     x ^= x >> 16;
@@ -15,26 +16,39 @@ inline uint rnd_mix(uint x) {
 }
 
 /* Hash of the counter (seed, frame, a, b): a, b are e.g. pixel index and sample number. */
-inline uint rnd_hash4(const uint seed, const uint frame, const uint a, const uint b) {
-    uint h = rnd_mix(seed ^ 0x9e3779b9u);
-    h = rnd_mix(h ^ frame);
-    h = rnd_mix(h ^ a);
-    return rnd_mix(h ^ b);
+inline CLP_U CLP_FN(rnd_hash4)(const uint seed, const uint frame, const CLP_U a, const CLP_U b) {
+    CLP_U h = CLP_FN(rnd_mix)((CLP_U)(seed ^ 0x9e3779b9u));
+    h = CLP_FN(rnd_mix)(h ^ frame);
+    h = CLP_FN(rnd_mix)(h ^ a);
+    return CLP_FN(rnd_mix)(h ^ b);
 }
 
 /* Uniform in (0, 1): 24 high bits, centred in their bin, never 0 or 1 (log() safe). */
-inline float rnd_uniform(const uint h) {
-    return ((float)(h >> 8) + 0.5f) * (1.0f / 16777216.0f);
+inline CLP_F CLP_FN(rnd_uniform)(const CLP_U h) {
+    return (CLP_TO_F(h >> 8) + 0.5f) * (1.0f / 16777216.0f);
 }
 
 /* Standard normal from two hashes (Box-Muller, cosine branch). ln and cos through clp_log2 and
- * clp_cos2pi (kernels/common.cl, which every program that includes this file starts with):
- * PoCL's log and cospi do not vectorise and made Box-Muller ~30 ns a normal. u1 >= 2^-25 is a
- * normal float, inside clp_log2's domain. */
-inline float rnd_normal(const uint h1, const uint h2) {
-    const float u1 = rnd_uniform(h1);
-    const float u2 = rnd_uniform(h2);
-    return sqrt(-1.38629436f * clp_log2(u1)) * clp_cos2pi(u2);
+ * clp_cos2pi (kernels/fastmath.cl): PoCL's log and cospi do not vectorise and made Box-Muller
+ * ~30 ns a normal. u1 >= 2^-25 is a normal float, inside clp_log2's domain. */
+inline CLP_F CLP_FN(rnd_normal)(const CLP_U h1, const CLP_U h2) {
+    const CLP_F u1 = CLP_FN(rnd_uniform)(h1);
+    const CLP_F u2 = CLP_FN(rnd_uniform)(h2);
+    return sqrt(-1.38629436f * CLP_FN(clp_log2)(u1)) * CLP_FN(clp_cos2pi)(u2);
 }
 
-#endif
+/* Poisson(mean) by inversion with uniform u: the smallest n with u <= F(n; mean), by the
+ * sequential search over the pmf (at most 128 steps; for small means — callers switch to a
+ * normal approximation above theirs, and pass 0 for those lanes so they stop at once).
+ * clpost/random.py poisson_inversion is the numpy twin. */
+inline CLP_F CLP_FN(rnd_poisson_inversion)(const CLP_F mean, const CLP_F u) {
+    CLP_F prob = exp(-mean), cdf = prob, n = 0.0f;
+    for (int k = 1; k <= 128; ++k) {
+        const CLP_I more = u > cdf;
+        if (!CLP_ANY(more)) break;
+        prob *= mean / (float)k;
+        cdf += prob;
+        n = more ? (CLP_F)((float)k) : n;
+    }
+    return n;
+}

@@ -1,47 +1,39 @@
 /* sensor: normalised signal -> raw digital recording (shot noise, full well, read noise, ISO gain,
  * black level, quantisation), renormalised so 1.0 = clipping. Formulas: clpost/stages/sensor.py.
  * Random numbers: counter (seed, frame, pixel, 4*channel + k), kernels/random.cl.
+ * Width-generic (clpost/codegen.py): CLP_W pixels of a row per call; both branches of the shot
+ * noise are evaluated and selected per lane (the Poisson search gets mean 0, one step, where the
+ * normal approximation is taken).
  */
 #define SENSOR_POISSON_EXACT_MAX 32.0f
 
-inline float sensor_poisson_inversion(const float mean, const float u) {
-    float prob = exp(-mean), cdf = prob, n = 0.0f;
-    for (int k = 1; k <= 128 && u > cdf; ++k) {
-        prob *= mean / (float)k;
-        cdf += prob;
-        n = (float)k;
-    }
-    return n;
-}
-
 /* The read-noise normal has its own counter; its second uniform is a re-mix of the first hash
  * (a constant XOR alone would leave the two normals correlated). */
-inline float sensor_read_normal(const uint h3) {
-    return rnd_normal(h3, rnd_mix(h3 ^ 0x5bd1e995u));
+inline CLP_F CLP_FN(sensor_read_normal)(const CLP_U h3) {
+    return CLP_FN(rnd_normal)(h3, CLP_FN(rnd_mix)(h3 ^ 0x5bd1e995u));
 }
 
-inline float sensor_channel(const float s, const uint ch, const PixelCtx p, const float e_sat,
-                            const float full_well, const float read_noise, const float black,
-                            const float white, const uint seed, const uint frame) {
-    const uint i = (uint)p.i;
-    const float mean = fmin(fmax(s, 0.0f) * e_sat, 2.0f * full_well);
-    const uint h2 = rnd_hash4(seed, frame, i, 4u * ch + 2u);
-    float e;
-    if (mean > SENSOR_POISSON_EXACT_MAX) {
-        const float g = rnd_normal(rnd_hash4(seed, frame, i, 4u * ch + 1u), h2);
-        e = fmax(rint(mean + sqrt(mean) * g), 0.0f);
-    } else {
-        e = sensor_poisson_inversion(mean, rnd_uniform(rnd_hash4(seed, frame, i, 4u * ch)));
-    }
-    e = fmin(e, full_well) + read_noise * sensor_read_normal(rnd_hash4(seed, frame, i, 4u * ch + 3u));
-    const float dn = clamp(rint(black + e * ((white - black) / e_sat)), 0.0f, white);
+inline CLP_F CLP_FN(sensor_channel)(const CLP_F s, const uint ch, const CLP_U i, const float e_sat,
+                                    const float full_well, const float read_noise, const float black,
+                                    const float white, const uint seed, const uint frame) {
+    const CLP_F mean = fmin(fmax(s, 0.0f) * e_sat, 2.0f * full_well);
+    const CLP_I normal = mean > SENSOR_POISSON_EXACT_MAX;
+    const CLP_U h2 = CLP_FN(rnd_hash4)(seed, frame, i, (CLP_U)(4u * ch + 2u));
+    const CLP_F g = CLP_FN(rnd_normal)(CLP_FN(rnd_hash4)(seed, frame, i, (CLP_U)(4u * ch + 1u)), h2);
+    const CLP_F e_normal = fmax(rint(mean + sqrt(mean) * g), 0.0f);
+    const CLP_F e_poisson = CLP_FN(rnd_poisson_inversion)(
+        normal ? (CLP_F)(0.0f) : mean, CLP_FN(rnd_uniform)(CLP_FN(rnd_hash4)(seed, frame, i, (CLP_U)(4u * ch))));
+    CLP_F e = normal ? e_normal : e_poisson;
+    e = fmin(e, full_well) + read_noise * CLP_FN(sensor_read_normal)(CLP_FN(rnd_hash4)(seed, frame, i, (CLP_U)(4u * ch + 3u)));
+    const CLP_F dn = clamp(rint(black + e * ((white - black) / e_sat)), 0.0f, white);
     return (dn - black) / (white - black);
 }
 
-inline float3 sensor_apply(const float3 c, const PixelCtx p, const float e_sat, const float full_well,
-                           const float read_noise, const float black, const float white,
-                           const uint seed, const uint frame) {
-    return (float3)(sensor_channel(c.x, 0u, p, e_sat, full_well, read_noise, black, white, seed, frame),
-                    sensor_channel(c.y, 1u, p, e_sat, full_well, read_noise, black, white, seed, frame),
-                    sensor_channel(c.z, 2u, p, e_sat, full_well, read_noise, black, white, seed, frame));
+inline void sensor_apply(CLP_F *r, CLP_F *g, CLP_F *b, const CLP_CTX p, const float e_sat,
+                         const float full_well, const float read_noise, const float black,
+                         const float white, const uint seed, const uint frame) {
+    const CLP_U i = CLP_INDEX(p);
+    *r = CLP_FN(sensor_channel)(*r, 0u, i, e_sat, full_well, read_noise, black, white, seed, frame);
+    *g = CLP_FN(sensor_channel)(*g, 1u, i, e_sat, full_well, read_noise, black, white, seed, frame);
+    *b = CLP_FN(sensor_channel)(*b, 2u, i, e_sat, full_well, read_noise, black, white, seed, frame);
 }

@@ -5,15 +5,10 @@
  * from the principal point; cos^4 theta of the thin lens, a lens's traced curve or a
  * manufacturer table). One contiguous load per pixel: a per-pixel LUT lookup here cost 2 of the
  * 3 ms of vignetting+exposure at 1080p (PoCL does not vectorise data-dependent loads).
+ * Width-generic (clpost/codegen.py): CLP_W pixels of a row per call.
  */
-inline float3 vignetting_apply(const float3 c, const PixelCtx p, __global const float *ri) {
-    const float v = ri[p.i];
-    return (float3)(c.x * v, c.y * v, c.z * v);
-}
-
-inline void vignetting_apply16(float16 *r, float16 *g, float16 *b, const PixelCtx16 p,
-                               __global const float *ri) {
-    const float16 v = vload16(0, ri + p.i0);
+inline void vignetting_apply(CLP_F *r, CLP_F *g, CLP_F *b, const CLP_CTX p, __global const float *ri) {
+    const CLP_F v = CLP_PLANE(ri, p);
     *r *= v;
     *g *= v;
     *b *= v;

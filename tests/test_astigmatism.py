@@ -8,6 +8,7 @@ import pytest
 from clpost import Camera, Frame, InputError, Pipeline
 from clpost.stages import _field as fld
 from clpost.stages import astigmatism as ast
+from clpost.stages.astigmatism_cl import device_plan
 
 from conftest import assert_planned, odd_frame
 
@@ -312,7 +313,7 @@ def test_reach_test_is_skipped_only_where_every_reach_weight_is_one(rng):
     stage.enqueue(rt, cam, frame, src, rt.empty((3, h, w)), aux)
     ntx, nty = fld.tiles(w, h)
     reach = np.empty((nty, ntx), np.int32)
-    cl.enqueue_copy(rt.queue, reach, stage._scratch[next(iter(stage._scratch))]["reach"], is_blocking=True)
+    cl.enqueue_copy(rt.queue, reach, device_plan(stage, rt, cam, w, h)["reach"], is_blocking=True)
     a_s, a_t, _, _ = stage.semi_axes_px(cam, frame)
     bs, bt, *_ = stage.tile_plan(cam, frame)
     ps, pt = np.pad(a_s, fld.PAD, mode="edge"), np.pad(a_t, fld.PAD, mode="edge")
@@ -337,3 +338,28 @@ def test_dof_and_astigmatism_share_the_sharp_plane_of_a_traced_lens():
     np.testing.assert_allclose(np.abs(coc_mm(cam, z)), ast.axes_mm(0, 0, z, d, v, f)[2],
                                rtol=1e-9, atol=1e-12)
     assert Camera(focus_distance_m=2.0).focused_depth_m == 2.0  # thin lens: exactly the focus
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_program_has_one_gather_per_tap_class_and_the_plan_is_built_once(rng, quality):
+    """Tap-class kernels and the kernels' constants are generated from Python; the device plan
+    (source, tables, buffers) is made once per camera and size, not per frame."""
+    from clpost.stages.astigmatism_cl import program_source
+
+    stage = ast.Astigmatism(quality)
+    cam = Camera(field_curvature_mm=0.05, astigmatism_mm=0.1, f_number=2.0)
+    src = program_source(tuple(stage.tap_classes()))
+    for n in stage.tap_classes()[:-1]:
+        assert f"__kernel void astigmatism_t{n}(" in src
+    assert f"#define ASTIGMATISM_MIN_SEMI {float(np.float32(ast.MIN_SEMI_PX))!r}f" in src
+    w, h = 37, 23
+    pipe = Pipeline(cam, stages=["astigmatism"], quality=quality)
+    depth = np.full((h, w), 1.5, np.float32)
+    frame = Frame(rng.random((h, w, 3), dtype=np.float32), depth=depth)
+    pipe.run(frame)
+    st = next(s for s in pipe._stages if s.name == "astigmatism")
+    plan = device_plan(st, pipe.runtime, cam, w, h)
+    pipe.run(frame)
+    assert device_plan(st, pipe.runtime, cam, w, h) is plan and plan["offsets_done"]
+    assert {f"astigmatism_t{n}" for n in stage.tap_classes()[:-1]} <= {
+        k.function_name for k in pipe.runtime.program(src, "astigmatism", {**stage.defines(cam), "ASTIGMATISM_WHOLE_TILES": 0}).all_kernels()}

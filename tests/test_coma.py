@@ -240,3 +240,18 @@ def test_inner_tiles_read_the_source_and_the_pad_fills_only_the_ring(rng):
         err = np.abs(out - ref) / np.maximum(np.abs(ref), 1.0)
         j = np.unravel_index(int(np.argmax(err)), err.shape)
         assert err.max() < 2e-4, f"max rel error {err.max():.3g} at (x={j[1]}, y={j[0]}, c={j[2]})"
+
+
+def test_program_has_one_stencil_kernel_pair_per_stencil_size():
+    """The kernel list is generated from STENCIL_SIZES: every size the planner can pick builds."""
+    from clpost.runtime import get_runtime
+    from clpost.stages.coma import Coma
+    from clpost.stages.coma import STENCIL_SIZES
+    from clpost.stages.coma_cl import program_source
+
+    st = Coma("draft")
+    rt = get_runtime()
+    prog = rt.program(program_source(st.taps), "coma", {**st.defines(Camera(coma_mm=0.01)), "COMA_WHOLE_TILES": 0})
+    names = {k.function_name for k in prog.all_kernels()}
+    want = {f"coma_{kind}{s}" for kind in "sc" for s in STENCIL_SIZES} | {"coma", "coma_pad", "coma_shape"}
+    assert want <= names

@@ -5,9 +5,10 @@ import pytest
 
 cl = pytest.importorskip("pyopencl")
 
-from clpost.runtime import get_runtime, kernel_source  # noqa: E402
+from clpost.codegen import library  # noqa: E402
+from clpost.runtime import get_runtime  # noqa: E402
 
-_SRC = kernel_source("common") + """
+_SRC = library() + """
 __kernel void fm(__global const float *x, __global float *out, const int n) {
     const int i = get_global_id(0);
     if (i >= n) return;

@@ -59,3 +59,67 @@ def test_device_option_after_the_subcommand(capsys):
 
     assert main(["bench", "--device", "no-such-device-xyz", "--sizes", "8x8"]) == 2
     assert "no-such-device-xyz" in capsys.readouterr().err
+
+
+_SRC = "__kernel void fill(__global float *a, const int n, const float v) { int i = get_global_id(0); if (i < n) a[i] = v + i; }"
+
+
+def test_kernels_cached_per_program_and_name_and_defines():
+    rt = get_runtime()
+    k = rt.kernel(_SRC, "fill")
+    assert rt.kernel(_SRC, "fill") is k
+    assert rt.kernel(_SRC, "fill", {"X": 1}) is not k  # other defines: another program
+    assert set(rt.kernels(_SRC, "fill")) == {"fill"} and rt.kernels(_SRC, "fill")["fill"] is k
+
+
+def test_constant_uploaded_once_per_content_key():
+    import pyopencl as cl
+    import numpy as np
+
+    rt = get_runtime()
+    a = np.arange(7, dtype=np.float32) * 0.37
+    buf = rt.constant(a)
+    assert rt.constant(a.copy()) is buf  # same content, same buffer
+    assert rt.constant(a + 1) is not buf
+    out = np.empty_like(a)
+    cl.enqueue_copy(rt.queue, out, buf, is_blocking=True)
+    np.testing.assert_array_equal(out, a)
+    calls = []
+    make = lambda: calls.append(1) or a  # noqa: E731
+    b1, b2 = rt.constant(make, key=("test", 1)), rt.constant(make, key=("test", 1))
+    assert b1 is b2 and calls == [1]
+
+
+def test_scratch_reused_per_owner_name_and_shape():
+    import numpy as np
+
+    class Owner:
+        pass
+
+    rt, o1, o2 = get_runtime(), Owner(), Owner()
+    b = rt.scratch(o1, "x", (4, 5))
+    assert rt.scratch(o1, "x", (4, 5)) is b
+    assert rt.scratch(o2, "x", (4, 5)) is not b
+    assert rt.scratch(o1, "y", (4, 5)) is not b
+    b2 = rt.scratch(o1, "x", (4, 6))
+    assert b2 is not b and b2.size == 4 * 6 * 4
+    assert rt.scratch(o1, "x", (4, 6), np.int32) is not b2
+    made = []
+    assert rt.cached(o1, "plan", 1, lambda: made.append(1) or "a") == "a"
+    assert rt.cached(o1, "plan", 1, lambda: made.append(1) or "b") == "a" and made == [1]
+    assert rt.cached(o1, "plan", 2, lambda: "c") == "c"
+
+
+def test_launch_rounds_global_size_to_whole_work_groups():
+    import numpy as np
+    import pyopencl as cl
+
+    rt = get_runtime()
+    n = 37  # not a multiple of the work-group: the kernel guards its bound
+    buf = rt.empty((n,))
+    ev = rt.launch(rt.kernel(_SRC, "fill"), (n,), (8,), buf, np.int32(n), np.float32(2.0))
+    out = np.empty(n, np.float32)
+    cl.enqueue_copy(rt.queue, out, buf, wait_for=[ev], is_blocking=True)
+    np.testing.assert_array_equal(out, 2.0 + np.arange(n))
+    from clpost.runtime import round_up
+    assert round_up(37, 8) == 40 and round_up(40, 8) == 40

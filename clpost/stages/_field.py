@@ -35,18 +35,6 @@ TILE_H = 8
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 
 
-def cached_kernel(cache: dict, rt, source: str, program: str, defines: dict, name: str):
-    """``cl.Kernel`` ``name`` of ``source`` built with ``defines`` (the runtime memoises the
-    program; ``cache`` keeps one kernel object per program and name, as kernels hold their args)."""
-    import pyopencl as cl
-
-    prog = rt.program(source, program, defines)
-    key = (id(prog), name)
-    if key not in cache:
-        cache[key] = cl.Kernel(prog, name)
-    return cache[key]
-
-
 def principal_point_px(camera, w: int, h: int) -> tuple[float, float]:
     """The optical centre (px) in the undistorted frame these stages see (they run before
     ``distortion``). A calibrated camera's render has the calibration's principal point: at the

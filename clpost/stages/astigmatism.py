@@ -226,11 +226,6 @@ class Astigmatism(GatherStage):
     params = AstigmatismParams
     reads = ("depth",)
 
-    def __init__(self, quality: str = "final") -> None:
-        super().__init__(quality)
-        self._kernels: dict = {}
-        self._scratch: dict = {}
-
     @property
     def taps(self) -> int:
         return TAPS[self.quality]
@@ -277,40 +272,6 @@ class Astigmatism(GatherStage):
                 "ASTIGMATISM_TAPS_PER_PX": f"{FULL_AT_PX / self.taps!r}f",
                 "ASTIGMATISM_FULL_TAP0": sum(classes[:-1])}
 
-    # -- OpenCL -----------------------------------------------------------------------------
-    def _kernel(self, rt, camera, name, whole_tiles: bool):
-        from ..runtime import kernel_source
-
-        # ASTIGMATISM_WHOLE_TILES is a property of the frame size, not of the camera
-        return fld.cached_kernel(self._kernels, rt, kernel_source("common") + self._tap_table() + kernel_source("astigmatism"), "astigmatism",
-                                 {**self.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole_tiles)}, name)
-
-    def _tap_table(self) -> str:
-        """OpenCL source of the ``astigmatism_taps`` table (float32 literals, exact round trip):
-        the Vogel spirals of every tap class one after the other (4, 8, ..., N points), a
-        program-scope constant (from a buffer, PoCL's SLP pass packed the loads of the work-item
-        vectoriser into vector gathers; the explicit float16 loop reads them as scalars)."""
-        taps = np.concatenate([fld.vogel_disc(n) for n in self.tap_classes()]).ravel()
-        vals = ", ".join(f"{float(v)!r}f" for v in taps)
-        return f"__constant float astigmatism_taps[{taps.size}] = {{{vals}}};\n"
-
-    def _buffers(self, rt, camera, w, h):
-        import pyopencl as cl
-
-        key = (id(rt.context), w, h, self.taps)
-        if key not in self._scratch:
-            ntx, nty = fld.tiles(w, h)
-            pw, ph = ntx * fld.TILE_W + 2 * fld.PAD, nty * fld.TILE_H + 2 * fld.PAD
-            self._scratch = {key: dict(
-                pad=rt.empty((3, ph, pw)), axes=rt.empty((4, ph, pw)), lut=rt.empty((2, fld.LUT_SIZE)),
-                offs=rt.empty((2, ph, pw)), offs_key=None,
-                tmin=rt.empty((nty, ntx, 2)), reach=rt.empty((nty, ntx), np.int32),
-                tiles=rt.empty((nty, ntx, 4)), counts=rt.empty((len(self.tap_classes()) + 2,), np.int32),
-                inner=cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                                hostbuf=np.ascontiguousarray(self.inner_tiles(w, h), np.int32)),
-                lists=rt.empty((len(self.tap_classes()) + 2, nty * ntx), np.int32))}
-        return self._scratch[key]
-
     @staticmethod
     def inner_tiles(w: int, h: int) -> np.ndarray:
         """(tiles_y, tiles_x) bool: tiles whose every read (pixel ± PAD, + 1 for the bilinear
@@ -343,71 +304,9 @@ class Astigmatism(GatherStage):
         return np.stack([ex, ey, r, np.zeros_like(ex)], -1).astype(np.float32)
 
     def enqueue(self, rt, camera, frame, src, dst, aux):
-        import pyopencl as cl
+        from .astigmatism_cl import enqueue_astigmatism
 
-        q = rt.queue
-        w, h = frame.width, frame.height
-        b = self._buffers(rt, camera, w, h)
-        cx, cy = fld.principal_point_px(camera, w, h)
-        ntx, nty = fld.tiles(w, h)
-        pw, ph = ntx * fld.TILE_W + 2 * fld.PAD, nty * fld.TILE_H + 2 * fld.PAD
-        whole = (ntx * fld.TILE_W, nty * fld.TILE_H) == (w, h)
-        aperture, v, f = thin_lens(camera)
-        events = [cl.enqueue_copy(q, b["tiles"], self.tile_directions(w, h, cx, cy), is_blocking=False)]
-        lut = self._lut(camera).astype(np.float32)
-        geometry = (np.float32(cx), np.float32(cy), np.float32(fld.pitch_mm(camera, w)),
-                    np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
-        offs_key = (lut.tobytes(), geometry)
-        if b["offs_key"] != offs_key:
-            # the per-pixel focal offsets depend on the camera and frame size only: once, not per frame
-            events.append(cl.enqueue_copy(q, b["lut"], lut, is_blocking=False))
-            k = self._kernel(rt, camera, "astigmatism_offsets", whole)
-            k.set_args(b["lut"], b["offs"], np.int32(w), np.int32(h), np.int32(pw), np.int32(ph), *geometry)
-            events.append(cl.enqueue_nd_range_kernel(q, k, (pw // 16, ph), None))
-            b["offs_key"] = offs_key
-        k = self._kernel(rt, camera, "astigmatism_pad", whole)
-        k.set_args(src, aux["depth"], b["offs"], b["pad"], b["axes"], np.int32(w), np.int32(h),
-                   np.int32(pw), np.int32(ph), geometry[2],
-                   np.float32(aperture), np.float32(v), np.float32(1.0 / f),
-                   *(np.int32(e) for e in self.ring(w, h)))
-        # 16 pixels of a padded row per work-item (pw is a multiple of 16)
-        events.append(cl.enqueue_nd_range_kernel(q, k, (pw // 16, ph), None))
-        nclass = len(self.tap_classes()) + 2
-        events.append(cl.enqueue_copy(q, b["counts"], np.zeros(nclass, np.int32), is_blocking=False))
-        k = self._kernel(rt, camera, "astigmatism_tiles", whole)
-        k.set_args(b["axes"], b["tiles"], b["tmin"], b["counts"], b["lists"], np.int32(w), np.int32(h),
-                   np.int32(ntx), np.int32(nty))
-        events.append(cl.enqueue_nd_range_kernel(q, k, (ntx, nty), None))
-        # which tiles' gathers can skip the reach test (every weight of it is 1 there)
-        k = self._kernel(rt, camera, "astigmatism_reach", whole)
-        k.set_args(b["tiles"], b["tmin"], b["reach"], np.int32(ntx), np.int32(nty))
-        events.append(cl.enqueue_nd_range_kernel(q, k, (ntx, nty), None))
-        # the tile lists' lengths set the launch sizes: a 4-int read, the one sync of this stage
-        counts = np.empty(nclass, np.int32)
-        cl.enqueue_copy(q, counts, b["counts"], wait_for=[events[-1]], is_blocking=True)
-        args = (np.int32(ntx), np.int32(nty), np.int32(w), np.int32(h))
-        group = (fld.TILE_W // 16, fld.TILE_H)  # 16 pixels (a float16) per work-item
-        for c, n in enumerate(counts):
-            if n == 0:
-                continue
-            sub = (b["lists"], np.int32(c * ntx * nty))  # this class's row of the lists
-            if c == 0:
-                k = self._kernel(rt, camera, "astigmatism_copy", whole)
-                k.set_args(b["pad"], src, b["inner"], dst, *sub, *args)
-            elif c == nclass - 1:
-                k = self._kernel(rt, camera, "astigmatism_exact", whole)
-                k.set_args(b["pad"], src, b["inner"], b["axes"], dst, *sub, *args, np.float32(cx), np.float32(cy))
-                events.append(cl.enqueue_nd_range_kernel(q, k, (int(n) * fld.TILE_W, fld.TILE_H),
-                                                         (fld.TILE_W, fld.TILE_H)))
-                continue
-            else:
-                n_taps = self.tap_classes()[c - 1]
-                # one kernel per tap count (compile-time loop; offsets n - 4 in the table)
-                name = "astigmatism" if n_taps == self.taps else f"astigmatism_t{n_taps}"
-                k = self._kernel(rt, camera, name, whole)
-                k.set_args(b["pad"], src, b["inner"], b["reach"], b["axes"], dst, b["tiles"], *sub, *args)
-            events.append(cl.enqueue_nd_range_kernel(q, k, (int(n) * group[0], group[1]), group))
-        return events
+        return enqueue_astigmatism(self, rt, camera, frame, src, dst, aux)
 
     # -- the oracle -------------------------------------------------------------------------
     def semi_axes_px(self, camera, frame):

@@ -13,10 +13,12 @@ A stage is one physical effect. Its module (``clpost/stages/<name>.py``) holds o
   options are generated from it. None: the stage reads only the camera core's parameters;
 - ``skip_reason(camera, frame)`` — why it is an identity for this camera and frame, or None;
 - ``reference(camera, frame, color)`` — a readable float64 numpy implementation (the oracle);
-- its OpenCL implementation: a :class:`PointwiseStage` supplies an inline per-pixel function
-  ``float3 <name>_apply(float3 c, const PixelCtx p, <args>)`` in ``kernels/<name>.cl`` that the
-  planner fuses with its pointwise neighbours into one kernel; a :class:`GatherStage` enqueues its
-  own kernels on planar buffers.
+- its OpenCL implementation: a :class:`PointwiseStage` supplies a width-generic per-pixel function
+  ``void <name>_apply(CLP_F *r, CLP_F *g, CLP_F *b, const CLP_CTX p, <args>)`` in
+  ``kernels/<name>.cl`` that the planner fuses with its pointwise neighbours into one kernel, run
+  16 pixels per work-item (:mod:`clpost.codegen`, "Width-generic code"); a :class:`GatherStage`
+  enqueues its own kernels on planar buffers through the runtime's toolkit
+  (:meth:`~clpost.runtime.Runtime.kernel`, ``constant``, ``scratch``, ``cached``, ``launch``).
 
 Structural parameters (tap counts, LUT sizes) are ``defines`` — part of the program key;
 name them ``<STAGE>_...`` so fused groups never clash. Per-frame scalars are kernel arguments,
@@ -24,13 +26,14 @@ so changing exposure never recompiles anything.
 
 How the planner calls a stage (:mod:`clpost.pipeline`):
 
-- pointwise: ``<name>_apply(c, p, [depth], [velocity], <args...>)`` where ``p`` is a
-  ``PixelCtx`` (x, y, width, height, i) and ``depth``/``velocity`` are passed only if the stage
-  lists them in ``reads`` (``depth[p.i]``; ``velocity[2*p.i]``, ``velocity[2*p.i+1]``).
+- pointwise: ``<name>_apply(&r, &g, &b, p, [depth], [velocity], <args...>)`` where ``p`` is the
+  pixel context (``CLP_X(p)``, ``CLP_INDEX(p)``, ...) and ``depth``/``velocity`` are passed only if
+  the stage lists them in ``reads`` (``CLP_PLANE(depth, p)``; ``CLP_PLANE2(velocity, p, 0|1)``).
 - gather: ``enqueue(rt, camera, frame, src, dst, aux)`` with planar float32 ``src``/``dst``
   (channel c of pixel i at ``c*W*H + i``), ``aux["depth"]`` / ``aux["velocity"]`` device
-  buffers for what it ``reads``; it builds its programs through ``rt.program`` (memoised) and
-  caches its own scratch buffers per resolution. Returns the events it enqueued (profiled).
+  buffers for what it ``reads``; it gets its kernels from ``rt.kernel`` (cached), its tables from
+  ``rt.constant`` and its work buffers from ``rt.scratch(self, name, shape)``, and launches with
+  ``rt.launch``. Returns the events it enqueued (profiled).
 - ``reference()`` gets float64 color and the host Frame; tests compare the two on odd sizes,
   after asserting that the stage is planned (``tests/conftest.py``: ``assert_planned``; an
   unplanned stage is the identity on both sides).
@@ -88,13 +91,9 @@ class PointwiseStage(Stage):
 
     kind = "pointwise"
     args: ClassVar[tuple[tuple[str, str], ...]] = ()
-    vector: ClassVar[bool] = False
-    """True if the source also defines ``<name>_apply16(float16 *r, float16 *g, float16 *b,
-    const PixelCtx16 p, <args>)`` for 16 pixels of a row; a fused group whose stages all have it
-    runs 16 pixels per work-item (:data:`clpost.codegen.VECTOR_PIXELS`)."""
 
     def source(self) -> str:
-        """OpenCL C defining ``<name>_apply`` (default: ``kernels/<name>.cl``)."""
+        """Width-generic OpenCL C defining ``<name>_apply`` (default: ``kernels/<name>.cl``)."""
         from ..runtime import kernel_source
 
         return kernel_source(self.name)

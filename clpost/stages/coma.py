@@ -105,7 +105,6 @@ Domain/range: colour ≥ 0 → convex combination of input colours.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 
@@ -137,44 +136,6 @@ STENCIL_SIZES = (4, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256)
 corners each reach at most 4N ≤ 256 integer offsets (fewer where the comet is short)."""
 """Tiles whose pixels' landing points are all within this (px) of the tile centre's take the
 tile centre's comet (``Coma.tile_uniform``)."""
-RHO_FIT = 0.7
-"""C is fitted over ρ ≤ 0.7 (half of the pupil's area), where the third-order ρ² law holds; the
-rim zone of a fast lens is dominated by high-order flare (spherical aberration's), which a ρ² fit
-would turn into a far too long comet."""
-
-
-@lru_cache(maxsize=32)
-def _traced(lens_name: str, focus_distance_m: float, f_number: float) -> tuple[np.ndarray, np.ndarray]:
-    """(image_height_mm, C_mm) of a traced lens from its meridional fans."""
-    from ..optics import get_lens, lens_curves
-    from ..optics.curves import _Field
-
-    lens = get_lens(lens_name)
-    curves = lens_curves(lens_name, focus_distance_m, f_number)
-    focus_mm = focus_distance_m * 1000.0
-    pres = lens.focused(focus_mm, f_number)
-    field = _Field(lens, pres, focus_mm, lens.stop_radius_mm(f_number))
-    r_e = curves.entrance_pupil_radius_mm
-    th = np.radians(np.asarray(curves.field_angle_deg, np.float64))
-    aim = field.chief_aim(th)
-    rho = np.linspace(0.07, RHO_FIT, 10)
-    fan = np.concatenate([-rho[::-1], [0.0], rho])
-    t = np.repeat(th, fan.size)
-    ay = np.repeat(aim, fan.size) + np.tile(fan, th.size) * r_e / np.cos(t)
-    res = field.trace(t, 0.0, ay, clip=False)
-    y = res.pos[:, 1].reshape(th.size, fan.size)
-    ok = (res.status == 0).reshape(th.size, fan.size)
-    eps = y - y[:, rho.size][:, None]
-    even = 0.5 * (eps[:, rho.size + 1:] + eps[:, :rho.size][:, ::-1])
-    good = ok[:, rho.size + 1:] & ok[:, :rho.size][:, ::-1] & ok[:, rho.size][:, None]
-    w = np.where(good, rho ** 3, 0.0)  # least squares of 3Cρ² with the pupil-area weight ρ dρ
-    with np.errstate(invalid="ignore", divide="ignore"):
-        c = np.where(w.sum(1) > 0, np.sum(w * np.where(good, even, 0.0), 1) / (3.0 * np.sum(w * rho ** 2, 1)), 0.0)
-    c = np.nan_to_num(c)
-    c[0] = 0.0  # on axis the fan is symmetric: no coma
-    return np.asarray(curves.image_height_mm), c
-
-
 def coma_curve(camera):
     """``fn(r_mm) -> C`` in mm (+ = tail away from the centre), or None (no source)."""
     if camera.coma_mm is not None:
@@ -182,7 +143,9 @@ def coma_curve(camera):
         return lambda r: k * np.asarray(r, np.float64)
     if camera.optics is None:
         return None
-    r, c = _traced(camera.lens, camera.focus_distance_m, camera.lens_curves().f_number)
+    from ..optics.coma_fit import traced_coma
+
+    r, c = traced_coma(camera.lens, camera.focus_distance_m, camera.lens_curves().f_number)
     return lambda x: np.interp(np.abs(np.asarray(x, np.float64)), r, c)
 
 
@@ -199,10 +162,6 @@ class Coma(GatherStage):
 
     def __init__(self, quality: str = "final") -> None:
         super().__init__(quality)
-        self._kernels: dict = {}
-        self._scratch: dict = {}
-        self._lists_key = None
-        self._lists: dict = {}
         self._uniform: tuple = (None, None)
 
     @property
@@ -237,97 +196,10 @@ class Coma(GatherStage):
         return {"COMA_TAPS": self.taps, "COMA_PAD": fld.PAD, "COMA_LUT_SIZE": fld.LUT_SIZE,
                 "COMA_TILE_W": fld.TILE_W, "COMA_TILE_H": fld.TILE_H}
 
-    # -- OpenCL -----------------------------------------------------------------------------
-    def _kernel(self, rt, camera, name, whole_tiles: bool):
-        from ..runtime import kernel_source
-
-        # COMA_WHOLE_TILES (the frame is whole tiles: stores need no branch) is a property of the
-        # frame size, not of the camera, so it is added here rather than in defines()
-        return fld.cached_kernel(self._kernels, rt, kernel_source("common") + self._tap_table() + kernel_source("coma"), "coma",
-                                 {**self.defines(camera), "COMA_WHOLE_TILES": int(whole_tiles)}, name)
-
-    def _tap_table(self) -> str:
-        """OpenCL source of the ``coma_taps`` table (float32 literals, exact round trip)."""
-        off = comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)).astype(np.float32).ravel()
-        vals = ", ".join(f"{float(v)!r}f" for v in off)
-        return f"__constant float coma_taps[{off.size}] = {{{vals}}};\n"
-
-    def _buffers(self, rt, w, h):
-        key = (id(rt.context), w, h, self.taps)
-        if key not in self._scratch:
-            ntx, nty = fld.tiles(w, h)
-            ow, oh = ntx * fld.TILE_W, nty * fld.TILE_H
-            self._scratch = {key: dict(
-                pad=rt.empty((3, oh + 2 * fld.PAD, ow + 2 * fld.PAD)), shape=rt.empty((4, oh, ow)),
-                tiles=rt.empty((nty, ntx, 4)), lut=rt.empty((2, fld.LUT_SIZE)))}
-        return self._scratch[key]
-
     def enqueue(self, rt, camera, frame, src, dst, aux):
-        import pyopencl as cl
+        from .coma_cl import enqueue_coma
 
-        q = rt.queue
-        w, h = frame.width, frame.height
-        b = self._buffers(rt, w, h)
-        cx, cy = fld.principal_point_px(camera, w, h)
-        ntx, nty = fld.tiles(w, h)
-        ow, oh = ntx * fld.TILE_W, nty * fld.TILE_H
-        whole = (ow, oh) == (w, h)
-        pitch = fld.pitch_mm(camera, w)
-        events = []
-        shape_key = (id(rt.context), self._uniform_key(camera, w, h))
-        if b.get("shape_key") != shape_key:
-            # the comet of every pixel depends on the camera and the frame size only (not on the
-            # frame's content): computed once, kept on the device for the next frames
-            events += [cl.enqueue_copy(q, b["lut"], self._lut(camera), is_blocking=False),
-                       cl.enqueue_copy(q, b["tiles"], self.tile_axes_px(camera, w, h).astype(np.float32),
-                                       is_blocking=False)]
-            k = self._kernel(rt, camera, "coma_shape", whole)
-            k.set_args(b["shape"], b["lut"], np.int32(ow), np.int32(oh), np.float32(cx), np.float32(cy),
-                       np.float32(pitch), np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
-            events.append(cl.enqueue_nd_range_kernel(q, k, (ow, oh), None))
-            b["shape_key"] = shape_key
-        lists = self._tile_lists(rt, camera, w, h)
-        k = self._kernel(rt, camera, "coma_pad", whole)
-        k.set_args(src, b["pad"], np.int32(w), np.int32(h), np.int32(ow + 2 * fld.PAD), np.int32(oh + 2 * fld.PAD),
-                   *(np.int32(v) for v in lists["skip"]))
-        # 16 pixels of a padded row per work-item
-        events.append(cl.enqueue_nd_range_kernel(q, k, ((ow + 2 * fld.PAD) // 16, oh + 2 * fld.PAD), None))
-        group = (fld.TILE_W // 16, fld.TILE_H)  # 16 pixels (a float16) per work-item
-        args = (np.int32(ntx), np.int32(nty), np.int32(w), np.int32(h))
-        if lists["n_window"]:
-            k = self._kernel(rt, camera, "coma", whole)
-            k.set_args(b["pad"], b["shape"], dst, b["tiles"], lists["window"], *args)
-            events.append(cl.enqueue_nd_range_kernel(q, k, (group[0] * lists["n_window"], group[1]), group))
-        for name, ids, n_ids, inner, offs, wts in lists["stencils"]:
-            # one kernel per stencil size (a compile-time loop count) and Jacobian kind
-            k = self._kernel(rt, camera, name, whole)
-            k.set_args(b["pad"], src, b["shape"], dst, ids, inner, offs, wts, *args)
-            events.append(cl.enqueue_nd_range_kernel(q, k, (group[0] * n_ids, group[1]), group))
-        return events
-
-    def _tile_lists(self, rt, camera, w, h) -> dict:
-        """Device lists of the tiles for the window kernel and, per stencil size, the uniform
-        tiles with their stencils (uploaded once per camera map, frame size and tap count: coma
-        does not depend on the frame's content)."""
-        import pyopencl as cl
-
-        key = (id(rt.context), self._uniform_key(camera, w, h))
-        if self._lists_key != key:
-            mk = lambda a: cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,  # noqa: E731
-                                     hostbuf=np.ascontiguousarray(a) if a.size else np.zeros(1, np.int32))
-            window = np.flatnonzero(~self.tile_uniform(camera, w, h).ravel()).astype(np.int32)
-            inner = self.inner_tiles(w, h).ravel()
-            stencils = [(f"coma_{'c' if const else 's'}{size}", mk(ids), ids.size, mk(inner[ids].astype(np.int32)),
-                         mk(np.stack([dx, dy], -1).astype(np.int32)), mk(wts.astype(np.float32)))
-                        for size, const, ids, dx, dy, wts in self.uniform_stencils(camera, w, h)]
-            # the padded copy's inside that no tile reads (padded coordinates, x0, x1, y0, y1): the
-            # inner tiles read the source, and the border tiles' reads (|d| <= PAD) stay within
-            # 2 PAD + tile of the frame's edge; the window kernel reads the padded copy everywhere
-            p, tw, th = fld.PAD, fld.TILE_W, fld.TILE_H
-            skip = (0, 0, 0, 0) if window.size else (3 * p + tw, w - p - tw, 3 * p + th, h - p - th)
-            self._lists_key, self._lists = key, dict(window=mk(window), n_window=window.size, stencils=stencils,
-                                                     skip=skip)
-        return self._lists
+        return enqueue_coma(self, rt, camera, frame, src, dst, aux)
 
     @staticmethod
     def inner_tiles(w: int, h: int) -> np.ndarray:

@@ -53,7 +53,6 @@ import numpy as np
 from ..calibration import OpenCVModel, render_intrinsics, required_render, undistort
 from ..errors import InputError
 from ..params import boolean, param, parse_on_off
-from . import _field as fld
 from .base import GatherStage
 
 
@@ -355,7 +354,6 @@ class Distortion(GatherStage):
     def __init__(self, quality: str = "final") -> None:
         super().__init__(quality)
         self._dev_maps: dict = {}
-        self._kernels: dict = {}
 
     @property
     def filter_taps(self) -> int:
@@ -430,7 +428,7 @@ class Distortion(GatherStage):
         source = kernel_source("common") + kernel_source("distortion")
 
         def kernel(name):  # built once per device, one kernel object per name (not per frame)
-            return fld.cached_kernel(self._kernels, rt, source, "distortion", {}, name)
+            return rt.kernel(source, name, {}, "distortion")
 
         out = (np.int32(model.width), np.int32(model.height))
         q = rt.queue

@@ -29,37 +29,26 @@ from . import dof as D
 
 
 def _kernels(rt, defines):
-    import pyopencl as cl
-
     from ..runtime import kernel_source
 
     out = {}
     for src in ("dof_coc", "dof_levels", "dof_tiles", "dof"):
         head = kernel_source("common") + kernel_source("dof_common")  # DOF_PW: the padded extent
-        prog = rt.program(head + kernel_source(src), src, defines)
-        for k in prog.all_kernels():
-            out[k.function_name] = cl.Kernel(prog, k.function_name)
+        out.update(rt.kernels(head + kernel_source(src), src, defines))
     return out
 
 
-def _launch(q, kernel, size, local):
-    """Global size rounded up to whole work-groups (kernels guard their bounds): left to itself
-    PoCL picks tiny work-groups for sizes like 706×426 and runs 10–50× slower (measured)."""
-    import pyopencl as cl
-
-    glob = tuple(-(-s // local) * local for s in size)
-    return cl.enqueue_nd_range_kernel(q, kernel, glob, (local, local))
+def _launch(rt, kernel, size, local):
+    """Square ``local`` × ``local`` work-groups over ``size`` (rounded up by :meth:`Runtime.launch`:
+    PoCL's own choice of tiny work-groups for sizes like 706×426 runs 10–50× slower, measured)."""
+    return rt.launch(kernel, size, (local, local))
 
 
-def _launch_rows(q, kernel, size, per_item=16, local=(8, 1)):
+def _launch_rows(rt, kernel, size, per_item=16, local=(8, 1)):
     """Kernels that do ``per_item`` pixels of a row per work-item (explicit float16): the x size
     divided by ``per_item``, then rounded up to whole work-groups like :func:`_launch`. Groups of
     8×1 work-items: the float16 bodies ran 3–10× slower in 8×8 groups (measured)."""
-    import pyopencl as cl
-
-    glob = (-(-size[0] // per_item), size[1])
-    glob = tuple(-(-g // l) * l for g, l in zip(glob, local))
-    return cl.enqueue_nd_range_kernel(q, kernel, glob, local)
+    return rt.launch(kernel, (-(-size[0] // per_item), size[1]), local)
 
 
 def gather_vector_width(rt) -> int:
@@ -75,12 +64,12 @@ def gather_vector_width(rt) -> int:
     return 16 if getattr(rt.device, "native_vector_width_float", 8) >= 16 else 8
 
 
-def _config(rt, defines, camera, w, h, scale, rmax, budget, built=None):
+def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=None):
     """Kernels and scratch buffers of one gather configuration (working resolution w/scale ×
     h/scale, max CoC ``rmax`` working px, lattice budget ``budget``). ``built``: levels to build
     when fewer than the plan's (final's full resolution in mixed mode, where dof_tile_mix sends
-    every tile that would need a coarser level to the half-resolution gather)."""
-    import pyopencl as cl
+    every tile that would need a coarser level to the half-resolution gather). Scratch buffers
+    are ``owner``'s, named with ``tag`` (one set per configuration)."""
 
     nlev = D.levels_for(rmax, budget)
     T = D.TILE
@@ -91,64 +80,64 @@ def _config(rt, defines, camera, w, h, scale, rmax, budget, built=None):
     pw, ph = tw * T + 2 * pad, th * T + 2 * pad  # DOF_PW in dof_common.cl: whole tiles + border
     defines = {**defines, "DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_BUDGET": budget,
                "DOF_LEVELS": plan_levels}
-    dx, dy, dist, rf, rn, ntaps = D.tap_table(budget, camera.blades, camera.blade_rotation_deg,
-                                              camera.aperture_roundness)
-    mf = cl.mem_flags
+    shape = (budget, camera.blades, camera.blade_rotation_deg, camera.aperture_roundness)
+    dx, dy, dist, rf, rn, ntaps = D.tap_table(*shape)
 
-    def const(a):
-        return cl.Buffer(rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
+    def const(name, a):
+        return rt.constant(a, ("dof_taps", name, shape))
+
+    def scratch(name, shp, dtype=np.float32):
+        return rt.scratch(owner, f"{tag}.{name}", shp, dtype)
 
     half = math.hypot(ww / 2.0, hw / 2.0)
     return {
         "k": _kernels(rt, defines), "scale": scale, "nlev": nlev, "ww": ww, "hw": hw, "pad": pad,
         "tw": tw, "th": th, "pw": pw, "ph": ph,
-        "taps": [const(dx), const(dy), const(dist.astype(np.float32)), const(rf.astype(np.float32)),
-                 const(rn.astype(np.float32)), const((1.0 / rf).astype(np.float32)),
-                 const((1.0 / rn).astype(np.float32))],
-        "ntaps": const(ntaps),
-        "lv": rt.empty((nlev + 1, 5, ph, pw)),
-        "pv": rt.empty((ph, pw) if camera.optical_vignetting > 0 else (1,)),
-        "tmax": rt.empty((th, tw)), "tn": rt.empty((th, tw), np.int32),
-        "alpha": rt.empty((hw, ww)),
-        "blur": rt.empty((3, hw, ww)) if scale > 1 else None,
+        "taps": [const("dx", dx), const("dy", dy), const("dist", dist.astype(np.float32)),
+                 const("rf", rf.astype(np.float32)), const("rn", rn.astype(np.float32)),
+                 const("inv_rf", (1.0 / rf).astype(np.float32)), const("inv_rn", (1.0 / rn).astype(np.float32))],
+        "ntaps": const("ntaps", ntaps),
+        "lv": scratch("lv", (nlev + 1, 5, ph, pw)),
+        "pv": scratch("pv", (ph, pw) if camera.optical_vignetting > 0 else (1,)),
+        "tmax": scratch("tmax", (th, tw)), "tn": scratch("tn", (th, tw), np.int32),
+        "alpha": scratch("alpha", (hw, ww)),
+        "blur": scratch("blur", (3, hw, ww)) if scale > 1 else None,
         "field": (np.float32(camera.optical_vignetting), np.float32((ww - 1) / 2.0),
                   np.float32((hw - 1) / 2.0), np.float32(1.0 / half)),
     }
 
 
-def _enqueue_plan(q, c, src, coc, w, h):
+def _enqueue_plan(rt, c, src, coc, w, h):
     """Working buffers, prefiltered levels and the tile plan of configuration ``c``."""
     i32 = np.int32
     k, evs = c["k"], []
     k["dof_prepare"].set_args(src, coc, c["lv"], c["pv"], i32(w), i32(h), i32(c["ww"]), i32(c["hw"]),
                               i32(c["pad"]), *c["field"])
-    evs.append(_launch_rows(q, k["dof_prepare"], (c["pw"], c["ph"])))
+    evs.append(_launch_rows(rt, k["dof_prepare"], (c["pw"], c["ph"])))
     for lvl in range(c["nlev"]):
         k["dof_levels"].set_args(c["lv"], i32(c["pw"]), i32(c["ph"]), i32(2 ** lvl), i32(lvl))
-        evs.append(_launch_rows(q, k["dof_levels"], (c["pw"], c["ph"])))
+        evs.append(_launch_rows(rt, k["dof_levels"], (c["pw"], c["ph"])))
     k["dof_tile_max"].set_args(c["lv"], c["tmax"], i32(c["ww"]), i32(c["hw"]), i32(c["pad"]), i32(c["tw"]),
                                i32(c["th"]))
-    evs.append(_launch(q, k["dof_tile_max"], (c["tw"], c["th"]), 4))
+    evs.append(_launch(rt, k["dof_tile_max"], (c["tw"], c["th"]), 4))
     k["dof_tile_dilate"].set_args(c["tmax"], c["tn"], c["ntaps"], i32(c["tw"]), i32(c["th"]))
-    evs.append(_launch(q, k["dof_tile_dilate"], (c["tw"], c["th"]), 4))
+    evs.append(_launch(rt, k["dof_tile_dilate"], (c["tw"], c["th"]), 4))
     return evs
 
 
-def _enqueue_gather(q, c, target, tn, camera, inv_area, vec):
-    import pyopencl as cl
-
+def _enqueue_gather(rt, c, target, tn, camera, inv_area, vec):
     T, i32, f32 = D.TILE, np.int32, np.float32
     c["k"]["dof"].set_args(c["lv"], c["pv"], tn, *c["taps"], target, c["alpha"], i32(c["ww"]), i32(c["hw"]),
                            i32(c["pad"]), i32(c["tw"]), inv_area, f32(camera.spherical_aberration), *c["field"])
     # one work-group per tile, DOF_VEC pixels of a row per work-item (dof.cl)
-    return cl.enqueue_nd_range_kernel(q, c["k"]["dof"], (c["tw"] * T // vec, c["th"] * T), (T // vec, T))
+    return rt.launch(c["k"]["dof"], (c["tw"] * T // vec, c["th"] * T), (T // vec, T))
 
 
-def _enqueue_upsample(q, c, src, coc, dst, w, h, tn_mix):
+def _enqueue_upsample(rt, c, src, coc, dst, w, h, tn_mix):
     i32 = np.int32
     c["k"]["dof_upsample"].set_args(src, coc, c["blur"], c["alpha"], c["lv"], dst, i32(w), i32(h), i32(c["ww"]),
                                     i32(c["hw"]), i32(c["pad"]), tn_mix, i32(c["tw"]))
-    return _launch_rows(q, c["k"]["dof_upsample"], (w, h))
+    return _launch_rows(rt, c["k"]["dof_upsample"], (w, h))
 
 
 def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
@@ -156,50 +145,50 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     (:data:`dof.MIXED`) also plans and gathers at half resolution; ``dof_tile_mix`` skips the
     full-resolution gather of the big tiles (count 0) and the half-resolution gather outside the
     big tiles and their neighbours, and ``dof_upsample`` writes only the big tiles' pixels."""
-    q = rt.queue
     scale, rmax, budget = D.QUALITY[stage.quality]
     mixed = D.MIXED.get(stage.quality)
     w, h = frame.width, frame.height
     vec = gather_vector_width(rt)
     defines = {**stage.defines(camera), "DOF_VEC": vec}
-    key = (id(rt), tuple(sorted(defines.items())), w, h, camera.blades, camera.blade_rotation_deg,
+    key = (tuple(sorted(defines.items())), w, h, camera.blades, camera.blade_rotation_deg,
            camera.aperture_roundness)
-    cache = getattr(stage, "_cl_cache", None)
-    if cache is None or cache["key"] != key:
+
+    def make():
         cache = {
-            "key": key,
-            "main": _config(rt, defines, camera, w, h, scale, rmax, budget,
+            "main": _config(rt, stage, "main", defines, camera, w, h, scale, rmax, budget,
                             built=D.MIXED_FULL_LEVELS if mixed else None),
-            "coc": rt.empty((h, w)),
+            "coc": rt.scratch(stage, "coc", (h, w)),
             "inv_area": np.float32(1.0 / D.aperture_area(camera.blades, camera.blade_rotation_deg,
                                                          camera.aperture_roundness)),
         }
         if mixed:
-            hc = _config(rt, {**defines, "DOF_MIXED": 1}, camera, w, h, *mixed)
-            hc["tn_gather"] = rt.empty((hc["th"], hc["tw"]), np.int32)
-            hc["mix"] = rt.empty((hc["th"], hc["tw"]), np.int32)
+            hc = _config(rt, stage, "half", {**defines, "DOF_MIXED": 1}, camera, w, h, *mixed)
+            hc["tn_gather"] = rt.scratch(stage, "half.tn_gather", (hc["th"], hc["tw"]), np.int32)
+            hc["mix"] = rt.scratch(stage, "half.mix", (hc["th"], hc["tw"]), np.int32)
             cache["half"] = hc
-            cache["tn_full"] = rt.empty((cache["main"]["th"], cache["main"]["tw"]), np.int32)
-        stage._cl_cache = cache
+            cache["tn_full"] = rt.scratch(stage, "tn_full", (cache["main"]["th"], cache["main"]["tw"]), np.int32)
+        return cache
+
+    cache = rt.cached(stage, "dof", key, make)
     c = cache["main"]
     kc, inv_u = D.coc_coefficients(camera, w)
     i32, f32 = np.int32, np.float32
     evs = []
     c["k"]["dof_coc"].set_args(src, aux["depth"], cache["coc"], i32(w), i32(h), f32(kc), f32(inv_u),
                                f32(scale * rmax))
-    evs.append(_launch_rows(q, c["k"]["dof_coc"], (w, h)))
-    evs += _enqueue_plan(q, c, src, cache["coc"], w, h)
+    evs.append(_launch_rows(rt, c["k"]["dof_coc"], (w, h)))
+    evs += _enqueue_plan(rt, c, src, cache["coc"], w, h)
     if mixed:
         hc = cache["half"]
-        evs += _enqueue_plan(q, hc, src, cache["coc"], w, h)
+        evs += _enqueue_plan(rt, hc, src, cache["coc"], w, h)
         hc["k"]["dof_tile_mix"].set_args(hc["tn"], c["tn"], hc["tn_gather"], cache["tn_full"], hc["mix"],
                                          i32(hc["tw"]), i32(hc["th"]), i32(c["tw"]), i32(c["th"]))
-        evs.append(_launch(q, hc["k"]["dof_tile_mix"], (hc["tw"], hc["th"]), 4))
-    evs.append(_enqueue_gather(q, c, dst if scale == 1 else c["blur"], cache["tn_full"] if mixed else c["tn"],
+        evs.append(_launch(rt, hc["k"]["dof_tile_mix"], (hc["tw"], hc["th"]), 4))
+    evs.append(_enqueue_gather(rt, c, dst if scale == 1 else c["blur"], cache["tn_full"] if mixed else c["tn"],
                                camera, cache["inv_area"], vec))
     if scale > 1:
-        evs.append(_enqueue_upsample(q, c, src, cache["coc"], dst, w, h, c["tn"]))
+        evs.append(_enqueue_upsample(rt, c, src, cache["coc"], dst, w, h, c["tn"]))
     if mixed:
-        evs.append(_enqueue_gather(q, hc, hc["blur"], hc["tn_gather"], camera, cache["inv_area"], vec))
-        evs.append(_enqueue_upsample(q, hc, src, cache["coc"], dst, w, h, hc["mix"]))
+        evs.append(_enqueue_gather(rt, hc, hc["blur"], hc["tn_gather"], camera, cache["inv_area"], vec))
+        evs.append(_enqueue_upsample(rt, hc, src, cache["coc"], dst, w, h, hc["mix"]))
     return evs

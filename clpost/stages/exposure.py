@@ -63,7 +63,6 @@ class Exposure(PointwiseStage):
     name = "exposure"
     order = 70.0
     params = ExposureParams
-    vector = True  # also defines <name>_apply16 (clpost.codegen.VECTOR_PIXELS)
     args = (("float", "gain"),)
 
     def skip_reason(self, camera, frame):

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -68,6 +69,18 @@ def log_exposure(camera, signal):
         return np.log10(np.asarray(signal, np.float64) * (SATURATION_EXPOSURE_ISO / camera.iso))
 
 
+@lru_cache(maxsize=16)
+def stock_lut(film: str) -> tuple[np.ndarray, float, float]:
+    """(lut, lo, inv_step) of a stock: its (3, FILM_LUT_SIZE) float32 table (read-only, built once
+    per stock — the pipeline uploads an unchanged read-only table once) and the grid's start and
+    inverse step in log10 H."""
+    s = load_stock(film)
+    lo, hi, inv = lut_params(s)
+    lut = s.lut(FILM_LUT_SIZE, lo, hi).astype(np.float32)
+    lut.setflags(write=False)
+    return lut, lo, inv
+
+
 class Film(PointwiseStage):
     name = "film"
     order = 80.0
@@ -88,9 +101,7 @@ class Film(PointwiseStage):
         return {"FILM_LUT_SIZE": FILM_LUT_SIZE}
 
     def values(self, camera, frame):
-        s = load_stock(camera.film)
-        lo, hi, inv = lut_params(s)
-        lut = s.lut(FILM_LUT_SIZE, lo, hi).astype(np.float32)
+        lut, lo, inv = stock_lut(camera.film)
         return (lut, np.float32(math.log10(SATURATION_EXPOSURE_ISO / camera.iso)), np.float32(lo),
                 np.float32(inv))
 

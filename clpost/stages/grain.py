@@ -141,15 +141,13 @@ class Grain(GatherStage):
         return 3 * (1 if a == 0.0 else 9)
 
     def enqueue(self, rt, camera, frame, src, dst, aux):
-        import pyopencl as cl
-
+        from ..codegen import library
         from ..runtime import kernel_source
 
         stock, d_min, d_max, span, r, boolean = self._setup(camera, frame.width)
         w, h = frame.width, frame.height
         params = np.concatenate([d_min, d_max]).astype(np.float32)
         seed, fr = np.uint32(camera.noise_seed), np.uint32(frame_index(frame))
-        src_text = kernel_source("random") + kernel_source("grain")
         if boolean:
             k = int(min(8, max(1, math.floor(1.0 / r))))
             sigma, (a, b) = np.zeros(GRAIN_LUT_SIZE), (0.0, 1.0)
@@ -158,23 +156,10 @@ class Grain(GatherStage):
             sigma, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
         defines = {"GRAIN_BOOLEAN": int(boolean), "GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k,
                    "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE, "GRAIN_TAPS": 1 if a == 0.0 else 3}
-        prog = rt.program(kernel_source("common") + src_text, "grain", defines)
-        knl = cl.Kernel(prog, "grain")
-        knl.set_args(src, dst, np.int32(w), np.int32(h), self._buffer(rt, "params", params),
-                     self._buffer(rt, "lut", sigma.astype(np.float32)),
-                     np.float32((GRAIN_LUT_SIZE - 1) / span), np.float32(a), np.float32(b),
-                     np.float32(r), seed, fr)
-        return [cl.enqueue_nd_range_kernel(rt.queue, knl, (w, h), None)]
-
-    def _buffer(self, rt, key, host):
-        import pyopencl as cl
-
-        cache = self.__dict__.setdefault("_bufs", {})
-        buf = cache.get((key, id(rt)))
-        if buf is None or buf.size != host.nbytes:
-            buf = cache[(key, id(rt))] = rt.empty(host.shape, host.dtype)
-        cl.enqueue_copy(rt.queue, buf, host)
-        return buf
+        knl = rt.kernel(library() + kernel_source("grain"), "grain", defines)
+        return [rt.launch(knl, (w, h), None, src, dst, np.int32(w), np.int32(h), rt.constant(params),
+                          rt.constant(sigma.astype(np.float32)), np.float32((GRAIN_LUT_SIZE - 1) / span),
+                          np.float32(a), np.float32(b), np.float32(r), seed, fr)]
 
     # -- float64 reference --------------------------------------------------------------------
     def reference(self, camera, frame, color):
@@ -233,9 +218,7 @@ def boolean_clear_fraction(d_img, r, seed, fr):
         pyl = np.clip(np.floor_divide(cy, k), 0, h - 1)
         lam = d_img[pyl, pxl, c] * LN10 / (math.pi * r * r) / (k * k)
         hc = rnd.hash4(seed, fr, (cx + 64).astype(np.uint32), (((cy + 64) << 2) | c).astype(np.uint32))
-        from .sensor import _poisson_inversion
-
-        n = _poisson_inversion(lam, rnd.uniform(hc)).astype(int)
+        n = rnd.poisson_inversion(lam, rnd.uniform(hc)).astype(int)
         kmax = max(int(n.max()), 1)
         kk = np.arange(kmax, dtype=np.uint32)
         with np.errstate(over="ignore"):

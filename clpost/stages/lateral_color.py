@@ -143,7 +143,6 @@ class LateralColor(GatherStage):
 
     def __init__(self, quality: str = "final") -> None:
         super().__init__(quality)
-        self._kernels: dict = {}
         self._scratch: dict = {}
         self._plan_key = None
         self._plan: dict = {}
@@ -176,8 +175,7 @@ class LateralColor(GatherStage):
     def _kernel(self, rt, camera, name):
         from ..runtime import kernel_source
 
-        return fld.cached_kernel(self._kernels, rt, kernel_source("lateral_color"), "lateral_color",
-                                 self.defines(camera), name)
+        return rt.kernel(kernel_source("lateral_color"), name, self.defines(camera), "lateral_color")
 
     # -- the tile plan (host, float64) -----------------------------------------------------
     def tile_plan(self, camera, w: int, h: int) -> dict:
@@ -246,8 +244,7 @@ class LateralColor(GatherStage):
         if key not in self._scratch:
             # the records depend only on the camera's map and the frame size: uploaded once
             rec, rest = self.records(plan, w)
-            mk = lambda a: cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,  # noqa: E731
-                                     hostbuf=a if a.size else np.zeros(1, a.dtype))
+            mk = rt.constant
             self._scratch = {key: dict(rec=mk(rec), rest=mk(rest), n_fast=len(rec), n_rest=len(rest),
                                        lut=mk(self._lut(camera)))}
         b = self._scratch[key]

@@ -64,6 +64,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import random as rnd
 from ..errors import InputError
 from ..params import at_least, param, parse_fraction, positive
 from .base import GatherStage
@@ -154,8 +155,6 @@ class MotionBlur(GatherStage):
 
     def __init__(self, quality: str = "final") -> None:
         super().__init__(quality)
-        self._scratch: dict = {}
-        self._kernels: dict = {}
 
     @property
     def samples(self) -> int:
@@ -189,25 +188,17 @@ class MotionBlur(GatherStage):
 
     # -- OpenCL -----------------------------------------------------------------------------
     def _kernel(self, rt, camera, name):
-        import pyopencl as cl
-
+        from ..codegen import library
         from ..runtime import kernel_source
 
-        src = kernel_source("common") + "\n" + kernel_source("motion_blur")
-        prog = rt.program(src, "motion_blur", self.defines(camera))
-        key = (id(prog), name)
-        if key not in self._kernels:
-            self._kernels[key] = cl.Kernel(prog, name)
-        return self._kernels[key]
+        src = library() + "\n" + kernel_source("motion_blur")
+        return rt.kernel(src, name, self.defines(camera), "motion_blur")
 
     def _buffers(self, rt, w, h):
-        key = (id(rt.context), w, h)
-        if key not in self._scratch:
-            tw, th = -(-w // TILE), -(-h // TILE)
-            self._scratch = {key: dict(hv=rt.empty((3, h, w)), iz=rt.empty((h, w)),
-                                       tile=rt.empty((3, th, tw)), nmax=rt.empty((2, th, tw)),
-                                       tmp=rt.empty((3, h, w)), tw=tw, th=th)}
-        return self._scratch[key]
+        tw, th = -(-w // TILE), -(-h // TILE)
+        return dict(hv=rt.scratch(self, "hv", (3, h, w)), iz=rt.scratch(self, "iz", (h, w)),
+                    tile=rt.scratch(self, "tile", (3, th, tw)), nmax=rt.scratch(self, "nmax", (2, th, tw)),
+                    tmp=rt.scratch(self, "tmp", (3, h, w)), tw=tw, th=th)
 
     def enqueue(self, rt, camera, frame, src, dst, aux):
         import pyopencl as cl
@@ -223,23 +214,23 @@ class MotionBlur(GatherStage):
             k = self._kernel(rt, camera, "motion_blur_prep")
             k.set_args(aux["velocity"], aux["depth"], b["hv"], b["iz"], np.int32(w), np.int32(h),
                        np.float32(shutter_fraction(camera) / 2.0))
-            events.append(cl.enqueue_nd_range_kernel(q, k, (w, h), None))
+            events.append(rt.launch(k, (w, h)))
             k = self._kernel(rt, camera, "motion_blur_tilemax")
             k.set_args(b["hv"], b["tile"], np.int32(w), np.int32(h), np.int32(tw), np.int32(th))
-            events.append(cl.enqueue_nd_range_kernel(q, k, (tw, th), None))
+            events.append(rt.launch(k, (tw, th)))
             k = self._kernel(rt, camera, "motion_blur_neighbormax")
             k.set_args(b["tile"], b["nmax"], np.int32(tw), np.int32(th))
-            events.append(cl.enqueue_nd_range_kernel(q, k, (tw, th), None))
+            events.append(rt.launch(k, (tw, th)))
             k = self._kernel(rt, camera, "motion_blur")
             k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], np.int32(w), np.int32(h),
                        np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(frame.index),
                        np.float32(1.0 / (self.samples + 1)))
-            events.append(cl.enqueue_nd_range_kernel(q, k, (w, h), None))
+            events.append(rt.launch(k, (w, h)))
         if rolling:
             k = self._kernel(rt, camera, "motion_blur_rolling")
             k.set_args(blur_dst if blur else src, dst, aux["velocity"], np.int32(w), np.int32(h),
                        np.float32(camera.readout_time_s * camera.frame_rate_fps))
-            events.append(cl.enqueue_nd_range_kernel(q, k, (w, h), None))
+            events.append(rt.launch(k, (w, h)))
         if not events:  # only reachable when forced past skip_reason (e.g. a test): copy through
             events.append(cl.enqueue_copy(q, dst, src))
         return events
@@ -261,21 +252,9 @@ class MotionBlur(GatherStage):
 
 # -- numpy reference ---------------------------------------------------------------------------
 
-def _mix32(x: np.ndarray) -> np.ndarray:
-    x = np.asarray(x, dtype=np.uint32)
-    with np.errstate(over="ignore"):
-        x = x ^ (x >> np.uint32(16))
-        x = x * np.uint32(0x7FEB352D)
-        x = x ^ (x >> np.uint32(15))
-        x = x * np.uint32(0x846CA68B)
-        x = x ^ (x >> np.uint32(16))
-    return x
-
-
 def jitter(seed: int, frame: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Per-pixel jitter j ∈ [−½, ½) — the kernel's ``motion_blur_jitter`` (float32)."""
-    inner = _mix32(np.uint32(frame) ^ _mix32(np.uint32(seed)))
-    h = _mix32(x.astype(np.uint32) ^ _mix32(y.astype(np.uint32) ^ inner))
+    h = rnd.hash4(seed, frame, np.asarray(x).astype(np.uint32), np.asarray(y).astype(np.uint32))
     return ((h >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0) - np.float32(0.5))
 
 

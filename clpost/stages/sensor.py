@@ -107,11 +107,6 @@ class Sensor(PointwiseStage):
         return (f"{camera.sensor_preset}: {e_sat:.0f} e⁻ at saturation (FW {p.full_well_e:g}, ISO {camera.iso:g}/"
                 f"{p.base_iso:g}), read noise {p.read_noise_e:g} e⁻, {p.bits} bit, black {p.black_level_dn}")
 
-    def source(self):
-        from ..runtime import kernel_source
-
-        return kernel_source("random") + kernel_source("sensor")
-
     def values(self, camera, frame):
         p, e_sat, white = sensor_scalars(camera)
         return (np.float32(e_sat), np.float32(p.full_well_e), np.float32(p.read_noise_e),
@@ -131,23 +126,8 @@ class Sensor(PointwiseStage):
         g_read = rnd.normal(h3, rnd.mix(h3 ^ np.uint32(0x5BD1E995)))
         e = np.where(mean > POISSON_EXACT_MAX,
                      np.maximum(np.round(mean + np.sqrt(mean) * g_shot), 0.0),
-                     _poisson_inversion(np.minimum(mean, POISSON_EXACT_MAX), u))
+                     rnd.poisson_inversion(np.minimum(mean, POISSON_EXACT_MAX), u))
         e = np.minimum(e, p.full_well_e) + p.read_noise_e * g_read
         dn = np.clip(np.round(p.black_level_dn + e * (white - p.black_level_dn) / e_sat), 0.0, white)
         return (dn - p.black_level_dn) / (white - p.black_level_dn)
 
-
-def _poisson_inversion(mean, u):
-    """Smallest n with u ≤ F(n; mean), the same sequential search as the kernel."""
-    n = np.zeros_like(mean)
-    prob = np.exp(-mean)
-    cdf = prob.copy()
-    active = u > cdf
-    k = 0
-    while active.any() and k < 128:
-        k += 1
-        prob = prob * mean / k
-        cdf = cdf + prob
-        n = np.where(active, k, n)
-        active &= u > cdf
-    return n

@@ -149,7 +149,6 @@ class Vignetting(PointwiseStage):
     name = "vignetting"
     order = 60.0
     params = VignettingParams
-    vector = True  # also defines <name>_apply16 (clpost.codegen.VECTOR_PIXELS)
     args = (("__global const float *", "ri"),)
 
     def __init__(self, quality: str = "final") -> None:

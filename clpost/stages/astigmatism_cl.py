@@ -1,0 +1,144 @@
+"""OpenCL side of the astigmatism stage: its program, buffers and launch sequence.
+
+Kept apart from :mod:`clpost.stages.astigmatism` (physics, tile planner and float64 oracle), as
+:mod:`clpost.stages.dof_cl` is from dof. Launch sequence: ``astigmatism_offsets`` (per-pixel focal
+offsets; once per camera and size) → ``astigmatism_pad`` (padded copy + per-pixel semi-axes) →
+``astigmatism_tiles`` (tile bounds and class lists) → ``astigmatism_reach`` → one read of the class
+counts (the stage's one sync) → per class: copy, one kernel per tap count, exact per-pixel.
+
+Everything that depends only on the camera's structure and the frame size — the program source
+with its tap table, the tile directions, the inner-tile mask and its ring, the focal-offset LUT —
+is built once per (tap count, size, principal point, LUT) through :meth:`Runtime.cached`, not per
+frame.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from . import _field as fld
+
+
+def _f(v: float) -> str:
+    """A float32 literal of ``v`` (exact round trip)."""
+    return f"{float(np.float32(v))!r}f"
+
+
+@lru_cache(maxsize=8)
+def program_source(classes: tuple[int, ...]) -> str:
+    """The astigmatism program for tap classes ``classes`` (4, 8, ..., N), generated so the kernels
+    cannot drift from their Python twins: kernels/common.cl, the stage's constants as
+    ``#define``s, the ``astigmatism_taps`` table, kernels/astigmatism.cl, and one gather kernel
+    ``astigmatism_t<n>`` per class below N (table offset: the classes before it).
+
+    The table (float32 literals, exact round trip) holds the Vogel spirals of every tap class one
+    after the other, a program-scope constant (from a buffer, PoCL's SLP pass packed the loads of
+    the work-item vectoriser into vector gathers; the explicit float16 loop reads them as
+    scalars)."""
+    from ..runtime import kernel_source
+    from .astigmatism import MAX_SEMI_PX, MIN_DEPTH_MM, MIN_SEMI_PX, Astigmatism
+
+    consts = {"ASTIGMATISM_MAX_SEMI": MAX_SEMI_PX, "ASTIGMATISM_MIN_SEMI": MIN_SEMI_PX,
+              "ASTIGMATISM_MIN_DEPTH_MM": MIN_DEPTH_MM, "ASTIGMATISM_EXACT_PX": Astigmatism.EXACT_PX,
+              "ASTIGMATISM_MIXED": Astigmatism.MIXED}
+    head = "".join(f"#define {k} {_f(v)}\n" for k, v in consts.items())
+    taps = np.concatenate([fld.vogel_disc(n) for n in classes]).ravel()
+    vals = ", ".join(f"{float(v)!r}f" for v in taps)
+    table = f"__constant float astigmatism_taps[{taps.size}] = {{{vals}}};\n"
+    offsets = np.concatenate([[0], np.cumsum(classes)])
+    kernels = "".join(f"__kernel void astigmatism_t{n}(ASTIGMATISM_GATHER_ARGS) "
+                      f"{{ ASTIGMATISM_GATHER_CALL({n}, {offsets[k]}); }}\n"
+                      for k, n in enumerate(classes[:-1]))
+    return kernel_source("common") + head + table + kernel_source("astigmatism") + kernels
+
+
+def _plan(stage, rt, camera, w, h, cx, cy, lut):
+    """Device buffers and host constants of one (tap count, size, principal point, LUT)."""
+    classes = tuple(stage.tap_classes())
+    ntx, nty = fld.tiles(w, h)
+    pw, ph = ntx * fld.TILE_W + 2 * fld.PAD, nty * fld.TILE_H + 2 * fld.PAD
+    nclass = len(classes) + 2
+    whole = (ntx * fld.TILE_W, nty * fld.TILE_H) == (w, h)
+    defines = {**stage.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole)}
+    source = program_source(classes)
+    sizes = (np.int32(w), np.int32(h), np.int32(pw), np.int32(ph))
+    geometry = (np.float32(cx), np.float32(cy), np.float32(fld.pitch_mm(camera, w)),
+                np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
+    return dict(
+        kernel=lambda name: rt.kernel(source, name, defines, "astigmatism"),
+        classes=classes, nclass=nclass, ntx=ntx, nty=nty, pw=pw, ph=ph, sizes=sizes, geometry=geometry,
+        ring=tuple(np.int32(e) for e in stage.ring(w, h)),
+        tiles_host=stage.tile_directions(w, h, cx, cy),
+        zeros=np.zeros(nclass, np.int32),
+        lut=rt.constant(lut),
+        inner=rt.constant(np.ascontiguousarray(stage.inner_tiles(w, h), np.int32), ("astigmatism_inner", w, h)),
+        pad=rt.scratch(stage, "pad", (3, ph, pw)), axes=rt.scratch(stage, "axes", (4, ph, pw)),
+        offs=rt.scratch(stage, "offs", (2, ph, pw)),
+        tmin=rt.scratch(stage, "tmin", (nty, ntx, 2)), reach=rt.scratch(stage, "reach", (nty, ntx), np.int32),
+        tiles=rt.scratch(stage, "tiles", (nty, ntx, 4)), counts=rt.scratch(stage, "counts", (nclass,), np.int32),
+        lists=rt.scratch(stage, "lists", (nclass, nty * ntx), np.int32),
+        offsets_done=False,
+    )
+
+
+def device_plan(stage, rt, camera, w, h) -> dict:
+    """The cached plan of :func:`_plan` for this camera and size (tests read its buffers)."""
+    cx, cy = fld.principal_point_px(camera, w, h)
+    lut = stage._lut(camera).astype(np.float32)
+    key = (stage.taps, w, h, cx, cy, lut.tobytes(), fld.pitch_mm(camera, w), fld.lut_range_mm(camera),
+           tuple(sorted(stage.defines(camera).items())))
+    return rt.cached(stage, "plan", key, lambda: _plan(stage, rt, camera, w, h, cx, cy, lut))
+
+
+def enqueue_astigmatism(stage, rt, camera, frame, src, dst, aux):
+    import pyopencl as cl
+
+    from .astigmatism import thin_lens
+
+    q = rt.queue
+    w, h = frame.width, frame.height
+    b = device_plan(stage, rt, camera, w, h)
+    kernel, ntx, nty, nclass = b["kernel"], b["ntx"], b["nty"], b["nclass"]
+    pw, ph = b["pw"], b["ph"]
+    aperture, v, f = thin_lens(camera)
+    events = [cl.enqueue_copy(q, b["tiles"], b["tiles_host"], is_blocking=False)]
+    if not b["offsets_done"]:
+        # the per-pixel focal offsets depend on the camera and frame size only: once, not per frame
+        events.append(rt.launch(kernel("astigmatism_offsets"), (pw // 16, ph), None,
+                                b["lut"], b["offs"], *b["sizes"], *b["geometry"]))
+        b["offsets_done"] = True
+    # 16 pixels of a padded row per work-item (pw is a multiple of 16)
+    events.append(rt.launch(kernel("astigmatism_pad"), (pw // 16, ph), None,
+                            src, aux["depth"], b["offs"], b["pad"], b["axes"], *b["sizes"], b["geometry"][2],
+                            np.float32(aperture), np.float32(v), np.float32(1.0 / f), *b["ring"]))
+    events.append(cl.enqueue_copy(q, b["counts"], b["zeros"], is_blocking=False))
+    events.append(rt.launch(kernel("astigmatism_tiles"), (ntx, nty), None,
+                            b["axes"], b["tiles"], b["tmin"], b["counts"], b["lists"], np.int32(w), np.int32(h),
+                            np.int32(ntx), np.int32(nty)))
+    # which tiles' gathers can skip the reach test (every weight of it is 1 there)
+    events.append(rt.launch(kernel("astigmatism_reach"), (ntx, nty), None,
+                            b["tiles"], b["tmin"], b["reach"], np.int32(ntx), np.int32(nty)))
+    # the tile lists' lengths set the launch sizes: a few ints read, the one sync of this stage
+    counts = np.empty(nclass, np.int32)
+    cl.enqueue_copy(q, counts, b["counts"], wait_for=[events[-1]], is_blocking=True)
+    args = (np.int32(ntx), np.int32(nty), np.int32(w), np.int32(h))
+    group = (fld.TILE_W // 16, fld.TILE_H)  # 16 pixels (a float16) per work-item
+    for c, n in enumerate(counts):
+        if n == 0:
+            continue
+        sub = (b["lists"], np.int32(c * ntx * nty))  # this class's row of the lists
+        if c == 0:
+            events.append(rt.launch(kernel("astigmatism_copy"), (int(n) * group[0], group[1]), group,
+                                    b["pad"], src, b["inner"], dst, *sub, *args))
+        elif c == nclass - 1:
+            events.append(rt.launch(kernel("astigmatism_exact"), (int(n) * fld.TILE_W, fld.TILE_H),
+                                    (fld.TILE_W, fld.TILE_H), b["pad"], src, b["inner"], b["axes"], dst, *sub,
+                                    *args, *b["geometry"][:2]))
+        else:
+            n_taps = b["classes"][c - 1]
+            # one kernel per tap count (compile-time loop; offsets n - 4 in the table)
+            name = "astigmatism" if n_taps == stage.taps else f"astigmatism_t{n_taps}"
+            events.append(rt.launch(kernel(name), (int(n) * group[0], group[1]), group,
+                                    b["pad"], src, b["inner"], b["reach"], b["axes"], dst, b["tiles"], *sub, *args))
+    return events
