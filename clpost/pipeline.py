@@ -136,7 +136,7 @@ class Pipeline:
         (default :meth:`camera_for`)."""
         if not isinstance(frame, Frame):
             raise InputError(f"Pipeline.run takes a clpost.Frame, not {type(frame).__name__}; wrap "
-                             "arrays with clpost.Frame(color=..., depth=...)")
+                             "arrays with clpost.Frame(color=...) (depth=, velocity= as the stages need)")
         cam = camera or self.camera_for(frame)
         planned = self._planned(frame, cam)
         key = (structure_key(cam), frame.size,
