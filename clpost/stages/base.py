@@ -7,6 +7,9 @@ A stage is one physical effect. Its module (``clpost/stages/<name>.py``) holds o
 - ``order`` — its place in the physical order of light through the camera (see
   :data:`clpost.stages.PHYSICAL_ORDER`);
 - ``reads`` — the Frame buffers it needs besides color (``"depth"``, ``"velocity"``);
+- ``requires`` — the stages whose output it takes as its input (grain and print work on the film
+  stage's densities; film and sensor on the exposure stage's normalised signal): the planner
+  refuses a plan that leaves one out while it would change the image;
 - ``skip_reason(camera, frame)`` — why it is an identity for this camera and frame, or None;
 - ``reference(camera, frame, color)`` — a readable float64 numpy implementation (the oracle);
 - its OpenCL implementation: a :class:`PointwiseStage` supplies an inline per-pixel function
@@ -49,6 +52,8 @@ class Stage(ABC):
     name: ClassVar[str]
     order: ClassVar[float]
     reads: ClassVar[tuple[str, ...]] = ()
+    requires: ClassVar[tuple[str, ...]] = ()
+    """Stages this one presupposes (their output is its input domain), by name."""
     kind: ClassVar[str] = "stage"
 
     def __init__(self, quality: str = "final") -> None:

@@ -45,6 +45,7 @@ def log_exposure(camera, signal):
 class Film(PointwiseStage):
     name = "film"
     order = 80.0
+    requires = ("exposure",)
     args = (("__global const float *", "lut"), ("float", "log_offset"), ("float", "lo"),
             ("float", "inv_step"))
 

@@ -64,6 +64,7 @@ def print_params(camera) -> np.ndarray:
 class Print(PointwiseStage):
     name = "print"
     order = 95.0
+    requires = ("film",)
     args = (("__global const float *", "params"),)
 
     def skip_reason(self, camera, frame):
