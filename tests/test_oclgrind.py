@@ -8,8 +8,10 @@ odd sizes in a subprocess (Oclgrind interprets each work-item: about 50 s of CPU
 on its stderr fails this test with the case that caused it.
 
 Checks: ``OCLGRIND_DATA_RACES`` (races between work-items) and the always-on bounds checks of
-global, local, private and constant memory. Not ``OCLGRIND_UNINITIALIZED``: Oclgrind 21.10
-crashes (SIGSEGV inside the simulator) on the astigmatism and distortion programs with it.
+global, local, private and constant memory. Not ``OCLGRIND_UNINITIALIZED``: with it Oclgrind
+21.10 crashes (SIGSEGV inside the simulator) on most programs (dof, astigmatism, coma,
+lateral_color, motion_blur, distortion, grain's Boolean model, lens_trace, the fused pointwise
+kernels) and flags ibl_warp's accumulator, which ``enqueue_fill_buffer`` zeroes, as uninitialised.
 ``tools/oclgrind_compat.h`` works around Oclgrind 21.10's wrong integer min/max/clamp with scalar
 bounds (tested below).
 
