@@ -42,8 +42,10 @@ import numpy as np
 from .atomic import atomic_path
 from .camera import Camera
 from .frame import Frame
-from .pipeline import AUX_BUFFERS, Pipeline, resized_view
-from .stages import GatherStage, PointwiseStage, registry
+from .codegen import AUX_BUFFERS
+from .pipeline import Pipeline
+from .plan import resized_view
+from .stages import PointwiseStage, registry
 
 SCHEMA_VERSION = 1
 DEFAULT_SIZES = ((640, 360), (1280, 720), (1920, 1080), (3840, 2160))
@@ -176,21 +178,16 @@ def launch_bytes(stages, camera: Camera, frame: Frame, in_size: tuple[int, int],
 
 def launches(pipe: Pipeline, frame: Frame, cam: Camera) -> list[dict]:
     """The plan's kernel launches in order: name, stages, kind, input/output size, bytes, taps/px."""
-    planned = pipe._planned(frame, cam)
-    nodes = pipe._build_nodes(planned, cam, build=False)
-    size, out = frame.size, []
-    for node in nodes:
-        gather = bool(node.stages) and isinstance(node.stages[0], GatherStage)
-        out_size = node.stages[0].output_size(cam, frame) if gather else size
+    plan = pipe.plan_for(frame, cam)
+    out = []
+    for node, L in zip(plan.nodes, plan.launches):
         taps = None
-        if gather and hasattr(node.stages[0], "taps_per_pixel"):
+        if L.kind == "gather" and hasattr(node.stages[0], "taps_per_pixel"):
             taps = node.stages[0].taps_per_pixel(cam, frame)
-        out.append(dict(kernel=node.name, stages=[s.name for s in node.stages],
-                        kind="gather" if gather else ("pointwise" if node.stages else "convert"),
-                        in_size=list(size), out_size=list(out_size),
-                        bytes=launch_bytes(node.stages, cam, frame, size, out_size),
+        out.append(dict(kernel=L.name, stages=list(L.stages), kind=L.kind,
+                        in_size=list(L.in_size), out_size=list(L.out_size),
+                        bytes=launch_bytes(node.stages, cam, frame, L.in_size, L.out_size),
                         taps_per_pixel=taps))
-        size = out_size
     return out
 
 
@@ -259,13 +256,14 @@ def bench_case(scene: Scene, width: int, height: int, *, quality: str = "final",
         not_available[f"Camera.{f}"] = "field not in this build"
     plan = launches(pipe, frame, rcam)
     per: dict[str, list[float]] = {}
-    walls = []
+    walls, hosts = [], []
     for i in range(warmup + repeats):
         t0 = time.perf_counter()
         pipe.run(frame)
         wall = (time.perf_counter() - t0) * 1e3
         if i >= warmup:
             walls.append(wall)
+            hosts.append(pipe.last_plan.last_host_ms if pipe.last_plan else 0.0)
             for k, v in pipe.last_timings.items():
                 per.setdefault(k, []).append(v)
     med = {k: statistics.median(v) for k, v in per.items()}
@@ -280,13 +278,16 @@ def bench_case(scene: Scene, width: int, height: int, *, quality: str = "final",
                                          if L["taps_per_pixel"] and ms > 0 else None)))
     device_ms = sum(k["ms"] for k in kernels)
     wall_ms = statistics.median(walls)
+    # one read + write pass of the frame's colour at the copy kernel's bandwidth: the unit that
+    # makes timings comparable across machines (a plan "costs N copy passes")
+    copy_ms = 2 * width * height * BYTES_PER_PIXEL["color"] / (copy * 1e9) * 1e3
     numpy_ms = None
     if plan and width * height <= numpy_max_pixels:
         t0 = time.perf_counter()
         pipe.reference(frame)
         numpy_ms = (time.perf_counter() - t0) * 1e3
     cv2_ms = kernel_ms = None
-    dist = next((s for s in pipe._planned(frame, rcam) if s.name == "distortion"), None)
+    dist = next((s for s in pipe.plan_for(frame, rcam).stages if s.name == "distortion"), None)
     if dist is not None:
         cv2_ms = cv2_remap_ms(dist, rcam, frame, max(3, repeats // 2))
         kernel_ms = med.get("distortion")
@@ -296,6 +297,8 @@ def bench_case(scene: Scene, width: int, height: int, *, quality: str = "final",
         plan=[s for k in kernels for s in k["stages"]], not_available=not_available,
         kernels=kernels, copy_kernel_gbps=copy,
         device_ms=device_ms, device_fps=1000.0 / device_ms if device_ms else None,
+        copy_pass_ms=copy_ms, copy_passes=device_ms / copy_ms if copy_ms else None,
+        host_ms=statistics.median(hosts) if hosts else None,
         upload_ms=med.get("upload", 0.0), download_ms=med.get("download", 0.0),
         wall_ms=wall_ms, wall_fps=1000.0 / wall_ms,
         numpy_ms=numpy_ms, speedup_vs_numpy=numpy_ms / wall_ms if numpy_ms else None,
@@ -359,7 +362,8 @@ def format_table(doc: dict) -> str:
         for k in r["kernels"]:
             out.append(f"  {k['kernel'][:34]:<34} {k['ms']:8.2f} {k['bytes'] / 1e6:7.1f} {k['gbps']:6.1f} "
                        f"{k['percent_of_copy']:5.0f}% {_f(k['gtaps_per_s'], '8.2f'):>8}")
-        line = (f"  device {r['device_ms']:.2f} ms ({_f(r['device_fps'], '.1f')} fps); with transfers "
+        line = (f"  device {r['device_ms']:.2f} ms ({_f(r['device_fps'], '.1f')} fps, "
+                f"{_f(r.get('copy_passes'), '.1f')} copy passes); host {_f(r.get('host_ms'), '.2f')} ms; with transfers "
                 f"{r['wall_ms']:.2f} ms ({r['wall_fps']:.1f} fps); numpy {_f(r['numpy_ms'], '.0f')} ms "
                 f"(×{_f(r['speedup_vs_numpy'], '.1f')})")
         if r["cv2_remap_ms"] is not None:

@@ -34,23 +34,14 @@ Image aspect: the image spans the full sensor **width**; the pixel pitch is
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, Mapping
 
 from .errors import InputError
-
-METERING_MODES = ("average", "centre", "spot")
-
-
-def _finite(name: str, value: Any, unit: str, fix: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"Camera.{name}={value!r} is not a number ({unit}); {fix}") from None
-    if not math.isfinite(v):
-        raise InputError(f"Camera.{name}={value!r} must be finite ({unit}); {fix}")
-    return v
+from .params import (META_KEY, ParamSpec, in_range, integer, one_of, param, parse_auto_or_fraction,
+                     parse_fraction, parse_wxh_mm, positive, show_auto, specs_of, to_float)
 
 
 def parse_lens(name: str) -> float:
@@ -79,222 +70,115 @@ def _lens_data_names() -> list[str]:
     return available_lenses()
 
 
+_LENS_DATA_FOUND: set[str] = set()  # names found once (get_lens keeps them for the process, too)
+
+
 def _is_lens_data(name: str) -> bool:
+    if name in _LENS_DATA_FOUND:  # a camera is validated per frame (the meter): no file system look-up
+        return True
     from .optics.prescription import lens_data_dir
 
-    return (lens_data_dir() / f"{name}.toml").is_file()
+    found = (lens_data_dir() / f"{name}.toml").is_file()
+    if found:
+        _LENS_DATA_FOUND.add(name)
+    return found
+
+
+def _check_lens(name: str, value: Any) -> str:
+    parse_lens(value)
+    return value
+
+
+def _check_sensor(name: str, value: Any) -> tuple[float, float]:
+    try:
+        sw, sh = (float(s) for s in value)
+    except (TypeError, ValueError):
+        raise InputError(f"Camera.{name}={value!r} must be (width, height) in mm, e.g. (36, 24)") from None
+    if not (math.isfinite(sw) and math.isfinite(sh) and sw > 0 and sh > 0):
+        raise InputError(f"Camera.{name}={value!r} must be two positive mm values, e.g. (36, 24)")
+    return sw, sh
 
 
 @dataclass(frozen=True)
-class Camera:
-    """A physical camera. All fields carry their unit in the name or docstring.
+class CoreParams:
+    """The camera's own parameters, read by several stages (lens, aperture, focus, shutter, sensor)."""
 
-    ``f_number`` or ``shutter_s`` may be ``None``: the missing one is chosen per frame by the
-    reflected-light meter (aperture priority when ``shutter_s`` is None, shutter priority when
-    ``f_number`` is None), see :mod:`clpost.metering`. With both given the camera is manual.
-    """
+    lens: str = param("thin:50", unit="lens name", flag="--lens", check=_check_lens, header="clpost.lens",
+                      scalar=False, help="lens name: thin:<focal mm> (e.g. thin:50) or a lens_data name "
+                                         "(`clpost lens list`)")
+    f_number: float | None = param(
+        2.0, unit="f-number N = f/D", flag="--f-number", parse=parse_auto_or_fraction, header="clpost.fNumber",
+        show=show_auto, scalar=True, help="f-number N, or 'auto' (shutter priority)",
+        check=positive("f-number N = f/D", "e.g. 2.8", optional=True,
+                       message="Camera.{name}={value!r} must be > 0 (f/0.7 … f/64 are typical)"))
+    focus_distance_m: float = param(
+        3.0, unit="m", flag="--focus", parse=parse_fraction, header="clpost.focusDistance_m", scalar=True,
+        check=lambda name, v: to_float(name, v, "m", "use inf for infinity focus"),
+        help="focus distance in metres ('inf' for infinity; from the film plane for a lens_data lens)")
+    shutter_s: float | None = param(
+        1 / 50, unit="seconds", flag="--shutter", parse=parse_auto_or_fraction, header="clpost.shutter_s",
+        show=show_auto, scalar=True, cli_default="1/50",
+        check=positive("seconds", "e.g. 0.02 for 1/50 s", optional=True),
+        help="shutter time in seconds (1/50 works), or 'auto' (aperture priority)")
+    iso: float = param(100.0, unit="ISO 12232 speed S", flag="--iso", parse=parse_fraction, header="clpost.iso",
+                       scalar=True, help="ISO 12232 saturation-based speed",
+                       check=positive("ISO 12232 speed S", "e.g. 100",
+                                      message="Camera.{name}={value!r} must be > 0, e.g. 100"))
+    transmittance: float = param(0.9, unit="fraction", flag="--transmittance", parse=parse_fraction,
+                                 header="clpost.transmittance", scalar=True,
+                                 check=in_range(0.0, 1.0, "fraction", "0.9", lo_open=True),
+                                 help="lens transmittance T in (0, 1]: fraction of light the glass passes")
+    sensor_mm: tuple[float, float] = param((36.0, 24.0), unit="mm", flag="--sensor", parse=parse_wxh_mm,
+                                           header="clpost.sensor_mm", check=_check_sensor, scalar=False,
+                                           help="sensor WxH in mm (e.g. 36x24)")
+    luminance_scale: float = param(
+        1.0, unit="cd/m² per unit Y", flag="--luminance-scale", parse=parse_fraction,
+        header="clpost.luminanceScale", scalar=True, help="cd/m² of input luminance Y = 1",
+        check=positive("cd/m² per unit Y", "e.g. 100",
+                       message="Camera.{name}={value!r} must be > 0 cd/m² per unit Y"))
+    working_space: str = param("rec709", unit="RGB space", flag="--working-space", header="clpost.workingSpace",
+                               check=one_of("rec709", "acescg"), scalar=False,
+                               help="linear RGB working space of the input: rec709 or acescg")
+    noise_seed: int = param(0, unit="seed", flag="--noise-seed", parse=int, header="clpost.noiseSeed",
+                            check=integer(0, 2**32, rule="an integer in [0, 2**32)"), scalar=True,
+                            help="seed of the grain and sensor noise (with the frame index)")
 
-    lens: str = "thin:50"
-    f_number: float | None = 2.0
-    focus_distance_m: float = 3.0
-    shutter_s: float | None = 1 / 50
-    iso: float = 100.0
-    transmittance: float = 0.9
-    """T in (0, 1]: fraction of light the glass passes (a multi-coated lens ≈ 0.9)."""
-    sensor_mm: tuple[float, float] = (36.0, 24.0)
-    luminance_scale: float = 1.0
-    """cd/m² of input Y = 1 (maps a renderer's arbitrary units to photometric luminance)."""
-    blades: int = 0
-    """Aperture blades; 0 is a round aperture."""
-    blade_rotation_deg: float = 0.0
-    metering: str = "average"
-    exposure_compensation_ev: float = 0.0
-    distortion: Any = None
-    """distortion stage: a :class:`clpost.calibration.OpenCVModel` (OpenCV standard model, e.g.
-    from ``--calibration cam.yaml``); None = no distortion."""
-    vignetting: str = "off"
-    """vignetting stage: ``off``, ``natural`` (cos⁴θ of the thin lens), ``lens`` (the traced
-    relative-illumination curve of ``lens``) or ``table:<path>`` (manufacturer-style table)."""
-    # motion_blur stage: the frame rate turns px-per-frame velocities into a blur over the
-    # shutter (fraction shutter_s × fps); None (default) leaves motion blur unmodelled.
-    frame_rate_fps: float | None = None
-    """Frames per second of the sequence (e.g. 24); with ``shutter_s`` it gives the open fraction."""
-    readout_time_s: float = 0.0
-    """Rolling shutter: time from reading the top row to the bottom row (s); 0 = global shutter."""
-    # -- recording medium (stages film, grain, print, sensor) -----------------------------------
-    film: str | None = None
-    """Film stock name (``clpost.film_stock.stock_names()``) or stock .toml path; None: no film."""
-    film_output: str = "print"
-    """Negative film's output: 'print' (display-referred paper print), 'linear' (re-linearised
-    scene-linear), 'negative' (the developed densities themselves)."""
-    grain_scale: float = 1.0
-    """Multiplier on the stock's grain radius; 0 turns grain off (grain stage)."""
-    sensor_preset: str | None = None
-    """Digital sensor preset (``clpost.stages.sensor.SENSOR_PRESETS``); None: no sensor stage."""
-    noise_seed: int = 0
-    """Seed of the grain and sensor noise (with the frame index, CONVENTIONS "Randomness")."""
-    working_space: str = "rec709"
-    """Linear RGB working space of the input: 'rec709' (default) or 'acescg'."""
-    # -- dof stage (clpost/stages/dof.py); defaults keep the pinhole image (stage not planned) --
-    depth_of_field: bool = False
-    """dof: True renders the thin lens's defocus from the depth buffer; False keeps the pinhole."""
-    aperture_roundness: float = 0.0
-    """dof: 0 = straight blades (polygon), 1 = circle; corners stay on the f/N circle."""
-    spherical_aberration: float = 0.0
-    """dof: bokeh texture in [-1, 1]; > 0 undercorrected (near: bright rim, far: bright core)."""
-    optical_vignetting: float = 0.0
-    """dof: cat's-eye strength in [0, 1]: barrel-clip displacement in aperture radii at the corner."""
-    # astigmatism / coma / lateral_color stages: parametric third-order aberrations (mm on the
-    # film at the sensor's half diagonal) for a lens without a prescription. None (default) takes
-    # them from the traced lens (a lens_data lens) or leaves them out (thin lens: passthrough);
-    # a number replaces the traced curve (0 turns the effect off).
-    field_curvature_mm: float | None = None
-    """Mean of the sagittal and tangential focal offsets at the image corner (mm, + = behind the film)."""
-    astigmatism_mm: float | None = None
-    """Tangential minus sagittal focal offset at the image corner (mm)."""
-    coma_mm: float | None = None
-    """Length of the comet (tangential coma, 3C) at the image corner (mm; + = tail away from the centre)."""
-    lateral_color_mm: float | None = None
-    """Chief-ray height at F (486.1 nm) minus at C (656.3 nm) at the image corner (mm)."""
-    # distortion stage, traced lenses: without a calibration (``distortion``), a lens_data lens
-    # distorts by its traced curve (:func:`clpost.calibration.lens_distortion_model`).
-    lens_distortion: bool = True
-    """distortion: a lens_data lens without a calibration distorts by its traced curve; False = not."""
-
-    def __post_init__(self) -> None:
-        parse_lens(self.lens)
-        if self.f_number is None and self.shutter_s is None:
+    @staticmethod
+    def validate(camera, inputs) -> None:
+        if camera.f_number is None and camera.shutter_s is None:
             raise InputError(
                 "Camera: f_number and shutter_s are both unset; give one (--f-number or --shutter) "
                 "and the meter picks the other"
             )
-        if self.f_number is not None:
-            n = _finite("f_number", self.f_number, "f-number N = f/D", "e.g. 2.8")
-            if n <= 0:
-                raise InputError(f"Camera.f_number={self.f_number!r} must be > 0 (f/0.7 … f/64 are typical)")
-            object.__setattr__(self, "f_number", n)
-        if self.shutter_s is not None:
-            t = _finite("shutter_s", self.shutter_s, "seconds", "e.g. 0.02 for 1/50 s")
-            if t <= 0:
-                raise InputError(f"Camera.shutter_s={self.shutter_s!r} must be > 0 seconds, e.g. 0.02 for 1/50 s")
-            object.__setattr__(self, "shutter_s", t)
-        u = float(self.focus_distance_m)
-        if math.isnan(u) or u <= self.focal_length_mm / 1000.0:
+        u = camera.focus_distance_m
+        if math.isnan(u) or u <= camera.focal_length_mm / 1000.0:
             raise InputError(
-                f"Camera.focus_distance_m={self.focus_distance_m!r} must be beyond the focal length "
-                f"({self.focal_length_mm / 1000:g} m) — a real image needs u > f; use inf for infinity focus"
+                f"Camera.focus_distance_m={u!r} must be beyond the focal length "
+                f"({camera.focal_length_mm / 1000:g} m) — a real image needs u > f; use inf for infinity focus"
             )
-        object.__setattr__(self, "focus_distance_m", u)
-        iso = _finite("iso", self.iso, "ISO 12232 speed S", "e.g. 100")
-        if iso <= 0:
-            raise InputError(f"Camera.iso={self.iso!r} must be > 0, e.g. 100")
-        object.__setattr__(self, "iso", iso)
-        tr = _finite("transmittance", self.transmittance, "fraction", "e.g. 0.9")
-        if not 0 < tr <= 1:
-            raise InputError(f"Camera.transmittance={self.transmittance!r} must be in (0, 1], e.g. 0.9")
-        object.__setattr__(self, "transmittance", tr)
-        try:
-            sw, sh = (float(s) for s in self.sensor_mm)
-        except (TypeError, ValueError):
-            raise InputError(f"Camera.sensor_mm={self.sensor_mm!r} must be (width, height) in mm, e.g. (36, 24)") from None
-        if not (math.isfinite(sw) and math.isfinite(sh) and sw > 0 and sh > 0):
-            raise InputError(f"Camera.sensor_mm={self.sensor_mm!r} must be two positive mm values, e.g. (36, 24)")
-        object.__setattr__(self, "sensor_mm", (sw, sh))
-        ls = _finite("luminance_scale", self.luminance_scale, "cd/m² per unit Y", "e.g. 100")
-        if ls <= 0:
-            raise InputError(f"Camera.luminance_scale={self.luminance_scale!r} must be > 0 cd/m² per unit Y")
-        object.__setattr__(self, "luminance_scale", ls)
-        if int(self.blades) != self.blades or self.blades < 0 or self.blades in (1, 2):
-            raise InputError(f"Camera.blades={self.blades!r} must be 0 (round) or an integer >= 3")
-        object.__setattr__(self, "blades", int(self.blades))
-        _finite("blade_rotation_deg", self.blade_rotation_deg, "degrees", "e.g. 0")
-        if self.metering not in METERING_MODES:
-            raise InputError(f"Camera.metering={self.metering!r} must be one of {', '.join(METERING_MODES)}")
-        _finite("exposure_compensation_ev", self.exposure_compensation_ev, "EV", "e.g. +1 for one stop brighter")
-        # Real lenses (issue "real lenses"): clamp the f-number to the lens, check min focus.
-        lens = self.optics
+        # Real lenses: clamp the f-number to the lens, check min focus.
+        lens = camera.optics
         if lens is not None:
-            if self.f_number is not None:
-                object.__setattr__(self, "f_number", lens.clamp_f_number(self.f_number))
-            if self.focus_distance_m * 1000.0 < lens.min_focus_m * 1000.0 * (1 - 1e-12):
+            if camera.f_number is not None:
+                object.__setattr__(camera, "f_number", lens.clamp_f_number(camera.f_number))
+            if u * 1000.0 < lens.min_focus_m * 1000.0 * (1 - 1e-12):
                 raise InputError(
-                    f"Camera.focus_distance_m={self.focus_distance_m!r} is closer than {self.lens}'s minimum "
+                    f"Camera.focus_distance_m={u!r} is closer than {camera.lens}'s minimum "
                     f"focus distance {lens.min_focus_m:g} m (measured from the film plane); use >= {lens.min_focus_m:g}")
-        # distortion stage
-        if self.distortion is not None:
-            from .calibration import OpenCVModel
 
-            if not isinstance(self.distortion, OpenCVModel):
-                raise InputError(f"Camera.distortion must be a clpost.calibration.OpenCVModel or None, not "
-                                 f"{type(self.distortion).__name__}; load one with load_calibration('cam.yaml')")
-        # vignetting stage
-        v = self.vignetting
-        if not isinstance(v, str) or not (v in ("off", "natural", "lens") or (v.startswith("table:") and len(v) > 6)):
-            raise InputError(f"Camera.vignetting={v!r} must be 'off', 'natural', 'lens' or 'table:<path>'")
-        # motion_blur stage
-        if self.frame_rate_fps is not None:
-            fps = _finite("frame_rate_fps", self.frame_rate_fps, "frames per second", "e.g. 24")
-            if fps <= 0:
-                raise InputError(f"Camera.frame_rate_fps={self.frame_rate_fps!r} must be > 0 frames per second, e.g. 24")
-            object.__setattr__(self, "frame_rate_fps", fps)
-        ro = _finite("readout_time_s", self.readout_time_s, "seconds", "e.g. 0.01 for a 10 ms sensor readout")
-        if ro < 0:
-            raise InputError(f"Camera.readout_time_s={self.readout_time_s!r} must be >= 0 seconds (0 = global shutter)")
-        if ro > 0 and self.frame_rate_fps is None:
-            raise InputError("Camera.readout_time_s > 0 needs Camera.frame_rate_fps (--fps) to turn "
-                             "px-per-frame velocities into a per-row shift")
-        object.__setattr__(self, "readout_time_s", ro)
-        if (self.frame_rate_fps is not None and self.shutter_s is not None
-                and self.shutter_s * self.frame_rate_fps > 1.0 + 1e-9):
-            raise InputError(f"Camera.shutter_s={self.shutter_s:g} s is longer than one frame interval at "
-                             f"{self.frame_rate_fps:g} fps (a 360° shutter is {1 / self.frame_rate_fps:.4g} s); "
-                             "use a shorter --shutter or --shutter-angle <= 360")
+    @staticmethod
+    def extra_header(camera) -> dict[str, str]:
+        return {"clpost.focalLength_mm": f"{camera.focal_length_mm:g}"}
 
-        # film / grain / print / sensor stages: one recording medium per camera.
-        if self.film is not None and self.sensor_preset is not None:
-            raise InputError(f"Camera: film={self.film!r} and sensor_preset={self.sensor_preset!r} are both "
-                             "set; a camera records on one medium — give --film or --sensor-preset, not both")
-        if self.film is not None:
-            from .film_stock import load_stock
 
-            load_stock(self.film)
-        if self.film_output not in ("print", "linear", "negative"):
-            raise InputError(f"Camera.film_output={self.film_output!r} must be 'print', 'linear' or 'negative'")
-        gs = _finite("grain_scale", self.grain_scale, "× the stock's grain radius", "e.g. 1, or 0 for no grain")
-        if gs < 0:
-            raise InputError(f"Camera.grain_scale={self.grain_scale!r} must be >= 0 (0 turns grain off)")
-        object.__setattr__(self, "grain_scale", gs)
-        if self.sensor_preset is not None:
-            from .stages.sensor import SENSOR_PRESETS
+class _CameraBase:
+    """Derived quantities and the generated API of :class:`Camera` (fields: :meth:`param_specs`)."""
 
-            if self.sensor_preset not in SENSOR_PRESETS:
-                raise InputError(f"Camera.sensor_preset={self.sensor_preset!r} is unknown: use one of "
-                                 f"{', '.join(SENSOR_PRESETS)}")
-        if int(self.noise_seed) != self.noise_seed or not 0 <= int(self.noise_seed) < 2**32:
-            raise InputError(f"Camera.noise_seed={self.noise_seed!r} must be an integer in [0, 2**32)")
-        object.__setattr__(self, "noise_seed", int(self.noise_seed))
-        if self.working_space not in ("rec709", "acescg"):
-            raise InputError(f"Camera.working_space={self.working_space!r} must be 'rec709' or 'acescg'")
-        # dof stage fields
-        if not isinstance(self.depth_of_field, (bool, int)):
-            raise InputError(f"Camera.depth_of_field={self.depth_of_field!r} must be True or False")
-        object.__setattr__(self, "depth_of_field", bool(self.depth_of_field))
-        for name, lo, hi, eg in (("aperture_roundness", 0.0, 1.0, "0 (polygon) … 1 (circle)"),
-                                 ("spherical_aberration", -1.0, 1.0, "0.5 (undercorrected) or -0.5"),
-                                 ("optical_vignetting", 0.0, 1.0, "0.5 for visible cat's-eye bokeh")):
-            v = _finite(name, getattr(self, name), "unitless", f"e.g. {eg}")
-            if not lo <= v <= hi:
-                raise InputError(f"Camera.{name}={v!r} must be in [{lo:g}, {hi:g}], e.g. {eg}")
-            object.__setattr__(self, name, v)
-        # astigmatism / coma / lateral_color stages
-        for name in ("field_curvature_mm", "astigmatism_mm", "coma_mm", "lateral_color_mm"):
-            val = getattr(self, name)
-            if val is not None:
-                object.__setattr__(self, name, _finite(name, val, "mm on the film at the image corner",
-                                                       "e.g. 0.1, or 0 to turn the effect off"))
-        if not isinstance(self.lens_distortion, (bool, int)):
-            raise InputError(f"Camera.lens_distortion={self.lens_distortion!r} must be True or False")
-        object.__setattr__(self, "lens_distortion", bool(self.lens_distortion))
+    _param_groups: tuple = ()
+    _param_specs: tuple = ()
+    _field_checks: tuple = ()
+    _input_checks: tuple = ()
+    _validators: tuple = ()
 
     # -- derived quantities -------------------------------------------------------------------
     @property
@@ -385,38 +269,112 @@ class Camera:
         return replace(self, **changes)
 
     def describe(self) -> dict[str, str]:
-        """The parameters as strings (written into output EXR headers)."""
-        return {
-            "clpost.lens": self.lens,
-            "clpost.focalLength_mm": f"{self.focal_length_mm:g}",
-            "clpost.fNumber": "auto" if self.f_number is None else f"{self.f_number:g}",
-            "clpost.focusDistance_m": f"{self.focus_distance_m:g}",
-            "clpost.shutter_s": "auto" if self.shutter_s is None else f"{self.shutter_s:g}",
-            "clpost.iso": f"{self.iso:g}",
-            "clpost.transmittance": f"{self.transmittance:g}",
-            "clpost.sensor_mm": f"{self.sensor_mm[0]:g}x{self.sensor_mm[1]:g}",
-            "clpost.luminanceScale": f"{self.luminance_scale:g}",
-            "clpost.blades": str(self.blades),
-            "clpost.bladeRotation_deg": f"{self.blade_rotation_deg:g}",
-            "clpost.metering": self.metering,
-            "clpost.exposureCompensation_ev": f"{self.exposure_compensation_ev:g}",
-            # distortion / vignetting stages: recorded only when in use
-            **({"clpost.distortion": " ".join(f"{t:.9g}" for t in (
-                self.distortion.width, self.distortion.height, self.distortion.fx, self.distortion.fy,
-                self.distortion.cx, self.distortion.cy, *self.distortion.vector()))}
-               if self.distortion is not None else {}),
-            **({"clpost.vignetting": self.vignetting} if self.vignetting != "off" else {}),
-            "clpost.film": self.film or "none",
-            "clpost.filmOutput": self.film_output,
-            "clpost.grainScale": f"{self.grain_scale:g}",
-            "clpost.sensorPreset": self.sensor_preset or "none",
-            "clpost.noiseSeed": str(self.noise_seed),
-            "clpost.workingSpace": self.working_space,
-            "clpost.depthOfField": str(self.depth_of_field),
-            "clpost.apertureRoundness": f"{self.aperture_roundness:g}",
-            "clpost.sphericalAberration": f"{self.spherical_aberration:g}",
-            "clpost.opticalVignetting": f"{self.optical_vignetting:g}",
-            # astigmatism / coma / lateral_color stages: parametric coefficients when given
-            **{f"clpost.{k}": f"{getattr(self, k):g}" for k in
-               ("field_curvature_mm", "astigmatism_mm", "coma_mm", "lateral_color_mm") if getattr(self, k) is not None},
-        }
+        """The parameters as strings (written into output EXR headers), from each parameter's
+        ``header`` key; a value whose header text is None (unset / off) is omitted."""
+        out: dict[str, str] = {}
+        for pcls, specs in self._param_groups:
+            for s in specs:
+                if s.meta.header is not None and not s.meta.input_only:
+                    text = s.header_text(getattr(self, s.name))
+                    if text is not None:
+                        out[s.meta.header] = text
+            extra = getattr(pcls, "extra_header", None)
+            if extra is not None:
+                out.update(extra(self))
+        return out
+
+    @classmethod
+    def param_specs(cls) -> tuple[ParamSpec, ...]:
+        """Every parameter: name, owning stage (``"camera"`` for the core), default and metadata."""
+        return cls._param_specs
+
+    def structure_key(self) -> tuple:
+        """The structural parameters as a hashable ``((name, value), ...)``: the values that choose
+        programs, ``#define``s, stage tables and which stages exist; cache plans by it (with the
+        frame size and quality). What the scalars change is per-frame work (:meth:`scalars`)."""
+        return tuple((s.name, getattr(self, s.name)) for s in self._param_specs
+                     if not s.meta.scalar and not s.meta.input_only)
+
+    def scalars(self) -> dict[str, Any]:
+        """The per-frame scalar parameters by name (they may change without rebuilding a plan)."""
+        return {s.name: getattr(self, s.name) for s in self._param_specs if s.meta.scalar and not s.meta.input_only}
+
+    def params(self, owner: str | type):
+        """The params dataclass of a stage name (or ``"camera"``, or the class) filled from this camera."""
+        for pcls, specs in self._param_groups:
+            if owner is pcls or (specs and specs[0].owner == owner):
+                return pcls(**{s.name: getattr(self, s.name) for s in specs if not s.meta.input_only})
+        raise KeyError(f"no parameters declared by {owner!r}")
+
+    @classmethod
+    def from_options(cls, given: Mapping[str, Any], defaults: Mapping[str, Any] | None = None):
+        """A camera from options a user gave (``given``) over ``defaults`` (e.g. the demo's), also
+        checking each params class's ``check_options`` rules about the given names (the CLI's path)."""
+        cam = cls(**{**(defaults or {}), **given})
+        for pcls, _ in cls._param_groups:
+            hook = getattr(pcls, "check_options", None)
+            if hook is not None:
+                hook(cam, frozenset(given))
+        return cam
+
+
+def _post_init(self, *input_values) -> None:
+    """Validate every declared field (its ``check``), then each params class's ``validate`` rules."""
+    cls = type(self)
+    setattr_ = object.__setattr__
+    for name, check in cls._field_checks:
+        setattr_(self, name, check(name, getattr(self, name)))
+    inputs = {}
+    for (name, check), value in zip(cls._input_checks, input_values):
+        inputs[name] = check(name, value) if check is not None and value is not None else value
+    for hook in cls._validators:
+        hook(self, inputs)
+
+
+CAMERA_DOC = """A physical camera. All fields carry their unit in the name or their declaration.
+
+    ``f_number`` or ``shutter_s`` may be ``None``: the missing one is chosen per frame by the
+    reflected-light meter (aperture priority when ``shutter_s`` is None, shutter priority when
+    ``f_number`` is None), see :mod:`clpost.metering`. With both given the camera is manual.
+
+    The fields are the camera core's (:class:`CoreParams`) followed by each stage's declared
+    parameters in physical order (``Stage.params``, :mod:`clpost.params`);
+    :meth:`param_specs` lists them with their units and owners. Input-only parameters (e.g.
+    ``shutter_angle_deg``) are accepted by the constructor and turned into stored fields.
+    """
+
+
+def build_camera_class(stages: Mapping[str, type] | None = None, name: str = "Camera") -> type:
+    """The frozen dataclass composing :class:`CoreParams` and the ``params`` of ``stages``
+    (default: the stage registry, in physical order)."""
+    if stages is None:
+        from .stages import registry
+
+        stages = registry()
+    groups = [(CoreParams, tuple(specs_of("camera", CoreParams)))]
+    for stage_name, stage in stages.items():
+        pcls = getattr(stage, "params", None)
+        if pcls is not None:
+            groups.append((pcls, tuple(specs_of(stage_name, pcls))))
+    specs = tuple(s for _, group in groups for s in group)
+    seen: dict[str, str] = {}
+    for s in specs:
+        if s.name in seen:
+            raise TypeError(f"camera parameter {s.name!r} is declared by both {seen[s.name]} and {s.owner}")
+        seen[s.name] = s.owner
+    fields = [(s.name, dataclasses.InitVar[Any] if s.meta.input_only else s.type,
+               dataclasses.field(default=s.default, metadata={META_KEY: s.meta}))
+              for s in specs]
+    namespace = {"__post_init__": _post_init, "__doc__": CAMERA_DOC, "__module__": __name__, "__qualname__": name,
+                 "_param_groups": tuple(groups), "_param_specs": specs,
+                 # precomputed for __post_init__ (a camera is built per frame by the meter)
+                 "_field_checks": tuple((s.name, s.meta.check) for s in specs
+                                        if s.meta.check is not None and not s.meta.input_only),
+                 "_input_checks": tuple((s.name, s.meta.check) for s in specs if s.meta.input_only),
+                 "_validators": tuple(h for pcls, _ in groups if (h := getattr(pcls, "validate", None)) is not None)}
+    cls = dataclasses.make_dataclass(name, fields, bases=(_CameraBase,), namespace=namespace, frozen=True)
+    cls.__module__, cls.__qualname__ = __name__, name
+    return cls
+
+
+Camera = build_camera_class()

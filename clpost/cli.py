@@ -10,42 +10,15 @@ import json
 import sys
 from pathlib import Path
 
-from .camera import METERING_MODES, Camera
+from .camera import Camera
 from .exr import COMPRESSIONS
 from .errors import ClpostError, InputError
+from .params import parse_fraction, parse_wxh_mm
 from .stages import QUALITIES
 
 
-def _positive_float(text: str) -> float:
-    """A number, a fraction like ``1/50``, or ``inf``."""
-    try:
-        if "/" in text:
-            num, den = text.split("/", 1)
-            return float(num) / float(den)
-        return float(text)
-    except (ValueError, ZeroDivisionError):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number (e.g. 2.8, 1/50, inf)") from None
-
-
-def _auto_or_float(text: str):
-    return None if text.lower() == "auto" else _positive_float(text)
-
-
-def _on_off(text: str) -> bool:
-    t = text.lower()
-    if t in ("1", "on", "true", "yes"):
-        return True
-    if t in ("0", "off", "false", "no"):
-        return False
-    raise argparse.ArgumentTypeError(f"{text!r} is not on/off")
-
-
-def _sensor(text: str) -> tuple[float, float]:
-    try:
-        w, h = text.lower().split("x")
-        return float(w), float(h)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not WxH in mm (e.g. 36x24)") from None
+_positive_float = parse_fraction  # a number, a fraction like 1/50, or inf
+_sensor = parse_wxh_mm
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -59,85 +32,32 @@ def _size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT in pixels (e.g. 1280x720)") from None
 
 
-def _calibration(text: str):
-    """A calibration file → OpenCVModel (distortion stage); its errors become usage errors."""
-    from .calibration import load_calibration
-
-    try:
-        return load_calibration(text)
-    except InputError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-CAMERA_OPTIONS = {
-    # flag: (Camera field, type, help)
-    "--lens": ("lens", str, "lens name: thin:<focal mm> (e.g. thin:50)"),
-    "--f-number": ("f_number", _auto_or_float, "f-number N, or 'auto' (shutter priority)"),
-    "--focus": ("focus_distance_m", _positive_float, "focus distance in metres ('inf' for infinity)"),
-    "--shutter": ("shutter_s", _auto_or_float, "shutter time in seconds (1/50 works), or 'auto' (aperture priority)"),
-    "--iso": ("iso", _positive_float, "ISO 12232 saturation-based speed"),
-    "--transmittance": ("transmittance", _positive_float, "lens transmittance T in (0, 1]"),
-    "--sensor": ("sensor_mm", _sensor, "sensor WxH in mm (e.g. 36x24)"),
-    "--luminance-scale": ("luminance_scale", _positive_float, "cd/m² of input luminance Y = 1"),
-    "--blades": ("blades", int, "aperture blades (0 = round)"),
-    "--blade-rotation": ("blade_rotation_deg", _positive_float, "aperture blade rotation in degrees"),
-    "--metering": ("metering", str, f"metering pattern for auto-exposure: {', '.join(METERING_MODES)}"),
-    "--ev": ("exposure_compensation_ev", _positive_float, "exposure compensation in EV (+1 = one stop brighter)"),
-    "--calibration": ("distortion", _calibration, "camera calibration (OpenCV YAML/JSON, ROS camera_info, "
-                      "COLMAP cameras.txt[#ID]): renders its distortion (distortion stage)"),
-    "--vignetting": ("vignetting", str, "off, natural (cos^4), lens or table:<file> (vignetting stage)"),
-    # motion_blur stage
-    "--fps": ("frame_rate_fps", _positive_float, "frame rate of the sequence (enables motion blur: shutter × fps of a frame)"),
-    "--shutter-angle": ("shutter_angle_deg", _positive_float, "rotary shutter angle in degrees (needs --fps; sets the shutter: 180° at 24 fps = 1/48 s)"),
-    "--readout": ("readout_time_s", _positive_float, "rolling-shutter readout time top to bottom row in seconds (needs --fps)"),
-    # film / grain / print / sensor stages
-    "--film": ("film", str, "film stock: neutral-100, kodak-ektar-100, kodak-gold-200, fuji-superia-400, or a stock .toml"),
-    "--film-output": ("film_output", str, "negative film output: print (display-referred), linear (re-linearised), negative (densities)"),
-    "--grain-scale": ("grain_scale", float, "grain radius multiplier (0 = no grain)"),
-    "--sensor-preset": ("sensor_preset", str, "digital sensor: fullframe-cmos, apsc-cmos, smartphone, machine-vision"),
-    "--noise-seed": ("noise_seed", int, "seed of grain and sensor noise"),
-    "--working-space": ("working_space", str, "input working space: rec709 (default) or acescg"),
-    # dof stage
-    "--depth-of-field": ("depth_of_field", _on_off,
-                         "thin-lens defocus from the depth buffer: on/off (default off: pinhole)"),
-    "--roundness": ("aperture_roundness", float, "aperture blade roundness 0 (polygon) … 1 (circle)"),
-    "--spherical-aberration": ("spherical_aberration", float, "bokeh texture -1 … 1 (> 0: undercorrected)"),
-    "--cats-eye": ("optical_vignetting", float, "optical vignetting (cat's-eye bokeh) strength 0 … 1"),
-    # astigmatism / coma / lateral_color stages: parametric aberrations at the image corner (mm);
-    # default: the traced lens's (lens_data lenses) or none (thin lens)
-    "--field-curvature": ("field_curvature_mm", _positive_float, "mean sagittal/tangential focal offset at the image corner in mm (astigmatism stage)"),
-    "--astigmatism": ("astigmatism_mm", _positive_float, "tangential minus sagittal focal offset at the image corner in mm (astigmatism stage)"),
-    "--lens-distortion": ("lens_distortion", _on_off,
-                          "a lens_data lens without --calibration distorts by its traced curve: on (default)/off"),
-    "--coma": ("coma_mm", _positive_float, "comet length (tangential coma) at the image corner in mm (coma stage)"),
-    "--lateral-color": ("lateral_color_mm", _positive_float, "chief-ray height F minus C at the image corner in mm (lateral_color stage)"),
-}
+def camera_options(camera_cls=None, defaults=None) -> list[tuple[str, str, object, str]]:
+    """``(flag, Camera field, parser, help with the default)`` of every declared camera
+    parameter that has a flag (:meth:`clpost.camera.Camera.param_specs`); ``defaults`` replaces
+    Camera's own defaults in the help (the demo camera's)."""
+    out = []
+    for s in (camera_cls or Camera).param_specs():
+        if s.meta.flag is not None:
+            shown = s.help_default(*([defaults[s.name]] if defaults and s.name in defaults else []))
+            help_ = f"{s.meta.help} (default: {shown})".replace("%", "%%")
+            out.append((s.meta.flag, s.name, s.meta.parse or str, help_))
+    return out
 
 
-def _add_camera_options(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("camera (defaults: clpost.Camera's)")
-    for flag, (dest, typ, help_) in CAMERA_OPTIONS.items():
+def _add_camera_options(p: argparse.ArgumentParser, camera_cls=None, defaults=None) -> None:
+    g = p.add_argument_group("camera (defaults: the demo camera's)" if defaults
+                             else "camera (defaults: clpost.Camera's)")
+    for flag, dest, typ, help_ in camera_options(camera_cls, defaults):
         g.add_argument(flag, dest=f"cam_{dest}", type=typ, default=argparse.SUPPRESS, help=help_)
 
 
-def camera_from_args(args: argparse.Namespace, **defaults) -> Camera:
-    """Camera from the options given; ``defaults`` overrides Camera's own defaults (demo)."""
-    kw = dict(defaults)
+def camera_from_args(args: argparse.Namespace, camera_cls=None, /, **defaults) -> Camera:
+    """Camera from the options given; ``defaults`` overrides Camera's own defaults (demo). The
+    rules about given options (e.g. --metering only in auto-exposure) are the declarations' own
+    (:meth:`clpost.camera.Camera.from_options`)."""
     given = {k[4:]: v for k, v in vars(args).items() if k.startswith("cam_")}
-    kw.update(given)
-    if "shutter_angle_deg" in kw:  # motion_blur: a shutter angle is a shutter time at a frame rate
-        from .stages.motion_blur import shutter_from_angle
-
-        angle = kw.pop("shutter_angle_deg")
-        if kw.get("frame_rate_fps") is None:
-            raise InputError("--shutter-angle needs --fps (the shutter time is angle / (360° × fps))")
-        kw["shutter_s"] = shutter_from_angle(angle, kw["frame_rate_fps"])
-    cam = Camera(**kw)
-    if not cam.is_auto_exposure and ({"metering", "exposure_compensation_ev"} & given.keys()):
-        # a silently ignored option is worse than an error: the meter only acts in auto-exposure
-        raise InputError("--metering/--ev act only in auto-exposure: add --shutter auto (aperture "
-                         "priority) or --f-number auto (shutter priority)")
-    return cam
+    return (camera_cls or Camera).from_options(given, defaults)
 
 
 def _add_pipeline_options(p: argparse.ArgumentParser) -> None:
@@ -199,7 +119,11 @@ def cmd_process(args) -> int:
         print(f"plan for {jobs[0].src} ({first.width}x{first.height}, quality {args.quality}):")
         for e in pipe.explain(first):
             print(f"  {e}")
-        print(f"kernels: {', '.join(pipe.kernels(first)) or '(none)'}")
+        plan = pipe.plan_for(first, cam)
+        print(f"kernels: {', '.join(plan.kernel_names) or '(none)'}")
+        if plan.output_size != plan.size:
+            print(f"output size: {plan.output_size[0]}x{plan.output_size[1]} (resampled by "
+                  f"{', '.join(L.name for L in plan.launches if L.out_size != L.in_size)})")
         if cam != camera:
             print(f"auto-exposure: f/{cam.f_number:.3g}, {cam.shutter_s:.4g} s")
         return 0
@@ -336,6 +260,13 @@ def cmd_bench(args) -> int:
     if unknown:
         raise InputError(f"--scenes: unknown scene(s) {', '.join(unknown)}; known: {', '.join(SCENES)}")
     qualities = args.qualities.split(",") if args.qualities else [args.quality]
+    if args.against:
+        from .bench_ab import compare, format_rows
+
+        rows = compare(args.against, scenes, args.sizes or list(DEFAULT_SIZES), qualities, device=args.device,
+                       repeats=args.repeats, warmup=args.warmup, log=lambda m: print(m, file=sys.stderr))
+        print(json.dumps(rows, indent=2) if args.json else format_rows(rows, args.against))
+        return 0
     # the demo scene uses the demo camera with the command line's camera options on top
     base = camera_from_args(args, **DEMO_CAMERA_DEFAULTS)
     doc = run(scenes, args.sizes or list(DEFAULT_SIZES), qualities, device=args.device,
@@ -368,6 +299,8 @@ def cmd_lens(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .demo import DEMO_CAMERA_DEFAULTS  # the demo and bench cameras' defaults, shown in their --help
+
     p = argparse.ArgumentParser(prog="clpost", description="A realistic camera for rendered images.")
     p.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     p.add_argument("--device", default=None,
@@ -391,7 +324,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(Lambers et al. 3.2; docs/geometry_distortion.md); image-based: the --lens "
                         "prescription as perspective projections per pupil sample (Heidrich et al.; "
                         "docs/image_based_lens.md)")
-    _add_camera_options(d)
+    _add_camera_options(d, defaults=DEMO_CAMERA_DEFAULTS)
     _add_pipeline_options(d)
     d.set_defaults(func=cmd_demo)
 
@@ -455,7 +388,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--cache", default=None, help="where the rendered demo frames are cached (EXR)")
     b.add_argument("--markdown", default=None,
                    help="also regenerate the generated section of this file (docs/benchmarks.md)")
-    _add_camera_options(b)
+    b.add_argument("--against", default=None, metavar="REV",
+                   help="also run git revision REV of clpost in this process, interleaved, and print "
+                        "per-kernel ms of both and new/old (run from a clpost checkout)")
+    _add_camera_options(b, defaults=DEMO_CAMERA_DEFAULTS)
     _add_pipeline_options(b)
     b.set_defaults(func=cmd_bench)
 

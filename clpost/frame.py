@@ -91,6 +91,7 @@ class Frame:
             _first_bad("depth", ~(depth > 0), "are <= 0 or -inf",
                        "depth is planar camera-space Z in metres (> 0); convert negative eye-space z or NDC depth first")
             object.__setattr__(self, "depth", depth)
+            self.depth_range  # noqa: B018 — computed with the validation scans, not per plan run
 
         if self.velocity is not None:
             vel = _as_float32("velocity", self.velocity)
@@ -116,6 +117,23 @@ class Frame:
             return int(self.metadata.get("frame_index", 0)) & 0xFFFFFFFF
         except (TypeError, ValueError):
             return 0
+
+    @property
+    def depth_range(self) -> tuple[float, float, bool] | None:
+        """(nearest depth, farthest finite depth, any +inf) in metres, or None without depth; the
+        farthest is ``inf`` when every pixel is sky. Computed once per depth buffer (the dof
+        stage's skip rule reads it every frame)."""
+        if self.depth is None:
+            return None
+        cached = self.__dict__.get("_depth_range")
+        if cached is not None and cached[0] is self.depth:
+            return cached[1]
+        d = self.depth
+        finite = np.isfinite(d)
+        far = float(d.max(where=finite, initial=0.0)) if finite.any() else float("inf")
+        rng = (float(d.min()), far, not bool(finite.all()))
+        object.__setattr__(self, "_depth_range", (d, rng))
+        return rng
 
     @property
     def height(self) -> int:

@@ -1,18 +1,15 @@
-"""Plan and run a chain of stages on frames: build kernels once, run many frames.
+"""A camera's chain of stages: resolve the camera per frame, decide what runs, run it.
 
-Plan time vs call time (after reikna): :meth:`Pipeline.plan` decides which stages change the
-image for this camera and frame (a stage that is an identity is not planned — "model only what the
-scene requires"); consecutive pointwise stages are fused into **one generated kernel** (one pass
-over memory); programs are built once per (stages, defines) and device buffers are allocated once
-per resolution, then reused for every frame. Per-frame scalars (exposure gain …) are kernel
-arguments, so changing them never rebuilds anything.
-
-Kernel code generation and device layouts: :mod:`clpost.codegen`.
+:class:`Pipeline` decides which stages change the image for this camera and frame (a stage that
+is an identity is not planned — "model only what the scene requires"; :meth:`Pipeline.explain`
+says why for each) and hands the frame to a :class:`~clpost.plan.Plan` — built once per camera
+structure, frame size and planned stages, then reused: per-frame scalars (auto-exposure, an
+animated focus) are kernel arguments, so they never rebuild anything. Kernel code generation and
+device layouts: :mod:`clpost.codegen`; plan time vs call time: :mod:`clpost.plan`.
 """
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -20,21 +17,10 @@ from .camera import Camera
 from .errors import InputError
 from .frame import Frame
 from . import metering
-from .codegen import AUX_BUFFERS, INTERLEAVED, PLANAR, fused_source, global_size
-from .stages import QUALITIES, GatherStage, PointwiseStage, Stage, registry
+from .plan import Buffers, Plan, PlanEntry, group_nodes, resized_view, structure_key
+from .stages import QUALITIES, Stage, registry
 
-
-
-@dataclass(frozen=True)
-class PlanEntry:
-    """One line of ``--explain``: a stage, whether it runs, and why."""
-
-    stage: str
-    planned: bool
-    reason: str
-
-    def __str__(self) -> str:
-        return f"{'+' if self.planned else '-'} {self.stage:<14} {self.reason}"
+__all__ = ["Buffers", "Pipeline", "Plan", "PlanEntry", "resized_view"]
 
 
 def _check_calibration_focal(cam: Camera) -> None:
@@ -50,18 +36,6 @@ def _check_calibration_focal(cam: Camera) -> None:
                       f"({cam.lens}, {cam.sensor_mm[0]:g} mm wide) gives {f_cam:.6g} px at "
                       f"{model.width} px: vignetting, dof and aberrations follow the camera; set "
                       "--lens/--sensor to match the calibration", stacklevel=3)
-
-
-def resized_view(frame: Frame, size: tuple[int, int], host: dict, by: str) -> Frame:
-    """The frame as stages after a resampling stage ``by`` see it: ``size`` (width, height), the
-    resampler's depth/velocity/alpha (``host``), and no host color (stages read color on the
-    device; a zero-stride placeholder keeps shapes right without allocating)."""
-    w, h = size
-    placeholder = np.broadcast_to(np.zeros((1, 1, 3), np.float32), (h, w, 3))
-    meta = dict(frame.metadata, resampled_by=by)
-    meta.pop("intrinsics", None)  # the render's pinhole intrinsics no longer describe these pixels
-    return frame.replace(color=placeholder, depth=host.get("depth"), velocity=host.get("velocity"),
-                         alpha=host.get("alpha"), metadata=meta, validate=False)
 
 
 def check_prerequisites(stages: list[Stage], entries: list[PlanEntry], selected: set[str] | None,
@@ -94,32 +68,6 @@ def check_prerequisites(stages: list[Stage], entries: list[PlanEntry], selected:
                          f"not selected; add the missing stage(s): --stages {','.join(fixed)}")
 
 
-@dataclass
-class _Node:
-    """One kernel launch of a plan: a fused pointwise group or a gather stage."""
-
-    stages: list[Stage]
-    src_layout: str
-    dst_layout: str
-    kernel: object = None
-
-    @property
-    def name(self) -> str:
-        return "__".join(s.name for s in self.stages) or f"convert_{self.src_layout}_to_{self.dst_layout}"
-
-
-@dataclass
-class _Buffers:
-    size: tuple[int, int]
-    color_in: object
-    color_out: object
-    planar: list = field(default_factory=list)
-    aux: dict = field(default_factory=dict)
-    args: dict = field(default_factory=dict)
-    uploaded: dict = field(default_factory=dict)
-    """(stage, arg) → the read-only host array last copied into its buffer (not copied again)."""
-
-
 class Pipeline:
     """A camera's chain of stages, planned per frame and run with OpenCL.
 
@@ -150,8 +98,9 @@ class Pipeline:
         self._already_applied = frozenset(already_applied)
         self._stages = [cls(quality) for cls in known.values()]
         self._runtime = None
-        self._nodes: dict[tuple, list[_Node]] = {}
-        self._buffers: _Buffers | None = None
+        self._plans: dict[tuple, Plan] = {}
+        self._buffers: Buffers | None = None
+        self.last_plan: Plan | None = None
         self.last_timings: dict[str, float] = {}
         """Device milliseconds of the last :meth:`run`, per kernel and for upload/download."""
 
@@ -210,193 +159,49 @@ class Pipeline:
         names = {e.stage for e in self.explain(frame, cam, reasons=False) if e.planned}
         return [s for s in self._stages if s.name in names]
 
+    def plan_for(self, frame: Frame, camera: Camera | None = None) -> Plan:
+        """The :class:`~clpost.plan.Plan` for this frame: built on first use, then reused for
+        every frame with the same camera structure, size and planned stages (per-frame scalars —
+        auto-exposure, an animated focus — do not make a new one). ``camera``: the resolved camera
+        (default :meth:`camera_for`)."""
+        if not isinstance(frame, Frame):
+            raise InputError(f"Pipeline.run takes a clpost.Frame, not {type(frame).__name__}; wrap "
+                             "arrays with clpost.Frame(color=..., depth=...)")
+        cam = camera or self.camera_for(frame)
+        planned = self._planned(frame, cam)
+        key = (structure_key(cam), frame.size,
+               tuple((s.name, tuple(sorted(s.defines(cam).items()))) for s in planned))
+        plan = self._plans.get(key)
+        if plan is None:
+            if len(self._plans) >= self.MAX_PLANS:  # a long run over many sizes: drop the oldest
+                self._plans.pop(next(iter(self._plans)))
+            bufs = self._buffers if self._buffers is not None and self._buffers.size == frame.size else None
+            plan = Plan(self.runtime, cam, frame, planned, self.quality, bufs)
+            self._plans[key] = plan
+        self._buffers = plan.buffers
+        return plan
+
+    MAX_PLANS = 16
+    """Plans kept per pipeline (each holds kernels and, per size, device buffers)."""
+
     def kernels(self, frame: Frame) -> list[str]:
         """The kernel launches of this frame's plan (fused groups joined by ``__``)."""
         cam = self.camera_for(frame)
-        return [n.name for n in self._build_nodes(self._planned(frame, cam), cam, build=False)]
-
-    def _build_nodes(self, planned: list[Stage], cam: Camera, build: bool = True) -> list[_Node]:
-        """Group the plan into kernel launches; build each fused group's program once.
-
-        Each group's program key is its stages plus *their* ``defines`` (structural
-        parameters), so a structural change of one stage rebuilds only its own group.
-        """
-        key = tuple((s.name, tuple(sorted(s.defines(cam).items()))) for s in planned)
-        if build and key in self._nodes:
-            return self._nodes[key]
-        groups: list[list[Stage]] = []
-        for s in planned:
-            if isinstance(s, PointwiseStage) and groups and groups[-1] and isinstance(groups[-1][0], PointwiseStage):
-                groups[-1].append(s)
-            else:
-                groups.append([s])
-        if groups and isinstance(groups[0][0], GatherStage):
-            groups.insert(0, [])
-        if groups and groups[-1] and isinstance(groups[-1][0], GatherStage):
-            groups.append([])
-        nodes = []
-        for i, g in enumerate(groups):
-            gather = bool(g) and isinstance(g[0], GatherStage)
-            src = PLANAR if gather or i > 0 else INTERLEAVED
-            dst = PLANAR if gather or i < len(groups) - 1 else INTERLEAVED
-            nodes.append(_Node(g, src, dst))
-        if build:
-            import pyopencl as cl
-
-            rt = self.runtime
-            for node in nodes:
-                if node.stages and isinstance(node.stages[0], GatherStage):
-                    continue
-                defines: dict = {}
-                for s in node.stages:
-                    defines.update(s.defines(cam))
-                kname, src = fused_source(node.stages, node.src_layout, node.dst_layout)
-                prog = rt.program(src, kname, defines)
-                node.kernel = cl.Kernel(prog, kname)
-            self._nodes[key] = nodes
-        return nodes
+        return [n.name for n in group_nodes(self._planned(frame, cam))]
 
     # -- running ------------------------------------------------------------------------------
-    def _buffers_for(self, w: int, h: int) -> _Buffers:
-        if self._buffers is None or self._buffers.size != (w, h):
-            rt = self.runtime
-            self._buffers = _Buffers((w, h), rt.empty((h, w, 3)), rt.empty((h, w, 3)))
-        return self._buffers
-
-    def _planar(self, bufs: _Buffers, k: int, size: tuple[int, int] | None = None):
-        if size is not None and size != bufs.size:
-            # a resampling gather (distortion) changed the size: later buffers at the new size
-            key = ("planar", size, k)
-            if key not in bufs.args:
-                bufs.args[key] = self.runtime.empty((3, size[1], size[0]))
-            return bufs.args[key]
-        while len(bufs.planar) <= k:
-            w, h = bufs.size
-            bufs.planar.append(self.runtime.empty((3, h, w)))
-        return bufs.planar[k]
-
-    def _color_out(self, bufs: _Buffers, size: tuple[int, int]):
-        if size == bufs.size:
-            return bufs.color_out
-        key = ("color_out", size)
-        if key not in bufs.args:
-            bufs.args[key] = self.runtime.empty((size[1], size[0], 3))
-        return bufs.args[key]
-
-    def _arg_values(self, stage: PointwiseStage, cam: Camera, frame: Frame, bufs: _Buffers) -> list:
-        import pyopencl as cl
-
-        vals = []
-        for (cl_type, arg), v in zip(stage.args, stage.values(cam, frame)):
-            if "*" in cl_type:
-                a = np.ascontiguousarray(v)
-                key = (stage.name, arg)
-                buf = bufs.args.get(key)
-                if buf is None or buf.size != max(a.nbytes, 4):
-                    buf = bufs.args[key] = self.runtime.empty(a.shape, a.dtype)
-                    bufs.uploaded.pop(key, None)
-                # a stage's static table (read-only, the same object) is uploaded once
-                if not (bufs.uploaded.get(key) is a and not a.flags.writeable):
-                    cl.enqueue_copy(self.runtime.queue, buf, a)
-                    bufs.uploaded[key] = a
-                vals.append(buf)
-            else:
-                vals.append(v)
-        return vals
-
     def run(self, frame: Frame) -> Frame:
         """Process one frame; returns a new Frame whose color is the camera's output
         (normalised sensor signal; later stages: the film/sensor's recorded values)."""
-        import pyopencl as cl
-
-        from .runtime import event_ms
-
-        cam = self.camera_for(frame)
-        planned = self._planned(frame, cam)
-        meta = dict(frame.metadata, camera=cam.describe(), plan=[s.name for s in planned])
-        self.last_timings = {}
-        if not planned:
-            return frame.replace(metadata=meta, validate=False)
-        nodes = self._build_nodes(planned, cam)
-        rt, q = self.runtime, self.runtime.queue
-        w, h = frame.width, frame.height
-        bufs = self._buffers_for(w, h)
-        events = [("upload", cl.enqueue_copy(q, bufs.color_in, frame.color, is_blocking=False))]
-        for name in AUX_BUFFERS:
-            if any(name in s.reads for s in planned):
-                host = getattr(frame, name)
-                buf = bufs.aux.get(name)
-                if buf is None:
-                    buf = bufs.aux[name] = rt.empty(host.shape)
-                events.append(("upload", cl.enqueue_copy(q, buf, host, is_blocking=False)))
-        src, planar_k = bufs.color_in, 0
-        size, host_out, aux = (w, h), {}, bufs.aux
-        view = frame  # the frame as the next stage sees it: resampling stages change its size
-        for k, node in enumerate(nodes):
-            gather = node.kernel is None
-            out_size = node.stages[0].output_size(cam, view) if gather else size
-            if node.dst_layout == INTERLEAVED:
-                dst = self._color_out(bufs, out_size)
-            else:
-                dst = self._planar(bufs, planar_k, out_size)
-                planar_k ^= 1
-            if gather:
-                stage = node.stages[0]
-                for ev in stage.enqueue(rt, cam, view, src, dst, aux):
-                    events.append((stage.name, ev))
-                host_out.update(stage.host_buffers(cam, view))
-                if out_size != size:
-                    view = resized_view(frame, out_size, host_out, stage.name)
-                    later = [s for n in nodes[k + 1:] for s in n.stages]
-                    aux, evs = self._upload_aux(bufs, view, later, out_size)
-                    events += evs
-                size = out_size
-            else:
-                w, h = size
-                args = [src, dst, np.int32(w), np.int32(h)]
-                args += [aux[b] for b in AUX_BUFFERS if any(b in s.reads for s in node.stages)]
-                for s in node.stages:
-                    args += self._arg_values(s, cam, view, bufs)
-                node.kernel.set_args(*args)
-                gsize = global_size(node.stages, node.src_layout, node.dst_layout, w, h)
-                events.append((node.name, cl.enqueue_nd_range_kernel(q, node.kernel, gsize, None)))
-            src = dst
-        w, h = size
-        out = np.empty((h, w, 3), np.float32)
-        events.append(("download", cl.enqueue_copy(q, out, self._color_out(bufs, size), is_blocking=True)))
-        for name, ev in events:
-            self.last_timings[name] = self.last_timings.get(name, 0.0) + event_ms(ev)
-        return frame.replace(color=out, metadata=meta, validate=False, **host_out)
+        cam = self.camera_for(frame) if isinstance(frame, Frame) else None
+        plan = self.plan_for(frame, cam)
+        self.last_plan = plan
+        try:
+            return plan.run(frame, cam)
+        finally:
+            self.last_timings = plan.last_timings
 
     def reference(self, frame: Frame) -> np.ndarray:
         """The same plan through each stage's float64 numpy reference; returns (H, W, 3) float64."""
         cam = self.camera_for(frame)
-        color = frame.color.astype(np.float64)
-        view, host = frame, {}
-        for s in self._planned(frame, cam):
-            color = s.reference(cam, view, color)
-            if color.shape[:2] != (view.height, view.width):
-                host.update(s.host_buffers(cam, view))
-                view = resized_view(frame, (color.shape[1], color.shape[0]), host, s.name)
-        return color
-
-    def _upload_aux(self, bufs: _Buffers, view: Frame, later: list[Stage], size: tuple[int, int]):
-        """Device depth/velocity at a resampled size for the stages after the resampling one."""
-        import pyopencl as cl
-
-        aux, events = {}, []
-        for name in AUX_BUFFERS:
-            readers = [s.name for s in later if name in s.reads]
-            if not readers:
-                continue
-            host = getattr(view, name)
-            if host is None:
-                raise InputError(f"stage '{readers[0]}' needs {name} after a resampling stage that "
-                                 f"provides none; leave one of them out with --stages")
-            key = ("aux", size, name)
-            if key not in bufs.args:
-                bufs.args[key] = self.runtime.empty(host.shape)
-            aux[name] = bufs.args[key]
-            events.append(("upload", cl.enqueue_copy(self.runtime.queue, aux[name],
-                                                     np.ascontiguousarray(host), is_blocking=False)))
-        return aux, events
+        return Plan(None, cam, frame, self._planned(frame, cam), self.quality, build=False).reference(frame, cam)

@@ -2,12 +2,14 @@
  *
  * map holds, for every output pixel i, the source position in the render (planar: x at map[i],
  * y at map[n + i], render pixel centres at integers). It is computed once per (camera, size) on
- * the host in float64 by the exact Newton inverse of the OpenCV model (clpost/calibration.py);
+ * the host in float64 by the exact Newton inverse of the OpenCV model (clpost/calibration/model.py);
  * a pixel with no preimage (outside the render, beyond the fold, no convergence) has x = -1e30
  * and gets color 0 (its alpha, written on the host, is 0).
  *
- * DISTORTION_FILTER 1: bilinear (4 taps, draft/preview), kernel `distortion`.
- * DISTORTION_FILTER 3: cubic B-spline interpolation (final): the B-spline coefficients of the
+ * Both filters live in one program (no define selects them); the quality picks the kernels.
+ * Draft/preview: bilinear (4 taps), kernels `distortion_tiles` and `distortion_rest` (`distortion`:
+ * the same per pixel over the whole map).
+ * Final: cubic B-spline interpolation: the B-spline coefficients of the
  * source (`distortion_fir_rows` then `_cols`: the prefilter of Unser 1999 as a separable FIR,
  * |k| <= DISTORTION_FIR_K) and 16 taps with B-spline weights (`distortion_bspline_tiles` on the
  * tiles whose taps fit a tile-uniform window, `distortion_table` elsewhere), clamped below at 0 so HDR edges cannot ring to negative values. Why not

@@ -1,5 +1,3 @@
-import os
-
 import numpy as np
 import pytest
 
@@ -22,3 +20,24 @@ def odd_frame(rng, w=37, h=23, scale=10.0, depth=True):
     color = (rng.random((h, w, 3)) * scale).astype(np.float32)
     d = rng.uniform(0.2, 50.0, (h, w)).astype(np.float32) if depth else None
     return Frame(color, depth=d)
+
+
+def assert_planned(pipe, frame, *stages):
+    """Assert that each of ``stages`` runs in ``pipe``'s plan for ``frame``.
+
+    Call it before comparing a kernel with its reference: a stage that is not planned is the
+    identity on both sides, so a regressed skip rule would otherwise pass every comparison.
+    The message lists the plan's reasons (as ``--explain`` prints them)."""
+    planned = [getattr(s, "name", s) for s in pipe.plan(frame)]
+    missing = [s for s in stages if s not in planned]
+    if missing:
+        why = "\n".join(str(e) for e in pipe.explain(frame))
+        raise AssertionError(f"stage(s) {missing} not planned for this camera and frame, so the "
+                             f"kernel-vs-reference comparison would compare two identities:\n{why}")
+    return planned
+
+
+def assert_stage_runs(stage, camera, frame):
+    """``assert_planned`` for a stage object whose ``reference`` a test calls directly."""
+    why = stage.skip_reason(camera, frame)
+    assert why is None, f"stage '{stage.name}' is skipped ({why}): the comparison would be vacuous"

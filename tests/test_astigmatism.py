@@ -9,7 +9,7 @@ from clpost import Camera, Frame, InputError, Pipeline
 from clpost.stages import _field as fld
 from clpost.stages import astigmatism as ast
 
-from conftest import odd_frame
+from conftest import assert_planned, odd_frame
 
 FLAGSHIP = "zeiss-planar-50-f1.4"
 
@@ -43,6 +43,7 @@ def test_kernel_matches_reference(rng, w, h, kw):
     depth[-1, -3:] = np.inf
     frame = Frame(frame.color, depth=depth)
     pipe = Pipeline(Camera(**kw), stages=["astigmatism"])
+    assert_planned(pipe, frame, "astigmatism")
     out = pipe.run(frame).color
     ref = pipe.reference(frame)
     err, where = _max_err(out, ref)
@@ -213,6 +214,7 @@ def test_tile_classes_copy_and_fewer_taps_match_the_reference(rng):
     *_, exact, taps = stage.tile_plan(cam, frame)
     assert len(set(np.unique(taps[~exact])) & {0, 4, 8, 16, 32}) >= 4, np.unique(taps)
     pipe = Pipeline(cam, stages=["astigmatism"], quality="final")
+    assert_planned(pipe, frame, "astigmatism")
     out = pipe.run(frame).color
     err, where = _max_err(out, pipe.reference(frame))
     assert err < 1e-3 * 10.0, where
@@ -277,6 +279,7 @@ def test_inner_tiles_read_the_source_and_the_pad_fills_only_the_ring(rng, fn, fc
         *_, exact, taps = stage.tile_plan(cam, frame)
         got = {"exact" if e else ("copy" if t == 0 else "gather") for e, t in zip(exact[inner], taps[inner])}
         assert kinds <= got, got
+        assert_planned(pipe, frame, "astigmatism")
         out, ref = pipe.run(frame).color, pipe.reference(frame)
         err = np.abs(out - ref) / np.maximum(np.abs(ref), 1.0)
         j = np.unravel_index(int(np.argmax(err)), err.shape)
@@ -298,6 +301,7 @@ def test_reach_test_is_skipped_only_where_every_reach_weight_is_one(rng):
     frame = Frame(odd_frame(rng, w=w, h=h, scale=10.0).color, depth=depth)
     stage = ast.Astigmatism("draft")
     pipe = Pipeline(cam, stages=["astigmatism"], quality="draft")
+    assert_planned(pipe, frame, "astigmatism")
     err, where = _max_err(pipe.run(frame).color, pipe.reference(frame))
     assert err < 1e-3 * 10.0, where
     rt = pipe.runtime
@@ -320,3 +324,16 @@ def test_reach_test_is_skipped_only_where_every_reach_weight_is_one(rng):
             need[ty, tx] = ps[win].min() + 0.5 < bs[ty, tx] - 1e-4 or pt[win].min() + 0.5 < bt[ty, tx] - 1e-4
     assert not np.any(need & (reach == 0)), np.argwhere(need & (reach == 0))
     assert 0.3 < (reach == 0).mean() and need.any() and reach.any()
+
+
+def test_dof_and_astigmatism_share_the_sharp_plane_of_a_traced_lens():
+    from clpost.stages.dof import coc_mm
+
+    cam = Camera(lens=FLAGSHIP, focus_distance_m=0.6)  # measured from the film plane
+    u = cam.focused_depth_m
+    assert 0.5 < u < 0.6  # the thin-lens conjugate lies in front of the film-plane distance
+    d, v, f = ast.thin_lens(cam)
+    z = np.array([0.48, u, 0.75])
+    np.testing.assert_allclose(np.abs(coc_mm(cam, z)), ast.axes_mm(0, 0, z, d, v, f)[2],
+                               rtol=1e-9, atol=1e-12)
+    assert Camera(focus_distance_m=2.0).focused_depth_m == 2.0  # thin lens: exactly the focus

@@ -3,6 +3,7 @@ section (no timing assertions: timings on a shared machine are not testable)."""
 import json
 
 import numpy as np
+import pytest
 
 from clpost import bench
 from clpost.camera import Camera
@@ -48,6 +49,7 @@ def test_scene_reports_missing_stages_and_fields():
     assert row["plan"] == ["exposure"]
 
 
+@pytest.mark.slow
 def test_json_schema_and_markdown(tmp_path, capsys):
     md = tmp_path / "benchmarks.md"
     md.write_text("# Benchmarks\n\nhand-written DoF section\n")
@@ -80,6 +82,7 @@ def test_json_schema_and_markdown(tmp_path, capsys):
     assert "| full |" not in text2
 
 
+@pytest.mark.slow
 def test_talk_rows():
     sc = bench.SCENES["no_defocus"]
     row = bench.bench_case(sc, 1280, 720, repeats=1, warmup=0, numpy_max_pixels=0,

@@ -114,6 +114,7 @@ def test_info_reports_ranges(tmp_path, capsys):
     assert d["layout"] == "blender"
 
 
+@pytest.mark.slow
 def test_bench_json(capsys, tmp_path):
     # the demo scene renders its frame once into --cache (EXR) and reads it back after
     assert run_cli("bench", "--sizes", "48x32", "--repeats", "2", "--scenes", "demo", "--cache",
@@ -124,6 +125,7 @@ def test_bench_json(capsys, tmp_path):
     assert "exposure" in row["plan"] and row["wall_ms"] > 0 and row["copy_kernel_gbps"] > 0
 
 
+@pytest.mark.slow
 def test_console_script_is_installed_and_errors_cleanly(tmp_path):
     exe = Path(sys.executable).with_name("clpost")
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "clpost.cli"]
@@ -148,6 +150,7 @@ def test_arnold_radial_depth_is_made_planar_with_the_camera(tmp_path, capsys):
     np.testing.assert_allclose(got.depth, planar, rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_demo_writes_exrs_and_visibly_exposed_pngs(tmp_path, capsys):
     from PIL import Image
 
@@ -183,3 +186,15 @@ def test_film_and_sensor_options_reach_the_camera(tmp_path, capsys):
     assert run_cli("process", src, "-o", tmp_path / "x.exr", "--film", "kodak-gold-200",
                    "--sensor-preset", "smartphone", *CAM_ARGS) == 2
     assert "one medium" in capsys.readouterr().err
+
+
+def test_meter_options_without_auto_exposure_are_an_error(tmp_path, capsys):
+    exr.write_frame(tmp_path / "a.exr", Frame(np.ones((4, 6, 3), np.float32)))
+    assert main(["process", str(tmp_path / "a.exr"), "-o", str(tmp_path / "b.exr"), "--ev", "2"]) == 2
+    assert "only in auto-exposure" in capsys.readouterr().err
+    assert main(["process", str(tmp_path / "a.exr"), "-o", str(tmp_path / "b.exr"), "--ev", "2",
+                 "--shutter", "auto", "--explain"]) == 0
+    with pytest.raises(SystemExit) as exc:
+        main(["demo", str(tmp_path / "d"), "--depth-of-field", "enabled"])
+    assert exc.value.code == 2
+    assert "is not on/off" in capsys.readouterr().err

@@ -7,7 +7,7 @@ from clpost import Camera, Frame, InputError, Pipeline
 from clpost.stages import _field as fld
 from clpost.stages import coma
 
-from conftest import odd_frame
+from conftest import assert_planned, assert_stage_runs, odd_frame
 
 FLAGSHIP = "zeiss-planar-50-f1.4"
 
@@ -32,6 +32,7 @@ def test_kernel_matches_reference(rng, w, h, kw):
     color[1, :4] = 0.0
     frame = Frame(color)
     pipe = Pipeline(Camera(**kw), stages=["coma"])
+    assert_planned(pipe, frame, "coma")
     out = pipe.run(frame).color
     ref = pipe.reference(frame)
     err = np.abs(out - ref) / np.maximum(np.abs(ref), 10.0)
@@ -147,6 +148,7 @@ def test_device_comet_is_recomputed_when_the_camera_changes(rng):
     for cam, f in ((Camera(coma_mm=0.9), frame), (Camera(coma_mm=-2.0), frame),
                    (Camera(coma_mm=-2.0), Frame(odd_frame(rng, w=45, h=67, scale=10.0).color))):
         pipe.camera = cam
+        assert_planned(pipe, f, "coma")
         out, ref = pipe.run(f).color, pipe.reference(f)
         assert np.abs(out - ref).max() < 2e-3 * np.abs(ref).max(), cam.coma_mm
 
@@ -185,6 +187,7 @@ def test_uniform_stencils_regroup_the_taps_exactly(rng, quality):
         assert uni.all() and const.all() if cam.coma_mm else uni.any() and not const[uni].any()
         color = rng.uniform(0.0, 10.0, (h, w, 3))
         color[5, 7] = 1e8
+        assert_stage_runs(st, cam, Frame(color.astype(np.float32)))
         ref = st.reference(cam, Frame(color.astype(np.float32)), color)
         mask = fld.per_pixel(uni, w, h)[..., None]
         got = np.where(mask, _apply_stencils(st, cam, color), ref)  # the window tiles are not stencils
@@ -232,6 +235,7 @@ def test_inner_tiles_read_the_source_and_the_pad_fills_only_the_ring(rng):
     pipe = Pipeline(cam, stages=["coma"])
     for scale in (1e4, 3.0):  # a bright frame first: stale values would show in the second
         frame = Frame(odd_frame(rng, w=w, h=h, scale=scale).color)
+        assert_planned(pipe, frame, "coma")
         out, ref = pipe.run(frame).color, pipe.reference(frame)
         err = np.abs(out - ref) / np.maximum(np.abs(ref), 1.0)
         j = np.unravel_index(int(np.argmax(err)), err.shape)

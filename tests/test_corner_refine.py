@@ -1,9 +1,7 @@
-"""tools/corner_refine.py: the saddle-fit corner refiner on analytically rendered corners of known
+"""clpost.calib_check.corner_refine: the saddle-fit corner refiner on analytically rendered corners of known
 sub-pixel position, against cv2.cornerSubPix on the same images; and the renderer's Gaussian
 board filter it relies on."""
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,8 +11,7 @@ from scipy.ndimage import gaussian_filter
 from scipy.optimize import approx_fprime, fsolve
 from scipy.special import erf
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
-import corner_refine as cr  # noqa: E402
+from clpost.calib_check import corner_refine as cr
 
 cv2 = pytest.importorskip("cv2")
 WARP = 0.6

@@ -3,6 +3,7 @@ calibration files, CLI, and the paper's checkerboard calibration (reduced)."""
 import math
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,7 @@ from clpost import Camera, Frame, InputError, Pipeline
 from clpost.calibration import (OpenCVModel, inverse_residual_px, load_calibration,
                                 required_render, undistort_newton)
 
-from conftest import odd_frame
+from conftest import assert_planned, odd_frame
 
 cv2 = pytest.importorskip("cv2")
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,6 +66,7 @@ def test_kernel_matches_reference_on_odd_sizes(rng, quality):
     spiky = smooth.replace(color=np.where(rng.random((23, 37, 1)) < 0.05, 1e8, smooth.color).astype(np.float32))
     pipe = Pipeline(Camera(distortion=m), quality=quality, stages=["distortion"])
     for frame, rel, absol in ((smooth, 1e-5, 1e-3), (spiky, 1e-5, 1e-7 * 16 * 1e8)):
+        assert_planned(pipe, frame, "distortion")
         out = pipe.run(frame)
         ref = pipe.reference(frame)
         err = np.abs(out.color - ref) - rel * np.abs(ref)
@@ -109,6 +111,7 @@ def test_tiny_sources_match_the_reference(rng, size, quality):
     m = OpenCVModel(w, h, 3.0, 3.0, (w - 1) / 2, (h - 1) / 2, k1=-0.2)
     frame = Frame(rng.uniform(0, 1, (h, w, 3)).astype(np.float32))
     pipe = Pipeline(Camera(distortion=m), quality=quality, stages=["distortion"])
+    assert_planned(pipe, frame, "distortion")
     out = pipe.run(frame)
     assert np.abs(out.color - pipe.reference(frame)).max() < 1e-5
 
@@ -152,6 +155,7 @@ def test_input_alpha_is_resampled_and_multiplied(rng):
     assert out.alpha[11, 5] == 0 and out.alpha[11, 30] == 1 and out.alpha.max() <= 1
 
 
+@pytest.mark.slow
 def test_renderer_principal_point_matches_a_crop_of_a_wider_centred_render():
     from clpost.render import DemoScene, PyVistaRenderer
 
@@ -232,6 +236,7 @@ def test_calibration_files(tmp_path):
         load_calibration(col)
 
 
+@pytest.mark.slow
 def test_cli_process_with_an_opencv_calibration(tmp_path):
     from clpost import exr
 
@@ -254,6 +259,7 @@ def test_cli_process_with_an_opencv_calibration(tmp_path):
     assert r.returncode == 2 and "not found" in r.stderr
 
 
+@pytest.mark.slow
 def test_checkerboards_calibrate_back_to_their_parameters():
     """The paper's verification on its hardest set (tangential, 17 views, 800×600; all three sets:
     tools/distortion_calibration.py, docs/distortion_calibration.md). The board is Gaussian
@@ -262,8 +268,7 @@ def test_checkerboards_calibrate_back_to_their_parameters():
     B-spline interpolation every parameter comes back within 1 % (the previous Keys a = −¾ filter,
     first-order, moved corners by 0.026 px RMS: k2 8.0 %, p2 6.7 % off). The stage's output and
     scipy's B-spline through the same map must agree on the corners too."""
-    sys.path.insert(0, str(ROOT / "tools"))
-    import distortion_calibration as dc
+    from clpost.calib_check import checkerboard as dc
 
     m = dc.parameter_sets((800, 600))["tangential"]
     raw, out = dc.render_views(m, 17)
@@ -297,7 +302,7 @@ def test_a_traced_lens_distorts_by_its_own_curve():
     import math
 
     from clpost.calibration import lens_distortion_model
-    from clpost.optics.curves import lens_curves
+    from clpost.optics import lens_curves
 
     cam = Camera(lens="zeiss-planar-50-f1.4", f_number=2.0, focus_distance_m=3.0)
     model = lens_distortion_model(cam, (960, 640))
@@ -353,6 +358,7 @@ def test_tile_lists_cover_the_image_and_both_kernels_match_the_reference(rng, qu
     covered = {tuple(t[:2]) for t in tiles} | {tuple(t) for t in rest}
     assert len(covered) == len(tiles) + len(rest) == (-(-w // TILE)) * (-(-h // TILE))
     pipe = Pipeline(Camera(distortion=m), quality=quality, stages=["distortion"])
+    assert_planned(pipe, frame, "distortion")
     out = pipe.run(frame).color
     ref = pipe.reference(frame)
     err = np.abs(out - ref) - 1e-5 * np.abs(ref)
@@ -367,6 +373,7 @@ def test_tile_lists_cover_the_image_and_both_kernels_match_the_reference(rng, qu
                              for t in mixed)
     # 1e8 highlights: weights computed in float32 per lane (vector tiles) vs the float64 table
     spiky = frame.replace(color=np.where(rng.random((h, w, 1)) < 0.05, 1e8, frame.color).astype(np.float32))
+    assert_planned(pipe, spiky, "distortion")
     out, ref = pipe.run(spiky).color, pipe.reference(spiky)
     err = np.abs(out - ref) - 1e-5 * np.abs(ref)
     j = np.unravel_index(int(np.argmax(err)), err.shape)
@@ -462,3 +469,21 @@ def test_prefilter_keeps_a_flat_field_flat_and_is_deterministic():
         got = _device_coefficients(planes)
         assert np.abs(got / v - 1).max() < 5e-7, v
         np.testing.assert_array_equal(got, _device_coefficients(planes))
+
+
+def test_a_one_pixel_frame_runs_through_a_traced_lens():
+    frame = Frame(np.ones((1, 1, 3), np.float32), depth=np.full((1, 1), 2.0, np.float32))
+    out = Pipeline(Camera(lens="zeiss-planar-50-f1.4")).run(frame)
+    assert np.isfinite(out.color).all()
+
+
+def test_a_calibration_that_disagrees_with_the_camera_is_named():
+    model = OpenCVModel(37, 23, 20.0, 20.0, 18.0, 11.0, k1=-0.1)
+    frame = Frame(np.ones((23, 37, 3), np.float32))
+    with pytest.warns(UserWarning, match="f_x = 20 px but the camera"):
+        Pipeline(Camera(distortion=model)).camera_for(frame)
+    fx = Camera().intrinsics(37, 23)[0]
+    agree = OpenCVModel(37, 23, fx, fx, 18.0, 11.0, k1=-0.1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        Pipeline(Camera(distortion=agree)).camera_for(frame)

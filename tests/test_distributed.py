@@ -10,6 +10,8 @@ from clpost.batch import FrameJob, process_sequence
 from clpost.cli import main
 from clpost.distributed import PipelineSpec, connect, process_sequence_dask
 
+pytestmark = pytest.mark.slow  # Dask clusters: integration runs
+
 CAM = Camera(f_number=2.8, shutter_s=1 / 60, iso=200, luminance_scale=50.0)
 N = 12
 

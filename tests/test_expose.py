@@ -109,6 +109,7 @@ def test_cli_shutter_angle_sets_shutter(tmp_path):
         camera_from_args(args)
 
 
+@pytest.mark.slow
 def test_subframe_reference_renders_and_blurs_the_mover():
     from clpost.render import DemoScene, PyVistaRenderer
     from clpost.render.motion import render_motion_blur_reference
@@ -133,6 +134,7 @@ def test_subframe_reference_renders_and_blurs_the_mover():
         r.close()
 
 
+@pytest.mark.slow
 def test_demo_writes_the_reference_and_refuses_it_without_a_frame_rate(tmp_path):
     rc = main(["demo", str(tmp_path / "d"), "--frames", "1", "--size", "48x32", "--fps", "24",
                "--shutter-angle", "180", "--reference-subframes", "2"])

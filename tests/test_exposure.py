@@ -7,8 +7,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from clpost import Camera, Frame, Pipeline
-from clpost.photometry import K_REFLECTED
+from clpost.photometry import K_REFLECTED, camera_bellows_factor
 from clpost.stages.exposure import exposure_gain
+
+from conftest import assert_planned
 
 
 def uniform(L, h=9, w=11):
@@ -49,6 +51,7 @@ def test_kernel_matches_reference_on_odd_size_random_and_adversarial(rng):
     c.reshape(-1)[: adversarial.size * 5] = np.tile(adversarial, 5)
     frame = Frame(c, depth=np.full((h, w), np.inf, np.float32))
     pipe = Pipeline(Camera(f_number=1.4, shutter_s=1 / 30, iso=800))
+    assert_planned(pipe, frame, "exposure")
     out = pipe.run(frame)
     ref = pipe.reference(frame)
     assert out.color.dtype == np.float32 and out.color.shape == (h, w, 3)
@@ -108,3 +111,13 @@ def test_skipped_exactly_when_identity():
     else:  # rounding left the gain a hair off 1: then it must be planned and exact
         assert pipe.plan(frame) == ["exposure"]
     assert Pipeline(Camera()).plan(frame) == ["exposure"]
+
+
+def test_working_f_number_uses_the_pupil_magnification():
+    thin = Camera(focus_distance_m=0.5)
+    assert camera_bellows_factor(thin) == pytest.approx(thin.image_distance_mm / thin.focal_length_mm)
+    tele = Camera(lens="telephoto-250", focus_distance_m=3.0)
+    p = tele.optics.paraxial.pupil_magnification
+    m = tele.image_distance_mm / tele.focal_length_mm - 1
+    assert p != pytest.approx(1.0, abs=0.05)
+    assert camera_bellows_factor(tele) == pytest.approx(1 + m / p, rel=1e-12)

@@ -11,6 +11,8 @@ from clpost.errors import InputError
 from clpost.film_stock import FilmStock, film_data_dir, load_stock, stock_names
 from clpost.stages.film import FILM_LUT_SIZE, lut_params
 
+from conftest import assert_planned
+
 DATASHEET = ["kodak-ektar-100", "kodak-gold-200", "fuji-superia-400"]
 
 
@@ -87,6 +89,7 @@ def test_kernel_matches_reference_odd_size_random_and_adversarial(rng, stock):
     c.reshape(-1)[: adversarial.size] = adversarial
     frame = Frame(c)
     pipe = Pipeline(_film_cam(stock))
+    assert_planned(pipe, frame, "exposure", "film")
     assert pipe.kernels(frame) == ["exposure__film"]
     out, ref = pipe.run(frame).color, pipe.reference(frame)
     assert out.dtype == np.float32 and np.isfinite(out).all()

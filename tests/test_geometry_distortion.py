@@ -84,6 +84,7 @@ def test_subdivision_is_crack_free_edges_shared_by_two_triangles():
     assert not bad, f"{len(bad)} edges without a partner, e.g. {bad[0]}"
 
 
+@pytest.mark.slow
 def test_end_to_end_ids_and_depth_match_the_exact_ray_cast():
     scene = DemoScene.default()
     w, h = 97, 65
@@ -120,6 +121,7 @@ def test_bad_scene_or_model_type():
         GeometryDistortionRenderer("scene", model())
 
 
+@pytest.mark.slow
 def test_cli_demo_geometry_distortion_writes_frames_and_refuses_without_calibration(tmp_path):
     import json
 

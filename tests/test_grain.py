@@ -9,6 +9,8 @@ from clpost.film_stock import load_stock
 from clpost.grain_model import grain_radius_um, pixel_covariance, rms_granularity
 from clpost.stages.grain import grain_radius_px
 
+from conftest import assert_planned
+
 STOCK = "kodak-gold-200"
 
 
@@ -50,6 +52,7 @@ def test_kernel_matches_reference_odd_size(rng, quality, r_px):
     d = load_stock(STOCK).d_min() + rng.uniform(-0.2, 2.5, (h, w, 3))
     frame = Frame(d.astype(np.float32), metadata={"frame_index": 5})
     pipe = Pipeline(cam_for_radius(r_px, w), quality=quality, stages=["grain"], already_applied=("film",))
+    assert_planned(pipe, frame, "grain")
     out, ref = pipe.run(frame).color, pipe.reference(frame)
     assert np.isfinite(out).all() and out.dtype == np.float32
     err = np.abs(out - ref)
@@ -132,3 +135,25 @@ def test_grain_off_and_plan():
     assert "grain" not in Pipeline(Camera(film=STOCK, grain_scale=0)).plan(f)
     pipe = Pipeline(Camera(film=STOCK))
     assert pipe.kernels(f) == ["exposure__film", "grain", "print"]
+
+
+def test_stages_after_a_resampling_stage_run_at_its_size():
+    """A traced lens distorts by default; film grain (a gather) after it used to be refused."""
+    from clpost.calibration import lens_distortion_model, required_render
+
+    cam = Camera(lens="zeiss-planar-50-f1.4", film="kodak-gold-200", f_number=2.0, shutter_s=1 / 100,
+                 luminance_scale=200.0)
+    cam = cam.with_(distortion=lens_distortion_model(cam, (48, 32)))
+    spec = required_render(cam.distortion)
+    rng = np.random.default_rng(3)
+    frame = Frame((rng.random((spec.height, spec.width, 3)) * 2).astype(np.float32),
+                  depth=np.full((spec.height, spec.width), 3.0, np.float32),
+                  metadata={"intrinsics": spec.intrinsics(), "frame_index": 7})
+    pipe = Pipeline(cam, stages=["distortion", "exposure", "film", "grain", "print"])
+    assert_planned(pipe, frame, "distortion", "exposure", "film", "grain", "print")
+    assert pipe.plan(frame) == ["distortion", "exposure", "film", "grain", "print"]
+    out = pipe.run(frame)
+    assert out.color.shape == (32, 48, 3) and out.depth.shape == (32, 48)
+    ref = pipe.reference(frame)
+    assert ref.shape == out.color.shape
+    np.testing.assert_allclose(out.color, ref, rtol=2e-3, atol=2e-3)

@@ -8,7 +8,7 @@ from clpost.optics.prescription import LAMBDA_C_NM, LAMBDA_D_NM, LAMBDA_F_NM
 from clpost.stages import _field as fld
 from clpost.stages import lateral_color as lc
 
-from conftest import odd_frame
+from conftest import assert_planned, odd_frame
 
 FLAGSHIP = "zeiss-planar-50-f1.4"
 
@@ -35,6 +35,7 @@ def test_not_planned_without_lateral_color_and_identity_when_skipped(rng):
 def test_kernel_matches_reference(rng, w, h, kw):
     frame = odd_frame(rng, w=w, h=h, scale=10.0)
     pipe = Pipeline(Camera(**kw), stages=["lateral_color"])
+    assert_planned(pipe, frame, "lateral_color")
     out = pipe.run(frame).color
     ref = pipe.reference(frame)
     err = np.abs(out - ref)

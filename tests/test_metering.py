@@ -82,3 +82,18 @@ def test_manual_camera_is_untouched():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert resolve(cam, scene()) is cam
+
+
+def test_shutter_priority_stays_in_the_lens_range_and_says_by_how_much():
+    frame = Frame(np.ones((8, 8, 3), np.float32))
+    cam = Camera(lens="zeiss-planar-50-f1.4", f_number=None, shutter_s=1 / 1000, luminance_scale=100.0)
+    with pytest.warns(UserWarning, match=r"f/1\.4.*EV off the meter"):
+        got = resolve(cam, frame)
+    assert got.f_number == pytest.approx(cam.optics.max_aperture)
+
+
+def test_metering_reads_luminance_in_the_working_space():
+    red = Frame(np.tile(np.array([1.0, 0.0, 0.0], np.float32), (4, 4, 1)))
+    y709 = metered_luminance(Camera(shutter_s=None, luminance_scale=1.0), red)
+    yaces = metered_luminance(Camera(shutter_s=None, luminance_scale=1.0, working_space="acescg"), red)
+    assert y709 == pytest.approx(0.2126, abs=1e-4) and yaces == pytest.approx(0.2722, abs=1e-3)

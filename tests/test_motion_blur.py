@@ -8,6 +8,8 @@ from clpost.errors import InputError
 from clpost.stages.motion_blur import (SAMPLES, TILE, MotionBlur, half_vectors, jitter,
                                        shutter_fraction, shutter_from_angle)
 
+from conftest import assert_planned
+
 CAM = Camera(frame_rate_fps=24.0, shutter_s=1 / 48)   # 180° shutter: fraction 0.5
 
 
@@ -18,6 +20,7 @@ def _run(cam, frame, quality="final"):
 
 def _compare(cam, frame, quality="final", tol=1e-5):
     pipe, out = _run(cam, frame, quality)
+    assert_planned(pipe, frame, "motion_blur")
     assert pipe.plan(frame) == ["motion_blur"]
     ref = pipe.reference(frame)
     assert out.dtype == np.float32 and np.isfinite(out).all()

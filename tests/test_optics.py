@@ -266,6 +266,7 @@ def test_curves_are_cached_and_exposed_on_the_camera():
     assert frac[0] == pytest.approx(1.0, abs=0.03) and frac[-1] < frac[0]  # cat's eye at the corner
 
 
+@pytest.mark.slow
 def test_cli_lens_list_info_json_and_plot(tmp_path, capsys):
     assert main(["lens", "list"]) == 0
     out = capsys.readouterr().out

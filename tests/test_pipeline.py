@@ -12,7 +12,7 @@ from clpost.runtime import kernels_dir
 from clpost.stages import GatherStage, PointwiseStage, registry
 from clpost.stages.exposure import Exposure, exposure_gain
 
-from conftest import odd_frame
+from conftest import assert_planned, odd_frame
 
 TESTS = Path(__file__).parent
 
@@ -30,11 +30,6 @@ def test_stage_names_match_kernel_files_functions_and_tests():
         else:
             assert re.search(rf"__kernel\s+void\s+{name}\s*\(", text), f"{src} must define __kernel {name}"
         assert (TESTS / f"test_{name}.py").is_file(), f"stage {name} needs tests/test_{name}.py"
-
-
-def test_registry_is_in_physical_order():
-    orders = [cls.order for cls in registry().values()]
-    assert orders == sorted(orders)
 
 
 def test_unknown_stage_and_quality_are_refused():
@@ -88,6 +83,7 @@ def test_consecutive_pointwise_stages_fuse_into_one_kernel(rng, monkeypatch):
     np.testing.assert_allclose(out.color, pipe.reference(frame), rtol=1e-6, atol=1e-6)
     # restricting to one stage gives that stage alone
     only = Pipeline(Camera(), stages=["tint"])
+    assert_planned(only, frame, "tint")
     np.testing.assert_allclose(only.run(frame).color, Tint().reference(None, frame, frame.color.astype(float)),
                                rtol=1e-6, atol=1e-6)
 
@@ -116,7 +112,7 @@ def test_auto_exposure_changes_only_scalars(rng):
     f1 = odd_frame(rng, scale=1.0)
     f2 = odd_frame(rng, scale=100.0)
     o1, o2 = pipe.run(f1), pipe.run(f2)
-    assert len(pipe._nodes) == 1
+    assert len(pipe._plans) == 1  # per-frame scalars: one plan, no rebuild
     # the meter brings both to the same mean exposure level
     assert o1.color.mean() == pytest.approx(o2.color.mean(), rel=0.05)
     assert exposure_gain(pipe.camera_for(f1)) == pytest.approx(100 * exposure_gain(pipe.camera_for(f2)), rel=0.1)
@@ -137,6 +133,7 @@ def test_half_float_input_runs(rng):
     c = (rng.random((23, 37, 3)) * 1000).astype(np.float16)
     frame = Frame(c, depth=np.full((23, 37), np.inf, np.float16))
     pipe = Pipeline(Camera())
+    assert_planned(pipe, frame, "exposure")
     np.testing.assert_allclose(pipe.run(frame).color, pipe.reference(frame), rtol=2e-7)
 
 
@@ -235,12 +232,13 @@ def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts):
     pipe = Pipeline(Camera(f_number=2.0, vignetting="natural"), stages=["vignetting", "exposure"])
     pipe.run(frame)
     cam = pipe.camera_for(frame)
-    stages = pipe._planned(frame, cam)
+    plan = pipe.plan_for(frame, cam)
+    stages = plan.stages
     assert vector_path(stages) and global_size(stages, *layouts, w, h) == ((w + 15) // 16, h)
-    rt, bufs = pipe.runtime, pipe._buffers_for(w, h)
+    rt, bufs = pipe.runtime, plan.buffers
     cl.enqueue_copy(rt.queue, bufs.color_in, np.ascontiguousarray(frame.color))
     defines = {k: v for s in stages for k, v in s.defines(cam).items()}
-    args = [np.int32(w), np.int32(h)] + [a for s in stages for a in pipe._arg_values(s, cam, frame, bufs)]
+    args = [np.int32(w), np.int32(h)] + [a for s in stages for a in plan.arg_values(s, cam, frame)]
     outs = []
     for vec, gsize in ((False, (w, h)), (True, ((w + 15) // 16, h))):
         name, src = fused_source(stages, *layouts, vector=vec)
@@ -279,4 +277,5 @@ def test_static_tables_are_uploaded_once_and_changed_ones_again(rng, monkeypatch
     copies.clear()
     second = pipe2.run(frame).color
     assert plane_bytes in copies and not np.array_equal(first, second)
+    assert_planned(pipe2, frame, "vignetting", "exposure")
     np.testing.assert_allclose(second, pipe2.reference(frame), rtol=2e-5)

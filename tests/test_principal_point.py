@@ -13,7 +13,7 @@ from clpost.stages.astigmatism import Astigmatism
 from clpost.stages.coma import Coma
 from clpost.stages.lateral_color import LateralColor
 
-from conftest import odd_frame
+from conftest import assert_planned, odd_frame
 
 W, H = 61, 41
 OFF = OpenCVModel(W, H, 80.0, 80.0, 12.0, 30.0)  # principal point far from the centre (30, 20)
@@ -54,6 +54,7 @@ def test_off_centre_kernels_match_their_references(rng, stage):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         pipe = Pipeline(cam, stages=[stage])
+        assert_planned(pipe, frame, stage)
         out = pipe.run(frame).color
         ref = pipe.reference(frame)
     err = np.abs(out - ref)

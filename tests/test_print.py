@@ -9,6 +9,8 @@ from clpost.film_stock import load_stock
 from clpost.photometry import K_REFLECTED
 from clpost.stages.print import PAPER_RANGE
 
+from conftest import assert_planned
+
 
 def _cam(stock, mode, **kw):
     return Camera(f_number=4.0, shutter_s=1 / 125, iso=kw.pop("iso", 100), luminance_scale=1.0, film=stock,
@@ -58,6 +60,7 @@ def test_kernel_matches_reference_odd_size(rng, mode):
     c = (10.0 ** rng.uniform(-6, 8, (23, 37, 3))).astype(np.float32)
     frame = Frame(c)
     pipe = Pipeline(cam)
+    assert_planned(pipe, frame, "exposure", "film", "print")
     assert pipe.kernels(frame) == ["exposure__film__print"]  # one fused pass
     out, ref = pipe.run(frame).color, pipe.reference(frame)
     rel = np.abs(out - ref) / ref

@@ -5,6 +5,8 @@ import pytest
 from clpost import Camera, Frame, Pipeline
 from clpost.stages.sensor import SENSOR_PRESETS
 
+from conftest import assert_planned
+
 
 def _cam(preset="smartphone", iso=400, **kw):
     return Camera(f_number=2.8, shutter_s=1 / 100, iso=iso, luminance_scale=1.0, sensor_preset=preset, **kw)
@@ -16,6 +18,7 @@ def test_kernel_matches_reference_odd_size(rng, preset):
     c[:8] = rng.uniform(0, 0.3, (8, 37, 3))  # low light: the exact-Poisson branch
     frame = Frame(c, metadata={"frame_index": 7})
     pipe = Pipeline(_cam(preset), stages=["sensor"], already_applied=("exposure",))
+    assert_planned(pipe, frame, "sensor")
     out, ref = pipe.run(frame).color, pipe.reference(frame)
     p = SENSOR_PRESETS[preset]
     step = 1.0 / ((1 << p.bits) - 1 - p.black_level_dn)

@@ -10,7 +10,7 @@ from clpost.calibration import OpenCVModel
 from clpost.stages import vignetting as vig
 from clpost.stages.vignetting import Vignetting
 
-from conftest import odd_frame
+from conftest import assert_planned, odd_frame
 
 DATA = __import__("pathlib").Path(__file__).parent / "data"
 
@@ -38,6 +38,7 @@ def test_kernel_matches_reference(rng, lens, w, h):
     cam = Camera(lens=lens, vignetting="natural")
     frame = odd_frame(rng, w=w, h=h, scale=1e4)
     pipe = Pipeline(cam)
+    assert_planned(pipe, frame, "vignetting", "exposure")
     assert pipe.kernels(frame) == ["vignetting__exposure"]
     out = pipe.run(frame).color
     ref = pipe.reference(frame)
@@ -62,6 +63,7 @@ def test_principal_point_of_the_calibration_is_the_centre(rng):
     m = OpenCVModel(37, 23, 30, 30, 10.0, 15.0)
     cam = Camera(lens="thin:12", vignetting="natural", distortion=m)
     frame = Frame(np.ones((23, 37, 3), np.float32))
+    assert_planned(Pipeline(cam, stages=["vignetting"]), frame, "vignetting")
     out = Pipeline(cam, stages=["vignetting"]).run(frame).color[..., 0]
     assert np.unravel_index(int(np.argmax(out)), out.shape) == (15, 10)
     np.testing.assert_allclose(out, Pipeline(cam, stages=["vignetting"]).reference(frame)[..., 0], rtol=2e-5)
@@ -72,6 +74,7 @@ def test_table_file_and_its_errors(tmp_path):
     ri = vig.relative_illumination(cam)
     assert ri(np.array(7.5)) == pytest.approx((0.980 + 0.925) / 2)
     frame = Frame(np.ones((23, 37, 3), np.float32))
+    assert_planned(Pipeline(cam, stages=["vignetting"]), frame, "vignetting")
     np.testing.assert_allclose(Pipeline(cam, stages=["vignetting"]).run(frame).color,
                                Pipeline(cam, stages=["vignetting"]).reference(frame), rtol=5e-5)  # LUT vs table kinks
     bad = tmp_path / "t.csv"

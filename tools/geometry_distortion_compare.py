@@ -1,6 +1,6 @@
 """Geometry pre-processing distortion vs the post-processing path (Lambers et al., Table 1 with
 measurements): error against the exact ray cast and cost, on the demo scene and on the
-checkerboard calibration test of tools/distortion_calibration.py.
+checkerboard calibration test of clpost.calib_check.checkerboard (tools/distortion_calibration.py).
 
     PYTHONPATH=. /tmp/venv/bin/python tools/geometry_distortion_compare.py --size 960x640 --views 9 \
         --png /tmp/renderlens_check
@@ -15,8 +15,6 @@ clipped at that white (display-referred: the demo's lamps are 250–1000× white
 from __future__ import annotations
 
 import argparse
-import importlib.util
-import sys
 import time
 from pathlib import Path
 
@@ -127,12 +125,10 @@ def demo_table(size, error_levels, png: Path | None) -> None:
 
 
 def calibration_table(size, n_views: int) -> None:
-    """tools/distortion_calibration.py's test with the geometry path in place of the stage."""
-    spec = importlib.util.spec_from_file_location("distortion_calibration",
-                                                  Path(__file__).with_name("distortion_calibration.py"))
-    dc = importlib.util.module_from_spec(spec)
-    sys.modules["distortion_calibration"] = dc
-    spec.loader.exec_module(dc)
+    """The checkerboard calibration check (:mod:`clpost.calib_check.checkerboard`) with the
+    geometry path in place of the stage."""
+    from clpost.calib_check import checkerboard as dc
+
     print(f"\n### checkerboard calibration, {size[0]}x{size[1]}, {n_views} views (cv2.calibrateCamera, k3 fixed)\n")
     print("| set | method | views found | RMS reproj. (px) | k1 rel. err | k2 rel. err | fx rel. err | cx abs err (px) |")
     print("|---|---|---|---|---|---|---|---|")

@@ -10,7 +10,7 @@ writes the images and 2× crops of a defocused region to ``--out``.
 render + warp over ``--repeats`` frames after one warm-up; the warp's device time from OpenCL
 profiling events) and the maximum ray-angle error, for the achromatic doublet on a 4×4 mm film at
 f/8 (one projection per pupil sample) and the bi-convex singlet on 12×8 mm (subdivided), the
-checker-plane scene of ``tools/kolb_trace.py``.
+checker-plane scene of :mod:`clpost.render.kolb_trace`.
 
 Usage::
 
@@ -96,8 +96,7 @@ def pupil(args) -> None:
 def fps(args) -> None:
     from clpost.render.pyvista_renderer import PyVistaRenderer
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from kolb_trace import planes_scene
+    from clpost.render.kolb_trace import planes_scene
 
     cases = (("thorlabs-ac254-050-a", (4.0, 4.0)), ("thorlabs-lb1471", (12.0, 8.0)))
     print(f"f/{args.f_number:g}, focus 3 m, {args.pupil_n}² pupil samples, threshold 0.05°, median of "

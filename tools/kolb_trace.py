@@ -1,225 +1,23 @@
-r"""Brute-force reference for the image-based lens model: a distribution ray tracer through the
-lens prescription (Kolb, Mitchell & Hanrahan, "A Realistic Camera Model for Computer Graphics",
-SIGGRAPH 1995), and the three-way comparison of docs/image_based_lens.md.
-
-For every film pixel, ``rays`` rays from random points of the pixel to uniform random points of
-a disc on the exit-pupil plane (1.3× the radius the axial point sees through, so no passing ray
-is missed) are traced through the lens (:func:`clpost.render.image_based_lens.trace_back`, the
-forward tracer on the mirrored prescription) and intersected with an analytic scene of textured
-planes. The film irradiance is the estimator of
-
-.. math:: E(x') = \int_{A} L(x', x'')\,\frac{\cos\theta'\cos\theta''}{\lVert x''-x'\rVert^2}\,dA(x''),
-
-divided by the same integral for the axial point with L = 1 — the normalisation of
-:func:`clpost.render.image_based_lens.render_image_based`, so the three images share one exposure:
-radiance × relative illumination.
-
-Scene: fronto-parallel checker planes at known depths (1.5 m, 3 m = focus, 7 m) in front of a
-backdrop at 25 m, lit only by the ambient term (no sun, no emitters) so the radiance is
-albedo × ambient × ½(1 + n_z) = albedo exactly — the same shading as the pyvista renderer's, so
-the renderer's pinhole images and the tracer see the same radiance.
-
-Usage::
+"""The three-way comparison of docs/image_based_lens.md: a Kolb-style distribution ray tracer
+(:mod:`clpost.render.kolb_trace`, the reference) against the image-based lens model and the
+post-process stages, on analytic checker planes.
 
     PYTHONPATH=. python tools/kolb_trace.py --lens thorlabs-lb1471 --size 192 128 --rays 256 --out /tmp/kolb
 
 prints the error table (RMS and 99th-percentile relative error against the traced image, in the
-regions away from the frame border) and writes PNGs of the three images and the error maps.
+regions away from the frame border) and writes PNGs of the images and the error maps.
 """
 from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from clpost.optics import get_lens  # noqa: E402
-from clpost.optics.trace import OK, trace_table  # noqa: E402
-from clpost.render.demo_scene import DemoScene, Material, Plane, RigidMotion, SceneObject, rotation  # noqa: E402
-from clpost.render.image_based_lens import lens_to_camera_m, mirrored_table, pixel_to_film, trace_back  # noqa: E402
-from clpost.render.pyvista_renderer import _albedo, _sky  # noqa: E402
-
-
-def planes_scene() -> DemoScene:
-    """Checker planes facing the camera (level, at 1 m height, looking along +y)."""
-    face = tuple(tuple(r) for r in rotation((1.0, 0.0, 0.0), math.pi / 2))  # local +z → world −y
-
-    def plane(name, x, y, z, half, a1, a2, scale):
-        return SceneObject(name, Plane(half), Material(albedo=a1, albedo2=a2, texture="checker", texture_scale_m=scale),
-                           RigidMotion(position_m=(x, y, z), base_rotation=face), casts_shadow=False)
-
-    objs = (
-        plane("near_1.5m", -0.22, 1.5, 1.0, 0.12, (0.9, 0.8, 0.2), (0.1, 0.1, 0.4), 0.02),
-        plane("focus_3m", 0.0, 3.0, 1.0, 0.5, (0.9, 0.9, 0.9), (0.05, 0.05, 0.05), 0.05),
-        plane("far_7m", 0.9, 7.0, 1.0, 0.6, (0.2, 0.7, 0.3), (0.8, 0.2, 0.2), 0.15),
-        plane("backdrop_25m", 0.0, 25.0, 1.0, 12.0, (0.6, 0.6, 0.7), (0.3, 0.3, 0.3), 0.8),
-    )
-    return DemoScene(objects=objs, camera_motion=RigidMotion.camera((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
-                     sun_irradiance=0.0, ambient=2.0, emitter_lighting=False)
-
-
-def radiance(scene: DemoScene, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
-    """Radiance (N×3) along world rays: the nearest plane's albedo under the ambient term, else
-    the sky (exactly the renderer's shading for this scene; planes only)."""
-    best = np.full(len(origin), np.inf)
-    out = _sky(direction, scene)
-    for k, obj in enumerate(scene.objects):
-        if not isinstance(obj.shape, Plane):
-            raise ValueError("kolb_trace shades planes only")
-        pose = scene.object_pose(k, 0)
-        rot, t = pose[:3, :3], pose[:3, 3]
-        o = (origin - t) @ rot
-        d = direction @ rot
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = -o[:, 2] / d[:, 2]
-        hit_local = o + s[:, None] * d
-        h = obj.shape.half_size_m
-        hit = (s > 0) & (s < best) & (np.abs(hit_local[:, 0]) <= h) & (np.abs(hit_local[:, 1]) <= h)
-        if not hit.any():
-            continue
-        best[hit] = s[hit]
-        n_world = rot[:, 2]
-        alb = _albedo(obj.material, hit_local[hit], np.zeros((int(hit.sum()), 3)))
-        out[hit] = alb * scene.ambient * 0.5 * (1.0 + n_world[2])
-    return out
-
-
-def kolb_image(lens_name: str, f_number: float, focus_m: float, sensor_mm, size, scene: DemoScene,
-               rays: int = 256, seed: int = 0, chunk: int = 200_000) -> np.ndarray:
-    """The traced image (H×W×3, radiance × relative illumination; module docstring)."""
-    lens = get_lens(lens_name)
-    pres = lens.focused(focus_m * 1000.0, f_number)
-    table, zf = mirrored_table(pres, lens.stop_radius_mm(f_number))
-    z_x, z_e = lens.paraxial.z_exit_pupil_mm, lens.paraxial.z_entrance_pupil_mm
-    lo, hi = 0.0, 4.0 * float(pres.surfaces[-1].semi_diameter_mm)
-    for _ in range(50):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if trace_back(table, zf, np.zeros((1, 2)), np.array([mid, 0, z_x]))[2][0] else (lo, mid)
-    radius = 1.3 * lo
-    area = math.pi * radius * radius
-    rng = np.random.default_rng(seed)
-    w, h = size
-    pose = scene.camera_pose(0)
-
-    def estimate(film_xy):
-        n = len(film_xy)
-        rr = radius * np.sqrt(rng.random(n))
-        ph = 2 * math.pi * rng.random(n)
-        pupil = np.stack([rr * np.cos(ph), rr * np.sin(ph), np.full(n, z_x)], -1)
-        ray = np.concatenate([pupil[:, :2] - film_xy, np.full((n, 1), z_x - zf)], 1)
-        d2 = np.einsum("ij,ij->i", ray, ray)
-        wgt = ray[:, 2] ** 2 / (d2 * d2) * area
-        out = np.zeros((n, 3))
-        # trace_back takes one pupil point; here every ray has its own (same mirrored frame)
-        o = np.concatenate([film_xy, np.zeros((n, 1))], 1)
-        pm = np.stack([pupil[:, 0], pupil[:, 1], zf - pupil[:, 2]], -1)
-        r = trace_table(table, o, pm - o, zf + 1.0)
-        ok = r.status == OK
-        q, d = r.pos[ok].copy(), r.dir[ok].copy()
-        q[:, 2] = zf - q[:, 2]
-        d[:, 2] = -d[:, 2]
-        oc = lens_to_camera_m(q, z_e)
-        dc = np.stack([d[:, 0], -d[:, 1], -d[:, 2]], -1)
-        ow = oc @ pose[:3, :3].T + pose[:3, 3]
-        dw = dc @ pose[:3, :3].T
-        out[ok] = radiance(scene, ow, dw) * wgt[ok, None]
-        return out
-
-    # axial normalisation for L = 1: the same integral at x' = 0, with many rays
-    n0 = 400_000
-    rr = radius * np.sqrt(rng.random(n0))
-    ph = 2 * math.pi * rng.random(n0)
-    target = np.stack([rr * np.cos(ph), rr * np.sin(ph), np.full(n0, zf - z_x)], -1)
-    r0 = trace_table(table, np.zeros((n0, 3)), target, zf + 1.0)
-    dz = z_x - zf
-    d2 = rr * rr + dz * dz
-    e0 = float(np.mean(np.where(r0.status == OK, dz * dz / (d2 * d2) * area, 0.0)))
-    jj, ii = np.mgrid[0:h, 0:w]
-    img = np.zeros((h * w, 3))
-    pix = np.stack([ii.ravel(), jj.ravel()], -1).astype(np.float64)
-    per = max(1, chunk // rays)
-    for s in range(0, len(pix), per):
-        blk = np.repeat(pix[s:s + per], rays, axis=0) + rng.random((len(pix[s:s + per]) * rays, 2)) - 0.5
-        fx, fy = pixel_to_film(blk[:, 0], blk[:, 1], size, sensor_mm[0])
-        est = estimate(np.stack([fx, fy], -1))
-        img[s:s + per] = est.reshape(-1, rays, 3).mean(1)
-    return (img / e0).reshape(h, w, 3)
-
-
-def fit_opencv(lens_name: str, f_number: float, focus_m: float, sensor_mm, size):
-    """The post-process path's distortion: OpenCV k1, k2, k3 fitted (least squares) to the lens's
-    traced distortion curve, in the pinhole render's normalised coordinates (r_n = r / v)."""
-    from clpost.calibration import OpenCVModel
-    from clpost.camera import Camera
-
-    cam = Camera(lens=lens_name, f_number=f_number, focus_distance_m=focus_m, sensor_mm=tuple(sensor_mm))
-    v = cam.image_distance_mm
-    curves = cam.lens_curves()
-    r = np.linspace(0.0, 0.5 * math.hypot(*sensor_mm), 64)
-    dist = curves.at("distortion_pct", r) / 100.0
-    rn = r / v
-    a = np.stack([rn ** 2, rn ** 4, rn ** 6], -1)
-    k = np.linalg.lstsq(a, dist, rcond=None)[0]
-    fx, fy, cx, cy = cam.intrinsics(*size)
-    return OpenCVModel(size[0], size[1], fx, fy, cx, cy, k1=k[0], k2=k[1], k3=k[2], source=f"{lens_name} traced curve")
-
-
-def post_image(lens_name, f_number, focus_m, sensor_mm, size, scene, device=None):
-    """The post-process path on the renderer's pinhole image (camera centre = entrance pupil):
-    stages dof + vignetting ('lens') + distortion (fitted), no exposure — radiance × RI."""
-    from clpost.camera import Camera
-    from clpost.pipeline import Pipeline
-    from clpost.render.pyvista_renderer import PyVistaRenderer
-
-    cam = Camera(lens=lens_name, f_number=f_number, focus_distance_m=focus_m, sensor_mm=tuple(sensor_mm),
-                 shutter_s=1 / 100, depth_of_field=True, vignetting="lens",
-                 distortion=fit_opencv(lens_name, f_number, focus_m, sensor_mm, size))
-    r = PyVistaRenderer(scene, supersample=3)
-    try:
-        frame = r.render(cam, size, 0)
-    finally:
-        r.close()
-    pipe = Pipeline(cam, stages=["dof", "vignetting", "distortion"], device=device)
-    t0 = time.perf_counter()
-    out = pipe.run(frame)
-    return np.asarray(out.color[..., :3], np.float64), [e for e in pipe.explain(frame)], time.perf_counter() - t0, frame
-
-
-def ibl_image(lens_name, f_number, focus_m, sensor_mm, size, scene, pupil_n=3, threshold_deg=0.05, max_depth=4,
-              device=None, supersample=2.0, pupil_pattern="grid"):
-    from clpost.render.image_based_lens import build, pyvista_render_fn, render_image_based
-    from clpost.render.pyvista_renderer import PyVistaRenderer
-
-    model = build(lens_name, focus_m, f_number, tuple(sensor_mm), pupil_n=pupil_n, threshold_deg=threshold_deg,
-                  max_depth=max_depth, pupil_pattern=pupil_pattern)
-    r = PyVistaRenderer(scene)
-    try:
-        t0 = time.perf_counter()
-        img, stats = render_image_based(model, size, pyvista_render_fn(r, 0), supersample=supersample, device=device)
-        stats["frame_s"] = time.perf_counter() - t0
-    finally:
-        r.close()
-    stats["max_angle_deg"] = model.max_angle_deg
-    stats["pupil_samples"] = len(model.pupil_samples_mm)
-    stats["preprocess_s"] = model.preprocess_s
-    return np.asarray(img, np.float64), stats
-
-
-def errors(img: np.ndarray, ref: np.ndarray, border: int) -> dict:
-    """Relative error |img − ref| / mean(ref) per pixel (luminance-like mean over RGB), away from
-    ``border`` pixels of the frame edge (the pinhole render has nothing outside the frame)."""
-    sl = (slice(border, -border), slice(border, -border))
-    e = np.abs(img[sl] - ref[sl]).mean(-1) / ref[sl].mean()
-    where = np.unravel_index(int(e.argmax()), e.shape)
-    return {"rms": float(np.sqrt(np.mean(e * e))), "p99": float(np.percentile(e, 99)), "max": float(e.max()),
-            "max_at": (int(where[1]) + border, int(where[0]) + border)}
-
+from clpost.render.kolb_trace import errors, ibl_image, kolb_image, planes_scene, post_image
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

@@ -7,6 +7,7 @@ lens from the camera, never by loading files yourself::
     lens = cam.optics                      # clpost.optics.Lens, or None for a thin lens
     if lens is not None:
         c = cam.lens_curves()              # LensCurves for (lens, focus, f-number), cached
+                                           # on the Lens: lens.curves(focus_m, f_number)
         c.at("distortion_pct", r_mm)       # % vs paraxial image height, 0 on axis
         c.at("relative_illumination", r_mm)  # in [0, 1], 1 on axis (natural + optical vignetting)
         c.at("sagittal_offset_mm", r_mm)   # focal offset along z, + = behind the film
@@ -22,8 +23,9 @@ lenses are measured from the film plane (thin lenses: from the principal plane).
 :func:`clpost.optics.trace.trace` (numpy) or :func:`clpost.optics.cltrace.trace_cl` (OpenCL,
 same results) on ``lens.focused(distance_mm, f_number)``.
 """
-from .lens import FNumberClampedWarning, FocusState, Lens, get_lens
+from .curves import LensCurves, compute_curves
+from .lens import FNumberClampedWarning, FocusState, Lens, get_lens, lens_curves
 from .prescription import Prescription, available_lenses, load_prescription, load_prescription_file
 
-__all__ = ["FNumberClampedWarning", "FocusState", "Lens", "Prescription", "available_lenses",
-           "get_lens", "load_prescription", "load_prescription_file"]
+__all__ = ["FNumberClampedWarning", "FocusState", "Lens", "LensCurves", "Prescription", "available_lenses",
+           "compute_curves", "get_lens", "lens_curves", "load_prescription", "load_prescription_file"]

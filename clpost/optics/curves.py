@@ -2,7 +2,8 @@ r"""Manufacturer-style lens curves derived by tracing the real prescription.
 
 Everything is a function of the image height r (mm on the film, 0 … ``image_height_max_mm``,
 default the 36×24 half diagonal 21.63 mm, or less where the lens's image circle ends) for one
-(lens, focus, f-number); :func:`lens_curves` caches them, since they change only when those do.
+(lens, focus, f-number); :meth:`clpost.optics.Lens.curves` caches them on the lens object, since
+they change only when those do (this module computes; it never looks a lens up by name).
 Field points are parametrised by the angle θ of the chief ray in object space, measured at the
 entrance pupil; for a finite focus the object point lies on the focused object plane.
 
@@ -43,7 +44,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 
@@ -286,12 +286,3 @@ def compute_curves(lens, focus_distance_m: float, f_number: float,
         sagittal_offset_mm=ro_(sag_off), tangential_offset_mm=ro_(tan_off),
         lateral_color_mm=ro_(lat), pupil_rho=ro_(rho), lsa_mm=ro_(lsa), sa_transverse_mm=ro_(sa_tr),
         pupil_field_mm=ro_(pf), pupil_grid=ro_(g), pupil_masks=ro_(pm), entrance_pupil_radius_mm=r_e)
-
-
-@lru_cache(maxsize=64)
-def lens_curves(name: str, focus_distance_m: float, f_number: float,
-                image_height_max_mm: float = FULL_FRAME_HALF_DIAGONAL_MM) -> LensCurves:
-    """Cached :func:`compute_curves` per (lens, focus, f-number, image-height range)."""
-    from .lens import get_lens
-
-    return compute_curves(get_lens(name), focus_distance_m, f_number, image_height_max_mm)

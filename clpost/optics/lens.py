@@ -34,6 +34,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..errors import InputError
+from .curves import FULL_FRAME_HALF_DIAGONAL_MM, LensCurves, compute_curves
 from .paraxial import Paraxial, paraxial
 from .prescription import LAMBDA_D_NM, Prescription, load_prescription
 from .trace import OK, trace
@@ -80,6 +81,7 @@ class Lens:
         self.min_aperture = max(pres.f_number_min_aperture, self.max_aperture)
         self.min_focus_m = pres.min_focus_m
         self._focus_cache: dict = {}
+        self._curves_cache: dict = {}
 
     # -- aperture -------------------------------------------------------------------------------
     def _axial_rays(self, h: np.ndarray, z0: float = -1.0, **kw):
@@ -206,12 +208,25 @@ class Lens:
         """The prescription with its last thickness set for this focus."""
         return self.prescription.with_back_distance(self.focus(distance_mm, f_number).back_distance_mm)
 
-    def curves(self, focus_distance_m: float = math.inf, f_number: float | None = None, **kw):
-        """Derived curves (:class:`clpost.optics.curves.LensCurves`), cached per (lens, focus, N)."""
-        from .curves import lens_curves
-
+    def curves(self, focus_distance_m: float = math.inf, f_number: float | None = None,
+               image_height_max_mm: float = FULL_FRAME_HALF_DIAGONAL_MM) -> LensCurves:
+        """Derived curves (:class:`clpost.optics.curves.LensCurves`) at this focus (m, from the
+        film) and f-number (clamped to the lens's range; None: wide open), cached on the lens."""
         n = self.max_aperture if f_number is None else self.clamp_f_number(f_number, warn=False)
-        return lens_curves(self.name, float(focus_distance_m), round(n, 9), **kw)
+        return self._curves(float(focus_distance_m), round(n, 9), float(image_height_max_mm))
+
+    _CURVES_KEPT = 64
+    """Curves kept per lens (an animated focus asks for new ones every frame; oldest go first)."""
+
+    def _curves(self, focus_distance_m: float, f_number: float, image_height_max_mm: float) -> LensCurves:
+        key = (focus_distance_m, f_number, image_height_max_mm)
+        hit = self._curves_cache.get(key)
+        if hit is None:
+            hit = compute_curves(self, focus_distance_m, f_number, image_height_max_mm)
+            if len(self._curves_cache) >= self._CURVES_KEPT:
+                self._curves_cache.pop(next(iter(self._curves_cache)))
+            self._curves_cache[key] = hit
+        return hit
 
     def __repr__(self) -> str:
         return f"Lens({self.name!r}, EFL {self.efl_mm:.4g} mm, f/{self.max_aperture:.3g})"
@@ -221,3 +236,10 @@ class Lens:
 def get_lens(name: str) -> Lens:
     """The :class:`Lens` for a ``lens_data`` name (built once per process)."""
     return Lens(load_prescription(name))
+
+
+def lens_curves(name: str, focus_distance_m: float, f_number: float,
+                image_height_max_mm: float = FULL_FRAME_HALF_DIAGONAL_MM) -> LensCurves:
+    """The curves of the ``lens_data`` lens ``name`` at exactly this f-number (not clamped),
+    cached on its :class:`Lens`."""
+    return get_lens(name)._curves(float(focus_distance_m), float(f_number), float(image_height_max_mm))

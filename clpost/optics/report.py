@@ -6,7 +6,8 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from .lens import get_lens
+from .curves import _Field
+from .lens import get_lens, lens_curves
 
 
 def lens_info(name: str, sensor_mm=(36.0, 24.0), focus_distance_m: float = math.inf,
@@ -16,8 +17,6 @@ def lens_info(name: str, sensor_mm=(36.0, 24.0), focus_distance_m: float = math.
     pres, px = lens.prescription, lens.paraxial
     n = lens.max_aperture if f_number is None else lens.clamp_f_number(f_number, warn=False)
     half_diag = math.hypot(*sensor_mm) / 2
-    from .curves import lens_curves
-
     c = lens_curves(name, float(focus_distance_m), round(n, 9), half_diag)
     r_edge = c.image_height_max_mm
     covered = r_edge >= half_diag * (1 - 1e-9)
@@ -112,7 +111,6 @@ def plot_lens(name: str, path, sensor_mm=(36.0, 24.0), focus_distance_m: float =
         import matplotlib.pyplot as plt
     except ImportError:
         raise InputError("clpost lens plot needs matplotlib: pip install 'clpost[plot]'") from None
-    from .curves import lens_curves
     from .trace import trace
 
     lens = get_lens(name)
@@ -145,8 +143,6 @@ def plot_lens(name: str, path, sensor_mm=(36.0, 24.0), focus_distance_m: float =
     zf = zs[-1] + surfs[-1].thickness_mm
     ax.axvline(zf, color="0.4", lw=1.5)
     ax.axhline(0, color="0.6", lw=0.5, ls="-.")
-    from .curves import _Field
-
     fld = _Field(lens, pres, focus_distance_m * 1000.0, lens.stop_radius_mm(nmax))
     r_e = lens.efl_mm / (2 * nmax)
     for frac, col in ((0.0, "tab:blue"), (0.7, "tab:green"), (1.0, "tab:orange")):

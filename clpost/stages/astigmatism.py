@@ -137,10 +137,29 @@ curvature, Coddington equations); Hecht, *Optics*, 5th ed., §6.3.1.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from ..params import CORNER_MM, param, parse_fraction
 from . import _field as fld
 from .base import GatherStage
+
+
+@dataclass(frozen=True)
+class AstigmatismParams:
+    """Parametric third-order astigmatism (mm on the film at the sensor's half diagonal) for a lens
+    without a prescription. None takes it from the traced lens (lens_data) or leaves it out (thin
+    lens); a number replaces the traced curve (0 turns the effect off)."""
+
+    field_curvature_mm: float | None = param(
+        None, unit="mm", flag="--field-curvature", parse=parse_fraction, check=CORNER_MM,
+        header="clpost.field_curvature_mm", scalar=False,
+        help="mean sagittal/tangential focal offset at the image corner in mm (+ = behind the film)")
+    astigmatism_mm: float | None = param(
+        None, unit="mm", flag="--astigmatism", parse=parse_fraction, check=CORNER_MM, header="clpost.astigmatism_mm",
+        scalar=False, help="tangential minus sagittal focal offset at the image corner in mm")
+
 
 TAPS = {"draft": 16, "preview": 32, "final": 64}
 # tile classes (module docstring, "Tile classes"): copied below COPY_PX; otherwise the fewest of
@@ -204,6 +223,7 @@ def residual_semi_px(cx, c0, pitch):
 class Astigmatism(GatherStage):
     name = "astigmatism"
     order = 20.0
+    params = AstigmatismParams
     reads = ("depth",)
 
     def __init__(self, quality: str = "final") -> None:

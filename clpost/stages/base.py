@@ -4,12 +4,16 @@ A stage is one physical effect. Its module (``clpost/stages/<name>.py``) holds o
 :class:`Stage` with:
 
 - ``name`` — used alike in ``--stages``, ``kernels/<name>.cl`` and ``tests/test_<name>.py``;
-- ``order`` — its place in the physical order of light through the camera (see
-  :data:`clpost.stages.PHYSICAL_ORDER`);
+- ``order`` — its place in the physical order of light through the camera: it must follow the
+  explicit list :data:`clpost.stages.PHYSICAL_ORDER`, where a new stage is added;
 - ``reads`` — the Frame buffers it needs besides color (``"depth"``, ``"velocity"``);
 - ``requires`` — the stages whose output it takes as its input (grain and print work on the film
   stage's densities; film and sensor on the exposure stage's normalised signal): the planner
   refuses a plan that leaves one out while it would change the image;
+- ``params`` — the frozen dataclass declaring the camera parameters it owns (fields made with
+  :func:`clpost.params.param`: unit, flag, help, default, check, header key, scalar or
+  structural); :class:`clpost.camera.Camera`, its validation and ``describe()`` and the CLI
+  options are generated from it. None: the stage reads only the camera core's parameters;
 - ``skip_reason(camera, frame)`` — why it is an identity for this camera and frame, or None;
 - ``reference(camera, frame, color)`` — a readable float64 numpy implementation (the oracle);
 - its OpenCL implementation: a :class:`PointwiseStage` supplies an inline per-pixel function
@@ -30,7 +34,9 @@ How the planner calls a stage (:mod:`clpost.pipeline`):
   (channel c of pixel i at ``c*W*H + i``), ``aux["depth"]`` / ``aux["velocity"]`` device
   buffers for what it ``reads``; it builds its programs through ``rt.program`` (memoised) and
   caches its own scratch buffers per resolution. Returns the events it enqueued (profiled).
-- ``reference()`` gets float64 color and the host Frame; tests compare the two on odd sizes.
+- ``reference()`` gets float64 color and the host Frame; tests compare the two on odd sizes,
+  after asserting that the stage is planned (``tests/conftest.py``: ``assert_planned``; an
+  unplanned stage is the identity on both sides).
 """
 from __future__ import annotations
 
@@ -55,6 +61,7 @@ class Stage(ABC):
     requires: ClassVar[tuple[str, ...]] = ()
     """Stages this one presupposes (their output is its input domain), by name."""
     kind: ClassVar[str] = "stage"
+    params: ClassVar[type | None] = None
 
     def __init__(self, quality: str = "final") -> None:
         self.quality = quality

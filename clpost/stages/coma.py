@@ -104,12 +104,25 @@ Domain/range: colour ≥ 0 → convex combination of input colours.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 
+from ..params import CORNER_MM, param, parse_fraction
 from . import _field as fld
 from .base import GatherStage
+
+
+@dataclass(frozen=True)
+class ComaParams:
+    """Parametric coma at the image corner (None: the traced lens's, or none for a thin lens)."""
+
+    coma_mm: float | None = param(
+        None, unit="mm", flag="--coma", parse=parse_fraction, check=CORNER_MM, header="clpost.coma_mm",
+        scalar=False,
+        help="comet length (tangential coma, 3C) at the image corner in mm (+ = tail away from the centre)")
+
 
 TAPS = {"draft": 16, "preview": 32, "final": 64}
 MAX_TAIL_PX = fld.PAD - 1
@@ -133,8 +146,8 @@ would turn into a far too long comet."""
 @lru_cache(maxsize=32)
 def _traced(lens_name: str, focus_distance_m: float, f_number: float) -> tuple[np.ndarray, np.ndarray]:
     """(image_height_mm, C_mm) of a traced lens from its meridional fans."""
-    from ..optics import get_lens
-    from ..optics.curves import _Field, lens_curves
+    from ..optics import get_lens, lens_curves
+    from ..optics.curves import _Field
 
     lens = get_lens(lens_name)
     curves = lens_curves(lens_name, focus_distance_m, f_number)
@@ -182,6 +195,7 @@ def comet_offsets(u: np.ndarray) -> np.ndarray:
 class Coma(GatherStage):
     name = "coma"
     order = 25.0
+    params = ComaParams
 
     def __init__(self, quality: str = "final") -> None:
         super().__init__(quality)

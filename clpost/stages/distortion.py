@@ -44,6 +44,7 @@ on the 1-pixel rim of the valid area, where a neighbour has no data).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -51,8 +52,49 @@ import numpy as np
 
 from ..calibration import OpenCVModel, render_intrinsics, required_render, undistort
 from ..errors import InputError
+from ..params import boolean, param, parse_on_off
 from . import _field as fld
 from .base import GatherStage
+
+
+def _check_calibration(name, value):
+    if value is not None and not isinstance(value, OpenCVModel):
+        raise InputError(f"Camera.{name} must be a clpost.calibration.OpenCVModel or None, not "
+                         f"{type(value).__name__}; load one with load_calibration('cam.yaml')")
+    return value
+
+
+def _show_calibration(m):
+    if m is None:
+        return None
+    return " ".join(f"{t:.9g}" for t in (m.width, m.height, m.fx, m.fy, m.cx, m.cy, *m.vector()))
+
+
+def _parse_calibration(text):
+    """A calibration file → OpenCVModel; its errors become usage errors."""
+    import argparse
+
+    from ..calibration import load_calibration
+
+    try:
+        return load_calibration(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+@dataclass(frozen=True)
+class DistortionParams:
+    """distortion: a calibration's OpenCV model, or a traced lens's own curve."""
+
+    distortion: OpenCVModel | None = param(
+        None, unit="OpenCV model", flag="--calibration", parse=_parse_calibration, check=_check_calibration,
+        header="clpost.distortion", show=_show_calibration, scalar=False,
+        help="camera calibration (OpenCV YAML/JSON, ROS camera_info, COLMAP cameras.txt[#ID]): renders its "
+             "distortion (a clpost.calibration.OpenCVModel in the library)")
+    lens_distortion: bool = param(
+        True, unit="on/off", flag="--lens-distortion", parse=parse_on_off, check=boolean, scalar=False,
+        help="a lens_data lens without --calibration distorts by its traced curve: on/off")
+
 
 INVALID = -1.0e30
 """Map value marking an output pixel without a preimage (the kernel writes 0, alpha is 0)."""
@@ -315,6 +357,7 @@ def tap_table(model: OpenCVModel, src_size: tuple[int, int],
 class Distortion(GatherStage):
     name = "distortion"
     order = 50.0
+    params = DistortionParams
 
     def __init__(self, quality: str = "final") -> None:
         super().__init__(quality)

@@ -131,7 +131,49 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..errors import InputError
+from ..params import boolean, finite, in_range, param, parse_fraction, parse_on_off
 from .base import GatherStage
+
+
+def _check_blades(name, value):
+    try:
+        ok = int(value) == value and value >= 0 and value not in (1, 2)
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise InputError(f"Camera.{name}={value!r} must be 0 (round) or an integer >= 3")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class DofParams:
+    """dof: the thin lens's defocus and the aperture's shape; defaults keep the pinhole image."""
+
+    depth_of_field: bool = param(False, unit="on/off", flag="--depth-of-field", parse=parse_on_off,
+                                 check=boolean, header="clpost.depthOfField", scalar=False,
+                                 help="thin-lens defocus from the depth buffer: on/off (off: pinhole)")
+    blades: int = param(0, unit="blades", flag="--blades", parse=int, check=_check_blades, header="clpost.blades",
+                        scalar=False, help="aperture blades (0 = round)")
+    blade_rotation_deg: float = param(0.0, unit="degrees", flag="--blade-rotation", parse=parse_fraction,
+                                      check=finite("degrees", "e.g. 0"), header="clpost.bladeRotation_deg",
+                                      scalar=True, help="aperture blade rotation in degrees")
+    aperture_roundness: float = param(0.0, unit="unitless", flag="--roundness", parse=float,
+                                      check=in_range(0.0, 1.0, "unitless", "0 (polygon) … 1 (circle)"),
+                                      header="clpost.apertureRoundness", scalar=True,
+                                      help="aperture blade roundness 0 (polygon) … 1 (circle); corners stay on "
+                                           "the f/N circle")
+    spherical_aberration: float = param(0.0, unit="unitless", flag="--spherical-aberration", parse=float,
+                                        check=in_range(-1.0, 1.0, "unitless", "0.5 (undercorrected) or -0.5"),
+                                        header="clpost.sphericalAberration", scalar=False,
+                                        help="bokeh texture -1 … 1 (> 0: undercorrected; near: bright rim, far: "
+                                             "bright core)")
+    optical_vignetting: float = param(0.0, unit="unitless", flag="--cats-eye", parse=float,
+                                      check=in_range(0.0, 1.0, "unitless", "0.5 for visible cat's-eye bokeh"),
+                                      header="clpost.opticalVignetting", scalar=False,
+                                      help="optical vignetting (cat's-eye bokeh) strength 0 … 1: barrel-clip "
+                                           "displacement in aperture radii at the corner")
+
 
 TILE = 16
 """Work-group / tile edge in working pixels."""
@@ -558,6 +600,7 @@ def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "
 class Dof(GatherStage):
     name = "dof"
     order = 10.0
+    params = DofParams
     reads = ("depth",)
 
     def skip_reason(self, camera, frame):
@@ -566,10 +609,10 @@ class Dof(GatherStage):
         if frame.depth is None:
             return None  # the planner then asks for the depth buffer
         k, inv_u = coc_coefficients(camera, frame.width)
-        finite = frame.depth[np.isfinite(frame.depth)].astype(np.float64)
-        inv = [0.0] if finite.size < frame.depth.size else []
-        if finite.size:
-            inv += [1.0 / finite.min(), 1.0 / finite.max()]
+        near, far, sky = frame.depth_range
+        inv = [0.0] if sky else []
+        if math.isfinite(far):
+            inv += [1.0 / near, 1.0 / far]
         worst = max(abs(k * (inv_u - i)) for i in inv)
         if worst <= 0.5:
             return f"all pixels in focus (largest CoC radius {worst:.3g} px <= 0.5 px)"

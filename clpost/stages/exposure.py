@@ -14,10 +14,42 @@ the blurs and the film/sensor stages, which saturate physically).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from ..errors import InputError
+from ..params import finite, param, parse_fraction
 from ..photometry import camera_bellows_factor, sensor_gain
 from .base import PointwiseStage
+
+METERING_MODES = ("average", "centre", "spot")
+
+
+def _check_metering(name, value):
+    if value not in METERING_MODES:
+        raise InputError(f"Camera.{name}={value!r} must be one of {', '.join(METERING_MODES)}")
+    return value
+
+
+@dataclass(frozen=True)
+class ExposureParams:
+    """The reflected-light meter's pattern and compensation (auto-exposure, :mod:`clpost.metering`)."""
+
+    metering: str = param("average", unit="pattern", flag="--metering", check=_check_metering,
+                          header="clpost.metering", scalar=True,
+                          help=f"metering pattern for auto-exposure: {', '.join(METERING_MODES)}")
+    exposure_compensation_ev: float = param(
+        0.0, unit="EV", flag="--ev", parse=parse_fraction, header="clpost.exposureCompensation_ev", scalar=True,
+        check=finite("EV", "e.g. +1 for one stop brighter"),
+        help="exposure compensation of auto-exposure in EV (+1 = one stop brighter)")
+
+    @staticmethod
+    def check_options(camera, given):
+        if not camera.is_auto_exposure and ({"metering", "exposure_compensation_ev"} & given):
+            # a silently ignored option is worse than an error: the meter only acts in auto-exposure
+            raise InputError("--metering/--ev act only in auto-exposure: add --shutter auto (aperture "
+                             "priority) or --f-number auto (shutter priority)")
 
 
 def exposure_gain(camera) -> float:
@@ -30,6 +62,7 @@ def exposure_gain(camera) -> float:
 class Exposure(PointwiseStage):
     name = "exposure"
     order = 70.0
+    params = ExposureParams
     vector = True  # also defines <name>_apply16 (clpost.codegen.VECTOR_PIXELS)
     args = (("float", "gain"),)
 

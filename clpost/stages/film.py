@@ -21,12 +21,38 @@ ISO 5800:2001 (colour negative speed).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..film_stock import load_stock
 from ..photometry import SATURATION_EXPOSURE_ISO
+from ..params import param, show_none
 from .base import PointwiseStage
+
+
+def _check_film(name, value):
+    if value is None:
+        return None
+    if not isinstance(value, str):
+        raise InputError(f"Camera.{name}={value!r} must be a film stock name or a stock .toml path")
+    try:
+        load_stock(value)
+    except InputError as exc:
+        raise InputError(f"Camera.{name}: {exc}") from None
+    return value
+
+
+@dataclass(frozen=True)
+class FilmParams:
+    """film: the negative's stock (``clpost.film_stock.stock_names()`` or a stock .toml path)."""
+
+    film: str | None = param(None, unit="stock", flag="--film", check=_check_film, header="clpost.film",
+                             show=show_none, scalar=False,
+                             help="film stock: neutral-100, kodak-ektar-100, kodak-gold-200, fuji-superia-400, "
+                                  "or a stock .toml")
+
 
 FILM_LUT_SIZE = 1024
 
@@ -46,6 +72,7 @@ class Film(PointwiseStage):
     name = "film"
     order = 80.0
     requires = ("exposure",)
+    params = FilmParams
     args = (("__global const float *", "lut"), ("float", "log_offset"), ("float", "lo"),
             ("float", "inv_step"))
 

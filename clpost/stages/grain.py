@@ -31,6 +31,7 @@ Resolution-Independent Rendering", Computer Graphics Forum 36(8), 2017; Selwyn (
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -38,8 +39,21 @@ import numpy as np
 from .. import random as rnd
 from ..film_stock import load_stock
 from ..grain_model import LN10, grain_radius_um, pixel_covariance
+from ..params import at_least, param
 from .base import GatherStage
 from .sensor import frame_index
+
+
+@dataclass(frozen=True)
+class GrainParams:
+    """grain: a multiplier on the stock's grain radius."""
+
+    grain_scale: float = param(1.0, unit="× the stock's grain radius", flag="--grain-scale", parse=float,
+                               check=at_least(0.0, "× the stock's grain radius", "e.g. 1, or 0 for no grain",
+                                              "0 turns grain off"),
+                               header="clpost.grainScale", scalar=False,
+                               help="grain radius multiplier (0 = no grain)")
+
 
 GRAIN_NS = 8
 """Samples per pixel side of the final Boolean model (64 samples)."""
@@ -90,6 +104,7 @@ class Grain(GatherStage):
     name = "grain"
     order = 90.0
     requires = ("film",)
+    params = GrainParams
 
     def skip_reason(self, camera, frame):
         if not camera.film:

@@ -55,13 +55,26 @@ Domain/range: colour ≥ 0 → ≥ 0; for an identity L = 0 the stage is not pla
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 
 from ..optics.prescription import LAMBDA_C_NM, LAMBDA_D_NM, LAMBDA_F_NM
+from ..params import CORNER_MM, param, parse_fraction
 from . import _field as fld
 from .base import GatherStage
+
+
+@dataclass(frozen=True)
+class LateralColorParams:
+    """Parametric lateral colour at the image corner (None: the traced lens's, or none for a thin lens)."""
+
+    lateral_color_mm: float | None = param(
+        None, unit="mm", flag="--lateral-color", parse=parse_fraction, check=CORNER_MM,
+        header="clpost.lateral_color_mm", scalar=False,
+        help="chief-ray height at F (486.1 nm) minus at C (656.3 nm) at the image corner in mm")
+
 
 FIXED_POINT_STEPS = 4
 DERIVATIVE_STEP_MM = 1e-3
@@ -126,6 +139,7 @@ def inverse_map(camera, rho_mm) -> tuple[np.ndarray, np.ndarray]:
 class LateralColor(GatherStage):
     name = "lateral_color"
     order = 30.0
+    params = LateralColorParams
 
     def __init__(self, quality: str = "final") -> None:
         super().__init__(quality)

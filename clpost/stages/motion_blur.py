@@ -60,11 +60,49 @@ Domain/range: any finite colour ≥ 0 → convex combinations of input colours (
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import InputError
+from ..params import at_least, param, parse_fraction, positive
 from .base import GatherStage
+
+
+@dataclass(frozen=True)
+class MotionBlurParams:
+    """motion_blur: the frame rate turns px-per-frame velocities into a blur over the shutter
+    (fraction shutter_s × fps); None (default) leaves motion blur unmodelled."""
+
+    frame_rate_fps: float | None = param(
+        None, unit="frames per second", flag="--fps", parse=parse_fraction, scalar=False,
+        check=positive("frames per second", "e.g. 24", optional=True),
+        help="frame rate of the sequence (enables motion blur: shutter × fps of a frame)")
+    shutter_angle_deg: float | None = param(
+        None, unit="degrees", flag="--shutter-angle", parse=parse_fraction, scalar=True, input_only=True,
+        help="rotary shutter angle in degrees (needs --fps; sets the shutter: 180° at 24 fps = 1/48 s)")
+    readout_time_s: float = param(
+        0.0, unit="seconds", flag="--readout", parse=parse_fraction, scalar=True,
+        check=at_least(0.0, "seconds", "e.g. 0.01 for a 10 ms sensor readout", "0 = global shutter"),
+        help="rolling-shutter readout time from the top to the bottom row in seconds (needs --fps; 0: global)")
+
+    @staticmethod
+    def validate(camera, inputs):
+        fps = camera.frame_rate_fps
+        angle = inputs.get("shutter_angle_deg")
+        if angle is not None:  # a shutter angle is a shutter time at a frame rate
+            if fps is None:
+                raise InputError(f"Camera.shutter_angle_deg={angle!r} needs Camera.frame_rate_fps (--fps): "
+                                 "the shutter time is angle / (360° × fps)")
+            object.__setattr__(camera, "shutter_s", shutter_from_angle(angle, fps))
+        if camera.readout_time_s > 0 and fps is None:
+            raise InputError("Camera.readout_time_s > 0 needs Camera.frame_rate_fps (--fps) to turn "
+                             "px-per-frame velocities into a per-row shift")
+        if fps is not None and camera.shutter_s is not None and camera.shutter_s * fps > 1.0 + 1e-9:
+            raise InputError(f"Camera.shutter_s={camera.shutter_s:g} s is longer than one frame interval at "
+                             f"{fps:g} fps (a 360° shutter is {1 / fps:.4g} s); "
+                             "use a shorter --shutter or --shutter-angle <= 360")
+
 
 TILE = 20
 """K: tile size and the largest blur half-length in px."""
@@ -111,6 +149,7 @@ def _rolling_needed(camera, frame) -> bool:
 class MotionBlur(GatherStage):
     name = "motion_blur"
     order = 40.0
+    params = MotionBlurParams
     reads = ("velocity", "depth")
 
     def __init__(self, quality: str = "final") -> None:

@@ -30,12 +30,25 @@ Range: print in (10^-2.2, 1]; linear > 0, finite. References: Hunt, *The Reprodu
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..film_stock import load_stock
 from ..photometry import K_REFLECTED, SATURATION_EXPOSURE_ISO
+from ..params import one_of, param
 from .base import PointwiseStage
+
+
+@dataclass(frozen=True)
+class PrintParams:
+    """print: what a negative film stage outputs."""
+
+    film_output: str = param("print", unit="mode", flag="--film-output", check=one_of("print", "linear", "negative"),
+                             header="clpost.filmOutput", scalar=False,
+                             help="negative film output: print (display-referred paper print), linear "
+                                  "(re-linearised scene-linear), negative (the densities)")
+
 
 PAPER_GAMMA = 2.0
 PAPER_RANGE = 2.2
@@ -65,6 +78,7 @@ class Print(PointwiseStage):
     name = "print"
     order = 95.0
     requires = ("film",)
+    params = PrintParams
     args = (("__global const float *", "params"),)
 
     def skip_reason(self, camera, frame):

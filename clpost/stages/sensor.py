@@ -34,6 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import random as rnd
+from ..errors import InputError
+from ..params import param, show_none
 from .base import PointwiseStage
 
 POISSON_EXACT_MAX = 32.0
@@ -57,6 +59,27 @@ SENSOR_PRESETS = {
 }
 
 
+def _check_preset(name, value):
+    if value is not None and (not isinstance(value, str) or value not in SENSOR_PRESETS):
+        raise InputError(f"Camera.{name}={value!r} is unknown: use one of {', '.join(SENSOR_PRESETS)}")
+    return value
+
+
+@dataclass(frozen=True)
+class SensorParams:
+    """sensor: a digital sensor preset; the camera records on film or on a sensor, not both."""
+
+    sensor_preset: str | None = param(None, unit="preset", flag="--sensor-preset", check=_check_preset,
+                                      header="clpost.sensorPreset", show=show_none, scalar=False,
+                                      help=f"digital sensor: {', '.join(SENSOR_PRESETS)}")
+
+    @staticmethod
+    def validate(camera, inputs):
+        if getattr(camera, "film", None) is not None and camera.sensor_preset is not None:
+            raise InputError(f"Camera: film={camera.film!r} and sensor_preset={camera.sensor_preset!r} are both "
+                             "set; a camera records on one medium — give --film or --sensor-preset, not both")
+
+
 def frame_index(frame) -> int:
     """The frame counter of the noise hash (:attr:`clpost.frame.Frame.index`)."""
     return frame.index
@@ -73,6 +96,7 @@ class Sensor(PointwiseStage):
     name = "sensor"
     order = 85.0
     requires = ("exposure",)
+    params = SensorParams
     args = (("float", "e_sat"), ("float", "full_well"), ("float", "read_noise"), ("float", "black"),
             ("float", "white"), ("uint", "seed"), ("uint", "frame"))
 

@@ -39,6 +39,7 @@ Domain/range: input ≥ 0 → output ≥ 0, never larger than the input (RI ≤ 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Callable
@@ -46,7 +47,25 @@ from typing import Callable
 import numpy as np
 
 from ..errors import InputError
+from ..params import param
 from .base import PointwiseStage
+
+
+def _check_mode(name, v):
+    if not isinstance(v, str) or not (v in ("off", "natural", "lens") or (v.startswith("table:") and len(v) > 6)):
+        raise InputError(f"Camera.{name}={v!r} must be 'off', 'natural', 'lens' or 'table:<path>'")
+    return v
+
+
+@dataclass(frozen=True)
+class VignettingParams:
+    """vignetting: ``off``, ``natural`` (cos⁴θ of the thin lens), ``lens`` (the traced
+    relative-illumination curve of ``lens``) or ``table:<path>`` (manufacturer-style table)."""
+
+    vignetting: str = param("off", unit="mode", flag="--vignetting", check=_check_mode, header="clpost.vignetting",
+                            show=lambda v: None if v == "off" else v, scalar=False,
+                            help="off, natural (cos^4), lens (traced) or table:<file>")
+
 
 LUT_SIZE = 1024
 
@@ -129,6 +148,7 @@ def principal_offset_mm(camera) -> tuple[float, float]:
 class Vignetting(PointwiseStage):
     name = "vignetting"
     order = 60.0
+    params = VignettingParams
     vector = True  # also defines <name>_apply16 (clpost.codegen.VECTOR_PIXELS)
     args = (("__global const float *", "ri"),)
 

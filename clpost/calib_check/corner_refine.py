@@ -17,13 +17,14 @@ does not move it), blurred by a step of width :math:`1/u_i` px. Ten parameters
 :math:`(c_x, c_y, \theta_1, \theta_2, \ln u_1, \ln u_2, \kappa_1, \kappa_2, a, b)` are fitted to
 the pixel values at the pixel centres (OpenCV convention: pixel (i, j) is centred at (i, j)) by
 Levenberg–Marquardt with the analytic Jacobian, all corners of an image at once (numpy batches of
-10×10 normal equations; ≈ 10× faster than one ``scipy.optimize.least_squares`` per corner).
+10×10 normal equations rather than one ``scipy.optimize.least_squares`` per corner; cost in
+docs/distortion_calibration.md).
 
 Why not ``cv2.cornerSubPix``: it solves for the point to which every image gradient in the
 window is orthogonal, which is exact for two straight ideal edges but biased by blur near the
 crossing when the lines are not perpendicular (perspective), by the discrete gradient, and by
 bent lines: 0.012–0.027 px RMS on exact synthetic corners (tests/test_corner_refine.py), 0.014
-px on the Gaussian-filtered board renders of tools/distortion_calibration.py, where this fit is
+px on the Gaussian-filtered board renders of :mod:`clpost.calib_check.checkerboard`, where this fit is
 at 0.0004 px.
 
 Where it is exact, and where not (measured): exact (to the solver's tolerance) when the blur is

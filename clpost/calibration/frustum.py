@@ -1,0 +1,99 @@
+r"""What the undistorted (pinhole) render must cover so that the distortion stage leaves no
+output pixel unfilled, and which intrinsics a render of a given size has.
+
+Both are pure functions of a frozen, hashable :class:`~clpost.calibration.model.OpenCVModel`
+and are cached per (model, size): the frustum needs one Newton inverse of the image border
+(:func:`~clpost.calibration.model.undistort_newton`), and stages ask for it every frame.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from .model import OpenCVModel, undistort_newton
+
+
+@dataclass(frozen=True)
+class RenderSpec:
+    r"""A pinhole render (square pixels) that covers every output pixel of a distorted image.
+
+    Frustum at unit distance in OpenCV's pixel-centre convention (Lambers et al., sec. 3.2;
+    ``shared/CONVENTIONS.md``):
+
+    .. math::
+
+        l = -\frac{c_x + 0.5}{f},\ r = \frac{W}{f} + l,\ b = -\frac{c_y + 0.5}{f},\ t = \frac{H}{f} + b
+
+    (b, t are in OpenCV's y-down image axis; an OpenGL projection uses −t, −b.)
+    """
+
+    width: int
+    height: int
+    f: float
+    cx: float
+    cy: float
+
+    def intrinsics(self) -> tuple[float, float, float, float]:
+        return self.f, self.f, self.cx, self.cy
+
+    def frustum(self) -> tuple[float, float, float, float]:
+        left = -(self.cx + 0.5) / self.f
+        bottom = -(self.cy + 0.5) / self.f
+        return left, self.width / self.f + left, bottom, self.height / self.f + bottom
+
+
+def required_render(model: OpenCVModel, margin_px: float = 2.0) -> RenderSpec:
+    r"""The undistorted render that leaves no output pixel unfilled.
+
+    Every point of the output image's border ([−0.5, W−0.5] × [−0.5, H−0.5], 4·(W+H) samples) is
+    undistorted; the render keeps the model's larger focal length f = max(f_x, f_y) (the same
+    pixel density at the centre) and gets the frustum of the bounding box of those points
+    (union with the model's own frustum), widened by ``margin_px`` for the resampling filter's
+    support. Barrel distortion → a larger render, pincushion → the model's own frustum.
+    Points beyond the fold (no preimage) are left out: they stay alpha 0 anyway.
+    Cached per (model, margin): the result is a frozen :class:`RenderSpec`.
+    """
+    return _required_render(model, float(margin_px))
+
+
+@lru_cache(maxsize=32)
+def _required_render(model: OpenCVModel, margin_px: float) -> RenderSpec:
+    w, h = model.width, model.height
+    t = np.linspace(-0.5, w - 0.5, 4 * w + 1)
+    s = np.linspace(-0.5, h - 0.5, 4 * h + 1)
+    u = np.concatenate([t, t, np.full_like(s, -0.5), np.full_like(s, w - 0.5)])
+    v = np.concatenate([np.full_like(t, -0.5), np.full_like(t, h - 0.5), s, s])
+    x, y, ok = undistort_newton(model, u, v)
+    f = max(model.fx, model.fy)
+    # the model's own (pinhole) frustum
+    x0, x1 = -(model.cx + 0.5) / model.fx, (w - 0.5 - model.cx) / model.fx
+    y0, y1 = -(model.cy + 0.5) / model.fy, (h - 0.5 - model.cy) / model.fy
+    if ok.any():
+        x0, x1 = min(x0, x[ok].min()), max(x1, x[ok].max())
+        y0, y1 = min(y0, y[ok].min()), max(y1, y[ok].max())
+    m = margin_px / f
+    x0, x1, y0, y1 = x0 - m, x1 + m, y0 - m, y1 + m
+    rw, rh = int(math.ceil(f * (x1 - x0))), int(math.ceil(f * (y1 - y0)))
+    # l = −(c + 0.5)/f = x0  ⇒  c = −x0 f − 0.5
+    return RenderSpec(rw, rh, float(f), float(-x0 * f - 0.5), float(-y0 * f - 0.5))
+
+
+def render_intrinsics(model: OpenCVModel, size: tuple[int, int]) -> tuple[float, float, float, float] | None:
+    """(f_x, f_y, c_x, c_y) of an undistorted render of ``size`` made for this calibration: its own
+    K at the calibration's size, :func:`required_render`'s frustum at that size; None otherwise.
+    Cached per (model, size): stages ask for it every frame."""
+    w, h = size
+    return _render_intrinsics(model, (int(w), int(h)))
+
+
+@lru_cache(maxsize=32)
+def _render_intrinsics(model: OpenCVModel, size: tuple[int, int]) -> tuple[float, float, float, float] | None:
+    if tuple(size) == (model.width, model.height):
+        return float(model.fx), float(model.fy), float(model.cx), float(model.cy)
+    spec = required_render(model)
+    if tuple(size) == (spec.width, spec.height):
+        return spec.intrinsics()
+    return None

@@ -1,0 +1,342 @@
+"""A :class:`Plan`: what runs for one camera structure, frame size, quality and stage selection.
+
+Plan time vs call time (after reikna's ``Computation``): building a plan decides the kernel
+launches — consecutive pointwise stages fused into one generated kernel (:mod:`clpost.codegen`),
+each gather stage with its own kernels — builds their programs, allocates the device buffers for
+the frame size and records each stage's reason (``--explain``) and each launch's sizes
+(``clpost bench``). :meth:`Plan.run` does only per-frame work: upload, per-frame scalars as kernel
+arguments, enqueue, download. A camera whose scalar parameters change from frame to frame (an
+animated focus, f-number, shutter or exposure) runs through the same plan; nothing is rebuilt.
+
+Plans are made by :meth:`clpost.pipeline.Pipeline.plan_for`, which caches them by
+(camera structure, frame size, planned stages and their ``defines``).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .codegen import AUX_BUFFERS, INTERLEAVED, PLANAR, fused_source, global_size
+from .errors import InputError
+from .frame import Frame
+from .stages import GatherStage, PointwiseStage, Stage
+
+
+@dataclass(frozen=True)
+class PlanEntry:
+    """One line of ``--explain``: a stage, whether it runs, and why."""
+
+    stage: str
+    planned: bool
+    reason: str
+
+    def __str__(self) -> str:
+        return f"{'+' if self.planned else '-'} {self.stage:<14} {self.reason}"
+
+
+@dataclass(frozen=True)
+class Launch:
+    """One kernel launch of a plan, in order: a fused pointwise group, a gather stage, or a
+    layout conversion (``kind``), with the frame size it reads and writes."""
+
+    name: str
+    stages: tuple[str, ...]
+    kind: str
+    in_size: tuple[int, int]
+    out_size: tuple[int, int]
+
+
+def resized_view(frame: Frame, size: tuple[int, int], host: dict, by: str) -> Frame:
+    """The frame as stages after a resampling stage ``by`` see it: ``size`` (width, height), the
+    resampler's depth/velocity/alpha (``host``), and no host color (stages read color on the
+    device; a zero-stride placeholder keeps shapes right without allocating)."""
+    w, h = size
+    placeholder = np.broadcast_to(np.zeros((1, 1, 3), np.float32), (h, w, 3))
+    meta = dict(frame.metadata, resampled_by=by)
+    meta.pop("intrinsics", None)  # the render's pinhole intrinsics no longer describe these pixels
+    return frame.replace(color=placeholder, depth=host.get("depth"), velocity=host.get("velocity"),
+                         alpha=host.get("alpha"), metadata=meta, validate=False)
+
+
+@dataclass
+class _Node:
+    """One kernel launch of a plan: a fused pointwise group or a gather stage."""
+
+    stages: list[Stage]
+    src_layout: str
+    dst_layout: str
+    kernel: object = None
+
+    @property
+    def name(self) -> str:
+        return "__".join(s.name for s in self.stages) or f"convert_{self.src_layout}_to_{self.dst_layout}"
+
+    @property
+    def gather(self) -> bool:
+        return bool(self.stages) and isinstance(self.stages[0], GatherStage)
+
+
+@dataclass
+class Buffers:
+    """Device buffers of a plan's frame size, reused for every frame (and by every plan of the
+    same pipeline and size)."""
+
+    size: tuple[int, int]
+    color_in: object
+    color_out: object
+    planar: list = field(default_factory=list)
+    aux: dict = field(default_factory=dict)
+    args: dict = field(default_factory=dict)
+    uploaded: dict = field(default_factory=dict)
+    """(stage, arg) → the read-only host array last copied into its buffer (not copied again)."""
+
+
+def group_nodes(stages: list[Stage]) -> list[_Node]:
+    """Consecutive pointwise stages → one fused launch; each gather its own launch on planar
+    buffers; a conversion launch where the plan starts or ends with a gather."""
+    groups: list[list[Stage]] = []
+    for s in stages:
+        if isinstance(s, PointwiseStage) and groups and groups[-1] and isinstance(groups[-1][0], PointwiseStage):
+            groups[-1].append(s)
+        else:
+            groups.append([s])
+    if groups and isinstance(groups[0][0], GatherStage):
+        groups.insert(0, [])
+    if groups and groups[-1] and isinstance(groups[-1][0], GatherStage):
+        groups.append([])
+    nodes = []
+    for i, g in enumerate(groups):
+        gather = bool(g) and isinstance(g[0], GatherStage)
+        src = PLANAR if gather or i > 0 else INTERLEAVED
+        dst = PLANAR if gather or i < len(groups) - 1 else INTERLEAVED
+        nodes.append(_Node(g, src, dst))
+    return nodes
+
+
+def structure_key(camera) -> object:
+    """What of a camera decides programs and buffers: its structural parameters
+    (:meth:`clpost.camera.Camera.structure_key`); per-frame scalars (focus, f-number, shutter,
+    exposure …) are not in it."""
+    return camera.structure_key()
+
+
+class Plan:
+    """The launches of one (camera structure, frame size, quality, stages); see the module
+    docstring. ``entries`` is every known stage with whether it runs and why (reasons filled in by
+    :meth:`clpost.pipeline.Pipeline.explain`, which may cost a pass over the frame)."""
+
+    def __init__(self, runtime, camera, frame: Frame, stages: list[Stage], quality: str,
+                 buffers: Buffers | None = None, build: bool = True) -> None:
+        self.runtime = runtime
+        self.camera = camera
+        self.quality = quality
+        self.size = frame.size
+        self.stages = list(stages)
+        self.structure = structure_key(camera)
+        self.nodes = group_nodes(self.stages)
+        self.launches = self._launches(camera, frame)
+        self.buffers = buffers
+        self.last_timings: dict[str, float] = {}
+        """Device milliseconds of the last :meth:`run`, per kernel and for upload/download."""
+        self.last_host_ms = 0.0
+        """CPU time of the calling thread in the last :meth:`run` (host work: planning checks,
+        tables, argument setting, enqueueing; the device's threads and waits are not in it)."""
+        if build:
+            self._build(camera)
+
+    # -- plan time ----------------------------------------------------------------------------
+    def _build(self, cam) -> None:
+        import pyopencl as cl
+
+        rt = self.runtime
+        for node in self.nodes:
+            if node.gather:
+                continue
+            defines: dict = {}
+            for s in node.stages:
+                defines.update(s.defines(cam))
+            kname, src = fused_source(node.stages, node.src_layout, node.dst_layout)
+            node.kernel = cl.Kernel(rt.program(src, kname, defines), kname)
+        if self.buffers is None or self.buffers.size != self.size:
+            w, h = self.size
+            self.buffers = Buffers((w, h), rt.empty((h, w, 3)), rt.empty((h, w, 3)))
+
+    def _launches(self, cam, frame: Frame) -> list[Launch]:
+        size, out, view = frame.size, [], frame
+        for node in self.nodes:
+            out_size = tuple(node.stages[0].output_size(cam, view)) if node.gather else size
+            kind = "gather" if node.gather else ("pointwise" if node.stages else "convert")
+            out.append(Launch(node.name, tuple(s.name for s in node.stages), kind, tuple(size), out_size))
+            if out_size != size:
+                view = resized_view(frame, out_size, {}, node.name)
+            size = out_size
+        return out
+
+    @property
+    def stage_names(self) -> list[str]:
+        return [s.name for s in self.stages]
+
+    @property
+    def kernel_names(self) -> list[str]:
+        return [n.name for n in self.nodes]
+
+    @property
+    def output_size(self) -> tuple[int, int]:
+        return self.launches[-1].out_size if self.launches else self.size
+
+    # -- device buffers -----------------------------------------------------------------------
+    def _scratch(self, key, shape):
+        bufs = self.buffers
+        if key not in bufs.args:
+            bufs.args[key] = self.runtime.empty(shape)
+        return bufs.args[key]
+
+    def _planar(self, k: int, size: tuple[int, int]):
+        bufs = self.buffers
+        if size != bufs.size:  # a resampling gather (distortion) changed the size
+            return self._scratch(("planar", size, k), (3, size[1], size[0]))
+        while len(bufs.planar) <= k:
+            w, h = bufs.size
+            bufs.planar.append(self.runtime.empty((3, h, w)))
+        return bufs.planar[k]
+
+    def _color_out(self, size: tuple[int, int]):
+        if size == self.buffers.size:
+            return self.buffers.color_out
+        return self._scratch(("color_out", size), (size[1], size[0], 3))
+
+    def arg_values(self, stage: PointwiseStage, cam, frame: Frame) -> list:
+        """The kernel arguments of a pointwise stage for this frame: scalars as they are, host
+        arrays in device buffers (a read-only array that is the same object as last time is not
+        copied again — a stage's static table)."""
+        import pyopencl as cl
+
+        bufs, vals = self.buffers, []
+        for (cl_type, arg), v in zip(stage.args, stage.values(cam, frame)):
+            if "*" in cl_type:
+                a = np.ascontiguousarray(v)
+                key = (stage.name, arg)
+                buf = bufs.args.get(key)
+                if buf is None or buf.size != max(a.nbytes, 4):
+                    buf = bufs.args[key] = self.runtime.empty(a.shape, a.dtype)
+                    bufs.uploaded.pop(key, None)
+                if not (bufs.uploaded.get(key) is a and not a.flags.writeable):
+                    cl.enqueue_copy(self.runtime.queue, buf, a)
+                    bufs.uploaded[key] = a
+                vals.append(buf)
+            else:
+                vals.append(v)
+        return vals
+
+    def _upload_aux(self, view: Frame, later: list[Stage], size: tuple[int, int]):
+        """Device depth/velocity at a resampled size for the stages after the resampling one."""
+        import pyopencl as cl
+
+        aux, events = {}, []
+        for name in AUX_BUFFERS:
+            readers = [s.name for s in later if name in s.reads]
+            if not readers:
+                continue
+            host = getattr(view, name)
+            if host is None:
+                raise InputError(f"stage '{readers[0]}' needs {name} after a resampling stage that "
+                                 f"provides none; leave one of them out with --stages")
+            buf = self._scratch(("aux", size, name), host.shape)
+            aux[name] = buf
+            events.append(("upload", cl.enqueue_copy(self.runtime.queue, buf, np.ascontiguousarray(host),
+                                                     is_blocking=False)))
+        return aux, events
+
+    # -- call time ----------------------------------------------------------------------------
+    def check(self, frame: Frame, camera) -> None:
+        """Refuse a frame or camera this plan was not built for (one line naming the fix)."""
+        if not isinstance(frame, Frame):
+            raise InputError(f"Plan.run takes a clpost.Frame, not {type(frame).__name__}; wrap arrays "
+                             "with clpost.Frame(color=...)")
+        if frame.size != self.size:
+            raise InputError(f"Plan.run: the frame is {frame.width}x{frame.height} but the plan was built "
+                             f"for {self.size[0]}x{self.size[1]}; use Pipeline.run, which plans per size")
+        if camera is not self.camera and structure_key(camera) != self.structure:
+            raise InputError("Plan.run: the camera differs from the plan's in more than its per-frame "
+                             "scalars (lens, blades, stock …); use Pipeline.run, which re-plans")
+
+    def run(self, frame: Frame, camera=None) -> Frame:
+        """Process one frame with this plan. ``camera``: this frame's camera (same structure as the
+        plan's; its scalars — focus, f-number, shutter, exposure … — may differ per frame).
+        Returns a new Frame whose color is the camera's output."""
+        t0 = time.thread_time()
+        try:
+            return self._run(frame, self.camera if camera is None else camera)
+        finally:
+            self.last_host_ms = (time.thread_time() - t0) * 1e3
+
+    def _run(self, frame: Frame, cam) -> Frame:
+        import pyopencl as cl
+
+        from .runtime import event_ms
+
+        self.check(frame, cam)
+        self.last_timings = {}
+        meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
+        if not self.stages:
+            return frame.replace(metadata=meta, validate=False)
+        rt, q, bufs = self.runtime, self.runtime.queue, self.buffers
+        events = [("upload", cl.enqueue_copy(q, bufs.color_in, frame.color, is_blocking=False))]
+        for name in AUX_BUFFERS:
+            if any(name in s.reads for s in self.stages):
+                host = getattr(frame, name)
+                buf = bufs.aux.get(name)
+                if buf is None:
+                    buf = bufs.aux[name] = rt.empty(host.shape)
+                events.append(("upload", cl.enqueue_copy(q, buf, host, is_blocking=False)))
+        src, planar_k = bufs.color_in, 0
+        size, host_out, aux = self.size, {}, bufs.aux
+        view = frame  # the frame as the next stage sees it: resampling stages change its size
+        for k, (node, launch) in enumerate(zip(self.nodes, self.launches)):
+            out_size = launch.out_size
+            if node.dst_layout == INTERLEAVED:
+                dst = self._color_out(out_size)
+            else:
+                dst = self._planar(planar_k, out_size)
+                planar_k ^= 1
+            if node.gather:
+                stage = node.stages[0]
+                for ev in stage.enqueue(rt, cam, view, src, dst, aux):
+                    events.append((stage.name, ev))
+                host_out.update(stage.host_buffers(cam, view))
+                if out_size != size:
+                    view = resized_view(frame, out_size, host_out, stage.name)
+                    later = [s for n in self.nodes[k + 1:] for s in n.stages]
+                    aux, evs = self._upload_aux(view, later, out_size)
+                    events += evs
+                size = out_size
+            else:
+                w, h = size
+                args = [src, dst, np.int32(w), np.int32(h)]
+                args += [aux[b] for b in AUX_BUFFERS if any(b in s.reads for s in node.stages)]
+                for s in node.stages:
+                    args += self.arg_values(s, cam, view)
+                node.kernel.set_args(*args)
+                gsize = global_size(node.stages, node.src_layout, node.dst_layout, w, h)
+                events.append((node.name, cl.enqueue_nd_range_kernel(q, node.kernel, gsize, None)))
+            src = dst
+        w, h = size
+        out = np.empty((h, w, 3), np.float32)
+        events.append(("download", cl.enqueue_copy(q, out, self._color_out(size), is_blocking=True)))
+        for name, ev in events:
+            self.last_timings[name] = self.last_timings.get(name, 0.0) + event_ms(ev)
+        return frame.replace(color=out, metadata=meta, validate=False, **host_out)
+
+    def reference(self, frame: Frame, camera=None) -> np.ndarray:
+        """The same plan through each stage's float64 numpy reference; (H, W, 3) float64."""
+        cam = self.camera if camera is None else camera
+        color = frame.color.astype(np.float64)
+        view, host = frame, {}
+        for s in self.stages:
+            color = s.reference(cam, view, color)
+            if color.shape[:2] != (view.height, view.width):
+                host.update(s.host_buffers(cam, view))
+                view = resized_view(frame, (color.shape[1], color.shape[0]), host, s.name)
+        return color

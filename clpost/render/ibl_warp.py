@@ -1,0 +1,232 @@
+r"""The quad-tree warp of the image-based lens model (Heidrich, Slusallek & Seidel, sec. 3.5):
+each projection's pinhole render warped onto its film cell with the weight W and accumulated
+(``kernels/ibl_warp.cl``, its float64 numpy reference :func:`warp_reference`).
+
+Film ↔ pixels. The lens inverts the image; the output is shown upright, as a camera shows it:
+the centre of pixel (i, j) is the film point (lens frame, mm)
+
+.. math:: x' = -(i - c_x)\,p,\quad y' = (j - c_y)\,p,\quad c = \left(\tfrac{W-1}{2}, \tfrac{H-1}{2}\right),\quad
+          p = \text{sensor width} / W
+
+(a scene point to the right, camera X > 0, images at lens-frame x' < 0 and shows at i > c_x).
+Camera space (X right, Y down, Z forward, metres) has its origin at the lens's entrance pupil
+on the axis — the perspective centre of the chief rays, and of the pinhole render the
+post-process pipeline starts from — so the depth buffers of both paths agree.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..optics import get_lens
+from .ibl_build import ImageBasedLens, Projection
+from .ibl_rays import focus_plane_z_mm, image_plane_tex, mirrored_table, trace_back
+
+
+def pixel_to_film(i, j, size: tuple[int, int], sensor_w_mm: float):
+    """Film point (lens frame, mm) of pixel coordinates (i, j) (module docstring)."""
+    w, h = size
+    p = sensor_w_mm / w
+    return -(np.asarray(i, np.float64) - (w - 1) / 2.0) * p, (np.asarray(j, np.float64) - (h - 1) / 2.0) * p
+
+
+def lens_to_camera_m(points_mm: np.ndarray, z_origin_mm: float) -> np.ndarray:
+    """Lens-frame points (mm) → camera space (m) with the origin on the axis at ``z_origin_mm``."""
+    pts = np.asarray(points_mm, np.float64)
+    return np.stack([pts[..., 0], -pts[..., 1], -(pts[..., 2] - z_origin_mm)], -1) / 1000.0
+
+
+@dataclass(frozen=True)
+class WarpCell:
+    """What the warp kernel needs for one projection at one output size: the projection's render
+    (size, focal length, principal point, camera-space COP) and the film node grid."""
+
+    pupil_index: int
+    box: tuple[int, int, int, int]  # output pixels i0, i1, j0, j1 (half-open) owned by the cell
+    nodes: np.ndarray  # (gy, gx, 4) float64: u, v (render px), W (1/mm²), 0
+    node_origin: tuple[float, float]  # output pixel coordinates of node (0, 0)
+    node_step: tuple[float, float]  # output pixels between nodes
+    render_size: tuple[int, int]
+    render_f_px: float
+    render_c: tuple[float, float]
+    cop_camera_m: np.ndarray
+
+
+def _owned(coord: np.ndarray, lo: float, hi: float, last: bool) -> tuple[int, int]:
+    """Half-open range of indices whose coordinate lies in [lo, hi) ([lo, hi] for the last cell),
+    so cells that share an edge never both own a pixel."""
+    m = (coord >= lo) & ((coord <= hi) if last else (coord < hi))
+    idx = np.flatnonzero(m)
+    return (int(idx[0]), int(idx[-1]) + 1) if idx.size else (0, 0)
+
+
+def warp_cells(model: ImageBasedLens, size: tuple[int, int], node_spacing_px: float = 16.0,
+               supersample: float = 1.0, margin_px: int = 2) -> tuple[list[WarpCell], float]:
+    r"""The warp data of every projection for an output of ``size`` pixels, and the
+    normalisation :math:`\sum_i W_i(0)` (the axial film point's weight over all pupil samples).
+
+    Nodes: a regular grid over the cell's film rectangle (at least the model's ``grid`` per side,
+    at most ``node_spacing_px`` apart so the vignetting border and the distortion are resolved
+    at the output's resolution), each traced back through its pupil sample exactly as in
+    preprocessing: u, v = the render pixel where the projection's image plane meets the ray's
+    approximation q − e, W as in :mod:`clpost.render.ibl_build`. Vignetted nodes get W = 0 and the
+    affine extrapolation of the passing nodes' (u, v), so interpolation across the border stays
+    smooth. Render: focal length ``supersample`` × the film's (v / p), the frustum = the
+    bounding box of the passing nodes' texture coordinates plus ``margin_px``."""
+    w, h = (int(v) for v in size)
+    if w < 2 or h < 2 or (w, h) != tuple(size):
+        raise InputError(f"image-based lens: size={size!r} must be (width, height) in whole pixels >= 2")
+    if not (math.isfinite(node_spacing_px) and node_spacing_px >= 1):
+        raise InputError(f"node_spacing_px={node_spacing_px!r} must be >= 1 output pixel, e.g. 16")
+    if not (math.isfinite(supersample) and 0.25 <= supersample <= 8):
+        raise InputError(f"supersample={supersample!r} must be in [0.25, 8] (render px per film px)")
+    L = get_lens(model.lens)
+    dist_mm = model.focus_distance_m * 1000.0 if math.isfinite(model.focus_distance_m) else math.inf
+    pres = L.focused(dist_mm, model.f_number)
+    table, zf = mirrored_table(pres, L.stop_radius_mm(model.f_number))
+    z_e = L.paraxial.z_entrance_pupil_mm
+    z_plane = focus_plane_z_mm(model.focus_distance_m, zf)
+    pitch = model.sensor_mm[0] / w
+    f_px = supersample * L.focus(dist_mm, model.f_number).image_distance_mm / pitch
+    cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
+    xs, ys = pixel_to_film(np.arange(w), np.arange(h), (w, h), model.sensor_mm[0])
+    hw, hh = 0.5 * model.sensor_mm[0], 0.5 * model.sensor_mm[1]
+    cells = []
+    for proj in model.projections:
+        x0, x1, y0, y1 = proj.cell_mm
+        p = model.pupil_samples_mm[proj.pupil_index]
+        # film x is mirrored: the cell [x0, x1) is the pixel interval (c_x − x1/p, c_x − x0/p]
+        i0, i1 = _owned(-xs, -x1, -x0, last=x0 <= -hw + 1e-9)
+        j0, j1 = _owned(ys, y0, y1, last=y1 >= hh - 1e-9)
+        if i1 <= i0 or j1 <= j0:
+            continue
+        a_x, b_x = cx - x1 / pitch, cx - x0 / pitch
+        a_y, b_y = cy + y0 / pitch, cy + y1 / pitch
+        gx = max(int(model_grid(proj)), int(math.ceil((b_x - a_x) / node_spacing_px)) + 1)
+        gy = max(int(model_grid(proj)), int(math.ceil((b_y - a_y) / node_spacing_px)) + 1)
+        nx, ny = np.meshgrid(np.linspace(a_x, b_x, gx), np.linspace(a_y, b_y, gy))
+        fx, fy = pixel_to_film(nx, ny, (w, h), model.sensor_mm[0])
+        film = np.stack([fx.ravel(), fy.ravel()], -1)
+        q, d, ok = trace_back(table, zf, film, p)
+        if ok.sum() < 3:
+            continue
+        tex = image_plane_tex(q, d, proj.cop_mm, z_plane)
+        ok &= np.all(np.isfinite(tex), axis=1)
+        if ok.sum() < 3:
+            continue
+        # vignetted nodes: affine extrapolation of the passing nodes' texture coordinates
+        design = np.concatenate([film, np.ones((len(film), 1))], 1)
+        coef = np.linalg.lstsq(design[ok], tex[ok], rcond=None)[0]
+        tex = np.where(ok[:, None], tex, design @ coef)
+        ray = np.concatenate([p[None, :2] - film, np.full((len(film), 1), p[2] - zf)], 1)
+        dist2 = np.einsum("ij,ij->i", ray, ray)
+        cos = np.abs(ray[:, 2]) / np.sqrt(dist2)
+        wgt = np.where(ok, cos * cos / dist2, 0.0)
+        t_ok = tex[ok]
+        lo, hi = t_ok.min(0), t_ok.max(0)
+        rw = int(math.ceil((hi[0] - lo[0]) * f_px)) + 2 * margin_px + 1
+        rh = int(math.ceil((hi[1] - lo[1]) * f_px)) + 2 * margin_px + 1
+        rc = (margin_px - lo[0] * f_px, margin_px - lo[1] * f_px)
+        uv = tex * f_px + np.array(rc)
+        nodes = np.zeros((gy, gx, 4))
+        nodes[..., 0] = uv[:, 0].reshape(gy, gx)
+        nodes[..., 1] = uv[:, 1].reshape(gy, gx)
+        nodes[..., 2] = wgt.reshape(gy, gx)
+        step = ((b_x - a_x) / (gx - 1), (b_y - a_y) / (gy - 1))
+        cells.append(WarpCell(proj.pupil_index, (i0, i1, j0, j1), nodes, (a_x, a_y), step, (rw, rh), f_px, rc,
+                              lens_to_camera_m(proj.cop_mm, z_e)))
+    # normalisation: the axial film point's irradiance for unit radiance (all samples pass there)
+    axial = 0.0
+    for p in model.pupil_samples_mm:
+        dz = p[2] - zf
+        d2 = p[0] ** 2 + p[1] ** 2 + dz * dz
+        axial += dz * dz / d2 / d2
+    return cells, axial
+
+
+def model_grid(proj: Projection) -> int:
+    """Rays per cell side the projection was fitted with."""
+    return int(proj.film_mm.shape[0])
+
+
+def warp_reference(acc: np.ndarray, src: np.ndarray, cell: WarpCell) -> None:
+    """float64 numpy reference of ``kernels/ibl_warp.cl``: adds the cell's weighted, warped
+    render ``src`` (h×w×3) into ``acc`` (H×W×3) in place."""
+    i0, i1, j0, j1 = cell.box
+    gy_n, gx_n = cell.nodes.shape[:2]
+    xx, yy = np.meshgrid(np.arange(i0, i1, dtype=np.float64), np.arange(j0, j1, dtype=np.float64))
+    gx = np.clip((xx - cell.node_origin[0]) / cell.node_step[0], 0, gx_n - 1)
+    gy = np.clip((yy - cell.node_origin[1]) / cell.node_step[1], 0, gy_n - 1)
+    ix = np.minimum(gx.astype(int), gx_n - 2)
+    iy = np.minimum(gy.astype(int), gy_n - 2)
+    fx, fy = (gx - ix)[..., None], (gy - iy)[..., None]
+    nd = cell.nodes
+    n = ((nd[iy, ix] * (1 - fx) + nd[iy, ix + 1] * fx) * (1 - fy)
+         + (nd[iy + 1, ix] * (1 - fx) + nd[iy + 1, ix + 1] * fx) * fy)
+    sh, sw = src.shape[:2]
+    u = np.clip(n[..., 0], 0, sw - 1)
+    v = np.clip(n[..., 1], 0, sh - 1)
+    iu = np.minimum(u.astype(int), sw - 2)
+    iv = np.minimum(v.astype(int), sh - 2)
+    fu, fv = (u - iu)[..., None], (v - iv)[..., None]
+    s = src.astype(np.float64)
+    val = ((s[iv, iu] * (1 - fu) + s[iv, iu + 1] * fu) * (1 - fv)
+           + (s[iv + 1, iu] * (1 - fu) + s[iv + 1, iu + 1] * fu) * fv)
+    wgt = np.where(n[..., 2] > 0, n[..., 2], 0.0)[..., None]
+    acc[j0:j1, i0:i1] += wgt * val
+
+
+class Warper:
+    """The OpenCL side: a planar accumulator of the output size and :meth:`add` per projection."""
+
+    def __init__(self, size: tuple[int, int], device: str | None = None) -> None:
+        import pyopencl as cl
+
+        from ..runtime import get_runtime, kernel_source
+
+        self.cl = cl
+        self.rt = get_runtime(device)
+        self.size = (int(size[0]), int(size[1]))
+        w, h = self.size
+        self.kernel = cl.Kernel(self.rt.program(kernel_source("ibl_warp"), "ibl_warp"), "ibl_warp")
+        self.acc = cl.Buffer(self.rt.context, cl.mem_flags.READ_WRITE, size=3 * w * h * 4)
+        cl.enqueue_fill_buffer(self.rt.queue, self.acc, np.float32(0), 0, 3 * w * h * 4)
+        self.events = []
+
+    def add(self, src: np.ndarray, cell: WarpCell) -> None:
+        cl = self.cl
+        i0, i1, j0, j1 = cell.box
+        if i1 <= i0 or j1 <= j0:
+            return
+        planar = np.ascontiguousarray(np.moveaxis(np.asarray(src, np.float32), -1, 0))
+        sh, sw = src.shape[:2]
+        if sw < 2 or sh < 2:
+            raise InputError(f"image-based lens: a projection's render of {sw}x{sh} px is too small to sample")
+        mf = cl.mem_flags
+        src_buf = cl.Buffer(self.rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=planar)
+        nodes = np.ascontiguousarray(cell.nodes, np.float32)
+        node_buf = cl.Buffer(self.rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=nodes)
+        gy, gx = nodes.shape[:2]
+        w, h = self.size
+        ev = self.kernel(self.rt.queue, (i1 - i0, j1 - j0), None, src_buf, np.int32(sw), np.int32(sh),
+                         node_buf, np.int32(gx), np.int32(gy), np.float32(cell.node_origin[0]),
+                         np.float32(cell.node_origin[1]), np.float32(1.0 / cell.node_step[0]),
+                         np.float32(1.0 / cell.node_step[1]), self.acc, np.int32(w), np.int32(h),
+                         np.int32(i0), np.int32(j0))
+        self.events.append(ev)
+
+    def result(self) -> np.ndarray:
+        w, h = self.size
+        out = np.empty((3, h, w), np.float32)
+        self.cl.enqueue_copy(self.rt.queue, out, self.acc)
+        self.rt.queue.finish()
+        return np.ascontiguousarray(np.moveaxis(out, 0, -1))
+
+    def device_ms(self) -> float:
+        from ..runtime import event_ms
+
+        self.rt.queue.finish()
+        return float(sum(event_ms(e) for e in self.events))
