@@ -316,18 +316,32 @@ def run(scenes: list[str], sizes, qualities, *, device=None, repeats=10, warmup=
 
     rt = get_runtime(device)
     rows = []
+
+    def doc():
+        return dict(schema=SCHEMA_VERSION, device=rt.name, time=time.strftime("%Y-%m-%d %H:%M:%S"),
+                    load_average=list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+                    rows=rows)
+
     for sc in scenes:
         for w, h in sizes:
             for q in qualities:
                 if log:
                     log(f"bench: {sc} {w}x{h} {q} …")
-                rows.append(bench_case(SCENES[sc], w, h, quality=q, device=device, repeats=repeats,
-                                       warmup=warmup, numpy_max_pixels=numpy_max_pixels,
-                                       base_camera=base_camera if sc == "demo" else None,
-                                       cache_dir=cache_dir))
-    return dict(schema=SCHEMA_VERSION, device=rt.name, time=time.strftime("%Y-%m-%d %H:%M:%S"),
-                load_average=list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
-                rows=rows)
+                try:
+                    row = bench_case(SCENES[sc], w, h, quality=q, device=device, repeats=repeats,
+                                     warmup=warmup, numpy_max_pixels=numpy_max_pixels,
+                                     base_camera=base_camera if sc == "demo" else None,
+                                     cache_dir=cache_dir)
+                except Exception:
+                    if log and rows:  # what was measured is not lost with the failing case
+                        log(f"bench: {sc} {w}x{h} {q} failed; the {len(rows)} row(s) measured before it:\n"
+                            + format_table(doc()))
+                    raise
+                rows.append(row)
+                if log:  # as soon as measured: a later crash (even in a driver) keeps it
+                    log(f"bench: {sc} {w}x{h} {q}: device {row['device_ms']:.2f} ms, "
+                        f"with transfers {row['wall_ms']:.2f} ms")
+    return doc()
 
 
 def _f(v, fmt, none="–"):

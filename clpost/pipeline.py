@@ -38,9 +38,34 @@ def _check_calibration_focal(cam: Camera) -> None:
                       "--lens/--sensor to match the calibration", stacklevel=3)
 
 
-# How to turn off a stage that lacks a buffer it reads (the CLI option, not --stages).
-_MISSING_FIX = {"dof": "turn depth of field off with --depth-of-field off",
-                "motion_blur": "leave out --fps/--shutter-angle/--readout (no motion blur)"}
+def check_prerequisites(stages: list[Stage], entries: list[PlanEntry], selected: set[str] | None,
+                        already_applied: frozenset[str], cam: Camera, frame: Frame) -> None:
+    """Refuse a plan in which a stage runs without a stage it ``requires``: one the selection
+    (``--stages``) leaves out although it would change this frame (it is not an identity) and
+    that the input does not already carry (``already_applied``). Its output is the planned
+    stage's input domain (grain on film densities, not on scene light), so the result would be
+    nonsense, not an approximation."""
+    if selected is None:
+        return  # every stage is a candidate: a needed prerequisite is planned
+    by_name = {st.name: st for st in stages}
+
+    def missing(name):  # the needed prerequisites of ``name`` left out, nearest first
+        return [r for r in by_name[name].requires if r not in selected and r not in already_applied
+                and by_name[r].skip_reason(cam, frame) is None]  # else an identity here
+
+    for name in (e.stage for e in entries if e.planned):
+        first = missing(name)
+        if not first:
+            continue
+        add, todo = set(), list(first)
+        while todo:  # and what those need in turn, so the fix is complete
+            r = todo.pop()
+            if r not in add:
+                add.add(r)
+                todo.extend(missing(r))
+        fixed = [st.name for st in stages if st.name in selected or st.name in add]
+        raise InputError(f"--stages: stage '{name}' works on the output of the '{first[0]}' stage, which is "
+                         f"not selected; add the missing stage(s): --stages {','.join(fixed)}")
 
 
 class Pipeline:
@@ -48,10 +73,12 @@ class Pipeline:
 
     ``stages`` restricts the candidates to the named stages (compositors often want one effect);
     ``device`` is a substring of an OpenCL platform/device name (see :mod:`clpost.runtime`).
+    ``already_applied`` names stages whose effect the input already carries (e.g. film densities
+    from an earlier run): the stages that ``require`` them may then run without them.
     """
 
     def __init__(self, camera: Camera, quality: str = "final", stages: list[str] | None = None,
-                 device: str | None = None) -> None:
+                 device: str | None = None, already_applied: tuple[str, ...] = ()) -> None:
         if not isinstance(camera, Camera):
             raise InputError(f"Pipeline: camera must be a clpost.Camera, not {type(camera).__name__}")
         if quality not in QUALITIES:
@@ -65,6 +92,10 @@ class Pipeline:
         self.quality = quality
         self.device = device
         self._selected = None if stages is None else set(stages)
+        unknown = [s for s in already_applied if s not in known]
+        if unknown:
+            raise InputError(f"already_applied: unknown stage(s) {', '.join(unknown)}; known: {', '.join(known)}")
+        self._already_applied = frozenset(already_applied)
         self._stages = [cls(quality) for cls in known.values()]
         self._runtime = None
         self._plans: dict[tuple, Plan] = {}
@@ -114,11 +145,12 @@ class Pipeline:
                     raise InputError(
                         (f"{src}: " if src else "") +
                         f"stage '{st.name}' needs the frame's {' and '.join(missing)} buffer; "
-                        f"re-render with that pass, or {_MISSING_FIX.get(st.name, 'leave the stage out with --stages')}"
+                        f"re-render with that pass, or {st.turn_off}"
                     )
                 out.append(PlanEntry(st.name, True, st.reason_needed(cam, frame) if reasons else ""))
             else:
                 out.append(PlanEntry(st.name, False, why))
+        check_prerequisites(self._stages, out, self._selected, self._already_applied, cam, frame)
         return out
 
     def plan(self, frame: Frame) -> list[str]:

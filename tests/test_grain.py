@@ -27,7 +27,7 @@ def density_frame(d_img, h, w, frame_index=0):
 
 
 def run_grain(cam, frame, quality):
-    pipe = Pipeline(cam, quality=quality, stages=["grain"])
+    pipe = Pipeline(cam, quality=quality, stages=["grain"], already_applied=("film",))
     return pipe, pipe.run(frame).color
 
 
@@ -51,7 +51,7 @@ def test_kernel_matches_reference_odd_size(rng, quality, r_px):
     h, w = 23, 37
     d = load_stock(STOCK).d_min() + rng.uniform(-0.2, 2.5, (h, w, 3))
     frame = Frame(d.astype(np.float32), metadata={"frame_index": 5})
-    pipe = Pipeline(cam_for_radius(r_px, w), quality=quality, stages=["grain"])
+    pipe = Pipeline(cam_for_radius(r_px, w), quality=quality, stages=["grain"], already_applied=("film",))
     assert_planned(pipe, frame, "grain")
     out, ref = pipe.run(frame).color, pipe.reference(frame)
     assert np.isfinite(out).all() and out.dtype == np.float32
@@ -121,7 +121,7 @@ def test_clamps_to_dmin_and_dmax():
     s = load_stock(STOCK)
     d = np.stack([s.d_min() - 1.0, s.d_min(), s.d_max(), s.d_max() + 5.0])[None]
     for q, r in (("draft", 0.3), ("final", 0.3), ("final", 0.01)):
-        out = Pipeline(cam_for_radius(r, 4), quality=q, stages=["grain"]).run(Frame(d.astype(np.float32))).color[0]
+        out = Pipeline(cam_for_radius(r, 4), quality=q, stages=["grain"], already_applied=("film",)).run(Frame(d.astype(np.float32))).color[0]
         assert np.isfinite(out).all()
         assert np.all(out >= s.d_min() - 1e-6) and np.all(out <= s.d_max() + 1e-5)
         # no image density: no grains (in the Boolean model grains of the dense neighbour at x=2

@@ -7,6 +7,9 @@ A stage is one physical effect. Its module (``clpost/stages/<name>.py``) holds o
 - ``order`` — its place in the physical order of light through the camera: it must follow the
   explicit list :data:`clpost.stages.PHYSICAL_ORDER`, where a new stage is added;
 - ``reads`` — the Frame buffers it needs besides color (``"depth"``, ``"velocity"``);
+- ``requires`` — the stages whose output it takes as its input (grain and print work on the film
+  stage's densities; film and sensor on the exposure stage's normalised signal): the planner
+  refuses a plan that leaves one out while it would change the image;
 - ``params`` — the frozen dataclass declaring the camera parameters it owns (fields made with
   :func:`clpost.params.param`: unit, flag, help, default, check, header key, scalar or
   structural); :class:`clpost.camera.Camera`, its validation and ``describe()`` and the CLI
@@ -58,6 +61,10 @@ class Stage(ABC):
     name: ClassVar[str]
     order: ClassVar[float]
     reads: ClassVar[tuple[str, ...]] = ()
+    turn_off: ClassVar[str] = "leave the stage out with --stages"
+    """How a user turns the stage off (said when a buffer it ``reads`` is missing)."""
+    requires: ClassVar[tuple[str, ...]] = ()
+    """Stages this one presupposes (their output is its input domain), by name."""
     kind: ClassVar[str] = "stage"
     params: ClassVar[type | None] = None
 

@@ -237,13 +237,20 @@ def bspline_tiles(model: OpenCVModel, src_size: tuple[int, int],
     """The final filter's tile lists: (x0, y0, ox, oy) int32 for the tiles inside the image with at
     least one pixel with a preimage, whose displacement there takes at most two neighbouring values
     — ``distortion_bspline_tiles`` reads their 5 × 5 coefficient window at (x + ox − 1, y + oy − 1)
-    with vector loads (it stays inside the :data:`PAD` border: valid positions are in
-    [−½, size − ½]) and writes 0 where there is no preimage; (x0, y0) int32 for the other tiles
+    with vector loads on every lane and row (valid positions are in [−½, size − ½], so the
+    windows of pixels with a preimage stay inside the :data:`PAD` border; a tile is listed only if
+    the windows of the others, which it loads and writes 0 for, stay inside the planes too); (x0, y0) int32 for the other tiles
     (``distortion_table``, per pixel: partial tiles at the image's right edge, tiles without data,
     strongly magnifying or minifying ones)."""
     x0, y0, ox, oy, uniform, valid = _tile_offsets(model, src_size, src_k)
-    w = model.width
-    fast = uniform & (valid > 0) & (x0 + TILE <= w)  # rows below the image: the kernel skips them
+    w, h = model.width, model.height
+    pw, ph = coef_pitch(src_size[0]), -(-(src_size[1] + 2 * PAD) // FIR_ROWS) * FIR_ROWS
+    # every lane and row (< h) loads its window, with or without a preimage: all 16 × 16 windows
+    # must lie in the coefficient planes (lanes without data can sit up to TILE − 1 px from the
+    # data that set ox, oy: at 3840×2160 they read 19215 floats before the buffer)
+    inside = ((x0 + ox - 1 + PAD >= 0) & (x0 + TILE - 1 + ox + 3 + PAD <= pw - 1)
+              & (y0 + oy - 1 + PAD >= 0) & (np.minimum(y0 + TILE, h) - 1 + oy + 3 + PAD <= ph - 1))
+    fast = uniform & (valid > 0) & (x0 + TILE <= w) & inside  # rows below the image: the kernel skips them
     return _split_tiles(x0, y0, ox, oy, fast)
 
 

@@ -602,6 +602,7 @@ class Dof(GatherStage):
     order = 10.0
     params = DofParams
     reads = ("depth",)
+    turn_off = "turn depth of field off with --depth-of-field off"
 
     def skip_reason(self, camera, frame):
         if not camera.depth_of_field:

@@ -84,6 +84,7 @@ def stock_lut(film: str) -> tuple[np.ndarray, float, float]:
 class Film(PointwiseStage):
     name = "film"
     order = 80.0
+    requires = ("exposure",)
     params = FilmParams
     args = (("__global const float *", "lut"), ("float", "log_offset"), ("float", "lo"),
             ("float", "inv_step"))

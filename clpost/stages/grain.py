@@ -103,6 +103,7 @@ def _stats_samples(r_px: float) -> int | None:
 class Grain(GatherStage):
     name = "grain"
     order = 90.0
+    requires = ("film",)
     params = GrainParams
 
     def skip_reason(self, camera, frame):

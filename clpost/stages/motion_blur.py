@@ -152,6 +152,7 @@ class MotionBlur(GatherStage):
     order = 40.0
     params = MotionBlurParams
     reads = ("velocity", "depth")
+    turn_off = "leave out --fps/--shutter-angle/--readout (no motion blur)"
 
     def __init__(self, quality: str = "final") -> None:
         super().__init__(quality)

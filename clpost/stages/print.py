@@ -77,6 +77,7 @@ def print_params(camera) -> np.ndarray:
 class Print(PointwiseStage):
     name = "print"
     order = 95.0
+    requires = ("film",)
     params = PrintParams
     args = (("__global const float *", "params"),)
 

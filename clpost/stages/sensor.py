@@ -95,6 +95,7 @@ def sensor_scalars(camera):
 class Sensor(PointwiseStage):
     name = "sensor"
     order = 85.0
+    requires = ("exposure",)
     params = SensorParams
     args = (("float", "e_sat"), ("float", "full_well"), ("float", "read_noise"), ("float", "black"),
             ("float", "white"), ("uint", "seed"), ("uint", "frame"))

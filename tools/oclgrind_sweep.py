@@ -1,0 +1,245 @@
+"""Run every clpost OpenCL kernel once per case on small and odd sizes, for Oclgrind.
+
+Meant to run on Oclgrind's simulated device (``tests/test_oclgrind.py`` starts it in a
+subprocess with an ICD file for ``liboclgrind-rt-icd.so`` and ``CLPOST_DEVICE=oclgrind``);
+Oclgrind writes its reports (invalid reads/writes, data races, uninitialised values) to stderr.
+Before each case this prints ``=== <case>`` to stderr, so a report names the case that made it.
+
+    python tools/oclgrind_sweep.py [--list] [--only SUBSTRING ...]
+
+Cases cover every stage at every quality it distinguishes (``dof`` with blades and cat's eye,
+``distortion`` bilinear, B-spline and fold-over, grain's Boolean model at ``final``, sensor, film,
+print), the layout conversions of a plan, ``clpost.expose``'s accumulator, the image-based
+lens warp and the OpenCL lens trace. Sizes are tiny because Oclgrind interprets every work-item.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+
+import numpy as np
+
+SIZES = ((1, 1), (3, 2), (17, 5), (37, 23))
+"""Odd sizes; 37×23 is not a multiple of the 16-pixel tiles and vectors in either direction."""
+
+
+def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0, intrinsics=None):
+    from clpost import Frame
+
+    rng = np.random.default_rng(seed + 7919 * w + h)
+    color = (rng.random((h, w, 3)) * scale).astype(np.float32)
+    d = rng.uniform(0.3, 30.0, (h, w)).astype(np.float32) if depth else None
+    v = (rng.standard_normal((h, w, 2)) * velocity).astype(np.float32) if velocity else None
+    meta = {"frame_index": 3}
+    if intrinsics is not None:
+        meta["intrinsics"] = intrinsics
+    return Frame(color, depth=d, velocity=v, metadata=meta)
+
+
+def _run(camera, stages, quality, w, h, **frame_kw):
+    from clpost import Pipeline
+
+    if callable(camera):  # a camera that depends on the size
+        camera = camera(w, h)
+    pipe = Pipeline(camera, quality=quality, stages=list(stages), device="oclgrind")
+    frame = _frame(w, h, **frame_kw)
+    planned = pipe.plan(frame)
+    missing = [s for s in stages if s not in planned]
+    if missing:  # a case that plans nothing would check nothing: fail loudly
+        raise SystemExit(f"oclgrind_sweep: stage(s) {missing} not planned for {w}x{h} {quality} "
+                         f"(planned: {planned})")
+    out = pipe.run(frame)
+    if not np.all(np.isfinite(out.color)):
+        raise SystemExit(f"oclgrind_sweep: non-finite output for {stages} {w}x{h} {quality}")
+
+
+def _distortion_model(cam, w, h, **k):
+    from clpost.calibration import OpenCVModel
+
+    return replace(cam, distortion=OpenCVModel.from_camera(cam, (w, h), **k))
+
+
+def cases():
+    """(name, callable) for every case."""
+    from clpost import Camera
+
+    base = Camera(f_number=2.0, shutter_s=1 / 50)
+    out = []
+
+    def add(name, fn):
+        out.append((name, fn))
+
+    qualities = ("draft", "preview", "final")
+    small = ((1, 1), (3, 2), (37, 23))
+
+    # dof: round, bladed with rounding and spherical aberration, cat's eye; a defocused scene
+    dof_cams = {
+        "round": replace(base, depth_of_field=True, f_number=1.4, focus_distance_m=0.5),
+        "blades": replace(base, depth_of_field=True, f_number=1.4, focus_distance_m=0.5, blades=6,
+                          blade_rotation_deg=10.0, aperture_roundness=0.3, spherical_aberration=0.5),
+        "catseye": replace(base, depth_of_field=True, f_number=1.4, focus_distance_m=0.5,
+                           optical_vignetting=0.8),
+    }
+    def dof_sized(cam):  # 0.4 mm pixels: circles of confusion of a few pixels, whatever the size
+        return lambda w, h: replace(cam, sensor_mm=(0.4 * w, 0.4 * h))
+
+    for label, cam in dof_cams.items():
+        cam = dof_sized(cam)
+        for q in qualities:
+            sizes = SIZES if (label == "round" and q == "final") else ((3, 2), (37, 23))
+            for w, h in sizes:
+                add(f"dof-{label} {q} {w}x{h}", lambda cam=cam, q=q, w=w, h=h: _run(cam, ["dof"], q, w, h))
+
+    aberr = replace(base, f_number=2.0, field_curvature_mm=-0.14, astigmatism_mm=0.11, coma_mm=0.087,
+                    lateral_color_mm=0.007)
+    for st in ("astigmatism", "coma", "lateral_color"):
+        for q in qualities:
+            for w, h in small:
+                add(f"{st} {q} {w}x{h}", lambda st=st, q=q, w=w, h=h: _run(aberr, [st], q, w, h))
+
+    # the same aberrations on small pixels (pitch 20 and 6 µm): blurs of tens of pixels, so the
+    # tiles fall into the larger tap/stencil classes and the whole-tile fast paths
+    for pitch in (0.02, 0.006):
+        for st in ("astigmatism", "coma", "lateral_color"):
+            w, h = 61, 35
+            cam = replace(aberr, sensor_mm=(w * pitch, h * pitch))
+            add(f"{st}-strong{pitch * 1000:g}um final {w}x{h}", lambda st=st, cam=cam, w=w, h=h: _run(cam, [st], "final", w, h))
+
+    mb = replace(base, frame_rate_fps=24.0, shutter_s=1 / 48, readout_time_s=0.01)
+    for q in qualities:
+        for w, h in small:
+            add(f"motion_blur {q} {w}x{h}",
+                lambda q=q, w=w, h=h: _run(mb, ["motion_blur"], q, w, h, velocity=6.0))
+
+    # distortion: barrel (bench scenes), strong pincushion + tangential (fold-over, pixels
+    # without data), at both filters; sizes include a partial tile in x and in y
+    dist = {"barrel": dict(k1=-0.12, k2=0.03, p1=1e-4),
+            "foldover": dict(k1=0.6, k2=-0.9, p1=0.01, p2=-0.01)}
+    for label, k in dist.items():
+        for q in ("draft", "final"):
+            for w, h in ((3, 2), (17, 5), (37, 23), (61, 35)):
+                add(f"distortion-{label} {q} {w}x{h}",
+                    lambda k=k, q=q, w=w, h=h: _run(_distortion_model(base, w, h, **k), ["distortion"], q, w, h))
+
+    # the render shifted by 12.6 px against the calibration (frame.metadata["intrinsics"]): the
+    # edge of the data crosses the 16-pixel tiles far from the render's edge, so a tile's lanes
+    # without data sit up to 16 px from those with data (the B-spline tiles' windows then reached
+    # past the coefficient planes: before the buffer for +, past its end for -)
+    from clpost.calibration import OpenCVModel
+
+    model = OpenCVModel.from_camera(base, (48, 48))
+    edge = replace(base, distortion=model)
+    for sign, label in ((1, "+"), (-1, "-")):
+        for q in ("draft", "final"):
+            k = (model.fx, model.fy, model.cx - sign * 12.6, model.cy - sign * 12.6)
+            add(f"distortion-shift{label} {q} 48x48",
+                lambda k=k, q=q: _run(edge, ["distortion"], q, 48, 48, intrinsics=k))
+
+    vig = replace(base, vignetting="natural")
+    film = replace(base, film="kodak-ektar-100")
+    sensor = replace(base, sensor_preset="smartphone", iso=800.0)
+    for q in qualities:
+        for w, h in SIZES:
+            add(f"vignetting+exposure {q} {w}x{h}",
+                lambda q=q, w=w, h=h: _run(vig, ["vignetting", "exposure"], q, w, h))
+            add(f"film+grain+print {q} {w}x{h}",
+                lambda q=q, w=w, h=h: _run(film, ["exposure", "film", "grain", "print"], q, w, h))
+            add(f"sensor {q} {w}x{h}", lambda q=q, w=w, h=h: _run(sensor, ["exposure", "sensor"], q, w, h))
+    # grain's Boolean model needs resolved grains (r >= 1/8 px): a fast stock, coarse grain and a
+    # tiny width make pixels large on the film
+    boolean = replace(base, film="fuji-superia-400", grain_scale=4.0, sensor_mm=(0.05, 0.03))
+    for w, h in ((3, 2), (17, 5)):
+        add(f"grain-boolean final {w}x{h}",
+            lambda w=w, h=h: _run(boolean, ["exposure", "film", "grain"], "final", w, h))
+    # a gather between pointwise stages: both layout conversions around it
+    for w, h in ((3, 2), (37, 23)):
+        add(f"layouts vignetting|astigmatism|exposure final {w}x{h}",
+            lambda w=w, h=h: _run(replace(aberr, vignetting="natural"), ["vignetting", "astigmatism", "exposure"],
+                                  "final", w, h))
+
+    def expose_case(w, h):
+        from clpost.expose import ExposureAccumulator
+
+        acc = ExposureAccumulator((w, h), 24, device="oclgrind")
+        for i in range(2):
+            acc.add(_frame(w, h, i, depth=False).color, "1/48")
+        acc.partial()
+
+    for w, h in ((1, 1), (17, 5)):
+        add(f"expose {w}x{h}", lambda w=w, h=h: expose_case(w, h))
+
+    def ibl_case(w, h):
+        from clpost.render.image_based_lens import WarpCell, Warper
+
+        rng = np.random.default_rng(5)
+        warper = Warper((w, h), device="oclgrind")
+        g, (sw, sh) = (4, 3), (9, 7)
+        for box in ((0, w // 2, 0, h), (w // 2, w, 0, h)):
+            i0, i1, j0, j1 = box
+            nodes = np.zeros((g[1], g[0], 4))
+            # texture coordinates overshooting the render (the kernel clamps), some zero weights
+            nodes[..., 0] = rng.uniform(-3, sw + 2, (g[1], g[0]))
+            nodes[..., 1] = rng.uniform(-3, sh + 2, (g[1], g[0]))
+            nodes[..., 2] = np.where(rng.random((g[1], g[0])) < 0.25, 0.0, rng.uniform(0, 5, (g[1], g[0])))
+            step = (max(i1 - i0, 1) / (g[0] - 1) * 1.03, (j1 - j0) / (g[1] - 1) * 1.03)
+            cell = WarpCell(0, box, nodes, (i0 - 0.4, j0 - 0.3), step, (sw, sh), 1.0, (0.0, 0.0), np.zeros(3))
+            warper.add(rng.uniform(0, 10, (sh, sw, 3)).astype(np.float32), cell)
+        warper.result()
+
+    add("ibl_warp 17x5", lambda: ibl_case(17, 5))
+
+    def trace_case():
+        from clpost.optics import load_prescription
+        from clpost.optics.cltrace import trace_cl
+
+        rng = np.random.default_rng(1)
+        n = 37  # not a multiple of any work-group size
+        o = np.c_[rng.uniform(-20, 20, (n, 2)), np.full(n, -3.0)]
+        d = np.c_[rng.normal(0, 0.4, (n, 2)), np.ones(n)]
+        trace_cl(load_prescription("zeiss-planar-50-f1.4"), o, d, device="oclgrind")
+
+    add("lens_trace 37 rays", trace_case)
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--list", action="store_true", help="print the case names and exit")
+    ap.add_argument("--only", nargs="*", default=[], help="run the cases whose name contains one of these")
+    args = ap.parse_args(argv)
+    todo = [(n, f) for n, f in cases() if not args.only or any(s in n for s in args.only)]
+    if args.list:
+        print("\n".join(n for n, _ in todo))
+        return 0
+    ran = _record_kernels()
+    for name, fn in todo:
+        print(f"=== {name}", file=sys.stderr, flush=True)
+        fn()
+    print(f"oclgrind_sweep: kernels run: {' '.join(sorted(ran))}", file=sys.stderr)
+    print(f"oclgrind_sweep: {len(todo)} case(s) done", file=sys.stderr, flush=True)
+    return 0
+
+
+def _record_kernels() -> set:
+    """The names of the kernels enqueued from now on (both ways clpost enqueues them)."""
+    import pyopencl as cl
+
+    ran = set()
+    enqueue, call = cl.enqueue_nd_range_kernel, cl.Kernel.__call__
+
+    def enqueue_nd_range_kernel(queue, kernel, *args, **kw):
+        ran.add(kernel.function_name)
+        return enqueue(queue, kernel, *args, **kw)
+
+    def kernel_call(self, *args, **kw):
+        ran.add(self.function_name)
+        return call(self, *args, **kw)
+
+    cl.enqueue_nd_range_kernel = enqueue_nd_range_kernel
+    cl.Kernel.__call__ = kernel_call
+    return ran
+
+
+if __name__ == "__main__":
+    sys.exit(main())
