@@ -305,7 +305,9 @@ class Plan:
                 stage = node.stages[0]
                 for ev in stage.enqueue(rt, cam, view, src, dst, aux):
                     events.append((stage.name, ev))
-                host_out.update(stage.host_buffers(cam, view))
+                host, evs = stage.enqueue_host_buffers(rt, cam, view, aux)
+                host_out.update(host)
+                events += evs
                 if out_size != size:
                     view = resized_view(frame, out_size, host_out, stage.name)
                     later = [s for n in self.nodes[k + 1:] for s in n.stages]

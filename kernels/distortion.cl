@@ -291,3 +291,26 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
         vstore16(select((float16)(0.0f), fmax(acc, 0.0f), ok), 0, dst + c * n + i);
     }
 }
+
+/* The distorted image's depth and velocity (the colour kernels' companions, so the host does no
+ * per-pixel work): nearest source pixel `flat[i]` (-1: no preimage -> depth +inf, velocity 0);
+ * velocities are displacements in the render, so they map to the output by the inverse of the
+ * map's Jacobian (`jinv`, 4 planes: a b; c d), exactly as Distortion.host_buffers computes them.
+ * One output pixel per work-item; global size rounded up to the work-group (hence the guard). */
+__kernel void distortion_aux(__global const float *restrict depth_in, __global const float *restrict vel_in,
+                             __global const int *restrict flat, __global const float *restrict jinv,
+                             __global float *restrict depth_out, __global float *restrict vel_out,
+                             const int n, const int has_depth, const int has_velocity)
+{
+    const int i = get_global_id(0);
+    if (i >= n) return;
+    const int s = flat[i];
+    if (has_depth)
+        depth_out[i] = s < 0 ? INFINITY : depth_in[s];
+    if (has_velocity) {
+        const size_t m = (size_t)n;
+        const float vx = s < 0 ? 0.0f : vel_in[2 * (size_t)s], vy = s < 0 ? 0.0f : vel_in[2 * (size_t)s + 1];
+        vel_out[2 * (size_t)i] = jinv[i] * vx + jinv[m + i] * vy;
+        vel_out[2 * (size_t)i + 1] = jinv[2 * m + i] * vx + jinv[3 * m + i] * vy;
+    }
+}

@@ -487,3 +487,28 @@ def test_a_calibration_that_disagrees_with_the_camera_is_named():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         Pipeline(Camera(distortion=agree)).camera_for(frame)
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_depth_and_velocity_computed_on_the_device_equal_the_host_oracle(rng, quality):
+    """The distorted frame's depth (nearest source pixel, +inf without a preimage) and velocity
+    (through the inverse Jacobian) come from the ``distortion_aux`` kernel; the host's
+    ``host_buffers`` is the oracle — depth exactly, velocity to float32 rounding."""
+    model = OpenCVModel(width=61, height=35, fx=40.0, fy=41.0, cx=29.0, cy=18.5, k1=-0.3, k2=0.05, p1=0.01)
+    h, w = 37, 59  # not the calibration's frustum: some output pixels have no preimage
+    depth = rng.uniform(0.5, 9.0, (h, w)).astype(np.float32)
+    depth[::7, ::5] = np.inf
+    frame = Frame(rng.uniform(0, 1, (h, w, 3)).astype(np.float32), depth=depth,
+                  velocity=rng.normal(0, 4, (h, w, 2)).astype(np.float32),
+                  metadata={"intrinsics": (40.0, 41.0, 29.0, 18.0)})
+    pipe = Pipeline(Camera(lens="thin:12", distortion=model), stages=["distortion"], quality=quality)
+    assert_planned(pipe, frame, "distortion")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the calibration's f disagrees with thin:12 on purpose
+        out = pipe.run(frame)
+        cam = pipe.camera_for(frame)
+    stage = pipe.last_plan.stages[0]
+    host = stage.host_buffers(cam, frame)
+    assert (out.alpha == host["alpha"]).all() and 0 < out.alpha.mean() < 1
+    np.testing.assert_array_equal(out.depth, host["depth"])
+    np.testing.assert_allclose(out.velocity, host["velocity"], rtol=1e-5, atol=1e-5)

@@ -124,6 +124,14 @@ class GatherStage(Stage):
         the frame's size (only a resampling stage such as distortion changes it)."""
         return frame.size
 
+    def enqueue_host_buffers(self, rt: "Runtime", camera: "Camera", frame: "Frame", aux: dict) -> tuple[dict, list]:
+        """:meth:`host_buffers` for :meth:`clpost.plan.Plan.run`: a stage may compute them on the
+        device and download them without blocking into the arrays it returns (the plan's final
+        download waits for them); returns (buffers, [(timing label, event), …]) — the label is the
+        stage's name for its kernels, ``upload``/``download`` for copies. Default:
+        :meth:`host_buffers`."""
+        return self.host_buffers(camera, frame), []
+
     def host_buffers(self, camera: "Camera", frame: "Frame") -> dict:
         """Host buffers of the output Frame this stage replaces (``alpha``, ``depth``,
         ``velocity``), e.g. alpha 0 where a resampling had no data. Default: none."""

@@ -169,6 +169,16 @@ def _map_geometry(model: OpenCVModel, src_size: tuple[int, int],
     return _MapGeometry(alpha, flat, invalid, inv)
 
 
+def _aux_flat(g: _MapGeometry) -> np.ndarray:
+    """The nearest source pixel of every output pixel as int32, -1 where there is no preimage
+    (``distortion_aux``'s index table)."""
+    flat = np.asarray(g.flat, np.int64).ravel().copy()
+    flat[g.invalid] = -1
+    if flat.size and flat.max() >= 2**31:
+        raise InputError("distortion: the render is too large for 32-bit pixel indices")
+    return flat.astype(np.int32)
+
+
 def _taps(plane: np.ndarray, xi: np.ndarray, yi: np.ndarray) -> np.ndarray:
     h, w = plane.shape
     return plane[np.clip(yi, 0, h - 1), np.clip(xi, 0, w - 1)]
@@ -471,6 +481,46 @@ class Distortion(GatherStage):
         m = m.astype(np.float32).astype(np.float64)  # the device's map, to compare filters alone
         return np.stack([resample(np.asarray(color[..., c], np.float64), m, self.filter_taps)
                          for c in range(3)], -1)
+
+    def enqueue_host_buffers(self, rt, camera, frame, aux) -> tuple[dict, list]:
+        """:meth:`host_buffers` computed on the device (kernel ``distortion_aux``): depth and
+        velocity are gathered there and downloaded without blocking into fresh arrays, which the
+        plan's final (blocking) download completes; the map's static tables are uploaded once."""
+        import pyopencl as cl
+
+        from ..runtime import kernel_source
+
+        if frame.alpha is not None:  # a coverage input is resampled bilinearly on the host
+            return self.host_buffers(camera, frame), []
+        model = self._model(camera)
+        g = _map_geometry(model, frame.size, source_intrinsics(model, frame))
+        out: dict = {"alpha": g.alpha}
+        if frame.depth is None and frame.velocity is None:
+            return out, []
+        h, w = g.alpha.shape
+        n = w * h
+        key = ("distortion_aux", model, frame.size, source_intrinsics(model, frame))
+        flat = rt.constant(lambda: _aux_flat(g), key=key + ("flat",))
+        jinv = rt.constant(lambda: np.ascontiguousarray(g.inv, np.float32), key=key + ("jinv",))
+        q, events = rt.queue, []
+        dev = {}
+        for name, shape in (("depth", (frame.height, frame.width)), ("velocity", (frame.height, frame.width, 2))):
+            host = getattr(frame, name)
+            dev[name] = rt.scratch(self, f"aux_in_{name}", shape if host is not None else (1,))
+            dev[name + "_out"] = rt.scratch(self, f"aux_out_{name}", (h, w) + shape[2:] if host is not None else (1,))
+            if host is not None:
+                events.append(("upload", cl.enqueue_copy(q, dev[name], host, is_blocking=False)))
+        kern = rt.kernel(kernel_source("common") + kernel_source("distortion"), "distortion_aux", {}, "distortion")
+        events.append((self.name, rt.launch(kern, (n,), (64,), dev["depth"], dev["velocity"], flat, jinv,
+                                            dev["depth_out"], dev["velocity_out"], np.int32(n),
+                                            np.int32(frame.depth is not None), np.int32(frame.velocity is not None))))
+        if frame.depth is not None:
+            out["depth"] = np.empty((h, w), np.float32)
+            events.append(("download", cl.enqueue_copy(q, out["depth"], dev["depth_out"], is_blocking=False)))
+        if frame.velocity is not None:
+            out["velocity"] = np.empty((h, w, 2), np.float32)
+            events.append(("download", cl.enqueue_copy(q, out["velocity"], dev["velocity_out"], is_blocking=False)))
+        return out, events
 
     def host_buffers(self, camera, frame) -> dict:
         """alpha, depth and velocity of the distorted image (see the module docstring)."""
