@@ -8,6 +8,8 @@ conversion kernel there.
 """
 from __future__ import annotations
 
+import functools
+
 from typing import TYPE_CHECKING
 
 from .runtime import kernel_source
@@ -92,6 +94,7 @@ def width_block(width: int, suffix: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
+@functools.lru_cache(maxsize=None)
 def library(width: int = 1, suffix: str = "") -> str:
     """kernels/common.cl and the width-generic libraries (fastmath, random) at ``width`` with
     plain names (``clp_log2``, ``rnd_hash4``, ...): the head of a gather's program."""

@@ -109,6 +109,7 @@ class Frame:
             _first_bad("velocity", np.isnan(vel).any(axis=2), "are NaN", "fix the renderer's vector pass")
             _first_bad("velocity", np.isinf(vel).any(axis=2), "are ±inf", "clamp velocity to finite pixels per frame")
             object.__setattr__(self, "velocity", vel)
+            self.velocity_max  # noqa: B018 — with the validation scans, not per plan run
 
         if alpha is not None:
             a = _as_float32("alpha", alpha, copy)
@@ -143,6 +144,19 @@ class Frame:
         rng = (float(d.min()), far, not bool(finite.all()))
         object.__setattr__(self, "_depth_range", (d, rng))
         return rng
+
+    @property
+    def velocity_max(self) -> float | None:
+        """The largest |component| of the velocity buffer in px/frame (the inf-norm), or None
+        without velocity. Computed once per velocity buffer (motion blur's skip rule)."""
+        if self.velocity is None:
+            return None
+        cached = self.__dict__.get("_velocity_max")
+        if cached is not None and cached[0] is self.velocity:
+            return cached[1]
+        v = float(np.max(np.abs(self.velocity))) if self.velocity.size else 0.0
+        object.__setattr__(self, "_velocity_max", (self.velocity, v))
+        return v
 
     @property
     def height(self) -> int:

@@ -72,6 +72,7 @@ def kernels_dir() -> Path:
     )
 
 
+@functools.lru_cache(maxsize=None)
 def kernel_source(name: str) -> str:
     """Text of ``kernels/<name>.cl`` (read once per process: stages ask for it every frame)."""
     return _read_source(kernels_dir() / f"{name}.cl")

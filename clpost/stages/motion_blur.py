@@ -136,7 +136,7 @@ def _max_speed_bound(frame) -> float:
     """An upper bound of max |v| (px/frame): √2 × the inf-norm (cheap; never under-estimates)."""
     if frame.velocity is None:
         return math.inf
-    return math.sqrt(2.0) * float(np.max(np.abs(frame.velocity))) if frame.velocity.size else 0.0
+    return math.sqrt(2.0) * frame.velocity_max
 
 
 def _blur_needed(camera, frame) -> bool:
