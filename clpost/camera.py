@@ -270,7 +270,11 @@ class _CameraBase:
 
     def describe(self) -> dict[str, str]:
         """The parameters as strings (written into output EXR headers), from each parameter's
-        ``header`` key; a value whose header text is None (unset / off) is omitted."""
+        ``header`` key; a value whose header text is None (unset / off) is omitted. Formatted
+        once per camera (a plan records it on every frame)."""
+        cached = self.__dict__.get("_described")
+        if cached is not None:
+            return dict(cached)
         out: dict[str, str] = {}
         for pcls, specs in self._param_groups:
             for s in specs:
@@ -281,6 +285,7 @@ class _CameraBase:
             extra = getattr(pcls, "extra_header", None)
             if extra is not None:
                 out.update(extra(self))
+        object.__setattr__(self, "_described", dict(out))
         return out
 
     @classmethod

@@ -101,8 +101,7 @@ class Pipeline:
         self._plans: dict[tuple, Plan] = {}
         self._buffers: Buffers | None = None
         self.last_plan: Plan | None = None
-        self.last_timings: dict[str, float] = {}
-        """Device milliseconds of the last :meth:`run`, per kernel and for upload/download."""
+
 
     # -- planning -----------------------------------------------------------------------------
     @property
@@ -198,10 +197,12 @@ class Pipeline:
         cam = self.camera_for(frame) if isinstance(frame, Frame) else None
         plan = self.plan_for(frame, cam)
         self.last_plan = plan
-        try:
-            return plan.run(frame, cam)
-        finally:
-            self.last_timings = plan.last_timings
+        return plan.run(frame, cam)
+
+    @property
+    def last_timings(self) -> dict[str, float]:
+        """Device milliseconds of the last :meth:`run`, per kernel and for upload/download."""
+        return self.last_plan.last_timings if self.last_plan is not None else {}
 
     def reference(self, frame: Frame) -> np.ndarray:
         """The same plan through each stage's float64 numpy reference; returns (H, W, 3) float64."""

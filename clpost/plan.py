@@ -138,8 +138,8 @@ class Plan:
         self.nodes = group_nodes(self.stages)
         self.launches = self._launches(camera, frame)
         self.buffers = buffers
-        self.last_timings: dict[str, float] = {}
-        """Device milliseconds of the last :meth:`run`, per kernel and for upload/download."""
+        self._events: list = []
+        self._timings: dict[str, float] = {}
         self.last_host_ms = 0.0
         """CPU time of the calling thread in the last :meth:`run` (host work: planning checks,
         tables, argument setting, enqueueing; the device's threads and waits are not in it)."""
@@ -275,10 +275,8 @@ class Plan:
     def _run(self, frame: Frame, cam) -> Frame:
         import pyopencl as cl
 
-        from .runtime import event_ms
-
         self.check(frame, cam)
-        self.last_timings = {}
+        self._events, self._timings = [], {}
         meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
         if not self.stages:
             return frame.replace(metadata=meta, validate=False)
@@ -327,9 +325,20 @@ class Plan:
         w, h = size
         out = np.empty((h, w, 3), np.float32)
         events.append(("download", cl.enqueue_copy(q, out, self._color_out(size), is_blocking=True)))
-        for name, ev in events:
-            self.last_timings[name] = self.last_timings.get(name, 0.0) + event_ms(ev)
+        self._events = events  # read into last_timings only when asked (profiling queries cost host time)
         return frame.replace(color=out, metadata=meta, validate=False, **host_out)
+
+    @property
+    def last_timings(self) -> dict[str, float]:
+        """Device milliseconds of the last :meth:`run`, per kernel and for upload/download."""
+        if self._events:
+            from .runtime import event_ms
+
+            t: dict[str, float] = {}
+            for name, ev in self._events:
+                t[name] = t.get(name, 0.0) + event_ms(ev)
+            self._timings, self._events = t, []
+        return self._timings
 
     def reference(self, frame: Frame, camera=None) -> np.ndarray:
         """The same plan through each stage's float64 numpy reference; (H, W, 3) float64."""

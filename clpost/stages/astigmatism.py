@@ -138,6 +138,7 @@ curvature, Coddington equations); Hecht, *Optics*, 5th ed., §6.3.1.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -220,6 +221,15 @@ def residual_semi_px(cx, c0, pitch):
     return np.minimum(np.nan_to_num(a, nan=MAX_SEMI_PX, posinf=MAX_SEMI_PX), MAX_SEMI_PX)
 
 
+@lru_cache(maxsize=16)
+def _offsets_lut(camera) -> np.ndarray:
+    """The focal-offset LUT of a camera (read-only; the planner and the device plan ask for it
+    every frame, and a traced lens's curve costs a trace)."""
+    lut = fld.sample_lut(focal_offsets(camera), camera, 2)
+    lut.setflags(write=False)
+    return lut
+
+
 class Astigmatism(GatherStage):
     name = "astigmatism"
     order = 20.0
@@ -231,7 +241,7 @@ class Astigmatism(GatherStage):
         return TAPS[self.quality]
 
     def _lut(self, camera) -> np.ndarray:
-        return fld.sample_lut(focal_offsets(camera), camera, 2)
+        return _offsets_lut(camera)
 
     def skip_reason(self, camera, frame):
         fn = focal_offsets(camera)
