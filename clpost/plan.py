@@ -135,6 +135,10 @@ class Plan:
         self.size = frame.size
         self.stages = list(stages)
         self.structure = structure_key(camera)
+        from .stages._field import frame_intrinsics, principal_point_px
+
+        self.principal_point = principal_point_px(camera, *frame.size, frame_intrinsics(frame))
+        """The optical axis (px) in the plan's input frame: the one definition every stage uses."""
         self.nodes = group_nodes(self.stages)
         self.launches = self._launches(camera, frame)
         self.buffers = buffers

@@ -60,3 +60,31 @@ def test_off_centre_kernels_match_their_references(rng, stage):
     err = np.abs(out - ref)
     j = np.unravel_index(int(np.argmax(err)), err.shape)
     assert err.max() < 2e-3, f"{stage}: max abs error {err.max():.3g} (values 0–10) at (x={j[1]}, y={j[0]}, c={j[2]})"
+
+
+def test_a_recorded_render_principal_point_is_the_one_every_stage_uses(rng):
+    """A render that records its pinhole intrinsics (frame.metadata["intrinsics"], as the pyvista
+    renderer does) is centred there for the field stages and vignetting alike — one definition
+    (``_field.principal_point_px``), not one per stage."""
+    k = (80.0, 80.0, 12.0, 30.0)
+    assert fld.principal_point_px(Camera(), W, H, k) == (12.0, 30.0)
+    flat = np.ones((H, W, 3), np.float32)
+    frame = Frame(flat, depth=np.full((H, W), 3.0, np.float32), metadata={"intrinsics": k})
+    # vignetting: brightest where the optical axis meets the sensor
+    out = Pipeline(Camera(vignetting="natural", f_number=2.0), stages=["vignetting"]).run(frame).color
+    y, x = np.unravel_index(np.argmax(out[..., 1]), out.shape[:2])
+    assert (x, y) == (12, 30)
+    # lateral colour: the green channel's magnification is centred on the same point
+    cam = Camera(lateral_color_mm=0.3, f_number=2.0)
+    sx, sy, _ = LateralColor("final").exact_positions(cam, W, H, k)
+    np.testing.assert_allclose([sx[1, 30, 12], sy[1, 30, 12]], [12.0, 30.0], atol=1e-9)
+    # kernel vs reference with the recorded point (odd content so a wrong centre shows)
+    frame = Frame(rng.uniform(0, 2, (H, W, 3)).astype(np.float32), depth=frame.depth, metadata={"intrinsics": k})
+    for stages, kw in ((["lateral_color"], dict(lateral_color_mm=0.3)), (["coma"], dict(coma_mm=0.5)),
+                       (["astigmatism"], dict(field_curvature_mm=-0.3, astigmatism_mm=0.2))):
+        pipe = Pipeline(Camera(f_number=2.0, **kw), stages=stages)
+        assert_planned(pipe, frame, *stages)
+        got = pipe.run(frame).color
+        np.testing.assert_allclose(got, pipe.reference(frame), rtol=2e-3, atol=2e-3)
+        centred = Pipeline(Camera(f_number=2.0, **kw), stages=stages).run(frame.replace(metadata={})).color
+        assert np.abs(got - centred).max() > 1e-3

@@ -35,19 +35,36 @@ TILE_H = 8
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 
 
-def principal_point_px(camera, w: int, h: int) -> tuple[float, float]:
-    """The optical centre (px) in the undistorted frame these stages see (they run before
-    ``distortion``). A calibrated camera's render has the calibration's principal point: at the
-    calibration's own size its (c_x, c_y), at the extended frustum of
-    :func:`clpost.calibration.required_render` that frustum's
-    (:func:`clpost.calibration.render_intrinsics`, as the distortion stage); otherwise the centre."""
-    model = getattr(camera, "distortion", None)
+def frame_intrinsics(frame) -> tuple[float, float, float, float] | None:
+    """The render's own pinhole intrinsics (f_x, f_y, c_x, c_y), as a renderer records them in
+    ``frame.metadata["intrinsics"]``; None when absent (or after a resampling stage)."""
+    k = frame.metadata.get("intrinsics") if isinstance(frame.metadata, dict) else None
+    return None if k is None else tuple(float(t) for t in k)
+
+
+def render_intrinsics_px(model, w: int, h: int, intrinsics=None):
+    """(f_x, f_y, c_x, c_y) of a w × h render: its recorded ``intrinsics`` (see
+    :func:`frame_intrinsics`), else, for a calibration ``model`` (or None), the render made for it
+    — the calibration's K at its own size, :func:`clpost.calibration.required_render`'s frustum
+    at that size — else None."""
+    if intrinsics is not None:
+        return tuple(float(t) for t in intrinsics)
     if model is not None:
         from ..calibration import render_intrinsics
 
-        k = render_intrinsics(model, (w, h))
-        if k is not None:
-            return k[2], k[3]
+        return render_intrinsics(model, (w, h))
+    return None
+
+
+def principal_point_px(camera, w: int, h: int, intrinsics=None) -> tuple[float, float]:
+    """The optical centre (px) of a w × h image: the one definition every stage uses (the field
+    stages and vignetting measure image height from it, distortion maps around it). The render's
+    recorded ``intrinsics`` when given, else a calibrated camera's (:func:`render_intrinsics_px`:
+    before ``distortion`` the render's, after it — at the calibration's size — the calibration's
+    own c), else the image centre ((W−1)/2, (H−1)/2) of the pixel-centre convention."""
+    k = render_intrinsics_px(getattr(camera, "distortion", None), w, h, intrinsics)
+    if k is not None:
+        return k[2], k[3]
     return 0.5 * (w - 1), 0.5 * (h - 1)
 
 

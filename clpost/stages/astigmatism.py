@@ -322,7 +322,7 @@ class Astigmatism(GatherStage):
     def semi_axes_px(self, camera, frame):
         """(a_s/2p, a_t/2p, e_x, e_y): per-pixel semi-axes (px) and radial unit vector, float64."""
         w, h = frame.width, frame.height
-        cx, cy = fld.principal_point_px(camera, w, h)
+        cx, cy = fld.principal_point_px(camera, w, h, fld.frame_intrinsics(frame))
         pitch = fld.pitch_mm(camera, w)
         _, _, r, ex, ey = fld.radial_frame(w, h, cx, cy)
         ds, dt = focal_offsets(camera)(r * pitch)
@@ -348,7 +348,7 @@ class Astigmatism(GatherStage):
         (0 = copied; exact tiles take the quality's N)."""
         w, h = frame.width, frame.height
         a_s, a_t, _, _ = self.semi_axes_px(camera, frame)
-        cx, cy = fld.principal_point_px(camera, w, h)
+        cx, cy = fld.principal_point_px(camera, w, h, fld.frame_intrinsics(frame))
         _, _, r, tex, tey = fld.tile_centres(w, h, cx, cy)
         ntx, nty = fld.tiles(w, h)
         big = np.full((2, nty * fld.TILE_H, ntx * fld.TILE_W), np.nan)

@@ -82,9 +82,9 @@ def _plan(stage, rt, camera, w, h, cx, cy, lut):
     )
 
 
-def device_plan(stage, rt, camera, w, h) -> dict:
+def device_plan(stage, rt, camera, w, h, k=None) -> dict:
     """The cached plan of :func:`_plan` for this camera and size (tests read its buffers)."""
-    cx, cy = fld.principal_point_px(camera, w, h)
+    cx, cy = fld.principal_point_px(camera, w, h, k)
     lut = stage._lut(camera).astype(np.float32)
     key = (stage.taps, w, h, cx, cy, lut.tobytes(), fld.pitch_mm(camera, w), fld.lut_range_mm(camera),
            tuple(sorted(stage.defines(camera).items())))
@@ -98,7 +98,7 @@ def enqueue_astigmatism(stage, rt, camera, frame, src, dst, aux):
 
     q = rt.queue
     w, h = frame.width, frame.height
-    b = device_plan(stage, rt, camera, w, h)
+    b = device_plan(stage, rt, camera, w, h, fld.frame_intrinsics(frame))
     kernel, ntx, nty, nclass = b["kernel"], b["ntx"], b["nty"], b["nclass"]
     pw, ph = b["pw"], b["ph"]
     aperture, v, f = thin_lens(camera)

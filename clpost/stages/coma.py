@@ -211,29 +211,30 @@ class Coma(GatherStage):
         return ((x0 >= fld.PAD) & (x0 + fld.TILE_W + fld.PAD <= w)
                 & (y0 >= fld.PAD) & (y0 + fld.TILE_H + fld.PAD <= h))
 
-    def _uniform_key(self, camera, w, h):
-        return (self._lut(camera).tobytes(), w, h, fld.pitch_mm(camera, w), self.taps)
+    def _uniform_key(self, camera, w, h, k=None):
+        return (self._lut(camera).tobytes(), w, h, fld.pitch_mm(camera, w), self.taps,
+                fld.principal_point_px(camera, w, h, k))
 
-    def tile_uniform(self, camera, w: int, h: int) -> np.ndarray:
+    def tile_uniform(self, camera, w: int, h: int, k=None) -> np.ndarray:
         r"""Per tile (tiles_y, tiles_x) bool: a bound on the distance between any pixel's landing
         point and the tile centre's, over its pixels and the taps, is ≤ ``UNIFORM_PX``, and no
         tap's Jacobian can reach its clamp at 0 (:math:`1 - A\max_k t_{k,r} - B\max_k(t_{k,r}^2
         + t_{k,s}^2) \ge 0`, A and B the tile's largest :math:`|C' + C/r|` and :math:`|C'\,C/r|`,
         so the Jacobian is linear in the taps' moments) — those tiles take the tile centre's comet
         for every pixel, as a stencil (memoised)."""
-        key = self._uniform_key(camera, w, h)
+        key = self._uniform_key(camera, w, h, k)
         if self._uniform[0] != key:
-            _, dc, q, _, _ = self.c_px(camera, w, h)
+            _, dc, q, _, _ = self.c_px(camera, w, h, k)
             ntx, nty = fld.tiles(w, h)
             big = np.zeros((2, nty * fld.TILE_H, ntx * fld.TILE_W))
             big[0, :h, :w], big[1, :h, :w] = np.abs(dc + q), np.abs(dc * q)
             a, b = big.reshape(2, nty, fld.TILE_H, ntx, fld.TILE_W).max(axis=(2, 4))
             t = comet_offsets(fld.vogel_disc(self.uniform_taps).astype(np.float64))
             no_clamp = 1.0 - a * t[:, 1].max() - b * (t * t).sum(1).max() >= 0.0
-            self._uniform = (key, (self.uniform_bound_px(camera, w, h) <= UNIFORM_PX) & no_clamp)
+            self._uniform = (key, (self.uniform_bound_px(camera, w, h, k) <= UNIFORM_PX) & no_clamp)
         return self._uniform[1]
 
-    def uniform_stencils(self, camera, w: int, h: int) -> list:
+    def uniform_stencils(self, camera, w: int, h: int, k=None) -> list:
         r"""The uniform tiles' taps merged per integer offset, grouped by stencil size: a list of
         (S, constant Jacobian, tile ids, dx, dy, weights) with dx, dy (tiles, S) int offsets and weights (tiles, S, 4)
         float64: per offset the sums over the taps k of the bilinear weight c_k of the tile
@@ -242,11 +243,11 @@ class Coma(GatherStage):
         A pixel's output is :math:`\sum_s (W_0 - a W_1 + b W_2)\,C_{in}(x + d_s)`, a = C' + C/r,
         b = C' C/r: the tap-by-tap sum of the reference regrouped. On the tiles ``tile_jacobian``
         gives one Jacobian, W0 holds :math:`W_0 - \bar a W_1 + \bar b W_2` and W1 = W2 = 0."""
-        uni = self.tile_uniform(camera, w, h).ravel()
+        uni = self.tile_uniform(camera, w, h, k).ravel()
         ids = np.flatnonzero(uni)
         if not ids.size:
             return []
-        ax = self.tile_axes_px(camera, w, h).reshape(-1, 4)[ids]
+        ax = self.tile_axes_px(camera, w, h, k).reshape(-1, 4)[ids]
         t = comet_offsets(fld.vogel_disc(self.uniform_taps).astype(np.float64))
         lx = ax[:, 0:1] * t[:, 0] + ax[:, 2:3] * t[:, 1]  # (tiles, taps): the tile's landing points
         ly = ax[:, 1:2] * t[:, 0] + ax[:, 3:4] * t[:, 1]
@@ -270,7 +271,7 @@ class Coma(GatherStage):
         start = np.concatenate([[0], np.cumsum(count)[:-1]])
         rank = np.arange(uniq.size) - start[tile]
         # tiles with one Jacobian for all pixels: its moments folded into W0 (W1 = W2 = 0)
-        a_t, b_t, const = (v.ravel()[ids] for v in self.tile_jacobian(camera, w, h))
+        a_t, b_t, const = (v.ravel()[ids] for v in self.tile_jacobian(camera, w, h, k))
         fold = const[tile]
         wts[fold, 0] = wts[fold, 0] - a_t[tile[fold]] * wts[fold, 1] + b_t[tile[fold]] * wts[fold, 2]
         wts[fold, 1:] = 0.0
@@ -291,12 +292,12 @@ class Coma(GatherStage):
             out.append((size, bool(ci >= len(sizes)), ids[sel_t].astype(np.int32), sdx, sdy, sw))
         return out
 
-    def tile_jacobian(self, camera, w: int, h: int):
+    def tile_jacobian(self, camera, w: int, h: int, k=None):
         r"""Per tile (tiles_y, tiles_x): the mean of a = C' + C/r and b = C' C/r over its pixels,
         and whether a Jacobian with them differs from every pixel's own by at most
         ``CONST_JAC_TOL`` (:math:`\max|a - \bar a|\,\max_k t_{k,r} + \max|b - \bar b|\,
         \max_k (t_{k,r}^2 + t_{k,s}^2)`): exact for a linear coefficient (a = 2k, b = k²)."""
-        _, dc, q, _, _ = self.c_px(camera, w, h)
+        _, dc, q, _, _ = self.c_px(camera, w, h, k)
         ntx, nty = fld.tiles(w, h)
         big = np.full((2, nty * fld.TILE_H, ntx * fld.TILE_W), np.nan)
         big[0, :h, :w], big[1, :h, :w] = dc + q, dc * q
@@ -307,12 +308,12 @@ class Coma(GatherStage):
         const = dev[0] * t[:, 1].max() + dev[1] * (t * t).sum(1).max() <= CONST_JAC_TOL
         return mean[0], mean[1], const
 
-    def uniform_bound_px(self, camera, w: int, h: int) -> np.ndarray:
+    def uniform_bound_px(self, camera, w: int, h: int, k=None) -> np.ndarray:
         """Per tile: :math:`\\max_k \\| (|t_{k,s}| m_{sx} + |t_{k,r}| m_{rx},\\ |t_{k,s}| m_{sy} +
         |t_{k,r}| m_{ry}) \\|` with m the largest deviation of the pixels' −C e_s, −C e_r (px) from
         the tile centre's: a bound on how far a pixel's landing point is from the tile's."""
-        c, _, _, ex, ey = self.c_px(camera, w, h)
-        tiles = self.tile_axes_px(camera, w, h)
+        c, _, _, ex, ey = self.c_px(camera, w, h, k)
+        tiles = self.tile_axes_px(camera, w, h, k)
         dev = np.abs(np.stack([c * ey, -c * ex, -c * ex, -c * ey]) - np.moveaxis(fld.per_pixel(tiles, w, h), -1, 0))
         ntx, nty = fld.tiles(w, h)
         big = np.zeros((4, nty * fld.TILE_H, ntx * fld.TILE_W))
@@ -322,21 +323,21 @@ class Coma(GatherStage):
         return np.hypot(t[:, 0] * m[0] + t[:, 1] * m[2], t[:, 0] * m[1] + t[:, 1] * m[3]).max(0)
 
     # -- the oracle -------------------------------------------------------------------------
-    def tile_axes_px(self, camera, w: int, h: int) -> np.ndarray:
+    def tile_axes_px(self, camera, w: int, h: int, k=None) -> np.ndarray:
         """(tiles_y, tiles_x, 4) float64: per tile the gather offsets −C e_s and −C e_r (px; x
         and y each) of its centre's comet (C capped) — what the kernel's windows are placed by."""
-        cx, cy = fld.principal_point_px(camera, w, h)
+        cx, cy = fld.principal_point_px(camera, w, h, k)
         pitch = fld.pitch_mm(camera, w)
         _, _, r, ex, ey = fld.tile_centres(w, h, cx, cy)
         c = np.clip(coma_curve(camera)(r * pitch) / pitch, -MAX_TAIL_PX / 3.0, MAX_TAIL_PX / 3.0)
         return np.stack([ey * c, -ex * c, -ex * c, -ey * c], -1)
 
-    def shape_error_px(self, camera, w: int, h: int) -> tuple[float, tuple[int, int]]:
+    def shape_error_px(self, camera, w: int, h: int, k=None) -> tuple[float, tuple[int, int]]:
         """Largest distance (px) between a tap's landing point with the tile centre's comet and
         with the pixel's own, over all pixels and taps, and the pixel (x, y) where it occurs: the
         kernel's window is exact while this stays below ½ px."""
-        c, _, _, ex, ey = self.c_px(camera, w, h)
-        tsxx, tsxy, trxx, trxy = np.moveaxis(fld.per_pixel(self.tile_axes_px(camera, w, h), w, h), -1, 0)
+        c, _, _, ex, ey = self.c_px(camera, w, h, k)
+        tsxx, tsxy, trxx, trxy = np.moveaxis(fld.per_pixel(self.tile_axes_px(camera, w, h, k), w, h), -1, 0)
         worst = np.zeros((h, w))
         for ts, tr in comet_offsets(fld.vogel_disc(self.taps).astype(np.float64)):
             d = np.hypot(c * (ts * ey - tr * ex) - (tsxx * ts + trxx * tr),
@@ -345,10 +346,10 @@ class Coma(GatherStage):
         j = np.unravel_index(int(np.argmax(worst)), worst.shape)
         return float(worst.max()), (int(j[1]), int(j[0]))
 
-    def c_px(self, camera, w: int, h: int):
+    def c_px(self, camera, w: int, h: int, k=None):
         """Per pixel: C in px (capped so the tail 3C ≤ 15 px), C' = dC/dr, C/r and the radial
         unit vector (float64)."""
-        cx, cy = fld.principal_point_px(camera, w, h)
+        cx, cy = fld.principal_point_px(camera, w, h, k)
         pitch = fld.pitch_mm(camera, w)
         _, _, r, ex, ey = fld.radial_frame(w, h, cx, cy)
         fn = coma_curve(camera)
@@ -366,11 +367,12 @@ class Coma(GatherStage):
         Jacobian where ``tile_jacobian`` allows)."""
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
-        c, dc, q, ex, ey = self.c_px(camera, w, h)
-        tsxx, tsxy, trxx, trxy = np.moveaxis(fld.per_pixel(self.tile_axes_px(camera, w, h), w, h), -1, 0)
+        k = fld.frame_intrinsics(frame)
+        c, dc, q, ex, ey = self.c_px(camera, w, h, k)
+        tsxx, tsxy, trxx, trxy = np.moveaxis(fld.per_pixel(self.tile_axes_px(camera, w, h, k), w, h), -1, 0)
         xs, ys = np.mgrid[0:h, 0:w].astype(np.float64)[::-1]
-        uniform = fld.per_pixel(self.tile_uniform(camera, w, h), w, h)
-        a_t, b_t, const = (fld.per_pixel(v, w, h) for v in self.tile_jacobian(camera, w, h))
+        uniform = fld.per_pixel(self.tile_uniform(camera, w, h, k), w, h)
+        a_t, b_t, const = (fld.per_pixel(v, w, h) for v in self.tile_jacobian(camera, w, h, k))
         a_px, b_px = np.where(const, a_t, dc + q), np.where(const, b_t, dc * q)
         out = np.zeros_like(color)
         for uni, n in ((False, self.taps), (True, self.uniform_taps)):

@@ -32,16 +32,16 @@ def program_source(taps: int) -> str:
     return kernel_source("common") + table + kernel_source("coma") + kernels
 
 
-def _tile_lists(stage, rt, camera, w, h) -> dict:
+def _tile_lists(stage, rt, camera, w, h, k=None) -> dict:
     """Device lists of the tiles for the window kernel and, per stencil size, the uniform tiles
     with their stencils (uploaded once per camera map, frame size and tap count: coma does not
     depend on the frame's content)."""
     mk = rt.constant
-    window = np.flatnonzero(~stage.tile_uniform(camera, w, h).ravel()).astype(np.int32)
+    window = np.flatnonzero(~stage.tile_uniform(camera, w, h, k).ravel()).astype(np.int32)
     inner = stage.inner_tiles(w, h).ravel()
     stencils = [(f"coma_{'c' if const else 's'}{size}", mk(ids), ids.size, mk(inner[ids].astype(np.int32)),
                  mk(np.stack([dx, dy], -1).astype(np.int32)), mk(wts.astype(np.float32)))
-                for size, const, ids, dx, dy, wts in stage.uniform_stencils(camera, w, h)]
+                for size, const, ids, dx, dy, wts in stage.uniform_stencils(camera, w, h, k)]
     # the padded copy's inside that no tile reads (padded coordinates, x0, x1, y0, y1): the
     # inner tiles read the source, and the border tiles' reads (|d| <= PAD) stay within
     # 2 PAD + tile of the frame's edge; the window kernel reads the padded copy everywhere
@@ -52,7 +52,8 @@ def _tile_lists(stage, rt, camera, w, h) -> dict:
 
 def enqueue_coma(stage, rt, camera, frame, src, dst, aux):
     w, h = frame.width, frame.height
-    cx, cy = fld.principal_point_px(camera, w, h)
+    k = fld.frame_intrinsics(frame)
+    cx, cy = fld.principal_point_px(camera, w, h, k)
     ntx, nty = fld.tiles(w, h)
     ow, oh = ntx * fld.TILE_W, nty * fld.TILE_H
     whole = (ow, oh) == (w, h)
@@ -67,17 +68,17 @@ def enqueue_coma(stage, rt, camera, frame, src, dst, aux):
     pad = rt.scratch(stage, "pad", (3, oh + 2 * fld.PAD, ow + 2 * fld.PAD))
     shape = rt.scratch(stage, "shape", (4, oh, ow))
     events = []
-    key = (stage._uniform_key(camera, w, h), cx, cy)
+    key = (stage._uniform_key(camera, w, h, k), cx, cy)
 
     def make_shape():
         # the comet of every pixel depends on the camera and the frame size only (not on the
         # frame's content): computed once, kept on the device for the next frames
         lut = rt.constant(stage._lut(camera))
-        tiles = rt.constant(stage.tile_axes_px(camera, w, h).astype(np.float32))
+        tiles = rt.constant(stage.tile_axes_px(camera, w, h, k).astype(np.float32))
         events.append(rt.launch(kernel("coma_shape"), (ow, oh), None, shape, lut, np.int32(ow), np.int32(oh),
                                 np.float32(cx), np.float32(cy), np.float32(pitch),
                                 np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera))))
-        return dict(tiles=tiles, lists=_tile_lists(stage, rt, camera, w, h))
+        return dict(tiles=tiles, lists=_tile_lists(stage, rt, camera, w, h, k))
 
     plan = rt.cached(stage, "plan", key, make_shape)
     lists = plan["lists"]

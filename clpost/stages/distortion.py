@@ -50,9 +50,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..calibration import OpenCVModel, render_intrinsics, required_render, undistort
+from ..calibration import OpenCVModel, required_render, undistort
 from ..errors import InputError
 from ..params import boolean, param, parse_on_off
+from . import _field as fld
 from .base import GatherStage
 
 
@@ -101,10 +102,7 @@ INVALID = -1.0e30
 
 def source_intrinsics(model: OpenCVModel, frame) -> tuple[float, float, float, float]:
     """(f_x, f_y, c_x, c_y) of the pinhole render in ``frame`` (see the module docstring)."""
-    k = frame.metadata.get("intrinsics") if isinstance(frame.metadata, dict) else None
-    if k is not None:
-        return tuple(float(t) for t in k)
-    k = render_intrinsics(model, frame.size)
+    k = fld.render_intrinsics_px(model, frame.width, frame.height, fld.frame_intrinsics(frame))
     if k is not None:
         return k
     spec = required_render(model)

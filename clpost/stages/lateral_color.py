@@ -178,21 +178,21 @@ class LateralColor(GatherStage):
         return rt.kernel(kernel_source("lateral_color"), name, self.defines(camera), "lateral_color")
 
     # -- the tile plan (host, float64) -----------------------------------------------------
-    def tile_plan(self, camera, w: int, h: int) -> dict:
+    def tile_plan(self, camera, w: int, h: int, k=None) -> dict:
         """Per tile (tiles_y, tiles_x): ``fast`` (bool) and, per channel (3, tiles_y, tiles_x),
         the cell offset ``b`` (x, y; int), the affine fractions ``f`` (x, y) × (a0, ax, ay) and
         Jacobian ``jac`` (a0, ax, ay) of the module docstring (memoised per camera map and size)."""
         lut = self._lut(camera)
         pitch = fld.pitch_mm(camera, w)
-        key = (lut.tobytes(), w, h, pitch)
+        key = (lut.tobytes(), w, h, pitch, fld.principal_point_px(camera, w, h, k))
         if self._plan_key != key:
-            self._plan_key, self._plan = key, self._tile_plan(camera, w, h)
+            self._plan_key, self._plan = key, self._tile_plan(camera, w, h, k)
         return self._plan
 
-    def _tile_plan(self, camera, w, h) -> dict:
+    def _tile_plan(self, camera, w, h, k=None) -> dict:
         tw, th = fld.TILE_W, fld.TILE_H
         ntx, nty = fld.tiles(w, h)
-        cx, cy = fld.principal_point_px(camera, w, h)
+        cx, cy = fld.principal_point_px(camera, w, h, k)
         pitch = fld.pitch_mm(camera, w)
         ty, tx = np.mgrid[0:nty, 0:ntx].astype(np.float64)
         x0, y0 = tx * tw, ty * th
@@ -238,8 +238,9 @@ class LateralColor(GatherStage):
 
         q = rt.queue
         w, h = frame.width, frame.height
-        cx, cy = fld.principal_point_px(camera, w, h)
-        plan = self.tile_plan(camera, w, h)
+        k = fld.frame_intrinsics(frame)
+        cx, cy = fld.principal_point_px(camera, w, h, k)
+        plan = self.tile_plan(camera, w, h, k)
         key = (id(rt.context), w, h, self._plan_key)
         if key not in self._scratch:
             # the records depend only on the camera's map and the frame size: uploaded once
@@ -262,17 +263,17 @@ class LateralColor(GatherStage):
         return events
 
     # -- the oracle -------------------------------------------------------------------------
-    def exact_positions(self, camera, w: int, h: int):
+    def exact_positions(self, camera, w: int, h: int, k=None):
         """Per pixel and channel (3, h, w) float64: source x, y of the exact map, and its Jacobian."""
-        cx, cy = fld.principal_point_px(camera, w, h)
+        cx, cy = fld.principal_point_px(camera, w, h, k)
         xs, ys, r, _, _ = fld.radial_frame(w, h, cx, cy)
         ratio, jac = inverse_map(camera, r * fld.pitch_mm(camera, w))
         return cx + (xs - cx) * ratio, cy + (ys - cy) * ratio, jac
 
-    def model_positions(self, camera, w: int, h: int):
+    def model_positions(self, camera, w: int, h: int, k=None):
         """As ``exact_positions``, with the tile model on the fast tiles (what the kernels do)."""
-        sx, sy, jac = self.exact_positions(camera, w, h)
-        plan = self.tile_plan(camera, w, h)
+        sx, sy, jac = self.exact_positions(camera, w, h, k)
+        plan = self.tile_plan(camera, w, h, k)
         ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
         lx, ly = xs % fld.TILE_W, ys % fld.TILE_H
         fast = fld.per_pixel(plan["fast"], w, h)
@@ -285,11 +286,11 @@ class LateralColor(GatherStage):
             jac[c] = np.where(fast, jc[..., 0] + jc[..., 1] * lx + jc[..., 2] * ly, jac[c])
         return sx, sy, jac
 
-    def model_error_px(self, camera, w: int, h: int) -> tuple[float, float, tuple[int, int, int]]:
+    def model_error_px(self, camera, w: int, h: int, k=None) -> tuple[float, float, tuple[int, int, int]]:
         """Largest |tile model − exact map| over all pixels and channels: source position (px),
         Jacobian, and the (x, y, channel) of the largest position error."""
-        ex, ey, ej = self.exact_positions(camera, w, h)
-        mx, my, mj = self.model_positions(camera, w, h)
+        ex, ey, ej = self.exact_positions(camera, w, h, k)
+        mx, my, mj = self.model_positions(camera, w, h, k)
         d = np.hypot(mx - ex, my - ey)
         c, y, x = np.unravel_index(int(np.argmax(d)), d.shape)
         return float(d.max()), float(np.abs(mj - ej).max()), (int(x), int(y), int(c))
@@ -299,7 +300,8 @@ class LateralColor(GatherStage):
         the exact map, no LUT, elsewhere)."""
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
-        sx, sy, jac = self.model_positions(camera, w, h)
+        k = fld.frame_intrinsics(frame)
+        sx, sy, jac = self.model_positions(camera, w, h, k)
         out = np.empty_like(color)
         for c in range(3):
             out[..., c] = fld.bilinear_padded(color[..., c:c + 1], sx[c], sy[c])[..., 0] * jac[c]

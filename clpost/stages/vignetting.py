@@ -48,6 +48,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..params import param
+from . import _field as fld
 from .base import PointwiseStage
 
 
@@ -136,13 +137,14 @@ def relative_illumination(camera) -> RelativeIllumination | None:
     return lambda x: np.interp(np.asarray(x, np.float64), r, ri)
 
 
-def principal_offset_mm(camera) -> tuple[float, float]:
-    """Principal point minus image centre on the sensor (mm): from the calibration, else 0."""
-    m = camera.distortion
-    if m is None:
-        return 0.0, 0.0
-    pitch = camera.sensor_mm[0] / m.width
-    return (m.cx - 0.5 * (m.width - 1)) * pitch, (m.cy - 0.5 * (m.height - 1)) * pitch
+def principal_offset_mm(camera, w: int, h: int, intrinsics=None) -> tuple[float, float]:
+    """Principal point minus image centre on the sensor (mm) of a w × h image
+    (:func:`clpost.stages._field.principal_point_px`)."""
+    from ._field import principal_point_px
+
+    cx, cy = principal_point_px(camera, w, h, intrinsics)
+    pitch = camera.sensor_mm[0] / w
+    return (cx - 0.5 * (w - 1)) * pitch, (cy - 0.5 * (h - 1)) * pitch
 
 
 class Vignetting(PointwiseStage):
@@ -179,14 +181,14 @@ class Vignetting(PointwiseStage):
     def defines(self, camera):
         return {}
 
-    def ri_plane(self, camera, w: int, h: int) -> np.ndarray:
+    def ri_plane(self, camera, w: int, h: int, intrinsics=None) -> np.ndarray:
         """RI at every pixel (float32 (h, w), read-only): the LUT interpolated in float64 at the
         pixel's image height. Built once per curve, principal point and size and uploaded once
         (the pipeline does not re-copy an unchanged read-only table); the kernel reads one float
         per pixel — a per-pixel LUT lookup in the kernel was the stage's whole cost (2 of every
         3 ms at 1080p) because PoCL cannot vectorise data-dependent loads."""
         lut = self._lut(camera)
-        ox, oy = principal_offset_mm(camera)
+        ox, oy = principal_offset_mm(camera, w, h, intrinsics)
         key = (lut.tobytes(), float(camera.sensor_mm[0]), ox, oy, w, h)
         if self._plane[0] != key:
             pitch = camera.sensor_mm[0] / w
@@ -200,13 +202,13 @@ class Vignetting(PointwiseStage):
         return self._plane[1]
 
     def values(self, camera, frame):
-        return (self.ri_plane(camera, frame.width, frame.height),)
+        return (self.ri_plane(camera, frame.width, frame.height, fld.frame_intrinsics(frame)),)
 
     def reference(self, camera, frame, color):
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
         pitch = camera.sensor_mm[0] / w
-        ox, oy = principal_offset_mm(camera)
+        ox, oy = principal_offset_mm(camera, w, h, fld.frame_intrinsics(frame))
         x = (np.arange(w) - 0.5 * (w - 1)) * pitch - ox
         y = (np.arange(h) - 0.5 * (h - 1)) * pitch - oy
         r = np.minimum(np.hypot(x[None, :], y[:, None]), self._r_max(camera))
