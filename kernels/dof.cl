@@ -133,11 +133,13 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     }
     const DOF_F alpha = fmin(1.0f, acc.wf);
     const DOF_F inv_wf = select((DOF_F)(0.0f), 1.0f / acc.wf, acc.wf > 0.0f);
-    const DOF_F inv_wb = 1.0f / acc.wb;
+    /* no background weight (a strong SA texture zeroes the centre tap and every other tap is in
+     * front): the background is the pixel's own colour, never 0/0 */
+    const DOF_F inv_wb = select((DOF_F)(0.0f), 1.0f / acc.wb, acc.wb > 0.0f);
     const DOF_F ob = 1.0f - alpha, af = alpha * inv_wf;
-    const DOF_F o_r = af * acc.fr + ob * (acc.r * inv_wb);
-    const DOF_F o_g = af * acc.fg + ob * (acc.g * inv_wb);
-    const DOF_F o_b = af * acc.fb + ob * (acc.b * inv_wb);
+    const DOF_F o_r = af * acc.fr + ob * select(DOF_LOAD(lv + c0), acc.r * inv_wb, acc.wb > 0.0f);
+    const DOF_F o_g = af * acc.fg + ob * select(DOF_LOAD(lv + pn + c0), acc.g * inv_wb, acc.wb > 0.0f);
+    const DOF_F o_b = af * acc.fb + ob * select(DOF_LOAD(lv + 2 * pn + c0), acc.b * inv_wb, acc.wb > 0.0f);
     if (y >= hw || x >= ww) return;
     const size_t n = (size_t)ww * hw, i = (size_t)y * ww + x;
     if (x + DOF_VEC <= ww) {

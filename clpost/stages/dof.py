@@ -515,7 +515,10 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
         B += wb[..., None] * cq; Wb += wb
     alpha = np.minimum(1.0, Wf)
     fr = np.where((Wf > 0)[..., None], F / np.where(Wf > 0, Wf, 1.0)[..., None], 0.0)
-    out = alpha[..., None] * fr + (1 - alpha)[..., None] * B / Wb[..., None]
+    # no background weight at all (a strong spherical-aberration texture zeroes the centre tap
+    # and every other tap is in front): the background is the pixel's own colour, never 0/0
+    bg = np.where((Wb > 0)[..., None], B / np.where(Wb > 0, Wb, 1.0)[..., None], own)
+    out = alpha[..., None] * fr + (1 - alpha)[..., None] * bg
     return out, alpha
 
 
