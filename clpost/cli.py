@@ -349,6 +349,13 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_stages(args) -> int:
+    from .stages import order_table
+
+    print(order_table())
+    return 0
+
+
 def cmd_lens(args) -> int:
     # Real lenses (issue "real lenses"): list / info / plot of lens_data prescriptions.
     from .optics import available_lenses, get_lens
@@ -466,6 +473,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_camera_options(b, defaults=DEMO_CAMERA_DEFAULTS)
     _add_pipeline_options(b)
     b.set_defaults(func=cmd_bench)
+
+    sub.add_parser("stages", help="every stage in physical order: order, domains, why it sits there"
+                   ).set_defaults(func=cmd_stages)
 
     ln = sub.add_parser("lens", help="real lens prescriptions in lens_data/: list, info, datasheet plot")
     lsub = ln.add_subparsers(dest="lens_command", required=True)

@@ -1,65 +1,58 @@
-"""The physical order of the stages: the registry follows the explicit list PHYSICAL_ORDER,
-each stage's ``order`` agrees with it, and the docs tables are generated from (or follow) it."""
+"""The physical order of the stages: each stage declares its order, role and domains, and the
+order is checked against the domains (a misplaced stage fails); the README lists stages in it."""
 import re
 from pathlib import Path
 
-from clpost import stages
-from clpost.stages import PHYSICAL_ORDER, STAGE_ROLES, order_table, registry
+from clpost.stages import order_problems, order_table, physical_order, registry
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def order_problems(reg: dict) -> list[str]:
-    """What is wrong with a registry (name → stage class, in the registry's order) against
-    PHYSICAL_ORDER: unlisted or missing stages, a different sequence, ``order`` not increasing."""
-    problems = []
-    unlisted = [n for n in reg if n not in PHYSICAL_ORDER]
-    missing = [n for n in PHYSICAL_ORDER if n not in reg]
-    if unlisted:
-        problems.append(f"stages {unlisted} are not in clpost.stages.PHYSICAL_ORDER: add them to STAGE_ROLES "
-                        "where light reaches them, then run python tools/gen_stage_table.py")
-    if missing:
-        problems.append(f"PHYSICAL_ORDER names {missing}, which no stage module defines")
-    listed = [n for n in reg if n in PHYSICAL_ORDER]
-    expected = [n for n in PHYSICAL_ORDER if n in reg]
-    if listed != expected:
-        problems.append(f"registry order {listed} differs from PHYSICAL_ORDER {expected}: fix the stages' `order`")
-    for a, b in zip(expected, expected[1:]):
-        if not reg[a].order < reg[b].order:
-            problems.append(f"{a}.order = {reg[a].order:g} is not below {b}.order = {reg[b].order:g}")
-    return problems
+def _stage(name, order, domains, role="why"):
+    return type(name.title(), (), {"name": name, "order": order, "domains": domains, "role": role})
 
 
-def test_registry_follows_the_explicit_physical_order():
+def test_the_registry_order_is_physically_sound():
     assert order_problems(registry()) == []
-    assert list(registry()) == list(PHYSICAL_ORDER)
-    assert len(set(PHYSICAL_ORDER)) == len(PHYSICAL_ORDER) == len(STAGE_ROLES)
+    assert physical_order() == tuple(registry())
+    # the conversions happen in the order light meets them
+    order = physical_order()
+    for a, b in (("motion_blur", "distortion"), ("distortion", "vignetting"), ("vignetting", "exposure"),
+                 ("exposure", "film"), ("exposure", "sensor"), ("film", "grain"), ("grain", "print")):
+        assert order.index(a) < order.index(b)
 
 
-def test_the_order_check_catches_a_misplaced_an_unlisted_and_a_missing_stage():
+def test_the_order_check_catches_misplaced_stages():
     reg = registry()
-    swapped = dict(reg)
-    swapped["film"], swapped["sensor"] = (type("Film", (), {"name": "film", "order": 86.0}),
-                                          type("Sensor", (), {"name": "sensor", "order": 80.0}))
-    swapped = dict(sorted(swapped.items(), key=lambda kv: kv[1].order))
-    assert any("differs from PHYSICAL_ORDER" in p for p in order_problems(swapped))
-    assert "film.order = 86 is not below sensor.order = 80" in order_problems(swapped)
-    extra = {**reg, "halation": type("Halation", (), {"name": "halation", "order": 96.0})}
-    assert any("['halation'] are not in" in p for p in order_problems(extra))
-    fewer = {n: c for n, c in reg.items() if n != "coma"}
-    assert any("['coma'], which no stage module defines" in p for p in order_problems(fewer))
+    # vignetting (on the sensor) before the resampling into the sensor's geometry
+    early = {**reg, "vignetting": _stage("vignetting", 45.0, ("image", "image"))}
+    assert any("'vignetting' (order 45) reads 'image', which 'distortion'" in p for p in order_problems(early))
+    # grain after the print left the density domain
+    late = {**reg, "grain": _stage("grain", 99.0, ("density", "density"))}
+    assert any("'grain' (order 99) works within 'density', which 'print'" in p for p in order_problems(late))
+    # a blur in the render's geometry placed after distortion
+    blur = {**reg, "halation": _stage("halation", 55.0, ("render", "render"))}
+    assert any("'halation' (order 55) works within 'render', which 'distortion'" in p for p in order_problems(blur))
+    assert any("share an order" in p for p in order_problems({**reg, "x": _stage("x", 70.0, ("image", "image"))}))
+    assert any("no role" in p for p in order_problems({**reg, "x": _stage("x", 61.0, ("image", "image"), "")}))
+    assert any("unknown domain" in p for p in order_problems({**reg, "x": _stage("x", 61.0, ("light", "image"))}))
 
 
-def test_docstring_table_is_generated_from_the_list():
+def test_a_new_stage_declared_in_its_module_alone_joins_the_order(monkeypatch):
+    """What `clpost stages` prints is generated from the declarations (no list to edit)."""
+    reg = dict(registry())
+    reg["halation"] = _stage("halation", 82.0, ("density", "density"), "red halo from the film base")
+    monkeypatch.setattr("clpost.stages.registry", lambda: dict(sorted(reg.items(), key=lambda kv: kv[1].order)))
+    assert order_problems(reg) == []
     table = order_table()
-    assert table in stages.__doc__, "stale stage-order table: run python tools/gen_stage_table.py"
-    rows = [line.split()[:2] for line in table.splitlines() if not line.startswith("=")]
-    assert [n for _, n in rows] == list(PHYSICAL_ORDER)
-    assert [float(o) for o, _ in rows] == [registry()[n].order for n in PHYSICAL_ORDER]
+    assert "82     halation       density → density  red halo from the film base" in table
+    rows = [ln.split()[1] for ln in table.splitlines()[3:-1]]
+    assert rows.index("film") < rows.index("halation") < rows.index("sensor")
 
 
-def test_readme_stage_table_is_in_physical_order():
+def test_readme_stage_table_follows_the_physical_order():
     text = (ROOT / "README.md").read_text()
     section = text.split("## What is modelled", 1)[1].split("\n## ", 1)[0]
-    names = re.findall(r"^\| (\w+) \|", section, re.M)
-    assert [n for n in names if n != "stage"] == list(PHYSICAL_ORDER)
+    names = [n for n in re.findall(r"^\| (\w+) \|", section, re.M) if n != "stage"]
+    assert set(names) <= set(physical_order())
+    assert names == [n for n in physical_order() if n in names]

@@ -1,32 +1,14 @@
 """The stage registry: every module here that defines a :class:`~clpost.stages.base.Stage`
-subclass contributes one stage — adding a stage touches no other stage; it adds one line to
-:data:`STAGE_ROLES` (where light reaches it) and regenerates the table below.
+subclass contributes one stage — adding a stage edits no other file.
 
-Physical order (light from the scene through the lens to the recorded image): the explicit list
-:data:`PHYSICAL_ORDER`, which each stage's ``order`` must follow (``tests/test_stage_order.py``).
-The table below is generated from it by ``python tools/gen_stage_table.py``; do not edit it by hand.
-
-.. stage-order-table: begin
-
-====  =============  =========================================================================
-10    dof            defocus: depends on scene depth, in the undistorted render's image space
-20    astigmatism    field-dependent directional blur (sagittal/tangential focus)
-25    coma           field-dependent asymmetric PSF
-30    lateral_color  per-channel radial magnification
-40    motion_blur    integration over the shutter; velocity is in undistorted pixel space
-50    distortion     resampling from the undistorted render into the distorted image
-60    vignetting     fixed to the sensor, so after everything that moves image content
-70    exposure       luminance → exposure → normalised sensor signal (linear)
-80    film           the film's response: characteristic curves, exposure → density
-85    sensor         a digital sensor's response: shot and read noise, full well, quantisation
-90    grain          noise of the film, on its densities
-95    print          negative → paper print (or re-linearised), the last step
-====  =============  =========================================================================
-
-.. stage-order-table: end
+Physical order (light from the scene through the lens to the recorded image): each stage
+declares its ``order``, its ``role`` (why it sits there) and its ``domains`` (input, output:
+:data:`~clpost.stages.base.DOMAINS`); :func:`order_problems` checks the order against the
+domains (converters into a domain before its users, transforms within a domain before the
+converter out of it), and ``clpost stages`` prints the table (:func:`order_table`).
 
 Linear pointwise stages (vignetting, exposure) commute with the linear blurs; where a
-stage is non-linear (film, sensor clipping, grain, print) its position matters and is as above.
+stage is non-linear (film, sensor clipping, grain, print) its position matters.
 """
 from __future__ import annotations
 
@@ -35,32 +17,10 @@ import inspect
 import pkgutil
 from functools import lru_cache
 
-from .base import QUALITIES, GatherStage, PointwiseStage, Stage
+from .base import DOMAINS, QUALITIES, GatherStage, PointwiseStage, Stage
 
-__all__ = ["PHYSICAL_ORDER", "QUALITIES", "STAGE_ROLES", "GatherStage", "PointwiseStage", "Stage", "order_table",
-           "registry", "stage_names"]
-
-#: Every stage, in the physical order of light through the camera, with why it sits there. A new
-#: stage is added here; its class's ``order`` must fall between its neighbours' (checked by
-#: ``tests/test_stage_order.py``), and the table in this module's docstring is generated from it.
-STAGE_ROLES: tuple[tuple[str, str], ...] = (
-    ("dof", "defocus: depends on scene depth, in the undistorted render's image space"),
-    ("astigmatism", "field-dependent directional blur (sagittal/tangential focus)"),
-    ("coma", "field-dependent asymmetric PSF"),
-    ("lateral_color", "per-channel radial magnification"),
-    ("motion_blur", "integration over the shutter; velocity is in undistorted pixel space"),
-    ("distortion", "resampling from the undistorted render into the distorted image"),
-    ("vignetting", "fixed to the sensor, so after everything that moves image content"),
-    ("exposure", "luminance → exposure → normalised sensor signal (linear)"),
-    ("film", "the film's response: characteristic curves, exposure → density"),
-    ("sensor", "a digital sensor's response: shot and read noise, full well, quantisation"),
-    ("grain", "noise of the film, on its densities"),
-    ("print", "negative → paper print (or re-linearised), the last step"),
-)
-
-#: Stage names in physical order (the names of :data:`STAGE_ROLES`).
-PHYSICAL_ORDER: tuple[str, ...] = tuple(name for name, _ in STAGE_ROLES)
-
+__all__ = ["DOMAINS", "QUALITIES", "GatherStage", "PointwiseStage", "Stage", "order_problems", "order_table",
+           "physical_order", "registry", "stage_names"]
 
 @lru_cache(maxsize=None)
 def registry() -> dict[str, type[Stage]]:
@@ -83,12 +43,46 @@ def stage_names() -> list[str]:
     return list(registry())
 
 
+def physical_order() -> tuple[str, ...]:
+    """Stage names in physical order (the registry sorted by each stage's ``order``)."""
+    return tuple(registry())
+
+
+def order_problems(reg: dict) -> list[str]:
+    """What is wrong with the physical order of ``reg`` (name → stage class): orders not unique,
+    a stage without a role or with an unknown domain, a stage before a converter into its input
+    domain, or a transform within a domain after the converter out of it (see
+    :data:`~clpost.stages.base.DOMAINS`). Empty for a sound order."""
+    problems = []
+    items = sorted(reg.items(), key=lambda kv: kv[1].order)
+    orders = [c.order for _, c in items]
+    if len(set(orders)) != len(orders):
+        problems.append(f"two stages share an order: {orders}")
+    for name, c in items:
+        if not getattr(c, "role", ""):
+            problems.append(f"stage '{name}' declares no role (why it sits where it does)")
+        bad = [d for d in c.domains if d not in DOMAINS]
+        if bad:
+            problems.append(f"stage '{name}' has unknown domain(s) {bad}; known: {', '.join(DOMAINS)}")
+    for name, c in items:
+        d_in, d_out = c.domains
+        for other, o in items:
+            o_in, o_out = o.domains
+            if o_out == d_in and o_in != o_out and not o.order < c.order:
+                problems.append(f"'{name}' (order {c.order:g}) reads {d_in!r}, which '{other}' (order "
+                                f"{o.order:g}) produces: it must come later")
+            if d_in != d_out and o_in == o_out == d_in and not o.order < c.order:
+                problems.append(f"'{other}' (order {o.order:g}) works within {d_in!r}, which '{name}' "
+                                f"(order {c.order:g}) leaves: it must come earlier")
+    return problems
+
+
 def order_table() -> str:
-    """The reStructuredText table of :data:`STAGE_ROLES` with each stage's ``order``, as this
-    module's docstring holds it (regenerate with ``python tools/gen_stage_table.py``)."""
-    reg = registry()
-    rows = [(f"{reg[name].order:g}" if name in reg else "?", name, role) for name, role in STAGE_ROLES]
-    widths = [max(4, *(len(r[i]) for r in rows)) for i in range(2)]
-    rule = "  ".join(["=" * widths[0], "=" * widths[1], "=" * max(len(r[2]) for r in rows)])
-    body = [f"{o:<{widths[0]}}  {n:<{widths[1]}}  {role}" for o, n, role in rows]
-    return "\n".join([rule, *body, rule])
+    """A reStructuredText table of every stage in physical order: order, name, domains, role
+    (``clpost stages`` prints it)."""
+    rows = [(f"{c.order:g}", name, f"{c.domains[0]} → {c.domains[1]}", c.role) for name, c in registry().items()]
+    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(("order", "stage", "domains"))]
+    rule = "  ".join(["=" * w for w in widths] + ["=" * max(len(r[3]) for r in rows)])
+    head = "  ".join(f"{h:<{w}}" for h, w in zip(("order", "stage", "domains"), widths)) + "  role"
+    body = ["  ".join(f"{v:<{w}}" for v, w in zip(r[:3], widths)) + "  " + r[3] for r in rows]
+    return "\n".join([rule, head, rule, *body, rule])

@@ -233,6 +233,8 @@ def _offsets_lut(camera) -> np.ndarray:
 class Astigmatism(GatherStage):
     name = "astigmatism"
     order = 20.0
+    role = "field-dependent directional blur (sagittal/tangential focus)"
+    domains = ("render", "render")
     params = AstigmatismParams
     reads = ("depth",)
 

@@ -4,8 +4,9 @@ A stage is one physical effect. Its module (``clpost/stages/<name>.py``) holds o
 :class:`Stage` with:
 
 - ``name`` — used alike in ``--stages``, ``kernels/<name>.cl`` and ``tests/test_<name>.py``;
-- ``order`` — its place in the physical order of light through the camera: it must follow the
-  explicit list :data:`clpost.stages.PHYSICAL_ORDER`, where a new stage is added;
+- ``order`` — its place in the physical order of light through the camera, ``role`` — why it sits
+  there (one line; ``clpost stages`` lists them), and ``domains`` — what its input and output are
+  (:data:`DOMAINS`); :func:`clpost.stages.order_problems` checks the order against the domains;
 - ``reads`` — the Frame buffers it needs besides color (``"depth"``, ``"velocity"``);
 - ``requires`` — the stages whose output it takes as its input (grain and print work on the film
   stage's densities; film and sensor on the exposure stage's normalised signal): the planner
@@ -53,6 +54,19 @@ if TYPE_CHECKING:
     from ..frame import Frame
     from ..runtime import Runtime
 
+DOMAINS = {
+    "render": "scene-linear light in the undistorted (pinhole) render's geometry",
+    "image": "scene-linear light in the distorted image's (sensor's) geometry",
+    "signal": "normalised sensor signal (1.0 = saturation), linear",
+    "density": "developed film dye densities (Status M) per layer",
+    "raw": "a digital sensor's recorded values",
+    "print": "a paper print or re-linearised image, display-referred",
+}
+"""What a stage's input and output are (``Stage.domains``). A stage whose input and output domain
+are the same transforms within it; one that changes the domain converts. Physical order follows:
+every converter into a stage's input domain runs before it, and every transform within a domain
+runs before the converter out of it (:func:`clpost.stages.order_problems`)."""
+
 QUALITIES = ("draft", "preview", "final")
 """Quality levels; each stage documents what they change (sample counts, resolution)."""
 
@@ -60,6 +74,8 @@ QUALITIES = ("draft", "preview", "final")
 class Stage(ABC):
     name: ClassVar[str]
     order: ClassVar[float]
+    role: ClassVar[str] = ""
+    domains: ClassVar[tuple[str, str]] = ("render", "render")
     reads: ClassVar[tuple[str, ...]] = ()
     turn_off: ClassVar[str] = "leave the stage out with --stages"
     """How a user turns the stage off (said when a buffer it ``reads`` is missing)."""

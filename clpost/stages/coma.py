@@ -158,6 +158,8 @@ def comet_offsets(u: np.ndarray) -> np.ndarray:
 class Coma(GatherStage):
     name = "coma"
     order = 25.0
+    role = "field-dependent asymmetric PSF"
+    domains = ("render", "render")
     params = ComaParams
 
     def __init__(self, quality: str = "final") -> None:

@@ -364,6 +364,8 @@ def tap_table(model: OpenCVModel, src_size: tuple[int, int],
 class Distortion(GatherStage):
     name = "distortion"
     order = 50.0
+    role = "resampling from the undistorted render into the distorted image"
+    domains = ("render", "image")
     params = DistortionParams
 
     def __init__(self, quality: str = "final") -> None:

@@ -603,6 +603,8 @@ def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "
 class Dof(GatherStage):
     name = "dof"
     order = 10.0
+    role = "defocus: depends on scene depth, in the undistorted render's image space"
+    domains = ("render", "render")
     params = DofParams
     reads = ("depth",)
     turn_off = "turn depth of field off with --depth-of-field off"

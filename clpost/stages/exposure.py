@@ -62,6 +62,8 @@ def exposure_gain(camera) -> float:
 class Exposure(PointwiseStage):
     name = "exposure"
     order = 70.0
+    role = "luminance → exposure → normalised sensor signal (linear)"
+    domains = ("image", "signal")
     params = ExposureParams
     args = (("float", "gain"),)
 

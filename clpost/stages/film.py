@@ -84,6 +84,8 @@ def stock_lut(film: str) -> tuple[np.ndarray, float, float]:
 class Film(PointwiseStage):
     name = "film"
     order = 80.0
+    role = "the film's response: characteristic curves, exposure → density"
+    domains = ("signal", "density")
     requires = ("exposure",)
     params = FilmParams
     args = (("__global const float *", "lut"), ("float", "log_offset"), ("float", "lo"),

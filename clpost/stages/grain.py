@@ -103,6 +103,8 @@ def _stats_samples(r_px: float) -> int | None:
 class Grain(GatherStage):
     name = "grain"
     order = 90.0
+    role = "noise of the film, on its densities"
+    domains = ("density", "density")
     requires = ("film",)
     params = GrainParams
 

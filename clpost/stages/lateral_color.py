@@ -139,6 +139,8 @@ def inverse_map(camera, rho_mm) -> tuple[np.ndarray, np.ndarray]:
 class LateralColor(GatherStage):
     name = "lateral_color"
     order = 30.0
+    role = "per-channel radial magnification"
+    domains = ("render", "render")
     params = LateralColorParams
 
     def __init__(self, quality: str = "final") -> None:

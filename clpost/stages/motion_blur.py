@@ -150,6 +150,8 @@ def _rolling_needed(camera, frame) -> bool:
 class MotionBlur(GatherStage):
     name = "motion_blur"
     order = 40.0
+    role = "integration over the shutter; velocity is in undistorted pixel space"
+    domains = ("render", "render")
     params = MotionBlurParams
     reads = ("velocity", "depth")
     turn_off = "leave out --fps/--shutter-angle/--readout (no motion blur)"

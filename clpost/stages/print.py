@@ -77,6 +77,8 @@ def print_params(camera) -> np.ndarray:
 class Print(PointwiseStage):
     name = "print"
     order = 95.0
+    role = "negative → paper print (or re-linearised), the last step"
+    domains = ("density", "print")
     requires = ("film",)
     params = PrintParams
     args = (("__global const float *", "params"),)

@@ -95,6 +95,8 @@ def sensor_scalars(camera):
 class Sensor(PointwiseStage):
     name = "sensor"
     order = 85.0
+    role = "a digital sensor's response: shot and read noise, full well, quantisation"
+    domains = ("signal", "raw")
     requires = ("exposure",)
     params = SensorParams
     args = (("float", "e_sat"), ("float", "full_well"), ("float", "read_noise"), ("float", "black"),

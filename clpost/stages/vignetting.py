@@ -150,6 +150,8 @@ def principal_offset_mm(camera, w: int, h: int, intrinsics=None) -> tuple[float,
 class Vignetting(PointwiseStage):
     name = "vignetting"
     order = 60.0
+    role = "fixed to the sensor, so after everything that moves image content"
+    domains = ("image", "image")
     params = VignettingParams
     args = (("__global const float *", "ri"),)
 
