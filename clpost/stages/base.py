@@ -77,6 +77,9 @@ class Stage(ABC):
     role: ClassVar[str] = ""
     domains: ClassVar[tuple[str, str]] = ("render", "render")
     reads: ClassVar[tuple[str, ...]] = ()
+    example: ClassVar[dict] = {}
+    """Camera fields for which the stage is planned (generic tests run every stage with it: the
+    16-pixel check of the fused kernels, ``tests/test_pipeline.py``)."""
     turn_off: ClassVar[str] = "leave the stage out with --stages"
     """How a user turns the stage off (said when a buffer it ``reads`` is missing)."""
     requires: ClassVar[tuple[str, ...]] = ()
