@@ -1,6 +1,6 @@
 """The buffers of one rendered frame, validated once at the boundary.
 
-Conventions (``shared/CONVENTIONS.md``): arrays are C-contiguous ``(H, W, C)`` with row 0 at
+Conventions (``docs/conventions.md``): arrays are C-contiguous ``(H, W, C)`` with row 0 at
 the top; pixel centre of column i, row j at (x, y) = (i, j).
 
 ============  ==========  ====================================================================

@@ -1,6 +1,6 @@
 r"""OpenEXR input and output: each renderer's channel layout mapped to clpost's conventions.
 
-Reading gives a :class:`clpost.frame.Frame` whose buffers follow ``shared/CONVENTIONS.md``:
+Reading gives a :class:`clpost.frame.Frame` whose buffers follow ``docs/conventions.md``:
 color linear RGB (H×W×3, optional alpha), depth **planar** camera-space Z in metres with
 ``+inf`` for sky, velocity **forward** screen-space motion in pixels per frame, **+x right,
 +y down**. Every renderer's convention is converted here, at the input boundary, and the
