@@ -6,6 +6,7 @@ traceback instead.
 from __future__ import annotations
 
 import argparse
+import os
 import json
 import re
 import sys
@@ -505,6 +506,11 @@ def main(argv: list[str] | None = None) -> int:
         # SIGTERM removes the temporary file being written and unwinds (releasing the output lock).
         with signal_cleanup():
             return args.func(args)
+    except BrokenPipeError:
+        # the reader went away (`clpost stages | head`): nothing to report; keep Python's final
+        # flush of stdout from raising again
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except (ClpostError, ValueError, OSError) as exc:
         if args.debug:
             raise
