@@ -511,7 +511,7 @@ class Distortion(GatherStage):
             if host is not None:
                 events.append(("upload", cl.enqueue_copy(q, dev[name], host, is_blocking=False)))
         kern = rt.kernel(kernel_source("common") + kernel_source("distortion"), "distortion_aux", {}, "distortion")
-        events.append((self.name, rt.launch(kern, (n,), (64,), dev["depth"], dev["velocity"], flat, jinv,
+        events.append((self.name + "_aux", rt.launch(kern, (n,), (64,), dev["depth"], dev["velocity"], flat, jinv,
                                             dev["depth_out"], dev["velocity_out"], np.int32(n),
                                             np.int32(frame.depth is not None), np.int32(frame.velocity is not None))))
         if frame.depth is not None:
