@@ -279,8 +279,17 @@ def bench_case(scene: Scene, width: int, height: int, *, quality: str = "final",
     # a stage's companion kernels (distortion's depth/velocity gather) are timed under their own
     # names: listed after the plan's launches so device ms counts them
     launched = {L["kernel"] for L in plan}
-    aux = {name: ms for name, ms in med.items() if name not in launched and name not in ("upload", "download")}
-    device_ms = sum(k["ms"] for k in kernels) + sum(aux.values())
+    by_name = {s.name: s for s in pipe.plan_for(frame, rcam).stages}
+    for name, ms in med.items():
+        if name in launched or name in ("upload", "download"):
+            continue
+        owner = by_name.get(name.rsplit("_", 1)[0])
+        nbytes = int(owner.aux_bytes(rcam, frame)) if hasattr(owner, "aux_bytes") else 0
+        gbps = nbytes / (ms * 1e-3) / 1e9 if ms > 0 else 0.0
+        kernels.append(dict(kernel=name, stages=[], kind="aux", in_size=[width, height], out_size=[width, height],
+                            bytes=nbytes, taps_per_pixel=None, ms=ms, gbps=gbps,
+                            percent_of_copy=100.0 * gbps / copy, gtaps_per_s=None))
+    device_ms = sum(k["ms"] for k in kernels)
     wall_ms = statistics.median(walls)
     # one read + write pass of the frame's colour at the copy kernel's bandwidth: the unit that
     # makes timings comparable across machines (a plan "costs N copy passes")
@@ -299,7 +308,7 @@ def bench_case(scene: Scene, width: int, height: int, *, quality: str = "final",
     return dict(
         scene=scene.name, width=width, height=height, quality=quality,
         plan=[s for k in kernels for s in k["stages"]], not_available=not_available,
-        kernels=kernels, aux_kernels_ms=aux, copy_kernel_gbps=copy,
+        kernels=kernels, copy_kernel_gbps=copy,
         device_ms=device_ms, device_fps=1000.0 / device_ms if device_ms else None,
         copy_pass_ms=copy_ms, copy_passes=device_ms / copy_ms if copy_ms else None,
         host_ms=statistics.median(hosts) if hosts else None,
@@ -366,8 +375,6 @@ def format_table(doc: dict) -> str:
         for k in r["kernels"]:
             out.append(f"  {k['kernel'][:34]:<34} {k['ms']:8.2f} {k['bytes'] / 1e6:7.1f} {k['gbps']:6.1f} "
                        f"{k['percent_of_copy']:5.0f}% {_f(k['gtaps_per_s'], '8.2f'):>8}")
-        for name, ms in r.get("aux_kernels_ms", {}).items():
-            out.append(f"  {name[:34]:<34} {ms:8.2f}  (a stage's companion kernel)")
         line = (f"  device {r['device_ms']:.2f} ms ({_f(r['device_fps'], '.1f')} fps, "
                 f"{_f(r.get('copy_passes'), '.1f')} copy passes); host {_f(r.get('host_ms'), '.2f')} ms; with transfers "
                 f"{r['wall_ms']:.2f} ms ({r['wall_fps']:.1f} fps); numpy {_f(r['numpy_ms'], '.0f')} ms "

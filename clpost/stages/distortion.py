@@ -522,6 +522,13 @@ class Distortion(GatherStage):
             events.append(("download", cl.enqueue_copy(q, out["velocity"], dev["velocity_out"], is_blocking=False)))
         return out, events
 
+    def aux_bytes(self, camera, frame) -> int:
+        """Bytes ``distortion_aux`` moves (``clpost bench``): per output pixel its index and
+        inverse Jacobian, and depth and velocity read and written."""
+        model = self._model(camera)
+        n = model.width * model.height
+        return n * (4 + 16 + (8 if frame.depth is not None else 0) + (16 if frame.velocity is not None else 0))
+
     def host_buffers(self, camera, frame) -> dict:
         """alpha, depth and velocity of the distorted image (see the module docstring)."""
         model = self._model(camera)
