@@ -1,0 +1,63 @@
+"""Host time per frame of ``Pipeline.run``: this tree and a git revision in one process.
+
+Host time is the calling thread's CPU time (``time.thread_time``) over one ``Pipeline.run`` —
+resolving the camera, planning, tables, argument setting, enqueueing — so it leaves out the
+device's threads and the waits for them. Median of 7 frames after 2 warm-ups, 1920×1080 bench
+scenes, interleaved per case (old, then this tree); the extended-frustum row renders at
+``required_render``'s size for the calibration, the case that solves the render's intrinsics.
+
+    PYTHONPATH=. python tools/host_time.py --against a4db22e
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import statistics
+import time
+
+import clpost
+from clpost.bench_ab import load_revision
+
+
+def host_ms(pkg, scene_name: str, quality: str, w: int, h: int, extended: bool, frames: int = 7) -> float:
+    bench = importlib.import_module(pkg.__name__ + ".bench")
+    pipeline = importlib.import_module(pkg.__name__ + ".pipeline")
+    scene = bench.SCENES[scene_name]
+    cam, _ = scene.camera(w, h)
+    if extended:
+        spec = importlib.import_module(pkg.__name__ + ".calibration").required_render(cam.distortion)
+        frame = bench.synthetic_frame(spec.width, spec.height, velocity_px=scene.velocity_px)
+    else:
+        frame = bench.synthetic_frame(w, h, velocity_px=scene.velocity_px)
+    pipe = pipeline.Pipeline(cam, quality=quality, stages=list(scene.wants))
+    for _ in range(2):
+        pipe.run(frame)
+    times = []
+    for _ in range(frames):
+        t0 = time.thread_time()
+        pipe.run(frame)
+        times.append((time.thread_time() - t0) * 1e3)
+    return statistics.median(times)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--against", required=True, help="git revision to compare with")
+    ap.add_argument("--size", default="1920x1080")
+    args = ap.parse_args(argv)
+    w, h = (int(v) for v in args.size.split("x"))
+    old = load_revision(args.against)
+    print(f"| scene {w}x{h} | quality | {args.against} host ms/frame | this tree |")
+    print("|---|---|---:|---:|")
+    cases = [(s, q, False) for s in ("worst", "no_defocus", "full") for q in ("draft", "final")]
+    cases += [("worst", q, True) for q in ("draft", "final")]
+    for scene, quality, extended in cases:
+        a = host_ms(old, scene, quality, w, h, extended)
+        b = host_ms(clpost, scene, quality, w, h, extended)
+        label = f"{scene}{', extended frustum' if extended else ''}"
+        print(f"| {label} | {quality} | {a:.1f} | {b:.1f} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
