@@ -154,6 +154,8 @@ class Plan:
     def _build(self, cam) -> None:
         import pyopencl as cl
 
+        from .runtime import typed_kernel
+
         rt = self.runtime
         for node in self.nodes:
             if node.gather:
@@ -162,7 +164,7 @@ class Plan:
             for s in node.stages:
                 defines.update(s.defines(cam))
             kname, src = fused_source(node.stages, node.src_layout, node.dst_layout)
-            node.kernel = cl.Kernel(rt.program(src, kname, defines), kname)
+            node.kernel = typed_kernel(cl.Kernel(rt.program(src, kname, defines), kname))
         if self.buffers is None or self.buffers.size != self.size:
             w, h = self.size
             self.buffers = Buffers((w, h), rt.empty((h, w, 3)), rt.empty((h, w, 3)))

@@ -191,7 +191,7 @@ class Warper:
         self.rt = get_runtime(device)
         self.size = (int(size[0]), int(size[1]))
         w, h = self.size
-        self.kernel = cl.Kernel(self.rt.program(kernel_source("ibl_warp"), "ibl_warp"), "ibl_warp")
+        self.kernel = self.rt.kernel(kernel_source("ibl_warp"), "ibl_warp")
         self.acc = cl.Buffer(self.rt.context, cl.mem_flags.READ_WRITE, size=3 * w * h * 4)
         cl.enqueue_fill_buffer(self.rt.queue, self.acc, np.float32(0), 0, 3 * w * h * 4)
         self.events = []

@@ -242,6 +242,7 @@ class Astigmatism(GatherStage):
     def taps(self) -> int:
         return TAPS[self.quality]
 
+    @fld.per_camera
     def _lut(self, camera) -> np.ndarray:
         return _offsets_lut(camera)
 

@@ -176,6 +176,7 @@ class Coma(GatherStage):
         comet's area, not the tap count: module docstring, "Stencils")."""
         return max(self.taps, UNIFORM_TAPS)
 
+    @fld.per_camera
     def _lut(self, camera) -> np.ndarray:
         fn = coma_curve(camera)
         return fld.sample_lut(lambda r: (fn(r), derivative(fn, r)), camera, 2)

@@ -149,6 +149,7 @@ class LateralColor(GatherStage):
         self._plan_key = None
         self._plan: dict = {}
 
+    @fld.per_camera
     def _lut(self, camera) -> np.ndarray:
         r = np.linspace(0.0, fld.lut_range_mm(camera), fld.LUT_SIZE)
         ratio, jac = inverse_map(camera, r)
