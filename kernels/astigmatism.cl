@@ -275,7 +275,7 @@ inline float16 astigmatism_sat16(float16 v)
  * work-group = a tile = ASTIGMATISM_TILE_W / 16 x ASTIGMATISM_TILE_H work-items). Written with
  * vectors rather than left to PoCL's work-item-loop vectoriser because that one needs the taps'
  * weights chained through a zero dependency on the running sum (or the SLP pass packs pairs of
- * taps and it gives up), and that chain made the loop latency-bound: the taps' weights are now
+ * taps and it gives up), and that chain makes the loop latency-bound; here the taps' weights are
  * independent and overlap. float16 rather than float8 (faster at 64 taps, the same at 16;
  * docs/measurements.md#kernel-forms-on-pocl); the tap loop is unrolled by 4 (see below), not fully. */
 inline void astigmatism_gather(__global const float *restrict padded, __global const float *restrict src,
