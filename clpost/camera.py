@@ -8,7 +8,7 @@ seconds. ``focus_distance_m`` is measured from the thin lens's principal plane (
 infinity focus); for a real prescription it is measured **from the film plane** and must be at
 least the lens's ``min_focus_m``.
 
-Real prescriptions (issue "real lenses"): ``focal_length_mm`` is the paraxial EFL;
+Real prescriptions: ``focal_length_mm`` is the paraxial EFL;
 ``image_distance_mm`` is the thin-lens-equivalent v = EFL + extension, where the extension is
 the lens travel found by real-ray unit focusing at the taking f-number
 (:meth:`clpost.optics.Lens.focus`); an ``f_number`` below the lens's maximum aperture is clamped

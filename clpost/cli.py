@@ -358,7 +358,7 @@ def cmd_stages(args) -> int:
 
 
 def cmd_lens(args) -> int:
-    # Real lenses (issue "real lenses"): list / info / plot of lens_data prescriptions.
+    # Real lenses: list / info / plot of lens_data prescriptions.
     from .optics import available_lenses, get_lens
     from .optics.report import format_info, lens_info, plot_lens
 
@@ -416,7 +416,7 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--overwrite", action="store_true", help="replace existing outputs (default: skip them)")
     pr.add_argument("--half", action="store_true", help="write half-float EXRs")
     pr.add_argument("--compression", default="zip", choices=list(COMPRESSIONS),
-                    help="lossless EXR compression of outputs (default zip; none is ~10x faster to write)")
+                    help="lossless EXR compression of outputs (default zip; none writes fastest, largest files)")
     pr.add_argument("--quiet", action="store_true", help="no progress bar")
     dist = pr.add_argument_group("distributed (Dask)")
     dist.add_argument("--workers", type=_count("--workers", 1), default=None,
@@ -458,7 +458,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="dof speed/accuracy per quality against the thin-lens accumulation reference (demo scene)")
     b.add_argument("--dof-samples", type=lambda s: [int(x) for x in s.split(",")], default=[128, 64],
                    help="reference aperture samples per size for --dof (default 128,64)")
-    # issue "performance": scenes, quality levels, baselines, docs/benchmarks.md
+    # scenes, quality levels, baselines, docs/benchmarks.md
     b.add_argument("--scenes", default=None,
                    help="comma-separated: demo, worst, no_defocus, full (default: all)")
     b.add_argument("--qualities", default=None, help="comma-separated quality levels (default: --quality)")

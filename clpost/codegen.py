@@ -227,9 +227,8 @@ __kernel void {name}({", ".join(params)})
 
 CONVERT_PIXELS = 4
 """Pixels per work-item of a plain layout conversion: three ``vload4`` of 4 interleaved pixels
-and one ``vstore4`` per plane (or the reverse). Measured at 1080p on the 2-core PoCL CPU (same
-run, best of 17): 1.8 ms vs 6.2 ms for one pixel per work-item with scalar loads, whose stride-3
-access PoCL does not vectorise."""
+and one ``vstore4`` per plane (or the reverse), not one pixel per work-item with scalar loads, whose
+stride-3 access PoCL does not vectorise (docs/measurements.md#kernel-forms-on-pocl)."""
 
 
 def global_size(stages: "list[PointwiseStage]", src_layout: str, dst_layout: str, w: int, h: int) -> tuple[int, int]:

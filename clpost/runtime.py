@@ -18,7 +18,7 @@ Platforms are selected by name, never by index: installing a second OpenCL drive
 Program cache: programs are built once per process (keyed by device, full source and options)
 and cached on disk between runs by the driver. On PoCL, pyopencl leaves disk caching to PoCL;
 we point ``POCL_CACHE_DIR`` at a per-user directory (``$XDG_CACHE_HOME/clpost/pocl``) unless the
-user set it — measured here: cold build ≈ 0.7 s, warm ≈ 0.05 s.
+user set it (build times: docs/measurements.md#host-work).
 
 Build options (:data:`BUILD_OPTIONS`): OpenCL C 1.2 and nothing that relaxes IEEE semantics —
 no ``-cl-fast-relaxed-math``, ``-cl-finite-math-only`` or ``-cl-denorms-are-zero``: stages rely on
@@ -321,7 +321,8 @@ class Runtime:
     def launch(self, kernel: "cl.Kernel", global_size, local_size=None, *args) -> "cl.Event":
         """Enqueue ``kernel`` (with ``args`` set first, if given) over ``global_size`` rounded up
         to whole ``local_size`` work-groups (the kernel guards its bounds). Why round: left to
-        itself PoCL picks tiny work-groups for sizes like 706×426 and runs 10–50× slower."""
+        itself PoCL picks tiny work-groups for sizes like 706×426 and runs many times slower
+        (docs/measurements.md#kernel-forms-on-pocl)."""
         if args:
             kernel.set_args(*args)
         glob = tuple(int(g) for g in global_size)

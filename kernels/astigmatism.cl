@@ -1,9 +1,10 @@
 /* astigmatism: field curvature + astigmatism as an elliptical gather on tiles.
  * clpost/stages/astigmatism.py documents the formulas; its reference() is the oracle.
  *
- * Vectorisation (PERFORMANCE.md): work-groups are tiles of ASTIGMATISM_TILE_W ×
- * ASTIGMATISM_TILE_H pixels and every tap offset is group-uniform — the tile's bounding ellipse
- * (largest semi-axes of its pixels, the tile centre's directions) sampled by the Vogel spiral, a
+ * Vectorisation (docs/measurements.md#gather-layouts-on-pocl): work-groups are tiles of
+ * ASTIGMATISM_TILE_W × ASTIGMATISM_TILE_H pixels and every tap offset is group-uniform — the tile's
+ * bounding ellipse (largest semi-axes of its pixels, the tile centre's directions) sampled by the
+ * Vogel spiral, a
  * program-scope literal table that Astigmatism prepends to this source — so each tap reads rows
  * of the tile at one offset. Each pixel keeps its own ellipse through the tap weights. The gather
  * computes 16 pixels per work-item as explicit float16 vectors: PoCL's vectoriser across
@@ -61,8 +62,8 @@ inline float16 astigmatism_semi16(float16 e0, float16 g, float16 d, float16 c0, 
  * (that of the frame pixel it continues). One work-item = 16 consecutive pixels of a padded row
  * (pw is a multiple of 16) as float16 vectors: whole-vector loads where the row's 16 source
  * pixels lie inside the frame, per-lane clamped loads only in the vectors that touch a side
- * (one pixel per work-item with a clamp on every pixel cost 4-8 ms at 1080p, as coma_pad did);
- * the axes are computed on the 16 lanes either way. */
+ * (a clamp on every pixel, one pixel per work-item, does not vectorise;
+ * docs/measurements.md#kernel-forms-on-pocl); the axes are computed on the 16 lanes either way. */
 /* The focal offsets (sagittal, tangential; mm) at every padded pixel's image height: 2 planes pw x
  * ph (those of the frame pixel it continues), from the LUT. They depend on the camera and frame
  * size only, so the host runs this once per camera and size, not per frame (the 64 per-lane LUT
@@ -274,9 +275,9 @@ inline float16 astigmatism_sat16(float16 v)
  * work-group = a tile = ASTIGMATISM_TILE_W / 16 x ASTIGMATISM_TILE_H work-items). Written with
  * vectors rather than left to PoCL's work-item-loop vectoriser because that one needs the taps'
  * weights chained through a zero dependency on the running sum (or the SLP pass packs pairs of
- * taps and it gives up), and that chain made the loop latency-bound: the taps' weights are now
- * independent and overlap. float16 rather than float8: same speed at 16 taps, 1.35-1.6x faster
- * at 64 (measured in one process); the tap loop is unrolled by 4 (see below), not fully. */
+ * taps and it gives up), and that chain makes the loop latency-bound; here the taps' weights are
+ * independent and overlap. float16 rather than float8 (faster at 64 taps, the same at 16;
+ * docs/measurements.md#kernel-forms-on-pocl); the tap loop is unrolled by 4 (see below), not fully. */
 inline void astigmatism_gather(__global const float *restrict padded, __global const float *restrict src,
                  __global const int *restrict inner, const int test_reach, __global const float *restrict axes,
                  __global float *restrict dst, __global const float *restrict tiles,
@@ -284,7 +285,8 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
                  const int width, const int height, const int ntaps, const int tap0)
 {
     /* work-group g = the g-th tile of this class's list; ntaps spiral points from tap0 (both
-     * compile-time constants after inlining: with a run-time count the loop ran 2x slower) */
+     * compile-time constants after inlining: a run-time count makes the loop slower;
+     * docs/measurements.md#kernel-forms-on-pocl) */
     const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
                                ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 16);
     const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;
@@ -304,10 +306,10 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
     __constant const float *taps = astigmatism_taps + 2 * tap0;
     const float tex = tile[0], tey = tile[1], bs = tile[2], bt = tile[3];
     float16 ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
-    /* unrolled by 4, not fully: 64 fully unrolled float16 taps build for 37 s cold (4 taps:
-     * about the same speed, within 10 % at 64 taps). By hand (a constant 4-trip inner loop):
-     * '#pragma unroll 4' in this inlined function was refused for one of the kernels ("loop not
-     * unrolled") and the 16-tap gather ran 8 % slower. Every tap count is a multiple of 4. */
+    /* unrolled by 4, not fully: a full unroll of 64 float16 taps takes tens of seconds to build
+     * cold for about the same speed. By hand (a constant 4-trip inner loop): '#pragma unroll 4'
+     * in this inlined function was refused for one of the kernels ("loop not unrolled").
+     * Every tap count is a multiple of 4 (docs/measurements.md#kernel-forms-on-pocl). */
     for (int k4 = 0; k4 < ntaps; k4 += 4)
 #pragma unroll
     for (int k = k4; k < k4 + 4; ++k) {

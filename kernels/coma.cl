@@ -179,7 +179,8 @@ __kernel void coma(__global const float *restrict padded, __global const float *
  * its stencil at offs/wts + g * S (offsets (dx, dy); weights W0, W1, W2, 0, the unused entries
  * of a shorter stencil zero). Tiles whose reads (|d| <= COMA_PAD) stay inside the frame
  * (inner[g]) read the source planes directly, so coma_pad only fills the ring the others read.
- * S is a compile-time constant per kernel (coma_s<S>): with a run-time count the astigmatism tap loop ran 2x slower. */
+ * S is a compile-time constant per kernel (coma_s<S>): a run-time count makes such loops slower
+ * (docs/measurements.md#kernel-forms-on-pocl). */
 inline void coma_stencil(__global const float *restrict padded, __global const float *restrict src,
                          __global const float *restrict shape, __global float *restrict dst,
                          __global const int *restrict list, __global const int *restrict inner,

@@ -92,8 +92,7 @@ inline void clp_store16_planar(__global float *restrict dst, const float16 r, co
 }
 
 /* Scalar loads and stores, not vload3/vstore3: on PoCL 3.0 a vload3/vstore3 stops the
- * vectorisation across work-items of the whole kernel (measured at 1080p: an exp2 per channel
- * 25 ms with vload3/vstore3, 13.6 ms with these, 7.2 ms planar). */
+ * vectorisation across work-items of the whole kernel (docs/measurements.md#kernel-forms-on-pocl). */
 inline float3 load_interleaved(__global const float *buf, const size_t i) {
     return (float3)(buf[3 * i], buf[3 * i + 1], buf[3 * i + 2]);
 }

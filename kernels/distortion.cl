@@ -22,8 +22,8 @@
  */
 
 /* Bilinear. One output pixel of the map: taps beyond the render repeat its edge, no preimage ->
- * colour 0. No floor/clamp calls and a select instead of an early return (8.4 vs 11.0 ms at
- * 1080p, one pixel per work-item, same run). */
+ * colour 0. No floor/clamp calls and a select instead of an early return: both keep PoCL's
+ * vectoriser going (docs/measurements.md#kernel-forms-on-pocl). */
 inline void distortion_pixel(__global const float *restrict src, __global float *restrict dst,
                              __global const float *restrict map, const int src_w, const int src_h,
                              const size_t n, const size_t i)
@@ -124,11 +124,11 @@ __constant float distortion_fir[DISTORTION_FIR_K + 1] = {
 /* Row pass. Work-item (g, r, ch): tmp row r, padded columns 16g ... 16g + 15, the source row
  * clamp(r - PAD - K) (rows repeat the edge, so the column pass needs no clamp either); source
  * column of padded column p: p - PAD. The window x0 ... x0 + 47 (16 + 2K = 40 used) is three
- * vload16 and the 2K + 1 shifted copies are shuffle2 with constant masks (one permute each):
- * 2.5x faster than 25 unaligned vload16, which split cache lines (1.46 vs 3.92 ms at 1080p, same
- * run, identical output). Work-items whose window leaves the row (5 of 122 per row at 1080p) copy
- * it with clamped indices to a private array first. tmp: 3 planes of th = coefficient rows + 2K
- * rows of pitch. The taps are written out for K = 12. */
+ * vload16 and the 2K + 1 shifted copies are shuffle2 with constant masks (one permute each),
+ * not 25 unaligned vload16, which split cache lines (same output;
+ * docs/measurements.md#kernel-forms-on-pocl). Work-items whose window leaves the row (5 of 122
+ * per row at 1080p) copy it with clamped indices to a private array first. tmp: 3 planes of th =
+ * coefficient rows + 2K rows of pitch. The taps are written out for K = 12. */
 #if DISTORTION_FIR_K != 12
 #error "distortion_fir_rows is unrolled for DISTORTION_FIR_K = 12"
 #endif
@@ -174,9 +174,9 @@ __kernel void distortion_fir_rows(__global const float *restrict src, __global f
 
 /* Column pass. Work-item (g, q0, ch): coefficient rows q = DISTORTION_FIR_ROWS q0 + o (source
  * row q - PAD), columns 16g ... 16g + 15, from tmp rows q ... q + 2K: the ROWS outputs share their
- * loads (ROWS + 2K vload16 instead of ROWS (2K + 1): 3.6 -> 0.7 ms at 720p, same run); each sums
- * its smallest taps first, as the row pass (same speed as summing in row order, half the rounding
- * error). coef: 3 planes of ch_rows (a multiple of ROWS) rows of pitch. */
+ * loads (ROWS + 2K vload16 instead of ROWS (2K + 1); docs/measurements.md#kernel-forms-on-pocl);
+ * each sums its smallest taps first, as the row pass (same speed as summing in row order, half the
+ * rounding error). coef: 3 planes of ch_rows (a multiple of ROWS) rows of pitch. */
 #define DISTORTION_FIR_ROWS 4
 __kernel void distortion_fir_cols(__global const float *restrict tmp, __global float *restrict coef,
                                   const int pitch, const int th, const int ch_rows)
@@ -203,9 +203,9 @@ __kernel void distortion_fir_cols(__global const float *restrict tmp, __global f
  * take, from a per-pixel tap table built once per map on the host (clpost/stages/distortion.py,
  * tap_table): base[i] is the index of the top-left tap of the 4x4 window in a coefficient plane
  * (-1: no preimage, colour 0) and wts holds the 4 horizontal then 4 vertical B-spline weights
- * (planes of n), computed in float64. No floor, clamp or polynomial per tap (a table was 2x
- * faster than computing Keys weights per pixel at 1080p). One work-group of DISTORTION_TILE^2 per
- * listed tile (x0, y0). */
+ * (planes of n), computed in float64. No floor, clamp or polynomial per tap (a table is faster
+ * than computing the weights per pixel; docs/measurements.md#kernel-forms-on-pocl). One work-group
+ * of DISTORTION_TILE^2 per listed tile (x0, y0). */
 __kernel void distortion_table(__global const float *restrict src, __global float *restrict dst,
                                __global const int *restrict base, __global const float *restrict wts,
                                __global const int *restrict tiles,

@@ -12,8 +12,8 @@
 #define DOF_FRONT_MARGIN 1.0f
 /* DOF_VEC pixels of a row per work-item in explicit vectors (PoCL does not vectorise across
  * work-items around a tap loop whose trip count is only known per tile): 16 where the device's
- * native float vector is 16 wide (AVX-512: 1.26-1.36x faster than 8, measured), else 8; the host
- * passes it (clpost/stages/dof_cl.py, gather_vector_width) */
+ * native float vector is 16 wide (AVX-512; docs/measurements.md#kernel-forms-on-pocl), else 8; the
+ * host passes it (clpost/stages/dof_cl.py, gather_vector_width) */
 #ifndef DOF_VEC
 #define DOF_VEC 8
 #endif
@@ -200,9 +200,9 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
                                 (v).s5, (v).s6, (v).s6, (v).s7, (v).s7, (v).s8, (v).s8, (v).s9))
 #endif
 
-/* 16 output pixels of a row per work-item, float16 (PoCL did not vectorise the per-pixel form:
- * 22 ms at 1080p, measured); groups of 16 at the image's left/right end (where the row load
- * would leave the working row) per pixel. Launched over (ceil(width / 16), height). */
+/* 16 output pixels of a row per work-item, float16 (PoCL does not vectorise the per-pixel form;
+ * docs/measurements.md#kernel-forms-on-pocl); groups of 16 at the image's left/right end (where the
+ * row load would leave the working row) per pixel. Launched over (ceil(width / 16), height). */
 __kernel void dof_upsample(__global const float *restrict src, __global const float *restrict coc,
                            __global const float *restrict blur, __global const float *restrict alpha,
                            __global const float *restrict lv, __global float *restrict dst,

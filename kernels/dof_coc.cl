@@ -38,9 +38,9 @@ inline float16 dof_luma16(__global const float *p, const size_t n) {
     return DOF_LUMA_R * vload16(0, p) + DOF_LUMA_G * vload16(0, p + n) + DOF_LUMA_B * vload16(0, p + 2 * n);
 }
 
-/* 16 pixels of a row per work-item in explicit float16 (PoCL did not vectorise the per-pixel
- * form, measured 18 ms at 1080p); groups of 16 touching the left/right edge or the image's end
- * take the per-pixel path (same formula). Launched over (ceil(width / 16), height). */
+/* 16 pixels of a row per work-item in explicit float16 (PoCL does not vectorise the per-pixel form;
+ * docs/measurements.md#kernel-forms-on-pocl); groups of 16 touching the left/right edge or the
+ * image's end take the per-pixel path (same formula). Launched over (ceil(width / 16), height). */
 __kernel void dof_coc(__global const float *restrict src, __global const float *restrict depth,
                       __global float *restrict coc, const int width, const int height,
                       const float k, const float inv_u, const float limit)

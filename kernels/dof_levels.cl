@@ -6,10 +6,10 @@
  *
  * One pass per level: the x filter of the three rows y - s, y, y + s, then the y filter, in the
  * same float operations as two separate passes (bit-identical), without writing and re-reading
- * an intermediate level (measured 1.4 ms per pass at 1080p draft). Each work-item does DOF_LVEC
- * pixels of a row in float16 (PoCL did not vectorise the per-pixel form: 25 ms per pass at 1080p
- * final, measured); the groups that touch the buffer's left/right end (where the clamp matters)
- * or its partial last group go pixel by pixel.
+ * an intermediate level. Each work-item does DOF_LVEC pixels of a row in float16 (PoCL does not
+ * vectorise the per-pixel form; both choices: docs/measurements.md#kernel-forms-on-pocl); the
+ * groups that touch the buffer's left/right end (where the clamp matters) or its partial last
+ * group go pixel by pixel.
  */
 #define DOF_LVEC 16
 

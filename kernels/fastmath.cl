@@ -3,10 +3,9 @@
  * generator at one pixel (names clp_log2, ... for gathers: codegen.library(); clp_log2_w1 in fused
  * pointwise kernels) and at 16 pixels (clp_log2_w16, float16 lanes).
  *
- * PoCL 3.0's log/log2/log10 and cospi cost 10-20 ns per call on these CPUs (measured on a 1080p
- * RGB frame: log 124 ms, cospi 54 ms, exp 6-8 ms, a copy 1.5 ms) because they do not vectorise;
- * these are built from integer bit operations, fma and short polynomials and vectorise across
- * work-items (clp_log2 5 ms, clp_exp2 8 ms, clp_cos2pi 6 ms on the same frame). Every select
+ * PoCL 3.0's log/log2/log10 and cospi do not vectorise across work-items and cost many times a
+ * copy of the frame; these are built from integer bit operations, fma and short polynomials and
+ * do vectorise (measurements: docs/measurements.md#kernel-forms-on-pocl). Every select
  * costs: the domains are restricted to what the callers pass, and the callers clamp first.
  * Accuracy (tests/test_fastmath.py, against float64):
  *   clp_log2(x), x normal and finite (FLT_MIN <= x <= FLT_MAX): |error| <= max(2e-7, 2 ulp);
@@ -37,7 +36,7 @@ inline CLP_F CLP_FN(clp_log2)(const CLP_F x) {
 
 /* 2^x = 2^k 2^f, k = round(x), |f| <= 1/2; 2^f = e^(f ln 2) by Taylor to degree 7 (< 5e-9
  * relative); 2^k applied in two halves so subnormal results and k = 128 come out right.
- * floor(x + 0.5) rather than rint: rint does not vectorise on PoCL (7 ms vs 4 ms a frame). */
+ * floor(x + 0.5) rather than rint: rint does not vectorise on PoCL. */
 inline CLP_F CLP_FN(clp_exp2)(const CLP_F x) {
     const CLP_F xc = clamp(x, -151.0f, 129.0f);
     const CLP_F k = floor(xc + 0.5f);

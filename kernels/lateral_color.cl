@@ -8,7 +8,8 @@
  *   the tile (to LATERAL_COLOR's tolerance) and its bilinear cell is the same integer offset
  *   (bx, by) for every pixel: addresses are affine in the work-item id and the body has no
  *   library call, select or branch, so PoCL vectorises the implicit work-item loop
- *   (PERFORMANCE.md). The record of a tile (LATERAL_COLOR_REC floats, from the host):
+ *   (docs/measurements.md#gather-layouts-on-pocl). The record of a tile (LATERAL_COLOR_REC floats,
+ *   from the host):
  *   [0] tile origin index y0*width + x0 (int bits), then per channel c (10 floats at 1 + 10c):
  *   the cell offset by*width + bx (int bits), the bilinear fraction fx = a0 + ax lx + ay ly (3),
  *   fy likewise (3), the flux Jacobian likewise (3), with (lx, ly) the pixel within the tile.

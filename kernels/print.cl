@@ -3,7 +3,7 @@
  * in clpost/stages/print.py. Width-generic (clpost/codegen.py): CLP_W pixels of a row per call.
  */
 /* One channel. exp and exp10 through clp_exp2 (kernels/fastmath.cl): PoCL's exp10 does not
- * vectorise (measured at 1080p: 90-120 ms as float3, 24 ms per channel in scalar code). */
+ * vectorise (measurements: docs/measurements.md#kernel-forms-on-pocl). */
 inline CLP_F CLP_FN(print_channel)(const CLP_F d, __global const float *params, const int ch) {
 #if PRINT_MODE == 0
     /* e^(-k x) overflows to +inf for very thin negatives: 1/(1+inf) = 0 -> paper white, no NaN. */

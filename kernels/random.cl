@@ -29,8 +29,8 @@ inline CLP_F CLP_FN(rnd_uniform)(const CLP_U h) {
 }
 
 /* Standard normal from two hashes (Box-Muller, cosine branch). ln and cos through clp_log2 and
- * clp_cos2pi (kernels/fastmath.cl): PoCL's log and cospi do not vectorise and made Box-Muller
- * ~30 ns a normal. u1 >= 2^-25 is a normal float, inside clp_log2's domain. */
+ * clp_cos2pi (kernels/fastmath.cl): PoCL's log and cospi do not vectorise. u1 >= 2^-25 is a normal
+ * float, inside clp_log2's domain. */
 inline CLP_F CLP_FN(rnd_normal)(const CLP_U h1, const CLP_U h2) {
     const CLP_F u1 = CLP_FN(rnd_uniform)(h1);
     const CLP_F u2 = CLP_FN(rnd_uniform)(h2);

@@ -3,8 +3,9 @@
  * ri is a plane of W x H factors built once per curve, principal point and size on the host
  * (clpost/stages/vignetting.py, Vignetting.ri_plane: RI(r) at the pixel's image height r in mm
  * from the principal point; cos^4 theta of the thin lens, a lens's traced curve or a
- * manufacturer table). One contiguous load per pixel: a per-pixel LUT lookup here cost 2 of the
- * 3 ms of vignetting+exposure at 1080p (PoCL does not vectorise data-dependent loads).
+ * manufacturer table). One contiguous load per pixel: PoCL does not vectorise data-dependent
+ * loads, so a per-pixel LUT lookup here would cost more than the rest of the stage
+ * (docs/measurements.md#kernel-forms-on-pocl).
  * Width-generic (clpost/codegen.py): CLP_W pixels of a row per call.
  */
 inline void vignetting_apply(CLP_F *r, CLP_F *g, CLP_F *b, const CLP_CTX p, __global const float *ri) {

@@ -265,8 +265,8 @@ def test_checkerboards_calibrate_back_to_their_parameters():
     tools/distortion_calibration.py, docs/distortion_calibration.md). The board is Gaussian
     anti-aliased and corners are saddle fits, exact to < 2e-3 px on the undistorted renders
     (measured 4e-4), so what remains is the stage's own error. With the final filter a cubic
-    B-spline interpolation every parameter comes back within 1 % (the previous Keys a = −¾ filter,
-    first-order, moved corners by 0.026 px RMS: k2 8.0 %, p2 6.7 % off). The stage's output and
+    B-spline interpolation every parameter comes back within 1 % (Keys a = −¾, first-order, moves
+    corners by 0.026 px RMS: k2 8.0 %, p2 6.7 % off). The stage's output and
     scipy's B-spline through the same map must agree on the corners too."""
     from clpost.calib_check import checkerboard as dc
 

@@ -138,7 +138,7 @@ def test_grain_off_and_plan():
 
 
 def test_stages_after_a_resampling_stage_run_at_its_size():
-    """A traced lens distorts by default; film grain (a gather) after it used to be refused."""
+    """A traced lens distorts by default; film grain (a gather) after it runs at its output size."""
     from clpost.calibration import lens_distortion_model, required_render
 
     cam = Camera(lens="zeiss-planar-50-f1.4", film="kodak-gold-200", f_number=2.0, shutter_s=1 / 100,

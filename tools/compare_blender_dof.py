@@ -41,8 +41,8 @@ How to read it:
 
 - **The truth is ours, not Cycles.** Every row is scored against clpost's accumulation-buffer
   thin-lens reference (Haeberli & Akeley 1990; `clpost/render/thin_lens.py`): the demo scene
-  re-rendered from many aperture points with sheared frusta, so occlusion is exact. The issue
-  asked for a Cycles render with aperture blades as the truth; the demo scene is procedural in
+  re-rendered from many aperture points with sheared frusta, so occlusion is exact. A Cycles
+  render with aperture blades would be the other candidate truth; the demo scene is procedural in
   clpost's own renderer (analytic shading of VTK ids and depth), and rebuilding it in Cycles with
   matching materials was out of scope. The reference is the ideal thin lens with the same 6-blade
   polygon; its own convergence (table above) is ≈ 60 dB at 640×360 and ≈ 50 dB at 1280×720, so

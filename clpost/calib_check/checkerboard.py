@@ -177,8 +177,9 @@ def to_gray8(color: np.ndarray) -> np.ndarray:
 
 
 SUBPIX_WINDOW = (7, 7)
-"""cornerSubPix half-window: 15×15 px. Measured on the undistorted renders, 7 → 0.037 px RMS,
-5 → 0.040, 3 → 0.047 (squares are 25–60 px; findChessboardCornersSB: 0.049)."""
+"""cornerSubPix half-window: 15×15 px, the most accurate of the half-windows tried on the
+undistorted renders (squares are 25–60 px; the errors of 7, 5, 3 and of findChessboardCornersSB:
+docs/distortion_calibration.md)."""
 CALIB_FLAGS_DOC = "CALIB_FIX_K3 (the generating model has k3 = 0; k4–k6, s1–s4, τ are off by default)"
 
 
@@ -263,9 +264,9 @@ def resample_what_if(model: OpenCVModel, raw: list, kind: str) -> list:
     """The undistorted renders ``raw`` resampled through the stage's own map
     (:func:`clpost.stages.distortion.distortion_map`, float64) by another interpolator, in numpy:
     ``spline3`` cubic B-spline interpolation with its prefilter (Unser 1999; scipy
-    ``map_coordinates(order=3)`` — the stage's final filter since this check found the Keys
-    filter's error), ``keys-0.75`` Keys cubic convolution with a = −¾ (OpenCV's INTER_CUBIC, the
-    stage's previous final filter), ``keys-0.5`` a = −½ (third order), ``bilinear``, ``lanczos3``
+    ``map_coordinates(order=3)`` — the stage's final filter), ``keys-0.75`` Keys cubic convolution
+    with a = −¾ (OpenCV's INTER_CUBIC; how it compares: docs/distortion_calibration.md),
+    ``keys-0.5`` a = −½ (third order), ``bilinear``, ``lanczos3``
     (normalised). Edge repeated. What the stage would give with that final filter."""
     from scipy.ndimage import map_coordinates
 

@@ -507,13 +507,13 @@ def _user_header(path: Path, header: dict[str, str] | None) -> dict[str, str]:
 
 
 COMPRESSIONS = {
-    # name: (OpenEXR constant, why pick it). Measured here on a 1280×720 frame with 6 float32
-    # channels (2-core machine): write / read / size.
-    "zip": ("ZIP_COMPRESSION", "lossless, what Blender and most tools write: 280 / 75 ms, 16.9 MB"),
-    "zips": ("ZIPS_COMPRESSION", "lossless, one scanline per block: 240 / 78 ms, 18.5 MB"),
-    "piz": ("PIZ_COMPRESSION", "lossless wavelet, smallest for noisy renders: 450 / 115 ms, 14.1 MB"),
-    "rle": ("RLE_COMPRESSION", "lossless run-length, fast: 66 / 21 ms, 21.9 MB"),
-    "none": ("NO_COMPRESSION", "fastest for sequences on local disks: 21 / 22 ms, 22.1 MB"),
+    # name: (OpenEXR constant, why pick it). Write/read times and sizes:
+    # docs/measurements.md#exr-compression
+    "zip": ("ZIP_COMPRESSION", "lossless, what Blender and most tools write"),
+    "zips": ("ZIPS_COMPRESSION", "lossless, one scanline per block"),
+    "piz": ("PIZ_COMPRESSION", "lossless wavelet, smallest for noisy renders"),
+    "rle": ("RLE_COMPRESSION", "lossless run-length, fast, larger files"),
+    "none": ("NO_COMPRESSION", "fastest for sequences on local disks, largest files"),
 }
 """Lossless compressions offered for writing (lossy DWA/B44 are not: outputs are data)."""
 

@@ -11,14 +11,14 @@ the half diagonal, so an off-centre principal point stays inside) and interpolat
 the kernels, as the vignetting stage does.
 
 The gathers read a copy of the image padded by ``PAD`` pixels (edge values repeated, i.e. the
-render is assumed to continue as its border) so no tap needs a clamp (PERFORMANCE.md); every tap
+render is assumed to continue as its border) so no tap needs a clamp; every tap
 offset is therefore limited to ``PAD − 1`` pixels.
 
 **Tiles.** PoCL vectorises a gather across pixels only when the work-items of a group read at
-the same offsets (PERFORMANCE.md: uniform offsets on planar padded buffers run at 1–2 Gtaps/s,
-per-pixel offsets at 0.1–0.3). The field-dependent PSFs change slowly with field height, so the
-gathers run on tiles of ``TILE_W × TILE_H`` pixels (grid from the top-left pixel; 16 px wide =
-one AVX-512 vector of floats) whose tap positions are placed by the tile centre
+the same offsets (uniform offsets on planar padded buffers run several times faster than per-pixel
+offsets: docs/measurements.md#gather-layouts-on-pocl). The field-dependent PSFs change slowly with
+field height, so the gathers run on tiles of ``TILE_W × TILE_H`` pixels (grid from the top-left
+pixel; 16 px wide = one AVX-512 vector of floats) whose tap positions are placed by the tile centre
 :math:`(t_x W_t + \tfrac{W_t-1}{2},\ t_y H_t + \tfrac{H_t-1}{2})`; each stage documents how it
 keeps (or approximates) the per-pixel shape within a tile.
 """

@@ -72,9 +72,10 @@ Semi-axes are capped at 15 px; below 1e-3 px both, the pixel is copied. Quality 
 16, preview 32, final 64.
 
 **Tiles (speed).** PoCL vectorises a gather across pixels only when all work-items of a group
-read at the same offsets (PERFORMANCE.md), so the kernel runs on tiles of 16 × 8 px
-(:mod:`clpost.stages._field`) and, per tile, places the N taps on the tile's *bounding* ellipse:
-the largest :math:`\alpha_s, \alpha_t` of its pixels, along the tile centre's :math:`e_s, e_t`.
+read at the same offsets (docs/measurements.md#gather-layouts-on-pocl), so the kernel runs on tiles
+of 16 × 8 px (:mod:`clpost.stages._field`) and, per tile, places the N taps on the tile's *bounding*
+ellipse: the largest :math:`\alpha_s, \alpha_t` of its pixels, along the tile centre's
+:math:`e_s, e_t`.
 Each pixel keeps its own ellipse through a second weight, membership
 
 .. math::
@@ -109,10 +110,9 @@ one tile list per class and each class is its own launch, so no branch enters th
 * tiles flagged for the exact path keep the quality's N.
 
 Draft at 1920×1080 on the benchmark's no_defocus frame: 9 % of the tiles copied, 23 % at 4 or 8
-taps; 1.05–1.2× faster (final 1.26×) in one process (``tools/ab_gathers.py``, loaded box; the
-pad and tiles passes are the fixed rest). The draft result
-moves further from the dense (final) one: 99.9th percentile of |draft − final| 5.3 instead of 3.6
-on values 0.08–500 (mean 0.018 instead of 0.011).
+taps; the pad and tiles passes are the fixed rest of the stage's cost. Draft's 99.9th percentile of
+|draft − final| there is 5.3 on values 0.08–500 (mean 0.018). Speed and accuracy against one class
+for all tiles: docs/benchmarks.md, "astigmatism: tile classes".
 
 **Reach test skipped (speed).** A tap's reach weight is 1 when :math:`q^2 \le 1`. The taps of a
 tile have :math:`|u_s| \le A_s|v_x|` and :math:`|u_t| \le A_t|v_y|` with :math:`|v| < 1` (a spiral
@@ -253,8 +253,8 @@ class Astigmatism(GatherStage):
         if not np.any(self._lut(camera)):
             return "sagittal and tangential focal offsets are zero over the sensor"
         if frame.depth is None:
-            # the blur depends on each pixel's depth; a colour-only frame keeps working (as it did
-            # before this stage existed) and --explain says why nothing was added
+            # the blur depends on each pixel's depth; a colour-only frame keeps working without
+            # this stage and --explain says why nothing was added
             return "the frame has no depth buffer (the blur depends on each pixel's depth)"
         return None
 

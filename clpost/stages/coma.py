@@ -49,15 +49,16 @@ comet length is capped at 15 px (C' = 0 where capped). Quality sets N: draft 16,
 final 64 (on the window tiles; the uniform tiles take 64 at every quality, "Stencils" below).
 
 **Tiles (speed).** PoCL vectorises a gather across pixels only when every work-item of a group
-reads at the same offsets (PERFORMANCE.md). The comet changes slowly with field height, so the
-kernel runs on tiles of 16 × 8 px (:mod:`clpost.stages._field`) and reads each tap's bilinear
-sample from a 3 × 3 window whose integer position :math:`b_k = \mathrm{round}(-\varepsilon_k(T))`
-is the same for the whole tile (T the tile centre); inside it, the pixel's own landing point
-:math:`-\varepsilon_k(x) - b_k` is interpolated with tent weights — the exact bilinear tap as long
-as it lies within 1 px of :math:`b_k`, i.e. while the comet changes by < ½ px across a tile
-(``shape_error_px``: ≤ 0.2 px for the flagship wide open at 720p and 1080p, 0.42 px for the
-steepest coefficient in the tests). Beyond, the landing point is clamped to the window (the
-reference does the same). ≈ 10× faster than per-pixel addresses on the 2-core PoCL CPU.
+reads at the same offsets (docs/measurements.md#gather-layouts-on-pocl). The comet changes
+slowly with field height, so the kernel runs on tiles of 16 × 8 px (:mod:`clpost.stages._field`)
+and reads each tap's bilinear sample from a 3 × 3 window whose integer position
+:math:`b_k = \mathrm{round}(-\varepsilon_k(T))` is the same for the whole tile (T the tile centre);
+inside it, the pixel's own landing point :math:`-\varepsilon_k(x) - b_k` is interpolated with tent
+weights — the exact bilinear tap as long as it lies within 1 px of :math:`b_k`, i.e. while the comet
+changes by < ½ px across a tile (``shape_error_px``: ≤ 0.2 px for the flagship wide open at 720p and
+1080p, 0.42 px for the steepest coefficient in the tests). Beyond, the landing point is clamped to
+the window (the reference does the same). Against per-pixel addresses:
+docs/measurements.md#kernel-forms-on-pocl.
 
 **Uniform tiles.** Where a bound on the distance between any pixel's landing point and the tile
 centre's, :math:`\max_k \| |t_{k,s}|\,m_s + |t_{k,r}|\,m_r \|` (m the largest deviation of the
@@ -91,14 +92,13 @@ measurable but would drop the comet and the Jacobian's dimming), 4–24 for the 
 (≤ 4.4 px) comets. Tiles whose reads (|d| ≤ 16 px) stay inside the frame read the source
 (``inner_tiles``), so the pad pass only fills the border ring when no window tile runs. One
 kernel per stencil size (``STENCIL_SIZES``, zero-weight padding, a compile-time loop). Same
-model as the tap-by-tap gather (float32 rounding only); as N no longer sets the cost there, the
-uniform tiles take ``UNIFORM_TAPS`` (64) at every quality. Where all pixels of a uniform tile
-have the same a and b within ``CONST_JAC_TOL`` (a linear coefficient: a = 2k, b = k²
-everywhere), the Jacobian is folded into W0 on the host (``tile_jacobian``; coma_c<S>: no
-per-pixel reads of C', C/r, one scalar weight per offset; ×1.05–1.16 in one process). 1080p
-no_defocus, old (tap-by-tap, 16 pixels per work-item) vs new in one process, interleaved
-(``tools/ab_gathers.py --truth final``, two runs): draft ×2.1–2.4 with final's accuracy (99.9th
-percentile |draft − final| 3.3 → 2e-6 on values 0.08–500), final ×4.7–5.3.
+model as the tap-by-tap gather (float32 rounding only); as N does not set the cost there, the
+uniform tiles take ``UNIFORM_TAPS`` (64) at every quality (draft has final's accuracy there).
+Where all pixels of a uniform tile have the same a and b within ``CONST_JAC_TOL`` (a linear
+coefficient: a = 2k, b = k² everywhere), the Jacobian is folded into W0 on the host
+(``tile_jacobian``; coma_c<S>: no per-pixel reads of C', C/r, one scalar weight per offset). Speed
+and accuracy against the tap-by-tap gather: docs/benchmarks.md, "coma: stencils for the uniform
+tiles".
 
 Domain/range: colour ≥ 0 → convex combination of input colours.
 """

@@ -27,8 +27,8 @@ computed per lane on the tiles whose taps fit a tile-uniform 5 × 5 window (:fun
 vector loads), from a per-pixel table built with the map elsewhere (:func:`tap_table`) — clamped
 below at 0 (no negative HDR values). It passes
 through the samples and reproduces cubics exactly, so an edge stays where it is whatever its
-sub-pixel phase. Keys' cubic convolution (OpenCV's ``INTER_CUBIC``, the previous final filter)
-is only first-order — a ramp is off by up to 0.048 × its slope — and moved checkerboard corners
+sub-pixel phase. Keys' cubic convolution (OpenCV's ``INTER_CUBIC``) is only first-order — a ramp is
+off by up to 0.048 × its slope — and moves checkerboard corners
 by ≈ 0.025 px in a way correlated over the image: k2 4.7–8 % and p2 6.7 % off in the
 calibration check, against < 1 % for every parameter with the B-spline
 (tools/distortion_calibration.py, docs/distortion_calibration.md). The reference is scipy's
@@ -140,9 +140,9 @@ class _MapGeometry(NamedTuple):
 def _map_geometry(model: OpenCVModel, src_size: tuple[int, int],
                   src_k: tuple[float, float, float, float]) -> _MapGeometry:
     """What :meth:`Distortion.host_buffers` needs of the map, once per map (the map is static,
-    so recomputing it per frame cost ~70 ms at 720p). Velocities transform by the inverse of
-    the map's Jacobian J = ∂(source)/∂(output); on the 1-px rim of the valid area J is unknown (a
-    neighbour has no data) and velocities pass untransformed."""
+    so it is not recomputed per frame: docs/measurements.md#host-work). Velocities transform by the
+    inverse of the map's Jacobian J = ∂(source)/∂(output); on the 1-px rim of the valid area J is
+    unknown (a neighbour has no data) and velocities pass untransformed."""
     m, ok = distortion_map(model, src_size, src_k)
     sw, sh = src_size
     xi = np.clip(np.where(ok, np.rint(m[0]), 0), 0, sw - 1).astype(np.int64)
@@ -289,19 +289,18 @@ def fir_taps(k_max: int = FIR_K) -> np.ndarray:
         h_k = \frac{-6 z_1}{1 - z_1^2}\, z_1^{|k|} = \sqrt 3\, z_1^{|k|}, \qquad
         \sum_k h_k = 1, \qquad \sum_k |h_k| = 3
 
-    which scipy (and the previous kernels, too slow: one sequential chain per row) applies as a
-    causal + anticausal recursion. Truncated at :math:`|k| \le K` and applied along rows then
-    columns of the edge-extended source (what ``mode="nearest"`` means), each 1-D pass is off by
+    which scipy applies as a causal + anticausal recursion (one sequential chain per row: too
+    slow on the device). Truncated at :math:`|k| \le K` and applied along rows then columns of
+    the edge-extended source (what ``mode="nearest"`` means), each 1-D pass is off by
     at most :math:`\varepsilon_K \max|f|`, :math:`\varepsilon_K = \sum_{|k|>K}|h_k| =
     2\sqrt 3\,|z_1|^{K+1}/(1-|z_1|)` (1.74e-7 at K = 12; 2.4e-6 at K = 10), so the coefficients
     by :math:`(\varepsilon_K \sum|h| + \sum|h|\,\varepsilon_K) = 6\varepsilon_K = 1.04\cdot10^{-6}`
     times :math:`\max|f|` at worst; float32 rounding adds about 3 half-ulps of the largest
     coefficient (:math:`\le 9\max|f|`): the test bound is :math:`(6\varepsilon_K +
     27 \cdot 2^{-24}) \max|f| = 2.6\cdot10^{-6}\max|f|`, measured 0.6–0.7e-6 with 1e8 spikes
-    (end to end at 720p with 1 % spikes of 1e8: 3.6e-7·1e8; the recursion kernels 4.2e-7·1e8 in
-    the same run). The interpolated value has the same bound
-    (B-spline weights ≥ 0, sum 1). scipy's mirror boundary on its 12-pixel padding differs from
-    the infinite edge repeat only ≥ 22 pixels away from any coefficient the 4×4 windows read
+    (end to end at 720p with 1 % spikes of 1e8: 3.6e-7·1e8). The interpolated value has the same
+    bound (B-spline weights ≥ 0, sum 1). scipy's mirror boundary on its 12-pixel padding differs
+    from the infinite edge repeat only ≥ 22 pixels away from any coefficient the 4×4 windows read
     (:math:`|z_1|^{22} < 10^{-12}`)."""
     z = np.sqrt(3.0) - 2.0
     return -6.0 * z / (1.0 - z * z) * z ** np.arange(k_max + 1, dtype=np.float64)
@@ -538,7 +537,8 @@ class Distortion(GatherStage):
         if frame.alpha is not None:
             alpha = alpha * np.clip(resample(frame.alpha.astype(np.float64), m, 1), 0.0, 1.0).astype(np.float32)
         out = {"alpha": alpha}
-        # flat np.take with a cached index: 1-D gathers are ~3× faster than 2-D fancy indexing
+        # flat np.take with a cached index: faster than 2-D fancy indexing
+        # (docs/measurements.md#host-work)
         if frame.depth is not None:
             d = np.ascontiguousarray(frame.depth, np.float32).ravel().take(g.flat)
             d.ravel()[g.invalid] = np.inf

@@ -117,9 +117,8 @@ path with final's budget), the others the full-resolution gather, which then nee
                    \text{full-resolution gather} & \text{else}\end{cases}
 
 Why it loses little: at reach > 17 px the full-resolution gather already used stride ≥ 4 over a
-tent-prefiltered level, i.e. it sampled the scene at ≤ ¼ of its pixels. Measured on the demo scene
-(docs/benchmarks.md, "dof: final at mixed resolution"): −0.00 dB at 640×360, −0.09 dB at
-1280×720 (FLIP 0.0269 → 0.0288, 0.0280 → 0.0296); worst scene 3.1–3.8× faster.
+tent-prefiltered level, i.e. it sampled the scene at ≤ ¼ of its pixels. PSNR/FLIP against the
+accumulation reference and the speed-up: docs/benchmarks.md, "dof: final at mixed resolution".
 
 Domain/range: colour ≥ 0 finite (HDR, nothing clipped); depth > 0 or +inf; output finite ≥ 0.
 """

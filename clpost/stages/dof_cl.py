@@ -9,8 +9,8 @@ pass), the same again at half resolution, ``dof_tile_mix`` (big tiles), the full
 gather (big tiles skipped), the half-resolution gather (big tiles and their neighbours only) and
 ``dof_upsample`` writing only the big tiles' pixels.
 
-Vectorisation (issue 10, measured with ``POCL_VECTORIZER_REMARKS=1``): PoCL vectorised none of
-these kernels across work-items — the gather's tap loop has a per-tile trip count ("loop control
+Vectorisation (found with ``POCL_VECTORIZER_REMARKS=1``): PoCL vectorises none of these kernels'
+scalar forms across work-items — the gather's tap loop has a per-tile trip count ("loop control
 flow is not understood"), the others clamp/branch per pixel. So every full-image kernel does 16
 pixels of a row per work-item in explicit ``float16`` (the gather: :func:`gather_vector_width`,
 8 or 16), loads whole rows with ``vload16`` where the group of pixels lies inside the image and
@@ -40,21 +40,23 @@ def _kernels(rt, defines):
 
 def _launch(rt, kernel, size, local):
     """Square ``local`` × ``local`` work-groups over ``size`` (rounded up by :meth:`Runtime.launch`:
-    PoCL's own choice of tiny work-groups for sizes like 706×426 runs 10–50× slower, measured)."""
+    PoCL's own choice of tiny work-groups for sizes like 706×426 runs many times slower;
+    docs/measurements.md#kernel-forms-on-pocl)."""
     return rt.launch(kernel, size, (local, local))
 
 
 def _launch_rows(rt, kernel, size, per_item=16, local=(8, 1)):
     """Kernels that do ``per_item`` pixels of a row per work-item (explicit float16): the x size
     divided by ``per_item``, then rounded up to whole work-groups like :func:`_launch`. Groups of
-    8×1 work-items: the float16 bodies ran 3–10× slower in 8×8 groups (measured)."""
+    8×1 work-items: the float16 bodies run several times slower in 8×8 groups
+    (docs/measurements.md#kernel-forms-on-pocl)."""
     return rt.launch(kernel, (-(-size[0] // per_item), size[1]), local)
 
 
 def gather_vector_width(rt) -> int:
     """Pixels per work-item of the gather: 16 where the device's native float vector is 16 wide
-    (AVX-512: measured 1.26–1.36× faster than 8 at final; presumably its 32 registers hold the 8
-    accumulators and the pixel's constants without spilling), else 8. ``CLPOST_DOF_VEC`` (8 or 16)
+    (AVX-512, where it is faster than 8: docs/measurements.md#kernel-forms-on-pocl; presumably its
+    32 registers hold the 8 accumulators and the pixel's constants without spilling), else 8. ``CLPOST_DOF_VEC`` (8 or 16)
     overrides it, for measuring and for the tests of both widths."""
     import os
 

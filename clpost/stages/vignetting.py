@@ -188,8 +188,8 @@ class Vignetting(PointwiseStage):
         """RI at every pixel (float32 (h, w), read-only): the LUT interpolated in float64 at the
         pixel's image height. Built once per curve, principal point and size and uploaded once
         (the pipeline does not re-copy an unchanged read-only table); the kernel reads one float
-        per pixel — a per-pixel LUT lookup in the kernel was the stage's whole cost (2 of every
-        3 ms at 1080p) because PoCL cannot vectorise data-dependent loads."""
+        per pixel — PoCL cannot vectorise data-dependent loads, so a per-pixel LUT lookup in the
+        kernel would be most of the stage's cost (docs/measurements.md#kernel-forms-on-pocl)."""
         lut = self._lut(camera)
         ox, oy = principal_offset_mm(camera, w, h, intrinsics)
         key = (lut.tobytes(), float(camera.sensor_mm[0]), ox, oy, w, h)
