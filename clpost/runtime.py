@@ -62,8 +62,8 @@ _SCALAR_DTYPES = {
 def typed_kernel(kernel: "cl.Kernel") -> "cl.Kernel":
     """Declare ``kernel``'s scalar argument types to pyopencl (``set_scalar_arg_dtypes``), read from
     the program's argument info. Why: without them pyopencl's ``set_args`` inspects every argument
-    generically — ≈ 30 µs per call on PoCL against ≈ 1 µs typed, the largest host cost of a frame
-    (figures in docs/architecture.md). Kernels whose argument info the driver cannot give (or with
+    generically, 20–50× slower per call than typed — it was the largest host cost of a frame
+    (docs/measurements.md#host-work). Kernels whose argument info the driver cannot give (or with
     vector-typed scalars) are left as they are: correct, only slower to launch."""
     info = cl.kernel_arg_info
     dtypes = []

@@ -7,6 +7,7 @@ scenes, interleaved per case (old, then this tree); the extended-frustum row ren
 ``required_render``'s size for the calibration, the case that solves the render's intrinsics.
 
     PYTHONPATH=. python tools/host_time.py --against a4db22e
+    PYTHONPATH=. python tools/host_time.py --breakdown    # this tree: where Plan.run's time goes
 """
 from __future__ import annotations
 
@@ -40,12 +41,70 @@ def host_ms(pkg, scene_name: str, quality: str, w: int, h: int, extended: bool, 
     return statistics.median(times)
 
 
+def breakdown(scene_name: str, quality: str, w: int, h: int, frames: int = 15) -> str:
+    """One table row: Plan.run's host ms per frame and the part spent in pyopencl's calls."""
+    import collections
+
+    import pyopencl as cl
+
+    from clpost import bench
+    from clpost.pipeline import Pipeline
+
+    spent, calls = collections.Counter(), collections.Counter()
+
+    def timed(name, fn):
+        def call(*a, **k):
+            t0 = time.thread_time()
+            try:
+                return fn(*a, **k)
+            finally:
+                spent[name] += time.thread_time() - t0
+                calls[name] += 1
+        return call
+
+    saved = cl.enqueue_nd_range_kernel, cl.enqueue_copy, cl.Kernel.set_args
+    cl.enqueue_nd_range_kernel = timed("enqueue", saved[0])
+    cl.enqueue_copy = timed("copy", saved[1])
+    cl.Kernel.set_args = timed("set_args", saved[2])
+    try:
+        scene = bench.SCENES[scene_name]
+        cam, _ = scene.camera(w, h)
+        frame = bench.synthetic_frame(w, h, velocity_px=scene.velocity_px)
+        plan = Pipeline(cam, quality=quality, stages=list(scene.wants)).plan_for(frame, cam)
+        for _ in range(3):
+            plan.run(frame, cam)
+        spent.clear(), calls.clear()
+        times = []
+        for _ in range(frames):
+            plan.run(frame, cam)
+            times.append(plan.last_host_ms)
+    finally:
+        cl.enqueue_nd_range_kernel, cl.enqueue_copy, cl.Kernel.set_args = saved
+    part = {k: spent[k] / frames * 1e3 for k in ("set_args", "enqueue", "copy")}
+    n = {k: calls[k] // frames for k in part}
+    rest = statistics.median(times) - sum(part.values())
+    return (f"| {scene_name} | {quality} | {statistics.median(times):.2f} | "
+            + " | ".join(f"{part[k]:.2f} ({n[k]})" for k in part) + f" | {rest:.2f} |")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--against", required=True, help="git revision to compare with")
+    ap.add_argument("--against", help="git revision to compare with")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="this tree only: Plan.run's host ms split into pyopencl calls and the rest")
     ap.add_argument("--size", default="1920x1080")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
+    if args.breakdown:
+        print(f"| scene {w}x{h} | quality | Plan.run host ms | set_args ms (calls) | enqueue ms (calls) "
+              "| copies ms (calls) | rest (Python) ms |")
+        print("|---|---|---:|---:|---:|---:|---:|")
+        for scene in ("worst", "no_defocus", "full"):
+            for quality in ("draft", "final"):
+                print(breakdown(scene, quality, w, h), flush=True)
+        return 0
+    if not args.against:
+        ap.error("give --against REV or --breakdown")
     old = load_revision(args.against)
     print(f"| scene {w}x{h} | quality | {args.against} host ms/frame | this tree |")
     print("|---|---|---:|---:|")

@@ -24,7 +24,6 @@ keeps (or approximates) the per-pixel shape within a tile.
 """
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -34,31 +33,6 @@ PAD = 16
 TILE_W = 16
 TILE_H = 8
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
-
-
-def per_camera(method):
-    """Memoise a stage method ``method(self, camera)`` per camera value (the last 8 cameras, on
-    the stage): LUTs sampled from a camera's curves are plan-time work, not per-frame work, yet a
-    camera may change between frames (an iris ramp changes a vignetting LUT) — keying on the whole
-    (frozen, hashable) camera keeps both right. Arrays come back read-only."""
-    slot = "_per_camera_" + method.__name__
-
-    @functools.wraps(method)
-    def wrapper(self, camera):
-        memo = self.__dict__.setdefault(slot, {})
-        try:
-            return memo[camera]
-        except KeyError:
-            pass
-        value = method(self, camera)
-        if isinstance(value, np.ndarray):
-            value.setflags(write=False)
-        if len(memo) >= 8:
-            memo.pop(next(iter(memo)))
-        memo[camera] = value
-        return value
-
-    return wrapper
 
 
 def frame_intrinsics(frame) -> tuple[float, float, float, float] | None:

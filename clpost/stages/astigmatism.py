@@ -144,7 +144,7 @@ import numpy as np
 
 from ..params import CORNER_MM, param, parse_fraction
 from . import _field as fld
-from .base import GatherStage
+from .base import GatherStage, per_camera
 
 
 @dataclass(frozen=True)
@@ -242,7 +242,7 @@ class Astigmatism(GatherStage):
     def taps(self) -> int:
         return TAPS[self.quality]
 
-    @fld.per_camera
+    @per_camera
     def _lut(self, camera) -> np.ndarray:
         return _offsets_lut(camera)
 

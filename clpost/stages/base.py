@@ -44,10 +44,12 @@ How the planner calls a stage (:mod:`clpost.pipeline`):
 """
 from __future__ import annotations
 
+import functools
 from abc import ABC, abstractmethod
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
+
 
 if TYPE_CHECKING:
     from ..camera import Camera
@@ -69,6 +71,32 @@ runs before the converter out of it (:func:`clpost.stages.order_problems`)."""
 
 QUALITIES = ("draft", "preview", "final")
 """Quality levels; each stage documents what they change (sample counts, resolution)."""
+
+
+def per_camera(method):
+    """Memoise a stage method ``method(self, camera, *args)`` per camera value and arguments (the
+    last 8, on the stage): LUTs sampled from a camera's curves are plan-time work, not per-frame
+    work, yet a camera may change between frames (an iris ramp changes a vignetting LUT) — keying on the whole
+    (frozen, hashable) camera keeps both right. Arrays come back read-only."""
+    slot = "_per_camera_" + method.__name__
+
+    @functools.wraps(method)
+    def wrapper(self, camera, *args):
+        memo = self.__dict__.setdefault(slot, {})
+        key = (camera, *args)
+        try:
+            return memo[key]
+        except KeyError:
+            pass
+        value = method(self, camera, *args)
+        if isinstance(value, np.ndarray):
+            value.setflags(write=False)
+        if len(memo) >= 8:
+            memo.pop(next(iter(memo)))
+        memo[key] = value
+        return value
+
+    return wrapper
 
 
 class Stage(ABC):

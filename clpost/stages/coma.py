@@ -110,7 +110,7 @@ import numpy as np
 
 from ..params import CORNER_MM, param, parse_fraction
 from . import _field as fld
-from .base import GatherStage
+from .base import GatherStage, per_camera
 
 
 @dataclass(frozen=True)
@@ -176,7 +176,7 @@ class Coma(GatherStage):
         comet's area, not the tap count: module docstring, "Stencils")."""
         return max(self.taps, UNIFORM_TAPS)
 
-    @fld.per_camera
+    @per_camera
     def _lut(self, camera) -> np.ndarray:
         fn = coma_curve(camera)
         return fld.sample_lut(lambda r: (fn(r), derivative(fn, r)), camera, 2)

@@ -40,7 +40,7 @@ from .. import random as rnd
 from ..film_stock import load_stock
 from ..grain_model import LN10, grain_radius_um, pixel_covariance
 from ..params import at_least, param
-from .base import GatherStage
+from .base import GatherStage, per_camera
 from .sensor import frame_index
 
 
@@ -122,6 +122,7 @@ class Grain(GatherStage):
         return f"grain radius {r:.3g} px ({r * camera.pixel_pitch_mm(frame.width) * 1e3:.3g} µm): {how}"
 
     # -- host tables --------------------------------------------------------------------------
+    @per_camera
     def _setup(self, camera, width):
         stock = load_stock(camera.film)
         d_min = stock.d_min()

@@ -63,7 +63,7 @@ import numpy as np
 from ..optics.prescription import LAMBDA_C_NM, LAMBDA_D_NM, LAMBDA_F_NM
 from ..params import CORNER_MM, param, parse_fraction
 from . import _field as fld
-from .base import GatherStage
+from .base import GatherStage, per_camera
 
 
 @dataclass(frozen=True)
@@ -149,7 +149,7 @@ class LateralColor(GatherStage):
         self._plan_key = None
         self._plan: dict = {}
 
-    @fld.per_camera
+    @per_camera
     def _lut(self, camera) -> np.ndarray:
         r = np.linspace(0.0, fld.lut_range_mm(camera), fld.LUT_SIZE)
         ratio, jac = inverse_map(camera, r)

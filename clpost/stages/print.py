@@ -37,7 +37,7 @@ import numpy as np
 from ..film_stock import load_stock
 from ..photometry import K_REFLECTED, SATURATION_EXPOSURE_ISO
 from ..params import one_of, param
-from .base import PointwiseStage
+from .base import PointwiseStage, per_camera
 
 
 @dataclass(frozen=True)
@@ -98,8 +98,12 @@ class Print(PointwiseStage):
     def defines(self, camera):
         return {"PRINT_MODE": MODES.get(camera.film_output, 0)}
 
+    @per_camera
+    def _table(self, camera) -> np.ndarray:
+        return print_params(camera).astype(np.float32)
+
     def values(self, camera, frame):
-        return (print_params(camera).astype(np.float32),)
+        return (self._table(camera),)
 
     def reference(self, camera, frame, color):
         p = print_params(camera)

@@ -49,7 +49,7 @@ import numpy as np
 from ..errors import InputError
 from ..params import param
 from . import _field as fld
-from .base import PointwiseStage
+from .base import PointwiseStage, per_camera
 
 
 def _check_mode(name, v):
@@ -176,7 +176,7 @@ class Vignetting(PointwiseStage):
     def _r_max(self, camera) -> float:
         return math.hypot(*camera.sensor_mm)
 
-    @fld.per_camera
+    @per_camera
     def _lut(self, camera) -> np.ndarray:
         r = np.linspace(0.0, self._r_max(camera), LUT_SIZE)
         return np.clip(relative_illumination(camera)(r), 0.0, 1.0).astype(np.float32)
