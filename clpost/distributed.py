@@ -195,14 +195,15 @@ def combine_partials(a, b):
 
 
 def expose_dask(client, pattern: str, frames, fps, t_open, t_close, *, layout: str | None = None,
-                device: str | None = None, chunk: int = 8, retries: int = 2):
+                device: str | None = None, chunk: int = 8, retries: int = 2, first: int = 0):
     """``clpost expose`` on a cluster: chunks of ``chunk`` consecutive frames are accumulated on
     workers, then the partial exposures are combined pairwise in a tree (log₂ depth), so no
     worker holds more than two partials. Same result as the serial accumulation to float32
-    rounding of each chunk's compensated sum (tested to 1e-6)."""
+    rounding of each chunk's compensated sum (tested to 1e-6). ``first``: the time origin
+    (:func:`clpost.expose.frame_interval`)."""
     from .expose import exposure_plan
 
-    plan = exposure_plan(frames, fps, t_open, t_close)
+    plan = exposure_plan(frames, fps, t_open, t_close, first)
     if not plan:
         raise InputError("no frame lies inside the shutter interval")
     if chunk < 1:

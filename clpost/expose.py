@@ -1,19 +1,49 @@
-r"""Long exposure, exact: accumulate frames weighted by how long the shutter saw each of them.
+r"""Long exposure, exact: integrate a sequence over the open shutter, through the camera.
 
-A rendered frame n of a sequence at F frames per second stands for the scene during
-:math:`I_n = [n/F, (n+1)/F)` (piecewise-constant in time, as the renderer produced it). A shutter
-open during :math:`[T_0, T_1]` (anywhere, not only on frame boundaries) collects
+**Temporal model (box filter).** A rendered frame n of a sequence at F frames per second stands
+for the scene during its whole interval (piecewise-constant in time, as a renderer's frame
+without motion blur does): with :math:`n_0` the sequence's first frame,
+
+.. math::
+
+    I_n = \Big[\frac{n - n_0}{F}, \frac{n - n_0 + 1}{F}\Big)
+
+seconds after the sequence starts (:func:`frame_interval`; ``first`` = :math:`n_0`, 0 in the
+library's default absolute timing, the first frame on disk in ``clpost expose``). A shutter open
+during :math:`[T_0, T_1]` (anywhere, not only on frame boundaries) collects
 
 .. math::
 
     H = \int_{T_0}^{T_1} E(t)\,dt = \sum_n w_n E_n, \qquad
-    w_n = \big|I_n \cap [T_0, T_1]\big| = \max\!\big(0, \min(T_1, \tfrac{n+1}{F}) - \max(T_0, \tfrac{n}{F})\big)
+    w_n = \big|I_n \cap [T_0, T_1]\big|
 
-which is *exact* for piecewise-constant input. Weights are computed in rational arithmetic
-(:class:`fractions.Fraction`), so :math:`\sum_n w_n = T_1 - T_0` exactly. The output of
-:func:`expose` is the time-averaged input :math:`\bar E = H / (T_1 - T_0)` (same units as a
-frame: feed it to ``clpost process --shutter T1-T0`` and the exposure stage applies
-:math:`H = \bar E\,t`); :attr:`ExposurePartial.seconds` is the exact open time.
+which is *exact* for piecewise-constant input: a frame cut by the shutter counts for the
+fraction of its interval the shutter saw. Weights are computed in rational arithmetic
+(:class:`fractions.Fraction`), so :math:`\sum_n w_n = T_1 - T_0` exactly. Times are seconds, or
+frame numbers as timeline positions: ``f1001`` (or ``1001f``) is the *start* of frame 1001,
+``f1001.5`` its middle (:func:`parse_instant`), so ``--open f1001 --close f1025`` is frames
+1001…1024, 24 frames.
+
+**Through the camera** (:func:`expose_camera_frames`). The exposure is one photograph with
+shutter time :math:`t = T_1 - T_0`. Every stage whose input is scene-linear light (domains
+``render`` and ``image``, :data:`PER_FRAME_DOMAINS`; the exposure stage, image → signal, is a
+gain) is linear in that light, so it commutes with the weighted sum; it is applied to each frame
+with that frame's own depth (DoF, distortion, vignetting, lateral colour, white balance,
+exposure with shutter t) and the outputs are averaged with weights :math:`w_n / t`. Per frame is
+exact for every linear stage, frame-dependent (DoF reads each frame's depth) or not. The stages
+that read the signal, densities, raw values or a print (film, sensor, grain, print) are
+non-linear and run **once**, on the accumulated signal — the film sees the exposure H, and grain
+and sensor noise are drawn once, as on a real negative. So a static scene exposed over
+:math:`[T_0, T_1]` is the frame processed with ``--shutter`` :math:`T_1 - T_0`. motion_blur
+(a velocity-buffer blur within a frame's shutter) is not used: in the box model a frame is
+constant over its interval; render at a higher frame rate for smoother trails.
+
+Auto-exposure is metered once, on the first frame the shutter sees, with the exposure's shutter
+time. **Alpha** of the result is the time-averaged coverage :math:`\sum_n w_n \alpha_n / t` (what
+a camera would record of a matte over the exposure); **depth** is the nearest depth any seen
+frame had at the pixel (per-pixel minimum: the surface a z-merge or a later DoF should treat as
+present; a static scene keeps its depth). Velocity is dropped (the exposure already integrated
+the motion).
 
 Streaming: frames are added one at a time to a device buffer (Neumaier-compensated float32 sum
 plus its compensation), so memory does not depend on the number of frames. Partial sums combine
@@ -27,6 +57,7 @@ Buffer", SIGGRAPH) for motion blur from sub-frames.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -54,12 +85,13 @@ def as_rate(fps) -> Fraction:
     return as_time(fps, "--fps", "a frame rate in frames per second (e.g. 24 or 24000/1001)")
 
 
-def frame_interval(n: int, fps) -> tuple[Fraction, Fraction]:
-    """The time interval [n/F, (n+1)/F) that frame ``n`` stands for (seconds, exact)."""
+def frame_interval(n: int, fps, first: int = 0) -> tuple[Fraction, Fraction]:
+    """The time interval [(n - first)/F, (n - first + 1)/F) that frame ``n`` stands for (seconds
+    after the start of frame ``first``, exact)."""
     f = as_rate(fps)
     if f <= 0:
         raise InputError(f"--fps {fps!r} must be > 0 frames per second, e.g. 24")
-    return Fraction(n) / f, Fraction(n + 1) / f
+    return Fraction(n - first) / f, Fraction(n - first + 1) / f
 
 
 def overlap(a0: Fraction, a1: Fraction, b0: Fraction, b1: Fraction) -> Fraction:
@@ -67,28 +99,28 @@ def overlap(a0: Fraction, a1: Fraction, b0: Fraction, b1: Fraction) -> Fraction:
     return max(Fraction(0), min(a1, b1) - max(a0, b0))
 
 
-def exposure_weights(frames, fps, t_open, t_close) -> dict[int, Fraction]:
+def exposure_weights(frames, fps, t_open, t_close, first: int = 0) -> dict[int, Fraction]:
     """Seconds of the shutter interval [t_open, t_close] that fall in each frame's interval;
-    frames the shutter never sees are left out."""
+    frames the shutter never sees are left out (``first``: see :func:`frame_interval`)."""
     t0, t1 = as_time(t_open, "--open"), as_time(t_close, "--close")
     if not t1 > t0:
         raise InputError(f"--close {t_close} must be later than --open {t_open} (seconds)")
     out = {}
     for n in frames:
-        a, b = frame_interval(int(n), fps)
+        a, b = frame_interval(int(n), fps, first)
         w = overlap(a, b, t0, t1)
         if w > 0:
             out[int(n)] = w
     return out
 
 
-def frames_needed(fps, t_open, t_close) -> range:
+def frames_needed(fps, t_open, t_close, first: int = 0) -> range:
     """Frame numbers whose intervals meet [t_open, t_close]."""
     f = as_rate(fps)
     t0, t1 = as_time(t_open, "--open"), as_time(t_close, "--close")
-    first = math.floor(t0 * f)
-    last = math.ceil(t1 * f) - 1
-    return range(first, max(last, first) + 1)
+    lo = math.floor(t0 * f)
+    hi = math.ceil(t1 * f) - 1
+    return range(first + lo, first + max(hi, lo) + 1)
 
 
 @dataclass
@@ -115,7 +147,7 @@ class ExposurePartial:
         r"""Time-averaged input :math:`\bar E = H/(T_1-T_0)` (H×W×3 float32)."""
         if self.applied <= 0:
             raise InputError("the exposure received no frame inside the shutter interval; "
-                             "check --open/--close against the frames' times (frame n spans [n/fps, (n+1)/fps))")
+                             "check --open/--close against the frames' times")
         return (self.sum / float(self.applied)).astype(np.float32)
 
     def exposure(self) -> np.ndarray:
@@ -181,32 +213,34 @@ class ExposureAccumulator:
         return ExposurePartial(total, self.applied, self.seconds, self.count)
 
 
-def exposure_plan(frames, fps, t_open, t_close) -> list[tuple[int, Fraction]]:
+def exposure_plan(frames, fps, t_open, t_close, first: int = 0) -> list[tuple[int, Fraction]]:
     """(frame, seconds) for every frame the shutter sees, in frame order.
 
     A frame of the interval missing from ``frames`` is an error (the exposure would silently be
     too dark otherwise).
     """
     frames = [int(n) for n in frames]
-    weights = exposure_weights(frames, fps, t_open, t_close)
+    weights = exposure_weights(frames, fps, t_open, t_close, first)
     t0, t1 = as_time(t_open, "--open"), as_time(t_close, "--close")
-    needed = [n for n in frames_needed(fps, t_open, t_close) if overlap(*frame_interval(n, fps), t0, t1) > 0]
+    needed = [n for n in frames_needed(fps, t_open, t_close, first)
+              if overlap(*frame_interval(n, fps, first), t0, t1) > 0]
     missing = [n for n in needed if n not in weights]
     if missing:
+        have = f"; the sequence has frames {min(frames)}…{max(frames)}" if frames else ""
         raise InputError(f"frames {missing[0]}…{missing[-1]} lie inside the shutter interval but are not in "
-                         f"the sequence ({len(missing)} missing); render them or move --open/--close")
+                         f"the sequence ({len(missing)} missing{have}); render them or move --open/--close")
     return sorted(weights.items())
 
 
 def expose(read, frames, fps, t_open, t_close, device: str | None = None,
-           progress=None) -> ExposurePartial:
+           progress=None, first: int = 0) -> ExposurePartial:
     """Accumulate ``read(n)`` (a :class:`~clpost.frame.Frame` or H×W×3 array) over the frames
     that the shutter [t_open, t_close] sees; returns the partial (``.mean()`` is the output).
 
     Only the frames with a non-zero weight are read; a frame of the interval missing from
     ``frames`` is an error (the exposure would silently be too dark otherwise).
     """
-    weights = exposure_plan(frames, fps, t_open, t_close)
+    weights = exposure_plan(frames, fps, t_open, t_close, first)
     acc = None
     for n, w in weights:
         frame = read(n)
@@ -223,3 +257,144 @@ def expose(read, frames, fps, t_open, t_close, device: str | None = None,
     if acc is None:
         raise InputError("no frame lies inside the shutter interval")
     return acc.partial()
+
+
+# -- times as the command line spells them -------------------------------------------------------
+
+_FRAME_TIME = re.compile(r"^\s*(?:f\s*([+-]?\d+(?:\.\d+)?)|([+-]?\d+(?:\.\d+)?)\s*f)\s*$", re.IGNORECASE)
+
+
+def parse_instant(text, fps, first: int, name: str) -> Fraction:
+    """A shutter time as seconds after the start of frame ``first``: seconds (``0.5``, ``1/48``)
+    or a frame number as a timeline position, ``f1001`` / ``1001f`` = the start of frame 1001,
+    ``f1001.5`` its middle (exact fractions)."""
+    m = _FRAME_TIME.match(str(text))
+    if m is None:
+        return as_time(text, name, "seconds (e.g. 0.5 or 1/48) or a frame number (e.g. f1001 or 1001f)")
+    frame = Fraction(m[1] or m[2])
+    return (frame - first) / as_rate(fps)
+
+
+def capture_rate(path) -> Fraction | None:
+    """The OpenEXR standard ``captureRate`` attribute of ``path`` (frames per second), None if absent."""
+    import OpenEXR
+
+    try:
+        value = OpenEXR.File(str(path), header_only=True).header().get("captureRate")
+    except Exception:  # unreadable here: read_frame reports the file's problem in one line later
+        return None
+    if value is None:
+        return None
+    try:
+        if isinstance(value, Fraction):
+            rate = value
+        elif np.ndim(value) == 1 and len(value) == 2:          # written as (numerator, denominator)
+            rate = Fraction(int(value[0]), int(value[1]))
+        else:
+            rate = Fraction(str(float(value)))
+    except (ValueError, ZeroDivisionError, TypeError):
+        return None
+    return rate if rate > 0 else None
+
+
+# -- the exposure through the camera --------------------------------------------------------------
+
+PER_FRAME_DOMAINS = ("render", "image")
+"""Input domains (:data:`clpost.stages.DOMAINS`) of the stages applied to each frame before the
+sum: scene-linear light, so the stage is linear in it and commutes with the weighted sum. A stage
+reading any other domain (signal, density, raw, print) runs once on the accumulated exposure."""
+
+
+def split_stages(names) -> tuple[list[str], list[str]]:
+    """(per-frame stages, once-on-the-sum stages) of stage ``names`` by their input domain."""
+    from .stages import registry
+
+    reg = registry()
+    per_frame = [n for n in names if reg[n].domains[0] in PER_FRAME_DOMAINS]
+    once = [n for n in names if reg[n].domains[0] not in PER_FRAME_DOMAINS]
+    return per_frame, once
+
+
+def exposure_camera(camera, seconds):
+    """The camera of one photograph with the shutter open ``seconds``: its shutter is the open
+    interval; no per-frame motion blur (box model, module docstring)."""
+    if camera.readout_time_s > 0:
+        raise InputError("--readout (rolling shutter) is not modelled by a long exposure; leave it out")
+    return camera.with_(shutter_s=float(seconds), frame_rate_fps=None)
+
+
+@dataclass
+class Exposed:
+    """A long exposure through the camera: ``frame`` (the camera's output; depth and alpha as in
+    the module docstring), ``camera`` (the resolved camera: shutter = the open time), the exact
+    open time ``seconds``, the frames seen with their seconds, and the stages run per frame and once."""
+
+    frame: object
+    camera: object
+    seconds: Fraction
+    weights: list
+    per_frame: list
+    once: list
+
+
+def expose_camera_frames(read, frames, fps, t_open, t_close, camera, *, first: int = 0, quality: str = "final",
+                         stages=None, device: str | None = None, progress=None) -> Exposed:
+    """Expose ``read(n)`` (a :class:`~clpost.frame.Frame`) over [t_open, t_close] through
+    ``camera`` (its shutter replaced by the open time): linear stages per frame, the others once
+    on the accumulated signal (module docstring). ``stages`` restricts the stages as
+    ``--stages`` does; ``first`` is the sequence's first frame (time origin)."""
+    from .frame import Frame
+    from .pipeline import Pipeline
+
+    weights = exposure_plan(frames, fps, t_open, t_close, first)
+    if not weights:
+        raise InputError("no frame lies inside the shutter interval")
+    seconds = sum((w for _, w in weights), Fraction(0))
+    cam = exposure_camera(camera, seconds)
+    first_seen = weights[0][0]
+    frame0 = read(first_seen)
+    # The whole chain decides once what runs and refuses a selection that breaks a prerequisite,
+    # exactly as `clpost process` would for this frame.
+    whole = Pipeline(cam, quality=quality, stages=stages, device=device)
+    cam = whole.camera_for(frame0)
+    entries = whole.explain(frame0, cam, reasons=False)
+    selected = [e.stage for e in entries if stages is None or e.stage in stages]
+    per_frame, once = split_stages(selected)
+    lin = Pipeline(cam, quality=quality, stages=per_frame, device=device)
+    acc = alpha_sum = depth_min = None
+    for n, w in weights:
+        frame = frame0 if n == first_seen else read(n)
+        frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(n)), validate=False)
+        out = lin.plan_for(frame, cam).run(frame, cam)
+        if acc is None:
+            acc = ExposureAccumulator(out.size, fps, device)
+            head = out
+        src = frame.metadata.get("path") or f"frame {n}"
+        try:
+            acc.add(out.color, w)
+        except InputError as exc:
+            raise InputError(f"{src}: {exc}") from None
+        if (out.alpha is None) != (head.alpha is None) or (out.depth is None) != (head.depth is None):
+            raise InputError(f"{src}: has {'no ' if out.alpha is None else ''}alpha and "
+                             f"{'no ' if out.depth is None else ''}depth unlike the exposure's first frame; "
+                             "all frames of an exposure need the same passes — re-render it")
+        if out.alpha is not None:
+            a = out.alpha.astype(np.float64) * float(w)
+            alpha_sum = a if alpha_sum is None else alpha_sum + a
+        if out.depth is not None:
+            depth_min = out.depth.copy() if depth_min is None else np.minimum(depth_min, out.depth)
+        if progress:
+            progress(n, w)
+    part = acc.partial()
+    alpha = None if alpha_sum is None else np.clip(alpha_sum / float(seconds), 0.0, 1.0).astype(np.float32)
+    meta = {k: v for k, v in head.metadata.items() if k not in ("camera", "plan")}
+    summed = Frame(part.mean(), depth=depth_min, alpha=alpha,
+                   metadata=dict(meta, frame_index=int(first_seen)))
+    if once:
+        rest = Pipeline(cam, quality=quality, stages=once, device=device, already_applied=tuple(per_frame))
+        result = rest.plan_for(summed, cam).run(summed, cam)
+    else:
+        result = summed.replace(metadata=dict(summed.metadata, camera=cam.describe()), validate=False)
+    plan = [s for s in head.metadata.get("plan", [])] + list(result.metadata.get("plan", []) if once else [])
+    result = result.replace(metadata=dict(result.metadata, plan=plan), validate=False)
+    return Exposed(result, cam, seconds, weights, per_frame, once)
