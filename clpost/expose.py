@@ -25,18 +25,20 @@ frame numbers as timeline positions: ``f1001`` (or ``1001f``) is the *start* of 
 1001…1024, 24 frames.
 
 **Through the camera** (:func:`expose_camera_frames`). The exposure is one photograph with
-shutter time :math:`t = T_1 - T_0`. Every stage whose input is scene-linear light (domains
-``render`` and ``image``, :data:`PER_FRAME_DOMAINS`; the exposure stage, image → signal, is a
-gain) is linear in that light, so it commutes with the weighted sum; it is applied to each frame
-with that frame's own depth (DoF, distortion, vignetting, lateral colour, white balance,
-exposure with shutter t) and the outputs are averaged with weights :math:`w_n / t`. Per frame is
-exact for every linear stage, frame-dependent (DoF reads each frame's depth) or not. The stages
-that read the signal, densities, raw values or a print (film, sensor, grain, print) are
-non-linear and run **once**, on the accumulated signal — the film sees the exposure H, and grain
-and sensor noise are drawn once, as on a real negative. So a static scene exposed over
-:math:`[T_0, T_1]` is the frame processed with ``--shutter`` :math:`T_1 - T_0`. motion_blur
-(a velocity-buffer blur within a frame's shutter) is not used: in the box model a frame is
-constant over its interval; render at a higher frame rate for smoother trails.
+shutter time :math:`t = T_1 - T_0`. The stages that act on light (input domain ``render`` or
+``image``, :data:`PER_FRAME_DOMAINS`: DoF, aberrations, distortion, vignetting, white balance,
+and the exposure stage's gain with shutter t) form the image at each instant, so they are applied
+to each frame with that frame's own depth, and the outputs are averaged with weights
+:math:`w_n / t` — exact for every such stage. (Summing first and applying a stage once would be
+exact only for a stage additive in light and independent of the frame: vignetting, white balance
+and exposure are, but DoF is not — its bright-edge depth fix compares a pixel with its
+neighbours — so per frame is the one rule.) The stages that read the signal, densities, raw
+values or a print (film, sensor, grain, print) are non-linear and respond to the total exposure
+H, so they run **once**, on the accumulated signal — grain and sensor noise are drawn once, as on
+a real negative. Hence a static scene exposed over :math:`[T_0, T_1]` is the frame processed with
+``--shutter`` :math:`T_1 - T_0`. motion_blur (a velocity-buffer blur within a frame's shutter)
+is not used: in the box model a frame is constant over its interval; render at a higher frame
+rate for smoother trails.
 
 Auto-exposure is metered once, on the first frame the shutter sees, with the exposure's shutter
 time. **Alpha** of the result is the time-averaged coverage :math:`\sum_n w_n \alpha_n / t` (what
@@ -301,8 +303,8 @@ def capture_rate(path) -> Fraction | None:
 
 PER_FRAME_DOMAINS = ("render", "image")
 """Input domains (:data:`clpost.stages.DOMAINS`) of the stages applied to each frame before the
-sum: scene-linear light, so the stage is linear in it and commutes with the weighted sum. A stage
-reading any other domain (signal, density, raw, print) runs once on the accumulated exposure."""
+sum: scene-linear light, the image formed at each instant. A stage reading any other domain
+(signal, density, raw, print) runs once on the accumulated exposure (module docstring)."""
 
 
 def split_stages(names) -> tuple[list[str], list[str]]:
