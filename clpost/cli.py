@@ -280,6 +280,8 @@ def cmd_expose(args) -> int:
     if out.exists() and not args.overwrite:
         raise InputError(f"{out} exists; choose another -o or pass --overwrite")
     plain = args.average or args.sum
+    if plain and args.motion_blur:
+        raise InputError("--motion-blur acts through the camera; leave out --average/--sum")
     camera = None if plain else _expose_camera(args)
     with writing(out, [out] + ([Path(args.png)] if args.png else [])):
         return _expose(args, out, frames, found, fps, first, t_open, t_close, camera)
@@ -324,7 +326,8 @@ def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> in
             return read_input(reader, Path(expand(args.input, n)), args.channels)
 
         ex = expose_camera_frames(read, frames or found, fps, t_open, t_close, camera, first=first,
-                                  quality=args.quality, stages=args.stages, device=args.device, progress=progress)
+                                  quality=args.quality, stages=args.stages, device=args.device, progress=progress,
+                                  motion_blur=args.motion_blur)
         result, count = ex.frame, len(ex.weights)
         header.update(output_header(result))
         header.update({"clpost.expose.frames": str(count), "clpost.expose.output": "camera",
@@ -506,6 +509,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the shutter closes: seconds or a frame (f1025 = the end of frame 1024); or give --shutter")
     e.add_argument("--frames", type=_frames_spec, default=None, help="frame range to consider (default: all found)")
     e.add_argument("--channels", default=None, help="input channel layout (default: detect)")
+    e.add_argument("--motion-blur", action="store_true",
+                   help="blur each frame along its velocity pass over the part of its interval the shutter "
+                        "sees: continuous trails instead of one copy per frame (needs velocity)")
     e.add_argument("--average", action="store_true",
                    help="no camera: write the time-averaged input (input units)")
     e.add_argument("--sum", action="store_true", help="no camera: write H = ∫E dt (input × seconds)")

@@ -37,8 +37,15 @@ values or a print (film, sensor, grain, print) are non-linear and respond to the
 H, so they run **once**, on the accumulated signal — grain and sensor noise are drawn once, as on
 a real negative. Hence a static scene exposed over :math:`[T_0, T_1]` is the frame processed with
 ``--shutter`` :math:`T_1 - T_0`. motion_blur (a velocity-buffer blur within a frame's shutter)
-is not used: in the box model a frame is constant over its interval; render at a higher frame
-rate for smoother trails.
+is not used by default: in the box model a frame is constant over its interval, so a light
+moving faster than its size per frame leaves a dotted trail. ``motion_blur=True``
+(``--motion-blur``) fills the interval from the frame's velocity pass instead: frame n is taken
+as the scene at the middle of its interval moving with its velocity, and the motion_blur stage
+blurs it over the part of the interval the shutter sees (:math:`w_n F` of a frame, centred on the
+frame — exact in extent for whole frames; a frame cut by the shutter is blurred over the right
+length but centred, so its streak is off by up to half the uncovered part). The stages up to
+motion_blur run with that per-frame shutter (they do not read the shutter); those after it with
+the exposure's.
 
 Auto-exposure is metered once, on the first frame the shutter sees, with the exposure's shutter
 time. **Alpha** of the result is the time-averaged coverage :math:`\sum_n w_n \alpha_n / t` (what
@@ -307,6 +314,13 @@ sum: scene-linear light, the image formed at each instant. A stage reading any o
 (signal, density, raw, print) runs once on the accumulated exposure (module docstring)."""
 
 
+def registry_order() -> dict[str, float]:
+    """Each stage's place in the physical order (``Stage.order``)."""
+    from .stages import registry
+
+    return {name: cls.order for name, cls in registry().items()}
+
+
 def split_stages(names) -> tuple[list[str], list[str]]:
     """(per-frame stages, once-on-the-sum stages) of stage ``names`` by their input domain."""
     from .stages import registry
@@ -340,11 +354,13 @@ class Exposed:
 
 
 def expose_camera_frames(read, frames, fps, t_open, t_close, camera, *, first: int = 0, quality: str = "final",
-                         stages=None, device: str | None = None, progress=None) -> Exposed:
+                         stages=None, device: str | None = None, progress=None,
+                         motion_blur: bool = False) -> Exposed:
     """Expose ``read(n)`` (a :class:`~clpost.frame.Frame`) over [t_open, t_close] through
-    ``camera`` (its shutter replaced by the open time): linear stages per frame, the others once
-    on the accumulated signal (module docstring). ``stages`` restricts the stages as
-    ``--stages`` does; ``first`` is the sequence's first frame (time origin)."""
+    ``camera`` (its shutter replaced by the open time): the optics per frame, the film/sensor
+    once on the accumulated signal (module docstring). ``stages`` restricts the stages as
+    ``--stages`` does; ``first`` is the sequence's first frame (time origin); ``motion_blur``
+    blurs each frame along its velocity pass over the part of its interval the shutter sees."""
     from .frame import Frame
     from .pipeline import Pipeline
 
@@ -362,12 +378,31 @@ def expose_camera_frames(read, frames, fps, t_open, t_close, camera, *, first: i
     entries = whole.explain(frame0, cam, reasons=False)
     selected = [e.stage for e in entries if stages is None or e.stage in stages]
     per_frame, once = split_stages(selected)
-    lin = Pipeline(cam, quality=quality, stages=per_frame, device=device)
+    blurred = []
+    if motion_blur:
+        if "motion_blur" not in per_frame:
+            raise InputError("--motion-blur: the motion_blur stage is not selected by --stages; add it")
+        if frame0.velocity is None:
+            src = frame0.metadata.get("path") or f"frame {first_seen}"
+            raise InputError(f"{src}: --motion-blur needs a velocity pass and the frame has none; re-render "
+                             "with one (Blender: Vector) or leave out --motion-blur")
+        order = registry_order()
+        blurred = [s for s in per_frame if order[s] <= order["motion_blur"]]
+    rate = as_rate(fps)
+    early = Pipeline(cam, quality=quality, stages=blurred, device=device)
+    lin = Pipeline(cam, quality=quality, stages=[s for s in per_frame if s not in blurred], device=device)
     acc = alpha_sum = depth_min = None
     for n, w in weights:
         frame = frame0 if n == first_seen else read(n)
         frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(n)), validate=False)
+        if blurred:  # the seen part of the interval, w·F of a frame (frame rate: structural, shutter: scalar)
+            cam_n = cam.with_(frame_rate_fps=float(rate), shutter_s=float(min(w, 1 / rate)))
+            frame = early.plan_for(frame, cam_n).run(frame, cam_n)
+            head_plan = frame.metadata.get("plan", [])
         out = lin.plan_for(frame, cam).run(frame, cam)
+        if blurred:
+            out = out.replace(metadata=dict(out.metadata, plan=list(head_plan) + list(out.metadata.get("plan", []))),
+                              validate=False)
         if acc is None:
             acc = ExposureAccumulator(out.size, fps, device)
             head = out
