@@ -498,8 +498,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "part it overlaps). Times are seconds from the start of the first frame (0.5, 1/48) or "
                     "frame numbers as timeline positions: f1001 (or 1001f) is the start of frame 1001, f1001.5 "
                     "its middle; --open f1001 --close f1025 exposes frames 1001-1024. The camera options are "
-                    "process's: stages linear in light (dof, distortion, vignetting, exposure ...) run on each "
-                    "frame, film/sensor/grain/print once on the summed exposure, so a static scene gives the "
+                    "process's: the optics (dof, aberrations, distortion, vignetting, the exposure gain) run on "
+                    "each frame, film/sensor/grain/print once on the summed exposure, so a static scene gives the "
                     "frame processed with --shutter close-open. Alpha is the time-averaged coverage, depth the "
                     "nearest depth seen.")
     e.add_argument("input", help="input EXR pattern (in.####.exr, in.%%04d.exr)")
@@ -527,6 +527,8 @@ def build_parser() -> argparse.ArgumentParser:
     _set_help(e, "cam_frame_rate_fps", "frame rate of the sequence (24, 24000/1001); default: the first "
                                        "frame's EXR captureRate attribute")
     _set_help(e, "cam_shutter_s", "the exposure's length in seconds, instead of --close")
+    for dest in ("cam_shutter_angle_deg", "cam_readout_time_s"):
+        _set_help(e, dest, "not for a long exposure (its shutter is --open to --close)")
     _add_pipeline_options(e)
     e.set_defaults(func=cmd_expose)
 
