@@ -312,7 +312,8 @@ def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> in
         if not args.quiet:
             print(f"frame {n}: {float(w):.6g} s of the exposure")
 
-    header = {"clpost.expose.open": str(args.open), "clpost.expose.close": str(args.close),
+    header = {"clpost.expose.open": str(args.open),
+              "clpost.expose.close": str(args.close) if args.close is not None else f"{float(t_close):.9g}",
               "clpost.expose.open_s": f"{float(t_open):.9g}", "clpost.expose.close_s": f"{float(t_close):.9g}",
               "clpost.expose.firstFrame": str(first), "clpost.expose.fps": f"{float(fps):.9g}",
               "clpost.expose.seconds": f"{float(t_close - t_open):.9g}"}

@@ -34,11 +34,13 @@ def _scene(rng, square_x=None):
     return Frame(color, depth=depth, alpha=alpha)
 
 
-def _camera_args(seconds, film):
+def _camera_args(seconds, film, dof=True):
     # about 0.2 of saturation for mid-grey at f/8, ISO 100 whatever the open time
     scale = 0.2 * 78 * 4 * 64 / (0.5 * math.pi * 0.9 * float(seconds) * 100)
     args = ["--luminance-scale", repr(scale), "--f-number", "8", "--iso", "100", "--transmittance", "0.9",
             "--vignetting", "natural"]
+    if dof:  # depth 5 m focused at 2 m on a 1.2 mm sensor: a CoC of ~2 px
+        args += ["--depth-of-field", "on", "--focus", "2", "--sensor", "1.2x0.8"]
     if film == "film":
         args += ["--film", "kodak-gold-200", "--grain-scale", "0"]
     elif film == "film+grain":
@@ -139,8 +141,10 @@ def test_static_scene_equals_one_frame_processed_with_the_open_time(tmp_path, rn
     hdr = got.metadata["header"]
     assert float(hdr["clpost.shutter_s"]) == pytest.approx(float(t1 - t0), rel=1e-5)   # %g
     assert hdr["clpost.expose.firstFrame"] == str(first)
+    assert {"dof", "vignetting", "exposure"} <= set(hdr["clpost.plan"].split(","))
     if film != "linear":
-        assert "film" in hdr["clpost.expose.once"] and "exposure" in hdr["clpost.expose.perFrame"]
+        assert "film" in hdr["clpost.plan"] and "film" in hdr["clpost.expose.once"]
+        assert "exposure" in hdr["clpost.expose.perFrame"]
 
 
 # -- a moving scene is the time average -------------------------------------------------------------
@@ -185,7 +189,7 @@ def test_frame_rate_from_capture_rate_and_shutter_as_length(tmp_path, rng):
         ch = {c: frame.color[..., i].copy() for i, c in enumerate("RGB")}
         OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
                       "captureRate": Fraction(24000, 1001)}, ch).write(str(tmp_path / f"in.{k:04d}.exr"))
-    cam = _camera_args(Fraction(1, 10), "linear")
+    cam = _camera_args(Fraction(1, 10), "linear", dof=False)
     a, b = tmp_path / "a.exr", tmp_path / "b.exr"
     assert main(["expose", str(tmp_path / "in.####.exr"), "--open", "f2", "--shutter", "0.1", "-o", str(a),
                  "--quiet", *cam]) == 0
