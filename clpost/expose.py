@@ -142,13 +142,25 @@ class ExposurePartial:
     applied: Fraction
     seconds: Fraction
     count: int = 0
+    alpha: np.ndarray | None = None
+    """Through the camera: the sum of w_k · alpha_k (seconds × coverage, float64), if the frames have alpha."""
+    depth: np.ndarray | None = None
+    """Through the camera: the per-pixel minimum depth of these frames, if they have depth."""
+    plan: tuple = ()
+    """Through the camera: the per-frame stages that ran on the first of these frames."""
 
     def combine(self, other: "ExposurePartial") -> "ExposurePartial":
         """The partial of both sets of frames (associative and exact in the weights)."""
         if self.sum.shape != other.sum.shape:
             raise InputError(f"cannot combine exposures of shapes {self.sum.shape} and {other.sum.shape}")
+        if (self.alpha is None) != (other.alpha is None) or (self.depth is None) != (other.depth is None):
+            raise InputError("cannot combine exposures of frames with and without alpha or depth; all frames "
+                             "of an exposure need the same passes")
+        alpha = None if self.alpha is None else self.alpha + other.alpha
+        depth = None if self.depth is None else np.minimum(self.depth, other.depth)
         return ExposurePartial(self.sum + other.sum, self.applied + other.applied,
-                               self.seconds + other.seconds, self.count + other.count)
+                               self.seconds + other.seconds, self.count + other.count, alpha, depth,
+                               self.plan or other.plan)
 
     __add__ = combine
 
@@ -353,6 +365,119 @@ class Exposed:
     once: list
 
 
+@dataclass(frozen=True)
+class CameraSetup:
+    """What every frame of one exposure goes through: the resolved camera (shutter = the open
+    time), the stages run per frame (``blurred``: those up to motion_blur, run with the frame's
+    seen part of its interval as shutter) and once, quality and device. Picklable (a Dask task
+    argument)."""
+
+    camera: object
+    fps: Fraction
+    per_frame: tuple
+    blurred: tuple
+    once: tuple
+    quality: str = "final"
+    device: str | None = None
+
+
+def prepare(frame0, camera, seconds, fps, *, quality: str = "final", stages=None, device: str | None = None,
+            motion_blur: bool = False) -> CameraSetup:
+    """Resolve the exposure's camera on its first frame (auto-exposure metered once, with the
+    open time as shutter) and split the stages; refuses what ``clpost process`` would refuse."""
+    from .pipeline import Pipeline
+
+    cam = exposure_camera(camera, seconds)
+    whole = Pipeline(cam, quality=quality, stages=stages, device=device)
+    cam = whole.camera_for(frame0)
+    entries = whole.explain(frame0, cam, reasons=False)
+    per_frame, once = split_stages([e.stage for e in entries if stages is None or e.stage in stages])
+    blurred = []
+    if motion_blur:
+        src = frame0.metadata.get("path") or "the first frame"
+        if "motion_blur" not in per_frame:
+            raise InputError("--motion-blur: the motion_blur stage is not selected by --stages; add it")
+        if frame0.velocity is None:
+            raise InputError(f"{src}: --motion-blur needs a velocity pass and the frame has none; re-render "
+                             "with one (Blender: Vector) or leave out --motion-blur")
+        order = registry_order()
+        blurred = [s for s in per_frame if order[s] <= order["motion_blur"]]
+    return CameraSetup(cam, as_rate(fps), tuple(per_frame), tuple(blurred), tuple(once), quality, device)
+
+
+class CameraAccumulator:
+    """The per-frame optics of :class:`CameraSetup` and the accumulation of their outputs (colour
+    on the device, alpha and depth on the host) for one exposure or one chunk of it."""
+
+    def __init__(self, setup: CameraSetup) -> None:
+        from .pipeline import Pipeline
+
+        self.setup = setup
+        q, dev = setup.quality, setup.device
+        self._early = Pipeline(setup.camera, quality=q, stages=list(setup.blurred), device=dev)
+        self._lin = Pipeline(setup.camera, quality=q, stages=[s for s in setup.per_frame if s not in setup.blurred],
+                             device=dev)
+        self._acc = self._alpha = self._depth = self._head = None
+
+    def add(self, frame, n: int, seconds: Fraction) -> None:
+        """Frame ``n`` (a :class:`~clpost.frame.Frame`) seen by the shutter for ``seconds``."""
+        cam, rate = self.setup.camera, self.setup.fps
+        src = frame.metadata.get("path") or f"frame {n}"
+        frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(n)), validate=False)
+        plan = []
+        if self.setup.blurred:  # the seen part of the interval, w·F of a frame (fps structural, shutter scalar)
+            if frame.velocity is None:
+                raise InputError(f"{src}: --motion-blur needs a velocity pass and this frame has none; re-render it")
+            cam_n = cam.with_(frame_rate_fps=float(rate), shutter_s=float(min(seconds, 1 / rate)))
+            frame = self._early.plan_for(frame, cam_n).run(frame, cam_n)
+            plan = list(frame.metadata.get("plan", []))
+        out = self._lin.plan_for(frame, cam).run(frame, cam)
+        if self._acc is None:
+            self._acc = ExposureAccumulator(out.size, rate, self.setup.device)
+            self._head = (out.alpha is not None, out.depth is not None, tuple(plan + list(out.metadata.get("plan", []))))
+        try:
+            self._acc.add(out.color, seconds)
+        except InputError as exc:
+            raise InputError(f"{src}: {exc}") from None
+        if (out.alpha is not None, out.depth is not None) != self._head[:2]:
+            raise InputError(f"{src}: has {'no ' if out.alpha is None else ''}alpha and "
+                             f"{'no ' if out.depth is None else ''}depth unlike the exposure's first frame; "
+                             "all frames of an exposure need the same passes — re-render it")
+        if out.alpha is not None:
+            a = out.alpha.astype(np.float64) * float(seconds)
+            self._alpha = a if self._alpha is None else self._alpha + a
+        if out.depth is not None:
+            self._depth = out.depth.copy() if self._depth is None else np.minimum(self._depth, out.depth)
+
+    def partial(self) -> ExposurePartial:
+        if self._acc is None:
+            raise InputError("no frame lies inside the shutter interval")
+        part = self._acc.partial()
+        part.alpha, part.depth, part.plan = self._alpha, self._depth, self._head[2]
+        return part
+
+
+def finish(part: ExposurePartial, setup: CameraSetup, first_seen: int, metadata: dict):
+    """The accumulated signal as a Frame (alpha: time-averaged coverage, depth: nearest seen)
+    through the stages that run once (film, sensor, grain, print), seeded by ``first_seen``."""
+    from .frame import Frame
+    from .pipeline import Pipeline
+
+    cam = setup.camera
+    alpha = None if part.alpha is None else np.clip(part.alpha / float(part.seconds), 0.0, 1.0).astype(np.float32)
+    meta = {k: v for k, v in metadata.items() if k not in ("camera", "plan")}
+    summed = Frame(part.mean(), depth=part.depth, alpha=alpha, metadata=dict(meta, frame_index=int(first_seen)))
+    if setup.once:
+        rest = Pipeline(cam, quality=setup.quality, stages=list(setup.once), device=setup.device,
+                        already_applied=setup.per_frame)
+        result = rest.plan_for(summed, cam).run(summed, cam)
+        later = list(result.metadata.get("plan", []))
+    else:
+        result, later = summed, []
+    return result.replace(metadata=dict(result.metadata, camera=cam.describe(), plan=list(part.plan) + later),
+                          validate=False)
+
+
 def expose_camera_frames(read, frames, fps, t_open, t_close, camera, *, first: int = 0, quality: str = "final",
                          stages=None, device: str | None = None, progress=None,
                          motion_blur: bool = False) -> Exposed:
@@ -361,77 +486,18 @@ def expose_camera_frames(read, frames, fps, t_open, t_close, camera, *, first: i
     once on the accumulated signal (module docstring). ``stages`` restricts the stages as
     ``--stages`` does; ``first`` is the sequence's first frame (time origin); ``motion_blur``
     blurs each frame along its velocity pass over the part of its interval the shutter sees."""
-    from .frame import Frame
-    from .pipeline import Pipeline
-
     weights = exposure_plan(frames, fps, t_open, t_close, first)
     if not weights:
         raise InputError("no frame lies inside the shutter interval")
     seconds = sum((w for _, w in weights), Fraction(0))
-    cam = exposure_camera(camera, seconds)
     first_seen = weights[0][0]
     frame0 = read(first_seen)
-    # The whole chain decides once what runs and refuses a selection that breaks a prerequisite,
-    # exactly as `clpost process` would for this frame.
-    whole = Pipeline(cam, quality=quality, stages=stages, device=device)
-    cam = whole.camera_for(frame0)
-    entries = whole.explain(frame0, cam, reasons=False)
-    selected = [e.stage for e in entries if stages is None or e.stage in stages]
-    per_frame, once = split_stages(selected)
-    blurred = []
-    if motion_blur:
-        if "motion_blur" not in per_frame:
-            raise InputError("--motion-blur: the motion_blur stage is not selected by --stages; add it")
-        if frame0.velocity is None:
-            src = frame0.metadata.get("path") or f"frame {first_seen}"
-            raise InputError(f"{src}: --motion-blur needs a velocity pass and the frame has none; re-render "
-                             "with one (Blender: Vector) or leave out --motion-blur")
-        order = registry_order()
-        blurred = [s for s in per_frame if order[s] <= order["motion_blur"]]
-    rate = as_rate(fps)
-    early = Pipeline(cam, quality=quality, stages=blurred, device=device)
-    lin = Pipeline(cam, quality=quality, stages=[s for s in per_frame if s not in blurred], device=device)
-    acc = alpha_sum = depth_min = None
+    setup = prepare(frame0, camera, seconds, fps, quality=quality, stages=stages, device=device,
+                    motion_blur=motion_blur)
+    acc = CameraAccumulator(setup)
     for n, w in weights:
-        frame = frame0 if n == first_seen else read(n)
-        frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(n)), validate=False)
-        if blurred:  # the seen part of the interval, w·F of a frame (frame rate: structural, shutter: scalar)
-            cam_n = cam.with_(frame_rate_fps=float(rate), shutter_s=float(min(w, 1 / rate)))
-            frame = early.plan_for(frame, cam_n).run(frame, cam_n)
-            head_plan = frame.metadata.get("plan", [])
-        out = lin.plan_for(frame, cam).run(frame, cam)
-        if blurred:
-            out = out.replace(metadata=dict(out.metadata, plan=list(head_plan) + list(out.metadata.get("plan", []))),
-                              validate=False)
-        if acc is None:
-            acc = ExposureAccumulator(out.size, fps, device)
-            head = out
-        src = frame.metadata.get("path") or f"frame {n}"
-        try:
-            acc.add(out.color, w)
-        except InputError as exc:
-            raise InputError(f"{src}: {exc}") from None
-        if (out.alpha is None) != (head.alpha is None) or (out.depth is None) != (head.depth is None):
-            raise InputError(f"{src}: has {'no ' if out.alpha is None else ''}alpha and "
-                             f"{'no ' if out.depth is None else ''}depth unlike the exposure's first frame; "
-                             "all frames of an exposure need the same passes — re-render it")
-        if out.alpha is not None:
-            a = out.alpha.astype(np.float64) * float(w)
-            alpha_sum = a if alpha_sum is None else alpha_sum + a
-        if out.depth is not None:
-            depth_min = out.depth.copy() if depth_min is None else np.minimum(depth_min, out.depth)
+        acc.add(frame0 if n == first_seen else read(n), n, w)
         if progress:
             progress(n, w)
-    part = acc.partial()
-    alpha = None if alpha_sum is None else np.clip(alpha_sum / float(seconds), 0.0, 1.0).astype(np.float32)
-    meta = {k: v for k, v in head.metadata.items() if k not in ("camera", "plan")}
-    summed = Frame(part.mean(), depth=depth_min, alpha=alpha,
-                   metadata=dict(meta, frame_index=int(first_seen)))
-    if once:
-        rest = Pipeline(cam, quality=quality, stages=once, device=device, already_applied=tuple(per_frame))
-        result = rest.plan_for(summed, cam).run(summed, cam)
-    else:
-        result = summed.replace(metadata=dict(summed.metadata, camera=cam.describe()), validate=False)
-    plan = [s for s in head.metadata.get("plan", [])] + list(result.metadata.get("plan", []) if once else [])
-    result = result.replace(metadata=dict(result.metadata, plan=plan), validate=False)
-    return Exposed(result, cam, seconds, weights, per_frame, once)
+    result = finish(acc.partial(), setup, first_seen, frame0.metadata)
+    return Exposed(result, setup.camera, seconds, weights, list(setup.per_frame), list(setup.once))
