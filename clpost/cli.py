@@ -318,17 +318,17 @@ def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> in
               "clpost.expose.firstFrame": str(first), "clpost.expose.fps": f"{float(fps):.9g}",
               "clpost.expose.seconds": f"{float(t_close - t_open):.9g}"}
     if camera is not None:
-        if args.workers or args.scheduler:
-            raise InputError("--workers/--scheduler tree-reduce the plain input (--average or --sum); an "
-                             "exposure through the camera runs in one process — leave them out")
         reader = Pipeline(camera)  # radial depth → planar with the camera's focal length
 
         def read(n):
             return read_input(reader, Path(expand(args.input, n)), args.channels)
 
-        ex = expose_camera_frames(read, frames or found, fps, t_open, t_close, camera, first=first,
-                                  quality=args.quality, stages=args.stages, device=args.device, progress=progress,
-                                  motion_blur=args.motion_blur)
+        if args.workers or args.scheduler:
+            ex = _expose_camera_dask(args, read, frames or found, fps, first, t_open, t_close, camera)
+        else:
+            ex = expose_camera_frames(read, frames or found, fps, t_open, t_close, camera, first=first,
+                                      quality=args.quality, stages=args.stages, device=args.device,
+                                      progress=progress, motion_blur=args.motion_blur)
         result, count = ex.frame, len(ex.weights)
         header.update(output_header(result))
         header.update({"clpost.expose.frames": str(count), "clpost.expose.output": "camera",
@@ -362,6 +362,32 @@ def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> in
         write_png(args.png, result.color * (args.png_gain or 1.0))
     print(f"exposed {count} frame(s) for {float(t_close - t_open):.6g} s -> {out}")
     return 0
+
+
+def _expose_camera_dask(args, read, frames, fps, first, t_open, t_close, camera):
+    """The exposure through the camera with its per-frame optics on Dask workers (chunks reduced
+    in a tree), then the once-stages here."""
+    from .distributed import connect, expose_dask
+    from .expose import Exposed, exposure_plan, finish, prepare
+
+    weights = exposure_plan(frames, fps, t_open, t_close, first)
+    if not weights:
+        raise InputError("no frame lies inside the shutter interval")
+    seconds = t_close - t_open
+    frame0 = read(weights[0][0])
+    setup = prepare(frame0, camera, seconds, fps, quality=args.quality, stages=args.stages, device=args.device,
+                    motion_blur=args.motion_blur)
+    client = connect(args.scheduler, args.workers)
+    try:
+        part = expose_dask(client, args.input, frames, fps, t_open, t_close, layout=args.channels,
+                           device=args.device, first=first, setup=setup)
+    finally:
+        cluster = getattr(client, "cluster", None)
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    result = finish(part, setup, weights[0][0], frame0.metadata)
+    return Exposed(result, setup.camera, seconds, weights, list(setup.per_frame), list(setup.once))
 
 
 def cmd_info(args) -> int:
@@ -521,9 +547,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--overwrite", action="store_true", help="replace an existing output")
     e.add_argument("--quiet", action="store_true")
     e.add_argument("--workers", type=_count("--workers", 1), default=None,
-                   help="with --average/--sum: tree-reduce on a local Dask cluster of N worker processes")
+                   help="run the frames on a local Dask cluster of N worker processes (a tree reduction)")
     e.add_argument("--scheduler", default=None,
-                   help="with --average/--sum: tree-reduce on an existing Dask cluster, e.g. tcp://HOST:8786")
+                   help="run the frames on an existing Dask cluster, e.g. tcp://HOST:8786")
     _add_camera_options(e)
     _set_help(e, "cam_frame_rate_fps", "frame rate of the sequence (24, 24000/1001); default: the first "
                                        "frame's EXR captureRate attribute")

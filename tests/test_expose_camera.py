@@ -274,3 +274,20 @@ def test_motion_blur_needs_velocity(rng):
     cam = Camera(f_number=8.0, iso=100, shutter_s=1 / 50, luminance_scale=50.0)
     with pytest.raises(InputError, match="velocity"):
         expose_camera_frames(lambda k: frame, range(1, 5), FPS, 0, Fraction(1, 12), cam, first=1, motion_blur=True)
+
+
+@pytest.mark.slow  # a Dask LocalCluster
+def test_workers_give_the_serial_exposure_through_the_camera(tmp_path, rng):
+    frames = {k: _scene(rng, square_x=k - 1) for k in range(1, 21)}
+    _write_seq(tmp_path, 1, 20, frames.__getitem__)
+    cam = _camera_args(Fraction(3, 4), "film+grain")
+    # 19 frames seen: three chunks of 8 on the workers, reduced in a tree
+    args = ["expose", str(tmp_path / "in.####.exr"), "--open", "f1.5", "--close", "f19.5", "--fps", "24",
+            "--quiet", *cam]
+    assert main([*args, "-o", str(tmp_path / "serial.exr")]) == 0
+    assert main([*args, "-o", str(tmp_path / "tree.exr"), "--workers", "2"]) == 0
+    serial, tree = exr.read_frame(tmp_path / "serial.exr"), exr.read_frame(tmp_path / "tree.exr")
+    assert "film" in tree.metadata["header"]["clpost.plan"] and "dof" in tree.metadata["header"]["clpost.plan"]
+    np.testing.assert_allclose(tree.color, serial.color, rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(tree.alpha, serial.alpha, rtol=1e-6)
+    np.testing.assert_array_equal(tree.depth, serial.depth)
