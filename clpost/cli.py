@@ -107,6 +107,13 @@ def camera_from_args(args: argparse.Namespace, camera_cls=None, /, **defaults) -
     return (camera_cls or Camera).from_options(given, defaults)
 
 
+def _set_help(p: argparse.ArgumentParser, dest: str, text: str) -> None:
+    """Reword one generated option's help where a subcommand gives it another meaning."""
+    for action in p._actions:
+        if action.dest == dest:
+            action.help = text.replace("%", "%%")
+
+
 def _add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quality", choices=QUALITIES, default="final", help="speed/accuracy level")
     p.add_argument("--stages", type=_stage_list, default=None,
@@ -235,7 +242,7 @@ def _process_distributed(args, camera, jobs, progress):
         if cluster is not None:
             cluster.close()
 def cmd_expose(args) -> int:
-    from .expose import frames_needed
+    from .expose import as_time, capture_rate, frames_needed, parse_instant
     from .outputs import check_paths, writing
     from .sequence import expand, find_frames, has_pattern, parse_frames
 
@@ -244,9 +251,27 @@ def cmd_expose(args) -> int:
             raise InputError(f"{args.input}: is a directory; expose needs a frame sequence pattern such as "
                              f"{Path(args.input) / 'render.####.exr'}")
         raise InputError(f"{args.input!r}: expose needs a frame sequence pattern (in.####.exr, in.%04d.exr)")
+    on_disk = find_frames(args.input)
+    if not on_disk:
+        raise InputError(f"{args.input}: no frames of this pattern exist; check the path and the #### padding")
+    first = min(on_disk)  # the time origin: seconds count from the start of the first frame on disk
+    fps = getattr(args, "cam_frame_rate_fps", None) or capture_rate(expand(args.input, first))
+    if fps is None:
+        raise InputError(f"{expand(args.input, first)} has no captureRate attribute, so the sequence's frame "
+                         "rate is unknown; give it with --fps (e.g. --fps 24)")
+    t_open = parse_instant(args.open, fps, first, "--open")
+    shutter = getattr(args, "cam_shutter_s", None)
+    if (args.close is None) == (shutter is None):
+        raise InputError("give the end of the exposure with --close (a time or frame) or its length with "
+                         "--shutter SECONDS, one of them")
+    t_close = parse_instant(args.close, fps, first, "--close") if args.close is not None else t_open + as_time(
+        shutter, "--shutter", "a time in seconds (e.g. 2 or 1/2)")
+    if not t_close > t_open:
+        raise InputError(f"--close {args.close or ''} ({float(t_close):g} s) must be later than --open {args.open} "
+                         f"({float(t_open):g} s); times count from the start of frame {first}")
     out = Path(args.output)
-    found = parse_frames(args.frames) if args.frames else find_frames(args.input)
-    want = set(frames_needed(args.fps, args.open, args.close))
+    found = parse_frames(args.frames) if args.frames else on_disk
+    want = set(frames_needed(fps, t_open, t_close, first))
     frames = [n for n in found if n in want]
     sources = [Path(expand(args.input, n)) for n in (frames or found)]
     check_paths([(src, out) for src in sources], args.output)
@@ -254,50 +279,115 @@ def cmd_expose(args) -> int:
         check_paths([(src, Path(args.png)) for src in sources], args.png)
     if out.exists() and not args.overwrite:
         raise InputError(f"{out} exists; choose another -o or pass --overwrite")
+    plain = args.average or args.sum
+    if plain and args.motion_blur:
+        raise InputError("--motion-blur acts through the camera; leave out --average/--sum")
+    camera = None if plain else _expose_camera(args)
     with writing(out, [out] + ([Path(args.png)] if args.png else [])):
-        return _expose(args, out, frames, found)
+        return _expose(args, out, frames, found, fps, first, t_open, t_close, camera)
 
 
-def _expose(args, out, frames, found) -> int:
+def _expose_camera(args) -> Camera:
+    """The camera options of an exposure: those of ``process`` less the shutter (the open
+    interval) and the frame rate (the sequence's)."""
+    given = {k[4:]: v for k, v in vars(args).items() if k.startswith("cam_")}
+    for key, flag in (("shutter_angle_deg", "--shutter-angle"), ("readout_time_s", "--readout")):
+        if key in given:
+            raise InputError(f"{flag} does not apply to a long exposure: its shutter is open from --open to "
+                             "--close; leave it out")
+    given.pop("frame_rate_fps", None)
+    given.pop("shutter_s", None)
+    return Camera.from_options(given)
+
+
+def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> int:
     from . import exr
     from .atomic import write_png
-    from .expose import expose
+    from .batch import output_header, read_input
+    from .expose import expose, expose_camera_frames
+    from .pipeline import Pipeline
     from .sequence import expand
-
-    def read(n):
-        return exr.read_frame(expand(args.input, n), args.channels)
 
     def progress(n, w):
         if not args.quiet:
             print(f"frame {n}: {float(w):.6g} s of the exposure")
 
-    if args.workers or args.scheduler:
-        from .distributed import connect, expose_dask
+    header = {"clpost.expose.open": str(args.open),
+              "clpost.expose.close": str(args.close) if args.close is not None else f"{float(t_close):.9g}",
+              "clpost.expose.open_s": f"{float(t_open):.9g}", "clpost.expose.close_s": f"{float(t_close):.9g}",
+              "clpost.expose.firstFrame": str(first), "clpost.expose.fps": f"{float(fps):.9g}",
+              "clpost.expose.seconds": f"{float(t_close - t_open):.9g}"}
+    if camera is not None:
+        reader = Pipeline(camera)  # radial depth → planar with the camera's focal length
 
-        client = connect(args.scheduler, args.workers)
-        try:
-            part = expose_dask(client, args.input, frames or found, args.fps, args.open, args.close,
-                               layout=args.channels, device=args.device)
-        finally:
-            cluster = getattr(client, "cluster", None)
-            client.close()
-            if cluster is not None:
-                cluster.close()
+        def read(n):
+            return read_input(reader, Path(expand(args.input, n)), args.channels)
+
+        if args.workers or args.scheduler:
+            ex = _expose_camera_dask(args, read, frames or found, fps, first, t_open, t_close, camera)
+        else:
+            ex = expose_camera_frames(read, frames or found, fps, t_open, t_close, camera, first=first,
+                                      quality=args.quality, stages=args.stages, device=args.device,
+                                      progress=progress, motion_blur=args.motion_blur)
+        result, count = ex.frame, len(ex.weights)
+        header.update(output_header(result))
+        header.update({"clpost.expose.frames": str(count), "clpost.expose.output": "camera",
+                       "clpost.expose.perFrame": ",".join(ex.per_frame), "clpost.expose.once": ",".join(ex.once)})
     else:
-        part = expose(read, frames or found, args.fps, args.open, args.close, device=args.device,
-                      progress=progress)
-    from .frame import Frame
+        def read(n):
+            return exr.read_frame(expand(args.input, n), args.channels)
 
-    color = part.exposure() if args.sum else part.mean()
-    header = {"clpost.expose.open_s": str(args.open), "clpost.expose.close_s": str(args.close),
-              "clpost.expose.fps": str(args.fps), "clpost.expose.seconds": f"{float(part.seconds):.9g}",
-              "clpost.expose.frames": str(part.count),
-              "clpost.expose.output": "exposure (input x seconds)" if args.sum else "time average (input units)"}
-    exr.write_frame(out, Frame(color), header=header)
+        if args.workers or args.scheduler:
+            from .distributed import connect, expose_dask
+
+            client = connect(args.scheduler, args.workers)
+            try:
+                part = expose_dask(client, args.input, frames or found, fps, t_open, t_close,
+                                   layout=args.channels, device=args.device, first=first)
+            finally:
+                cluster = getattr(client, "cluster", None)
+                client.close()
+                if cluster is not None:
+                    cluster.close()
+        else:
+            part = expose(read, frames or found, fps, t_open, t_close, device=args.device,
+                          progress=progress, first=first)
+        from .frame import Frame
+
+        result, count = Frame(part.exposure() if args.sum else part.mean()), part.count
+        header.update({"clpost.expose.frames": str(count),
+                       "clpost.expose.output": "exposure (input x seconds)" if args.sum else "time average (input units)"})
+    exr.write_frame(out, result, header=header)
     if args.png:
-        write_png(args.png, color * (args.png_gain or 1.0))
-    print(f"exposed {part.count} frame(s) for {float(part.seconds):.6g} s -> {out}")
+        write_png(args.png, result.color * (args.png_gain or 1.0))
+    print(f"exposed {count} frame(s) for {float(t_close - t_open):.6g} s -> {out}")
     return 0
+
+
+def _expose_camera_dask(args, read, frames, fps, first, t_open, t_close, camera):
+    """The exposure through the camera with its per-frame optics on Dask workers (chunks reduced
+    in a tree), then the once-stages here."""
+    from .distributed import connect, expose_dask
+    from .expose import Exposed, exposure_plan, finish, prepare
+
+    weights = exposure_plan(frames, fps, t_open, t_close, first)
+    if not weights:
+        raise InputError("no frame lies inside the shutter interval")
+    seconds = t_close - t_open
+    frame0 = read(weights[0][0])
+    setup = prepare(frame0, camera, seconds, fps, quality=args.quality, stages=args.stages, device=args.device,
+                    motion_blur=args.motion_blur)
+    client = connect(args.scheduler, args.workers)
+    try:
+        part = expose_dask(client, args.input, frames, fps, t_open, t_close, layout=args.channels,
+                           device=args.device, first=first, setup=setup)
+    finally:
+        cluster = getattr(client, "cluster", None)
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    result = finish(part, setup, weights[0][0], frame0.metadata)
+    return Exposed(result, setup.camera, seconds, weights, list(setup.per_frame), list(setup.once))
 
 
 def cmd_info(args) -> int:
@@ -427,21 +517,46 @@ def build_parser() -> argparse.ArgumentParser:
     _add_pipeline_options(pr)
     pr.set_defaults(func=cmd_process)
 
-    e = sub.add_parser("expose", help="long exposure: exact time-weighted sum of a sequence over [--open, --close]")
-    e.add_argument("input", help="input EXR pattern; frame n spans [n/fps, (n+1)/fps) seconds")
+    e = sub.add_parser(
+        "expose", help="long exposure through the camera: the sequence integrated over the open shutter",
+        description="One photograph of a sequence with the shutter open from --open to --close. Frame n "
+                    "stands for the scene during [(n - first)/fps, (n - first + 1)/fps) seconds, where first is "
+                    "the sequence's first frame on disk (box filter: a frame cut by the shutter counts for the "
+                    "part it overlaps). Times are seconds from the start of the first frame (0.5, 1/48) or "
+                    "frame numbers as timeline positions: f1001 (or 1001f) is the start of frame 1001, f1001.5 "
+                    "its middle; --open f1001 --close f1025 exposes frames 1001-1024. The camera options are "
+                    "process's: the optics (dof, aberrations, distortion, vignetting, the exposure gain) run on "
+                    "each frame, film/sensor/grain/print once on the summed exposure, so a static scene gives the "
+                    "frame processed with --shutter close-open. Alpha is the time-averaged coverage, depth the "
+                    "nearest depth seen.")
+    e.add_argument("input", help="input EXR pattern (in.####.exr, in.%%04d.exr)")
     e.add_argument("-o", "--output", required=True, help="output EXR (written atomically)")
-    e.add_argument("--open", required=True, help="shutter opens at this time in seconds (e.g. 0.5 or 1/48)")
-    e.add_argument("--close", required=True, help="shutter closes at this time in seconds")
-    e.add_argument("--fps", required=True, help="frame rate of the sequence (24, 25, 24000/1001)")
+    e.add_argument("--open", required=True, help="the shutter opens: seconds (0.5, 1/48) or a frame (f1001, 1001f)")
+    e.add_argument("--close", default=None,
+                   help="the shutter closes: seconds or a frame (f1025 = the end of frame 1024); or give --shutter")
     e.add_argument("--frames", type=_frames_spec, default=None, help="frame range to consider (default: all found)")
     e.add_argument("--channels", default=None, help="input channel layout (default: detect)")
-    e.add_argument("--sum", action="store_true", help="write H = ∫E dt (input × seconds) instead of the time average")
+    e.add_argument("--motion-blur", action="store_true",
+                   help="blur each frame along its velocity pass over the part of its interval the shutter "
+                        "sees: continuous trails instead of one copy per frame (needs velocity)")
+    e.add_argument("--average", action="store_true",
+                   help="no camera: write the time-averaged input (input units)")
+    e.add_argument("--sum", action="store_true", help="no camera: write H = ∫E dt (input × seconds)")
     e.add_argument("--png", default=None, help="also write an sRGB preview PNG here")
     e.add_argument("--png-gain", type=_positive_float, default=None, help="scale before the PNG encoding")
     e.add_argument("--overwrite", action="store_true", help="replace an existing output")
     e.add_argument("--quiet", action="store_true")
-    e.add_argument("--workers", type=_count("--workers", 1), default=None, help="tree-reduce on a local Dask cluster of N worker processes")
-    e.add_argument("--scheduler", default=None, help="tree-reduce on an existing Dask cluster, e.g. tcp://HOST:8786")
+    e.add_argument("--workers", type=_count("--workers", 1), default=None,
+                   help="run the frames on a local Dask cluster of N worker processes (a tree reduction)")
+    e.add_argument("--scheduler", default=None,
+                   help="run the frames on an existing Dask cluster, e.g. tcp://HOST:8786")
+    _add_camera_options(e)
+    _set_help(e, "cam_frame_rate_fps", "frame rate of the sequence (24, 24000/1001); default: the first "
+                                       "frame's EXR captureRate attribute")
+    _set_help(e, "cam_shutter_s", "the exposure's length in seconds, instead of --close")
+    for dest in ("cam_shutter_angle_deg", "cam_readout_time_s"):
+        _set_help(e, dest, "not for a long exposure (its shutter is --open to --close)")
+    _add_pipeline_options(e)
     e.set_defaults(func=cmd_expose)
 
     i = sub.add_parser("info", help="channels, size, depth and velocity ranges of EXR files")

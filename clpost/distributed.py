@@ -26,6 +26,7 @@ from __future__ import annotations
 import functools
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable
 
 from .batch import BatchReport, FrameJob, pending, process_one
@@ -155,15 +156,24 @@ def first_size(jobs: list[FrameJob]) -> tuple[int, int] | None:
 
 # -- long exposure as a tree reduction ------------------------------------------------------------
 
-def expose_chunk(pattern: str, items: list, fps, layout: str | None, device: str | None):
+def expose_chunk(pattern: str, items: list, fps, layout: str | None, device: str | None, setup=None):
     """Accumulate one run of frames ``items`` = [(frame, seconds), …] on a worker; returns the
-    :class:`~clpost.expose.ExposurePartial` (host float64 sums, exact weights)."""
+    :class:`~clpost.expose.ExposurePartial` (host float64 sums, exact weights). ``setup``: a
+    :class:`~clpost.expose.CameraSetup` — each frame goes through its per-frame optics first."""
     from . import exr
-    from .expose import ExposureAccumulator
+    from .expose import CameraAccumulator, ExposureAccumulator
     from .sequence import expand
 
     acc = None
     try:
+        if setup is not None:
+            from .batch import read_input
+            from .pipeline import Pipeline
+
+            cam_acc, reader = CameraAccumulator(setup), Pipeline(setup.camera)
+            for n, seconds in items:
+                cam_acc.add(read_input(reader, Path(expand(pattern, n)), layout), n, seconds)
+            return cam_acc.partial()
         for n, seconds in items:
             path = expand(pattern, n)
             frame = exr.read_frame(path, layout)
@@ -195,19 +205,21 @@ def combine_partials(a, b):
 
 
 def expose_dask(client, pattern: str, frames, fps, t_open, t_close, *, layout: str | None = None,
-                device: str | None = None, chunk: int = 8, retries: int = 2):
+                device: str | None = None, chunk: int = 8, retries: int = 2, first: int = 0, setup=None):
     """``clpost expose`` on a cluster: chunks of ``chunk`` consecutive frames are accumulated on
     workers, then the partial exposures are combined pairwise in a tree (log₂ depth), so no
     worker holds more than two partials. Same result as the serial accumulation to float32
-    rounding of each chunk's compensated sum (tested to 1e-6)."""
+    rounding of each chunk's compensated sum (tested to 1e-6). ``first``: the time origin
+    (:func:`clpost.expose.frame_interval`); ``setup``: a :class:`~clpost.expose.CameraSetup` whose
+    per-frame optics each worker applies (:func:`clpost.expose.finish` completes the exposure)."""
     from .expose import exposure_plan
 
-    plan = exposure_plan(frames, fps, t_open, t_close)
+    plan = exposure_plan(frames, fps, t_open, t_close, first)
     if not plan:
         raise InputError("no frame lies inside the shutter interval")
     if chunk < 1:
         raise InputError(f"chunk={chunk!r} must be >= 1 frame")
-    futs = [client.submit(expose_chunk, pattern, plan[i:i + chunk], fps, layout, device,
+    futs = [client.submit(expose_chunk, pattern, plan[i:i + chunk], fps, layout, device, setup,
                           retries=retries, pure=False)
             for i in range(0, len(plan), chunk)]
     while len(futs) > 1:

@@ -78,7 +78,7 @@ def test_bad_intervals_and_missing_frames():
         acc.add(np.zeros((4, 4, 3), np.float32), Fraction(1, 24))
 
 
-def test_cli_expose_equals_library(tmp_path, rng):
+def test_cli_expose_average_equals_library(tmp_path, rng):
     frames = {}
     for n in range(1, 6):
         c = (rng.random((7, 9, 3)) * 10).astype(np.float32)
@@ -86,16 +86,18 @@ def test_cli_expose_equals_library(tmp_path, rng):
         exr.write_frame(tmp_path / f"in.{n:04d}.exr", Frame(c))
     out = tmp_path / "long.exr"
     rc = main(["expose", str(tmp_path / "in.####.exr"), "--open", "0.05", "--close", "0.2",
-               "--fps", "24", "-o", str(out), "--quiet"])
+               "--fps", "24", "-o", str(out), "--quiet", "--average"])
     assert rc == 0
     got = exr.read_frame(out).color
-    want = expose(frames.__getitem__, frames, 24, "0.05", "0.2").mean()
+    # times count from the start of the first frame on disk (frame 1), not from a frame 0
+    want = expose(frames.__getitem__, frames, 24, "0.05", "0.2", first=1).mean()
     np.testing.assert_allclose(got, want, rtol=1e-6)
     assert main(["expose", str(tmp_path / "in.####.exr"), "--open", "0.05", "--close", "0.2",
-                 "--fps", "24", "-o", str(out), "--quiet"]) == 2          # exists: refused
-    # frame 0 would be needed for [0, 0.05) and is not on disk
-    assert main(["expose", str(tmp_path / "in.####.exr"), "--open", "0", "--close", "0.2",
-                 "--fps", "24", "-o", str(tmp_path / "x.exr"), "--quiet"]) == 2
+                 "--fps", "24", "-o", str(out), "--quiet", "--average"]) == 2          # exists: refused
+    # [0, 0.25) needs frames 1-6 and frame 6 is not on disk
+    assert main(["expose", str(tmp_path / "in.####.exr"), "--open", "0", "--close", "0.25",
+                 "--fps", "24", "-o", str(tmp_path / "x.exr"), "--quiet", "--average"]) == 2
+    assert not (tmp_path / "x.exr").exists()
 
 
 def test_cli_shutter_angle_sets_shutter(tmp_path):
