@@ -84,7 +84,8 @@ def radiance(scene: DemoScene, origin: np.ndarray, direction: np.ndarray) -> np.
 
 def kolb_image(lens_name: str, f_number: float, focus_m: float, sensor_mm, size, scene: DemoScene,
                rays: int = 256, seed: int = 0, chunk: int = 200_000, axial_rays: int = 400_000) -> np.ndarray:
-    """The traced image (H×W×3, radiance × relative illumination; module docstring). The axial
+    """The traced image (H×W×3, radiance × relative illumination; module docstring) with the lens
+    focused at ``focus_m`` from the film (lens scale; a Camera's ``focus_from_film_m``). The axial
     normalisation integral takes ``axial_rays`` rays (its Monte Carlo noise falls as 1/√axial_rays)."""
     lens = get_lens(lens_name)
     pres = lens.focused(focus_m * 1000.0, f_number)
@@ -151,7 +152,7 @@ def fit_opencv(lens_name: str, f_number: float, focus_m: float, sensor_mm, size)
     from clpost.calibration import OpenCVModel
     from clpost.camera import Camera
 
-    cam = Camera(lens=lens_name, f_number=f_number, focus_distance_m=focus_m, sensor_mm=tuple(sensor_mm))
+    cam = Camera(lens=lens_name, f_number=f_number, focus_scale_m=focus_m, sensor_mm=tuple(sensor_mm))
     v = cam.image_distance_mm
     curves = cam.lens_curves()
     r = np.linspace(0.0, 0.5 * math.hypot(*sensor_mm), 64)
@@ -170,7 +171,7 @@ def post_image(lens_name, f_number, focus_m, sensor_mm, size, scene, device=None
     from clpost.pipeline import Pipeline
     from clpost.render.pyvista_renderer import PyVistaRenderer
 
-    cam = Camera(lens=lens_name, f_number=f_number, focus_distance_m=focus_m, sensor_mm=tuple(sensor_mm),
+    cam = Camera(lens=lens_name, f_number=f_number, focus_scale_m=focus_m, sensor_mm=tuple(sensor_mm),
                  shutter_s=1 / 100, depth_of_field=True, vignetting="lens",
                  distortion=fit_opencv(lens_name, f_number, focus_m, sensor_mm, size))
     r = PyVistaRenderer(scene, supersample=3)
