@@ -82,6 +82,47 @@ def radiance(scene: DemoScene, origin: np.ndarray, direction: np.ndarray) -> np.
     return out
 
 
+def exit_pupil_disc_mm(table, zf: float, lens) -> float:
+    """Radius (mm) of the exit-pupil-plane disc the estimator samples: 1.3× the radius the axial
+    film point sees through (bisection), so no passing ray is missed."""
+    z_x = lens.paraxial.z_exit_pupil_mm
+    lo, hi = 0.0, 4.0 * float(lens.prescription.surfaces[-1].semi_diameter_mm)
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if trace_back(table, zf, np.zeros((1, 2)), np.array([mid, 0, z_x]))[2][0] else (lo, mid)
+    return 1.3 * lo
+
+
+def film_point_footprint(lens_name: str, f_number: float, focus_m: float, film_xy_mm, depth_m: float,
+                         rays: int = 20000, seed: int = 0) -> np.ndarray:
+    """Where the light reaching one film point comes from on the plane at planar depth ``depth_m``
+    (camera space: origin at the entrance pupil, z toward the scene): hits (N×2, mm) of the
+    estimator's rays — film point → uniform points of the exit-pupil disc → through the lens
+    focused at ``focus_m`` from the film — with that plane. By reciprocity the footprint's size
+    over the depth is the blur a point at that depth makes on the film (its minimum is where the
+    lens is sharp); the reference of tests/test_focus.py."""
+    lens = get_lens(lens_name)
+    pres = lens.focused(focus_m * 1000.0, f_number)
+    table, zf = mirrored_table(pres, lens.stop_radius_mm(f_number))
+    radius = exit_pupil_disc_mm(table, zf, lens)
+    z_x, z_e = lens.paraxial.z_exit_pupil_mm, lens.paraxial.z_entrance_pupil_mm
+    rng = np.random.default_rng(seed)
+    rr = radius * np.sqrt(rng.random(rays))
+    ph = 2 * math.pi * rng.random(rays)
+    fx, fy = (float(v) for v in film_xy_mm)
+    o = np.tile([fx, fy, 0.0], (rays, 1))
+    pm = np.stack([rr * np.cos(ph), rr * np.sin(ph), np.full(rays, zf - z_x)], -1)
+    r = trace_table(table, o, pm - o, zf + 1.0)
+    ok = r.status == OK
+    q, d = r.pos[ok].copy(), r.dir[ok].copy()
+    q[:, 2] = zf - q[:, 2]
+    d[:, 2] = -d[:, 2]
+    oc = lens_to_camera_m(q, z_e) * 1000.0
+    dc = np.stack([d[:, 0], -d[:, 1], -d[:, 2]], -1)
+    t = (depth_m * 1000.0 - oc[:, 2]) / dc[:, 2]
+    return oc[:, :2] + t[:, None] * dc[:, :2]
+
+
 def kolb_image(lens_name: str, f_number: float, focus_m: float, sensor_mm, size, scene: DemoScene,
                rays: int = 256, seed: int = 0, chunk: int = 200_000, axial_rays: int = 400_000) -> np.ndarray:
     """The traced image (H×W×3, radiance × relative illumination; module docstring) with the lens
@@ -91,11 +132,7 @@ def kolb_image(lens_name: str, f_number: float, focus_m: float, sensor_mm, size,
     pres = lens.focused(focus_m * 1000.0, f_number)
     table, zf = mirrored_table(pres, lens.stop_radius_mm(f_number))
     z_x, z_e = lens.paraxial.z_exit_pupil_mm, lens.paraxial.z_entrance_pupil_mm
-    lo, hi = 0.0, 4.0 * float(pres.surfaces[-1].semi_diameter_mm)
-    for _ in range(50):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if trace_back(table, zf, np.zeros((1, 2)), np.array([mid, 0, z_x]))[2][0] else (lo, mid)
-    radius = 1.3 * lo
+    radius = exit_pupil_disc_mm(table, zf, lens)
     area = math.pi * radius * radius
     rng = np.random.default_rng(seed)
     w, h = size
