@@ -309,6 +309,17 @@ class _CameraBase:
         :attr:`render_focal_length_mm` (focus breathing)."""
         return math.degrees(2 * math.atan(self.sensor_mm[0] / (2 * self.render_focal_length_mm)))
 
+    def focus_summary(self, width_px: int) -> str:
+        """One line for ``--explain``: the focus depth, its lens-scale distance and the camera to
+        render the plate with at this focus (focal length, f_x at ``width_px``, horizontal FOV)."""
+        u, s = self.focus_distance_m, self.focus_from_film_m
+        where = "entrance pupil" if self.optics is not None else "lens"
+        return (f"focus: depth {u:.6g} m from the {where} (the depth pass's camera centre) = {s:.6g} m from the film "
+                f"(lens scale); render with focal length {self.render_focal_length_mm:.6g} mm "
+                f"(f_x {self.render_focal_length_mm / self.pixel_pitch_mm(width_px):.6g} px), "
+                f"horizontal FOV {self.field_of_view_focused_deg:.4g}° (infinity focus: "
+                f"{self.with_(focus_distance_m=math.inf).field_of_view_focused_deg:.4g}°)")
+
     def pixel_pitch_mm(self, width_px: int) -> float:
         """Pixel pitch (mm) when the image is ``width_px`` wide (the image spans the sensor width)."""
         return self.sensor_mm[0] / float(width_px)

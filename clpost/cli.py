@@ -173,6 +173,7 @@ def cmd_process(args) -> int:
         plan = pipe.plan_for(first, cam)
         print(f"kernels: {', '.join(plan.kernel_names) or '(none)'}")
         print(f"principal point: ({plan.principal_point[0]:.6g}, {plan.principal_point[1]:.6g}) px")
+        print(cam.focus_summary(first.width))
         if plan.output_size != plan.size:
             print(f"output size: {plan.output_size[0]}x{plan.output_size[1]} (resampled by "
                   f"{', '.join(L.name for L in plan.launches if L.out_size != L.in_size)})")
