@@ -15,19 +15,14 @@ from clpost.errors import InputError
 from clpost.optics import get_lens
 from clpost.render.ibl_rays import mirrored_table, trace_back
 from clpost.render.ibl_warp import lens_to_camera_m
-from clpost.render.kolb_trace import film_point_footprint
+from clpost.render.kolb_trace import axial_blur_px
 from clpost.stages.dof import coc_px
 
 W = 1920  # image width the blur is measured at (px); pitch 36 mm / 1920
 
 
 def traced_blur_px(cam, depth_m, rays=20000):
-    """Blur (px) of a point at ``depth_m`` on the axis by the reference tracer: the diameter of the
-    uniform disc with the footprint's RMS radius (2√2 · RMS), mapped to the film at F/S."""
-    hits = film_point_footprint(cam.lens, cam.f_number, cam.focus_from_film_m, (0.0, 0.0), depth_m, rays=rays)
-    c = hits - hits.mean(0)
-    rms = math.sqrt(float((c ** 2).sum(1).mean()))
-    return 2 * math.sqrt(2) * rms * cam.render_focal_length_mm / (depth_m * 1000.0) / cam.pixel_pitch_mm(W)
+    return axial_blur_px(cam, depth_m, W, rays=rays)
 
 
 # (lens, f-number, depth m): centimetres (the fisheye at 8 cm) to far; the achromat and the fisheye

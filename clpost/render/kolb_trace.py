@@ -123,6 +123,17 @@ def film_point_footprint(lens_name: str, f_number: float, focus_m: float, film_x
     return oc[:, :2] + t[:, None] * dc[:, :2]
 
 
+def axial_blur_px(camera, depth_m: float, width_px: int, rays: int = 20000, seed: int = 0) -> float:
+    """Blur (px at ``width_px``) of an axial point at ``depth_m`` through ``camera``'s traced lens at
+    its focus, by :func:`film_point_footprint`: the diameter of the uniform disc with the footprint's
+    RMS radius (2√2 · RMS), mapped to the film at the focused camera's scale F/S."""
+    hits = film_point_footprint(camera.lens, camera.f_number, camera.focus_from_film_m, (0.0, 0.0), depth_m,
+                                rays=rays, seed=seed)
+    c = hits - hits.mean(0)
+    rms = math.sqrt(float((c ** 2).sum(1).mean()))
+    return 2 * math.sqrt(2) * rms * camera.render_focal_length_mm / (depth_m * 1000.0) / camera.pixel_pitch_mm(width_px)
+
+
 def kolb_image(lens_name: str, f_number: float, focus_m: float, sensor_mm, size, scene: DemoScene,
                rays: int = 256, seed: int = 0, chunk: int = 200_000, axial_rays: int = 400_000) -> np.ndarray:
     """The traced image (H×W×3, radiance × relative illumination; module docstring) with the lens
