@@ -110,6 +110,12 @@ def _check_sensor(name: str, value: Any) -> tuple[float, float]:
     return sw, sh
 
 
+def _breathing():
+    from . import breathing
+
+    return breathing
+
+
 def depth_for_focus_scale(camera, scale_m: Any) -> float:
     r"""The focus depth (m, from the pinhole) of a lens-scale distance L (film → object).
 
@@ -152,6 +158,12 @@ class CoreParams:
         None, unit="m", flag="--focus-scale", parse=parse_fraction, scalar=True, input_only=True,
         help="focus by the lens's distance scale instead: metres from the film plane to the object, as engraved "
              "on a focus ring (sets --focus exactly; not with --focus)")
+    plate_fov: str = param(
+        "focused", unit="field of view", flag="--plate-fov", header="clpost.plateFov", scalar=False,
+        check=one_of("focused", "infinity"), show=lambda v: None if v == "focused" else v,
+        help="field of view the plate was rendered at: 'focused' (with the camera at this focus, Camera.intrinsics; "
+             "--explain prints it) or 'infinity' (the lens focused at infinity, e.g. a renderer set to the lens's "
+             "focal length: the plate is magnified by the focus breathing first, clpost.breathing)")
     shutter_s: float | None = param(
         1 / 50, unit="seconds", flag="--shutter", parse=parse_auto_or_fraction, header="clpost.shutter_s",
         show=show_auto, scalar=True, cli_default="1/50",
@@ -318,7 +330,9 @@ class _CameraBase:
                 f"(lens scale); render with focal length {self.render_focal_length_mm:.6g} mm "
                 f"(f_x {self.render_focal_length_mm / self.pixel_pitch_mm(width_px):.6g} px), "
                 f"horizontal FOV {self.field_of_view_focused_deg:.4g}° (infinity focus: "
-                f"{self.with_(focus_distance_m=math.inf).field_of_view_focused_deg:.4g}°)")
+                f"{self.with_(focus_distance_m=math.inf).field_of_view_focused_deg:.4g}°)"
+                + ("" if self.plate_fov == "focused" else
+                   f"; the plate (--plate-fov {self.plate_fov}) is magnified ×{_breathing().magnification(self):.6g} first"))
 
     def pixel_pitch_mm(self, width_px: int) -> float:
         """Pixel pitch (mm) when the image is ``width_px`` wide (the image spans the sensor width)."""

@@ -168,3 +168,61 @@ def test_cli_lens_info_reports_the_focused_camera(capsys):
     assert at["render_focal_mm"] == pytest.approx(cam.render_focal_length_mm, rel=1e-12)
     assert at["fov_focused_deg"]["horizontal"] == pytest.approx(cam.field_of_view_focused_deg, rel=1e-12)
     assert 1.05 < at["breathing"] < 1.12
+
+
+# -- a fixed render at the infinity-focus field of view (--plate-fov infinity) ------------------
+
+def test_plate_magnification_is_v_over_f_for_a_thin_lens():
+    from clpost.breathing import magnification
+
+    cam = Camera(lens="thin:50", focus_distance_m=0.5, plate_fov="infinity")
+    assert magnification(cam) == pytest.approx((50 * 500 / 450) / 50, rel=1e-12)
+    assert magnification(cam.with_(plate_fov="focused")) == 1.0
+
+
+@pytest.mark.parametrize("lens, n, depth", [("zeiss-planar-50-f1.4", 2.8, 0.475), ("telephoto-250", 8.0, 3.5)])
+def test_rescaled_plate_puts_a_point_where_the_traced_chief_ray_lands(lens, n, depth):
+    """A small blob at angle θ in a plate rendered at the infinity-focus camera (x = c + F∞ tan θ / p)
+    lands, after the rescale, where the real chief ray of the lens focused at D does (0.1 px)."""
+    from clpost.breathing import rescale_plate
+    from clpost.frame import Frame
+
+    w, h = 480, 320
+    cam = Camera(lens=lens, f_number=n, focus_distance_m=depth, plate_fov="infinity")
+    p = cam.pixel_pitch_mm(w)
+    f_inf = cam.with_(focus_distance_m=math.inf).render_focal_length_mm
+    c = ((w - 1) / 2, (h - 1) / 2)
+    off = 60.0  # plate px from the centre, along +y (down)
+    tan_t = off * p / f_inf
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    blob = np.exp(-((xx - c[0]) ** 2 + (yy - c[1] - off) ** 2) / (2 * 1.5 ** 2))
+    plate = Frame(np.repeat(blob[..., None], 3, -1).astype(np.float32), depth=np.full((h, w), depth, np.float32))
+    out = rescale_plate(plate, cam).color[..., 0].astype(np.float64)
+    y_c = float((out * yy).sum() / out.sum())
+    x_c = float((out * xx).sum() / out.sum())
+    assert x_c == pytest.approx(c[0], abs=1e-6)
+    # the traced chief ray's film height for this θ: its focal length at about that height
+    k = chief_ray_focal_mm(cam.with_(plate_fov="focused"), r_mm=off * p * cam.render_focal_length_mm / f_inf)
+    assert y_c - c[1] == pytest.approx(k * tan_t / p, abs=0.1)
+    assert y_c - c[1] == pytest.approx(off * cam.render_focal_length_mm / f_inf, abs=0.02)  # the scale itself
+    assert y_c - c[1] > off + 2.0  # magnified: the lens breathes
+
+
+def test_pipeline_applies_the_plate_rescale_before_the_stages(rng):
+    from clpost.breathing import rescale_plate
+    from clpost.frame import Frame
+    from clpost.pipeline import Pipeline
+
+    h, w = 24, 36
+    frame = Frame(rng.random((h, w, 3)).astype(np.float32) + 0.1, depth=np.full((h, w), 2.0, np.float32),
+                  velocity=rng.normal(size=(h, w, 2)).astype(np.float32))
+    cam = Camera(lens="thin:50", focus_distance_m=0.4, plate_fov="infinity", shutter_s=1 / 50)
+    got = Pipeline(cam, stages=["exposure"]).run(frame)
+    want = Pipeline(cam.with_(plate_fov="focused"), stages=["exposure"]).run(rescale_plate(frame, cam))
+    np.testing.assert_array_equal(got.color, want.color)
+    r = rescale_plate(frame, cam)
+    s = 400 / 350
+    np.testing.assert_allclose(r.velocity[h // 2, w // 2], frame.velocity[h // 2, w // 2] * s, rtol=1e-6)
+    assert r.color.min() >= 0 and np.isfinite(r.color).all() and (r.depth == 2.0).all()
+    assert cam.describe()["clpost.plateFov"] == "infinity"  # recorded in the output header
+    assert "clpost.plateFov" not in cam.with_(plate_fov="focused").describe()  # default: headers unchanged
