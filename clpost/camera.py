@@ -4,14 +4,18 @@ A lens is a thin lens named ``thin:<focal length in mm>`` or a real prescription
 ``lens_data/`` by name (``zeiss-planar-50-f1.4``; see :mod:`clpost.optics`).
 
 Units: lengths on the sensor and of the lens in millimetres, scene distances in metres, time in
-seconds. ``focus_distance_m`` is measured from the thin lens's principal plane (``math.inf`` for
-infinity focus); for a real prescription it is measured **from the film plane** and must be at
-least the lens's ``min_focus_m``.
+seconds. ``focus_distance_m`` is the **planar depth that is sharp, measured like the depth pass**:
+along the optical axis from the render's pinhole, which stands for the thin lens itself and for a
+real prescription's entrance pupil (the centre of projection of its chief rays), for thin and
+traced lenses alike (``math.inf`` for infinity focus). The lens-scale distance, film plane →
+object as engraved on a focus ring, is :attr:`Camera.focus_from_film_m`; giving ``focus_scale_m=``
+instead of ``focus_distance_m`` converts it exactly (a real lens must reach the scale distance:
+at least its ``min_focus_m``). docs/conventions.md "Focus".
 
 Real prescriptions: ``focal_length_mm`` is the paraxial EFL;
 ``image_distance_mm`` is the thin-lens-equivalent v = EFL + extension, where the extension is
 the lens travel found by real-ray unit focusing at the taking f-number
-(:meth:`clpost.optics.Lens.focus`); an ``f_number`` below the lens's maximum aperture is clamped
+(:meth:`clpost.optics.Lens.focus_depth`); an ``f_number`` below the lens's maximum aperture is clamped
 to it with a :class:`clpost.optics.FNumberClampedWarning`. :attr:`Camera.optics` is the
 :class:`clpost.optics.Lens` (None for a thin lens) and :meth:`Camera.lens_curves` its curves at
 this focus and f-number — the API later stages consume.
@@ -26,7 +30,14 @@ Derived optics (thin lens, Hecht, *Optics*, 5th ed., §5.2):
 
 with u the focus distance, v the image distance, K the sensor extent along the direction of the
 field of view (the FOV formula is the one for focus at infinity, as lens datasheets quote it;
-:attr:`Camera.field_of_view_focused_deg` uses v instead of f).
+:attr:`Camera.field_of_view_focused_deg` uses the focused camera's focal length instead of f).
+
+Focus breathing: :attr:`Camera.render_focal_length_mm` is the focal length of the pinhole camera
+that images like the lens at this focus — v for a thin lens (image scale v/f of infinity focus),
+for a real lens the film height K of the paraxial chief ray per tan θ of its object-side angle
+(:attr:`clpost.optics.FocusState.render_focal_mm`; its distortion curve is the real chief ray's
+departure from K tan θ). :meth:`Camera.intrinsics` uses it: render with them and the plate has
+the field of view the lens has at this focus.
 
 Image aspect: the image spans the full sensor **width**; the pixel pitch is
 ``sensor_width_mm / width_px`` and the used sensor height is ``pitch · height_px`` (Blender's
@@ -99,6 +110,33 @@ def _check_sensor(name: str, value: Any) -> tuple[float, float]:
     return sw, sh
 
 
+def _breathing():
+    from . import breathing
+
+    return breathing
+
+
+def depth_for_focus_scale(camera, scale_m: Any) -> float:
+    r"""The focus depth (m, from the pinhole) of a lens-scale distance L (film → object).
+
+    Thin lens: L = u + v with 1/u + 1/v = 1/f gives :math:`u = (L + \sqrt{L^2 - 4Lf})/2` (the
+    far conjugate; L ≥ 4f). Real lens: :meth:`clpost.optics.Lens.focus` at L, its ``depth_mm``."""
+    L = to_float("focus_scale_m", scale_m, "m", "use inf for infinity focus")
+    if math.isinf(L):
+        return math.inf
+    lens = camera.optics
+    if lens is not None:
+        if not (L >= lens.min_focus_m * (1 - 1e-12)):
+            raise InputError(f"Camera.focus_scale_m={scale_m!r} is closer than {camera.lens}'s minimum focus "
+                             f"distance {lens.min_focus_m:g} m (from the film plane); use >= {lens.min_focus_m:g}")
+        return lens.focus(L * 1000.0, camera.f_number).depth_mm / 1000.0
+    f = camera.focal_length_mm / 1000.0
+    if not (L >= 4 * f):
+        raise InputError(f"Camera.focus_scale_m={scale_m!r} is closer than a thin lens of {f * 1000:g} mm can "
+                         f"focus (film to object >= 4f = {4 * f:g} m); use >= {4 * f:g}")
+    return 0.5 * (L + math.sqrt(L * L - 4 * L * f))
+
+
 @dataclass(frozen=True)
 class CoreParams:
     """The camera's own parameters, read by several stages (lens, aperture, focus, shutter, sensor)."""
@@ -114,7 +152,18 @@ class CoreParams:
     focus_distance_m: float = param(
         3.0, unit="m", flag="--focus", parse=parse_fraction, header="clpost.focusDistance_m", scalar=True,
         check=lambda name, v: to_float(name, v, "m", "use inf for infinity focus"),
-        help="focus distance in metres ('inf' for infinity; from the film plane for a lens_data lens)")
+        help="depth in metres that is sharp, measured like the depth pass (planar, from the camera's "
+             "pinhole = a real lens's entrance pupil); 'inf' for infinity. Lens-scale distance: --focus-scale")
+    focus_scale_m: float | None = param(
+        None, unit="m", flag="--focus-scale", parse=parse_fraction, scalar=True, input_only=True,
+        help="focus by the lens's distance scale instead: metres from the film plane to the object, as engraved "
+             "on a focus ring (sets --focus exactly; not with --focus)")
+    plate_fov: str = param(
+        "focused", unit="field of view", flag="--plate-fov", header="clpost.plateFov", scalar=False,
+        check=one_of("focused", "infinity"), show=lambda v: None if v == "focused" else v,
+        help="field of view the plate was rendered at: 'focused' (with the camera at this focus, Camera.intrinsics; "
+             "--explain prints it) or 'infinity' (the lens focused at infinity, e.g. a renderer set to the lens's "
+             "focal length: the plate is magnified by the focus breathing first, clpost.breathing)")
     shutter_s: float | None = param(
         1 / 50, unit="seconds", flag="--shutter", parse=parse_auto_or_fraction, header="clpost.shutter_s",
         show=show_auto, scalar=True, cli_default="1/50",
@@ -144,7 +193,16 @@ class CoreParams:
                             help="seed of the grain and sensor noise (with the frame index)")
 
     @staticmethod
+    def check_options(camera, given) -> None:
+        if "focus_distance_m" in given and "focus_scale_m" in given:
+            raise InputError("--focus (depth from the camera, as the depth pass measures it) and --focus-scale "
+                             "(distance from the film plane) set the same focus; give one of them")
+
+    @staticmethod
     def validate(camera, inputs) -> None:
+        scale = inputs.get("focus_scale_m")
+        if scale is not None:  # the lens-scale distance names a focus depth (one internal state)
+            object.__setattr__(camera, "focus_distance_m", depth_for_focus_scale(camera, scale))
         if camera.f_number is None and camera.shutter_s is None:
             raise InputError(
                 "Camera: f_number and shutter_s are both unset; give one (--f-number or --shutter) "
@@ -161,10 +219,12 @@ class CoreParams:
         if lens is not None:
             if camera.f_number is not None:
                 object.__setattr__(camera, "f_number", lens.clamp_f_number(camera.f_number))
-            if u * 1000.0 < lens.min_focus_m * 1000.0 * (1 - 1e-12):
+            d_min = lens.focus(lens.min_focus_m * 1000.0, camera.f_number).depth_mm / 1000.0
+            if u < d_min * (1 - 1e-12):
                 raise InputError(
-                    f"Camera.focus_distance_m={u!r} is closer than {camera.lens}'s minimum "
-                    f"focus distance {lens.min_focus_m:g} m (measured from the film plane); use >= {lens.min_focus_m:g}")
+                    f"Camera.focus_distance_m={u!r} is closer than {camera.lens}'s minimum focus distance "
+                    f"{lens.min_focus_m:g} m on its scale (from the film), which is depth {d_min:.4g} m from the "
+                    f"entrance pupil; use --focus >= {d_min:.4g} (or --focus-scale >= {lens.min_focus_m:g})")
 
     @staticmethod
     def extra_header(camera) -> dict[str, str]:
@@ -186,12 +246,36 @@ class _CameraBase:
         return parse_lens(self.lens)
 
     @property
+    def focus_state(self):
+        """The real lens's :class:`clpost.optics.FocusState` at this focus depth and f-number
+        (unit focusing solved with real rays, cached on the lens); None for a thin lens."""
+        lens = self.optics
+        return None if lens is None else lens.focus_depth(self.focus_distance_m * 1000.0, self.f_number)
+
+    @property
+    def focus_from_film_m(self) -> float:
+        """The lens-scale focus distance (m): film plane → sharp object, as a focus ring is engraved.
+        Thin lens: u + v; real lens: from the unit-focusing solution."""
+        st = self.focus_state
+        if st is not None:
+            return st.distance_mm / 1000.0
+        u = self.focus_distance_m
+        return math.inf if math.isinf(u) else u + self.image_distance_mm / 1000.0
+
+    @property
+    def render_focal_length_mm(self) -> float:
+        """Focal length (mm) of the pinhole camera that images like the lens at this focus (module
+        docstring, "Focus breathing"): v for a thin lens, K of the focus state for a real lens."""
+        st = self.focus_state
+        return self.image_distance_mm if st is None else st.render_focal_mm
+
+    @property
     def image_distance_mm(self) -> float:
         r"""Lens-to-film distance v (mm) for the focus distance: :math:`v = 1/(1/f - 1/u)`."""
-        lens = self.optics
-        if lens is not None:
-            # Real lens: v = EFL + extension from real-ray unit focusing (u from the film plane).
-            return lens.focus(self.focus_distance_m * 1000.0, self.f_number).image_distance_mm
+        st = self.focus_state
+        if st is not None:
+            # Real lens: v = EFL + extension from real-ray unit focusing.
+            return st.image_distance_mm
         f = self.focal_length_mm
         u = self.focus_distance_m * 1000.0
         if math.isinf(u):
@@ -213,23 +297,14 @@ class _CameraBase:
         lens = self.optics
         if lens is None:
             return None
-        return lens.curves(self.focus_distance_m, self.f_number)
+        return lens.curves(self.focus_from_film_m, self.f_number)
 
     @property
     def focused_depth_m(self) -> float:
-        r"""Planar scene depth (m, from the camera centre) that is imaged sharply: the thin-lens
-        conjugate of the image distance, :math:`u = f v / (v - f)`.
-
-        For a thin lens this is ``focus_distance_m`` itself. For a traced lens,
-        ``focus_distance_m`` is measured from the film plane (CONVENTIONS) and the real-ray focus
-        sets v; its thin-lens equivalent (measured from the front principal plane, which the
-        pinhole render's centre stands for) is what the CoC of every stage uses, so dof and
-        astigmatism agree on the sharp plane.
-        """
-        if self.optics is None:
-            return self.focus_distance_m
-        f, v = self.focal_length_mm, self.image_distance_mm
-        return math.inf if v <= f else f * v / (v - f) / 1000.0
+        """Planar scene depth (m, from the camera's pinhole) that is imaged sharply: the CoC of
+        every stage is zero here. It is ``focus_distance_m`` for thin and real lenses alike (a real
+        lens is focused by :meth:`clpost.optics.Lens.focus_depth` so that it is)."""
+        return self.focus_distance_m
 
     @property
     def is_auto_exposure(self) -> bool:
@@ -242,8 +317,22 @@ class _CameraBase:
 
     @property
     def field_of_view_focused_deg(self) -> float:
-        r"""Horizontal angle of view with the lens focused at u: :math:`2\arctan(K/2v)`."""
-        return math.degrees(2 * math.atan(self.sensor_mm[0] / (2 * self.image_distance_mm)))
+        r"""Horizontal angle of view with the lens focused at u: :math:`2\arctan(K/2F)`, F the
+        :attr:`render_focal_length_mm` (focus breathing)."""
+        return math.degrees(2 * math.atan(self.sensor_mm[0] / (2 * self.render_focal_length_mm)))
+
+    def focus_summary(self, width_px: int) -> str:
+        """One line for ``--explain``: the focus depth, its lens-scale distance and the camera to
+        render the plate with at this focus (focal length, f_x at ``width_px``, horizontal FOV)."""
+        u, s = self.focus_distance_m, self.focus_from_film_m
+        where = "entrance pupil" if self.optics is not None else "lens"
+        return (f"focus: depth {u:.6g} m from the {where} (the depth pass's camera centre) = {s:.6g} m from the film "
+                f"(lens scale); render with focal length {self.render_focal_length_mm:.6g} mm "
+                f"(f_x {self.render_focal_length_mm / self.pixel_pitch_mm(width_px):.6g} px), "
+                f"horizontal FOV {self.field_of_view_focused_deg:.4g}° (infinity focus: "
+                f"{self.with_(focus_distance_m=math.inf).field_of_view_focused_deg:.4g}°)"
+                + ("" if self.plate_fov == "focused" else
+                   f"; the plate (--plate-fov {self.plate_fov}) is magnified ×{_breathing().magnification(self):.6g} first"))
 
     def pixel_pitch_mm(self, width_px: int) -> float:
         """Pixel pitch (mm) when the image is ``width_px`` wide (the image spans the sensor width)."""
@@ -252,11 +341,11 @@ class _CameraBase:
     def intrinsics(self, width_px: int, height_px: int) -> tuple[float, float, float, float]:
         r"""Pinhole intrinsics ``(f_x, f_y, c_x, c_y)`` in pixels (OpenCV convention).
 
-        :math:`f_x = f_y = v / p` with v the image distance (the lens focused at u) and p the
-        pixel pitch; the principal point is the image centre ``((W-1)/2, (H-1)/2)`` because pixel
+        :math:`f_x = f_y = F / p` with F the :attr:`render_focal_length_mm` (the lens focused at
+        u: v for a thin lens) and p the pixel pitch; the principal point is the image centre ``((W-1)/2, (H-1)/2)`` because pixel
         centres are at integer coordinates (CONVENTIONS.md).
         """
-        f_px = self.image_distance_mm / self.pixel_pitch_mm(width_px)
+        f_px = self.render_focal_length_mm / self.pixel_pitch_mm(width_px)
         return f_px, f_px, (width_px - 1) / 2.0, (height_px - 1) / 2.0
 
     def default_resolution(self, width_px: int) -> tuple[int, int]:

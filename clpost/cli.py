@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import os
 import json
+import math
 import re
 import sys
 from pathlib import Path
@@ -179,6 +180,7 @@ def cmd_process(args) -> int:
         plan = pipe.plan_for(first, cam)
         print(f"kernels: {', '.join(plan.kernel_names) or '(none)'}")
         print(f"principal point: ({plan.principal_point[0]:.6g}, {plan.principal_point[1]:.6g}) px")
+        print(cam.focus_summary(first.width))
         if plan.output_size != plan.size:
             print(f"output size: {plan.output_size[0]}x{plan.output_size[1]} (resampled by "
                   f"{', '.join(L.name for L in plan.launches if L.out_size != L.in_size)})")
@@ -447,6 +449,18 @@ def cmd_stages(args) -> int:
     return 0
 
 
+def _lens_focus_scale_m(args) -> float:
+    """`clpost lens`'s focus as the lens-scale distance (m from the film) its reports take: --focus
+    is a depth from the entrance pupil, as everywhere (docs/conventions.md "Focus")."""
+    if args.focus is not None and args.focus_scale is not None:
+        raise InputError("--focus (depth from the entrance pupil) and --focus-scale (distance from the film plane) "
+                         "set the same focus; give one of them")
+    cam = Camera(lens=args.name, f_number=getattr(args, "f_number", None), shutter_s=1 / 50,
+                 **({"focus_scale_m": args.focus_scale} if args.focus_scale is not None
+                    else {"focus_distance_m": math.inf if args.focus is None else args.focus}))
+    return cam.focus_from_film_m
+
+
 def cmd_lens(args) -> int:
     # Real lenses: list / info / plot of lens_data prescriptions.
     from .optics import available_lenses, get_lens
@@ -457,11 +471,12 @@ def cmd_lens(args) -> int:
             lens = get_lens(name)
             print(f"{name:24s} EFL {lens.efl_mm:7.2f} mm  f/{lens.max_aperture:.3g}  {lens.prescription.description}")
         return 0
+    scale = _lens_focus_scale_m(args)
     if args.lens_command == "info":
-        d = lens_info(args.name, sensor_mm=args.sensor, focus_distance_m=args.focus, f_number=args.f_number)
+        d = lens_info(args.name, sensor_mm=args.sensor, focus_distance_m=scale, f_number=args.f_number)
         print(json.dumps(d, indent=2, default=str) if args.json else format_info(d))
         return 0
-    plot_lens(args.name, args.output, sensor_mm=args.sensor, focus_distance_m=args.focus)
+    plot_lens(args.name, args.output, sensor_mm=args.sensor, focus_distance_m=scale)
     print(f"wrote {args.output}")
     return 0
 
@@ -601,8 +616,11 @@ def build_parser() -> argparse.ArgumentParser:
         q = lsub.add_parser(cmd, help=help_)
         q.add_argument("name", help="lens name (see `clpost lens list`)")
         q.add_argument("--sensor", type=_sensor, default=(36.0, 24.0), help="sensor WxH in mm (default 36x24)")
-        q.add_argument("--focus", type=_positive_float, default=float("inf"),
-                       help="focus distance in metres from the film (default inf)")
+        q.add_argument("--focus", type=_positive_float, default=None,
+                       help="depth in metres that is sharp, from the entrance pupil (the depth pass's camera "
+                            "centre; default inf)")
+        q.add_argument("--focus-scale", type=_positive_float, default=None,
+                       help="focus by the lens's distance scale instead: metres from the film plane (not with --focus)")
         if cmd == "info":
             q.add_argument("--f-number", type=_positive_float, default=None, help="f-number (default: wide open)")
             q.add_argument("--json", action="store_true")

@@ -194,10 +194,20 @@ class Pipeline:
     def run(self, frame: Frame) -> Frame:
         """Process one frame; returns a new Frame whose color is the camera's output
         (normalised sensor signal; later stages: the film/sensor's recorded values)."""
+        frame = self._plate(frame)
         cam = self.camera_for(frame) if isinstance(frame, Frame) else None
         plan = self.plan_for(frame, cam)
         self.last_plan = plan
         return plan.run(frame, cam)
+
+    def _plate(self, frame):
+        """A plate rendered at the infinity-focus field of view (``Camera.plate_fov``) magnified to
+        the focused camera's first (:func:`clpost.breathing.rescale_plate`); other frames as they are."""
+        if not isinstance(frame, Frame) or self.camera.plate_fov == "focused":
+            return frame
+        from .breathing import rescale_plate
+
+        return rescale_plate(frame, self.camera)
 
     @property
     def last_timings(self) -> dict[str, float]:
@@ -206,5 +216,6 @@ class Pipeline:
 
     def reference(self, frame: Frame) -> np.ndarray:
         """The same plan through each stage's float64 numpy reference; returns (H, W, 3) float64."""
+        frame = self._plate(frame)
         cam = self.camera_for(frame)
         return Plan(None, cam, frame, self._planned(frame, cam), self.quality, build=False).reference(frame, cam)

@@ -330,9 +330,9 @@ def test_reach_test_is_skipped_only_where_every_reach_weight_is_one(rng):
 def test_dof_and_astigmatism_share_the_sharp_plane_of_a_traced_lens():
     from clpost.stages.dof import coc_mm
 
-    cam = Camera(lens=FLAGSHIP, focus_distance_m=0.6)  # measured from the film plane
+    cam = Camera(lens=FLAGSHIP, focus_distance_m=0.6)  # the depth that is sharp (issue 18)
     u = cam.focused_depth_m
-    assert 0.5 < u < 0.6  # the thin-lens conjugate lies in front of the film-plane distance
+    assert u == 0.6 and cam.focus_from_film_m > 0.6  # the lens-scale distance adds pupil → film
     d, v, f = ast.thin_lens(cam)
     z = np.array([0.48, u, 0.75])
     np.testing.assert_allclose(np.abs(coc_mm(cam, z)), ast.axes_mm(0, 0, z, d, v, f)[2],

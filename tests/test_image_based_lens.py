@@ -135,7 +135,7 @@ def test_uniform_white_scene_gives_the_relative_illumination_of_the_pupil_sample
     # against the traced RI curve (the pupil area that passes × cos factors, optics.curves)
     from clpost.camera import Camera
 
-    ri = Camera(lens=lens, f_number=model.f_number, focus_distance_m=3.0, sensor_mm=(12.0, 8.0)).lens_curves()
+    ri = Camera(lens=lens, f_number=model.f_number, focus_scale_m=3.0, sensor_mm=(12.0, 8.0)).lens_curves()
     r = np.hypot(xs[None, :], ys[:, None])
     curve = ri.at("relative_illumination", r)
     assert curve.min() < 0.96  # the corner falls off: the comparison can fail

@@ -58,7 +58,7 @@ def pupil(args) -> None:
     try:
         for text in ([args.reference] if args.reference else []) + args.configs:
             pattern, n, depth = _config(text)
-            model = build(cam.lens, float(cam.focus_distance_m), cam.f_number, tuple(cam.sensor_mm), pupil_n=n,
+            model = build(cam.lens, float(cam.focus_from_film_m), cam.f_number, tuple(cam.sensor_mm), pupil_n=n,
                           max_depth=depth, pupil_pattern=pattern)
             t0 = time.perf_counter()
             img, st = render_image_based(model, size, pyvista_render_fn(r, 0))

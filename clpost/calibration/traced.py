@@ -39,7 +39,7 @@ def lens_distortion_model(camera, size: tuple[int, int]) -> "OpenCVModel | None"
     if camera.optics is None or not camera.lens_distortion:
         return None
     w, h = (int(v) for v in size)
-    return _traced_model(camera.lens, camera.focus_distance_m, camera.f_number, (w, h), camera.intrinsics(w, h),
+    return _traced_model(camera.lens, camera.focus_from_film_m, camera.f_number, (w, h), camera.intrinsics(w, h),
                          camera.pixel_pitch_mm(w))
 
 

@@ -16,10 +16,14 @@ lens from the camera, never by loading files yourself::
         c.pupil_rho, c.lsa_mm, c.sa_transverse_mm   # spherical aberration vs pupil height
         c.pupil_field_mm, c.pupil_grid, c.pupil_masks  # vignetted pupil (cat's eye) per field
         lens.focus(distance_mm, f_number)  # FocusState: extension, thin-lens equivalent, error
+        lens.focus_depth(depth_mm, f_number)  # the same for a depth from the entrance pupil
+        cam.focus_state                    # = lens.focus_depth(cam.focus_distance_m * 1000, N)
         lens.paraxial                      # EFL, BFL, principal planes, pupils (mm)
 
-Image heights r are in mm on the film, radial from the optical centre; focus distances of real
-lenses are measured from the film plane (thin lenses: from the principal plane). For rays, use
+Image heights r are in mm on the film, radial from the optical centre. The optics layer takes
+lens-scale focus distances, measured from the film plane (``Lens.focus``, ``Lens.curves``,
+``lens_curves``); a Camera's ``focus_distance_m`` is a depth from the entrance pupil (the render's
+pinhole) and ``cam.focus_from_film_m`` its lens-scale distance (docs/conventions.md "Focus"). For rays, use
 :func:`clpost.optics.trace.trace` (numpy) or :func:`clpost.optics.cltrace.trace_cl` (OpenCL,
 same results) on ``lens.focused(distance_mm, f_number)``.
 """

@@ -6,8 +6,13 @@ and its height there is the iris radius (exact for real rays, not only paraxiall
 maximum aperture N_max is the N whose beam just fills the stop of the file, found by bisection
 on h; smaller f-numbers are clamped to N_max with a warning.
 
-**Unit focusing.** The whole lens moves; the film stays. The focus distance D is measured
-**from the film plane** to the object (CONVENTIONS.md for real prescriptions). For a lens
+**Unit focusing.** The whole lens moves; the film stays. :meth:`Lens.focus` takes the
+lens-scale distance D **from the film plane** to the object (as engraved on a focus ring);
+:meth:`Lens.focus_depth` takes the object's planar **depth in front of the entrance pupil** — the
+depth a pinhole render measures, its pinhole standing for the entrance pupil (the centre of
+projection of the chief rays) — and returns the same :class:`FocusState`. Unit focusing moves the
+pupil with the lens, so an object at depth d sits at the fixed lens-frame position z_E − d and its
+best image z* does not depend on the lens position: b = z* − z_L, D = z* − (z_E − d). For a lens
 position (last vertex → film = b) the best image of an axial object point is the plane of least
 RMS spot radius of a real meridional fan filling the iris (weights ∝ pupil radius, i.e. equal
 pupil area): for rays y_i + m_i (z − z_L)
@@ -35,7 +40,7 @@ import numpy as np
 
 from ..errors import InputError
 from .curves import FULL_FRAME_HALF_DIAGONAL_MM, LensCurves, compute_curves
-from .paraxial import Paraxial, paraxial
+from .paraxial import Paraxial, paraxial, yu_trace
 from .prescription import LAMBDA_D_NM, Prescription, load_prescription
 from .trace import OK, trace
 
@@ -56,6 +61,11 @@ class FocusState:
     object_distance_from_h_mm: float  # front principal plane H → object
     thin_lens_object_distance_mm: float  # 1/(1/f - 1/v)
     magnification: float  # paraxial lateral magnification (negative: inverted; 0 at infinity)
+    depth_mm: float = math.inf  # entrance pupil → object, planar (what a depth pass measures)
+    render_focal_mm: float = math.nan  # K: film height of the paraxial chief ray per tan θ (object side)
+    """The focal length of the pinhole camera (at the entrance pupil) that images like the lens at
+    this focus: a point at angle θ from the axis seen from the entrance pupil lands at K tan θ on the
+    film (paraxially; distortion is the real chief ray's departure from it). K/EFL is focus breathing."""
 
     @property
     def thin_lens_error_mm(self) -> float:
@@ -159,7 +169,7 @@ class Lens:
         stop_r = self.stop_radius_mm(n)
         zl = self.prescription.total_track_mm
         b_par = self.paraxial.bfl_mm
-        b_inf = self._best_focus_z(b_par, math.inf, stop_r) - zl
+        b_inf = self._b_inf(n)
         f = self.efl_mm
         if math.isinf(distance_mm):
             b = b_inf
@@ -187,20 +197,62 @@ class Lens:
                 if abs(g1) < 1e-10:
                     break
             b = b1
+        st = self._state(float(distance_mm), float(b), float(b_inf))
+        self._focus_cache[key] = st
+        return st
+
+    def _b_inf(self, n: float) -> float:
+        """Last vertex → film at infinity focus (the real best focus at f-number ``n``)."""
+        key = ("b_inf", round(n, 12))
+        if key not in self._focus_cache:
+            zl = self.prescription.total_track_mm
+            self._focus_cache[key] = self._best_focus_z(self.paraxial.bfl_mm, math.inf, self.stop_radius_mm(n)) - zl
+        return self._focus_cache[key]
+
+    def _state(self, distance_mm: float, b: float, b_inf: float) -> FocusState:
+        """The :class:`FocusState` of the lens at back distance ``b`` focused on ``distance_mm``."""
+        f, zl = self.efl_mm, self.prescription.total_track_mm
         # v of the thin-lens equivalent: f plus the real extension, so v = f exactly at infinity
         # (the film sits at the real best focus, which spherical aberration moves off the
         # paraxial focus; measuring v from H' would count that shift as focusing).
         v = f + (b - b_inf)
         u_thin = math.inf if v <= f else 1.0 / (1.0 / f - 1.0 / v)
+        z_e = self.paraxial.z_entrance_pupil_mm
         if math.isinf(distance_mm):
-            u_h = math.inf
+            u_h = depth = math.inf
             mag = 0.0
         else:
-            z_film = zl + b
-            z_obj = z_film - distance_mm
+            z_obj = zl + b - distance_mm
             u_h = self.paraxial.z_principal_front_mm - z_obj
+            depth = z_e - z_obj
             mag = -v / u_h
-        st = FocusState(float(distance_mm), float(b), float(b - b_inf), float(v), float(u_h), float(u_thin), float(mag))
+        y, u = yu_trace(self.prescription.with_back_distance(b), -z_e, 1.0)  # paraxial chief ray, slope 1
+        k = float(y[-1] + u[-1] * b)
+        return FocusState(distance_mm, b, b - b_inf, v, u_h, u_thin, mag, depth, k)
+
+    def focus_depth(self, depth_mm: float, f_number: float | None = None) -> FocusState:
+        """Solve unit focusing for an object at planar depth ``depth_mm`` in front of the entrance
+        pupil (``inf`` allowed): the same :class:`FocusState` as :meth:`focus` at the film distance
+        it returns (module docstring)."""
+        n = self.max_aperture if f_number is None else self.clamp_f_number(f_number, warn=False)
+        if math.isinf(depth_mm):
+            return self.focus(math.inf, n)
+        key = ("depth", float(depth_mm), round(n, 12))
+        hit = self._focus_cache.get(key)
+        if hit is not None:
+            return hit
+        zl, b_par = self.prescription.total_track_mm, self.paraxial.bfl_mm
+        z_obj = self.paraxial.z_entrance_pupil_mm - float(depth_mm)
+        front = min(0.0, self.prescription.surfaces[0].sag(self.prescription.surfaces[0].semi_diameter_mm))
+        if not (depth_mm > 0 and z_obj < front):
+            raise InputError(f"lens {self.name}: depth {depth_mm / 1000:g} m puts the object inside the lens "
+                             f"(its front vertex is {(self.paraxial.z_entrance_pupil_mm - front) / 1000:.3g} m "
+                             "in front of the entrance pupil)")
+        z_star = self._best_focus_z(b_par, zl + b_par - z_obj, self.stop_radius_mm(n))
+        if not (z_star - zl > 0 and z_star > z_obj):
+            raise InputError(f"lens {self.name}: depth {depth_mm / 1000:g} m is closer than any real image allows "
+                             "(the object is inside the front focal length)")
+        st = self._state(z_star - z_obj, z_star - zl, self._b_inf(n))
         self._focus_cache[key] = st
         return st
 

@@ -12,7 +12,9 @@ from .lens import get_lens, lens_curves
 
 def lens_info(name: str, sensor_mm=(36.0, 24.0), focus_distance_m: float = math.inf,
               f_number: float | None = None) -> dict:
-    """Derived numbers of a lens (mm, degrees, %) as a JSON-ready dict."""
+    """Derived numbers of a lens (mm, degrees, %) as a JSON-ready dict, focused at
+    ``focus_distance_m`` from the film (lens scale; ``at`` also gives the focus depth from the
+    entrance pupil and the focused pinhole camera: its focal length K and angle of view)."""
     lens = get_lens(name)
     pres, px = lens.prescription, lens.paraxial
     n = lens.max_aperture if f_number is None else lens.clamp_f_number(f_number, warn=False)
@@ -50,7 +52,12 @@ def lens_info(name: str, sensor_mm=(36.0, 24.0), focus_distance_m: float = math.
         "image_circle_radius_mm": r_edge,
         "at": {"focus_distance_m": focus_distance_m, "f_number": n,
                "extension_mm": fs.extension_mm, "back_distance_mm": fs.back_distance_mm,
-               "thin_lens_error_mm": fs.thin_lens_error_mm},
+               "thin_lens_error_mm": fs.thin_lens_error_mm,
+               "focus_scale_m": fs.distance_mm / 1000.0, "depth_m": fs.depth_mm / 1000.0,
+               "render_focal_mm": fs.render_focal_mm,
+               "breathing": fs.render_focal_mm / lens.focus(math.inf, n).render_focal_mm,
+               "fov_focused_deg": {"horizontal": math.degrees(2 * math.atan(sensor_mm[0] / (2 * fs.render_focal_mm))),
+                                   "vertical": math.degrees(2 * math.atan(sensor_mm[1] / (2 * fs.render_focal_mm)))}},
         "corner": {"image_height_mm": r_edge, "field_angle_deg": float(c.field_angle_deg[-1]),
                    "distortion_pct": float(c.distortion_pct[-1]),
                    "relative_illumination": float(c.relative_illumination[-1]),
@@ -89,8 +96,13 @@ def format_info(d: dict) -> str:
     if not d["image_circle_covers_sensor"]:
         lines.append(f"  image circle radius {d['image_circle_radius_mm']:.2f} mm does not cover the sensor corner")
     lines.append(f"  at r = {cn['image_height_mm']:.2f} mm ({cn['field_angle_deg']:.1f}°), f/{d['at']['f_number']:.3g}, "
-                 f"focus {d['at']['focus_distance_m']:g} m: distortion {cn['distortion_pct']:+.2f} %, relative "
+                 f"focus {d['at']['focus_distance_m']:g} m from the film: distortion {cn['distortion_pct']:+.2f} %, relative "
                  f"illumination {cn['relative_illumination']:.3f}, lateral colour {cn['lateral_color_um']:+.1f} µm")
+    at = d["at"]
+    lines.append(f"  focused at depth {at['depth_m']:.6g} m from the entrance pupil = {at['focus_scale_m']:.6g} m on the "
+                 f"lens scale (from the film): render with focal length {at['render_focal_mm']:.4f} mm, "
+                 f"{at['fov_focused_deg']['horizontal']:.2f}° × {at['fov_focused_deg']['vertical']:.2f}° "
+                 f"(breathing ×{at['breathing']:.4f} of infinity focus)")
     ref = d.get("reference", {})
     if "efl_rel_error" in ref:
         lines.append(f"  vs reference ({ref.get('source', '')}): EFL {ref['efl_rel_error'] * 100:+.5f} %, "

@@ -163,7 +163,8 @@ def build(lens: str, focus_distance_m: float = math.inf, f_number: float | None 
           sensor_mm: tuple[float, float] = (36.0, 24.0), grid: int = 10, pupil_n: int = 3,
           threshold_deg: float = THRESHOLD_DEG, max_depth: int = 4, pupil_pattern: str = "grid") -> ImageBasedLens:
     """The image-based model of ``lens`` (a ``lens_data`` name) focused at ``focus_distance_m``
-    (from the film) at ``f_number``; cached per arguments (module docstring)."""
+    (lens-scale: from the film, :meth:`clpost.optics.Lens.focus`; a Camera's is its
+    ``focus_from_film_m``) at ``f_number``; cached per arguments (module docstring)."""
     if lens not in available_lenses():
         raise InputError(f"lens {lens!r} is not in lens_data/; choose one of {', '.join(available_lenses())}")
     if int(grid) != grid or grid < 2:
@@ -227,6 +228,6 @@ def model_for_camera(camera, *, pupil_n: int = 3, threshold_deg: float = THRESHO
     if camera.optics is None:
         raise InputError(f"the image-based lens model needs a real lens from lens_data (--lens "
                          f"{', '.join(available_lenses())}); {camera.lens!r} is a thin lens")
-    return build(camera.lens, float(camera.focus_distance_m), camera.f_number, tuple(camera.sensor_mm),
+    return build(camera.lens, float(camera.focus_from_film_m), camera.f_number, tuple(camera.sensor_mm),
                  grid=grid, pupil_n=pupil_n, threshold_deg=threshold_deg, max_depth=max_depth,
                  pupil_pattern=pupil_pattern)

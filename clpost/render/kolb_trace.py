@@ -82,19 +82,68 @@ def radiance(scene: DemoScene, origin: np.ndarray, direction: np.ndarray) -> np.
     return out
 
 
+def exit_pupil_disc_mm(table, zf: float, lens) -> float:
+    """Radius (mm) of the exit-pupil-plane disc the estimator samples: 1.3× the radius the axial
+    film point sees through (bisection), so no passing ray is missed."""
+    z_x = lens.paraxial.z_exit_pupil_mm
+    lo, hi = 0.0, 4.0 * float(lens.prescription.surfaces[-1].semi_diameter_mm)
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if trace_back(table, zf, np.zeros((1, 2)), np.array([mid, 0, z_x]))[2][0] else (lo, mid)
+    return 1.3 * lo
+
+
+def film_point_footprint(lens_name: str, f_number: float, focus_m: float, film_xy_mm, depth_m: float,
+                         rays: int = 20000, seed: int = 0) -> np.ndarray:
+    """Where the light reaching one film point comes from on the plane at planar depth ``depth_m``
+    (camera space: origin at the entrance pupil, z toward the scene): hits (N×2, mm) of the
+    estimator's rays — film point → uniform points of the exit-pupil disc → through the lens
+    focused at ``focus_m`` from the film — with that plane. By reciprocity the footprint's size
+    over the depth is the blur a point at that depth makes on the film (its minimum is where the
+    lens is sharp); the reference of tests/test_focus.py."""
+    lens = get_lens(lens_name)
+    pres = lens.focused(focus_m * 1000.0, f_number)
+    table, zf = mirrored_table(pres, lens.stop_radius_mm(f_number))
+    radius = exit_pupil_disc_mm(table, zf, lens)
+    z_x, z_e = lens.paraxial.z_exit_pupil_mm, lens.paraxial.z_entrance_pupil_mm
+    rng = np.random.default_rng(seed)
+    rr = radius * np.sqrt(rng.random(rays))
+    ph = 2 * math.pi * rng.random(rays)
+    fx, fy = (float(v) for v in film_xy_mm)
+    o = np.tile([fx, fy, 0.0], (rays, 1))
+    pm = np.stack([rr * np.cos(ph), rr * np.sin(ph), np.full(rays, zf - z_x)], -1)
+    r = trace_table(table, o, pm - o, zf + 1.0)
+    ok = r.status == OK
+    q, d = r.pos[ok].copy(), r.dir[ok].copy()
+    q[:, 2] = zf - q[:, 2]
+    d[:, 2] = -d[:, 2]
+    oc = lens_to_camera_m(q, z_e) * 1000.0
+    dc = np.stack([d[:, 0], -d[:, 1], -d[:, 2]], -1)
+    t = (depth_m * 1000.0 - oc[:, 2]) / dc[:, 2]
+    return oc[:, :2] + t[:, None] * dc[:, :2]
+
+
+def axial_blur_px(camera, depth_m: float, width_px: int, rays: int = 20000, seed: int = 0) -> float:
+    """Blur (px at ``width_px``) of an axial point at ``depth_m`` through ``camera``'s traced lens at
+    its focus, by :func:`film_point_footprint`: the diameter of the uniform disc with the footprint's
+    RMS radius (2√2 · RMS), mapped to the film at the focused camera's scale F/S."""
+    hits = film_point_footprint(camera.lens, camera.f_number, camera.focus_from_film_m, (0.0, 0.0), depth_m,
+                                rays=rays, seed=seed)
+    c = hits - hits.mean(0)
+    rms = math.sqrt(float((c ** 2).sum(1).mean()))
+    return 2 * math.sqrt(2) * rms * camera.render_focal_length_mm / (depth_m * 1000.0) / camera.pixel_pitch_mm(width_px)
+
+
 def kolb_image(lens_name: str, f_number: float, focus_m: float, sensor_mm, size, scene: DemoScene,
                rays: int = 256, seed: int = 0, chunk: int = 200_000, axial_rays: int = 400_000) -> np.ndarray:
-    """The traced image (H×W×3, radiance × relative illumination; module docstring). The axial
+    """The traced image (H×W×3, radiance × relative illumination; module docstring) with the lens
+    focused at ``focus_m`` from the film (lens scale; a Camera's ``focus_from_film_m``). The axial
     normalisation integral takes ``axial_rays`` rays (its Monte Carlo noise falls as 1/√axial_rays)."""
     lens = get_lens(lens_name)
     pres = lens.focused(focus_m * 1000.0, f_number)
     table, zf = mirrored_table(pres, lens.stop_radius_mm(f_number))
     z_x, z_e = lens.paraxial.z_exit_pupil_mm, lens.paraxial.z_entrance_pupil_mm
-    lo, hi = 0.0, 4.0 * float(pres.surfaces[-1].semi_diameter_mm)
-    for _ in range(50):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if trace_back(table, zf, np.zeros((1, 2)), np.array([mid, 0, z_x]))[2][0] else (lo, mid)
-    radius = 1.3 * lo
+    radius = exit_pupil_disc_mm(table, zf, lens)
     area = math.pi * radius * radius
     rng = np.random.default_rng(seed)
     w, h = size
@@ -151,7 +200,7 @@ def fit_opencv(lens_name: str, f_number: float, focus_m: float, sensor_mm, size)
     from clpost.calibration import OpenCVModel
     from clpost.camera import Camera
 
-    cam = Camera(lens=lens_name, f_number=f_number, focus_distance_m=focus_m, sensor_mm=tuple(sensor_mm))
+    cam = Camera(lens=lens_name, f_number=f_number, focus_scale_m=focus_m, sensor_mm=tuple(sensor_mm))
     v = cam.image_distance_mm
     curves = cam.lens_curves()
     r = np.linspace(0.0, 0.5 * math.hypot(*sensor_mm), 64)
@@ -170,7 +219,7 @@ def post_image(lens_name, f_number, focus_m, sensor_mm, size, scene, device=None
     from clpost.pipeline import Pipeline
     from clpost.render.pyvista_renderer import PyVistaRenderer
 
-    cam = Camera(lens=lens_name, f_number=f_number, focus_distance_m=focus_m, sensor_mm=tuple(sensor_mm),
+    cam = Camera(lens=lens_name, f_number=f_number, focus_scale_m=focus_m, sensor_mm=tuple(sensor_mm),
                  shutter_s=1 / 100, depth_of_field=True, vignetting="lens",
                  distortion=fit_opencv(lens_name, f_number, focus_m, sensor_mm, size))
     r = PyVistaRenderer(scene, supersample=3)

@@ -17,8 +17,8 @@ their difference. Sources:
 
       \delta_s = (F - A/2)\,(r/r_c)^2, \qquad \delta_t = (F + A/2)\,(r/r_c)^2
 
-**Blur of one pixel.** Thin-lens equivalent: focal length f (the lens's EFL), film at v (the
-camera's ``image_distance_mm``), entrance pupil diameter :math:`D = f/N`. A surface at planar depth z
+**Blur of one pixel.** Thin-lens equivalent of the camera at its focus (:func:`thin_lens`): focal
+length f, film at v (for a thin lens its own f and v), entrance pupil diameter :math:`D = f/N`. A surface at planar depth z
 (metres, converted to mm) images at :math:`1/g` with :math:`g = 1/f - 1/z`; its sagittal focus
 lies at :math:`1/g + \delta_s`. The pencil of a uniform circular pupil cut by the film is an
 ellipse whose axes (diameters, mm) along the sagittal and tangential directions are
@@ -137,6 +137,7 @@ curvature, Coddington equations); Hecht, *Optics*, 5th ed., §6.3.1.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -193,9 +194,15 @@ def focal_offsets(camera):
 
 
 def thin_lens(camera) -> tuple[float, float, float]:
-    """(D, v, f) in mm: entrance pupil diameter f/N, film distance, focal length."""
-    f = camera.focal_length_mm
-    return f / camera.f_number, camera.image_distance_mm, f
+    """(D, v, f) in mm: entrance pupil diameter f/N (f the lens's EFL), and the film distance v and
+    focal length of the thin lens that images like the camera at its focus depth u (from the
+    pinhole, like the depth pass): v = F, the camera's ``render_focal_length_mm``, and
+    1/f_eq = 1/F + 1/u — so c_0 = D F |1/z − 1/u| is the dof stage's CoC, zero at the same depth
+    for thin and real lenses alike (a thin lens has F = v and f_eq = f exactly)."""
+    big_f = camera.render_focal_length_mm
+    u = camera.focused_depth_m * 1000.0
+    f_eq = big_f if math.isinf(u) else 1.0 / (1.0 / big_f + 1.0 / u)
+    return camera.focal_length_mm / camera.f_number, big_f, f_eq
 
 
 def axes_mm(d_s, d_t, depth_m, aperture, v, f):

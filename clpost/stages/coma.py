@@ -145,7 +145,7 @@ def coma_curve(camera):
         return None
     from ..optics.coma_fit import traced_coma
 
-    r, c = traced_coma(camera.lens, camera.focus_distance_m, camera.lens_curves().f_number)
+    r, c = traced_coma(camera.lens, camera.focus_from_film_m, camera.lens_curves().f_number)
     return lambda x: np.interp(np.abs(np.asarray(x, np.float64)), r, c)
 
 

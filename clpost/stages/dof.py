@@ -231,9 +231,9 @@ def max_coc_px(quality: str) -> float:
 
 def coc_coefficients(camera, width_px: int) -> tuple[float, float]:
     r"""``(k, inv_u)`` with :math:`r_{px} = k\,(1/u - 1/S)` for S and u in metres:
-    :math:`k = \frac{f v}{2 N p}\cdot 10^{-3}` (f, v, p in mm; 1/m → 1/mm)."""
+    :math:`k = \frac{f F}{2 N p}\cdot 10^{-3}` (f, F, p in mm; 1/m → 1/mm; F below :func:`coc_mm`)."""
     f = camera.focal_length_mm
-    v = camera.image_distance_mm
+    v = camera.render_focal_length_mm
     p = camera.pixel_pitch_mm(width_px)
     k = f * v / (2.0 * camera.f_number * p) * 1e-3
     u = camera.focused_depth_m
@@ -241,13 +241,19 @@ def coc_coefficients(camera, width_px: int) -> tuple[float, float]:
 
 
 def coc_mm(camera, depth_m) -> np.ndarray:
-    r"""Signed CoC *diameter* on the film in mm (far > 0): :math:`c = \frac{fv}{N}(1/u - 1/S)`."""
+    r"""Signed CoC *diameter* on the film in mm (far > 0): :math:`c = \frac{fF}{N}(1/u - 1/S)`.
+
+    Depths S and the focus depth u are measured from the pinhole (a real lens's entrance pupil,
+    diameter f/N). The cone from a point at S through the pupil cuts the sharp plane at u in a disc
+    of diameter (f/N)·|u − S|/S, which the lens images at magnification F/u, F the
+    :attr:`~clpost.camera.Camera.render_focal_length_mm` (paraxially exact; thin lens F = v, the
+    classic f v/N (1/u − 1/S))."""
     s = np.asarray(depth_m, dtype=np.float64)
     u = camera.focused_depth_m
     inv_u = 0.0 if math.isinf(u) else 1.0 / (u * 1e3)
     with np.errstate(divide="ignore"):
         inv_s = np.where(np.isinf(s), 0.0, 1.0 / (s * 1e3))
-    return camera.focal_length_mm * camera.image_distance_mm / camera.f_number * (inv_u - inv_s)
+    return camera.focal_length_mm * camera.render_focal_length_mm / camera.f_number * (inv_u - inv_s)
 
 
 def coc_px(camera, depth_m, width_px: int, limit_px: float = math.inf) -> np.ndarray:
