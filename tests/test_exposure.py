@@ -39,8 +39,8 @@ def test_metered_uniform_scene_lands_at_qK_over_78(n, t, s):
 
 
 def test_bellows_factor_costs_two_stops_at_one_to_one():
-    inf = Camera(focus_distance_m=math.inf)
-    macro = Camera(focus_distance_m=0.1)  # u = 2f: magnification 1, v = 2f
+    inf = Camera(focus_distance_m=math.inf, luminance_scale=1.0)
+    macro = Camera(focus_distance_m=0.1, luminance_scale=1.0)  # u = 2f: magnification 1, v = 2f
     assert exposure_gain(macro) / exposure_gain(inf) == pytest.approx(0.25, rel=1e-12)
 
 
@@ -50,7 +50,7 @@ def test_kernel_matches_reference_on_odd_size_random_and_adversarial(rng):
     adversarial = np.array([0.0, 1e-6, 1e-38, 1e-45, 1.0, 1e4, 1e8, 3e38 / 1e7], np.float32)
     c.reshape(-1)[: adversarial.size * 5] = np.tile(adversarial, 5)
     frame = Frame(c, depth=np.full((h, w), np.inf, np.float32))
-    pipe = Pipeline(Camera(f_number=1.4, shutter_s=1 / 30, iso=800))
+    pipe = Pipeline(Camera(f_number=1.4, shutter_s=1 / 30, iso=800, luminance_scale=1.0))
     assert_planned(pipe, frame, "exposure")
     out = pipe.run(frame)
     ref = pipe.reference(frame)
@@ -88,12 +88,12 @@ def _pipe(cam):
 
 def test_changing_exposure_never_rebuilds(rng):
     frame = Frame(rng.random((8, 8, 3)).astype(np.float32))
-    pipe = Pipeline(Camera(f_number=2))
+    pipe = Pipeline(Camera(f_number=2, luminance_scale=1.0))
     pipe.run(frame)
     progs = dict(pipe.runtime._programs)
     buf = pipe._buffers
     for n in (1.4, 4, 11):
-        pipe.camera = Camera(f_number=n)
+        pipe.camera = Camera(f_number=n, luminance_scale=1.0)
         pipe.run(frame)
     assert pipe.runtime._programs.keys() == progs.keys()
     assert pipe._buffers is buf
@@ -110,7 +110,7 @@ def test_skipped_exactly_when_identity():
         np.testing.assert_array_equal(pipe.run(frame).color, frame.color)
     else:  # rounding left the gain a hair off 1: then it must be planned and exact
         assert pipe.plan(frame) == ["exposure"]
-    assert Pipeline(Camera()).plan(frame) == ["exposure"]
+    assert Pipeline(Camera(luminance_scale=1.0)).plan(frame) == ["exposure"]
 
 
 def test_working_f_number_uses_the_pupil_magnification():

@@ -131,7 +131,7 @@ def test_custom_parametric_toml_stock(tmp_path):
     s = load_stock(str(p))
     assert s.iso_speed() == pytest.approx(50, rel=0.01)
     np.testing.assert_allclose(s.d_min(), [0.1, 0.3, 0.5], atol=3e-3)  # stored toe starts 0.1 % of the range up
-    assert Pipeline(Camera(film=str(p))).plan(Frame(np.ones((3, 3, 3), np.float32)))[:2] == ["exposure", "film"]
+    assert Pipeline(Camera(film=str(p), luminance_scale=1.0)).plan(Frame(np.ones((3, 3, 3), np.float32)))[:2] == ["exposure", "film"]
 
 
 def test_camera_iso_is_metering_not_the_film():

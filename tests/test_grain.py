@@ -133,7 +133,7 @@ def test_clamps_to_dmin_and_dmax():
 def test_grain_off_and_plan():
     f = Frame(np.ones((4, 4, 3), np.float32))
     assert "grain" not in Pipeline(Camera(film=STOCK, grain_scale=0)).plan(f)
-    pipe = Pipeline(Camera(film=STOCK))
+    pipe = Pipeline(Camera(film=STOCK, luminance_scale=1.0))
     assert pipe.kernels(f) == ["exposure__film", "grain", "print"]
 
 
