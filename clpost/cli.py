@@ -497,11 +497,29 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings as one line each, ``clpost: warning: …`` — never a source path (``--debug`` keeps
+    Python's own format)."""
+    print(f"clpost: warning: {_one_line(str(message))}", file=file or sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
-    from .atomic import Terminated, signal_cleanup
+    import warnings
 
     parser = build_parser()
     args = parser.parse_args(argv)
+    shown = warnings.showwarning
+    if not args.debug:
+        warnings.showwarning = _show_warning
+    try:
+        return _run(args)
+    finally:
+        warnings.showwarning = shown
+
+
+def _run(args) -> int:
+    from .atomic import Terminated, signal_cleanup
+
     try:
         # SIGTERM removes the temporary file being written and unwinds (releasing the output lock).
         with signal_cleanup():

@@ -272,4 +272,4 @@ def test_two_stages_declaring_one_name_are_refused():
 
 def test_extremes_of_the_declared_ranges_are_valid():
     Camera(transmittance=1.0, aperture_roundness=1.0, spherical_aberration=-1.0, optical_vignetting=1.0,
-           noise_seed=2**32 - 1, readout_time_s=0.0, grain_scale=0.0, focus_distance_m=math.inf)
+           noise_seed=2**32 - 1, readout_time_s=0.0, grain_amount=0.0, focus_distance_m=math.inf)

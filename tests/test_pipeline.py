@@ -224,9 +224,9 @@ def test_gathers_get_planar_buffers_and_aux_uploads(rng, monkeypatch, names, ker
 
 VECTOR_GROUPS = {
     "vignetting+exposure": (dict(f_number=2.0, vignetting="natural"), ["vignetting", "exposure"]),
-    "exposure+film+print": (dict(f_number=2.0, film="fuji-superia-400", grain_scale=0.0),
+    "exposure+film+print": (dict(f_number=2.0, film="fuji-superia-400", grain_amount=0.0),
                             ["exposure", "film", "print"]),
-    "film+linear print": (dict(film="kodak-ektar-100", film_output="linear", grain_scale=0.0), ["film", "print"]),
+    "film+linear print": (dict(film="kodak-ektar-100", film_output="linear", grain_amount=0.0), ["film", "print"]),
     "exposure+sensor": (dict(f_number=2.0, sensor_preset="smartphone", iso=800), ["exposure", "sensor"]),
 }
 # every other pointwise stage of the registry, alone, with the camera its class declares as an
