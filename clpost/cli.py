@@ -148,6 +148,12 @@ def _jobs(args):
         check_input(Path(src))
         jobs = [FrameJob(0, Path(src), Path(dst))]
     check_paths([(j.src, j.dst) for j in jobs], dst)
+    if args.preview is not None:
+        from .batch import preview_path
+
+        if Path(args.preview).exists() and not Path(args.preview).is_dir():
+            raise InputError(f"--preview {args.preview}: is a file; give a directory for the PNG previews")
+        check_paths([(j.src, preview_path(j.dst, Path(args.preview))) for j in jobs], args.preview)
     return jobs
 
 
@@ -158,6 +164,12 @@ def cmd_process(args) -> int:
     if args.stages == [] and not args.explain:
         raise InputError("--stages names no stage, so every output would be its input unchanged; give "
                          "stages (e.g. --stages exposure,dof; --explain lists them) or leave --stages out")
+    from .display_image import output_format
+
+    output_format(args.output)  # an unknown extension is refused before anything is read
+    if args.preview is not None and (args.workers or args.scheduler):
+        raise InputError("--preview is not available with --workers/--scheduler yet; run the previews "
+                         "without them, or write -o out.####.png")
     camera = camera_from_args(args)
     pipe = Pipeline(camera, quality=args.quality, stages=args.stages, device=args.device)
     jobs = _jobs(args)
@@ -197,12 +209,15 @@ def cmd_process(args) -> int:
 
     try:
         # The lock is held for the whole run: each frame's "exists, skip" check is made under it.
-        with writing(args.output, [j.dst for j in jobs]):
+        previews = [] if args.preview is None else [Path(args.preview) / f"{j.dst.stem}.png" for j in jobs]
+        with writing(args.output, [j.dst for j in jobs] + previews):
             if args.workers or args.scheduler:
                 rep = _process_distributed(args, camera, jobs, progress)
             else:
                 rep = process_sequence(pipe, jobs, layout=args.channels, overwrite=args.overwrite,
-                                       half=args.half, compression=args.compression, progress=progress)
+                                       half=args.half, compression=args.compression, progress=progress,
+                                       display=args.display,
+                                       preview_dir=None if args.preview is None else Path(args.preview))
     finally:
         bar.close()
     for frame, err in sorted(rep.failed.items()):
@@ -408,7 +423,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     pr = sub.add_parser("process", help="process an EXR sequence")
     pr.add_argument("input", help="input EXR or pattern (in.####.exr, in.%%04d.exr, in.@@@@.exr)")
-    pr.add_argument("-o", "--output", required=True, help="output EXR or pattern")
+    pr.add_argument("-o", "--output", required=True,
+                    help="output or pattern: .exr (linear, the camera in its header), or a viewable "
+                         ".png/.jpg/.tif (display-encoded for --display, ICC profile embedded)")
+    pr.add_argument("--preview", default=None, metavar="DIR",
+                    help="also write a display-encoded PNG of each frame into DIR (<output stem>.png)")
+    pr.add_argument("--display", default="srgb", choices=["srgb", "rec709", "display-p3"],
+                    help="encoding of .png/.jpg/.tif outputs and previews (default srgb)")
     pr.add_argument("--frames", type=_frames_spec, default=None,
                     help="frame range, e.g. 1-100, 1-100x2, 1,5,9 (default: all found)")
     pr.add_argument("--channels", default=None, help="input channel layout: clpost, blender, nuke, arnold (default: detect)")
