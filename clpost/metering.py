@@ -92,16 +92,19 @@ def exposure_offset_ev(camera, frame) -> float | None:
 
 
 def check_exposure(camera, frame) -> float | None:
-    """Warn (:class:`ExposureWarning`, one line) when a manually exposed frame meters more than
-    :data:`WARN_EV` from mid-grey, naming the flag that fixes it. Returns the offset in EV."""
-    if camera.__dict__.get("metered", False):
-        return None  # the meter chose it
+    """Warn (:class:`ExposureWarning`, one line) when a manually set physical exposure, or a relative
+    one more than :data:`WARN_EV` from its reference, meters more than :data:`WARN_EV` from
+    mid-grey, naming the flag that fixes it; returns the offset in EV. A passthrough plate is the user's own exposure (its average may well sit far from
+    grey: a few bright lamps), and a metered camera is at grey by construction: neither warns."""
+    if camera.__dict__.get("metered", False) or exposure_mode(camera) == "passthrough":
+        return None
     off = exposure_offset_ev(camera, frame)
     if off is None or abs(off) <= WARN_EV:
         return off
     mode = exposure_mode(camera)
-    fix = {"passthrough": f"--ev {-off:+.1f}, or --luminance-scale/--reference-exposure for a physical exposure",
-           "physical": f"--ev {-off:+.1f}, a --luminance-scale {2 ** -off:.3g}× this one, or --shutter auto",
+    if mode == "relative" and abs(math.log2(exposure_gain(camera))) <= WARN_EV:
+        return off  # the plate as made (its own average) or near it: the user's exposure
+    fix = {"physical": f"--ev {-off:+.1f}, a --luminance-scale {2 ** -off:.3g}× this one, or --shutter auto",
            "relative": f"--ev {-off:+.1f}, or --shutter auto"}[mode]
     src = frame.metadata.get("path")
     warnings.warn(f"{src or 'frame'}: metered {abs(off):.1f} EV {'above' if off > 0 else 'below'} mid-grey "

@@ -104,7 +104,10 @@ def test_cli_png_output_and_previews_beside_the_exr(tmp_path, capsys):
 
 def test_cli_warnings_are_one_line(tmp_path, capsys):
     src = _plate(tmp_path, 200.0)
-    assert main(["process", str(src), "-o", str(tmp_path / "o.exr"), "--quiet"]) == 0
+    assert main(["process", str(src), "-o", str(tmp_path / "p.exr"), "--quiet"]) == 0
+    assert not capsys.readouterr().err.strip()  # passthrough: the plate's exposure is the user's
+    assert main(["process", str(src), "-o", str(tmp_path / "o.exr"), "--quiet", "--luminance-scale", "100",
+                 "--shutter", "1/15"]) == 0
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert err and all(ln.startswith("clpost: warning: ") for ln in err), err
     assert "above mid-grey" in err[0] and "--ev -" in err[0] and ".py" not in err[0]

@@ -222,4 +222,5 @@ def test_far_from_mid_grey_warns_in_one_line_naming_the_fix():
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", ExposureWarning)
-        Pipeline(Camera()).run(uniform(0.18))  # a plate at mid-grey: no warning
+        Pipeline(Camera(luminance_scale=1.0, shutter_s=0.02 * 2 ** 7.16)).run(uniform(0.18))  # at grey
+        Pipeline(Camera()).run(uniform(1e5))  # passthrough: the plate's exposure is the user's
