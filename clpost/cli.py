@@ -167,9 +167,6 @@ def cmd_process(args) -> int:
     from .display_image import output_format
 
     output_format(args.output)  # an unknown extension is refused before anything is read
-    if args.preview is not None and (args.workers or args.scheduler):
-        raise InputError("--preview is not available with --workers/--scheduler yet; run the previews "
-                         "without them, or write -o out.####.png")
     camera = camera_from_args(args)
     pipe = Pipeline(camera, quality=args.quality, stages=args.stages, device=args.device)
     jobs = _jobs(args)
@@ -238,7 +235,8 @@ def cmd_process(args) -> int:
 def _process_distributed(args, camera, jobs, progress):
     from .distributed import PipelineSpec, connect, first_size, process_sequence_dask
 
-    spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device)
+    spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device,
+                        args.display, args.preview)
     client = connect(args.scheduler, args.workers)
     try:
         return process_sequence_dask(client, spec, jobs, layout=args.channels, overwrite=args.overwrite,

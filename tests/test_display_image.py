@@ -111,3 +111,13 @@ def test_cli_warnings_are_one_line(tmp_path, capsys):
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert err and all(ln.startswith("clpost: warning: ") for ln in err), err
     assert "above mid-grey" in err[0] and "--ev -" in err[0] and ".py" not in err[0]
+
+
+@pytest.mark.slow
+def test_cli_previews_on_a_local_dask_cluster(tmp_path):
+    from PIL import Image
+
+    src = _plate(tmp_path)
+    assert main(["process", str(src), "-o", str(tmp_path / "cam.exr"), "--preview", str(tmp_path / "pv"),
+                 "--workers", "1", "--quiet"]) == 0
+    assert Image.open(tmp_path / "pv" / "cam.png").getpixel((0, 0)) == (118, 118, 118)
