@@ -145,13 +145,9 @@ def _umask() -> int:
 
 def write_png(path: str | os.PathLike, signal, *, display: str = "srgb",
               working_space: str = "rec709") -> None:
-    """Display-encode a linear (H, W, 3) image (1.0 = white) and write an 8-bit PNG, atomically:
-    ``working_space`` primaries → the ``display``'s (``colorspace.DISPLAYS``: srgb, rec709,
-    display-p3), clipped, encoded, quantised."""
-    from PIL import Image
+    """Display-encode a linear (H, W, 3) image (1.0 = white) and write an 8-bit PNG, atomically,
+    with the display's ICC profile: :func:`clpost.display_image.write_image` (whatever the name's
+    extension, the file is a PNG)."""
+    from .display_image import write_image
 
-    from .colorspace import display_encode
-
-    img = display_encode(signal, working_space, display, 8)
-    with atomic_path(path) as tmp:
-        Image.fromarray(img, mode="RGB").save(tmp, format="PNG")
+    write_image(path, signal, display=display, working_space=working_space, fmt="PNG")

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from . import exr
+from .display_image import output_format, write_image
 from .errors import InputError
 from .frame import Frame
 from .pipeline import Pipeline
@@ -64,8 +65,10 @@ def read_input(pipeline: Pipeline, path: Path, layout: str | None = None) -> Fra
 
 def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
                 half: bool = False, expect_size: tuple[int, int] | None = None,
-                compression: str = "zip") -> Frame:
-    """Read, process and write one frame; returns the processed frame."""
+                compression: str = "zip", display: str = "srgb", preview_dir: Path | None = None) -> Frame:
+    """Read, process and write one frame; returns the processed frame. An output named .png, .jpg
+    or .tif is written display-encoded for ``display`` (:mod:`clpost.display_image`), an .exr
+    linear with the camera in its header; ``preview_dir`` also gets ``<output stem>.png``."""
     frame = read_input(pipeline, job.src, layout)
     if expect_size is not None and frame.size != expect_size:
         raise InputError(
@@ -75,8 +78,20 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
     # The frame number seeds grain/sensor noise (CONVENTIONS "Randomness"): frames differ, reruns agree.
     frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(job.frame)), validate=False)
     out = pipeline.run(frame)
-    exr.write_frame(job.dst, out, header=output_header(out), half=half, compression=compression)
+    ws = pipeline.camera.working_space
+    if output_format(job.dst) == "EXR":
+        exr.write_frame(job.dst, out, header=output_header(out), half=half, compression=compression)
+    else:
+        write_image(job.dst, out.color, display=display, working_space=ws)
+    if preview_dir is not None:
+        write_image(preview_path(job.dst, preview_dir), out.color, display=display, working_space=ws,
+                    option="--preview")
     return out
+
+
+def preview_path(dst: Path, preview_dir: Path) -> Path:
+    """The preview of output ``dst``: ``<preview_dir>/<dst stem>.png``."""
+    return Path(preview_dir) / f"{Path(dst).stem}.png"
 
 
 def pending(jobs: list[FrameJob], overwrite: bool, report: BatchReport,
@@ -97,13 +112,14 @@ def pending(jobs: list[FrameJob], overwrite: bool, report: BatchReport,
 
 def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | None = None,
                      overwrite: bool = False, half: bool = False, compression: str = "zip",
-                     progress: Callable[[FrameJob, float | None], None] | None = None) -> BatchReport:
+                     progress: Callable[[FrameJob, float | None], None] | None = None,
+                     display: str = "srgb", preview_dir: Path | None = None) -> BatchReport:
     """Process ``jobs`` in order; ``progress(job, seconds or None if skipped)`` after each."""
     report = BatchReport()
     size = None
     for job in pending(jobs, overwrite, report, progress):
         t0 = time.perf_counter()
-        out = process_one(pipeline, job, layout, half, size, compression)
+        out = process_one(pipeline, job, layout, half, size, compression, display, preview_dir)
         size = out.size
         dt = time.perf_counter() - t0
         report.done.append(job.frame)

@@ -136,6 +136,9 @@ def depth_for_focus_scale(camera, scale_m: Any) -> float:
                          f"focus (film to object >= 4f = {4 * f:g} m); use >= {4 * f:g}")
     return 0.5 * (L + math.sqrt(L * L - 4 * L * f))
 
+DEFAULT_ISO = 100.0
+"""ISO of a camera without film (with ``film``: the stock's box speed) when none is given."""
+
 
 @dataclass(frozen=True)
 class CoreParams:
@@ -169,10 +172,12 @@ class CoreParams:
         show=show_auto, scalar=True, cli_default="1/50",
         check=positive("seconds", "e.g. 0.02 for 1/50 s", optional=True),
         help="shutter time in seconds (1/50 works), or 'auto' (aperture priority)")
-    iso: float = param(100.0, unit="ISO 12232 speed S", flag="--iso", parse=parse_fraction, header="clpost.iso",
-                       scalar=True, help="ISO 12232 saturation-based speed",
-                       check=positive("ISO 12232 speed S", "e.g. 100",
-                                      message="Camera.{name}={value!r} must be > 0, e.g. 100"))
+    iso: float | None = param(None, unit="ISO 12232 speed S", flag="--iso", parse=parse_fraction, header="clpost.iso",
+                              scalar=True, cli_default="100", show=lambda v: "box speed" if v is None else f"{v:g}",
+                              help="ISO 12232 saturation-based speed; with --film, the stock's box speed "
+                                   "unless given",
+                              check=positive("ISO 12232 speed S", "e.g. 100", optional=True,
+                                             message="Camera.{name}={value!r} must be > 0, e.g. 100"))
     transmittance: float = param(0.9, unit="fraction", flag="--transmittance", parse=parse_fraction,
                                  header="clpost.transmittance", scalar=True,
                                  check=in_range(0.0, 1.0, "fraction", "0.9", lo_open=True),
@@ -180,10 +185,11 @@ class CoreParams:
     sensor_mm: tuple[float, float] = param((36.0, 24.0), unit="mm", flag="--sensor", parse=parse_wxh_mm,
                                            header="clpost.sensor_mm", check=_check_sensor, scalar=False,
                                            help="sensor WxH in mm (e.g. 36x24)")
-    luminance_scale: float = param(
-        1.0, unit="cd/m² per unit Y", flag="--luminance-scale", parse=parse_fraction,
-        header="clpost.luminanceScale", scalar=True, help="cd/m² of input luminance Y = 1",
-        check=positive("cd/m² per unit Y", "e.g. 100",
+    luminance_scale: float | None = param(
+        None, unit="cd/m² per unit Y", flag="--luminance-scale", parse=parse_fraction,
+        header="clpost.luminanceScale", scalar=True, cli_default="none: passthrough, gain 1",
+        help="cd/m² of input luminance Y = 1: exposes physically from f-number, shutter, ISO and T",
+        check=positive("cd/m² per unit Y", "e.g. 100", optional=True,
                        message="Camera.{name}={value!r} must be > 0 cd/m² per unit Y"))
     working_space: str = param("rec709", unit="RGB space", flag="--working-space", header="clpost.workingSpace",
                                check=one_of("rec709", "acescg"), scalar=False,
@@ -203,6 +209,14 @@ class CoreParams:
         scale = inputs.get("focus_scale_m")
         if scale is not None:  # the lens-scale distance names a focus depth (one internal state)
             object.__setattr__(camera, "focus_distance_m", depth_for_focus_scale(camera, scale))
+        if camera.iso is None:  # a film is rated at its box speed unless an ISO is given
+            film = getattr(camera, "film", None)
+            if film:
+                from .film_stock import load_stock
+
+                object.__setattr__(camera, "iso", float(load_stock(film).iso))
+            else:
+                object.__setattr__(camera, "iso", DEFAULT_ISO)
         if camera.f_number is None and camera.shutter_s is None:
             raise InputError(
                 "Camera: f_number and shutter_s are both unset; give one (--f-number or --shutter) "
@@ -354,8 +368,12 @@ class _CameraBase:
         return width_px, max(h, 2)
 
     def with_(self, **changes: Any) -> "Camera":
-        """A copy with some fields changed (validated again)."""
-        return replace(self, **changes)
+        """A copy with some fields changed (validated again). A camera set by the meter
+        (:func:`clpost.metering.resolve`) stays marked as such unless f-number or shutter change."""
+        cam = replace(self, **changes)
+        if self.__dict__.get("metered") and not {"f_number", "shutter_s"} & changes.keys():
+            object.__setattr__(cam, "metered", True)
+        return cam
 
     def describe(self) -> dict[str, str]:
         """The parameters as strings (written into output EXR headers), from each parameter's

@@ -156,6 +156,12 @@ def _jobs(args):
         check_input(Path(src))
         jobs = [FrameJob(0, Path(src), Path(dst))]
     check_paths([(j.src, j.dst) for j in jobs], dst)
+    if args.preview is not None:
+        from .batch import preview_path
+
+        if Path(args.preview).exists() and not Path(args.preview).is_dir():
+            raise InputError(f"--preview {args.preview}: is a file; give a directory for the PNG previews")
+        check_paths([(j.src, preview_path(j.dst, Path(args.preview))) for j in jobs], args.preview)
     return jobs
 
 
@@ -166,6 +172,9 @@ def cmd_process(args) -> int:
     if args.stages == [] and not args.explain:
         raise InputError("--stages names no stage, so every output would be its input unchanged; give "
                          "stages (e.g. --stages exposure,dof; --explain lists them) or leave --stages out")
+    from .display_image import output_format
+
+    output_format(args.output)  # an unknown extension is refused before anything is read
     camera = camera_from_args(args)
     pipe = Pipeline(camera, quality=args.quality, stages=args.stages, device=args.device)
     jobs = _jobs(args)
@@ -206,12 +215,15 @@ def cmd_process(args) -> int:
 
     try:
         # The lock is held for the whole run: each frame's "exists, skip" check is made under it.
-        with writing(args.output, [j.dst for j in jobs]):
+        previews = [] if args.preview is None else [Path(args.preview) / f"{j.dst.stem}.png" for j in jobs]
+        with writing(args.output, [j.dst for j in jobs] + previews):
             if args.workers or args.scheduler:
                 rep = _process_distributed(args, camera, jobs, progress)
             else:
                 rep = process_sequence(pipe, jobs, layout=args.channels, overwrite=args.overwrite,
-                                       half=args.half, compression=args.compression, progress=progress)
+                                       half=args.half, compression=args.compression, progress=progress,
+                                       display=args.display,
+                                       preview_dir=None if args.preview is None else Path(args.preview))
     finally:
         bar.close()
     for frame, err in sorted(rep.failed.items()):
@@ -232,7 +244,8 @@ def cmd_process(args) -> int:
 def _process_distributed(args, camera, jobs, progress):
     from .distributed import PipelineSpec, connect, first_size, process_sequence_dask
 
-    spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device)
+    spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device,
+                        args.display, args.preview)
     client = connect(args.scheduler, args.workers)
     try:
         return process_sequence_dask(client, spec, jobs, layout=args.channels, overwrite=args.overwrite,
@@ -513,7 +526,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     pr = sub.add_parser("process", help="process an EXR sequence")
     pr.add_argument("input", help="input EXR or pattern (in.####.exr, in.%%04d.exr, in.@@@@.exr)")
-    pr.add_argument("-o", "--output", required=True, help="output EXR or pattern")
+    pr.add_argument("-o", "--output", required=True,
+                    help="output or pattern: .exr (linear, the camera in its header), or a viewable "
+                         ".png/.jpg/.tif (display-encoded for --display, ICC profile embedded)")
+    pr.add_argument("--preview", default=None, metavar="DIR",
+                    help="also write a display-encoded PNG of each frame into DIR (<output stem>.png)")
+    pr.add_argument("--display", default="srgb", choices=["srgb", "rec709", "display-p3"],
+                    help="encoding of .png/.jpg/.tif outputs and previews (default srgb)")
     pr.add_argument("--frames", type=_frames_spec, default=None,
                     help="frame range, e.g. 1-100, 1-100x2, 1,5,9 (default: all found)")
     pr.add_argument("--channels", default=None, help="input channel layout: clpost, blender, nuke, arnold (default: detect)")
@@ -630,11 +649,29 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings as one line each, ``clpost: warning: …`` — never a source path (``--debug`` keeps
+    Python's own format)."""
+    print(f"clpost: warning: {_one_line(str(message))}", file=file or sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
-    from .atomic import Terminated, signal_cleanup
+    import warnings
 
     parser = build_parser()
     args = parser.parse_args(argv)
+    shown = warnings.showwarning
+    if not args.debug:
+        warnings.showwarning = _show_warning
+    try:
+        return _run(args)
+    finally:
+        warnings.showwarning = shown
+
+
+def _run(args) -> int:
+    from .atomic import Terminated, signal_cleanup
+
     try:
         # SIGTERM removes the temporary file being written and unwinds (releasing the output lock).
         with signal_cleanup():

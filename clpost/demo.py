@@ -9,7 +9,9 @@ Layout of the output directory::
     preview/clpost.####.png   sRGB previews of the output
 
 The demo camera meters the scene (aperture priority at f/2 unless --shutter is given) so the image
-is exposed as a camera would expose it. The scene's sunlit diffuse white (Y ≈ 1) is taken as
+is exposed as a camera would expose it. Its defaults (:data:`DEMO_CAMERA_DEFAULTS`) differ from
+``clpost process``'s (a passthrough thin lens): ``--help`` shows them and the demo prints them as
+``process`` flags (:func:`process_flags`). The scene's sunlit diffuse white (Y ≈ 1) is taken as
 1000 cd/m² (``luminance_scale``), white paper outdoors on an overcast day. Its small lamps
 (0.2 % of the pixels at 250–1000× diffuse white) pull an averaging meter down by about 1.4 stops,
 so the demo dials in +1 EV as a photographer would; the meter then picks about 1/1250 s at f/2,
@@ -41,6 +43,21 @@ IBL_DEMO_PUPIL = dict(pupil_n=6, pupil_pattern="spiral", max_depth=1)
 IBL_CONTAINS = ("dof", "distortion", "vignetting", "astigmatism", "coma")
 
 
+def process_flags(camera: Camera) -> str:
+    """The ``clpost process`` options that give ``camera`` (every value that differs from
+    ``clpost.Camera``'s default), so a demo camera is reproducible on any plate."""
+    plain = Camera()
+    out = []
+    for s in Camera.param_specs():
+        if s.meta.flag is None or s.meta.input_only:
+            continue
+        value = getattr(camera, s.name)
+        if value != getattr(plain, s.name):
+            shown = s.help_default(value)
+            out.append(f"{s.meta.flag} {'+' if s.name == 'exposure_compensation_ev' and value > 0 else ''}{shown}")
+    return " ".join(out) or "(none: clpost.Camera's defaults)"
+
+
 def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int] | None = None,
              n_frames: int = 3, quality: str = "final", stages: list[str] | None = None,
              device: str | None = None, camera_motion: bool = True, overwrite: bool = False,
@@ -55,6 +72,7 @@ def run_demo(outdir: Path, camera: Camera | None = None, *, size: tuple[int, int
     from .render import render_demo_sequence
 
     camera = camera or Camera(**DEMO_CAMERA_DEFAULTS)
+    log(f"camera, as `clpost process` flags (the demo's defaults differ from process's): {process_flags(camera)}")
     size = size or camera.default_resolution(DEMO_WIDTH)
     outdir = Path(outdir)
     out_paths = [outdir / f"clpost.{i:04d}.exr" for i in range(1, n_frames + 1)]

@@ -25,7 +25,7 @@ D_min + 0.10 at :math:`H_m = 0.8/S` lux·s) falls on the stock's box speed S.
 
 Film speed and the camera's ISO: the exposure stage's signal is :math:`H \cdot S_{cam}/78`, so the
 film stage recovers the physical exposure :math:`H = \text{signal}\cdot 78/S_{cam}` in lux·s and
-looks it up on the datasheet axis. Setting ``Camera.iso`` to the stock's box speed meters the
+looks it up on the datasheet axis. ``Camera.iso`` defaults to the stock's box speed, which meters the
 film as its maker rates it; another ISO is over-/under-exposure by
 :math:`\log_2(S_{box}/S_{cam})` stops (a push/pull without the development change).
 """

@@ -6,7 +6,7 @@ the top; pixel centre of column i, row j at (x, y) = (i, j).
 ============  ==========  ====================================================================
 buffer        shape       unit / meaning
 ============  ==========  ====================================================================
-``color``     H×W×3       scene-referred linear RGB; Y = 1 is ``Camera.luminance_scale`` cd/m²
+``color``     H×W×3       scene-referred linear RGB; Y = 1 is ``Camera.luminance_scale`` cd/m² (else: the signal)
 ``depth``     H×W         planar camera-space Z in metres, > 0, ``+inf`` for sky (optional)
 ``velocity``  H×W×2       forward screen-space motion, px per frame, +x right, +y down (optional)
 ``alpha``     H×W         coverage in [0, 1]; 0 marks "no data" (optional)

@@ -101,6 +101,7 @@ class Pipeline:
         self._plans: dict[tuple, Plan] = {}
         self._buffers: Buffers | None = None
         self.last_plan: Plan | None = None
+        self._exposure_checked = False
 
 
     # -- planning -----------------------------------------------------------------------------
@@ -197,6 +198,10 @@ class Pipeline:
         frame = self._plate(frame)
         cam = self.camera_for(frame) if isinstance(frame, Frame) else None
         plan = self.plan_for(frame, cam)
+        if cam is not None and not self._exposure_checked and (self._selected is None or "exposure" in self._selected):
+            # once per pipeline (a sequence): a manual exposure far from mid-grey is one warning line
+            self._exposure_checked = True
+            metering.check_exposure(cam, frame)
         self.last_plan = plan
         return plan.run(frame, cam)
 

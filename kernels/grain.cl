@@ -14,7 +14,8 @@ inline float grain_to_density(const float t, const float dmin, const float dmax)
 inline void grain_gaussian(__global const float *restrict src, __global float *restrict dst,
                              const int width, const int height, __global const float *params,
                              __global const float *sigma_lut, const float lut_scale,
-                             const float a, const float b, const uint seed, const uint frame) {
+                             const float a, const float b, const float amount, const uint seed,
+                             const uint frame) {
     const int x = get_global_id(0);
     const int y = get_global_id(1);
     if (x >= width || y >= height) return;
@@ -42,7 +43,7 @@ inline void grain_gaussian(__global const float *restrict src, __global float *r
             }
         }
 #endif
-        dst[c * n + i] = grain_to_density(clp_exp2(-3.32192809f * d_img) + sigma * g, dmin, dmax);  /* 10^-d */
+        dst[c * n + i] = grain_to_density(clp_exp2(-3.32192809f * d_img) + amount * sigma * g, dmin, dmax);  /* 10^-d */
     }
 }
 
@@ -50,7 +51,7 @@ inline void grain_gaussian(__global const float *restrict src, __global float *r
  * each cell's grains a pure function of (seed, frame, cell, layer); GRAIN_NS^2 jittered samples. */
 inline void grain_boolean(__global const float *restrict src, __global float *restrict dst,
                             const int width, const int height, __global const float *params,
-                            const float r, const uint seed, const uint frame) {
+                            const float r, const float amount, const uint seed, const uint frame) {
     const int x = get_global_id(0);
     const int y = get_global_id(1);
     if (x >= width || y >= height) return;
@@ -90,7 +91,9 @@ inline void grain_boolean(__global const float *restrict src, __global float *re
             }
         }
         const float clear = (float)(NS2 - (int)popcount(covered)) / (float)NS2;
-        dst[c * n + i] = grain_to_density(clear, dmin, dmax);
+        /* amount scales the deviation from the pixel's mean clear fraction 10^-D_img (1 = the model) */
+        const float mean = clp_exp2(-3.32192809f * fmax(src[c * n + i] - dmin, 0.0f));
+        dst[c * n + i] = grain_to_density(mean + amount * (clear - mean), dmin, dmax);
     }
 }
 
@@ -98,12 +101,12 @@ inline void grain_boolean(__global const float *restrict src, __global float *re
 __kernel void grain(__global const float *restrict src, __global float *restrict dst,
                     const int width, const int height, __global const float *params,
                     __global const float *sigma_lut, const float lut_scale, const float a,
-                    const float b, const float r, const uint seed, const uint frame) {
+                    const float b, const float r, const float amount, const uint seed, const uint frame) {
 #if GRAIN_BOOLEAN
     (void)sigma_lut; (void)lut_scale; (void)a; (void)b;
-    grain_boolean(src, dst, width, height, params, r, seed, frame);
+    grain_boolean(src, dst, width, height, params, r, amount, seed, frame);
 #else
     (void)r;
-    grain_gaussian(src, dst, width, height, params, sigma_lut, lut_scale, a, b, seed, frame);
+    grain_gaussian(src, dst, width, height, params, sigma_lut, lut_scale, a, b, amount, seed, frame);
 #endif
 }

@@ -330,7 +330,7 @@ def test_reach_test_is_skipped_only_where_every_reach_weight_is_one(rng):
 def test_dof_and_astigmatism_share_the_sharp_plane_of_a_traced_lens():
     from clpost.stages.dof import coc_mm
 
-    cam = Camera(lens=FLAGSHIP, focus_distance_m=0.6)  # the depth that is sharp (issue 18)
+    cam = Camera(lens=FLAGSHIP, focus_distance_m=0.6)  # the depth that is sharp
     u = cam.focused_depth_m
     assert u == 0.6 and cam.focus_from_film_m > 0.6  # the lens-scale distance adds pupil → film
     d, v, f = ast.thin_lens(cam)

@@ -12,7 +12,7 @@ from clpost.pipeline import Pipeline
 
 
 def test_launch_bytes_counts_each_buffer_once():
-    cam = Camera(vignetting="natural")
+    cam = Camera(vignetting="natural", luminance_scale=1.0)
     f = bench.synthetic_frame(37, 23, velocity_px=4.0)
     pipe = Pipeline(cam)
     (L,) = bench.launches(pipe, f, pipe.camera_for(f))
@@ -42,7 +42,7 @@ def test_distortion_taps_per_quality():
 
 def test_scene_reports_missing_stages_and_fields():
     sc = bench.Scene("t", "test", wants=("exposure", "no_such_stage"),
-                     camera_fields=dict(f_number=4.0, no_such_field=1))
+                     camera_fields=dict(f_number=4.0, luminance_scale=1.0, no_such_field=1))
     row = bench.bench_case(sc, 32, 16, repeats=1, warmup=0)
     assert row["not_available"]["no_such_stage"] == "stage not in this build"
     assert "Camera.no_such_field" in row["not_available"]

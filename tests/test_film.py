@@ -78,7 +78,7 @@ def test_lut_matches_pchip_everywhere():
 
 def _film_cam(stock="kodak-ektar-100", **kw):
     return Camera(f_number=2.8, shutter_s=1 / 125, iso=100, luminance_scale=1.0, film=stock,
-                  film_output="negative", grain_scale=0.0, **kw)
+                  film_output="negative", grain_amount=0.0, **kw)
 
 
 @pytest.mark.parametrize("stock", ["kodak-gold-200", "neutral-100"])
@@ -103,7 +103,7 @@ def test_luminance_extremes_clamp_to_dmin_dmax_without_nan():
     lum = np.array([0.0, 1e-6, 1e-3, 1.0, 1e3, 1e6, 1e8], np.float32)
     frame = Frame(np.repeat(lum[None, :, None], 3, axis=2))
     for out_mode in ("negative", "print", "linear"):
-        cam = _film_cam("fuji-superia-400").with_(film_output=out_mode, grain_scale=1.0)
+        cam = _film_cam("fuji-superia-400").with_(film_output=out_mode, grain_size=1.0)
         out = Pipeline(cam).run(frame).color[0]
         assert np.isfinite(out).all(), out_mode
         if out_mode == "negative":
@@ -131,7 +131,7 @@ def test_custom_parametric_toml_stock(tmp_path):
     s = load_stock(str(p))
     assert s.iso_speed() == pytest.approx(50, rel=0.01)
     np.testing.assert_allclose(s.d_min(), [0.1, 0.3, 0.5], atol=3e-3)  # stored toe starts 0.1 % of the range up
-    assert Pipeline(Camera(film=str(p))).plan(Frame(np.ones((3, 3, 3), np.float32)))[:2] == ["exposure", "film"]
+    assert Pipeline(Camera(film=str(p), luminance_scale=1.0)).plan(Frame(np.ones((3, 3, 3), np.float32)))[:2] == ["exposure", "film"]
 
 
 def test_camera_iso_is_metering_not_the_film():

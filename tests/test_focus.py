@@ -1,4 +1,4 @@
-"""Focus is where the depth pass says (issue 18): ``focus_distance_m`` / ``--focus`` is the planar
+"""Focus is where the depth pass says: ``focus_distance_m`` / ``--focus`` is the planar
 depth that is sharp, measured from the render's pinhole (a real lens's entrance pupil), for thin
 and traced lenses alike; ``focus_scale_m`` / ``--focus-scale`` is the lens-scale distance from the
 film; the focused camera's focal length (breathing) matches traced chief rays.

@@ -132,8 +132,8 @@ def test_clamps_to_dmin_and_dmax():
 
 def test_grain_off_and_plan():
     f = Frame(np.ones((4, 4, 3), np.float32))
-    assert "grain" not in Pipeline(Camera(film=STOCK, grain_scale=0)).plan(f)
-    pipe = Pipeline(Camera(film=STOCK))
+    assert "grain" not in Pipeline(Camera(film=STOCK, grain_amount=0)).plan(f)
+    pipe = Pipeline(Camera(film=STOCK, luminance_scale=1.0))
     assert pipe.kernels(f) == ["exposure__film", "grain", "print"]
 
 
@@ -157,3 +157,43 @@ def test_stages_after_a_resampling_stage_run_at_its_size():
     ref = pipe.reference(frame)
     assert ref.shape == out.color.shape
     np.testing.assert_allclose(out.color, ref, rtol=2e-3, atol=2e-3)
+
+
+# -- size and amount are separate controls ---------------------------------------------
+
+@pytest.mark.parametrize("quality, r_px", [("draft", 0.6), ("final", 0.6)])
+def test_amount_scales_only_the_strength(quality, r_px):
+    frame = density_frame([0.8, 0.8, 0.8], 48, 64)
+    _, base = run_grain(cam_for_radius(r_px, 64), frame, quality)
+    _, half = run_grain(cam_for_radius(r_px, 64, grain_amount=0.5), frame, quality)
+    # the same grains (same hash): each pixel's clear fraction deviates from its mean 10^-D half as
+    # much (variance ¼, the same grains so the same size and correlation)
+    t = lambda d: 10.0 ** -(d.astype(np.float64) - load_stock(STOCK).d_min())  # noqa: E731
+    mean = 10.0 ** -0.8
+    s = load_stock(STOCK)
+    unclamped = t(base) > 1.01 * 10.0 ** -(s.d_max() - s.d_min())  # an all-covered pixel is held at D_max
+    assert unclamped.mean() > 0.6
+    np.testing.assert_allclose(t(half)[unclamped], (mean + 0.5 * (t(base) - mean))[unclamped], atol=5e-5)
+    # size moves the grain radius (the correlation length), amount does not
+    assert grain_radius_px(cam_for_radius(r_px, 64, grain_amount=3.0), 64) == pytest.approx(r_px)
+    assert grain_radius_px(cam_for_radius(r_px, 64, grain_size=2.0), 64) == pytest.approx(2 * r_px)
+
+
+def test_amount_zero_is_no_grain_and_size_must_be_positive():
+    from clpost import InputError
+
+    f = Frame(np.ones((4, 4, 3), np.float32))
+    assert "grain" not in Pipeline(Camera(film=STOCK, grain_amount=0.0)).plan(f)
+    with pytest.raises(InputError, match="grain_size"):
+        Camera(film=STOCK, grain_size=0.0)
+
+
+def test_grain_amount_kernel_matches_reference(rng):
+    d = load_stock(STOCK).d_min() + rng.uniform(0, 2.0, (23, 37, 3))
+    frame = Frame(d.astype(np.float32))
+    for quality, r_px in (("draft", 0.7), ("final", 0.7)):
+        cam = cam_for_radius(r_px, 37, grain_amount=4.0)
+        pipe, out = run_grain(cam, frame, quality)
+        ref = pipe.reference(frame)
+        err = np.abs(out - ref)
+        assert np.quantile(err, 0.999) < 2e-3 and err.mean() < 2e-4, (quality, err.max())

@@ -7,7 +7,7 @@ import pytest
 
 from clpost import Camera, Frame, InputError, Pipeline
 from clpost.metering import metered_luminance, metering_weights, resolve
-from clpost.photometry import K_REFLECTED
+from clpost.photometry import K_REFLECTED, METER_TRANSMITTANCE
 
 
 def scene(h=40, w=60, value=1.0, centre=None):
@@ -37,8 +37,10 @@ def test_aperture_priority_lands_a_uniform_scene_at_qK_over_78(focus):
                  luminance_scale=37.0, focus_distance_m=focus)
     frame = scene(value=1.0)
     out = Pipeline(cam).run(frame)
-    # TTL metering compensates the bellows factor, so the result is focus-independent.
-    np.testing.assert_allclose(out.color, math.pi * 0.83 / 4 * K_REFLECTED / 78, rtol=1e-6)
+    # TTL metering compensates the bellows factor, so the result is focus-independent — and the
+    # transmittance (it sees through the glass; calibrated for T_m = 0.9), so q = π T_m / 4
+    # whatever the lens's T (a meter blind to T would leave a dark lens underexposed).
+    np.testing.assert_allclose(out.color, math.pi * METER_TRANSMITTANCE / 4 * K_REFLECTED / 78, rtol=1e-6)
 
 
 def test_shutter_priority_solves_for_the_f_number():
@@ -59,8 +61,8 @@ def test_exposure_compensation_doubles_per_ev():
 
 def test_spot_meter_reads_the_centre_only():
     f = scene(value=1.0, centre=1000.0)
-    avg = metered_luminance(Camera(shutter_s=None, metering="average"), f)
-    spot = metered_luminance(Camera(shutter_s=None, metering="spot"), f)
+    avg = metered_luminance(Camera(shutter_s=None, metering="average", luminance_scale=1.0), f)
+    spot = metered_luminance(Camera(shutter_s=None, metering="spot", luminance_scale=1.0), f)
     assert spot == pytest.approx(1000.0, rel=1e-12)
     assert avg == pytest.approx((144 * 1000.0 + (2400 - 144)) / 2400, rel=1e-6)
 
@@ -74,7 +76,7 @@ def test_out_of_range_is_clamped_with_a_warning():
 
 def test_black_frame_cannot_be_metered():
     with pytest.raises(InputError, match="black"):
-        resolve(Camera(shutter_s=None), scene(value=0.0))
+        resolve(Camera(shutter_s=None, luminance_scale=1.0), scene(value=0.0))
 
 
 def test_manual_camera_is_untouched():

@@ -259,7 +259,7 @@ def test_curves_are_cached_and_exposed_on_the_camera():
     cam = Camera(lens=FLAGSHIP, f_number=2.8, focus_distance_m=3.0)
     assert cam.lens_curves() is cam.lens_curves()
     c = cam.lens_curves()
-    assert c.f_number == 2.8 and c.focus_distance_m == cam.focus_from_film_m  # curves: lens scale (issue 18)
+    assert c.f_number == 2.8 and c.focus_distance_m == cam.focus_from_film_m  # curves: lens scale
     assert c.at("relative_illumination", 0.0) == pytest.approx(1.0)
     assert c.pupil_masks.shape[0] == c.pupil_field_mm.size
     frac = c.pupil_area_fraction()

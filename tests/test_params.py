@@ -25,6 +25,7 @@ STORED = [s for s in SPECS if not s.meta.input_only]
 EXAMPLES = {
     "field_curvature_mm": 0.1, "astigmatism_mm": 0.1, "coma_mm": 0.05, "lateral_color_mm": 0.01,
     "vignetting": "natural", "plate_fov": "infinity",
+    "luminance_scale": 100.0,  # None (passthrough) by default
     "distortion": OpenCVModel(width=640, height=480, fx=500.0, fy=500.0, cx=319.5, cy=239.5, k1=-0.1),
 }
 BAD = ("not-a-value", float("nan"), -1e9, object())
@@ -79,7 +80,8 @@ def test_every_declared_field_is_a_camera_field_with_its_default():
     assert names == [s.name for s in STORED]
     cam = Camera()
     for s in STORED:
-        assert getattr(cam, s.name) == s.default, s.name
+        # iso: None means "the film's box speed, else 100" and validation sets it
+        assert getattr(cam, s.name) == (100.0 if s.name == "iso" else s.default), s.name
         assert Camera(**{s.name: s.default}) == cam, s.name  # keyword construction
 
 
@@ -270,4 +272,4 @@ def test_two_stages_declaring_one_name_are_refused():
 
 def test_extremes_of_the_declared_ranges_are_valid():
     Camera(transmittance=1.0, aperture_roundness=1.0, spherical_aberration=-1.0, optical_vignetting=1.0,
-           noise_seed=2**32 - 1, readout_time_s=0.0, grain_scale=0.0, focus_distance_m=math.inf)
+           noise_seed=2**32 - 1, readout_time_s=0.0, grain_amount=0.0, focus_distance_m=math.inf)

@@ -34,17 +34,17 @@ def test_stage_names_match_kernel_files_functions_and_tests():
 
 def test_unknown_stage_and_quality_are_refused():
     with pytest.raises(InputError, match="unknown stage.*bokeh.*known: .*exposure"):
-        Pipeline(Camera(), stages=["bokeh"])
+        Pipeline(Camera(luminance_scale=1.0), stages=["bokeh"])
     with pytest.raises(InputError, match="quality 'ultra'"):
-        Pipeline(Camera(), quality="ultra")
+        Pipeline(Camera(luminance_scale=1.0), quality="ultra")
 
 
 def test_explain_lists_every_stage_with_a_reason(rng):
     frame = odd_frame(rng)
-    lines = Pipeline(Camera(), stages=[]).explain(frame)
+    lines = Pipeline(Camera(luminance_scale=1.0), stages=[]).explain(frame)
     assert [e.stage for e in lines] == list(registry())
     assert all(not e.planned and "--stages" in e.reason for e in lines)
-    assert Pipeline(Camera(), stages=[]).run(frame).color is frame.color
+    assert Pipeline(Camera(luminance_scale=1.0), stages=[]).run(frame).color is frame.color
 
 
 class Tint(PointwiseStage):
@@ -77,21 +77,21 @@ def test_consecutive_pointwise_stages_fuse_into_one_kernel(rng, monkeypatch):
     reg = {"exposure": Exposure, "tint": Tint}
     monkeypatch.setattr(pipeline_mod, "registry", lambda: reg)
     frame = odd_frame(rng)
-    pipe = Pipeline(Camera())
+    pipe = Pipeline(Camera(luminance_scale=1.0))
     assert pipe.plan(frame) == ["exposure", "tint"]
     assert pipe.kernels(frame) == ["exposure__tint"]
     out = pipe.run(frame)
     assert set(pipe.last_timings) == {"upload", "exposure__tint", "download"}
     np.testing.assert_allclose(out.color, pipe.reference(frame), rtol=1e-6, atol=1e-6)
     # restricting to one stage gives that stage alone
-    only = Pipeline(Camera(), stages=["tint"])
+    only = Pipeline(Camera(luminance_scale=1.0), stages=["tint"])
     assert_planned(only, frame, "tint")
     np.testing.assert_allclose(only.run(frame).color, Tint().reference(None, frame, frame.color.astype(float)),
                                rtol=1e-6, atol=1e-6)
 
 
 def test_buffers_are_reused_per_resolution(rng):
-    pipe = Pipeline(Camera())
+    pipe = Pipeline(Camera(luminance_scale=1.0))
     a, b = odd_frame(rng), odd_frame(rng)
     pipe.run(a)
     bufs = pipe._buffers
@@ -103,14 +103,14 @@ def test_buffers_are_reused_per_resolution(rng):
 
 def test_depth_and_velocity_pass_through_untouched(rng):
     frame = odd_frame(rng).replace(velocity=rng.normal(size=(23, 37, 2)))
-    out = Pipeline(Camera()).run(frame)
+    out = Pipeline(Camera(luminance_scale=1.0)).run(frame)
     assert out.depth is frame.depth and out.velocity is frame.velocity
     assert out.metadata["plan"] == ["exposure"]
     assert out.metadata["camera"]["clpost.fNumber"] == "2"
 
 
 def test_auto_exposure_changes_only_scalars(rng):
-    pipe = Pipeline(Camera(shutter_s=None))
+    pipe = Pipeline(Camera(luminance_scale=1.0, shutter_s=None))
     f1 = odd_frame(rng, scale=1.0)
     f2 = odd_frame(rng, scale=100.0)
     o1, o2 = pipe.run(f1), pipe.run(f2)
@@ -128,13 +128,13 @@ def test_a_stage_needing_a_missing_buffer_says_so(rng, monkeypatch):
     monkeypatch.setattr(pipeline_mod, "registry", lambda: {"needs_depth": NeedsDepth})
     frame = odd_frame(rng, depth=False)
     with pytest.raises(InputError, match="needs_depth' needs the frame's depth buffer"):
-        Pipeline(Camera()).plan(frame)
+        Pipeline(Camera(luminance_scale=1.0)).plan(frame)
 
 
 def test_half_float_input_runs(rng):
     c = (rng.random((23, 37, 3)) * 1000).astype(np.float16)
     frame = Frame(c, depth=np.full((23, 37), np.inf, np.float16))
-    pipe = Pipeline(Camera())
+    pipe = Pipeline(Camera(luminance_scale=1.0))
     assert_planned(pipe, frame, "exposure")
     np.testing.assert_allclose(pipe.run(frame).color, pipe.reference(frame), rtol=2e-7)
 
@@ -215,7 +215,7 @@ def test_gathers_get_planar_buffers_and_aux_uploads(rng, monkeypatch, names, ker
     frame = odd_frame(rng)
     frame = frame.replace(depth=np.where(rng.random((23, 37)) < 0.1, np.inf, frame.depth))
     frame = frame.replace(depth=np.minimum(frame.depth, 3.0))  # keep the depth tint finite
-    pipe = Pipeline(Camera(), stages=names)
+    pipe = Pipeline(Camera(luminance_scale=1.0), stages=names)
     assert pipe.kernels(frame) == kernels
     out = pipe.run(frame)
     np.testing.assert_allclose(out.color, pipe.reference(frame), rtol=2e-6, atol=1e-7)
@@ -224,9 +224,9 @@ def test_gathers_get_planar_buffers_and_aux_uploads(rng, monkeypatch, names, ker
 
 VECTOR_GROUPS = {
     "vignetting+exposure": (dict(f_number=2.0, vignetting="natural"), ["vignetting", "exposure"]),
-    "exposure+film+print": (dict(f_number=2.0, film="fuji-superia-400", grain_scale=0.0),
+    "exposure+film+print": (dict(f_number=2.0, film="fuji-superia-400", grain_amount=0.0),
                             ["exposure", "film", "print"]),
-    "film+linear print": (dict(film="kodak-ektar-100", film_output="linear", grain_scale=0.0), ["film", "print"]),
+    "film+linear print": (dict(film="kodak-ektar-100", film_output="linear", grain_amount=0.0), ["film", "print"]),
     "exposure+sensor": (dict(f_number=2.0, sensor_preset="smartphone", iso=800), ["exposure", "sensor"]),
 }
 # every other pointwise stage of the registry, alone, with the camera its class declares as an
@@ -264,7 +264,7 @@ def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts, gr
     # signals from deep shadow (sensor: Poisson lanes) to highlights (normal lanes), and zeros
     frame = frame.replace(color=(frame.color * np.float32(10.0) ** rng.uniform(-4, 1, (h, w, 1))).astype(np.float32))
     frame.color[0, :3] = 0.0
-    pipe = Pipeline(Camera(**kw), stages=names, already_applied=() if "exposure" in names else ("exposure",))
+    pipe = Pipeline(Camera(luminance_scale=1.0, **kw), stages=names, already_applied=() if "exposure" in names else ("exposure",))
     pipe.run(frame)
     cam = pipe.camera_for(frame)
     plan = pipe.plan_for(frame, cam)
@@ -295,7 +295,7 @@ def test_static_tables_are_uploaded_once_and_changed_ones_again(rng, monkeypatch
     import pyopencl as cl
 
     frame = odd_frame(rng, w=37, h=23)
-    pipe = Pipeline(Camera(vignetting="natural"), stages=["vignetting", "exposure"])
+    pipe = Pipeline(Camera(luminance_scale=1.0, vignetting="natural"), stages=["vignetting", "exposure"])
     pipe.run(frame)
     plane_bytes = 37 * 23 * 4
     copies = []
@@ -308,7 +308,7 @@ def test_static_tables_are_uploaded_once_and_changed_ones_again(rng, monkeypatch
     monkeypatch.setattr(cl, "enqueue_copy", spy)
     first = pipe.run(frame).color
     assert plane_bytes not in copies  # colour in/out (37·23·12 bytes) only
-    pipe2 = Pipeline(Camera(vignetting="natural", focus_distance_m=0.3), stages=["vignetting", "exposure"])
+    pipe2 = Pipeline(Camera(luminance_scale=1.0, vignetting="natural", focus_distance_m=0.3), stages=["vignetting", "exposure"])
     pipe2._buffers = pipe._buffers  # same device buffers, new curve
     copies.clear()
     second = pipe2.run(frame).color

@@ -12,8 +12,8 @@ from clpost.stages import registry
 
 # cameras for which the stages with a prerequisite, and their prerequisites, change the image (a
 # camera records on film or on a sensor, not both)
-FILM = Camera(f_number=4.0, shutter_s=1 / 100, iso=200.0, film="kodak-ektar-100")
-SENSOR = Camera(f_number=4.0, shutter_s=1 / 100, iso=200.0, sensor_preset="apsc-cmos")
+FILM = Camera(luminance_scale=1.0, f_number=4.0, shutter_s=1 / 100, iso=200.0, film="kodak-ektar-100")
+SENSOR = Camera(luminance_scale=1.0, f_number=4.0, shutter_s=1 / 100, iso=200.0, sensor_preset="apsc-cmos")
 
 
 def _camera(name):
@@ -67,13 +67,13 @@ def test_a_stage_without_its_prerequisite_is_refused(name, req):
 
 def test_a_prerequisite_that_is_an_identity_for_this_camera_need_not_be_selected():
     """grain without film selected, for a camera without film: grain is not planned, no error."""
-    cam = Camera(f_number=4.0, shutter_s=1 / 100)
+    cam = Camera(luminance_scale=1.0, f_number=4.0, shutter_s=1 / 100)
     assert Pipeline(cam, stages=["grain"]).plan(_frame()) == []
 
 
 def test_library_run_refuses_grain_without_film():
     with pytest.raises(InputError, match=r"'grain'.*'film'.*--stages exposure,film,grain"):
-        Pipeline(Camera(film="kodak-ektar-100"), stages=["grain"]).run(_frame())
+        Pipeline(Camera(luminance_scale=1.0, film="kodak-ektar-100"), stages=["grain"]).run(_frame())
 
 
 def test_unknown_already_applied_stage():
@@ -84,7 +84,8 @@ def test_unknown_already_applied_stage():
 def test_cli_grain_with_film_but_without_the_film_stage(tmp_path, capsys):
     src, out = tmp_path / "grey.exr", tmp_path / "out.exr"
     exr.write_frame(src, Frame(np.full((4, 6, 3), 0.18, np.float32)))
-    rc = main(["process", str(src), "-o", str(out), "--stages", "grain", "--film", "kodak-ektar-100"])
+    rc = main(["process", str(src), "-o", str(out), "--stages", "grain", "--film", "kodak-ektar-100",
+               "--luminance-scale", "1"])
     err = capsys.readouterr().err.strip()
     assert rc == 2
     assert len(err.splitlines()) == 1 and "Traceback" not in err
@@ -92,5 +93,5 @@ def test_cli_grain_with_film_but_without_the_film_stage(tmp_path, capsys):
     assert not out.exists() and not list(tmp_path.glob(".out*"))
     # the fix the message gives runs
     assert main(["process", str(src), "-o", str(out), "--stages", "exposure,film,grain", "--film",
-                 "kodak-ektar-100", "--quiet"]) == 0
+                 "kodak-ektar-100", "--luminance-scale", "1", "--quiet"]) == 0
     assert out.exists()

@@ -14,7 +14,7 @@ from conftest import assert_planned
 
 def _cam(stock, mode, **kw):
     return Camera(f_number=4.0, shutter_s=1 / 125, iso=kw.pop("iso", 100), luminance_scale=1.0, film=stock,
-                  film_output=mode, grain_scale=0.0, focus_distance_m=math.inf, **kw)
+                  film_output=mode, grain_amount=0.0, focus_distance_m=math.inf, **kw)
 
 
 def metered_grey(cam):
@@ -72,3 +72,34 @@ def test_negative_output_skips_print():
     cam = _cam("kodak-ektar-100", "negative")
     entries = {e.stage: e for e in Pipeline(cam).explain(Frame(np.ones((2, 2, 3), np.float32)))}
     assert not entries["print"].planned and "negative" in entries["print"].reason
+
+
+@pytest.mark.parametrize("stock", ["kodak-gold-200", "neutral-100"])
+def test_print_depends_on_exposure_only_at_equal_T_times_t(stock, rng):
+    # T 0.1 with 9× the shutter vs T 0.9 printed 0.41 vs 0.07 — the printer light was
+    # computed from the lens's T; a printer sees only the negative
+    lum = (10.0 ** rng.uniform(-1, 3, (5, 7, 3))).astype(np.float32)
+    frame = Frame(lum)
+    dark = _cam(stock, "print", transmittance=0.1).with_(shutter_s=9 / 125)
+    clear = _cam(stock, "print", transmittance=0.9)
+    a, b = Pipeline(dark).run(frame).color, Pipeline(clear).run(frame).color
+    np.testing.assert_allclose(a, b, rtol=2e-5)
+    # and the grey card the meter exposes prints at 18 % through either lens (TTL meter)
+    grey = Frame(np.full((3, 5, 3), 50.0, np.float32))
+    for T in (0.1, 0.9):
+        cam = Camera(f_number=4.0, shutter_s=None, luminance_scale=1.0, film=stock, grain_amount=0.0,
+                     transmittance=T, focus_distance_m=math.inf)
+        np.testing.assert_allclose(Pipeline(cam).run(grey).color, 0.18, rtol=2e-3)
+
+
+def test_film_rates_the_camera_at_its_box_speed_unless_iso_is_given():
+    assert Camera(film="kodak-gold-200").iso == 200.0
+    assert Camera(film="fuji-superia-400").iso == 400.0
+    assert Camera(film="kodak-gold-200", iso=800).iso == 800.0
+    assert Camera().iso == 100.0
+    from clpost.cli import build_parser, camera_from_args
+
+    args = build_parser().parse_args(["process", "in.exr", "-o", "o.exr", "--film", "kodak-gold-200"])
+    assert camera_from_args(args).iso == 200.0
+    args = build_parser().parse_args(["process", "in.exr", "-o", "o.exr", "--film", "kodak-gold-200", "--iso", "100"])
+    assert camera_from_args(args).iso == 100.0

@@ -17,25 +17,25 @@ DATA = __import__("pathlib").Path(__file__).parent / "data"
 
 def test_off_by_default_so_existing_plans_are_unchanged(rng):
     frame = odd_frame(rng)
-    assert Pipeline(Camera()).plan(frame) == ["exposure"]
-    e = {x.stage: x for x in Pipeline(Camera()).explain(frame)}["vignetting"]
+    assert Pipeline(Camera(luminance_scale=1.0)).plan(frame) == ["exposure"]
+    e = {x.stage: x for x in Pipeline(Camera(luminance_scale=1.0)).explain(frame)}["vignetting"]
     assert not e.planned and "off" in e.reason
 
 
 def test_natural_is_cos4_of_the_field_angle():
-    cam = Camera(lens="thin:50", focus_distance_m=math.inf, vignetting="natural")
+    cam = Camera(luminance_scale=1.0, lens="thin:50", focus_distance_m=math.inf, vignetting="natural")
     ri = vig.relative_illumination(cam)
     for r in (0.0, 10.0, 21.63):
         theta = math.atan(r / 50.0)
         assert ri(np.array(r)) == pytest.approx(math.cos(theta) ** 4, rel=1e-12)
     # focus moves the exit pupil's distance to the film: v = f u/(u - f)
-    near = Camera(lens="thin:50", focus_distance_m=0.5, vignetting="natural")
+    near = Camera(luminance_scale=1.0, lens="thin:50", focus_distance_m=0.5, vignetting="natural")
     assert vig.relative_illumination(near)(np.array(20.0)) > ri(np.array(20.0))
 
 
 @pytest.mark.parametrize("lens,w,h", [("thin:12", 37, 23), ("thin:50", 64, 43), ("thin:200", 23, 37)])
 def test_kernel_matches_reference(rng, lens, w, h):
-    cam = Camera(lens=lens, vignetting="natural")
+    cam = Camera(luminance_scale=1.0, lens=lens, vignetting="natural")
     frame = odd_frame(rng, w=w, h=h, scale=1e4)
     pipe = Pipeline(cam)
     assert_planned(pipe, frame, "vignetting", "exposure")
@@ -49,7 +49,7 @@ def test_kernel_matches_reference(rng, lens, w, h):
 
 
 def test_energy_of_a_uniform_field_is_the_integral_of_cos4_over_the_sensor():
-    cam = Camera(lens="thin:24", vignetting="natural", focus_distance_m=math.inf)
+    cam = Camera(luminance_scale=1.0, lens="thin:24", vignetting="natural", focus_distance_m=math.inf)
     w, h = 360, 240
     frame = Frame(np.ones((h, w, 3), np.float32))
     out = Pipeline(cam, stages=["vignetting"]).run(frame).color
@@ -61,7 +61,7 @@ def test_energy_of_a_uniform_field_is_the_integral_of_cos4_over_the_sensor():
 
 def test_principal_point_of_the_calibration_is_the_centre(rng):
     m = OpenCVModel(37, 23, 30, 30, 10.0, 15.0)
-    cam = Camera(lens="thin:12", vignetting="natural", distortion=m)
+    cam = Camera(luminance_scale=1.0, lens="thin:12", vignetting="natural", distortion=m)
     frame = Frame(np.ones((23, 37, 3), np.float32))
     assert_planned(Pipeline(cam, stages=["vignetting"]), frame, "vignetting")
     out = Pipeline(cam, stages=["vignetting"]).run(frame).color[..., 0]
@@ -70,7 +70,7 @@ def test_principal_point_of_the_calibration_is_the_centre(rng):
 
 
 def test_table_file_and_its_errors(tmp_path):
-    cam = Camera(vignetting=f"table:{DATA / 'ri_table.csv'}")
+    cam = Camera(luminance_scale=1.0, vignetting=f"table:{DATA / 'ri_table.csv'}")
     ri = vig.relative_illumination(cam)
     assert ri(np.array(7.5)) == pytest.approx((0.980 + 0.925) / 2)
     frame = Frame(np.ones((23, 37, 3), np.float32))
@@ -81,21 +81,21 @@ def test_table_file_and_its_errors(tmp_path):
     bad.write_text("0 1\n10 0.9\n")
     vig.read_table.cache_clear()
     with pytest.raises(InputError, match="source"):
-        vig.relative_illumination(Camera(vignetting=f"table:{bad}"))
+        vig.relative_illumination(Camera(luminance_scale=1.0, vignetting=f"table:{bad}"))
     bad = tmp_path / "t2.csv"  # read_table is cached per path
     bad.write_text("# source: x\n0 1\n10 0.9\n")
     with pytest.raises(InputError, match="half diagonal"):
-        vig.relative_illumination(Camera(vignetting=f"table:{bad}"))
+        vig.relative_illumination(Camera(luminance_scale=1.0, vignetting=f"table:{bad}"))
     bad = tmp_path / "t3.csv"
     bad.write_text("# source: x\n0 100\n30 90\n")
     with pytest.raises(InputError, match="percentages"):
-        vig.relative_illumination(Camera(vignetting=f"table:{bad}"))
+        vig.relative_illumination(Camera(luminance_scale=1.0, vignetting=f"table:{bad}"))
 
 
 def test_lens_mode_uses_the_traced_curve_or_says_what_to_do(rng):
     with pytest.raises(InputError, match="--vignetting natural"):
-        vig.relative_illumination(Camera(lens="thin:35", vignetting="lens"))
-    cam = Camera(lens="zeiss-planar-50-f1.4", f_number=1.4, vignetting="lens")
+        vig.relative_illumination(Camera(luminance_scale=1.0, lens="thin:35", vignetting="lens"))
+    cam = Camera(luminance_scale=1.0, lens="zeiss-planar-50-f1.4", f_number=1.4, vignetting="lens")
     curves = cam.lens_curves()
     frame = odd_frame(rng)
     out = Pipeline(cam, stages=["vignetting"]).run(frame).color
@@ -109,11 +109,11 @@ def test_lens_mode_uses_the_traced_curve_or_says_what_to_do(rng):
 
 def test_wide_open_flagship_vignettes_more_than_stopped_down(rng):
     frame = odd_frame(rng)
-    wide = Pipeline(Camera(lens="zeiss-planar-50-f1.4", f_number=1.4, vignetting="lens"), stages=["vignetting"])
-    f8 = Pipeline(Camera(lens="zeiss-planar-50-f1.4", f_number=8, vignetting="lens"), stages=["vignetting"])
+    wide = Pipeline(Camera(luminance_scale=1.0, lens="zeiss-planar-50-f1.4", f_number=1.4, vignetting="lens"), stages=["vignetting"])
+    f8 = Pipeline(Camera(luminance_scale=1.0, lens="zeiss-planar-50-f1.4", f_number=8, vignetting="lens"), stages=["vignetting"])
     assert (wide.run(frame).color[0, 0] < f8.run(frame).color[0, 0]).all()
 
 
 def test_bad_mode_is_refused():
     with pytest.raises(InputError, match="natural"):
-        Camera(vignetting="cos4")
+        Camera(luminance_scale=1.0, vignetting="cos4")

@@ -64,7 +64,7 @@ def cases():
     """(name, callable) for every case."""
     from clpost import Camera
 
-    base = Camera(f_number=2.0, shutter_s=1 / 50)
+    base = Camera(f_number=2.0, shutter_s=1 / 50, luminance_scale=1.0)  # exposure planned (passthrough by default)
     out = []
 
     def add(name, fn):
@@ -148,7 +148,7 @@ def cases():
             add(f"sensor {q} {w}x{h}", lambda q=q, w=w, h=h: _run(sensor, ["exposure", "sensor"], q, w, h))
     # grain's Boolean model needs resolved grains (r >= 1/8 px): a fast stock, coarse grain and a
     # tiny width make pixels large on the film
-    boolean = replace(base, film="fuji-superia-400", grain_scale=4.0, sensor_mm=(0.05, 0.03))
+    boolean = replace(base, film="fuji-superia-400", grain_size=4.0, sensor_mm=(0.05, 0.03))
     for w, h in ((3, 2), (17, 5)):
         add(f"grain-boolean final {w}x{h}",
             lambda w=w, h=h: _run(boolean, ["exposure", "film", "grain"], "final", w, h))

@@ -1,7 +1,7 @@
 r"""grain: the developed negative's grain, per dye layer, on the film stage's densities.
 
 Model (:mod:`clpost.grain_model`): each dye layer is a Boolean model of discs of radius r (the
-stock's effective grain radius × ``Camera.grain_scale``, in µm on the film → pixels through
+stock's effective grain radius × ``Camera.grain_size``, in µm on the film → pixels through
 ``Camera.pixel_pitch_mm``) with Poisson intensity :math:`λ = D_{img}\ln 10/(\pi r^2)`, where
 :math:`D_{img} = D - D_{min}` is the image density above base. A pixel records the clear fraction
 :math:`T'` of its area; :math:`D' = D_{min} - \log_{10} T'`, clamped to [D_min, D_max].
@@ -24,6 +24,12 @@ Two implementations, matched in mean, variance and lag-1 autocorrelation (tested
   draft matches final) and G a unit-variance field correlated by the separable kernel [a, b, a] so its lag-1
   correlation equals the model's.
 
+Strength: ``Camera.grain_amount`` a scales the clear fraction's deviation from its mean,
+:math:`T'' = T + a\,(T' - T)`, :math:`T = 10^{-D_{img}}` — σ_T grows a-fold, the mean, the grain
+size and the correlation stay; a = 1 is the physical model, 0 no grain. Size and amount are
+separate controls: in the physical model a larger grain is also stronger (σ_D ∝ r at a fixed pixel,
+Selwyn), so ``grain_size`` alone moves both; ``grain_amount`` moves only the strength.
+
 Randomness: counter-based hash of (``Camera.noise_seed``, ``metadata["frame_index"]``, …).
 Reference: A. Newson, J. Delon, B. Galerne, "A Stochastic Film Grain Model for
 Resolution-Independent Rendering", Computer Graphics Forum 36(8), 2017; Selwyn (1935).
@@ -39,20 +45,27 @@ import numpy as np
 from .. import random as rnd
 from ..film_stock import load_stock
 from ..grain_model import LN10, grain_radius_um, pixel_covariance
-from ..params import at_least, param
+from ..params import at_least, param, positive
 from .base import GatherStage, per_camera
 from .sensor import frame_index
 
 
 @dataclass(frozen=True)
 class GrainParams:
-    """grain: a multiplier on the stock's grain radius."""
+    """grain: the grain's size (× the stock's physical grain radius) and amount (× its strength)."""
 
-    grain_scale: float = param(1.0, unit="× the stock's grain radius", flag="--grain-scale", parse=float,
-                               check=at_least(0.0, "× the stock's grain radius", "e.g. 1, or 0 for no grain",
-                                              "0 turns grain off"),
-                               header="clpost.grainScale", scalar=False,
-                               help="grain radius multiplier (0 = no grain)")
+    grain_size: float = param(1.0, unit="× the stock's grain radius", flag="--grain-size", parse=float,
+                              check=positive("× the stock's grain radius", "e.g. 1 (the stock's own), 2 for "
+                                             "clumps twice as large"),
+                              header="clpost.grainSize", scalar=False,
+                              help="grain/clump radius relative to the stock's physical grain (1 = the "
+                                   "stock's; larger grains are also stronger, as on film)")
+    grain_amount: float = param(1.0, unit="× the model's strength", flag="--grain-amount", parse=float,
+                                check=at_least(0.0, "× the model's strength", "e.g. 1, or 0 for no grain",
+                                               "0 turns grain off"),
+                                header="clpost.grainAmount", scalar=True,
+                                help="grain strength relative to the physical model (1 = physical, 0 = no "
+                                     "grain; the size stays)")
 
 
 GRAIN_NS = 8
@@ -67,7 +80,7 @@ T_FLOOR_MARGIN = 0.0
 
 def grain_radius_px(camera, width: int) -> float:
     stock = load_stock(camera.film)
-    r_um = grain_radius_um(stock.iso) * camera.grain_scale
+    r_um = grain_radius_um(stock.iso) * camera.grain_size
     return r_um / 1000.0 / camera.pixel_pitch_mm(width)
 
 
@@ -111,15 +124,16 @@ class Grain(GatherStage):
     def skip_reason(self, camera, frame):
         if not camera.film:
             return "no film stock (Camera.film is None)"
-        if camera.grain_scale == 0:
-            return "Camera.grain_scale is 0"
+        if camera.grain_amount == 0:
+            return "Camera.grain_amount is 0"
         return None
 
     def reason_needed(self, camera, frame):
         r = grain_radius_px(camera, frame.width)
         how = ("Boolean model (Newson 2017), 64 samples/px" if use_boolean(self.quality, r)
                else "Gaussian clear fraction matched to the Boolean model")
-        return f"grain radius {r:.3g} px ({r * camera.pixel_pitch_mm(frame.width) * 1e3:.3g} µm): {how}"
+        return (f"grain radius {r:.3g} px ({r * camera.pixel_pitch_mm(frame.width) * 1e3:.3g} µm), amount "
+                f"{camera.grain_amount:g}: {how}")
 
     # -- host tables --------------------------------------------------------------------------
     @per_camera
@@ -163,7 +177,7 @@ class Grain(GatherStage):
         knl = rt.kernel(library() + kernel_source("grain"), "grain", defines)
         return [rt.launch(knl, (w, h), None, src, dst, np.int32(w), np.int32(h), rt.constant(params),
                           rt.constant(sigma.astype(np.float32)), np.float32((GRAIN_LUT_SIZE - 1) / span),
-                          np.float32(a), np.float32(b), np.float32(r), seed, fr)]
+                          np.float32(a), np.float32(b), np.float32(r), np.float32(camera.grain_amount), seed, fr)]
 
     # -- float64 reference --------------------------------------------------------------------
     def reference(self, camera, frame, color):
@@ -172,10 +186,11 @@ class Grain(GatherStage):
         d = np.asarray(color, np.float64)
         d_img = np.clip(d - d_min, 0.0, None)
         if boolean:
-            t = boolean_clear_fraction(d_img, r, seed, fr)
+            t_mean = 10.0 ** -d_img
+            t = t_mean + camera.grain_amount * (boolean_clear_fraction(d_img, r, seed, fr) - t_mean)
         else:
             sigma, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
-            t = 10.0 ** -d_img + np.stack(
+            t = 10.0 ** -d_img + camera.grain_amount * np.stack(
                 [np.interp(d_img[..., c], np.linspace(0, span, GRAIN_LUT_SIZE), sigma) for c in range(3)], -1
             ) * correlated_normal(color.shape[0], color.shape[1], a, b, seed, fr)
         t_floor = 10.0 ** -(d_max - d_min)

@@ -13,8 +13,9 @@ channel), and responds with a logistic characteristic curve of a representative 
     \text{out}_c = 10^{-D_p}
 
 The printer lights are set as an automatic printer sets them: a metered mid-grey (the exposure
-the ISO 2720 meter aims at, :math:`H_g = \pi T K/(4S)`) prints as 18 % reflectance, neutral in
-every channel. System contrast is γ_neg·γ_p ≈ 1.1–1.4 in the mid-tones; the paper's toe and
+the TTL meter aims at, :math:`H_g = \pi T_m K/(4S)`, :func:`clpost.photometry.metered_grey_exposure`)
+prints as 18 % reflectance, neutral in every channel. The printer sees only the negative: the
+print is a function of the exposure H alone, never of the lens (T) or shutter that made it. System contrast is γ_neg·γ_p ≈ 1.1–1.4 in the mid-tones; the paper's toe and
 shoulder roll off highlights and shadows.
 
 ``linear`` — re-linearised scene-linear, as a scanner's "linear" inversion: each layer's
@@ -35,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..film_stock import load_stock
-from ..photometry import K_REFLECTED, SATURATION_EXPOSURE_ISO
+from ..photometry import SATURATION_EXPOSURE_ISO, metered_grey_exposure
 from ..params import one_of, param
 from .base import PointwiseStage, per_camera
 
@@ -64,7 +65,7 @@ def print_params(camera) -> np.ndarray:
     stock = load_stock(camera.film)
     if camera.film_output == "print":
         k = 4 * PAPER_GAMMA / PAPER_RANGE
-        h_grey = math.pi * camera.transmittance * K_REFLECTED / (4 * camera.iso)
+        h_grey = metered_grey_exposure(camera.iso)  # the negative's grey, whatever lens made it
         d_grey = stock.density_at(np.full(3, math.log10(h_grey)))
         f = -math.log10(GREY_REFLECTANCE) / PAPER_RANGE
         x = math.log(f / (1 - f)) / k
