@@ -135,8 +135,6 @@ class Scene:
 
 # luminance_scale=1.0: a physical exposure of 1 cd/m² per unit, as these scenes were always measured
 # (the camera is passthrough by default; this keeps the exposure stage running and bench numbers comparable)
-
-
 SCENES: dict[str, Scene] = {s.name: s for s in (
     Scene("demo", "the built-in demo frame (clpost.render) with the demo camera's plan",
           wants=(), frame="demo"),
