@@ -284,7 +284,12 @@ def cmd_expose(args) -> int:
     if not t_close > t_open:
         raise InputError(f"--close {args.close or ''} ({float(t_close):g} s) must be later than --open {args.open} "
                          f"({float(t_open):g} s); times count from the start of frame {first}")
+    from .display_image import output_format
+
     out = Path(args.output)
+    output_format(out)  # an unknown extension is refused before anything is read
+    if args.png and output_format(args.png, "--png") == "EXR":
+        raise InputError(f"--png {args.png}: a preview is display-encoded; name a .png (or .jpg/.tif) file")
     found = parse_frames(args.frames) if args.frames else on_disk
     want = set(frames_needed(fps, t_open, t_close, first))
     frames = [n for n in found if n in want]
@@ -317,8 +322,8 @@ def _expose_camera(args) -> Camera:
 
 def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> int:
     from . import exr
-    from .atomic import write_png
     from .batch import output_header, read_input
+    from .display_image import output_format, write_image
     from .expose import expose, expose_camera_frames
     from .pipeline import Pipeline
     from .sequence import expand
@@ -372,9 +377,14 @@ def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> in
         result, count = Frame(part.exposure() if args.sum else part.mean()), part.count
         header.update({"clpost.expose.frames": str(count),
                        "clpost.expose.output": "exposure (input x seconds)" if args.sum else "time average (input units)"})
-    exr.write_frame(out, result, header=header)
+    ws = camera.working_space if camera is not None else "rec709"
+    if output_format(out) == "EXR":
+        exr.write_frame(out, result, header=header)
+    else:  # -o x.png/.jpg/.tif: the result display-encoded, ICC profile embedded
+        write_image(out, result.color, display=args.display, working_space=ws)
     if args.png:
-        write_png(args.png, result.color * (args.png_gain or 1.0))
+        write_image(args.png, result.color * (args.png_gain or 1.0), display=args.display, working_space=ws,
+                    option="--png")
     print(f"exposed {count} frame(s) for {float(t_close - t_open):.6g} s -> {out}")
     return 0
 
@@ -564,7 +574,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "frame processed with --shutter close-open. Alpha is the time-averaged coverage, depth the "
                     "nearest depth seen.")
     e.add_argument("input", help="input EXR pattern (in.####.exr, in.%%04d.exr)")
-    e.add_argument("-o", "--output", required=True, help="output EXR (written atomically)")
+    e.add_argument("-o", "--output", required=True,
+                   help="output: .exr (linear, the camera in the header) or .png/.jpg/.tif (display-encoded "
+                        "for --display, ICC profile embedded); written atomically")
     e.add_argument("--open", required=True, help="the shutter opens: seconds (0.5, 1/48) or a frame (f1001, 1001f)")
     e.add_argument("--close", default=None,
                    help="the shutter closes: seconds or a frame (f1025 = the end of frame 1024); or give --shutter")
@@ -576,7 +588,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--average", action="store_true",
                    help="no camera: write the time-averaged input (input units)")
     e.add_argument("--sum", action="store_true", help="no camera: write H = ∫E dt (input × seconds)")
-    e.add_argument("--png", default=None, help="also write an sRGB preview PNG here")
+    e.add_argument("--png", default=None, help="also write a display-encoded preview (.png/.jpg/.tif) here")
+    e.add_argument("--display", default="srgb", choices=["srgb", "rec709", "display-p3"],
+                   help="encoding of image outputs and --png (default srgb)")
     e.add_argument("--png-gain", type=_positive_float, default=None, help="scale before the PNG encoding")
     e.add_argument("--overwrite", action="store_true", help="replace an existing output")
     e.add_argument("--quiet", action="store_true")

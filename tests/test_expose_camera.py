@@ -42,7 +42,7 @@ def _camera_args(seconds, film, dof=True):
     if dof:  # depth 5 m focused at 2 m on a 1.2 mm sensor: a CoC of ~2 px
         args += ["--depth-of-field", "on", "--focus", "2", "--sensor", "1.2x0.8"]
     if film == "film":
-        args += ["--film", "kodak-gold-200", "--grain-scale", "0"]
+        args += ["--film", "kodak-gold-200", "--grain-amount", "0"]
     elif film == "film+grain":
         args += ["--film", "kodak-gold-200", "--noise-seed", "7"]
     return args
@@ -104,7 +104,7 @@ def test_why_optics_run_per_frame_and_the_film_once(rng):
     assert {"lateral_color", "coma", "astigmatism", "vignetting", "white_balance", "exposure"} <= set(pipe.plan(x))
     assert additive(pipe)
     assert not additive(Pipeline(cam, stages=["dof"]))
-    film = Pipeline(cam.with_(film="kodak-gold-200", grain_scale=0.0), stages=["exposure", "film", "print"])
+    film = Pipeline(cam.with_(film="kodak-gold-200", grain_amount=0.0), stages=["exposure", "film", "print"])
     assert not additive(film)
 
 
@@ -155,7 +155,7 @@ def test_moving_scene_gives_the_time_average_through_the_camera(rng, film):
     t0, t1 = Fraction(1, 16), Fraction(13, 48)    # mid-frame 2 … mid-frame 7 (first = 1)
     seconds = t1 - t0
     cam = Camera(f_number=8.0, iso=100, transmittance=0.9, shutter_s=1 / 50, luminance_scale=50.0,
-                 vignetting="natural", film=film, grain_scale=0.0)
+                 vignetting="natural", film=film, grain_amount=0.0)
     ex = expose_camera_frames(frames.__getitem__, frames, FPS, t0, t1, cam, first=1)
     w = exposure_weights(frames, FPS, t0, t1, first=1)
     assert sorted(w) == [2, 3, 4, 5, 6, 7] and w[2] == w[7] == Fraction(1, 48)
@@ -291,3 +291,31 @@ def test_workers_give_the_serial_exposure_through_the_camera(tmp_path, rng):
     np.testing.assert_allclose(tree.color, serial.color, rtol=1e-4, atol=1e-6)
     np.testing.assert_allclose(tree.alpha, serial.alpha, rtol=1e-6)
     np.testing.assert_array_equal(tree.depth, serial.depth)
+
+
+# -- viewable outputs --------------------------------------------------------------------------------
+
+def test_image_outputs_are_display_encoded_with_their_profile_and_unknown_ones_refused(tmp_path, rng, capsys):
+    from PIL import Image
+
+    frame = _scene(rng)
+    _write_seq(tmp_path, 1, 4, lambda k: frame)
+    args = ["expose", str(tmp_path / "in.####.exr"), "--open", "f1", "--close", "f4", "--fps", "24", "--quiet",
+            *_camera_args(Fraction(3, 24), "linear", dof=False)]
+    assert main([*args, "-o", str(tmp_path / "long.exr"), "--png", str(tmp_path / "prev.jpg")]) == 0
+    assert main([*args, "-o", str(tmp_path / "long.png"), "--display", "display-p3"]) == 0
+    linear = exr.read_frame(tmp_path / "long.exr").color
+    for name, fmt in (("long.png", "PNG"), ("prev.jpg", "JPEG")):
+        with Image.open(tmp_path / name) as im:       # the named format, never an EXR under an image name
+            assert im.format == fmt and im.size == (W, H) and im.info.get("icc_profile")
+    with Image.open(tmp_path / "long.png") as im:     # brighter pixels stay brighter after the encoding
+        code = np.asarray(im.convert("RGB"), np.float64).mean(axis=2)
+    lum = linear.mean(axis=2)
+    assert np.corrcoef(code.ravel(), lum.ravel())[0, 1] > 0.95
+    before = sorted(p.name for p in tmp_path.iterdir())
+    capsys.readouterr()
+    assert main([*args, "-o", str(tmp_path / "long.bmp")]) == 2
+    assert main([*args, "-o", str(tmp_path / "ok.exr"), "--png", str(tmp_path / "prev.exr")]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 2 and "long.bmp" in err[0] and "prev.exr" in err[1], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before     # nothing written
