@@ -15,7 +15,7 @@ from pathlib import Path
 from .camera import Camera
 from .exr import COMPRESSIONS
 from .errors import ClpostError, InputError
-from .params import parse_fraction, parse_wxh_mm
+from .params import parse_fraction, parse_on_off, parse_wxh_mm
 from .stages import QUALITIES
 
 
@@ -107,6 +107,32 @@ def camera_from_args(args: argparse.Namespace, camera_cls=None, /, **defaults) -
     return (camera_cls or Camera).from_options(given, defaults)
 
 
+def camera_sources_from_args(args: argparse.Namespace):
+    """The animated camera of ``process``: flags > --camera-from > --camera-track > the inputs'
+    OpenEXR attributes > defaults (:mod:`clpost.camera_sources`)."""
+    from .camera_sources import CameraSources, camera_from_file
+    from .camera_track import load_track
+
+    flags = {k[4:]: v for k, v in vars(args).items() if k.startswith("cam_")}
+    src = getattr(args, "camera_from", None)
+    track = getattr(args, "camera_track", None)
+    return CameraSources(flags=flags, camera_from=camera_from_file(src) if src else {},
+                         camera_from_path=src, track=load_track(track) if track else None,
+                         use_exr=getattr(args, "exr_camera", True))
+
+
+def _add_source_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("animated camera (docs/camera-tracks.md; priority: flags > --camera-from > "
+                             "--camera-track > the inputs' OpenEXR attributes > defaults)")
+    g.add_argument("--camera-track", default=None, metavar="FILE",
+                   help="keyframed camera parameters per frame number (JSON or CSV; linear or step)")
+    g.add_argument("--camera-from", default=None, metavar="OUT.exr",
+                   help="reuse the camera recorded in an output's header (its clpost.* keys)")
+    g.add_argument("--exr-camera", type=parse_on_off, default=True, metavar="on/off",
+                   help="read focus, aperture, expTime, isoSpeed, nominalFocalLength, tStop, shutterAngle "
+                        "and captureRate from each input's header (default: on)")
+
+
 def _add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quality", choices=QUALITIES, default="final", help="speed/accuracy level")
     p.add_argument("--stages", type=_stage_list, default=None,
@@ -158,12 +184,17 @@ def cmd_process(args) -> int:
     if args.stages == [] and not args.explain:
         raise InputError("--stages names no stage, so every output would be its input unchanged; give "
                          "stages (e.g. --stages exposure,dof; --explain lists them) or leave --stages out")
-    camera = camera_from_args(args)
-    pipe = Pipeline(camera, quality=args.quality, stages=args.stages, device=args.device)
+    from .batch import frame_camera
+
+    camera_from_args(args)  # the flags' own errors first, as they are
+    sources = camera_sources_from_args(args)
     jobs = _jobs(args)
     if not jobs:
         raise InputError(f"{args.input}: no input frames")
+    camera = frame_camera(sources, jobs[0])
+    pipe = Pipeline(camera, quality=args.quality, stages=args.stages, device=args.device)
     if args.explain:
+        _explain_sources(sources, jobs)
         first = read_input(pipe, jobs[0].src, args.channels)
         cam = pipe.camera_for(first)
         print(f"plan for {jobs[0].src} ({first.width}x{first.height}, quality {args.quality}):")
@@ -199,10 +230,11 @@ def cmd_process(args) -> int:
         # The lock is held for the whole run: each frame's "exists, skip" check is made under it.
         with writing(args.output, [j.dst for j in jobs]):
             if args.workers or args.scheduler:
-                rep = _process_distributed(args, camera, jobs, progress)
+                rep = _process_distributed(args, camera, jobs, progress, sources)
             else:
                 rep = process_sequence(pipe, jobs, layout=args.channels, overwrite=args.overwrite,
-                                       half=args.half, compression=args.compression, progress=progress)
+                                       half=args.half, compression=args.compression, progress=progress,
+                                       sources=sources)
     finally:
         bar.close()
     for frame, err in sorted(rep.failed.items()):
@@ -220,7 +252,24 @@ def cmd_process(args) -> int:
     return 0
 
 
-def _process_distributed(args, camera, jobs, progress):
+def _explain_sources(sources, jobs) -> None:
+    """The camera per parameter: its value (range over the frames) and which source set it."""
+    from . import exr
+    from .camera_sources import explain_sources
+
+    resolved = []
+    for job in jobs:
+        attrs = exr.read_attributes(job.src)[0] if sources.use_exr and job.src.is_file() else {}
+        try:
+            resolved.append((job.frame, sources.resolve(job.frame, attrs)))
+        except InputError as exc:
+            raise InputError(f"{job.src}: {exc}") from None
+    print(f"camera over {len(jobs)} frame(s) (value [source: flag / camera-from / track / EXR attribute / default]):")
+    for line in explain_sources(resolved):
+        print(f"  {line}")
+
+
+def _process_distributed(args, camera, jobs, progress, sources=None):
     from .distributed import PipelineSpec, connect, first_size, process_sequence_dask
 
     spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device)
@@ -228,7 +277,7 @@ def _process_distributed(args, camera, jobs, progress):
     try:
         return process_sequence_dask(client, spec, jobs, layout=args.channels, overwrite=args.overwrite,
                                      half=args.half, compression=args.compression, retries=args.retries,
-                                     expect_size=first_size(jobs), progress=progress)
+                                     expect_size=first_size(jobs), progress=progress, sources=sources)
     finally:
         cluster = getattr(client, "cluster", None)
         client.close()
@@ -424,6 +473,7 @@ def build_parser() -> argparse.ArgumentParser:
     dist.add_argument("--scheduler", default=None, help="run on an existing Dask cluster, e.g. tcp://HOST:8786")
     dist.add_argument("--retries", type=_count("--retries", 0), default=2, help="retries of a failing frame before it is reported (default 2)")
     _add_camera_options(pr)
+    _add_source_options(pr)
     _add_pipeline_options(pr)
     pr.set_defaults(func=cmd_process)
 

@@ -13,6 +13,7 @@ Reference: OpenEXR file layout, https://openexr.com/en/latest/OpenEXRFileLayout.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import resource
 import struct
@@ -55,6 +56,14 @@ _FRAME_BYTES_PER_PX = 4 * 8
 depth, velocity (2) and one temporary plane."""
 _FLAG_LONG_NAMES, _FLAG_MULTIPART = 0x400, 0x1000
 
+CAMERA_ATTRIBUTES = {
+    "focus": "m", "aperture": "f-number", "expTime": "s", "isoSpeed": "ISO", "nominalFocalLength": "mm",
+    "tStop": "T-number", "shutterAngle": "degrees", "captureRate": "frames per second",
+}
+"""The OpenEXR standard attributes that describe the camera (ImfStandardAttributes.h; captureRate
+is a rational, the others floats), read as floats into ``Frame.metadata["attributes"]`` and by
+:func:`read_attributes`; their mapping to camera parameters is :mod:`clpost.camera_sources`."""
+
 
 # ----------------------------------------------------------------------------------------------
 # Headers, parsed and checked before OpenEXR allocates anything
@@ -69,6 +78,10 @@ class PartHeader:
     data_window: Window | None = None
     display_window: Window | None = None
     type: str = ""
+    attributes: dict[str, float] = field(default_factory=dict)
+    """The :data:`CAMERA_ATTRIBUTES` present, as floats."""
+    strings: dict[str, str] = field(default_factory=dict)
+    """Every string attribute (e.g. the ``clpost.*`` keys a camera wrote)."""
 
 
 class _NeedMore(Exception):
@@ -170,8 +183,13 @@ def _parse_headers(r: _Reader) -> list[PartHeader]:
                 setattr(ph, "data_window" if name == "dataWindow" else "display_window", _box(r, size))
             elif typ == "chlist" and name == "channels":
                 ph.channels = _chlist(r, size, limit)
-            elif typ == "string" and name == "type":
-                ph.type = r.take(size).decode("latin-1")
+            elif typ == "string":
+                text = r.take(size).decode("utf-8", "replace")
+                if name == "type":
+                    ph.type = text
+                ph.strings[name] = text
+            elif name in CAMERA_ATTRIBUTES and (typ, size) in _NUMERIC_ATTRS:
+                ph.attributes[name] = _NUMERIC_ATTRS[typ, size](r.take(size))
             else:
                 r.take(size)
         parts.append(ph)
@@ -180,6 +198,43 @@ def _parse_headers(r: _Reader) -> list[PartHeader]:
         if r.b[r.i:r.i + 1] == b"\0":  # the empty header ending the list
             break
     return parts
+
+
+def _f32(v: float) -> float:
+    """A float32 attribute as the shortest decimal that rounds to it (2.8, not 2.7999999523)."""
+    return float(str(np.float32(v)))
+
+
+_NUMERIC_ATTRS = {
+    ("float", 4): lambda b: _f32(struct.unpack("<f", b)[0]),
+    ("double", 8): lambda b: float(struct.unpack("<d", b)[0]),
+    ("rational", 8): lambda b: (lambda n, d: n / d if d else float("nan"))(*struct.unpack("<iI", b)),
+}
+
+
+def read_attributes(path: str | os.PathLike) -> tuple[dict[str, float], dict[str, str]]:
+    """The camera's standard attributes (:data:`CAMERA_ATTRIBUTES`, floats) and the string
+    attributes of the first part of ``path``, from the header alone (no pixels are read)."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such file; check the path")
+    try:
+        first = read_header(p)[0]
+    except OSError as e:
+        raise InputError(f"{p}: cannot read ({e.strerror}); check the file's permissions") from None
+    return dict(first.attributes), dict(first.strings)
+
+
+def _camera_attrs(header: dict) -> dict[str, float]:
+    """:data:`CAMERA_ATTRIBUTES` of an OpenEXR binding header as floats (a rational as n/d)."""
+    out = {}
+    for k in CAMERA_ATTRIBUTES:
+        v = header.get(k)
+        if hasattr(v, "n") and hasattr(v, "d"):
+            v = v.n / v.d if v.d else float("nan")
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            out[k] = float(v) if k == "captureRate" else _f32(v)
+    return out
 
 
 def _limit_bytes() -> int:
@@ -439,7 +494,7 @@ def _frame_from_parts(path: Path, parts: Sequence[_Part], layout: str | None, de
         vel = lay.velocity(m, velocity_y_up)
         vel = np.stack([_place(vel[..., i], data, display, 0.0) for i in range(2)], axis=-1)
     metadata = {"path": str(path), "layout": layout, "header": _str_attrs(parts[0].header),
-                "depth_kind": kind_out}
+                "attributes": _camera_attrs(parts[0].header), "depth_kind": kind_out}
     try:
         return Frame(color=color, depth=depth_m, velocity=vel, alpha=alpha, metadata=metadata, copy=False)
     except InputError as e:
@@ -458,6 +513,7 @@ def read_frame(path: str | os.PathLike, layout: str | None = None, *, depth: str
     clpost, nuke and arnold layouts (Blender's verified convention is fixed).
 
     ``metadata`` = ``{"path", "layout", "header": str attributes of the first part,
+    "attributes": its camera standard attributes (:data:`CAMERA_ATTRIBUTES`, floats),
     "depth_kind": "planar" | "radial"}``. Color is required; depth and velocity are optional
     (``None`` when the file has no such pass).
     """
@@ -493,11 +549,15 @@ def _layout_parts(path: Path, frame: Frame, layout: str, half: bool,
     return get_layout(path, layout).parts(rgb, alpha, frame.depth, vel, focal_px)
 
 
-def _user_header(path: Path, header: dict[str, str] | None) -> dict[str, str]:
-    out: dict[str, str] = {}
+def _user_header(path: Path, header: dict[str, str | float] | None) -> dict[str, str | float]:
+    out: dict[str, str | float] = {}
     for k, v in (header or {}).items():
+        if isinstance(v, float) and k in CAMERA_ATTRIBUTES and k != "captureRate" and math.isfinite(v):
+            out[k] = v  # an OpenEXR standard float attribute (focus, aperture, expTime, ...)
+            continue
         if not isinstance(k, str) or not isinstance(v, str):
-            raise InputError(f"{path}: header attribute {k!r}={v!r} must be a str name and a str value; "
+            raise InputError(f"{path}: header attribute {k!r}={v!r} must be a str name and a str value "
+                             f"(or a finite float for {', '.join(a for a in CAMERA_ATTRIBUTES if a != 'captureRate')}); "
                              "format numbers with str() first")
         if k in _RESERVED_ATTRS:
             raise InputError(f"{path}: header attribute {k!r} is managed by OpenEXR; use another name, "
