@@ -118,6 +118,14 @@ def _calibration_from_header(text: str):
     return OpenCVModel.from_vector(int(t[0]), int(t[1]), k, t[6:], source="--camera-from header")
 
 
+def _none_text(spec) -> str | None:
+    """What the header shows for None (e.g. ``none``), if it shows None at all."""
+    try:
+        return spec.header_text(None)
+    except (TypeError, ValueError, AttributeError):
+        return None
+
+
 def values_from_header(strings: Mapping[str, str], where: str, camera_cls) -> dict[str, Any]:
     """Camera fields from the ``clpost.*`` string attributes :meth:`Camera.describe` wrote. A
     field whose key is absent was unset/off (omitted by describe) and takes its default."""
@@ -135,7 +143,9 @@ def values_from_header(strings: Mapping[str, str], where: str, camera_cls) -> di
                 out[s.name] = s.default  # omitted = unset / off
             continue
         try:
-            if s.name == "distortion":
+            if _none_text(s) == text:  # show_none's "none": unset
+                v = None
+            elif s.name == "distortion":
                 v = _calibration_from_header(text)
             elif s.meta.parse is not None:
                 v = s.meta.parse(text)
