@@ -202,7 +202,9 @@ def _parse_headers(r: _Reader) -> list[PartHeader]:
 
 def _f32(v: float) -> float:
     """A float32 attribute as the shortest decimal that rounds to it (2.8, not 2.7999999523)."""
-    return float(str(np.float32(v)))
+    # format_float_scientific(unique=True) is the shortest round-trip text whatever numpy's
+    # print options (str(np.float32) follows them)
+    return float(np.format_float_scientific(np.float32(v), unique=True))
 
 
 _NUMERIC_ATTRS = {
