@@ -64,8 +64,8 @@ def test_focus_pull_builds_no_new_plan_or_program():
     assert len(pipe._plans) == plans == 1
     assert len(pipe.runtime._programs) == programs
     b = bench(cam, frame, FOCUS, repeats=1)
-    assert b["pull"]["plans"] == b["static"]["plans"] == 1
-    assert b["pull"]["programs_built"] == b["pull"]["programs_after_warmup"]
+    assert b["pull_plans"] == b["pull_plans_after_warmup"] == 1
+    assert b["programs_built_after_warmup"] == 0 and b["frames"] == len(FOCUS)
 
 
 def test_contact_sheet_stacks_frames():

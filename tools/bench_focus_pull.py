@@ -12,6 +12,7 @@ a warm-up frame), plans and programs of each pipeline.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import tempfile
@@ -32,6 +33,8 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=3, help="passes over the five frames (default 3)")
     p.add_argument("--device", default=None)
     p.add_argument("--sheet", default=None, help="also write the pull's contact sheet PNG here")
+    p.add_argument("--exr-camera", default="on", choices=("on", "off"),
+                   help="off: ignore the inputs' focus attributes (the camera before issue 18: constant)")
     a = p.parse_args(argv)
     w, h = (int(x) for x in a.size.lower().split("x"))
     frame = planes_scene(w, h, DEPTHS)
@@ -41,8 +44,10 @@ def main(argv=None) -> int:
         with tempfile.TemporaryDirectory() as tmp:
             src = write_pull(Path(tmp) / "in", frame, FOCUS)
             out = str(Path(tmp) / "o.####.exr")
-            rc = clpost_main(["process", src, "-o", out, "--depth-of-field", "on", "--f-number", "1.4", "--quiet"]
-                             + (["--device", a.device] if a.device else []))
+            with contextlib.redirect_stdout(sys.stderr):  # stdout is the JSON
+                rc = clpost_main(["process", src, "-o", out, "--depth-of-field", "on", "--f-number", "1.4", "--quiet",
+                                  "--exr-camera", a.exr_camera]
+                                 + (["--device", a.device] if a.device else []))
             if rc:
                 return rc
             frames = [exr.read_frame(Path(tmp) / f"o.{i:04d}.exr").color for i in range(1, len(FOCUS) + 1)]
