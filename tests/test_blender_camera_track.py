@@ -1,7 +1,6 @@
-"""tools/blender_camera_track.py: the conversion (fake Blender objects), a track Blender 5.0.1
+"""tools/blender_camera_track.py: the conversion (clpost.blender_track, fake Blender objects), a track Blender 5.0.1
 exported (tests/data/blender_pull_track.json, made by tests/data/make_blender_pull.py), and —
 where $CLPOST_BPY_PYTHON names a Python with bpy — the whole export."""
-import importlib.util
 import json
 import math
 import os
@@ -15,10 +14,9 @@ from clpost import Camera
 from clpost.camera_sources import CameraSources
 from clpost.camera_track import load_track
 
+from clpost import blender_track as bct
+
 ROOT = Path(__file__).resolve().parents[1]
-spec = importlib.util.spec_from_file_location("blender_camera_track", ROOT / "tools" / "blender_camera_track.py")
-bct = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(bct)
 
 
 def _matrix(pos, look_down_minus_z_towards):

@@ -30,77 +30,26 @@ track key          from                                                         
 
 Scene units are converted to metres with ``unit_settings.scale_length``. The JSON lists every
 frame (so the interpolation never matters between them); the format is ``docs/camera-tracks.md``.
-The conversion (:func:`camera_keys`) is plain Python on attribute values, so it is tested without
+The conversion is :mod:`clpost.blender_track` (plain Python on attribute values), tested without
 Blender (``tests/test_blender_camera_track.py``).
 """
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
-import math
 import sys
-from typing import Any, Sequence
+from pathlib import Path
+from typing import Sequence
 
 
-def focus_from_object(cam_matrix: Sequence[Sequence[float]], target: Sequence[float]) -> float:
-    """Depth (scene units) of ``target`` along the camera's view axis: ``(p − c) · (−z)`` with c
-    the camera position and z its local +Z axis (Blender cameras look down −Z), both from the
-    camera's 4×4 world matrix (rows, column 3 = translation)."""
-    c = [cam_matrix[i][3] for i in range(3)]
-    z = [cam_matrix[i][2] for i in range(3)]
-    n = math.sqrt(sum(v * v for v in z)) or 1.0
-    return -sum((p - q) * v / n for p, q, v in zip(target, c, z))
-
-
-def sensor_mm(cam_data: Any, res_x: float, res_y: float) -> tuple[float, float]:
-    """(width, height) mm of the sensor area imaged, with clpost's horizontal fit."""
-    fit = getattr(cam_data, "sensor_fit", "AUTO")
-    aspect = res_x / res_y
-    if fit == "VERTICAL" or (fit == "AUTO" and res_y > res_x):
-        h = cam_data.sensor_height if fit == "VERTICAL" else cam_data.sensor_width
-        return h * aspect, h
-    w = cam_data.sensor_width
-    return w, w / aspect
-
-
-def camera_keys(frame: int, cam_obj: Any, scene: Any) -> dict[str, Any]:
-    """One keyframe of the track from a camera object and its scene at ``frame``."""
-    data = cam_obj.data
-    dof = data.dof
-    scale = float(getattr(getattr(scene, "unit_settings", None), "scale_length", 1.0) or 1.0)
-    if getattr(dof, "focus_object", None) is not None:
-        target = dof.focus_object.matrix_world.translation
-        focus = focus_from_object(cam_obj.matrix_world, [target[0], target[1], target[2]]) * scale
-    else:
-        focus = float(dof.focus_distance) * scale
-    r = scene.render
-    res_x = r.resolution_x * getattr(r, "pixel_aspect_x", 1.0)
-    res_y = r.resolution_y * getattr(r, "pixel_aspect_y", 1.0)
-    fps = r.fps / r.fps_base
-    key: dict[str, Any] = {"frame": int(frame), "focus": round(focus, 9) if focus > 0 else "inf",
-                           "f-number": round(float(dof.aperture_fstop), 6),
-                           "depth-of-field": "on" if dof.use_dof else "off"}
-    if getattr(data, "type", "PERSP") == "PERSP":
-        key["lens"] = f"thin:{float(data.lens):.6g}"
-    w, h = sensor_mm(data, res_x, res_y)
-    key["sensor"] = f"{w:.6g}x{h:.6g}"
-    key["shutter"] = float(r.motion_blur_shutter) / fps
-    if getattr(r, "use_motion_blur", False):
-        key["fps"] = fps
-    return key
-
-
-def export(scene: Any, cam_obj: Any, frames: Sequence[int], source: str) -> dict:
-    """The track document: every frame of ``frames`` (the scene is stepped with frame_set)."""
-    keys = []
-    for f in frames:
-        scene.frame_set(f)
-        keys.append(camera_keys(f, cam_obj, scene))
-    return {"format": "clpost camera track",
-            "comment": f"{source}: camera {cam_obj.name!r}, frames {frames[0]}-{frames[-1]}, "
-                       "by tools/blender_camera_track.py",
-            "interpolation": {"lens": "step", "sensor": "step", "depth-of-field": "step"},
-            "keys": keys}
+def _conversion():
+    """clpost/blender_track.py, loaded by path: Blender's Python has no clpost installed."""
+    path = Path(__file__).resolve().parents[1] / "clpost" / "blender_track.py"
+    spec = importlib.util.spec_from_file_location("clpost_blender_track", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -128,7 +77,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         frames = list(range(int(lo), int(hi or lo) + 1))
     else:
         frames = list(range(scene.frame_start, scene.frame_end + 1, scene.frame_step))
-    doc = export(scene, cam, frames, a.blend or bpy.data.filepath or "(unsaved)")
+    doc = _conversion().export(scene, cam, frames, a.blend or bpy.data.filepath or "(unsaved)")
     with open(a.output, "w") as fh:
         json.dump(doc, fh, indent=1)
     print(f"wrote {len(doc['keys'])} keyframes of camera {cam.name!r} to {a.output}")
