@@ -289,6 +289,6 @@ def explain_sources(resolved: list[tuple[int, Resolved]]) -> list[str]:
                 text = f"{len(distinct)} values over the frames ({', '.join(s.header_text(v) or 'none' for v in distinct[:4])}{', …' if len(distinct) > 4 else ''})"
             if not s.meta.scalar:
                 text += f"; structural: {len(distinct)} plans"
-        unit = f" {s.meta.unit}" if s.meta.unit in ("m", "seconds", "mm", "degrees") else ""
+        unit = f" {s.meta.unit}" if s.meta.unit in ("m", "seconds", "mm", "degrees") and text != "none" else ""
         lines.append(f"{s.name:<26} {text}{unit}  [{' / '.join(srcs)}]")
     return lines

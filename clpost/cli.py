@@ -186,7 +186,8 @@ def cmd_process(args) -> int:
                          "stages (e.g. --stages exposure,dof; --explain lists them) or leave --stages out")
     from .batch import frame_camera
 
-    camera_from_args(args)  # the flags' own errors first, as they are
+    if not (args.camera_from or args.camera_track):
+        camera_from_args(args)  # the flags' own errors first, as before (with these, lower sources may complete them)
     sources = camera_sources_from_args(args)
     jobs = _jobs(args)
     if not jobs:
