@@ -49,6 +49,9 @@ def test_standard_attributes_written_and_read_back(tmp_path):
     back = exr.read_attributes(tmp_path / "a.exr")[0]
     assert back == pytest.approx(a, rel=1e-6)
     assert exr.read_frame(tmp_path / "a.exr").metadata["attributes"] == back
+    d = exr.info(tmp_path / "a.exr")
+    assert d["camera_attributes"] == back  # `clpost info` shows what `process` will read
+    assert "camera attributes: focus 2.5 m, aperture 4, expTime 0.0208333 s" in exr.format_info(d)
 
 
 def _track(tmp_path, keys):

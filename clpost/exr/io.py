@@ -657,7 +657,8 @@ def info(path: str | os.PathLike) -> dict:
     "display_window"}``), ``size`` ((width, height) of the display window), ``layout`` (None if
     no layout fits), ``depth_kind``, ``depth`` (``{"min", "max", "inf_count"}`` over finite
     values, or None), ``velocity`` (``{"x": (min, max), "y": (min, max), "max_magnitude"}`` in
-    our convention, or None), ``problems`` (messages that stop :func:`read_frame`, or warnings).
+    our convention, or None), ``problems`` (messages that stop :func:`read_frame`, or warnings),
+    ``camera_attributes`` (the :data:`CAMERA_ATTRIBUTES` present: what ``process`` reads per frame).
     """
     p = Path(path)
     parts = _load(p)
@@ -668,6 +669,7 @@ def info(path: str | os.PathLike) -> dict:
                    "data_window": pt.data_window, "display_window": pt.display_window} for pt in parts],
         "size": (ox1 - ox0 + 1, oy1 - oy0 + 1),
         "layout": None, "depth_kind": None, "depth": None, "velocity": None, "problems": [],
+        "camera_attributes": _camera_attrs(parts[0].header),
     }
     try:
         with warnings.catch_warnings(record=True) as caught:
@@ -709,5 +711,10 @@ def format_info(d: dict) -> str:
     else:
         lines.append(f"  velocity (px/frame, +x right, +y down): x [{_fmt(vel['x'][0])}, {_fmt(vel['x'][1])}], "
                      f"y [{_fmt(vel['y'][0])}, {_fmt(vel['y'][1])}], max |v| {_fmt(vel['max_magnitude'])}")
+    cam = d.get("camera_attributes")
+    if cam:
+        lines.append("  camera attributes: " + ", ".join(
+            f"{k} {v:g}{'' if CAMERA_ATTRIBUTES[k] in ('f-number', 'ISO', 'T-number') else ' ' + CAMERA_ATTRIBUTES[k]}"
+            for k, v in cam.items()))
     lines.extend(f"  problem: {msg}" for msg in d["problems"])
     return "\n".join(lines)
