@@ -213,3 +213,20 @@ def test_camera_from_a_file_without_a_camera_is_one_line_exit_2(tmp_path, capsys
     rc = main(["process", str(inp), "-o", str(tmp_path / "o.exr"), "--camera-from", str(inp)])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "clpost.fNumber='fast'" in err and "--f-number" in err
+
+
+def test_a_zoom_from_nominal_focal_length_builds_one_plan_per_focal_length(tmp_path):
+    from clpost import Pipeline
+    from clpost.batch import FrameJob, process_sequence
+
+    jobs = []
+    for n, f in enumerate((35.0, 35.0, 50.0), 1):
+        exr.write_frame(tmp_path / f"z.{n}.exr", _frame(), header={"nominalFocalLength": f, "focus": 2.0})
+        jobs.append(FrameJob(n, tmp_path / f"z.{n}.exr", tmp_path / f"o.{n}.exr"))
+    src = CameraSources(flags={"depth_of_field": True, "f_number": 1.4})
+    pipe = Pipeline(src.resolve(1, {"nominalFocalLength": 35.0}).camera)
+    rep = process_sequence(pipe, jobs, sources=src)
+    assert rep.done == [1, 2, 3] and len(pipe._plans) == 2
+    got = [exr.read_attributes(j.dst) for j in jobs]
+    assert [a["nominalFocalLength"] for a, _ in got] == [35.0, 35.0, 50.0]
+    assert [s["clpost.lens"] for _, s in got] == ["thin:35", "thin:35", "thin:50"]
