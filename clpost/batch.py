@@ -68,18 +68,22 @@ def read_input(pipeline: Pipeline, path: Path, layout: str | None = None, camera
     return frame
 
 
-def frame_camera(sources, job: FrameJob):
-    """This job's camera from ``sources`` (:class:`~clpost.camera_sources.CameraSources`; None:
-    the pipeline's camera, constant) and the input's standard attributes (header only: the
-    camera is needed before the pixels, to convert radial depth)."""
-    if sources is None:
-        return None
+def frame_resolved(sources, job: FrameJob):
+    """This job's :class:`~clpost.camera_sources.Resolved` camera (and each value's source) from
+    ``sources`` and the input's standard attributes (header only: the camera is needed before the
+    pixels, to convert radial depth)."""
     # a missing input is read_frame's error to report (it names the frame)
     attrs = exr.read_attributes(job.src)[0] if sources.use_exr and job.src.is_file() else {}
     try:
-        return sources.resolve(job.frame, attrs).camera
+        return sources.resolve(job.frame, attrs)
     except InputError as exc:
         raise InputError(f"{job.src}: {exc}") from None
+
+
+def frame_camera(sources, job: FrameJob):
+    """This job's camera from ``sources`` (:class:`~clpost.camera_sources.CameraSources`; None:
+    the pipeline's camera, constant)."""
+    return None if sources is None else frame_resolved(sources, job).camera
 
 
 def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,

@@ -6,7 +6,7 @@ Sources, highest priority first (``docs/camera-tracks.md``):
 2. ``camera-from`` — the camera recorded in an output's header (``--camera-from OUT.exr``: the
    ``clpost.*`` keys :meth:`~clpost.camera.Camera.describe` writes), constant;
 3. ``track`` — a camera track file (``--camera-track``, :mod:`clpost.camera_track`), per frame;
-4. ``exr`` — the input frame's OpenEXR standard attributes (:data:`EXR_PARAMETERS`), per frame;
+4. ``exr`` — the input frame's OpenEXR standard attributes (table below, :func:`exr_values`), per frame;
 5. ``default`` — the camera's defaults.
 
 Each parameter takes the highest source that sets it. ``shutter_s`` and ``shutter_angle_deg``
@@ -45,13 +45,8 @@ from typing import Any, Mapping
 
 from .errors import InputError
 
-SOURCES = ("flag", "camera-from", "track", "exr", "default")
 _LINKED = ({"shutter_s", "shutter_angle_deg"},)
 """Fields that are one quantity: the highest source of any of them sets all of them."""
-
-EXR_PARAMETERS = {"focus": "focus_distance_m", "aperture": "f_number", "expTime": "shutter_s",
-                  "isoSpeed": "iso", "nominalFocalLength": "lens", "tStop": "f_number or transmittance",
-                  "shutterAngle": "shutter_s", "captureRate": "shutter_s (with shutterAngle)"}
 
 
 def _positive(v: float | None) -> bool:
@@ -64,10 +59,8 @@ def exr_values(attrs: Mapping[str, float], above: Mapping[str, Any], camera_cls)
     the mapping of ``nominalFocalLength`` and ``tStop`` depends on."""
     out: dict[str, tuple[Any, str]] = {}
     a = {k: v for k, v in attrs.items() if isinstance(v, float) and math.isfinite(v)}
-    if "focus" in a and a["focus"] > 0:
+    if _positive(a.get("focus")):  # 0 is how some tools write "unknown"
         out["focus_distance_m"] = (a["focus"], "focus")
-    elif a.get("focus") == 0:
-        pass  # 0 is how some tools write "unknown"
     if _positive(a.get("aperture")):
         out["f_number"] = (a["aperture"], "aperture")
     if _positive(a.get("tStop")):
@@ -253,11 +246,6 @@ class CameraSources:
             if not s.meta.input_only and s.name not in labels:
                 labels[s.name] = "default" if s.name not in self.defaults else "default (demo)"
         return Resolved(cam, labels)
-
-    @property
-    def varies(self) -> bool:
-        """True when frames may get different cameras (a track, or the inputs' attributes)."""
-        return self.track is not None or self.use_exr
 
 
 def explain_sources(resolved: list[tuple[int, Resolved]]) -> list[str]:

@@ -255,16 +255,10 @@ def cmd_process(args) -> int:
 
 def _explain_sources(sources, jobs) -> None:
     """The camera per parameter: its value (range over the frames) and which source set it."""
-    from . import exr
+    from .batch import frame_resolved
     from .camera_sources import explain_sources
 
-    resolved = []
-    for job in jobs:
-        attrs = exr.read_attributes(job.src)[0] if sources.use_exr and job.src.is_file() else {}
-        try:
-            resolved.append((job.frame, sources.resolve(job.frame, attrs)))
-        except InputError as exc:
-            raise InputError(f"{job.src}: {exc}") from None
+    resolved = [(job.frame, frame_resolved(sources, job)) for job in jobs]
     print(f"camera over {len(jobs)} frame(s) (value [source: flag / camera-from / track / EXR attribute / default]):")
     for line in explain_sources(resolved):
         print(f"  {line}")
