@@ -101,3 +101,18 @@ def test_bad_track_on_the_command_line_exits_2_with_one_line(tmp_path, capsys):
     rc = main(["process", str(tmp_path / "in.exr"), "-o", str(tmp_path / "out.exr"),
                "--camera-track", str(tmp_path / "missing.json")])
     assert rc == 2 and "missing.json: no such file" in capsys.readouterr().err
+
+
+def test_the_examples_in_docs_load_and_agree(tmp_path):
+    import re
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "camera-tracks.md").read_text()
+    js = re.search(r"```json\n(.*?)```", doc, re.S).group(1)
+    csv_text = re.search(r"```\n(# focus pull.*?)```", doc, re.S).group(1)
+    a = load_track(_write(tmp_path, "a.json", js))
+    b = load_track(_write(tmp_path, "b.csv", csv_text))
+    for t in (a, b):
+        assert t.values_at(101)["focus_distance_m"] == 1.2 and t.values_at(124)["focus_distance_m"] == 3.5
+        assert t.values_at(112)["f_number"] == 2.8  # stepped
+    assert b.values_at(113)["f_number"] == 4.0 and a.values_at(130)["f_number"] == 4.0
