@@ -159,6 +159,10 @@ def camera_from_file(path, camera_cls=None) -> dict[str, Any]:
 
     if camera_cls is None:
         from .camera import Camera as camera_cls
+    from pathlib import Path
+
+    if not Path(path).is_file():
+        raise InputError(f"--camera-from {path}: no such file; give an output EXR written by `clpost process`")
     _, strings = exr.read_attributes(path)
     return values_from_header(strings, str(path), camera_cls)
 

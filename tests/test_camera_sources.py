@@ -213,6 +213,8 @@ def test_camera_from_a_file_without_a_camera_is_one_line_exit_2(tmp_path, capsys
     rc = main(["process", str(inp), "-o", str(tmp_path / "o.exr"), "--camera-from", str(inp)])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "clpost.fNumber='fast'" in err and "--f-number" in err
+    rc = main(["process", str(inp), "-o", str(tmp_path / "o.exr"), "--camera-from", str(tmp_path / "nope.exr")])
+    assert rc == 2 and "--camera-from" in capsys.readouterr().err and not (tmp_path / "o.exr").exists()
 
 
 def test_a_zoom_from_nominal_focal_length_builds_one_plan_per_focal_length(tmp_path):
