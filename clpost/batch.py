@@ -43,6 +43,11 @@ class BatchReport:
 def output_header(frame: Frame) -> dict[str, str]:
     """String header attributes recording what the camera did (written into output EXRs)."""
     hdr = dict(frame.metadata.get("camera", {}))
+    cam = frame.metadata.get("resolved_camera")
+    if cam is not None:  # the same values under the OpenEXR standard names (focus, aperture, ...)
+        from .camera_sources import standard_attributes
+
+        hdr.update(standard_attributes(cam))
     hdr["clpost.plan"] = ",".join(frame.metadata.get("plan", [])) or "(identity)"
     src = frame.metadata.get("path")
     if src:
@@ -50,26 +55,49 @@ def output_header(frame: Frame) -> dict[str, str]:
     return hdr
 
 
-def read_input(pipeline: Pipeline, path: Path, layout: str | None = None) -> Frame:
+def read_input(pipeline: Pipeline, path: Path, layout: str | None = None, camera=None) -> Frame:
     """Read one input frame; radial depth (Arnold's Z, see :mod:`clpost.exr`) is converted to
-    planar with the camera's own focal length in pixels at the frame's resolution."""
+    planar with the camera's own focal length in pixels at the frame's resolution (``camera``:
+    this frame's, default the pipeline's)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", exr.DepthConventionWarning)
         frame = exr.read_frame(path, layout)
     if frame.metadata.get("depth_kind") == "radial" and frame.depth is not None:
-        fx, fy, _, _ = pipeline.camera.intrinsics(frame.width, frame.height)
+        fx, fy, _, _ = (camera or pipeline.camera).intrinsics(frame.width, frame.height)
         meta = dict(frame.metadata, depth_kind="planar (converted from radial with the camera's focal length)")
         frame = frame.replace(depth=exr.radial_to_planar(frame.depth, (fx, fy)), metadata=meta)
     return frame
 
 
+def frame_resolved(sources, job: FrameJob):
+    """This job's :class:`~clpost.camera_sources.Resolved` camera (and each value's source) from
+    ``sources`` and the input's standard attributes (header only: the camera is needed before the
+    pixels, to convert radial depth)."""
+    # a missing input is read_frame's error to report (it names the frame)
+    attrs = exr.read_attributes(job.src)[0] if sources.use_exr and job.src.is_file() else {}
+    try:
+        return sources.resolve(job.frame, attrs)
+    except InputError as exc:
+        raise InputError(f"{job.src}: {exc}") from None
+
+
+def frame_camera(sources, job: FrameJob):
+    """This job's camera from ``sources`` (:class:`~clpost.camera_sources.CameraSources`; None:
+    the pipeline's camera, constant)."""
+    return None if sources is None else frame_resolved(sources, job).camera
+
+
 def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
                 half: bool = False, expect_size: tuple[int, int] | None = None,
-                compression: str = "zip", display: str = "srgb", preview_dir: Path | None = None) -> Frame:
+                compression: str = "zip", display: str = "srgb", preview_dir: Path | None = None,
+                sources=None) -> Frame:
     """Read, process and write one frame; returns the processed frame. An output named .png, .jpg
     or .tif is written display-encoded for ``display`` (:mod:`clpost.display_image`), an .exr
-    linear with the camera in its header; ``preview_dir`` also gets ``<output stem>.png``."""
-    frame = read_input(pipeline, job.src, layout)
+    linear with the camera in its header; ``preview_dir`` also gets ``<output stem>.png``.
+    ``sources``: an animated camera (:class:`~clpost.camera_sources.CameraSources`), resolved for
+    this frame."""
+    cam = frame_camera(sources, job)
+    frame = read_input(pipeline, job.src, layout, cam)
     if expect_size is not None and frame.size != expect_size:
         raise InputError(
             f"{job.src}: size {frame.width}x{frame.height} differs from the sequence's "
@@ -77,8 +105,8 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
         )
     # The frame number seeds grain/sensor noise (CONVENTIONS "Randomness"): frames differ, reruns agree.
     frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(job.frame)), validate=False)
-    out = pipeline.run(frame)
-    ws = pipeline.camera.working_space
+    out = pipeline.run(frame, cam)
+    ws = (cam or pipeline.camera).working_space
     if output_format(job.dst) == "EXR":
         exr.write_frame(job.dst, out, header=output_header(out), half=half, compression=compression)
     else:
@@ -113,13 +141,14 @@ def pending(jobs: list[FrameJob], overwrite: bool, report: BatchReport,
 def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | None = None,
                      overwrite: bool = False, half: bool = False, compression: str = "zip",
                      progress: Callable[[FrameJob, float | None], None] | None = None,
-                     display: str = "srgb", preview_dir: Path | None = None) -> BatchReport:
-    """Process ``jobs`` in order; ``progress(job, seconds or None if skipped)`` after each."""
+                     display: str = "srgb", preview_dir: Path | None = None, sources=None) -> BatchReport:
+    """Process ``jobs`` in order; ``progress(job, seconds or None if skipped)`` after each;
+    ``sources``: an animated camera (per-frame, :mod:`clpost.camera_sources`)."""
     report = BatchReport()
     size = None
     for job in pending(jobs, overwrite, report, progress):
         t0 = time.perf_counter()
-        out = process_one(pipeline, job, layout, half, size, compression, display, preview_dir)
+        out = process_one(pipeline, job, layout, half, size, compression, display, preview_dir, sources)
         size = out.size
         dt = time.perf_counter() - t0
         report.done.append(job.frame)

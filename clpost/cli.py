@@ -16,7 +16,7 @@ from pathlib import Path
 from .camera import Camera
 from .exr import COMPRESSIONS
 from .errors import ClpostError, InputError
-from .params import parse_fraction, parse_wxh_mm
+from .params import parse_fraction, parse_on_off, parse_wxh_mm
 from .stages import QUALITIES
 
 
@@ -115,6 +115,32 @@ def _set_help(p: argparse.ArgumentParser, dest: str, text: str) -> None:
             action.help = text.replace("%", "%%")
 
 
+def camera_sources_from_args(args: argparse.Namespace):
+    """The animated camera of ``process``: flags > --camera-from > --camera-track > the inputs'
+    OpenEXR attributes > defaults (:mod:`clpost.camera_sources`)."""
+    from .camera_sources import CameraSources, camera_from_file
+    from .camera_track import load_track
+
+    flags = {k[4:]: v for k, v in vars(args).items() if k.startswith("cam_")}
+    src = getattr(args, "camera_from", None)
+    track = getattr(args, "camera_track", None)
+    return CameraSources(flags=flags, camera_from=camera_from_file(src) if src else {},
+                         camera_from_path=src, track=load_track(track) if track else None,
+                         use_exr=getattr(args, "exr_camera", True))
+
+
+def _add_source_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("animated camera (docs/camera-tracks.md; priority: flags > --camera-from > "
+                             "--camera-track > the inputs' OpenEXR attributes > defaults)")
+    g.add_argument("--camera-track", default=None, metavar="FILE",
+                   help="keyframed camera parameters per frame number (JSON or CSV; linear or step)")
+    g.add_argument("--camera-from", default=None, metavar="OUT.exr",
+                   help="reuse the camera recorded in an output's header (its clpost.* keys)")
+    g.add_argument("--exr-camera", type=parse_on_off, default=True, metavar="on/off",
+                   help="read focus, aperture, expTime, isoSpeed, nominalFocalLength, tStop, shutterAngle "
+                        "and captureRate from each input's header (default: on)")
+
+
 def _add_pipeline_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quality", choices=QUALITIES, default="final", help="speed/accuracy level")
     p.add_argument("--stages", type=_stage_list, default=None,
@@ -172,15 +198,20 @@ def cmd_process(args) -> int:
     if args.stages == [] and not args.explain:
         raise InputError("--stages names no stage, so every output would be its input unchanged; give "
                          "stages (e.g. --stages exposure,dof; --explain lists them) or leave --stages out")
+    from .batch import frame_camera
     from .display_image import output_format
 
     output_format(args.output)  # an unknown extension is refused before anything is read
-    camera = camera_from_args(args)
-    pipe = Pipeline(camera, quality=args.quality, stages=args.stages, device=args.device)
+    if not (args.camera_from or args.camera_track):
+        camera_from_args(args)  # the flags' own errors first, as before (with these, lower sources may complete them)
+    sources = camera_sources_from_args(args)
     jobs = _jobs(args)
     if not jobs:
         raise InputError(f"{args.input}: no input frames")
+    camera = frame_camera(sources, jobs[0])
+    pipe = Pipeline(camera, quality=args.quality, stages=args.stages, device=args.device)
     if args.explain:
+        _explain_sources(sources, jobs)
         first = read_input(pipe, jobs[0].src, args.channels)
         cam = pipe.camera_for(first)
         print(f"plan for {jobs[0].src} ({first.width}x{first.height}, quality {args.quality}):")
@@ -218,12 +249,13 @@ def cmd_process(args) -> int:
         previews = [] if args.preview is None else [Path(args.preview) / f"{j.dst.stem}.png" for j in jobs]
         with writing(args.output, [j.dst for j in jobs] + previews):
             if args.workers or args.scheduler:
-                rep = _process_distributed(args, camera, jobs, progress)
+                rep = _process_distributed(args, camera, jobs, progress, sources)
             else:
                 rep = process_sequence(pipe, jobs, layout=args.channels, overwrite=args.overwrite,
                                        half=args.half, compression=args.compression, progress=progress,
                                        display=args.display,
-                                       preview_dir=None if args.preview is None else Path(args.preview))
+                                       preview_dir=None if args.preview is None else Path(args.preview),
+                                       sources=sources)
     finally:
         bar.close()
     for frame, err in sorted(rep.failed.items()):
@@ -241,7 +273,18 @@ def cmd_process(args) -> int:
     return 0
 
 
-def _process_distributed(args, camera, jobs, progress):
+def _explain_sources(sources, jobs) -> None:
+    """The camera per parameter: its value (range over the frames) and which source set it."""
+    from .batch import frame_resolved
+    from .camera_sources import explain_sources
+
+    resolved = [(job.frame, frame_resolved(sources, job)) for job in jobs]
+    print(f"camera over {len(jobs)} frame(s) (value [source: flag / camera-from / track / EXR attribute / default]):")
+    for line in explain_sources(resolved):
+        print(f"  {line}")
+
+
+def _process_distributed(args, camera, jobs, progress, sources=None):
     from .distributed import PipelineSpec, connect, first_size, process_sequence_dask
 
     spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device,
@@ -250,7 +293,7 @@ def _process_distributed(args, camera, jobs, progress):
     try:
         return process_sequence_dask(client, spec, jobs, layout=args.channels, overwrite=args.overwrite,
                                      half=args.half, compression=args.compression, retries=args.retries,
-                                     expect_size=first_size(jobs), progress=progress)
+                                     expect_size=first_size(jobs), progress=progress, sources=sources)
     finally:
         cluster = getattr(client, "cluster", None)
         client.close()
@@ -558,6 +601,7 @@ def build_parser() -> argparse.ArgumentParser:
     dist.add_argument("--scheduler", default=None, help="run on an existing Dask cluster, e.g. tcp://HOST:8786")
     dist.add_argument("--retries", type=_count("--retries", 0), default=2, help="retries of a failing frame before it is reported (default 2)")
     _add_camera_options(pr)
+    _add_source_options(pr)
     _add_pipeline_options(pr)
     pr.set_defaults(func=cmd_process)
 

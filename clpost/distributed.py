@@ -59,14 +59,15 @@ def worker_pipeline(spec: PipelineSpec):
 
 def process_frame_task(spec: PipelineSpec, job: FrameJob, layout: str | None, half: bool,
                        compression: str, overwrite: bool,
-                       expect_size: tuple[int, int] | None) -> dict:
-    """One frame on a worker. Returns what happened (the client aggregates)."""
+                       expect_size: tuple[int, int] | None, sources=None) -> dict:
+    """One frame on a worker. Returns what happened (the client aggregates). ``sources``: an
+    animated camera (:class:`~clpost.camera_sources.CameraSources`), resolved on the worker."""
     if job.dst.exists() and not overwrite:
         return {"frame": job.frame, "skipped": True, "seconds": 0.0}
     t0 = time.perf_counter()
     try:
         process_one(worker_pipeline(spec), job, layout, half, expect_size, compression, spec.display,
-                    None if spec.preview_dir is None else Path(spec.preview_dir))
+                    None if spec.preview_dir is None else Path(spec.preview_dir), sources)
     except ClpostError as exc:
         # Deterministic and the user's to fix: a result, not an exception Dask would retry.
         return {"frame": job.frame, "skipped": False, "seconds": 0.0, "error": str(exc)}
@@ -98,7 +99,7 @@ def process_sequence_dask(client, spec: PipelineSpec, jobs: list[FrameJob], *,
                           expect_size: tuple[int, int] | None = None,
                           task: Callable = process_frame_task,
                           progress: Callable[[FrameJob, float | None], None] | None = None,
-                          on_result: Callable[[int], None] | None = None) -> BatchReport:
+                          on_result: Callable[[int], None] | None = None, sources=None) -> BatchReport:
     """Submit one task per frame and collect results as they complete.
 
     ``task`` is the per-frame function (tests inject faults through it); ``on_result(n_done)``
@@ -109,7 +110,8 @@ def process_sequence_dask(client, spec: PipelineSpec, jobs: list[FrameJob], *,
     report = BatchReport()
     by_key = {}
     for job in pending(jobs, overwrite, report, progress):
-        fut = client.submit(task, spec, job, layout, half, compression, overwrite, expect_size,
+        extra = () if sources is None else (sources,)  # injected test tasks keep their signature
+        fut = client.submit(task, spec, job, layout, half, compression, overwrite, expect_size, *extra,
                             key=f"clpost-frame-{job.frame}-{job.dst.name}-{time.time_ns()}",
                             retries=retries, pure=False)
         by_key[fut.key] = (fut, job)

@@ -120,22 +120,29 @@ def specs_of(owner: str, cls: type) -> list[ParamSpec]:
 
 # -- header text -------------------------------------------------------------------------------
 
+def exact_g(value: float) -> str:
+    """``%g`` when that reads back as the same float, else the shortest text that does (repr):
+    headers stay readable (``0.02``, ``3``) and a camera read back from them is identical."""
+    text = f"{value:g}"
+    return text if float(text) == value else repr(float(value))
+
+
 def show_default(value: Any) -> str | None:
-    """None → omitted; numbers ``%g``; (w, h) → ``WxH``; anything else ``str``."""
+    """None → omitted; numbers ``%g`` (exact: :func:`exact_g`); (w, h) → ``WxH``; anything else ``str``."""
     if value is None:
         return None
     if isinstance(value, bool) or isinstance(value, int):
         return str(value)
     if isinstance(value, float):
-        return f"{value:g}"
+        return exact_g(value)
     if isinstance(value, tuple):
-        return "x".join(f"{v:g}" for v in value)
+        return "x".join(exact_g(float(v)) for v in value)
     return str(value)
 
 
 def show_auto(value: Any) -> str:
-    """``auto`` for None (chosen by the meter), else ``%g``."""
-    return "auto" if value is None else f"{value:g}"
+    """``auto`` for None (chosen by the meter), else ``%g`` (exact)."""
+    return "auto" if value is None else exact_g(value)
 
 
 def show_none(value: Any) -> str:

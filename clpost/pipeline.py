@@ -113,11 +113,14 @@ class Pipeline:
             self._runtime = get_runtime(self.device)
         return self._runtime
 
-    def camera_for(self, frame: Frame) -> Camera:
+    def camera_for(self, frame: Frame, camera: Camera | None = None) -> Camera:
         """The camera resolved for this frame: auto-exposure metered, and a lens_data lens without
-        a calibration given its traced distortion at the frame's size."""
-        cam = metering.resolve(self.camera, frame)
-        if self.camera.distortion is not None:
+        a calibration given its traced distortion at the frame's size. ``camera``: this frame's
+        camera before that (an animated camera, :mod:`clpost.camera_sources`; default the
+        pipeline's)."""
+        base = self.camera if camera is None else camera
+        cam = metering.resolve(base, frame)
+        if base.distortion is not None:
             _check_calibration_focal(cam)
         if cam.distortion is None and cam.optics is not None and cam.lens_distortion:
             from .calibration import lens_distortion_model
@@ -192,27 +195,35 @@ class Pipeline:
         return [n.name for n in group_nodes(self._planned(frame, cam))]
 
     # -- running ------------------------------------------------------------------------------
-    def run(self, frame: Frame) -> Frame:
+    def run(self, frame: Frame, camera: Camera | None = None) -> Frame:
         """Process one frame; returns a new Frame whose color is the camera's output
-        (normalised sensor signal; later stages: the film/sensor's recorded values)."""
-        frame = self._plate(frame)
-        cam = self.camera_for(frame) if isinstance(frame, Frame) else None
+        (normalised sensor signal; later stages: the film/sensor's recorded values).
+        ``camera``: this frame's camera (an animated camera; default the pipeline's): its scalar
+        parameters change per frame through the same plan; its metadata ``resolved_camera`` is
+        the camera used (metered)."""
+        if camera is not None and not isinstance(camera, Camera):
+            raise InputError(f"Pipeline.run: camera must be a clpost.Camera, not {type(camera).__name__}")
+        frame = self._plate(frame, camera)
+        cam = self.camera_for(frame, camera) if isinstance(frame, Frame) else None
         plan = self.plan_for(frame, cam)
         if cam is not None and not self._exposure_checked and (self._selected is None or "exposure" in self._selected):
             # once per pipeline (a sequence): a manual exposure far from mid-grey is one warning line
             self._exposure_checked = True
             metering.check_exposure(cam, frame)
         self.last_plan = plan
-        return plan.run(frame, cam)
+        out = plan.run(frame, cam)
+        return out.replace(metadata=dict(out.metadata, resolved_camera=cam), validate=False)
 
-    def _plate(self, frame):
+    def _plate(self, frame, camera=None):
         """A plate rendered at the infinity-focus field of view (``Camera.plate_fov``) magnified to
-        the focused camera's first (:func:`clpost.breathing.rescale_plate`); other frames as they are."""
-        if not isinstance(frame, Frame) or self.camera.plate_fov == "focused":
+        the focused camera's — this frame's ``camera`` (a focus pull breathes), default the
+        pipeline's — first (:func:`clpost.breathing.rescale_plate`); other frames as they are."""
+        cam = camera or self.camera
+        if not isinstance(frame, Frame) or cam.plate_fov == "focused":
             return frame
         from .breathing import rescale_plate
 
-        return rescale_plate(frame, self.camera)
+        return rescale_plate(frame, cam)
 
     @property
     def last_timings(self) -> dict[str, float]:

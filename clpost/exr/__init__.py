@@ -118,14 +118,14 @@ References: OpenEXR file layout and multi-part files, https://openexr.com/en/lat
 Blender manual, "Render Passes" (Depth, Vector); Foundry Nuke reference guide, ScanlineRender,
 ZDefocus, VectorBlur; Autodesk Arnold user guide, "AOVs" and the ``motion_vector`` shader.
 """
-from .io import (COMPRESSIONS, MAX_CHANNELS, MAX_SIDE, PartHeader, check_header, format_info, info,
-                 quiet_openexr, read_frame, read_header, write_frame)
+from .io import (CAMERA_ATTRIBUTES, COMPRESSIONS, MAX_CHANNELS, MAX_SIDE, PartHeader, check_header, format_info, info,
+                 quiet_openexr, read_attributes, read_frame, read_header, write_frame)
 from .layouts import (BLENDER_VIEW_LAYER, DEPTH_KINDS, LAYOUTS, REGISTRY, SKY_DEPTH_M,
                       ArnoldLayout, BlenderLayout, ClpostLayout, DepthConventionWarning, Layout,
                       NukeLayout, detect_layout, get_layout, planar_to_radial, radial_to_planar)
 
 __all__ = [
-    "ArnoldLayout", "BLENDER_VIEW_LAYER", "BlenderLayout", "COMPRESSIONS", "ClpostLayout", "DEPTH_KINDS",
+    "CAMERA_ATTRIBUTES", "read_attributes", "ArnoldLayout", "BLENDER_VIEW_LAYER", "BlenderLayout", "COMPRESSIONS", "ClpostLayout", "DEPTH_KINDS",
     "DepthConventionWarning", "LAYOUTS", "Layout", "MAX_CHANNELS", "MAX_SIDE", "NukeLayout", "PartHeader",
     "REGISTRY", "SKY_DEPTH_M", "check_header", "detect_layout", "format_info", "get_layout", "info",
     "planar_to_radial", "quiet_openexr", "radial_to_planar", "read_frame", "read_header", "write_frame",

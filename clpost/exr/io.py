@@ -13,6 +13,7 @@ Reference: OpenEXR file layout, https://openexr.com/en/latest/OpenEXRFileLayout.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import resource
 import struct
@@ -55,6 +56,14 @@ _FRAME_BYTES_PER_PX = 4 * 8
 depth, velocity (2) and one temporary plane."""
 _FLAG_LONG_NAMES, _FLAG_MULTIPART = 0x400, 0x1000
 
+CAMERA_ATTRIBUTES = {
+    "focus": "m", "aperture": "f-number", "expTime": "s", "isoSpeed": "ISO", "nominalFocalLength": "mm",
+    "tStop": "T-number", "shutterAngle": "degrees", "captureRate": "frames per second",
+}
+"""The OpenEXR standard attributes that describe the camera (ImfStandardAttributes.h; captureRate
+is a rational, the others floats), read as floats into ``Frame.metadata["attributes"]`` and by
+:func:`read_attributes`; their mapping to camera parameters is :mod:`clpost.camera_sources`."""
+
 
 # ----------------------------------------------------------------------------------------------
 # Headers, parsed and checked before OpenEXR allocates anything
@@ -69,6 +78,10 @@ class PartHeader:
     data_window: Window | None = None
     display_window: Window | None = None
     type: str = ""
+    attributes: dict[str, float] = field(default_factory=dict)
+    """The :data:`CAMERA_ATTRIBUTES` present, as floats."""
+    strings: dict[str, str] = field(default_factory=dict)
+    """Every string attribute (e.g. the ``clpost.*`` keys a camera wrote)."""
 
 
 class _NeedMore(Exception):
@@ -170,8 +183,13 @@ def _parse_headers(r: _Reader) -> list[PartHeader]:
                 setattr(ph, "data_window" if name == "dataWindow" else "display_window", _box(r, size))
             elif typ == "chlist" and name == "channels":
                 ph.channels = _chlist(r, size, limit)
-            elif typ == "string" and name == "type":
-                ph.type = r.take(size).decode("latin-1")
+            elif typ == "string":
+                text = r.take(size).decode("utf-8", "replace")
+                if name == "type":
+                    ph.type = text
+                ph.strings[name] = text
+            elif name in CAMERA_ATTRIBUTES and (typ, size) in _NUMERIC_ATTRS:
+                ph.attributes[name] = _NUMERIC_ATTRS[typ, size](r.take(size))
             else:
                 r.take(size)
         parts.append(ph)
@@ -180,6 +198,45 @@ def _parse_headers(r: _Reader) -> list[PartHeader]:
         if r.b[r.i:r.i + 1] == b"\0":  # the empty header ending the list
             break
     return parts
+
+
+def _f32(v: float) -> float:
+    """A float32 attribute as the shortest decimal that rounds to it (2.8, not 2.7999999523)."""
+    # format_float_scientific(unique=True) is the shortest round-trip text whatever numpy's
+    # print options (str(np.float32) follows them)
+    return float(np.format_float_scientific(np.float32(v), unique=True))
+
+
+_NUMERIC_ATTRS = {
+    ("float", 4): lambda b: _f32(struct.unpack("<f", b)[0]),
+    ("double", 8): lambda b: float(struct.unpack("<d", b)[0]),
+    ("rational", 8): lambda b: (lambda n, d: n / d if d else float("nan"))(*struct.unpack("<iI", b)),
+}
+
+
+def read_attributes(path: str | os.PathLike) -> tuple[dict[str, float], dict[str, str]]:
+    """The camera's standard attributes (:data:`CAMERA_ATTRIBUTES`, floats) and the string
+    attributes of the first part of ``path``, from the header alone (no pixels are read)."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such file; check the path")
+    try:
+        first = read_header(p)[0]
+    except OSError as e:
+        raise InputError(f"{p}: cannot read ({e.strerror}); check the file's permissions") from None
+    return dict(first.attributes), dict(first.strings)
+
+
+def _camera_attrs(header: dict) -> dict[str, float]:
+    """:data:`CAMERA_ATTRIBUTES` of an OpenEXR binding header as floats (a rational as n/d)."""
+    out = {}
+    for k in CAMERA_ATTRIBUTES:
+        v = header.get(k)
+        if hasattr(v, "n") and hasattr(v, "d"):
+            v = v.n / v.d if v.d else float("nan")
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            out[k] = float(v) if k == "captureRate" else _f32(v)
+    return out
 
 
 def _limit_bytes() -> int:
@@ -439,7 +496,7 @@ def _frame_from_parts(path: Path, parts: Sequence[_Part], layout: str | None, de
         vel = lay.velocity(m, velocity_y_up)
         vel = np.stack([_place(vel[..., i], data, display, 0.0) for i in range(2)], axis=-1)
     metadata = {"path": str(path), "layout": layout, "header": _str_attrs(parts[0].header),
-                "depth_kind": kind_out}
+                "attributes": _camera_attrs(parts[0].header), "depth_kind": kind_out}
     try:
         return Frame(color=color, depth=depth_m, velocity=vel, alpha=alpha, metadata=metadata, copy=False)
     except InputError as e:
@@ -458,6 +515,7 @@ def read_frame(path: str | os.PathLike, layout: str | None = None, *, depth: str
     clpost, nuke and arnold layouts (Blender's verified convention is fixed).
 
     ``metadata`` = ``{"path", "layout", "header": str attributes of the first part,
+    "attributes": its camera standard attributes (:data:`CAMERA_ATTRIBUTES`, floats),
     "depth_kind": "planar" | "radial"}``. Color is required; depth and velocity are optional
     (``None`` when the file has no such pass).
     """
@@ -493,11 +551,15 @@ def _layout_parts(path: Path, frame: Frame, layout: str, half: bool,
     return get_layout(path, layout).parts(rgb, alpha, frame.depth, vel, focal_px)
 
 
-def _user_header(path: Path, header: dict[str, str] | None) -> dict[str, str]:
-    out: dict[str, str] = {}
+def _user_header(path: Path, header: dict[str, str | float] | None) -> dict[str, str | float]:
+    out: dict[str, str | float] = {}
     for k, v in (header or {}).items():
+        if isinstance(v, float) and k in CAMERA_ATTRIBUTES and k != "captureRate" and math.isfinite(v):
+            out[k] = v  # an OpenEXR standard float attribute (focus, aperture, expTime, ...)
+            continue
         if not isinstance(k, str) or not isinstance(v, str):
-            raise InputError(f"{path}: header attribute {k!r}={v!r} must be a str name and a str value; "
+            raise InputError(f"{path}: header attribute {k!r}={v!r} must be a str name and a str value "
+                             f"(or a finite float for {', '.join(a for a in CAMERA_ATTRIBUTES if a != 'captureRate')}); "
                              "format numbers with str() first")
         if k in _RESERVED_ATTRS:
             raise InputError(f"{path}: header attribute {k!r} is managed by OpenEXR; use another name, "
@@ -595,7 +657,8 @@ def info(path: str | os.PathLike) -> dict:
     "display_window"}``), ``size`` ((width, height) of the display window), ``layout`` (None if
     no layout fits), ``depth_kind``, ``depth`` (``{"min", "max", "inf_count"}`` over finite
     values, or None), ``velocity`` (``{"x": (min, max), "y": (min, max), "max_magnitude"}`` in
-    our convention, or None), ``problems`` (messages that stop :func:`read_frame`, or warnings).
+    our convention, or None), ``problems`` (messages that stop :func:`read_frame`, or warnings),
+    ``camera_attributes`` (the :data:`CAMERA_ATTRIBUTES` present: what ``process`` reads per frame).
     """
     p = Path(path)
     parts = _load(p)
@@ -606,6 +669,7 @@ def info(path: str | os.PathLike) -> dict:
                    "data_window": pt.data_window, "display_window": pt.display_window} for pt in parts],
         "size": (ox1 - ox0 + 1, oy1 - oy0 + 1),
         "layout": None, "depth_kind": None, "depth": None, "velocity": None, "problems": [],
+        "camera_attributes": _camera_attrs(parts[0].header),
     }
     try:
         with warnings.catch_warnings(record=True) as caught:
@@ -647,5 +711,10 @@ def format_info(d: dict) -> str:
     else:
         lines.append(f"  velocity (px/frame, +x right, +y down): x [{_fmt(vel['x'][0])}, {_fmt(vel['x'][1])}], "
                      f"y [{_fmt(vel['y'][0])}, {_fmt(vel['y'][1])}], max |v| {_fmt(vel['max_magnitude'])}")
+    cam = d.get("camera_attributes")
+    if cam:
+        lines.append("  camera attributes: " + ", ".join(
+            f"{k} {v:g}{'' if CAMERA_ATTRIBUTES[k] in ('f-number', 'ISO', 'T-number') else ' ' + CAMERA_ATTRIBUTES[k]}"
+            for k, v in cam.items()))
     lines.extend(f"  problem: {msg}" for msg in d["problems"])
     return "\n".join(lines)

@@ -52,7 +52,7 @@ import numpy as np
 
 from ..calibration import OpenCVModel, required_render, undistort
 from ..errors import InputError
-from ..params import boolean, param, parse_on_off
+from ..params import boolean, exact_g, param, parse_on_off
 from . import _field as fld
 from .base import GatherStage
 
@@ -67,7 +67,8 @@ def _check_calibration(name, value):
 def _show_calibration(m):
     if m is None:
         return None
-    return " ".join(f"{t:.9g}" for t in (m.width, m.height, m.fx, m.fy, m.cx, m.cy, *m.vector()))
+    # exact floats (exact_g): --camera-from reads the same model back
+    return " ".join(exact_g(float(t)) for t in (m.width, m.height, m.fx, m.fy, m.cx, m.cy, *m.vector()))
 
 
 def _parse_calibration(text):
@@ -93,6 +94,7 @@ class DistortionParams:
              "distortion (a clpost.calibration.OpenCVModel in the library)")
     lens_distortion: bool = param(
         True, unit="on/off", flag="--lens-distortion", parse=parse_on_off, check=boolean, scalar=False,
+        header="clpost.lensDistortion",
         help="a lens_data lens without --calibration distorts by its traced curve: on/off")
 
 

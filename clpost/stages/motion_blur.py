@@ -76,14 +76,14 @@ class MotionBlurParams:
     (fraction shutter_s × fps); None (default) leaves motion blur unmodelled."""
 
     frame_rate_fps: float | None = param(
-        None, unit="frames per second", flag="--fps", parse=parse_fraction, scalar=False,
+        None, unit="frames per second", flag="--fps", parse=parse_fraction, scalar=False, header="clpost.fps",
         check=positive("frames per second", "e.g. 24", optional=True),
         help="frame rate of the sequence (enables motion blur: shutter × fps of a frame)")
     shutter_angle_deg: float | None = param(
         None, unit="degrees", flag="--shutter-angle", parse=parse_fraction, scalar=True, input_only=True,
         help="rotary shutter angle in degrees (needs --fps; sets the shutter: 180° at 24 fps = 1/48 s)")
     readout_time_s: float = param(
-        0.0, unit="seconds", flag="--readout", parse=parse_fraction, scalar=True,
+        0.0, unit="seconds", flag="--readout", parse=parse_fraction, scalar=True, header="clpost.readout_s",
         check=at_least(0.0, "seconds", "e.g. 0.01 for a 10 ms sensor readout", "0 = global shutter"),
         help="rolling-shutter readout time from the top to the bottom row in seconds (needs --fps; 0: global)")
 
@@ -153,6 +153,7 @@ class MotionBlur(GatherStage):
     role = "integration over the shutter; velocity is in undistorted pixel space"
     domains = ("render", "render")
     params = MotionBlurParams
+    example = {"frame_rate_fps": 24.0}  # a non-default value (tests/test_params.py)
     reads = ("velocity", "depth")
     turn_off = "leave out --fps/--shutter-angle/--readout (no motion blur)"
 
