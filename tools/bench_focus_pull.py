@@ -34,7 +34,7 @@ def main(argv=None) -> int:
     p.add_argument("--device", default=None)
     p.add_argument("--sheet", default=None, help="also write the pull's contact sheet PNG here")
     p.add_argument("--exr-camera", default="on", choices=("on", "off"),
-                   help="off: ignore the inputs' focus attributes (the camera before issue 18: constant)")
+                   help="off: ignore the inputs' focus attributes (a constant camera, as before per-frame sources)")
     a = p.parse_args(argv)
     w, h = (int(x) for x in a.size.lower().split("x"))
     frame = planes_scene(w, h, DEPTHS)
