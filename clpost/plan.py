@@ -331,6 +331,12 @@ class Plan:
         w, h = size
         out = np.empty((h, w, 3), np.float32)
         events.append(("download", cl.enqueue_copy(q, out, self._color_out(size), is_blocking=True)))
+        # The queue is in order, so every command is complete: let the transfers' events drop their
+        # host arrays now (NannyEvent.wait), or the previous frame's arrays would be freed — and
+        # counted — in the next run, when these events are replaced.
+        for _, ev in events:
+            if isinstance(ev, cl.NannyEvent):
+                ev.wait()
         self._events = events  # read into last_timings only when asked (profiling queries cost host time)
         return frame.replace(color=out, metadata=meta, validate=False, **host_out)
 
