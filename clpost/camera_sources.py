@@ -258,6 +258,12 @@ def explain_sources(resolved: list[tuple[int, Resolved]]) -> list[str]:
         return []
     cls = type(resolved[0][1].camera)
     lines = []
+
+    def shown(s, v) -> str:
+        # a value left out of the header at its default (e.g. plate_fov "focused") is still a value
+        text = s.header_text(v)
+        return text if text is not None else ("none" if v is None else str(v))
+
     for s in cls.param_specs():
         if s.meta.input_only:
             continue
@@ -266,7 +272,7 @@ def explain_sources(resolved: list[tuple[int, Resolved]]) -> list[str]:
         for _, r in resolved:
             if r.sources[s.name] not in srcs:
                 srcs.append(r.sources[s.name])
-        text = s.header_text(values[0]) or "none"
+        text = shown(s, values[0])
         distinct = []
         for v in values:
             if v not in distinct:
@@ -278,7 +284,7 @@ def explain_sources(resolved: list[tuple[int, Resolved]]) -> list[str]:
                 text = (f"{min(nums):g} … {max(nums):g} (varies over frames {first}–{last}: "
                         f"{len(distinct)} values)")
             else:
-                text = f"{len(distinct)} values over the frames ({', '.join(s.header_text(v) or 'none' for v in distinct[:4])}{', …' if len(distinct) > 4 else ''})"
+                text = f"{len(distinct)} values over the frames ({', '.join(shown(s, v) for v in distinct[:4])}{', …' if len(distinct) > 4 else ''})"
             if not s.meta.scalar:
                 text += f"; structural: {len(distinct)} plans"
         unit = f" {s.meta.unit}" if s.meta.unit in ("m", "seconds", "mm", "degrees") and text != "none" else ""
