@@ -138,6 +138,16 @@ def pending(jobs: list[FrameJob], overwrite: bool, report: BatchReport,
     return todo
 
 
+def first_size(jobs: list[FrameJob]) -> tuple[int, int] | None:
+    """(width, height) of the first input frame whose output will be written: every task checks
+    its frame against it, so a mismatched frame fails by itself instead of stopping the run."""
+    for job in jobs:
+        if job.src.is_file():
+            info = exr.info(job.src)
+            return tuple(info["size"])  # type: ignore[return-value]
+    return None
+
+
 def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | None = None,
                      overwrite: bool = False, half: bool = False, compression: str = "zip",
                      progress: Callable[[FrameJob, float | None], None] | None = None,
@@ -145,11 +155,11 @@ def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | 
     """Process ``jobs`` in order; ``progress(job, seconds or None if skipped)`` after each;
     ``sources``: an animated camera (per-frame, :mod:`clpost.camera_sources`)."""
     report = BatchReport()
-    size = None
-    for job in pending(jobs, overwrite, report, progress):
+    todo = pending(jobs, overwrite, report, progress)
+    size = first_size(todo)  # the inputs' size (an output may differ: a calibration's own size)
+    for job in todo:
         t0 = time.perf_counter()
-        out = process_one(pipeline, job, layout, half, size, compression, display, preview_dir, sources)
-        size = out.size
+        process_one(pipeline, job, layout, half, size, compression, display, preview_dir, sources)
         dt = time.perf_counter() - t0
         report.done.append(job.frame)
         report.seconds.append(dt)

@@ -45,7 +45,7 @@ from typing import Any, Mapping
 
 from .errors import InputError
 
-_LINKED = ({"shutter_s", "shutter_angle_deg"},)
+_LINKED = ({"shutter_s", "shutter_angle_deg"}, {"focus_distance_m", "focus_scale_m"})
 """Fields that are one quantity: the highest source of any of them sets all of them."""
 
 
@@ -235,8 +235,9 @@ class CameraSources:
                     if g in values:
                         chosen[g] = values[g]
                         labels[g] = lab[g]
-                if "shutter_angle_deg" in group and "shutter_angle_deg" in values and "shutter_s" not in values:
-                    labels["shutter_s"] = lab["shutter_angle_deg"]
+                for stored, alias in (("shutter_s", "shutter_angle_deg"), ("focus_distance_m", "focus_scale_m")):
+                    if alias in group and alias in values and stored not in values:
+                        labels[stored] = lab[alias]  # the stored field is named by the source that set it
         given = {k: v for k, v in chosen.items() if k in self.flags}
         lower = {**self.defaults, **{k: v for k, v in chosen.items() if k not in self.flags}}
         try:

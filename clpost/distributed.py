@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from .batch import BatchReport, FrameJob, pending, process_one
+from .batch import BatchReport, FrameJob, first_size, pending, process_one  # noqa: F401 (first_size: API)
 from .camera import Camera
 from .errors import ClpostError, InputError
 
@@ -147,16 +147,6 @@ def process_sequence_dask(client, spec: PipelineSpec, jobs: list[FrameJob], *,
     return report
 
 
-def first_size(jobs: list[FrameJob]) -> tuple[int, int] | None:
-    """(width, height) of the first input frame whose output will be written: every task checks
-    its frame against it, so a mismatched frame fails by itself instead of stopping the run."""
-    from . import exr
-
-    for job in jobs:
-        if job.src.is_file():
-            info = exr.info(job.src)
-            return tuple(info["size"])  # type: ignore[return-value]
-    return None
 
 
 

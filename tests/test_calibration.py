@@ -2,6 +2,7 @@
 frustum that stages ask for every frame (a Newton inverse of the image border; docs/measurements.md)."""
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 import clpost.calibration as cal
@@ -67,3 +68,23 @@ def test_a_traced_lens_model_is_one_object_per_camera_and_size():
     assert other is not m and other.fx != m.fx
     assert lens_distortion_model(cam, (192, 128)).fx == pytest.approx(2 * m.fx)
     assert lens_distortion_model(cam.with_(lens_distortion=False), (96, 64)) is None
+
+
+def test_an_extended_frustum_sequence_checks_input_sizes_not_output_sizes(tmp_path):
+    # The render for a barrel calibration is larger than the calibration's image; every frame of the
+    # sequence must be checked against the first *input* (the serial loop compared the next input with
+    # the previous output and stopped at frame 2, while --workers went through).
+    from clpost import Frame, Pipeline, exr
+    from clpost.batch import FrameJob, process_sequence
+
+    m = _barrel(-0.2)
+    spec = required_render(m)
+    rng = np.random.default_rng(3)
+    jobs = []
+    for n in (1, 2, 3):
+        src, dst = tmp_path / f"in.{n:04d}.exr", tmp_path / f"out.{n:04d}.exr"
+        exr.write_frame(src, Frame(rng.random((spec.height, spec.width, 3), dtype=np.float32)))
+        jobs.append(FrameJob(n, src, dst))
+    report = process_sequence(Pipeline(Camera(distortion=m), stages=["distortion"]), jobs)
+    assert report.done == [1, 2, 3] and not report.failed
+    assert all(exr.read_frame(j.dst).size == (m.width, m.height) for j in jobs)

@@ -89,6 +89,18 @@ def test_a_shutter_angle_flag_beats_an_exr_exposure_time():
     assert r.camera.shutter_s == pytest.approx(1 / 96) and r.sources["shutter_s"] == "flag --shutter-angle"
 
 
+def test_the_lens_scale_focus_is_the_same_quantity_as_the_focus_depth(tmp_path):
+    # --focus and --focus-scale (or a track's focus_scale_m) set one focus: the highest source of
+    # either wins, and --explain names the source that set it
+    track = _track(tmp_path, [{"frame": 1, "focus_scale_m": 2.0}])
+    r = CameraSources(flags={"focus_distance_m": 5.0}, track=track).resolve(1, {"focus": 9.0})
+    assert r.camera.focus_distance_m == 5.0 and r.sources["focus_distance_m"] == "flag --focus"
+    r = CameraSources(track=track).resolve(1, {"focus": 9.0})
+    assert r.camera.focus_from_film_m == pytest.approx(2.0) and r.sources["focus_distance_m"].startswith("track ")
+    r = CameraSources(flags={"focus_scale_m": 3.0}).resolve(1, {"focus": 9.0})
+    assert r.camera.focus_from_film_m == pytest.approx(3.0) and r.sources["focus_distance_m"] == "flag --focus-scale"
+
+
 def test_inconsistent_values_from_sources_name_the_frame_and_sources(tmp_path):
     track = _track(tmp_path, [{"frame": 1, "focus": 0.01}])  # inside the focal length
     with pytest.raises(InputError, match=r"frame 1: Camera\.focus_distance_m=0\.01 .*\(values from track "):

@@ -319,3 +319,18 @@ def test_image_outputs_are_display_encoded_with_their_profile_and_unknown_ones_r
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(err) == 2 and "long.bmp" in err[0] and "prev.exr" in err[1], err
     assert sorted(p.name for p in tmp_path.iterdir()) == before     # nothing written
+
+
+def test_a_plate_at_the_infinity_focus_field_of_view_is_magnified_as_process_does(tmp_path, rng):
+    frame = _scene(rng, square_x=8)
+    _write_seq(tmp_path, 1, 3, lambda k: frame)
+    cam = [*_camera_args(Fraction(1, 24), "linear", dof=False), "--focus", "0.3", "--plate-fov", "infinity"]
+    seq = str(tmp_path / "in.####.exr")
+    a, b, ref = tmp_path / "a.exr", tmp_path / "b.exr", tmp_path / "ref.exr"
+    assert main(["expose", seq, "--open", "f1", "--close", "f2", "--fps", "24", "-o", str(a), "--quiet", *cam]) == 0
+    assert main(["expose", seq, "--open", "f1", "--close", "f2", "--fps", "24", "-o", str(b), "--quiet",
+                 *cam[:-1], "focused"]) == 0
+    assert main(["process", str(tmp_path / "in.0001.exr"), "-o", str(ref), "--quiet", "--shutter", "1/24", *cam]) == 0
+    got, want = exr.read_frame(a).color, exr.read_frame(ref).color
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-6 * float(np.abs(want).max()))
+    assert np.abs(exr.read_frame(b).color - got).max() > 0.1 * float(np.abs(got).max())  # it was magnified
