@@ -210,6 +210,9 @@ class CoreParams:
         if scale is not None:  # the lens-scale distance names a focus depth (one internal state)
             object.__setattr__(camera, "focus_distance_m", depth_for_focus_scale(camera, scale))
         if camera.iso is None:  # a film is rated at its box speed unless an ISO is given
+            # marked, so the header says "box speed" (a camera read back rates another film at its
+            # own speed) and with_(film=…) rates the new stock
+            object.__setattr__(camera, "iso_default", True)
             film = getattr(camera, "film", None)
             if film:
                 from .film_stock import load_stock
@@ -242,7 +245,10 @@ class CoreParams:
 
     @staticmethod
     def extra_header(camera) -> dict[str, str]:
-        return {"clpost.focalLength_mm": f"{camera.focal_length_mm:g}"}
+        out = {"clpost.focalLength_mm": f"{camera.focal_length_mm:g}"}
+        if camera.__dict__.get("iso_default"):
+            out["clpost.iso"] = "box speed"  # read back as unset: the default rule, not this number
+        return out
 
 
 class _CameraBase:
@@ -370,6 +376,8 @@ class _CameraBase:
     def with_(self, **changes: Any) -> "Camera":
         """A copy with some fields changed (validated again). A camera set by the meter
         (:func:`clpost.metering.resolve`) stays marked as such unless f-number or shutter change."""
+        if self.__dict__.get("iso_default") and "iso" not in changes:
+            changes = {**changes, "iso": None}  # still the default rule (another film: its box speed)
         cam = replace(self, **changes)
         if self.__dict__.get("metered") and not {"f_number", "shutter_s"} & changes.keys():
             object.__setattr__(cam, "metered", True)

@@ -94,7 +94,8 @@ def standard_attributes(camera) -> dict[str, float]:
         fps = getattr(camera, "frame_rate_fps", None)
         if fps is not None:
             out["shutterAngle"] = float(camera.shutter_s * fps * 360.0)
-    out["isoSpeed"] = float(camera.iso)
+    if not camera.__dict__.get("iso_default"):  # a defaulted ISO is not the user's: not recorded as one
+        out["isoSpeed"] = float(camera.iso)
     out["nominalFocalLength"] = float(camera.focal_length_mm)
     return out
 

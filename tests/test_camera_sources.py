@@ -192,6 +192,33 @@ def test_camera_from_an_output_gives_the_identical_camera(tmp_path):
            {k: v for k, v in b.metadata["header"].items() if k.startswith("clpost.") and k != "clpost.source"}
 
 
+def test_camera_from_a_metered_output_gives_the_same_image(tmp_path):
+    # the metered shutter already holds --ev: read back as a manual camera it must not apply it again
+    inp = tmp_path / "in.exr"
+    exr.write_frame(inp, _frame())
+    a, b = tmp_path / "a.exr", tmp_path / "b.exr"
+    assert main(["process", str(inp), "-o", str(a), "--quiet", "--luminance-scale", "1000", "--shutter", "auto",
+                 "--ev", "1", "--nd", "2"]) == 0
+    assert main(["process", str(inp), "-o", str(b), "--quiet", "--camera-from", str(a)]) == 0
+    np.testing.assert_array_equal(exr.read_frame(b).color, exr.read_frame(a).color)
+    assert exr.read_frame(a).metadata["header"]["clpost.meteredCompensation_ev"] == "1"
+
+
+def test_a_defaulted_iso_is_recorded_as_the_rule_not_as_a_number(tmp_path):
+    # Camera(): ISO 100 by rule, and a film's box speed; read back or changed, the rule applies again
+    assert Camera().describe()["clpost.iso"] == "box speed" and "isoSpeed" not in standard_attributes(Camera())
+    assert Camera().with_(film="fuji-superia-400").iso == 400.0
+    assert Camera(iso=200.0).with_(film="fuji-superia-400").iso == 200.0       # a given ISO stays
+    inp = tmp_path / "in.exr"
+    exr.write_frame(inp, _frame())
+    a = tmp_path / "a.exr"
+    assert main(["process", str(inp), "-o", str(a), "--quiet", "--film", "kodak-gold-200"]) == 0
+    assert camera_from_file(a).get("iso") is None
+    r = CameraSources(flags={"film": "fuji-superia-400"}, camera_from=camera_from_file(a),
+                      camera_from_path=str(a)).resolve(0, exr.read_frame(a).metadata.get("attributes", {}))
+    assert r.camera.iso == 400.0
+
+
 def test_camera_from_keeps_a_calibration_exactly(tmp_path):
     from clpost.calibration import OpenCVModel
     from clpost.camera_sources import values_from_header

@@ -119,7 +119,10 @@ def test_every_header_key_is_in_describe():
         else:
             cam = Camera()
         assert s.meta.header in cam.describe(), s.name
-        assert cam.describe()[s.meta.header] == s.header_text(getattr(cam, s.name))
+        # a value resolved from a default rule (iso: the film's box speed, else 100; marked
+        # "<field>_default") is recorded as the rule, so a camera read back applies the rule again
+        recorded = None if cam.__dict__.get(f"{s.name}_default") else getattr(cam, s.name)
+        assert cam.describe()[s.meta.header] == s.header_text(recorded)
 
 
 def test_describe_keeps_todays_keys_and_formatting():

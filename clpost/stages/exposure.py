@@ -80,7 +80,14 @@ class ExposureParams:
 
     @staticmethod
     def extra_header(camera) -> dict[str, str]:
-        return {"clpost.exposureMode": exposure_mode(camera)}
+        out = {"clpost.exposureMode": exposure_mode(camera)}
+        ev = camera.exposure_compensation_ev
+        if camera.__dict__.get("metered") and ev:
+            # the metered f-number/shutter already hold the compensation: recorded as applied, so a
+            # camera read back from this header (--camera-from) does not apply it a second time
+            out["clpost.exposureCompensation_ev"] = "0"
+            out["clpost.meteredCompensation_ev"] = f"{ev:g}"
+        return out
 
 
 def parse_reference_exposure(text: str) -> tuple:
