@@ -219,6 +219,17 @@ def test_a_defaulted_iso_is_recorded_as_the_rule_not_as_a_number(tmp_path):
     assert r.camera.iso == 400.0
 
 
+def test_a_lens_traced_distortion_is_not_recorded_as_a_calibration():
+    # the traced model belongs to the lens and the frame size: --camera-from traces it again at the
+    # size of the frame it is used on, instead of pinning the first output's size as a calibration
+    from clpost import Pipeline
+
+    cam = Camera(lens="zeiss-planar-50-f1.4", f_number=2.0)
+    traced = Pipeline(cam).camera_for(Frame(np.full((24, 40, 3), 0.2, np.float32)))
+    assert traced.distortion is not None
+    assert "clpost.distortion" not in traced.describe() and "clpost.distortion" not in cam.describe()
+
+
 def test_camera_from_keeps_a_calibration_exactly(tmp_path):
     from clpost.calibration import OpenCVModel
     from clpost.camera_sources import values_from_header

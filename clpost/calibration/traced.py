@@ -9,6 +9,9 @@ import numpy as np
 
 from .model import OpenCVModel
 
+TRACED_SOURCE = "traced distortion curve"
+"""Marks a model traced from a lens (not a user's calibration) in ``OpenCVModel.source``."""
+
 
 @lru_cache(maxsize=32)
 def _radial_fit(lens: str, focus_distance_m: float, f_number: float, r_max_mm: float):
@@ -55,4 +58,4 @@ def _traced_model(lens: str, focus_distance_m: float, f_number: float, size: tup
         return None
     fx, fy, cx, cy = intrinsics
     return OpenCVModel(w, h, fx, fy, cx, cy, k1=k1, k2=k2, k3=k3,
-                       source=f"{lens} traced distortion curve, fit residual {resid:.3g} %")
+                       source=f"{lens} {TRACED_SOURCE}, fit residual {resid:.3g} %")

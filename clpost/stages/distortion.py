@@ -65,8 +65,10 @@ def _check_calibration(name, value):
 
 
 def _show_calibration(m):
-    if m is None:
-        return None
+    from ..calibration.traced import TRACED_SOURCE
+
+    if m is None or TRACED_SOURCE in (m.source or ""):
+        return None  # a lens's own traced model is re-traced from the lens (clpost.lensDistortion), at any size
     # exact floats (exact_g): --camera-from reads the same model back
     return " ".join(exact_g(float(t)) for t in (m.width, m.height, m.fx, m.fy, m.cx, m.cy, *m.vector()))
 
