@@ -1,7 +1,7 @@
 """Write outputs so that a reader never sees a half-written file and an old file is never lost
 to a failed write: write a temporary file in the destination directory, then ``os.replace``.
 
-This module owns every temporary file clpost writes. Each is named ``.<name>.tmp-XXXXXXXX<suffix>``
+This module owns every temporary file clpost writes. Each is named ``.<name>.tmp-<8 random characters><suffix>``
 beside its destination ``<name>`` and registered while it exists:
 
 - an exception or Ctrl-C removes it (``atomic_path``);

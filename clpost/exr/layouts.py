@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 import re
 import warnings
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -166,7 +167,7 @@ def _pair_velocity(m: Mapped, y_up: bool) -> np.ndarray:
 
 # -- the layouts --------------------------------------------------------------------------------
 
-class Layout:
+class Layout(ABC):
     """One renderer's channel convention. Subclasses set :attr:`name`, :attr:`depth_kind` (the
     default reading of its depth channel) and :attr:`velocity_y_up` (None: fixed by the layout,
     not overridable)."""
@@ -175,24 +176,24 @@ class Layout:
     depth_kind: str = "planar"
     velocity_y_up: bool | None = False
 
+    @abstractmethod
     def matches(self, names: set[str]) -> bool:
         """Whether channel names (of all parts) look written in this layout."""
-        raise NotImplementedError
 
+    @abstractmethod
     def map_channels(self, path: Path, planes: dict[str, np.ndarray]) -> Mapped:
         """The planes this layout reads, in the file's conventions."""
-        raise NotImplementedError
 
     def velocity(self, m: Mapped, y_up: bool | None) -> np.ndarray:
         """(H, W, 2) forward, y down px/frame from the mapped pair; ``y_up`` overrides the default."""
         return _pair_velocity(m, self.velocity_y_up if y_up is None else bool(y_up))
 
+    @abstractmethod
     def parts(self, rgb: dict[str, np.ndarray], alpha: np.ndarray | None, depth: np.ndarray | None,
               vel: tuple[np.ndarray, np.ndarray] | None,
               focal_px: float | tuple[float, float] | None) -> Parts:
         """The parts to write: encoded color/alpha/velocity planes (float16 or 32) and planar depth
         (float32, ``+inf`` sky) with this layout's conventions applied."""
-        raise NotImplementedError
 
     def __repr__(self) -> str:
         return f"<exr layout {self.name}>"
