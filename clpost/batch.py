@@ -107,14 +107,22 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
     frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(job.frame)), validate=False)
     out = pipeline.run(frame, cam)
     ws = (cam or pipeline.camera).working_space
-    if output_format(job.dst) == "EXR":
-        exr.write_frame(job.dst, out, header=output_header(out), half=half, compression=compression)
-    else:
-        write_image(job.dst, out.color, display=display, working_space=ws)
+    write_output(job.dst, out, output_header(out), display=display, working_space=ws, half=half,
+                 compression=compression)
     if preview_dir is not None:
         write_image(preview_path(job.dst, preview_dir), out.color, display=display, working_space=ws,
                     option="--preview")
     return out
+
+
+def write_output(path: Path, frame: Frame, header: dict, *, display: str = "srgb", working_space: str = "rec709",
+                 half: bool = False, compression: str = "zip") -> None:
+    """Write ``frame`` as its name says: an .exr linear with ``header``, a .png/.jpg/.tif
+    display-encoded for ``display`` with its ICC profile (:mod:`clpost.display_image`)."""
+    if output_format(path) == "EXR":
+        exr.write_frame(path, frame, header=header, half=half, compression=compression)
+    else:
+        write_image(path, frame.color, display=display, working_space=working_space)
 
 
 def preview_path(dst: Path, preview_dir: Path) -> Path:

@@ -108,6 +108,12 @@ def camera_from_args(args: argparse.Namespace, camera_cls=None, /, **defaults) -
     return (camera_cls or Camera).from_options(given, defaults)
 
 
+def _add_display_option(p: argparse.ArgumentParser, what: str) -> None:
+    from .colorspace import DISPLAYS
+
+    p.add_argument("--display", default="srgb", choices=list(DISPLAYS), help=f"{what} (default srgb)")
+
+
 def _set_help(p: argparse.ArgumentParser, dest: str, text: str) -> None:
     """Reword one generated option's help where a subcommand gives it another meaning."""
     for action in p._actions:
@@ -365,8 +371,8 @@ def _expose_camera(args) -> Camera:
 
 def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> int:
     from . import exr
-    from .batch import output_header, read_input
-    from .display_image import output_format, write_image
+    from .batch import output_header, read_input, write_output
+    from .display_image import write_image
     from .expose import expose, expose_camera_frames
     from .pipeline import Pipeline
     from .sequence import expand
@@ -421,10 +427,7 @@ def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> in
         header.update({"clpost.expose.frames": str(count),
                        "clpost.expose.output": "exposure (input x seconds)" if args.sum else "time average (input units)"})
     ws = camera.working_space if camera is not None else "rec709"
-    if output_format(out) == "EXR":
-        exr.write_frame(out, result, header=header)
-    else:  # -o x.png/.jpg/.tif: the result display-encoded, ICC profile embedded
-        write_image(out, result.color, display=args.display, working_space=ws)
+    write_output(out, result, header, display=args.display, working_space=ws)
     if args.png:
         write_image(args.png, result.color * (args.png_gain or 1.0), display=args.display, working_space=ws,
                     option="--png")
@@ -565,8 +568,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--reference-subframes", type=int, default=0, metavar="K",
                    help="also render a reference motion-blurred frame from K sub-frames per frame "
                         "(needs --fps and --shutter or --shutter-angle)")
-    d.add_argument("--display", default="srgb", choices=["srgb", "rec709", "display-p3"],
-                   help="preview PNG encoding (default srgb)")
+    _add_display_option(d, "preview PNG encoding")
     d.add_argument("--lens-model", choices=("post", "geometry-distortion", "image-based"), default="post",
                    help="post: lens effects as post-process stages (default); geometry-distortion: the "
                         "--calibration's distortion applied to the vertices before rasterisation "
@@ -584,8 +586,7 @@ def build_parser() -> argparse.ArgumentParser:
                          ".png/.jpg/.tif (display-encoded for --display, ICC profile embedded)")
     pr.add_argument("--preview", default=None, metavar="DIR",
                     help="also write a display-encoded PNG of each frame into DIR (<output stem>.png)")
-    pr.add_argument("--display", default="srgb", choices=["srgb", "rec709", "display-p3"],
-                    help="encoding of .png/.jpg/.tif outputs and previews (default srgb)")
+    _add_display_option(pr, "encoding of .png/.jpg/.tif outputs and previews")
     pr.add_argument("--frames", type=_frames_spec, default=None,
                     help="frame range, e.g. 1-100, 1-100x2, 1,5,9 (default: all found)")
     pr.add_argument("--channels", default=None, help="input channel layout: clpost, blender, nuke, arnold (default: detect)")
@@ -633,8 +634,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="no camera: write the time-averaged input (input units)")
     e.add_argument("--sum", action="store_true", help="no camera: write H = ∫E dt (input × seconds)")
     e.add_argument("--png", default=None, help="also write a display-encoded preview (.png/.jpg/.tif) here")
-    e.add_argument("--display", default="srgb", choices=["srgb", "rec709", "display-p3"],
-                   help="encoding of image outputs and --png (default srgb)")
+    _add_display_option(e, "encoding of image outputs and --png")
     e.add_argument("--png-gain", type=_positive_float, default=None, help="scale before the PNG encoding")
     e.add_argument("--overwrite", action="store_true", help="replace an existing output")
     e.add_argument("--quiet", action="store_true")

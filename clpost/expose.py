@@ -389,7 +389,7 @@ def prepare(frame0, camera, seconds, fps, *, quality: str = "final", stages=None
 
     cam = exposure_camera(camera, seconds)
     whole = Pipeline(cam, quality=quality, stages=stages, device=device)
-    frame0 = whole._plate(frame0, cam)  # --plate-fov infinity: metered as the focused camera sees it
+    frame0 = whole.plate(frame0, cam)  # --plate-fov infinity: metered as the focused camera sees it
     cam = whole.camera_for(frame0)
     entries = whole.explain(frame0, cam, reasons=False)
     per_frame, once = split_stages([e.stage for e in entries if stages is None or e.stage in stages])
@@ -425,7 +425,7 @@ class CameraAccumulator:
         cam, rate = self.setup.camera, self.setup.fps
         src = frame.metadata.get("path") or f"frame {n}"
         frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(n)), validate=False)
-        frame = self._lin._plate(frame, cam)  # --plate-fov infinity: magnified as the lens breathes
+        frame = self._lin.plate(frame, cam)  # --plate-fov infinity: magnified as the lens breathes
         plan = []
         if self.setup.blurred:  # the seen part of the interval, w·F of a frame (fps structural, shutter scalar)
             if frame.velocity is None:

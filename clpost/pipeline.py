@@ -203,7 +203,7 @@ class Pipeline:
         the camera used (metered)."""
         if camera is not None and not isinstance(camera, Camera):
             raise InputError(f"Pipeline.run: camera must be a clpost.Camera, not {type(camera).__name__}")
-        frame = self._plate(frame, camera)
+        frame = self.plate(frame, camera)
         cam = self.camera_for(frame, camera) if isinstance(frame, Frame) else None
         plan = self.plan_for(frame, cam)
         if cam is not None and not self._exposure_checked and (self._selected is None or "exposure" in self._selected):
@@ -214,10 +214,11 @@ class Pipeline:
         out = plan.run(frame, cam)
         return out.replace(metadata=dict(out.metadata, resolved_camera=cam), validate=False)
 
-    def _plate(self, frame, camera=None):
+    def plate(self, frame, camera=None):
         """A plate rendered at the infinity-focus field of view (``Camera.plate_fov``) magnified to
         the focused camera's — this frame's ``camera`` (a focus pull breathes), default the
-        pipeline's — first (:func:`clpost.breathing.rescale_plate`); other frames as they are."""
+        pipeline's — first (:func:`clpost.breathing.rescale_plate`); other frames as they are.
+        The step before :meth:`camera_for`, for callers that run plans themselves (``expose``)."""
         cam = camera or self.camera
         if not isinstance(frame, Frame) or cam.plate_fov == "focused":
             return frame
@@ -232,6 +233,6 @@ class Pipeline:
 
     def reference(self, frame: Frame) -> np.ndarray:
         """The same plan through each stage's float64 numpy reference; returns (H, W, 3) float64."""
-        frame = self._plate(frame)
+        frame = self.plate(frame)
         cam = self.camera_for(frame)
         return Plan(None, cam, frame, self._planned(frame, cam), self.quality, build=False).reference(frame, cam)

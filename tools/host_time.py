@@ -20,7 +20,8 @@ import clpost
 from clpost.bench_ab import load_revision
 
 
-def host_ms(pkg, scene_name: str, quality: str, w: int, h: int, extended: bool, frames: int = 7) -> float:
+def _case(pkg, scene_name: str, quality: str, w: int, h: int, extended: bool = False):
+    """(pipeline, frame, camera) of a bench scene in package ``pkg`` (this tree or a revision)."""
     bench = importlib.import_module(pkg.__name__ + ".bench")
     pipeline = importlib.import_module(pkg.__name__ + ".pipeline")
     scene = bench.SCENES[scene_name]
@@ -30,7 +31,11 @@ def host_ms(pkg, scene_name: str, quality: str, w: int, h: int, extended: bool, 
         frame = bench.synthetic_frame(spec.width, spec.height, velocity_px=scene.velocity_px)
     else:
         frame = bench.synthetic_frame(w, h, velocity_px=scene.velocity_px)
-    pipe = pipeline.Pipeline(cam, quality=quality, stages=list(scene.wants))
+    return pipeline.Pipeline(cam, quality=quality, stages=list(scene.wants)), frame, cam
+
+
+def host_ms(pkg, scene_name: str, quality: str, w: int, h: int, extended: bool, frames: int = 7) -> float:
+    pipe, frame, _ = _case(pkg, scene_name, quality, w, h, extended)
     for _ in range(2):
         pipe.run(frame)
     times = []
@@ -46,9 +51,6 @@ def breakdown(scene_name: str, quality: str, w: int, h: int, frames: int = 15) -
     import collections
 
     import pyopencl as cl
-
-    from clpost import bench
-    from clpost.pipeline import Pipeline
 
     spent, calls = collections.Counter(), collections.Counter()
 
@@ -67,10 +69,8 @@ def breakdown(scene_name: str, quality: str, w: int, h: int, frames: int = 15) -
     cl.enqueue_copy = timed("copy", saved[1])
     cl.Kernel.set_args = timed("set_args", saved[2])
     try:
-        scene = bench.SCENES[scene_name]
-        cam, _ = scene.camera(w, h)
-        frame = bench.synthetic_frame(w, h, velocity_px=scene.velocity_px)
-        plan = Pipeline(cam, quality=quality, stages=list(scene.wants)).plan_for(frame, cam)
+        pipe, frame, cam = _case(clpost, scene_name, quality, w, h)
+        plan = pipe.plan_for(frame, cam)
         for _ in range(3):
             plan.run(frame, cam)
         spent.clear(), calls.clear()
