@@ -291,7 +291,7 @@ def _explain_sources(sources, jobs) -> None:
 
 
 def _process_distributed(args, camera, jobs, progress, sources=None):
-    from .distributed import PipelineSpec, connect, first_size, process_sequence_dask
+    from .distributed import PipelineSpec, connect, disconnect, first_size, process_sequence_dask
 
     spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device,
                         args.display, args.preview)
@@ -301,10 +301,7 @@ def _process_distributed(args, camera, jobs, progress, sources=None):
                                      half=args.half, compression=args.compression, retries=args.retries,
                                      expect_size=first_size(jobs), progress=progress, sources=sources)
     finally:
-        cluster = getattr(client, "cluster", None)
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        disconnect(client)
 def cmd_expose(args) -> int:
     from .expose import as_time, capture_rate, frames_needed, parse_instant
     from .outputs import check_paths, writing
@@ -407,17 +404,14 @@ def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> in
             return exr.read_frame(expand(args.input, n), args.channels)
 
         if args.workers or args.scheduler:
-            from .distributed import connect, expose_dask
+            from .distributed import connect, disconnect, expose_dask
 
             client = connect(args.scheduler, args.workers)
             try:
                 part = expose_dask(client, args.input, frames or found, fps, t_open, t_close,
                                    layout=args.channels, device=args.device, first=first)
             finally:
-                cluster = getattr(client, "cluster", None)
-                client.close()
-                if cluster is not None:
-                    cluster.close()
+                disconnect(client)
         else:
             part = expose(read, frames or found, fps, t_open, t_close, device=args.device,
                           progress=progress, first=first)
@@ -438,7 +432,7 @@ def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> in
 def _expose_camera_dask(args, read, frames, fps, first, t_open, t_close, camera):
     """The exposure through the camera with its per-frame optics on Dask workers (chunks reduced
     in a tree), then the once-stages here."""
-    from .distributed import connect, expose_dask
+    from .distributed import connect, disconnect, expose_dask
     from .expose import Exposed, exposure_plan, finish, prepare
 
     weights = exposure_plan(frames, fps, t_open, t_close, first)
@@ -453,10 +447,7 @@ def _expose_camera_dask(args, read, frames, fps, first, t_open, t_close, camera)
         part = expose_dask(client, args.input, frames, fps, t_open, t_close, layout=args.channels,
                            device=args.device, first=first, setup=setup)
     finally:
-        cluster = getattr(client, "cluster", None)
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        disconnect(client)
     result = finish(part, setup, weights[0][0], frame0.metadata)
     return Exposed(result, setup.camera, seconds, weights, list(setup.per_frame), list(setup.once))
 

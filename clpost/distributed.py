@@ -93,6 +93,33 @@ def connect(scheduler: str | None = None, workers: int | None = None):
     return Client(cluster)
 
 
+def _quiet_distributed_logs() -> None:
+    import logging
+
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
+
+
+def disconnect(client) -> None:
+    """Close ``client`` and, if :func:`connect` started it, its LocalCluster.
+
+    Shutting a LocalCluster down races its workers' heartbeats against the closing scheduler;
+    a worker that loses the race logs a "Failed to communicate with scheduler" traceback on
+    stderr although nothing failed. The run's results are already collected here, so the
+    workers, their nannies and this process (which hosts the scheduler) are told to log
+    only critical errors before they are closed. A joined cluster (``--scheduler``) is left
+    alone: its workers are not ours to quiet.
+    """
+    cluster = getattr(client, "cluster", None)
+    if cluster is not None:
+        # on_error="ignore": a dead worker must not keep the others from closing
+        client.run(_quiet_distributed_logs, on_error="ignore")
+        client.run(_quiet_distributed_logs, nanny=True, on_error="ignore")
+        _quiet_distributed_logs()
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
 def process_sequence_dask(client, spec: PipelineSpec, jobs: list[FrameJob], *,
                           layout: str | None = None, overwrite: bool = False, half: bool = False,
                           compression: str = "zip", retries: int = 2,

@@ -8,7 +8,7 @@ import pytest
 from clpost import Camera, Frame, Pipeline, exr
 from clpost.batch import FrameJob, process_sequence
 from clpost.cli import main
-from clpost.distributed import PipelineSpec, connect, process_sequence_dask
+from clpost.distributed import PipelineSpec, connect, disconnect, process_sequence_dask
 
 pytestmark = pytest.mark.slow  # Dask clusters: integration runs
 
@@ -20,9 +20,7 @@ N = 12
 def client():
     c = connect(workers=2)
     yield c
-    cluster = c.cluster
-    c.close()
-    cluster.close()
+    disconnect(c)
 
 
 def make_sequence(folder, n=N, w=160, h=120):

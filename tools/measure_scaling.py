@@ -20,7 +20,7 @@ import numpy as np
 from clpost import Camera, Pipeline, exr
 from clpost.batch import FrameJob, process_sequence
 from clpost.bench import synthetic_frame
-from clpost.distributed import PipelineSpec, connect, process_sequence_dask
+from clpost.distributed import PipelineSpec, connect, disconnect, process_sequence_dask
 
 CAM = Camera(f_number=2.8, shutter_s=1 / 60, iso=200, luminance_scale=50.0)
 
@@ -68,9 +68,7 @@ def throughput(tmp: Path, n: int, size=(1920, 1080)):
             process_sequence_dask(client, PipelineSpec(CAM), jobs, compression=comp)
             res[f"dask2_{comp}"] = n / (time.perf_counter() - t0)
         finally:
-            cluster = client.cluster
-            client.close()
-            cluster.close()
+            disconnect(client)
     return res
 
 
