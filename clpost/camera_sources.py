@@ -103,13 +103,9 @@ def standard_attributes(camera) -> dict[str, float]:
 # -- --camera-from: the camera an output's header records ---------------------------------------
 
 def _calibration_from_header(text: str):
-    import numpy as np
+    from .calibration.header import model_from_header
 
-    from .calibration import OpenCVModel
-
-    t = [float(x) for x in text.split()]
-    k = np.array([[t[2], 0, t[4]], [0, t[3], t[5]], [0, 0, 1]])
-    return OpenCVModel.from_vector(int(t[0]), int(t[1]), k, t[6:], source="--camera-from header")
+    return model_from_header(text, source="--camera-from header")
 
 
 def _none_text(spec) -> str | None:

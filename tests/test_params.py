@@ -133,7 +133,9 @@ def test_describe_keeps_todays_keys_and_formatting():
     assert d["clpost.film"] == "neutral-100" and d["clpost.sensorPreset"] == "none"
     assert d["clpost.noiseSeed"] == "0" and d["clpost.workingSpace"] == "rec709"
     dist = Camera(distortion=EXAMPLES["distortion"]).describe()["clpost.distortion"]
-    assert dist.split()[:6] == ["640", "480", "500", "500", "319.5", "239.5"] and dist.split()[6] == "-0.1"
+    # named fields since issue 19 (the bare list "640 480 500 …" is still read, tests/test_calibration_formats.py)
+    assert dist.split()[:8] == ["model=opencv", "width=640", "height=480", "fx=500", "fy=500", "cx=319.5",
+                                "cy=239.5", "k1=-0.1"]
     assert all(isinstance(v, str) for v in d.values())
 
 

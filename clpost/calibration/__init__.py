@@ -9,16 +9,24 @@ One module per job:
   (:func:`render_intrinsics`), cached per (model, size);
 * :mod:`~clpost.calibration.traced` — a ``lens_data`` lens's traced distortion as an OpenCV model
   (:func:`lens_distortion_model`);
-* :mod:`~clpost.calibration.formats` — OpenCV/ROS YAML and JSON, COLMAP ``cameras.txt``
-  (:func:`load_calibration`).
+* :mod:`~clpost.calibration.formats` — reading OpenCV FileStorage YAML/XML/JSON, ROS camera_info,
+  COLMAP ``cameras.txt`` and Kalibr camchain files (:func:`load_calibration`);
+* :mod:`~clpost.calibration.writers` — writing a model back out in those formats
+  (:func:`write_calibration`);
+* :mod:`~clpost.calibration.header` — the model as the EXR header's named fields
+  (:func:`header_text`, :func:`model_from_header`).
 
 Every public name is importable from ``clpost.calibration``.
 """
 from .formats import COLMAP_MODELS, load_calibration
 from .frustum import RenderSpec, render_intrinsics, required_render
-from .model import COEFF_NAMES, HeikkilaInverse, OpenCVModel, inverse_residual_px, undistort, undistort_newton
+from .header import header_text, model_from_header
+from .model import (COEFF_NAMES, DISTORTION_MODELS, FISHEYE_COEFF_NAMES, HeikkilaInverse, OpenCVModel,
+                    inverse_residual_px, undistort, undistort_newton)
 from .traced import lens_distortion_model
+from .writers import FORMATS, calibration_text, write_calibration
 
-__all__ = ["COEFF_NAMES", "COLMAP_MODELS", "HeikkilaInverse", "OpenCVModel", "RenderSpec", "inverse_residual_px",
-           "lens_distortion_model", "load_calibration", "render_intrinsics", "required_render", "undistort",
-           "undistort_newton"]
+__all__ = ["COEFF_NAMES", "COLMAP_MODELS", "DISTORTION_MODELS", "FISHEYE_COEFF_NAMES", "FORMATS", "HeikkilaInverse",
+           "OpenCVModel", "RenderSpec", "calibration_text", "header_text", "inverse_residual_px",
+           "lens_distortion_model", "load_calibration", "model_from_header", "render_intrinsics", "required_render",
+           "undistort", "undistort_newton", "write_calibration"]

@@ -1,26 +1,56 @@
-r"""Calibration files → :class:`~clpost.calibration.model.OpenCVModel`.
+r"""Calibration files → :class:`~clpost.calibration.model.OpenCVModel` (readers; the writers are
+:mod:`clpost.calibration.writers`).
 
-:func:`load_calibration` reads OpenCV FileStorage YAML or JSON
-(``camera_matrix``, ``distortion_coefficients``, ``image_width``/``image_height``), ROS
-``camera_info`` YAML (``camera_matrix``, ``distortion_model: plumb_bob|rational_polynomial``,
-``distortion_coefficients``, ``image_width``/``image_height``) and COLMAP ``cameras.txt``
-(``SIMPLE_RADIAL``, ``RADIAL``, ``OPENCV``, ``FULL_OPENCV``); the format is told from the content.
+:func:`load_calibration` tells the format from the content:
+
+* **OpenCV FileStorage** YAML, XML or JSON (what ``cv::FileStorage`` writes; OpenCV's
+  ``samples/cpp/tutorial_code/calib3d/camera_calibration`` writes ``camera_matrix``,
+  ``distortion_coefficients``, ``image_width``, ``image_height`` and ``fisheye_model``), with the
+  key aliases other tools and scripts use (:data:`MATRIX_KEYS`, :data:`DISTORTION_KEYS`,
+  :data:`SIZE_KEYS`);
+* **ROS camera_info** YAML (``camera_calibration_parsers``: ``camera_matrix``,
+  ``distortion_model`` ``plumb_bob`` | ``rational_polynomial`` | ``equidistant``,
+  ``distortion_coefficients``, ``image_width``/``image_height``), and the ``sensor_msgs/CameraInfo``
+  message as ``rostopic echo`` / ``ros2 topic echo`` print it (``K``/``k``, ``D``/``d``,
+  ``width``/``height``);
+* **COLMAP** ``cameras.txt`` (``CAMERA_ID MODEL WIDTH HEIGHT PARAMS…``, the models of
+  :data:`COLMAP_MODELS`; ``cameras.txt#2`` picks camera 2);
+* **Kalibr** camchain YAML (``cam0: {camera_model: pinhole, intrinsics: [fu, fv, pu, pv],
+  distortion_model: radtan | equidistant, distortion_coeffs, resolution: [w, h]}``;
+  ``camchain.yaml#cam1`` picks cam1).
+
+Pixel conventions: OpenCV, ROS and Kalibr put the centre of the top-left pixel at (0, 0), as clpost
+does; COLMAP puts the top-left *corner* there (:func:`_read_colmap`).
 """
 from __future__ import annotations
 
 import json
 import re
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
-from .model import COEFF_NAMES, OpenCVModel
+from .model import COEFF_NAMES, FISHEYE_COEFF_NAMES, OpenCVModel
+
+MATRIX_KEYS = ("camera_matrix", "cameraMatrix", "K", "k", "mtx", "intrinsic_matrix", "intrinsics_matrix")
+"""Keys of the 3×3 camera matrix, in the order they are looked for."""
+DISTORTION_KEYS = ("distortion_coefficients", "distCoeffs", "dist_coeffs", "D", "d", "dist",
+                   "distortion_coeffs", "distortion")
+"""Keys of the distortion vector."""
+SIZE_KEYS = (("image_width", "image_height"), ("width", "height"), ("imageWidth", "imageHeight"))
+"""Keys of the image size (pairs); a two-entry ``image_size``/``imageSize``/``resolution`` also works."""
+
+FISHEYE_NAMES = ("equidistant", "fisheye", "opencv_fisheye", "kannala_brandt")
+"""``distortion_model`` values meaning OpenCV's fisheye model (ROS, Kalibr and others)."""
+STANDARD_NAMES = ("plumb_bob", "rational_polynomial", "radtan", "opencv", "pinhole", "none")
+"""``distortion_model`` values meaning the standard OpenCV model."""
 
 
 def _read_opencv_yaml(text: str) -> dict:
     """The subset of OpenCV FileStorage YAML calibration files use: scalars and ``!!opencv-matrix``
-    mappings (rows, cols, dt, data: [...]); also plain ROS YAML."""
+    mappings (rows, cols, dt, data: [...]); also plain ROS and Kalibr YAML."""
     import yaml
 
     class _Loader(yaml.SafeLoader):
@@ -38,59 +68,137 @@ def _read_opencv_yaml(text: str) -> dict:
     return yaml.load(text, Loader=_Loader) or {}
 
 
+def _xml_value(el: ET.Element):
+    """An OpenCV FileStorage XML node: a matrix (rows/cols/dt/data children), a mapping, or text
+    (one number, several numbers, or a string)."""
+    children = list(el)
+    if children:
+        if el.get("type_id") == "opencv-matrix" or {c.tag for c in children} >= {"rows", "cols", "data"}:
+            d = {c.tag: (c.text or "").strip() for c in children}
+            return {"rows": int(d["rows"]), "cols": int(d["cols"]), "dt": d.get("dt", "d"),
+                    "data": [float(t) for t in d["data"].split()]}
+        if all(c.tag == "_" for c in children):
+            return [_xml_value(c) for c in children]
+        return {c.tag: _xml_value(c) for c in children}
+    text = (el.text or "").strip().strip('"')
+    tokens = text.split()
+    try:
+        nums = [float(t) for t in tokens]
+    except ValueError:
+        return text
+    if len(nums) == 1:
+        return int(nums[0]) if re.fullmatch(r"[-+]?\d+", tokens[0]) else nums[0]
+    return nums
+
+
+def _read_opencv_xml(text: str, path: str) -> dict:
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise InputError(f"{path}: invalid XML ({exc})") from None
+    if root.tag != "opencv_storage":
+        raise InputError(f"{path}: XML root is <{root.tag}>, not an OpenCV FileStorage <opencv_storage>")
+    return {c.tag: _xml_value(c) for c in root}
+
+
 def _matrix_value(node, name: str, path: str) -> np.ndarray:
     if isinstance(node, dict) and "data" in node:
-        data = np.asarray(node["data"], dtype=np.float64)
+        try:
+            data = np.asarray(node["data"], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InputError(f"{path}: {name}'s data must be numbers") from None
         rows, cols = int(node.get("rows", 1)), int(node.get("cols", data.size))
         if rows * cols != data.size:
             raise InputError(f"{path}: {name} says {rows}×{cols} but has {data.size} values")
         return data.reshape(rows, cols)
     if isinstance(node, (list, tuple)):
-        return np.asarray(node, dtype=np.float64)
+        try:
+            return np.asarray(node, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InputError(f"{path}: {name} must be a list of numbers") from None
     raise InputError(f"{path}: {name} must be a matrix (rows/cols/data) or a list of numbers")
 
 
+def _lookup(d: dict, keys, what: str, path: str):
+    """The value of the first of ``keys`` present; two different values under two aliases is an error."""
+    found = [(k, d[k]) for k in keys if k in d]
+    if len(found) > 1 and any(str(v) != str(found[0][1]) for _, v in found[1:]):
+        raise InputError(f"{path}: {what} given twice with different values ({found[0][0]} and {found[1][0]}); "
+                         "keep one")
+    return found[0] if found else (None, None)
+
+
 def _size_from(d: dict, path: str) -> tuple[int, int]:
-    w = d.get("image_width", d.get("width"))
-    h = d.get("image_height", d.get("height"))
-    if w is None or h is None:
-        raise InputError(f"{path}: no image size; add image_width and image_height (pixels) — "
-                         "the intrinsics are only meaningful for the resolution they were calibrated at")
-    return int(w), int(h)
+    for kw, kh in SIZE_KEYS:
+        if kw in d and kh in d:
+            return int(d[kw]), int(d[kh])
+    for k in ("image_size", "imageSize", "resolution"):
+        v = d.get(k)
+        if isinstance(v, (list, tuple)) and len(v) == 2:
+            return int(v[0]), int(v[1])
+    raise InputError(f"{path}: no image size; add image_width and image_height (pixels) — "
+                     "the intrinsics are only meaningful for the resolution they were calibrated at")
+
+
+def _family(name, path: str, where: str = "distortion_model") -> str:
+    if name is None:
+        return "opencv"
+    n = str(name).strip().lower()
+    if n in FISHEYE_NAMES:
+        return "fisheye"
+    if n in STANDARD_NAMES:
+        return "opencv"
+    raise InputError(f"{path}: {where} {name!r} is not a model clpost has; it reads "
+                     f"{', '.join(STANDARD_NAMES[:3])} (OpenCV standard) and {', '.join(FISHEYE_NAMES[:2])} "
+                     "(OpenCV fisheye)")
 
 
 def _from_mapping(d: dict, path: str) -> OpenCVModel:
-    if not isinstance(d, dict) or "camera_matrix" not in d:
-        raise InputError(f"{path}: no camera_matrix; expected an OpenCV FileStorage or ROS camera_info "
-                         "file with camera_matrix and distortion_coefficients")
-    k = _matrix_value(d["camera_matrix"], "camera_matrix", path).reshape(-1)
+    """OpenCV FileStorage (YAML/XML/JSON) or ROS camera_info as a mapping."""
+    if not isinstance(d, dict):
+        raise InputError(f"{path}: not a calibration (a mapping with camera_matrix and distortion_coefficients)")
+    kkey, knode = _lookup(d, MATRIX_KEYS, "the camera matrix", path)
+    if knode is None:
+        raise InputError(f"{path}: no camera matrix (looked for {', '.join(MATRIX_KEYS)}); expected an OpenCV "
+                         "FileStorage, ROS camera_info, Kalibr camchain or COLMAP cameras.txt file")
+    k = _matrix_value(knode, kkey, path).reshape(-1)
     if k.size != 9:
-        raise InputError(f"{path}: camera_matrix must have 9 values, has {k.size}")
-    dist_node = d.get("distortion_coefficients", d.get("dist_coeffs", d.get("D")))
-    if dist_node is None:
-        raise InputError(f"{path}: no distortion_coefficients; add them (OpenCV order {', '.join(COEFF_NAMES[:5])}, …)")
-    dist = _matrix_value(dist_node, "distortion_coefficients", path).reshape(-1)
-    model_name = d.get("distortion_model")
-    if model_name is not None and model_name not in ("plumb_bob", "rational_polynomial"):
-        raise InputError(f"{path}: distortion_model {model_name!r} is not the OpenCV standard model; "
-                         "clpost reads plumb_bob and rational_polynomial (fisheye/equidistant are other models)")
+        raise InputError(f"{path}: {kkey} must have 9 values, has {k.size}")
+    dkey, dnode = _lookup(d, DISTORTION_KEYS, "the distortion coefficients", path)
+    if dnode is None:
+        raise InputError(f"{path}: no distortion coefficients (looked for {', '.join(DISTORTION_KEYS[:6])}); add "
+                         f"them (OpenCV order {', '.join(COEFF_NAMES[:5])}, …)")
+    dist = _matrix_value(dnode, dkey, path).reshape(-1)
+    family = _family(d.get("distortion_model"), path)
+    if family == "opencv" and str(d.get("fisheye_model", 0)).strip().lower() in ("1", "true"):
+        family = "fisheye"  # OpenCV's calibration tutorial's flag
     w, h = _size_from(d, path)
-    return OpenCVModel.from_vector(w, h, k.reshape(3, 3), dist, source=path)
+    return OpenCVModel.from_vector(w, h, k.reshape(3, 3), dist, source=path, distortion_model=family)
 
 
 COLMAP_MODELS = {
-    # name: parameter names (COLMAP src/colmap/sensor/models.h)
-    "SIMPLE_RADIAL": ("f", "cx", "cy", "k1"),
-    "RADIAL": ("f", "cx", "cy", "k1", "k2"),
-    "OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
-    "FULL_OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
+    # name: (parameter names, clpost family) — COLMAP src/colmap/sensor/models.h
+    "SIMPLE_PINHOLE": (("f", "cx", "cy"), "opencv"),
+    "PINHOLE": (("fx", "fy", "cx", "cy"), "opencv"),
+    "SIMPLE_RADIAL": (("f", "cx", "cy", "k1"), "opencv"),
+    "RADIAL": (("f", "cx", "cy", "k1", "k2"), "opencv"),
+    "OPENCV": (("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"), "opencv"),
+    "FULL_OPENCV": (("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"), "opencv"),
+    "OPENCV_FISHEYE": (("fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"), "fisheye"),
+    # θ_d = θ(1 + k θ²) and θ(1 + k1 θ² + k2 θ⁴): truncations of OpenCV's fisheye model
+    "SIMPLE_RADIAL_FISHEYE": (("f", "cx", "cy", "k1"), "fisheye"),
+    "RADIAL_FISHEYE": (("f", "cx", "cy", "k1", "k2"), "fisheye"),
 }
+"""COLMAP camera models clpost's models express (FOV, THIN_PRISM_FISHEYE and
+RAD_TAN_THIN_PRISM_FISHEYE are other models and are refused)."""
+
+COLMAP_PIXEL_OFFSET = 0.5
+r"""COLMAP's principal point minus OpenCV's: COLMAP puts the image's top-left *corner* at (0, 0)
+(pixel centres at i + 0.5), so :math:`c_{\text{OpenCV}} = c_{\text{COLMAP}} - 0.5`."""
 
 
-def _read_colmap(text: str, path: str, camera_id: int | None) -> OpenCVModel:
-    r"""COLMAP ``cameras.txt``: ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS…``. COLMAP's pixel
-    convention puts the image's top-left *corner* at (0, 0) (pixel centres at i + 0.5), so
-    :math:`c_{\text{OpenCV}} = c_{\text{COLMAP}} - 0.5`."""
+def _read_colmap(text: str, path: str, camera_id: str | None) -> OpenCVModel:
+    """COLMAP ``cameras.txt``: ``CAMERA_ID MODEL WIDTH HEIGHT PARAMS…`` (:data:`COLMAP_PIXEL_OFFSET`)."""
     rows = [ln.split() for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     if not rows:
         raise InputError(f"{path}: no camera lines (CAMERA_ID MODEL WIDTH HEIGHT PARAMS…)")
@@ -99,29 +207,82 @@ def _read_colmap(text: str, path: str, camera_id: int | None) -> OpenCVModel:
     row = rows[0] if camera_id is None else next((r for r in rows if r[0] == str(camera_id)), None)
     if row is None:
         raise InputError(f"{path}: no camera with id {camera_id}")
+    if len(row) < 4:
+        raise InputError(f"{path}: camera line {' '.join(row)!r} needs CAMERA_ID MODEL WIDTH HEIGHT PARAMS…")
     name = row[1]
     if name not in COLMAP_MODELS:
-        raise InputError(f"{path}: COLMAP model {name} is not supported; use one of {', '.join(COLMAP_MODELS)}")
-    names = COLMAP_MODELS[name]
-    vals = [float(t) for t in row[4:]]
+        raise InputError(f"{path}: COLMAP model {name} is not supported (clpost's OpenCV and fisheye models cannot "
+                         f"express it); use one of {', '.join(COLMAP_MODELS)}")
+    names, family = COLMAP_MODELS[name]
+    try:
+        vals = [float(t) for t in row[4:]]
+        width, height = int(row[2]), int(row[3])
+    except ValueError:
+        raise InputError(f"{path}: camera {row[0]}: WIDTH HEIGHT PARAMS must be numbers") from None
     if len(vals) != len(names):
         raise InputError(f"{path}: {name} needs {len(names)} parameters ({' '.join(names)}), got {len(vals)}")
     p = dict(zip(names, vals))
     if "f" in p:
         p["fx"] = p["fy"] = p.pop("f")
-    p["cx"] -= 0.5
-    p["cy"] -= 0.5
-    return OpenCVModel(int(row[2]), int(row[3]), source=path, **p)
+    p["cx"] -= COLMAP_PIXEL_OFFSET
+    p["cy"] -= COLMAP_PIXEL_OFFSET
+    return OpenCVModel(width, height, source=path, distortion_model=family, **p)
+
+
+KALIBR_DISTORTIONS = {"radtan": ("opencv", ("k1", "k2", "p1", "p2")), "equidistant": ("fisheye", FISHEYE_COEFF_NAMES),
+                      "none": ("opencv", ())}
+"""Kalibr ``distortion_model`` → (clpost family, coefficient names); Kalibr's ``fov`` is another model."""
+
+
+def _is_kalibr(d) -> bool:
+    return isinstance(d, dict) and any(isinstance(v, dict) and "camera_model" in v and "intrinsics" in v
+                                       for v in d.values())
+
+
+def _read_kalibr(d: dict, path: str, cam: str | None) -> OpenCVModel:
+    """Kalibr camchain: ``camN: {camera_model, intrinsics, distortion_model, distortion_coeffs,
+    resolution}`` (Kalibr wiki, "Yaml formats")."""
+    cams = [k for k, v in d.items() if isinstance(v, dict) and "camera_model" in v]
+    if cam is None:
+        if len(cams) > 1:
+            raise InputError(f"{path}: {len(cams)} cameras ({', '.join(cams)}); say which with {path}#{cams[0]}")
+        cam = cams[0]
+    elif cam not in d and f"cam{cam}" in d:
+        cam = f"cam{cam}"
+    c = d.get(cam)
+    if not isinstance(c, dict) or "camera_model" not in c:
+        raise InputError(f"{path}: no camera {cam!r}; it has {', '.join(cams)}")
+    where = f"{path}#{cam}"
+    if c["camera_model"] != "pinhole":
+        raise InputError(f"{where}: Kalibr camera_model {c['camera_model']!r} is not supported; clpost reads "
+                         "pinhole (with radtan or equidistant distortion)")
+    dm = c.get("distortion_model", "none")
+    if dm not in KALIBR_DISTORTIONS:
+        raise InputError(f"{where}: Kalibr distortion_model {dm!r} is not supported; clpost reads "
+                         f"{', '.join(KALIBR_DISTORTIONS)}")
+    family, names = KALIBR_DISTORTIONS[dm]
+    intr = _matrix_value(c.get("intrinsics"), "intrinsics", where).reshape(-1)
+    coeffs = _matrix_value(c.get("distortion_coeffs", []), "distortion_coeffs", where).reshape(-1)
+    if intr.size != 4:
+        raise InputError(f"{where}: pinhole intrinsics must be [fu, fv, pu, pv], got {intr.size} values")
+    if coeffs.size != len(names):
+        raise InputError(f"{where}: {dm} needs {len(names)} distortion_coeffs ({', '.join(names) or 'none'}), "
+                         f"got {coeffs.size}")
+    res = c.get("resolution")
+    if not (isinstance(res, (list, tuple)) and len(res) == 2):
+        raise InputError(f"{where}: no resolution [width, height]; add it")
+    fu, fv, pu, pv = intr.tolist()
+    return OpenCVModel(int(res[0]), int(res[1]), fu, fv, pu, pv, source=where, distortion_model=family,
+                       **dict(zip(names, coeffs.tolist())))
 
 
 def load_calibration(path: str | Path) -> OpenCVModel:
-    """Read a calibration file (format from its content: OpenCV YAML/JSON, ROS YAML, COLMAP txt);
-    ``cameras.txt#2`` picks COLMAP camera 2."""
+    """Read a calibration file (format from its content, module docstring); ``cameras.txt#2``
+    picks COLMAP camera 2, ``camchain.yaml#cam1`` Kalibr's cam1."""
     spec = str(path)
-    camera_id = None
-    if "#" in spec and spec.rsplit("#", 1)[1].isdigit():
-        spec, cid = spec.rsplit("#", 1)
-        camera_id = int(cid)
+    selector = None
+    if "#" in spec and re.fullmatch(r"[A-Za-z0-9_]+", spec.rsplit("#", 1)[1]):
+        spec, selector = spec.rsplit("#", 1)
     p = Path(spec)
     try:
         text = p.read_text()
@@ -137,10 +298,15 @@ def load_calibration(path: str | Path) -> OpenCVModel:
             raise InputError(f"{spec}: invalid JSON ({exc})") from None
         d = d.get("opencv_storage", d) if isinstance(d, dict) else d
         return _from_mapping(d, spec)
+    if stripped.startswith("<"):
+        return _from_mapping(_read_opencv_xml(text, spec), spec)
     if re.match(r"^(#.*\n|\s*\n)*\s*\d+\s+[A-Z_]+\s+\d+\s+\d+", text) or p.name == "cameras.txt":
-        return _read_colmap(text, spec, camera_id)
+        return _read_colmap(text, spec, selector)
     try:
         d = _read_opencv_yaml(text)
     except Exception as exc:  # yaml.YAMLError and friends: report as a file problem
-        raise InputError(f"{spec}: not a readable OpenCV/ROS YAML, JSON or COLMAP cameras.txt ({exc})") from None
+        raise InputError(f"{spec}: not a readable OpenCV/ROS/Kalibr YAML, XML, JSON or COLMAP cameras.txt "
+                         f"({exc})") from None
+    if _is_kalibr(d):
+        return _read_kalibr(d, spec, selector)
     return _from_mapping(d, spec)

@@ -16,6 +16,20 @@ normalised coordinates :math:`x' = X/Z,\ y' = Y/Z`, :math:`r^2 = x'^2 + y'^2`:
 The tilt is OpenCV's ``computeTiltProjectionMatrix`` (Scheimpflug sensor). Pixel coordinates
 follow ``shared/CONVENTIONS.md`` (pixel centres at integers, OpenCV).
 
+Fisheye family (``distortion_model="fisheye"``): OpenCV's ``cv::fisheye`` model, the
+equidistant projection with Kannala & Brandt's odd polynomial ("A generic camera model and
+calibration method for conventional, wide-angle, and fish-eye lenses", IEEE PAMI 2006) — what ROS
+calls ``equidistant``, Kalibr ``equidistant`` and COLMAP ``OPENCV_FISHEYE``. With
+:math:`r = \sqrt{x'^2 + y'^2}` and :math:`\theta = \arctan r`:
+
+.. math::
+
+    \theta_d = \theta\,(1 + k_1\theta^2 + k_2\theta^4 + k_3\theta^6 + k_4\theta^8), \qquad
+    (x'', y'') = \frac{\theta_d}{r}\,(x', y')
+
+(OpenCV's fisheye skew α is not supported: clpost's K has no skew.) The undistorted coordinates
+are a pinhole's, so only rays within 90° of the axis have them.
+
 Inverse (distorted → undistorted, what post-processing needs, because each output pixel asks
 where its light came from in the pinhole render):
 
@@ -47,6 +61,13 @@ from ..errors import InputError
 COEFF_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tau_x", "tau_y")
 """OpenCV's order of the distortion vector (4, 5, 8, 12 or 14 entries)."""
 
+FISHEYE_COEFF_NAMES = ("k1", "k2", "k3", "k4")
+"""``cv::fisheye``'s distortion vector (exactly 4 entries)."""
+
+DISTORTION_MODELS = ("opencv", "fisheye")
+"""``OpenCVModel.distortion_model``: the standard (rational, tangential, thin-prism, tilt) model,
+or OpenCV's fisheye (equidistant, Kannala–Brandt) model."""
+
 
 @dataclass(frozen=True)
 class OpenCVModel:
@@ -75,6 +96,8 @@ class OpenCVModel:
     tau_y: float = 0.0
     inverse: str = "newton"
     """How the stage inverts the model: ``newton`` (exact) or ``heikkila`` (the paper's fit)."""
+    distortion_model: str = "opencv"
+    """One of :data:`DISTORTION_MODELS`; ``fisheye`` uses k1…k4 only (θ polynomial)."""
     source: str = field(default="", compare=False)
     """Where the model came from (file path), for messages."""
 
@@ -85,7 +108,7 @@ class OpenCVModel:
                 raise InputError(f"OpenCVModel.{n}={v!r} must be a whole number of pixels >= 1{self._where()}")
             object.__setattr__(self, n, int(v))
         for f in fields(self):
-            if f.name in ("width", "height", "inverse", "source"):
+            if f.name in ("width", "height", "inverse", "source", "distortion_model"):
                 continue
             v = getattr(self, f.name)
             try:
@@ -101,14 +124,27 @@ class OpenCVModel:
             raise InputError(f"OpenCVModel: tilt tau_x={self.tau_x}, tau_y={self.tau_y} must be within ±90° (radians){self._where()}")
         if self.inverse not in ("newton", "heikkila"):
             raise InputError(f"OpenCVModel.inverse={self.inverse!r} must be 'newton' or 'heikkila'")
+        if self.distortion_model not in DISTORTION_MODELS:
+            raise InputError(f"OpenCVModel.distortion_model={self.distortion_model!r} must be one of "
+                             f"{', '.join(DISTORTION_MODELS)}{self._where()}")
+        if self.is_fisheye:
+            extra = [n for n in COEFF_NAMES if n not in FISHEYE_COEFF_NAMES and getattr(self, n)]
+            if extra:
+                raise InputError(f"OpenCVModel: the fisheye model has only k1..k4; {', '.join(extra)} must be 0"
+                                 f"{self._where()}")
+            if self.inverse == "heikkila":
+                raise InputError(f"OpenCVModel: the Heikkilä inverse is for the standard model, not fisheye; "
+                                 f"use inverse='newton'{self._where()}")
 
     def _where(self) -> str:
         return f" (from {self.source})" if self.source else ""
 
     # -- construction -----------------------------------------------------------------------
     @staticmethod
-    def from_vector(width: int, height: int, k: np.ndarray, d, source: str = "") -> "OpenCVModel":
-        """From a 3×3 camera matrix and an OpenCV distortion vector of 4/5/8/12/14 entries."""
+    def from_vector(width: int, height: int, k: np.ndarray, d, source: str = "",
+                    distortion_model: str = "opencv") -> "OpenCVModel":
+        """From a 3×3 camera matrix and an OpenCV distortion vector of 4/5/8/12/14 entries
+        (``fisheye``: ``cv::fisheye``'s 4)."""
         k = np.asarray(k, dtype=np.float64)
         d = np.asarray(d, dtype=np.float64).reshape(-1)
         where = f" in {source}" if source else ""
@@ -117,11 +153,18 @@ class OpenCVModel:
         if abs(k[0, 1]) > 1e-9 * abs(k[0, 0]) or k[1, 0] or k[2, 0] or k[2, 1] or abs(k[2, 2] - 1) > 1e-12:
             raise InputError(f"camera_matrix{where} must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] "
                              f"(no skew); got {k.tolist()}")
-        if d.size not in (4, 5, 8, 12, 14):
+        if distortion_model == "fisheye":
+            if d.size != 4:
+                raise InputError(f"distortion_coefficients{where} has {d.size} entries; the fisheye (equidistant) "
+                                 f"model has 4 ({', '.join(FISHEYE_COEFF_NAMES)})")
+            coeffs = dict(zip(FISHEYE_COEFF_NAMES, d.tolist()))
+        elif d.size not in (4, 5, 8, 12, 14):
             raise InputError(f"distortion_coefficients{where} has {d.size} entries; OpenCV uses 4, 5, 8, 12 "
                              f"or 14 ({', '.join(COEFF_NAMES)})")
-        coeffs = dict(zip(COEFF_NAMES, d.tolist()))
-        return OpenCVModel(width, height, k[0, 0], k[1, 1], k[0, 2], k[1, 2], source=source, **coeffs)
+        else:
+            coeffs = dict(zip(COEFF_NAMES, d.tolist()))
+        return OpenCVModel(width, height, k[0, 0], k[1, 1], k[0, 2], k[1, 2], source=source,
+                           distortion_model=distortion_model, **coeffs)
 
     @staticmethod
     def from_camera(camera, size: tuple[int, int], **coeffs) -> "OpenCVModel":
@@ -130,8 +173,24 @@ class OpenCVModel:
         return OpenCVModel(size[0], size[1], fx, fy, cx, cy, **coeffs)
 
     def vector(self) -> np.ndarray:
-        """The 14-entry OpenCV distortion vector."""
+        """The 14-entry OpenCV distortion vector (standard model only; see :meth:`coefficients`)."""
+        if self.is_fisheye:
+            raise InputError(f"OpenCVModel.vector(): a fisheye model has no standard OpenCV vector; use "
+                             f"coefficients(){self._where()}")
         return np.array([getattr(self, n) for n in COEFF_NAMES])
+
+    @property
+    def is_fisheye(self) -> bool:
+        return self.distortion_model == "fisheye"
+
+    @property
+    def coeff_names(self) -> tuple[str, ...]:
+        """The names of this family's coefficients, in its vector's order."""
+        return FISHEYE_COEFF_NAMES if self.is_fisheye else COEFF_NAMES
+
+    def coefficients(self) -> np.ndarray:
+        """The family's own distortion vector: 14 OpenCV entries, or fisheye's k1..k4."""
+        return np.array([getattr(self, n) for n in self.coeff_names])
 
     def matrix(self) -> np.ndarray:
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
@@ -149,7 +208,8 @@ class OpenCVModel:
 
     @property
     def is_identity(self) -> bool:
-        return not np.any(self.vector())
+        """No distortion (the equidistant projection is one even with k = 0)."""
+        return not self.is_fisheye and not np.any(self.vector())
 
     # -- the forward model --------------------------------------------------------------------
     def _tilt(self) -> np.ndarray:
@@ -167,8 +227,25 @@ class OpenCVModel:
         den = 1 + r2 * (self.k4 + r2 * (self.k5 + r2 * self.k6))
         return num / den
 
+    def fisheye_scale(self, r: np.ndarray) -> np.ndarray:
+        """θ_d(arctan r)/r of the fisheye model (1 at r = 0)."""
+        r = np.asarray(r, np.float64)
+        th = np.arctan(r)
+        t2 = th * th
+        thd = th * (1 + t2 * (self.k1 + t2 * (self.k2 + t2 * (self.k3 + t2 * self.k4))))
+        safe = np.where(r > 1e-12, r, 1.0)
+        return np.where(r > 1e-12, thd / safe, 1 + t2 * self.k1)
+
+    def distorted_radius(self, r: np.ndarray) -> np.ndarray:
+        """ρ(r): the radial part of the model at undistorted normalised radius r."""
+        r = np.asarray(r, np.float64)
+        return r * (self.fisheye_scale(r) if self.is_fisheye else self.radial(r * r))
+
     def distort_normalized(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Undistorted normalised (x', y') → distorted normalised (x''', y''') (float64)."""
+        if self.is_fisheye:
+            sc = self.fisheye_scale(np.hypot(x, y))
+            return x * sc, y * sc
         r2 = x * x + y * y
         rad = self.radial(r2)
         xd = x * rad + 2 * self.p1 * x * y + self.p2 * (r2 + 2 * x * x) + self.s1 * r2 + self.s2 * r2 * r2
@@ -190,12 +267,12 @@ class OpenCVModel:
 
     # -- fold-over ----------------------------------------------------------------------------
     def fold_radius(self, r_max: float = 20.0, n: int = 200001) -> float:
-        r"""First undistorted radius r (normalised) where :math:`\rho(r) = r R(r^2)` stops
-        increasing or the denominator of R reaches 0; ``inf`` if none up to ``r_max``."""
+        r"""First undistorted radius r (normalised) where :math:`\rho(r)` (:meth:`distorted_radius`)
+        stops increasing or the denominator of R reaches 0; ``inf`` if none up to ``r_max``."""
         r = np.linspace(0.0, r_max, n)
         r2 = r * r
-        den = 1 + r2 * (self.k4 + r2 * (self.k5 + r2 * self.k6))
-        rho = r * self.radial(np.where(den > 0, r2, 0.0))
+        den = np.ones_like(r) if self.is_fisheye else 1 + r2 * (self.k4 + r2 * (self.k5 + r2 * self.k6))
+        rho = self.distorted_radius(np.where(den > 0, r, 0.0))
         bad = (den <= 0)[1:] | (np.diff(rho) <= 0)
         if not bad.any():
             return math.inf
@@ -206,7 +283,7 @@ class OpenCVModel:
         rf = self.fold_radius()
         if math.isinf(rf):
             return math.inf
-        return float(rf * self.radial(np.array(rf * rf)))
+        return float(self.distorted_radius(np.array(rf)))
 
 
 # ---------------------------------------------------------------------------------------------

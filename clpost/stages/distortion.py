@@ -52,7 +52,7 @@ import numpy as np
 
 from ..calibration import OpenCVModel, required_render, undistort
 from ..errors import InputError
-from ..params import boolean, exact_g, param, parse_on_off
+from ..params import boolean, param, parse_on_off
 from . import _field as fld
 from .base import GatherStage
 
@@ -69,8 +69,9 @@ def _show_calibration(m):
 
     if m is None or TRACED_SOURCE in (m.source or ""):
         return None  # a lens's own traced model is re-traced from the lens (clpost.lensDistortion), at any size
-    # exact floats (exact_g): --camera-from reads the same model back
-    return " ".join(exact_g(float(t)) for t in (m.width, m.height, m.fx, m.fy, m.cx, m.cy, *m.vector()))
+    from ..calibration.header import header_text
+
+    return header_text(m)  # named fields, exact floats: --camera-from reads the same model back
 
 
 def _parse_calibration(text):
@@ -92,7 +93,8 @@ class DistortionParams:
     distortion: OpenCVModel | None = param(
         None, unit="OpenCV model", flag="--calibration", parse=_parse_calibration, check=_check_calibration,
         header="clpost.distortion", show=_show_calibration, scalar=False,
-        help="camera calibration (OpenCV YAML/JSON, ROS camera_info, COLMAP cameras.txt[#ID]): renders its "
+        help="camera calibration (OpenCV YAML/XML/JSON, ROS camera_info, COLMAP cameras.txt[#ID], Kalibr "
+             "camchain[#camN]): renders its "
              "distortion (a clpost.calibration.OpenCVModel in the library)")
     lens_distortion: bool = param(
         True, unit="on/off", flag="--lens-distortion", parse=parse_on_off, check=boolean, scalar=False,
@@ -396,8 +398,8 @@ class Distortion(GatherStage):
     def reason_needed(self, camera, frame):
         model = self._model(camera)
         m, ok = self._host_map(camera, frame)
-        nz = ", ".join(f"{n}={getattr(model, n):.4g}" for n in ("k1", "k2", "p1", "p2", "k3") if getattr(model, n))
-        return (f"OpenCV model {nz or '(intrinsics only)'} → {model.width}x{model.height}, "
+        nz = ", ".join(f"{n}={getattr(model, n):.4g}" for n in model.coeff_names[:5] if getattr(model, n))
+        return (f"{'OpenCV fisheye' if model.is_fisheye else 'OpenCV'} model {nz or '(intrinsics only)'} → {model.width}x{model.height}, "
                 f"{'cubic B-spline' if self.filter_taps == 3 else 'bilinear'}; {int((~ok).sum())} pixel(s) without data (alpha 0)")
 
     def _host_map(self, camera, frame):
