@@ -65,6 +65,7 @@ def _read_opencv_yaml(text: str) -> dict:
     text = re.sub(r"^%YAML[: ]1\.0\s*$", "", text, flags=re.M).lstrip("\n")
     if text.startswith("---"):
         text = text.split("\n", 1)[1] if "\n" in text else ""
+    text = re.sub(r"\n---\s*$", "\n", text)  # `ros2 topic echo` ends each message with a separator
     return yaml.load(text, Loader=_Loader) or {}
 
 
