@@ -699,8 +699,8 @@ def build_parser() -> argparse.ArgumentParser:
     from .calibration.command import add_parser as add_calibration_parser  # issue 19: matchmove interchange
     from .stmap import add_parser as add_stmap_parser
 
-    add_stmap_parser(sub)
-    add_calibration_parser(sub)
+    add_stmap_parser(sub, _size, camera_options())
+    add_calibration_parser(sub, _size, camera_options())
     return p
 
 

@@ -153,9 +153,9 @@ CAMERA_FIELDS = ("distortion", "lens", "f_number", "focus_distance_m", "focus_sc
 def model_from_args(args, size: tuple[int, int] | None) -> OpenCVModel:
     """The distortion ``--calibration`` or a ``--lens``'s traced curve (at ``size``) gives."""
     from .calibration import lens_distortion_model
-    from .cli import camera_from_args
+    from .camera import Camera
 
-    cam = camera_from_args(args)
+    cam = Camera.from_options({k[4:]: v for k, v in vars(args).items() if k.startswith("cam_")})
     if cam.distortion is not None:
         m = cam.distortion
         return m if size is None or tuple(size) == (m.width, m.height) else m.scaled_to(*size)
@@ -194,10 +194,10 @@ def cmd_stmap(args) -> int:
     return 0
 
 
-def add_parser(sub) -> None:
-    """Register ``clpost stmap`` on the CLI's subparsers."""
-    from .cli import _size
-
+def add_parser(sub, size, options) -> None:
+    """Register ``clpost stmap`` on the CLI's subparsers; ``size`` parses WxH and ``options`` are the CLI's
+    generated camera options (:func:`clpost.cli.camera_options`), handed in so this module does not import
+    the CLI."""
     p = sub.add_parser(
         "stmap", help="write a Nuke-convention ST map (EXR) of a calibration's or lens's distortion",
         description="R = s = (x+0.5)/W, G = t = 1-(y+0.5)/H of the source position each pixel samples (origin "
@@ -207,21 +207,19 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--output", required=True, help="output EXR (float32 RGBA)")
     p.add_argument("--undistort", action="store_true",
                    help="the undistort map (plate -> undistorted image) instead of the distort map")
-    p.add_argument("--size", type=_size, default=None,
+    p.add_argument("--size", type=size, default=None,
                    help="WIDTHxHEIGHT: the calibration scaled to this size (same aspect), or the traced lens's "
                         "image size (default: the calibration's; 1920 wide at the sensor's aspect for --lens)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
-    add_source_options(p)
+    add_source_options(p, options)
     p.set_defaults(func=cmd_stmap)
 
 
-def add_source_options(p) -> None:
+def add_source_options(p, options) -> None:
     """``--calibration`` or ``--lens`` with the options that shape a traced lens's distortion."""
     import argparse
 
-    from .cli import camera_options
-
     g = p.add_argument_group("distortion source (--calibration, or --lens with its focus and f-number)")
-    for flag, dest, typ, help_ in camera_options():
+    for flag, dest, typ, help_ in options:
         if dest in CAMERA_FIELDS:
             g.add_argument(flag, dest=f"cam_{dest}", type=typ, default=argparse.SUPPRESS, help=help_)

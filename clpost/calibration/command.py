@@ -70,9 +70,9 @@ def cmd_calibration(args) -> int:
     return 0
 
 
-def add_parser(sub) -> None:
-    """Register ``clpost calibration {show,convert}`` on the CLI's subparsers."""
-    from ..cli import _size
+def add_parser(sub, size, options) -> None:
+    """Register ``clpost calibration {show,convert}`` on the CLI's subparsers (``size`` and ``options``:
+    :func:`clpost.stmap.add_parser`'s)."""
     from ..stmap import add_source_options
     from .writers import FORMATS
 
@@ -91,8 +91,8 @@ def add_parser(sub) -> None:
                            help="default from the extension: .yaml/.yml opencv-yaml, .xml opencv-xml, "
                                 ".json opencv-json, .txt colmap")
             q.add_argument("--overwrite", action="store_true", help="replace an existing output")
-        q.add_argument("--size", type=_size, default=None,
+        q.add_argument("--size", type=size, default=None,
                        help="WIDTHxHEIGHT: scale the calibration to this size (same aspect), or the traced lens's")
-        add_source_options(q)
+        add_source_options(q, options)
         q.set_defaults(func=cmd_calibration)
 
