@@ -150,9 +150,11 @@ def test_domain_alpha_and_no_preimage():
         assert (st.alpha[none] == 0).all() and (st.st[none] == NO_PREIMAGE).all()
 
 
-def test_the_distort_map_carries_the_distortion_stage_s_distortion():
+@pytest.mark.parametrize("m", [OpenCVModel(97, 61, 90.0, 91.0, 47.0, 29.5, k1=-0.2, k2=0.03, p1=1e-3),
+                               OpenCVModel(97, 61, 60.0, 60.0, 48.0, 30.0, k1=0.02, k2=0.01,
+                                           distortion_model="fisheye")], ids=["radtan", "fisheye"])
+def test_the_distort_map_carries_the_distortion_stage_s_distortion(m):
     # the same model through `clpost process` (draft: bilinear) and through the map (bilinear): one distortion
-    m = OpenCVModel(97, 61, 90.0, 91.0, 47.0, 29.5, k1=-0.2, k2=0.03, p1=1e-3)
     rng = np.random.default_rng(7)
     img = rng.random((61, 97, 3)).astype(np.float32)
     out = Pipeline(Camera(distortion=m), stages=["distortion"], quality="draft").run(Frame(img))
@@ -161,7 +163,7 @@ def test_the_distort_map_carries_the_distortion_stage_s_distortion():
     ref = np.stack([map_coordinates(img[..., c].astype(np.float64), [y, x], order=1, mode="nearest")
                     for c in range(3)], -1)
     inside = out.alpha > 0.999
-    assert inside.mean() > 0.8
+    assert inside.mean() > 0.6
     np.testing.assert_array_equal(inside, st.alpha > 0)
     assert np.abs(out.color[inside] - ref[inside]).max() < 1e-4
 
