@@ -249,3 +249,23 @@ def test_cli_never_overwrites_or_writes_over_its_input(tmp_path, capsys):
     assert rc == 2 and ".exr" in io.err and not (tmp_path / "st.png").exists()
     rc, io = _run(["stmap", "-o", str(out), "--calibration", str(tmp_path / "cam.yaml"), "--overwrite"], capsys)
     assert rc == 0 and exr.read_frame(out).color.shape == (40, 64, 3)
+
+
+def test_the_readmes_matchmove_commands_run(tmp_path, capsys, monkeypatch):
+    # every `clpost stmap` / `clpost calibration` line of README's "Matchmove workflow" section, on a real file
+    import shlex
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = readme.split("## Matchmove workflow", 1)[1].split("\n## ", 1)[0]
+    lines = [ln.split("#", 1)[0].strip() for ln in section.splitlines()
+             if ln.startswith(("clpost stmap", "clpost calibration"))]
+    assert len(lines) >= 5
+    (tmp_path / "cam.yaml").write_text(CALIB)
+    monkeypatch.chdir(tmp_path)
+    for ln in lines:
+        argv = shlex.split(ln)[1:]
+        if "--lens" in argv:  # the README's 1920x1080 traced map: the same command, smaller
+            argv[argv.index("--size") + 1] = "96x54"
+        rc, io = _run(argv + (["--overwrite"] if argv[0] == "stmap" else []), capsys)
+        assert rc == 0, (ln, io.err)
