@@ -19,8 +19,9 @@ r"""Calibration files → :class:`~clpost.calibration.model.OpenCVModel` (reader
   distortion_model: radtan | equidistant, distortion_coeffs, resolution: [w, h]}``;
   ``camchain.yaml#cam1`` picks cam1).
 
-Pixel conventions: OpenCV, ROS and Kalibr put the centre of the top-left pixel at (0, 0), as clpost
-does; COLMAP puts the top-left *corner* there (:func:`_read_colmap`).
+Pixel conventions: OpenCV, ROS and Kalibr (whose corners come from OpenCV's detector) put the centre of
+the top-left pixel at (0, 0), as clpost does; COLMAP puts the top-left *corner* there
+(:func:`_read_colmap`).
 """
 from __future__ import annotations
 
