@@ -107,22 +107,34 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
     frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(job.frame)), validate=False)
     out = pipeline.run(frame, cam)
     ws = (cam or pipeline.camera).working_space
+    chroma = input_chromaticities(display, job.src)
     write_output(job.dst, out, output_header(out), display=display, working_space=ws, half=half,
-                 compression=compression)
+                 compression=compression, chroma=chroma)
     if preview_dir is not None:
         write_image(preview_path(job.dst, preview_dir), out.color, display=display, working_space=ws,
-                    option="--preview")
+                    option="--preview", chroma=chroma)
     return out
 
 
-def write_output(path: Path, frame: Frame, header: dict, *, display: str = "srgb", working_space: str = "rec709",
-                 half: bool = False, compression: str = "zip") -> None:
+def input_chromaticities(display, src: Path | None):
+    """The input file's chromaticities where an OCIO view takes its input space from them
+    (:mod:`clpost.ocio`), else None."""
+    from .ocio import OcioView, file_chromaticities
+
+    if isinstance(display, OcioView) and display.input_colorspace is None:
+        return file_chromaticities(src)
+    return None
+
+
+def write_output(path: Path, frame: Frame, header: dict, *, display="srgb", working_space: str = "rec709",
+                 half: bool = False, compression: str = "zip", chroma=None) -> None:
     """Write ``frame`` as its name says: an .exr linear with ``header``, a .png/.jpg/.tif
-    display-encoded for ``display`` with its ICC profile (:mod:`clpost.display_image`)."""
+    display-encoded for ``display`` (a clpost encoding or an OCIO view; ``chroma``: the input's
+    chromaticities) with its ICC profile (:mod:`clpost.display_image`)."""
     if output_format(path) == "EXR":
         exr.write_frame(path, frame, header=header, half=half, compression=compression)
     else:
-        write_image(path, frame.color, display=display, working_space=working_space)
+        write_image(path, frame.color, display=display, working_space=working_space, chroma=chroma)
 
 
 def preview_path(dst: Path, preview_dir: Path) -> Path:

@@ -111,7 +111,41 @@ def camera_from_args(args: argparse.Namespace, camera_cls=None, /, **defaults) -
 def _add_display_option(p: argparse.ArgumentParser, what: str) -> None:
     from .colorspace import DISPLAYS
 
-    p.add_argument("--display", default="srgb", choices=list(DISPLAYS), help=f"{what} (default srgb)")
+    g = p.add_argument_group("display (clpost's encodings, or an OpenColorIO config's display/view: README "
+                             "\"Colour-managed workflow\")")
+    g.add_argument("--display", default=None, metavar="NAME",
+                   help=f"{what}: without an OCIO config one of {', '.join(DISPLAYS)} (default srgb); with one, "
+                        "a display of the config (default: its default display)")
+    g.add_argument("--ocio-config", default=None, metavar="CONFIG",
+                   help="OpenColorIO config for --display: a config.ocio file or a built-in URI such as "
+                        "ocio://studio-config-latest (default: $OCIO if set; 'none': clpost's encodings)")
+    g.add_argument("--ocio-view", default=None, metavar="VIEW",
+                   help="the OCIO view of --display (default: the display's default view)")
+    g.add_argument("--look", default=None, metavar="LOOK[,LOOK]", help="OCIO looks applied before the view")
+    g.add_argument("--input-colorspace", default=None, metavar="NAME",
+                   help="the OCIO colour space of the images (default: the input EXR's chromaticities, else "
+                        "the working space)")
+
+
+def display_from_args(args: argparse.Namespace):
+    """What ``--display`` means: a :data:`clpost.colorspace.DISPLAYS` name, or a
+    :class:`clpost.ocio.OcioView` when an OCIO config is in use (``--ocio-config`` or ``$OCIO``)."""
+    from .colorspace import DISPLAYS
+    from .ocio import OcioView, config_spec
+
+    spec = config_spec(getattr(args, "ocio_config", None))
+    if spec is None:
+        for flag, value in (("--ocio-view", args.ocio_view), ("--look", args.look),
+                            ("--input-colorspace", args.input_colorspace)):
+            if value is not None:
+                raise InputError(f"{flag} {value!r} needs an OpenColorIO config: give --ocio-config (e.g. "
+                                 "ocio://studio-config-latest) or set $OCIO")
+        display = args.display or "srgb"
+        if display not in DISPLAYS:
+            raise InputError(f"--display {display!r} is not one of clpost's encodings ({', '.join(DISPLAYS)}); "
+                             "for an OpenColorIO display give --ocio-config (e.g. ocio://studio-config-latest)")
+        return display
+    return OcioView.resolve(spec, args.display, args.ocio_view, args.look, args.input_colorspace)
 
 
 def _set_help(p: argparse.ArgumentParser, dest: str, text: str) -> None:
@@ -166,7 +200,7 @@ def cmd_demo(args) -> int:
     run_demo(Path(args.outdir), camera, size=args.size, n_frames=args.frames, quality=args.quality,
              stages=args.stages, device=args.device, camera_motion=not args.static_camera,
              overwrite=args.overwrite, log=print, reference_subframes=args.reference_subframes,
-             display=args.display, lens_model=args.lens_model)
+             display=display_from_args(args), lens_model=args.lens_model)
     return 0
 
 
@@ -208,6 +242,7 @@ def cmd_process(args) -> int:
     from .display_image import output_format
 
     output_format(args.output)  # an unknown extension is refused before anything is read
+    display = display_from_args(args)
     if not (args.camera_from or args.camera_track):
         camera_from_args(args)  # the flags' own errors first, as before (with these, lower sources may complete them)
     sources = camera_sources_from_args(args)
@@ -255,11 +290,11 @@ def cmd_process(args) -> int:
         previews = [] if args.preview is None else [Path(args.preview) / f"{j.dst.stem}.png" for j in jobs]
         with writing(args.output, [j.dst for j in jobs] + previews):
             if args.workers or args.scheduler:
-                rep = _process_distributed(args, camera, jobs, progress, sources)
+                rep = _process_distributed(args, camera, jobs, progress, sources, display)
             else:
                 rep = process_sequence(pipe, jobs, layout=args.channels, overwrite=args.overwrite,
                                        half=args.half, compression=args.compression, progress=progress,
-                                       display=args.display,
+                                       display=display,
                                        preview_dir=None if args.preview is None else Path(args.preview),
                                        sources=sources)
     finally:
@@ -290,11 +325,11 @@ def _explain_sources(sources, jobs) -> None:
         print(f"  {line}")
 
 
-def _process_distributed(args, camera, jobs, progress, sources=None):
+def _process_distributed(args, camera, jobs, progress, sources=None, display="srgb"):
     from .distributed import PipelineSpec, connect, disconnect, first_size, process_sequence_dask
 
     spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device,
-                        args.display, args.preview)
+                        display, args.preview)
     client = connect(args.scheduler, args.workers)
     try:
         return process_sequence_dask(client, spec, jobs, layout=args.channels, overwrite=args.overwrite,
@@ -334,6 +369,7 @@ def cmd_expose(args) -> int:
 
     out = Path(args.output)
     output_format(out)  # an unknown extension is refused before anything is read
+    args.display = display_from_args(args)
     if args.png and output_format(args.png, "--png") == "EXR":
         raise InputError(f"--png {args.png}: a preview is display-encoded; name a .png (or .jpg/.tif) file")
     found = parse_frames(args.frames) if args.frames else on_disk

@@ -42,8 +42,9 @@ class PipelineSpec:
     quality: str = "final"
     stages: tuple[str, ...] | None = None
     device: str | None = None
-    display: str = "srgb"
-    """How image outputs (-o x.png) and previews are encoded (:mod:`clpost.display_image`)."""
+    display: object = "srgb"
+    """How image outputs (-o x.png) and previews are encoded: a clpost encoding name or a
+    :class:`clpost.ocio.OcioView` (:mod:`clpost.display_image`)."""
     preview_dir: str | None = None
     """Where each frame's PNG preview goes (``--preview``), None for none."""
 
