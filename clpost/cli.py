@@ -57,6 +57,15 @@ def _count(flag: str, minimum: int):
     return parse
 
 
+def _aovs(text: str) -> tuple[str, ...]:
+    from .aovs import parse_aovs
+
+    try:
+        return parse_aovs(text)
+    except InputError as e:
+        raise argparse.ArgumentTypeError(str(e).split(": ", 1)[-1]) from None
+
+
 def _frames_spec(text: str) -> str:
     if not text.strip():
         raise argparse.ArgumentTypeError("empty frame range; give e.g. 1-100, 1-100x2 or 1,5,9")
@@ -243,6 +252,9 @@ def cmd_process(args) -> int:
 
     output_format(args.output)  # an unknown extension is refused before anything is read
     display = display_from_args(args)
+    if args.aovs and output_format(args.output) != "EXR":
+        raise InputError(f"--aovs {','.join(args.aovs)}: the passes are written as EXR channels; name an .exr "
+                         f"output (-o {Path(args.output).with_suffix('.exr')})")
     if not (args.camera_from or args.camera_track):
         camera_from_args(args)  # the flags' own errors first, as before (with these, lower sources may complete them)
     sources = camera_sources_from_args(args)
@@ -296,7 +308,7 @@ def cmd_process(args) -> int:
                                        half=args.half, compression=args.compression, progress=progress,
                                        display=display,
                                        preview_dir=None if args.preview is None else Path(args.preview),
-                                       sources=sources)
+                                       sources=sources, aovs=tuple(args.aovs or ()))
     finally:
         bar.close()
     for frame, err in sorted(rep.failed.items()):
@@ -329,7 +341,7 @@ def _process_distributed(args, camera, jobs, progress, sources=None, display="sr
     from .distributed import PipelineSpec, connect, disconnect, first_size, process_sequence_dask
 
     spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device,
-                        display, args.preview)
+                        display, args.preview, tuple(args.aovs or ()))
     client = connect(args.scheduler, args.workers)
     try:
         return process_sequence_dask(client, spec, jobs, layout=args.channels, overwrite=args.overwrite,
@@ -620,6 +632,9 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--explain", action="store_true", help="print the plan for the first frame and why each stage is in or out, then exit")
     pr.add_argument("--overwrite", action="store_true", help="replace existing outputs (default: skip them)")
     pr.add_argument("--half", action="store_true", help="write half-float EXRs")
+    pr.add_argument("--aovs", type=_aovs, default=None, metavar="coc,focus,blur",
+                    help="also write diagnostic passes as EXR channels: coc.Y (signed CoC diameter px, near < 0), "
+                         "focus.A (depth-of-field matte), blur.Y (motion-blur length px); docs/conventions.md")
     pr.add_argument("--compression", default="zip", choices=list(COMPRESSIONS),
                     help="lossless EXR compression of outputs (default zip; none writes fastest, largest files)")
     pr.add_argument("--quiet", action="store_true", help="no progress bar")
