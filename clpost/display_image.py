@@ -6,8 +6,11 @@ that decides what an output's extension means and writes the non-EXR ones.
   is never written under a name that lies about its content.
 - :func:`write_image` display-encodes a linear working-space image (1.0 = display white) for a
   display of :data:`clpost.colorspace.DISPLAYS` (primaries converted, clipped, encoded, 8-bit)
-  and writes it atomically (:func:`clpost.atomic.atomic_path`) with that display's ICC profile
-  embedded, so colour-managed viewers show Display P3 as P3 and sRGB as sRGB.
+  or an OpenColorIO display/view (:class:`clpost.ocio.OcioView`: OCIO's own processor, clipped,
+  8-bit) and writes it atomically (:func:`clpost.atomic.atomic_path`) with that display's ICC
+  profile embedded and, in a PNG, its cICP chunk (ITU-T H.273 code points, read before the ICC
+  profile by PNG 3rd-edition readers), so colour-managed viewers show Display P3 as P3 and sRGB
+  as sRGB.
 - :func:`icc_profile` builds the profile: an ICC.1:2001-04 (v2.1) RGB display matrix/TRC profile,
   the smallest kind every colour-managed reader understands. Colorants are the display's RGB → XYZ
   matrix chromatically adapted to the ICC's D50 PCS with Bradford (ICC.1 Annex E), the ``chad`` tag
