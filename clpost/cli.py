@@ -469,10 +469,13 @@ def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> in
         header.update({"clpost.expose.frames": str(count),
                        "clpost.expose.output": "exposure (input x seconds)" if args.sum else "time average (input units)"})
     ws = camera.working_space if camera is not None else "rec709"
-    write_output(out, result, header, display=args.display, working_space=ws)
+    from .batch import input_chromaticities
+
+    chroma = input_chromaticities(args.display, Path(expand(args.input, (frames or found)[0])))
+    write_output(out, result, header, display=args.display, working_space=ws, chroma=chroma)
     if args.png:
         write_image(args.png, result.color * (args.png_gain or 1.0), display=args.display, working_space=ws,
-                    option="--png")
+                    option="--png", chroma=chroma)
     print(f"exposed {count} frame(s) for {float(t_close - t_open):.6g} s -> {out}")
     return 0
 
