@@ -279,6 +279,15 @@ def cmd_process(args) -> int:
                   f"{', '.join(L.name for L in plan.launches if L.out_size != L.in_size)})")
         if cam != camera:
             print(f"auto-exposure: f/{cam.f_number:.3g}, {cam.shutter_s:.4g} s")
+        from .ocio import OcioView
+
+        if isinstance(display, OcioView):
+            from .batch import input_chromaticities
+
+            src = display.source_space(cam.working_space, input_chromaticities(display, jobs[0].src))
+            how = "" if src.matrix is None else " via a matrix from the chromaticities"
+            print(f"display-referred outputs: {display.label}; input colour space {src.name!r}{how} "
+                  f"(from {src.source})")
         return 0
     from tqdm import tqdm
 

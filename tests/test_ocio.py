@@ -216,3 +216,15 @@ def test_bad_chromaticities_are_refused():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert O.file_chromaticities(None) is None
+
+
+def test_explain_names_the_view_and_input_space(tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("OCIO", raising=False)
+    _aces_exr(tmp_path / "in.exr", chroma=ODD)
+    args = ["process", tmp_path / "in.exr", "-o", tmp_path / "o.png", "--stages", "exposure", "--f-number", "2",
+            "--ocio-config", CONFIG, "--explain"]
+    assert main([str(a) for a in args]) == 0
+    out = capsys.readouterr().out
+    assert ("display-referred outputs: OCIO sRGB - Display / ACES 2.0 - SDR 100 nits (Rec.709)" in out
+            and "input colour space 'ACEScg' via a matrix from the chromaticities (from the input's chromaticities)"
+            in out), out
