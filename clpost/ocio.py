@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 import os
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -50,14 +50,6 @@ MATCH_TOL = 1e-5
 """Largest difference between two RGB → XYZ matrices taken as the same colour space."""
 
 BUILTIN_EXAMPLE = "ocio://studio-config-latest"
-
-
-def available() -> bool:
-    try:
-        import PyOpenColorIO  # noqa: F401
-    except ImportError:  # pragma: no cover - a dependency; kept for a clear message
-        return False
-    return True
 
 
 def _ocio():
@@ -285,9 +277,6 @@ class OcioView:
         cfg = load_config(self.config)
         name = cfg.getDisplayViewColorSpaceName(self.display, self.view)
         return self.display if name == "<USE_DISPLAY_NAME>" else name  # OCIO's shared-view placeholder
-
-    def with_input(self, name: str | None) -> "OcioView":
-        return replace(self, input_colorspace=name)
 
 
 @lru_cache(maxsize=32)
