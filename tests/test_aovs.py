@@ -128,3 +128,28 @@ def test_cli_writes_the_passes_as_exr_channels(tmp_path, rng, capsys):
     np.testing.assert_array_equal(back.depth, f.depth)
     assert main([str(a) for a in args[:3] + [tmp_path / "o.png", "--aovs", "coc"]]) == 2
     assert "written as EXR channels" in capsys.readouterr().err
+
+
+def test_passes_follow_the_output_geometry_after_distortion(rng):
+    import warnings
+    from dataclasses import replace
+
+    from clpost import Pipeline
+    from clpost.calibration import OpenCVModel
+
+    h, w = 40, 64
+    f = Frame(rng.random((h, w, 3)).astype(np.float32), depth=rng.uniform(1, 20, (h, w)).astype(np.float32),
+              velocity=rng.normal(0, 3, (h, w, 2)).astype(np.float32))
+    cam = replace(CAM, distortion=OpenCVModel.from_camera(CAM, (w, h), k1=-0.12, k2=0.03))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pipe = Pipeline(cam, stages=["distortion"], quality="draft")
+        out = pipe.run(f)
+    assert "distortion" in pipe.plan(f)
+    used = out.metadata["resolved_camera"]
+    got = aovs.compute(pipe.runtime, used, out, ("coc", "blur"))
+    ref = aovs.reference(used, out, ("coc", "blur"))  # from the resampled depth and velocity
+    assert got["coc.Y"].shape == out.depth.shape
+    np.testing.assert_allclose(got["coc.Y"], ref["coc.Y"], atol=1e-5)
+    np.testing.assert_allclose(got["blur.Y"], ref["blur.Y"], atol=1e-5)
+    assert not np.allclose(ref["coc.Y"], aovs.reference(used, f, ("coc",))["coc.Y"])  # not the input's
