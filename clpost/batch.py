@@ -89,13 +89,14 @@ def frame_camera(sources, job: FrameJob):
 
 def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
                 half: bool = False, expect_size: tuple[int, int] | None = None,
-                compression: str = "zip", display: str = "srgb", preview_dir: Path | None = None,
-                sources=None) -> Frame:
+                compression: str = "zip", display="srgb", preview_dir: Path | None = None,
+                sources=None, aovs: tuple[str, ...] = ()) -> Frame:
     """Read, process and write one frame; returns the processed frame. An output named .png, .jpg
     or .tif is written display-encoded for ``display`` (:mod:`clpost.display_image`), an .exr
     linear with the camera in its header; ``preview_dir`` also gets ``<output stem>.png``.
     ``sources``: an animated camera (:class:`~clpost.camera_sources.CameraSources`), resolved for
-    this frame."""
+    this frame. ``aovs``: diagnostic passes written as extra channels of an .exr output
+    (:mod:`clpost.aovs`)."""
     cam = frame_camera(sources, job)
     frame = read_input(pipeline, job.src, layout, cam)
     if expect_size is not None and frame.size != expect_size:
@@ -107,22 +108,40 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
     frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(job.frame)), validate=False)
     out = pipeline.run(frame, cam)
     ws = (cam or pipeline.camera).working_space
+    chroma = input_chromaticities(display, job.src)
+    extra = None
+    if aovs:
+        from .aovs import compute
+
+        extra = compute(pipeline.runtime, out.metadata.get("resolved_camera") or cam or pipeline.camera, out, aovs)
     write_output(job.dst, out, output_header(out), display=display, working_space=ws, half=half,
-                 compression=compression)
+                 compression=compression, chroma=chroma, extra=extra)
     if preview_dir is not None:
         write_image(preview_path(job.dst, preview_dir), out.color, display=display, working_space=ws,
-                    option="--preview")
+                    option="--preview", chroma=chroma)
     return out
 
 
-def write_output(path: Path, frame: Frame, header: dict, *, display: str = "srgb", working_space: str = "rec709",
-                 half: bool = False, compression: str = "zip") -> None:
+def input_chromaticities(display, src: Path | None):
+    """The input file's chromaticities where an OCIO view takes its input space from them
+    (:mod:`clpost.ocio`), else None."""
+    from .ocio import OcioView, file_chromaticities
+
+    if isinstance(display, OcioView) and display.input_colorspace is None:
+        return file_chromaticities(src)
+    return None
+
+
+def write_output(path: Path, frame: Frame, header: dict, *, display="srgb", working_space: str = "rec709",
+                 half: bool = False, compression: str = "zip", chroma=None, extra=None) -> None:
     """Write ``frame`` as its name says: an .exr linear with ``header``, a .png/.jpg/.tif
-    display-encoded for ``display`` with its ICC profile (:mod:`clpost.display_image`)."""
+    display-encoded for ``display`` (a clpost encoding or an OCIO view; ``chroma``: the input's
+    chromaticities) with its ICC profile (:mod:`clpost.display_image`); ``extra``: further EXR
+    channels (:mod:`clpost.aovs`)."""
     if output_format(path) == "EXR":
-        exr.write_frame(path, frame, header=header, half=half, compression=compression)
+        exr.write_frame(path, frame, header=header, half=half, compression=compression, extra=extra)
     else:
-        write_image(path, frame.color, display=display, working_space=working_space)
+        write_image(path, frame.color, display=display, working_space=working_space, chroma=chroma)
 
 
 def preview_path(dst: Path, preview_dir: Path) -> Path:
@@ -159,7 +178,8 @@ def first_size(jobs: list[FrameJob]) -> tuple[int, int] | None:
 def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | None = None,
                      overwrite: bool = False, half: bool = False, compression: str = "zip",
                      progress: Callable[[FrameJob, float | None], None] | None = None,
-                     display: str = "srgb", preview_dir: Path | None = None, sources=None) -> BatchReport:
+                     display="srgb", preview_dir: Path | None = None, sources=None,
+                     aovs: tuple[str, ...] = ()) -> BatchReport:
     """Process ``jobs`` in order; ``progress(job, seconds or None if skipped)`` after each;
     ``sources``: an animated camera (per-frame, :mod:`clpost.camera_sources`)."""
     report = BatchReport()
@@ -167,7 +187,7 @@ def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | 
     size = first_size(todo)  # the inputs' size (an output may differ: a calibration's own size)
     for job in todo:
         t0 = time.perf_counter()
-        process_one(pipeline, job, layout, half, size, compression, display, preview_dir, sources)
+        process_one(pipeline, job, layout, half, size, compression, display, preview_dir, sources, aovs)
         dt = time.perf_counter() - t0
         report.done.append(job.frame)
         report.seconds.append(dt)

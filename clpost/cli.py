@@ -57,6 +57,15 @@ def _count(flag: str, minimum: int):
     return parse
 
 
+def _aovs(text: str) -> tuple[str, ...]:
+    from .aovs import parse_aovs
+
+    try:
+        return parse_aovs(text)
+    except InputError as e:
+        raise argparse.ArgumentTypeError(str(e).split(": ", 1)[-1]) from None
+
+
 def _frames_spec(text: str) -> str:
     if not text.strip():
         raise argparse.ArgumentTypeError("empty frame range; give e.g. 1-100, 1-100x2 or 1,5,9")
@@ -111,7 +120,41 @@ def camera_from_args(args: argparse.Namespace, camera_cls=None, /, **defaults) -
 def _add_display_option(p: argparse.ArgumentParser, what: str) -> None:
     from .colorspace import DISPLAYS
 
-    p.add_argument("--display", default="srgb", choices=list(DISPLAYS), help=f"{what} (default srgb)")
+    g = p.add_argument_group("display (clpost's encodings, or an OpenColorIO config's display/view: README "
+                             "\"Colour-managed workflow\")")
+    g.add_argument("--display", default=None, metavar="NAME",
+                   help=f"{what}: without an OCIO config one of {', '.join(DISPLAYS)} (default srgb); with one, "
+                        "a display of the config (default: its default display)")
+    g.add_argument("--ocio-config", default=None, metavar="CONFIG",
+                   help="OpenColorIO config for --display: a config.ocio file or a built-in URI such as "
+                        "ocio://studio-config-latest (default: $OCIO if set; 'none': clpost's encodings)")
+    g.add_argument("--ocio-view", default=None, metavar="VIEW",
+                   help="the OCIO view of --display (default: the display's default view)")
+    g.add_argument("--look", default=None, metavar="LOOK[,LOOK]", help="OCIO looks applied before the view")
+    g.add_argument("--input-colorspace", default=None, metavar="NAME",
+                   help="the OCIO colour space of the images (default: the input EXR's chromaticities, else "
+                        "the working space)")
+
+
+def display_from_args(args: argparse.Namespace):
+    """What ``--display`` means: a :data:`clpost.colorspace.DISPLAYS` name, or a
+    :class:`clpost.ocio.OcioView` when an OCIO config is in use (``--ocio-config`` or ``$OCIO``)."""
+    from .colorspace import DISPLAYS
+    from .ocio import OcioView, config_spec
+
+    spec = config_spec(getattr(args, "ocio_config", None))
+    if spec is None:
+        for flag, value in (("--ocio-view", args.ocio_view), ("--look", args.look),
+                            ("--input-colorspace", args.input_colorspace)):
+            if value is not None:
+                raise InputError(f"{flag} {value!r} needs an OpenColorIO config: give --ocio-config (e.g. "
+                                 "ocio://studio-config-latest) or set $OCIO")
+        display = args.display or "srgb"
+        if display not in DISPLAYS:
+            raise InputError(f"--display {display!r} is not one of clpost's encodings ({', '.join(DISPLAYS)}); "
+                             "for an OpenColorIO display give --ocio-config (e.g. ocio://studio-config-latest)")
+        return display
+    return OcioView.resolve(spec, args.display, args.ocio_view, args.look, args.input_colorspace)
 
 
 def _set_help(p: argparse.ArgumentParser, dest: str, text: str) -> None:
@@ -166,7 +209,7 @@ def cmd_demo(args) -> int:
     run_demo(Path(args.outdir), camera, size=args.size, n_frames=args.frames, quality=args.quality,
              stages=args.stages, device=args.device, camera_motion=not args.static_camera,
              overwrite=args.overwrite, log=print, reference_subframes=args.reference_subframes,
-             display=args.display, lens_model=args.lens_model)
+             display=display_from_args(args), lens_model=args.lens_model)
     return 0
 
 
@@ -208,6 +251,10 @@ def cmd_process(args) -> int:
     from .display_image import output_format
 
     output_format(args.output)  # an unknown extension is refused before anything is read
+    display = display_from_args(args)
+    if args.aovs and output_format(args.output) != "EXR":
+        raise InputError(f"--aovs {','.join(args.aovs)}: the passes are written as EXR channels; name an .exr "
+                         f"output (-o {Path(args.output).with_suffix('.exr')})")
     if not (args.camera_from or args.camera_track):
         camera_from_args(args)  # the flags' own errors first, as before (with these, lower sources may complete them)
     sources = camera_sources_from_args(args)
@@ -232,6 +279,15 @@ def cmd_process(args) -> int:
                   f"{', '.join(L.name for L in plan.launches if L.out_size != L.in_size)})")
         if cam != camera:
             print(f"auto-exposure: f/{cam.f_number:.3g}, {cam.shutter_s:.4g} s")
+        from .ocio import OcioView
+
+        if isinstance(display, OcioView):
+            from .batch import input_chromaticities
+
+            src = display.source_space(cam.working_space, input_chromaticities(display, jobs[0].src))
+            how = "" if src.matrix is None else " via a matrix from the chromaticities"
+            print(f"display-referred outputs: {display.label}; input colour space {src.name!r}{how} "
+                  f"(from {src.source})")
         return 0
     from tqdm import tqdm
 
@@ -255,13 +311,13 @@ def cmd_process(args) -> int:
         previews = [] if args.preview is None else [Path(args.preview) / f"{j.dst.stem}.png" for j in jobs]
         with writing(args.output, [j.dst for j in jobs] + previews):
             if args.workers or args.scheduler:
-                rep = _process_distributed(args, camera, jobs, progress, sources)
+                rep = _process_distributed(args, camera, jobs, progress, sources, display)
             else:
                 rep = process_sequence(pipe, jobs, layout=args.channels, overwrite=args.overwrite,
                                        half=args.half, compression=args.compression, progress=progress,
-                                       display=args.display,
+                                       display=display,
                                        preview_dir=None if args.preview is None else Path(args.preview),
-                                       sources=sources)
+                                       sources=sources, aovs=tuple(args.aovs or ()))
     finally:
         bar.close()
     for frame, err in sorted(rep.failed.items()):
@@ -290,11 +346,11 @@ def _explain_sources(sources, jobs) -> None:
         print(f"  {line}")
 
 
-def _process_distributed(args, camera, jobs, progress, sources=None):
+def _process_distributed(args, camera, jobs, progress, sources=None, display="srgb"):
     from .distributed import PipelineSpec, connect, disconnect, first_size, process_sequence_dask
 
     spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device,
-                        args.display, args.preview)
+                        display, args.preview, tuple(args.aovs or ()))
     client = connect(args.scheduler, args.workers)
     try:
         return process_sequence_dask(client, spec, jobs, layout=args.channels, overwrite=args.overwrite,
@@ -334,6 +390,7 @@ def cmd_expose(args) -> int:
 
     out = Path(args.output)
     output_format(out)  # an unknown extension is refused before anything is read
+    args.display = display_from_args(args)
     if args.png and output_format(args.png, "--png") == "EXR":
         raise InputError(f"--png {args.png}: a preview is display-encoded; name a .png (or .jpg/.tif) file")
     found = parse_frames(args.frames) if args.frames else on_disk
@@ -421,10 +478,13 @@ def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> in
         header.update({"clpost.expose.frames": str(count),
                        "clpost.expose.output": "exposure (input x seconds)" if args.sum else "time average (input units)"})
     ws = camera.working_space if camera is not None else "rec709"
-    write_output(out, result, header, display=args.display, working_space=ws)
+    from .batch import input_chromaticities
+
+    chroma = input_chromaticities(args.display, Path(expand(args.input, (frames or found)[0])))
+    write_output(out, result, header, display=args.display, working_space=ws, chroma=chroma)
     if args.png:
         write_image(args.png, result.color * (args.png_gain or 1.0), display=args.display, working_space=ws,
-                    option="--png")
+                    option="--png", chroma=chroma)
     print(f"exposed {count} frame(s) for {float(t_close - t_open):.6g} s -> {out}")
     return 0
 
@@ -584,6 +644,9 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--explain", action="store_true", help="print the plan for the first frame and why each stage is in or out, then exit")
     pr.add_argument("--overwrite", action="store_true", help="replace existing outputs (default: skip them)")
     pr.add_argument("--half", action="store_true", help="write half-float EXRs")
+    pr.add_argument("--aovs", type=_aovs, default=None, metavar="coc,focus,blur",
+                    help="also write diagnostic passes as EXR channels: coc.Y (signed CoC diameter px, near < 0), "
+                         "focus.A (depth-of-field matte), blur.Y (motion-blur length px); docs/conventions.md")
     pr.add_argument("--compression", default="zip", choices=list(COMPRESSIONS),
                     help="lossless EXR compression of outputs (default zip; none writes fastest, largest files)")
     pr.add_argument("--quiet", action="store_true", help="no progress bar")

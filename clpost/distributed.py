@@ -42,10 +42,13 @@ class PipelineSpec:
     quality: str = "final"
     stages: tuple[str, ...] | None = None
     device: str | None = None
-    display: str = "srgb"
-    """How image outputs (-o x.png) and previews are encoded (:mod:`clpost.display_image`)."""
+    display: object = "srgb"
+    """How image outputs (-o x.png) and previews are encoded: a clpost encoding name or a
+    :class:`clpost.ocio.OcioView` (:mod:`clpost.display_image`)."""
     preview_dir: str | None = None
     """Where each frame's PNG preview goes (``--preview``), None for none."""
+    aovs: tuple[str, ...] = ()
+    """Diagnostic passes written into each output EXR (``--aovs``, :mod:`clpost.aovs`)."""
 
 
 @functools.lru_cache(maxsize=4)
@@ -67,7 +70,7 @@ def process_frame_task(spec: PipelineSpec, job: FrameJob, layout: str | None, ha
     t0 = time.perf_counter()
     try:
         process_one(worker_pipeline(spec), job, layout, half, expect_size, compression, spec.display,
-                    None if spec.preview_dir is None else Path(spec.preview_dir), sources)
+                    None if spec.preview_dir is None else Path(spec.preview_dir), sources, spec.aovs)
     except ClpostError as exc:
         # Deterministic and the user's to fix: a result, not an exception Dask would retry.
         return {"frame": job.frame, "skipped": False, "seconds": 0.0, "error": str(exc)}

@@ -200,6 +200,17 @@ def cases():
         trace_cl(load_prescription("zeiss-planar-50-f1.4"), o, d, device="oclgrind")
 
     add("lens_trace 37 rays", trace_case)
+
+    def aovs_case(w, h, names):
+        from clpost import Camera, aovs
+        from clpost.runtime import get_runtime
+
+        cam = Camera(f_number=2.0, focus_distance_m=3.0, frame_rate_fps=24.0, shutter_s=1 / 48)
+        aovs.compute(get_runtime("oclgrind"), cam, _frame(w, h, velocity=3.0), names)
+
+    for w, h in ((1, 1), (37, 23)):
+        add(f"aovs coc,focus,blur {w}x{h}", lambda w=w, h=h: aovs_case(w, h, ("coc", "focus", "blur")))
+    add("aovs blur 17x5", lambda: aovs_case(17, 5, ("blur",)))
     return out
 
 

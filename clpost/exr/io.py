@@ -597,7 +597,8 @@ def _write_exr(exr_file: Any, tmp_path: str) -> None:
 
 def write_frame(path: str | os.PathLike, frame: Frame, header: dict[str, str] | None = None,
                 half: bool = False, layout: str = "clpost", *,
-                focal_px: float | tuple[float, float] | None = None, compression: str = "zip") -> None:
+                focal_px: float | tuple[float, float] | None = None, compression: str = "zip",
+                extra: dict[str, np.ndarray] | None = None) -> None:
     """Write ``frame``'s color (+alpha), depth and velocity in one layout, atomically.
 
     ``clpost``, ``nuke`` and ``arnold`` are single-part files; ``blender`` is one part per pass
@@ -605,7 +606,9 @@ def write_frame(path: str | os.PathLike, frame: Frame, header: dict[str, str] | 
     attributes (added to every part). ``half`` stores color/alpha/velocity as float16 (depth
     stays float32). ``compression`` is one of :data:`COMPRESSIONS` (lossless). For ``arnold``,
     ``focal_px`` writes Z as radial distance (what the reader assumes); without it Z is written
-    planar. Any failure leaves an existing ``path`` untouched and no temporary file behind.
+    planar. ``extra``: further (H, W) channels by full name (e.g. ``coc.Y``, :mod:`clpost.aovs`),
+    float32, added to the first part. Any failure leaves an existing ``path`` untouched and no
+    temporary file behind.
     """
     p = Path(path)
     get_layout(p, layout)
@@ -613,8 +616,13 @@ def write_frame(path: str | os.PathLike, frame: Frame, header: dict[str, str] | 
         raise InputError(f"{p}: write_frame needs a clpost.frame.Frame, got {type(frame).__name__}")
     if compression not in COMPRESSIONS:
         raise InputError(f"{p}: compression {compression!r} is unknown; use one of {', '.join(COMPRESSIONS)}")
-    exr_file = _build_file(_layout_parts(p, frame, layout, half, focal_px), _user_header(p, header),
-                           compression)
+    parts = _layout_parts(p, frame, layout, half, focal_px)
+    for name, plane in (extra or {}).items():
+        if any(name in ch for _, ch in parts) or np.shape(plane) != (frame.height, frame.width):
+            raise InputError(f"{p}: extra channel {name!r} clashes with a written channel or is not "
+                             f"{frame.height}x{frame.width}; name it differently / give an (H, W) plane")
+        parts[0][1][name] = np.ascontiguousarray(plane, dtype=np.float32)
+    exr_file = _build_file(parts, _user_header(p, header), compression)
     # Whatever goes wrong (including Ctrl-C), the old output stays and no temp file remains.
     with atomic_path(p) as tmp:
         try:
