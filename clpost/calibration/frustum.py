@@ -60,25 +60,56 @@ def required_render(model: OpenCVModel, margin_px: float = 2.0) -> RenderSpec:
 
 
 @lru_cache(maxsize=32)
-def _required_render(model: OpenCVModel, margin_px: float) -> RenderSpec:
+def undistorted_bounds(model: OpenCVModel, margin_px: float = 2.0) -> tuple[float, float, float, float]:
+    """(x0, x1, y0, y1): the normalised undistorted coordinates an image must span so that every
+    output pixel of ``model`` has a preimage — the bounding box of the undistorted output border
+    (4 samples a pixel) and the model's own pinhole frustum, widened by ``margin_px`` pixels at
+    f = max(f_x, f_y) for the resampling filter. Points beyond the fold are left out."""
     w, h = model.width, model.height
     t = np.linspace(-0.5, w - 0.5, 4 * w + 1)
     s = np.linspace(-0.5, h - 0.5, 4 * h + 1)
     u = np.concatenate([t, t, np.full_like(s, -0.5), np.full_like(s, w - 0.5)])
     v = np.concatenate([np.full_like(t, -0.5), np.full_like(t, h - 0.5), s, s])
     x, y, ok = undistort_newton(model, u, v)
-    f = max(model.fx, model.fy)
     # the model's own (pinhole) frustum
     x0, x1 = -(model.cx + 0.5) / model.fx, (w - 0.5 - model.cx) / model.fx
     y0, y1 = -(model.cy + 0.5) / model.fy, (h - 0.5 - model.cy) / model.fy
     if ok.any():
         x0, x1 = min(x0, x[ok].min()), max(x1, x[ok].max())
         y0, y1 = min(y0, y[ok].min()), max(y1, y[ok].max())
-    m = margin_px / f
-    x0, x1, y0, y1 = x0 - m, x1 + m, y0 - m, y1 + m
+    m = float(margin_px) / max(model.fx, model.fy)
+    return float(x0 - m), float(x1 + m), float(y0 - m), float(y1 + m)
+
+
+@lru_cache(maxsize=32)
+def _required_render(model: OpenCVModel, margin_px: float) -> RenderSpec:
+    x0, x1, y0, y1 = undistorted_bounds(model, margin_px)
+    f = max(model.fx, model.fy)
     rw, rh = int(math.ceil(f * (x1 - x0))), int(math.ceil(f * (y1 - y0)))
     # l = −(c + 0.5)/f = x0  ⇒  c = −x0 f − 0.5
     return RenderSpec(rw, rh, float(f), float(-x0 * f - 0.5), float(-y0 * f - 0.5))
+
+
+def overscan_px(model: OpenCVModel, margin_px: float = 2.0) -> tuple[int, int, int, int]:
+    r"""Pixels (left, top, right, bottom) a render made with the calibration's own K must reach
+    beyond its W × H image so that no output pixel is unfilled: the render's pixel column u covers
+    [u − ½, u + ½], so with the undistorted bounds of :func:`undistorted_bounds` (u = f_x x + c_x)
+
+    .. math::
+
+        L = \lceil -\tfrac12 - (f_x x_0 + c_x) \rceil,\quad R = \lceil f_x x_1 + c_x - (W - \tfrac12) \rceil
+
+    (T, B likewise with f_y, c_y, y_0, y_1, H), each at least 0. This is the overscan to set in a
+    renderer that writes an EXR data window beyond the display window (Nuke's ScanlineRender
+    ``overscan``); the data window is (−L, −T) − (W − 1 + R, H − 1 + B)."""
+    x0, x1, y0, y1 = undistorted_bounds(model, float(margin_px))
+    w, h = model.width, model.height
+
+    def beyond(v):  # whole pixels, with a hair of tolerance for float round-off
+        return max(0, int(math.ceil(v - 1e-9)))
+
+    return (beyond(-0.5 - (model.fx * x0 + model.cx)), beyond(-0.5 - (model.fy * y0 + model.cy)),
+            beyond(model.fx * x1 + model.cx - (w - 0.5)), beyond(model.fy * y1 + model.cy - (h - 0.5)))
 
 
 def render_intrinsics(model: OpenCVModel, size: tuple[int, int]) -> tuple[float, float, float, float] | None:
