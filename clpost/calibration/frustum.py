@@ -60,11 +60,13 @@ def required_render(model: OpenCVModel, margin_px: float = 2.0) -> RenderSpec:
 
 
 @lru_cache(maxsize=32)
-def undistorted_bounds(model: OpenCVModel, margin_px: float = 2.0) -> tuple[float, float, float, float]:
+def undistorted_bounds(model: OpenCVModel, margin_px: float = 2.0,
+                       own_frustum: bool = True) -> tuple[float, float, float, float]:
     """(x0, x1, y0, y1): the normalised undistorted coordinates an image must span so that every
     output pixel of ``model`` has a preimage — the bounding box of the undistorted output border
-    (4 samples a pixel) and the model's own pinhole frustum, widened by ``margin_px`` pixels at
-    f = max(f_x, f_y) for the resampling filter. Points beyond the fold are left out."""
+    (4 samples a pixel) and (``own_frustum``) the model's own pinhole frustum, widened by
+    ``margin_px`` pixels at f = max(f_x, f_y) for the resampling filter. Points beyond the fold
+    are left out."""
     w, h = model.width, model.height
     t = np.linspace(-0.5, w - 0.5, 4 * w + 1)
     s = np.linspace(-0.5, h - 0.5, 4 * h + 1)
@@ -74,6 +76,8 @@ def undistorted_bounds(model: OpenCVModel, margin_px: float = 2.0) -> tuple[floa
     # the model's own (pinhole) frustum
     x0, x1 = -(model.cx + 0.5) / model.fx, (w - 0.5 - model.cx) / model.fx
     y0, y1 = -(model.cy + 0.5) / model.fy, (h - 0.5 - model.cy) / model.fy
+    if not own_frustum:
+        x0, x1, y0, y1 = math.inf, -math.inf, math.inf, -math.inf
     if ok.any():
         x0, x1 = min(x0, x[ok].min()), max(x1, x[ok].max())
         y0, y1 = min(y0, y[ok].min()), max(y1, y[ok].max())
@@ -92,24 +96,28 @@ def _required_render(model: OpenCVModel, margin_px: float) -> RenderSpec:
 
 def overscan_px(model: OpenCVModel, margin_px: float = 2.0) -> tuple[int, int, int, int]:
     r"""Pixels (left, top, right, bottom) a render made with the calibration's own K must reach
-    beyond its W × H image so that no output pixel is unfilled: the render's pixel column u covers
-    [u − ½, u + ½], so with the undistorted bounds of :func:`undistorted_bounds` (u = f_x x + c_x)
+    beyond its W × H image so that no output pixel is unfilled. The render's column u covers
+    [u − ½, u + ½]; with (x_0, x_1, y_0, y_1) the bounds of the undistorted output border
+    (:func:`undistorted_bounds` without the model's own frustum) a side falls short by
 
     .. math::
 
-        L = \lceil -\tfrac12 - (f_x x_0 + c_x) \rceil,\quad R = \lceil f_x x_1 + c_x - (W - \tfrac12) \rceil
+        l = -\tfrac12 - (f_x x_0 + c_x), \qquad r = f_x x_1 + c_x - (W - \tfrac12)
 
-    (T, B likewise with f_y, c_y, y_0, y_1, H), each at least 0. This is the overscan to set in a
-    renderer that writes an EXR data window beyond the display window (Nuke's ScanlineRender
-    ``overscan``); the data window is (−L, −T) − (W − 1 + R, H − 1 + B)."""
-    x0, x1, y0, y1 = undistorted_bounds(model, float(margin_px))
+    (t, b likewise with f_y, c_y, y_0, y_1, H), and needs ⌈l + margin⌉ px where l > 0, else none
+    (a pincushion lens needs no overscan; the margin is the resampling filter's support). This is
+    the overscan to set in a renderer that writes an EXR data window beyond the display window
+    (Nuke's ScanlineRender ``overscan``); the data window is (−L, −T) − (W − 1 + R, H − 1 + B)."""
+    x0, x1, y0, y1 = undistorted_bounds(model, 0.0, own_frustum=False)
+    if not math.isfinite(x0):
+        return 0, 0, 0, 0
     w, h = model.width, model.height
 
-    def beyond(v):  # whole pixels, with a hair of tolerance for float round-off
-        return max(0, int(math.ceil(v - 1e-9)))
+    def need(short):  # whole pixels, with a hair of tolerance for float round-off
+        return int(math.ceil(short + margin_px - 1e-9)) if short > 1e-9 else 0
 
-    return (beyond(-0.5 - (model.fx * x0 + model.cx)), beyond(-0.5 - (model.fy * y0 + model.cy)),
-            beyond(model.fx * x1 + model.cx - (w - 0.5)), beyond(model.fy * y1 + model.cy - (h - 0.5)))
+    return (need(-0.5 - (model.fx * x0 + model.cx)), need(-0.5 - (model.fy * y0 + model.cy)),
+            need(model.fx * x1 + model.cx - (w - 0.5)), need(model.fy * y1 + model.cy - (h - 0.5)))
 
 
 def render_intrinsics(model: OpenCVModel, size: tuple[int, int]) -> tuple[float, float, float, float] | None:
