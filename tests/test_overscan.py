@@ -192,3 +192,21 @@ def test_blender_shift_puts_the_optical_axis_where_the_larger_render_has_it():
     side = max(w, h)
     assert math.isclose((w - 1) / 2 - r.blender_shift[0] * side, r.big_c[0], abs_tol=1e-9)
     assert math.isclose((h - 1) / 2 + r.blender_shift[1] * side, r.big_c[1], abs_tol=1e-9)
+
+
+def test_explain_states_the_windows_and_the_overscan_the_calibration_needs(tmp_path, capsys):
+    from clpost.cli import main
+
+    cal = tmp_path / "cam.yaml"
+    cal.write_text("%YAML:1.0\n---\nimage_width: 96\nimage_height: 64\ncamera_matrix: !!opencv-matrix\n"
+                   "   rows: 3\n   cols: 3\n   dt: d\n   data: [ 80., 0., 47.5, 0., 80., 31.5, 0., 0., 1. ]\n"
+                   "distortion_coefficients: !!opencv-matrix\n   rows: 1\n   cols: 5\n   dt: d\n"
+                   "   data: [ -0.25, 0.05, 0.002, 0., 0. ]\n")
+    need = overscan_px(MODEL)
+    exr.write_frame(tmp_path / "plate.exr", _render(MODEL, *need))
+    assert main(["process", str(tmp_path / "plate.exr"), "-o", str(tmp_path / "o.exr"), "--calibration", str(cal),
+                 "--explain"]) == 0
+    text = capsys.readouterr().out
+    (x0, y0), (x1, y1) = render_size(MODEL).data_window
+    assert f"windows: display (0,0)-(95,63), data ({x0},{y0})-({x1},{y1})" in text
+    assert f"needs {'/'.join(map(str, need))} px overscan" in text and f"the frame has {'/'.join(map(str, need))}" in text
