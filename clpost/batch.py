@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from . import exr
 from .display_image import output_format, write_image
 from .errors import InputError
@@ -99,9 +101,12 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
     (:mod:`clpost.aovs`)."""
     cam = frame_camera(sources, job)
     frame = read_input(pipeline, job.src, layout, cam)
-    if expect_size is not None and frame.size != expect_size:
+    # the image size is the display window's (a data window may change per frame, as a render's
+    # bounding box does)
+    size = frame.windows.display_size
+    if expect_size is not None and size != expect_size:
         raise InputError(
-            f"{job.src}: size {frame.width}x{frame.height} differs from the sequence's "
+            f"{job.src}: size {size[0]}x{size[1]} differs from the sequence's "
             f"{expect_size[0]}x{expect_size[1]}; all frames of a sequence must have one size"
         )
     # The frame number seeds grain/sensor noise (CONVENTIONS "Randomness"): frames differ, reruns agree.
@@ -117,8 +122,8 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
     write_output(job.dst, out, output_header(out), display=display, working_space=ws, half=half,
                  compression=compression, chroma=chroma, extra=extra)
     if preview_dir is not None:
-        write_image(preview_path(job.dst, preview_dir), out.color, display=display, working_space=ws,
-                    option="--preview", chroma=chroma)
+        write_image(preview_path(job.dst, preview_dir), display_window(out).color, display=display,
+                    working_space=ws, option="--preview", chroma=chroma)
     return out
 
 
@@ -141,7 +146,18 @@ def write_output(path: Path, frame: Frame, header: dict, *, display="srgb", work
     if output_format(path) == "EXR":
         exr.write_frame(path, frame, header=header, half=half, compression=compression, extra=extra)
     else:
-        write_image(path, frame.color, display=display, working_space=working_space, chroma=chroma)
+        write_image(path, display_window(frame).color, display=display, working_space=working_space, chroma=chroma)
+
+
+def display_window(frame: Frame) -> Frame:
+    """The frame's display window alone (a picture shows the image, not the overscan or the data
+    beyond it); pixels of the display window without data are black."""
+    win = frame.windows
+    (x0, y0), (w, h) = win.display_offset, win.display_size
+    if (x0, y0, w, h) == (0, 0, frame.width, frame.height):
+        return frame
+    return frame.replace(color=np.ascontiguousarray(frame.color[y0:y0 + h, x0:x0 + w]), depth=None, velocity=None,
+                         alpha=None, validate=False)
 
 
 def preview_path(dst: Path, preview_dir: Path) -> Path:

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from .camera import Camera
+from . import exr
 from .exr import COMPRESSIONS
 from .errors import ClpostError, InputError
 from .params import parse_fraction, parse_on_off, parse_wxh_mm
@@ -255,6 +256,8 @@ def cmd_process(args) -> int:
     if args.aovs and output_format(args.output) != "EXR":
         raise InputError(f"--aovs {','.join(args.aovs)}: the passes are written as EXR channels; name an .exr "
                          f"output (-o {Path(args.output).with_suffix('.exr')})")
+    if args.view is not None:
+        args.channels = exr.ReadSpec(args.channels, args.view)  # travels where a layout name does
     if not (args.camera_from or args.camera_track):
         camera_from_args(args)  # the flags' own errors first, as before (with these, lower sources may complete them)
     sources = camera_sources_from_args(args)
@@ -267,7 +270,11 @@ def cmd_process(args) -> int:
         _explain_sources(sources, jobs)
         first = read_input(pipe, jobs[0].src, args.channels)
         cam = pipe.camera_for(first)
+        win = first.windows
         print(f"plan for {jobs[0].src} ({first.width}x{first.height}, quality {args.quality}):")
+        if win.data != win.display or win.origin != (0, 0):
+            print(f"windows: display {exr.window_str(win.display)}, data {exr.window_str(win.data)} "
+                  f"(overscan left/top/right/bottom {'/'.join(map(str, win.overscan))} px)")
         for e in pipe.explain(first):
             print(f"  {e}")
         plan = pipe.plan_for(first, cam)
@@ -277,6 +284,10 @@ def cmd_process(args) -> int:
         if plan.output_size != plan.size:
             print(f"output size: {plan.output_size[0]}x{plan.output_size[1]} (resampled by "
                   f"{', '.join(L.name for L in plan.launches if L.out_size != L.in_size)})")
+        if "distortion" in plan.stage_names:
+            from .stages.distortion import Distortion
+
+            print(f"distortion fill: {Distortion(args.quality).coverage(cam, first)} (clpost render-size says how)")
         if cam != camera:
             print(f"auto-exposure: f/{cam.f_number:.3g}, {cam.shutter_s:.4g} s")
         from .ocio import OcioView
@@ -562,6 +573,30 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_render_size(args) -> int:
+    from .calibration import lens_distortion_model
+    from .render_size import report
+
+    cam = camera_from_args(args)
+    if cam.distortion is not None:
+        if args.size is not None:
+            raise InputError("render-size: --size is the calibration's own with --calibration; leave --size out")
+        model, what = cam.distortion, f"calibration {cam.distortion.source or ''}".strip()
+    else:
+        if cam.optics is None:
+            raise InputError("render-size: give --calibration FILE, or --lens NAME (a lens_data lens: "
+                             "`clpost lens list`) with --size WxH")
+        if args.size is None:
+            raise InputError("render-size: --lens needs the image size, --size WxH (e.g. --size 1920x1080)")
+        model = lens_distortion_model(cam, args.size)
+        what = f"{cam.lens} at {args.size[0]}x{args.size[1]}, focus {cam.focus_distance_m:g} m"
+        if model is None:
+            print(f"{what}: no distortion to 0.001 %: render at {args.size[0]}x{args.size[1]}, no overscan needed")
+            return 0
+    print(report(model, what, cam.sensor_mm[0] if cam.distortion is None else None))
+    return 0
+
+
 def cmd_stages(args) -> int:
     from .stages import order_table
 
@@ -641,6 +676,8 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--frames", type=_frames_spec, default=None,
                     help="frame range, e.g. 1-100, 1-100x2, 1,5,9 (default: all found)")
     pr.add_argument("--channels", default=None, help="input channel layout: clpost, blender, nuke, arnold (default: detect)")
+    pr.add_argument("--view", default=None,
+                    help="view of multi-view EXRs, e.g. left (default: the file's default view, the first it lists)")
     pr.add_argument("--explain", action="store_true", help="print the plan for the first frame and why each stage is in or out, then exit")
     pr.add_argument("--overwrite", action="store_true", help="replace existing outputs (default: skip them)")
     pr.add_argument("--half", action="store_true", help="write half-float EXRs")
@@ -738,6 +775,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     sub.add_parser("stages", help="every stage in physical order: order, domains, why it sits there"
                    ).set_defaults(func=cmd_stages)
+
+    rs = sub.add_parser("render-size", help="the overscan (EXR data window) or larger render a calibration or "
+                        "lens needs so distortion leaves no pixel unfilled")
+    rs.add_argument("--size", type=_size, default=None,
+                    help="image size WxH for --lens (a calibration has its own)")
+    _add_camera_options(rs)
+    rs.set_defaults(func=cmd_render_size)
 
     ln = sub.add_parser("lens", help="real lens prescriptions in lens_data/: list, info, datasheet plot")
     lsub = ln.add_subparsers(dest="lens_command", required=True)

@@ -20,6 +20,13 @@ NaN is never valid; ±inf only as ``+inf`` in depth.
 
 ``metadata["frame_index"]`` (int, default 0) is the frame number of a sequence; the renderer and
 the batch loop set it, and the grain and sensor stages hash it into their noise.
+
+``metadata["windows"]`` (a :class:`Windows`, set by the EXR reader) places the arrays in the
+file's pixel space: the **display window** is the image (the format a compositor calls it, the
+camera's sensor), the **data window** where the file has pixels — larger than the display window
+for overscan, smaller for a crop, anywhere for the odd file. The arrays cover the bounding box of
+both (:attr:`Frame.windows`); pixels outside the data window are "no data" (alpha 0). Without it
+(or after a stage that resamples to another size), data and display are the whole array.
 """
 from __future__ import annotations
 
@@ -31,6 +38,61 @@ import numpy as np
 from .errors import InputError
 
 _FLOAT_DTYPES = (np.float16, np.float32, np.float64)
+
+Window = tuple[tuple[int, int], tuple[int, int]]
+"""((x_min, y_min), (x_max, y_max)), inclusive, in the file's pixel space (OpenEXR's box2i)."""
+
+
+def bbox(*windows: Window) -> Window:
+    """The smallest window holding all of ``windows``."""
+    return ((min(w[0][0] for w in windows), min(w[0][1] for w in windows)),
+            (max(w[1][0] for w in windows), max(w[1][1] for w in windows)))
+
+
+def window_size(w: Window) -> tuple[int, int]:
+    """(width, height) of a window."""
+    return w[1][0] - w[0][0] + 1, w[1][1] - w[0][1] + 1
+
+
+@dataclass(frozen=True)
+class Windows:
+    """Where a frame's arrays lie in its file's pixel space (see the module docstring): array
+    pixel (0, 0) is at ``origin``; the arrays span ``bbox(data, display)``."""
+
+    data: Window
+    display: Window
+
+    @property
+    def extent(self) -> Window:
+        """The window the arrays cover: the bounding box of the data and display windows."""
+        return bbox(self.data, self.display)
+
+    @property
+    def origin(self) -> tuple[int, int]:
+        return self.extent[0]
+
+    @property
+    def display_size(self) -> tuple[int, int]:
+        """(width, height) of the display window: the image a camera made."""
+        return window_size(self.display)
+
+    @property
+    def display_offset(self) -> tuple[int, int]:
+        """Array column and row of the display window's top-left pixel."""
+        return self.display[0][0] - self.origin[0], self.display[0][1] - self.origin[1]
+
+    @property
+    def overscan(self) -> tuple[int, int, int, int]:
+        """Pixels of data beyond the display window on each side (left, top, right, bottom), ≥ 0."""
+        (dx0, dy0), (dx1, dy1) = self.data
+        (ox0, oy0), (ox1, oy1) = self.display
+        return max(ox0 - dx0, 0), max(oy0 - dy0, 0), max(dx1 - ox1, 0), max(dy1 - oy1, 0)
+
+    @staticmethod
+    def full(width: int, height: int) -> "Windows":
+        """Data = display = the whole ``width`` × ``height`` array at (0, 0)."""
+        w = ((0, 0), (int(width) - 1, int(height) - 1))
+        return Windows(w, w)
 
 
 def _as_float32(name: str, a: Any, copy: bool = True) -> np.ndarray:
@@ -157,6 +219,15 @@ class Frame:
         v = float(np.max(np.abs(self.velocity))) if self.velocity.size else 0.0
         object.__setattr__(self, "_velocity_max", (self.velocity, v))
         return v
+
+    @property
+    def windows(self) -> Windows:
+        """The frame's data and display windows (``metadata["windows"]`` when it describes these
+        arrays, else data = display = the whole array)."""
+        w = self.metadata.get("windows") if isinstance(self.metadata, dict) else None
+        if isinstance(w, Windows) and window_size(w.extent) == self.size:
+            return w
+        return Windows.full(self.width, self.height)
 
     @property
     def height(self) -> int:

@@ -15,7 +15,7 @@ import numpy as np
 
 from .camera import Camera
 from .errors import InputError
-from .frame import Frame
+from .frame import Frame, Windows
 from . import metering
 from .plan import Buffers, Plan, PlanEntry, group_nodes, resized_view, structure_key
 from .stages import QUALITIES, Stage, registry
@@ -125,7 +125,8 @@ class Pipeline:
         if cam.distortion is None and cam.optics is not None and cam.lens_distortion:
             from .calibration import lens_distortion_model
 
-            model = lens_distortion_model(cam, frame.size)
+            # the lens distorts the image (the display window), not the overscan around it
+            model = lens_distortion_model(cam, frame.windows.display_size)
             if model is not None:
                 cam = cam.with_(distortion=model)
         return cam
@@ -212,7 +213,11 @@ class Pipeline:
             metering.check_exposure(cam, frame)
         self.last_plan = plan
         out = plan.run(frame, cam)
-        return out.replace(metadata=dict(out.metadata, resolved_camera=cam), validate=False)
+        meta = dict(out.metadata, resolved_camera=cam)
+        if "distortion" in plan.stage_names:
+            # the distorted image is the calibration's: data = display = the output, at (0, 0)
+            meta["windows"] = Windows.full(out.width, out.height)
+        return out.replace(metadata=meta, validate=False)
 
     def plate(self, frame, camera=None):
         """A plate rendered at the infinity-focus field of view (``Camera.plate_fov``) magnified to

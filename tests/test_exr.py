@@ -281,26 +281,51 @@ def test_display_window_with_offset_origin(tmp_path):
     assert got.alpha[3].sum() == 0 and got.alpha[:, 0].sum() == 0
 
 
-def test_overscan_is_refused(tmp_path):
-    c = np.ones((10, 12), np.float32)
-    path = _write_raw(tmp_path / "overscan.exr", {"R": c, "G": c, "B": c},
+def test_overscan_is_read_and_written_back(tmp_path):
+    # the data window reaches 2 px beyond the display window on the left and top, 2 right, 2 bottom
+    c = np.arange(10 * 12, dtype=np.float32).reshape(10, 12)
+    path = _write_raw(tmp_path / "overscan.exr", {"R": c, "G": c + 1, "B": c + 2},
                       dataWindow=_win(-2, -2, 9, 7), displayWindow=_win(0, 0, 7, 5))
-    with pytest.raises(InputError) as e:
-        exr.read_frame(path)
-    msg = str(e.value)
-    assert "overscan.exr" in msg and "(-2,-2)-(9,7)" in msg and "(0,0)-(7,5)" in msg
-    assert "crop" in msg and "\n" not in msg
+    got = exr.read_frame(path)
+    assert got.size == (12, 10)  # the arrays cover the data window, which holds the display window
+    w = got.windows
+    assert w.data == ((-2, -2), (9, 7)) and w.display == ((0, 0), (7, 5))
+    assert w.display_offset == (2, 2) and w.display_size == (8, 6) and w.overscan == (2, 2, 2, 2)
+    np.testing.assert_array_equal(got.color[..., 0], c)
+    assert got.alpha is None  # every array pixel has data
+    exr.write_frame(tmp_path / "out.exr", got)
+    head = exr.read_header(tmp_path / "out.exr")[0]
+    assert head.data_window == ((-2, -2), (9, 7)) and head.display_window == ((0, 0), (7, 5))
+    np.testing.assert_array_equal(exr.read_frame(tmp_path / "out.exr").color, got.color)
 
 
-def test_parts_of_different_sizes_are_refused(tmp_path):
-    # OpenEXR makes parts share the display window; their data windows may still differ.
+def test_disjoint_windows_keep_both(tmp_path):
+    # data window right of the display window, not touching it (the OpenEXR DisplayWindow t09 case)
+    c = np.full((3, 4), 0.25, np.float32)
+    path = _write_raw(tmp_path / "apart.exr", {"R": c, "G": c, "B": c},
+                      dataWindow=_win(6, 0, 9, 2), displayWindow=_win(0, 0, 3, 2))
+    got = exr.read_frame(path)
+    assert got.size == (10, 3) and got.windows.origin == (0, 0)
+    assert np.all(got.color[:, 6:] == 0.25) and np.all(got.color[:, :6] == 0)
+    assert np.all(got.alpha[:, 6:] == 1) and np.all(got.alpha[:, :6] == 0)
+    exr.write_frame(tmp_path / "out.exr", got)
+    head = exr.read_header(tmp_path / "out.exr")[0]
+    assert (head.data_window, head.display_window) == (((6, 0), (9, 2)), ((0, 0), (3, 2)))
+
+
+def test_parts_with_different_data_windows_are_placed(tmp_path):
+    # OpenEXR makes parts share the display window; their data windows may differ (each pass's
+    # bounding box): each is placed at its own offset, "no data" elsewhere
     head = {"type": OpenEXR.scanlineimage, "displayWindow": _win(0, 0, W - 1, H - 1)}
     c = np.ones((H, W), np.float32)
     parts = [OpenEXR.Part({**head, "dataWindow": _win(0, 0, W - 1, H - 1)}, {"R": c, "G": c, "B": c}, "rgba"),
-             OpenEXR.Part({**head, "dataWindow": _win(0, 0, 3, 2)}, {"Z": np.ones((3, 4), np.float32)}, "depth")]
+             OpenEXR.Part({**head, "dataWindow": _win(2, 1, 5, 3)}, {"Z": np.full((3, 4), 2.0, np.float32)}, "depth")]
     OpenEXR.File(parts).write(str(tmp_path / "sizes.exr"))
-    with pytest.raises(InputError, match=r"sizes\.exr: part 1 'depth'.*one resolution"):
-        exr.read_frame(tmp_path / "sizes.exr")
+    got = exr.read_frame(tmp_path / "sizes.exr")
+    assert got.size == (W, H)
+    inside = np.zeros((H, W), bool)
+    inside[1:4, 2:6] = True
+    assert np.all(got.depth[inside] == 2.0) and np.all(np.isinf(got.depth[~inside]))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -451,7 +476,7 @@ def test_info_numbers(tmp_path):
 
 def test_info_reports_problems_instead_of_failing(tmp_path):
     c = np.ones((H, W), np.float32)
-    i = exr.info(_write_raw(tmp_path / "odd.exr", {"Y": c}))
+    i = exr.info(_write_raw(tmp_path / "odd.exr", {"mask.Q": c}))  # (a lone Y reads as grey)
     assert i["layout"] is None and i["depth"] is None
     assert "no known channel layout" in i["problems"][0]
     assert "problem:" in exr.format_info(i)

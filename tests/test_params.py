@@ -24,7 +24,7 @@ STORED = [s for s in SPECS if not s.meta.input_only]
 # A valid non-default value for the parameters whose header entry is omitted at their default.
 EXAMPLES = {
     "field_curvature_mm": 0.1, "astigmatism_mm": 0.1, "coma_mm": 0.05, "lateral_color_mm": 0.01,
-    "vignetting": "natural", "plate_fov": "infinity",
+    "vignetting": "natural", "plate_fov": "infinity", "fill": "crop",
     "luminance_scale": 100.0,  # None (passthrough) by default
     "distortion": OpenCVModel(width=640, height=480, fx=500.0, fy=500.0, cx=319.5, cy=239.5, k1=-0.1),
 }

@@ -5,7 +5,8 @@ One module per job:
 * :mod:`~clpost.calibration.model` — :class:`OpenCVModel` (forward model, fold radius) and its
   inverses (:func:`undistort_newton`, :class:`HeikkilaInverse`, :func:`undistort`);
 * :mod:`~clpost.calibration.frustum` — the render that covers a distorted image
-  (:func:`required_render`, :class:`RenderSpec`) and the intrinsics of a render of a given size
+  (:func:`required_render`, :class:`RenderSpec`, the overscan around the calibration's own K
+  :func:`overscan_px`) and the intrinsics of a render of a given size
   (:func:`render_intrinsics`), cached per (model, size);
 * :mod:`~clpost.calibration.traced` — a ``lens_data`` lens's traced distortion as an OpenCV model
   (:func:`lens_distortion_model`);
@@ -19,7 +20,7 @@ One module per job:
 Every public name is importable from ``clpost.calibration``.
 """
 from .formats import COLMAP_MODELS, load_calibration
-from .frustum import RenderSpec, render_intrinsics, required_render
+from .frustum import RenderSpec, overscan_px, render_intrinsics, required_render, undistorted_bounds
 from .header import header_text, model_from_header
 from .model import (COEFF_NAMES, DISTORTION_MODELS, FISHEYE_COEFF_NAMES, HeikkilaInverse, OpenCVModel,
                     inverse_residual_px, undistort, undistort_newton)
@@ -28,5 +29,5 @@ from .writers import FORMATS, calibration_text, write_calibration
 
 __all__ = ["COEFF_NAMES", "COLMAP_MODELS", "DISTORTION_MODELS", "FISHEYE_COEFF_NAMES", "FORMATS", "HeikkilaInverse",
            "OpenCVModel", "RenderSpec", "calibration_text", "header_text", "inverse_residual_px",
-           "lens_distortion_model", "load_calibration", "model_from_header", "render_intrinsics", "required_render",
-           "undistort", "undistort_newton", "write_calibration"]
+           "lens_distortion_model", "load_calibration", "model_from_header", "overscan_px", "render_intrinsics",
+           "required_render", "undistort", "undistort_newton", "undistorted_bounds", "write_calibration"]

@@ -60,25 +60,64 @@ def required_render(model: OpenCVModel, margin_px: float = 2.0) -> RenderSpec:
 
 
 @lru_cache(maxsize=32)
-def _required_render(model: OpenCVModel, margin_px: float) -> RenderSpec:
+def undistorted_bounds(model: OpenCVModel, margin_px: float = 2.0,
+                       own_frustum: bool = True) -> tuple[float, float, float, float]:
+    """(x0, x1, y0, y1): the normalised undistorted coordinates an image must span so that every
+    output pixel of ``model`` has a preimage — the bounding box of the undistorted output border
+    (4 samples a pixel) and (``own_frustum``) the model's own pinhole frustum, widened by
+    ``margin_px`` pixels at f = max(f_x, f_y) for the resampling filter. Points beyond the fold
+    are left out."""
     w, h = model.width, model.height
     t = np.linspace(-0.5, w - 0.5, 4 * w + 1)
     s = np.linspace(-0.5, h - 0.5, 4 * h + 1)
     u = np.concatenate([t, t, np.full_like(s, -0.5), np.full_like(s, w - 0.5)])
     v = np.concatenate([np.full_like(t, -0.5), np.full_like(t, h - 0.5), s, s])
     x, y, ok = undistort_newton(model, u, v)
-    f = max(model.fx, model.fy)
     # the model's own (pinhole) frustum
     x0, x1 = -(model.cx + 0.5) / model.fx, (w - 0.5 - model.cx) / model.fx
     y0, y1 = -(model.cy + 0.5) / model.fy, (h - 0.5 - model.cy) / model.fy
+    if not own_frustum:
+        x0, x1, y0, y1 = math.inf, -math.inf, math.inf, -math.inf
     if ok.any():
         x0, x1 = min(x0, x[ok].min()), max(x1, x[ok].max())
         y0, y1 = min(y0, y[ok].min()), max(y1, y[ok].max())
-    m = margin_px / f
-    x0, x1, y0, y1 = x0 - m, x1 + m, y0 - m, y1 + m
+    m = float(margin_px) / max(model.fx, model.fy)
+    return float(x0 - m), float(x1 + m), float(y0 - m), float(y1 + m)
+
+
+@lru_cache(maxsize=32)
+def _required_render(model: OpenCVModel, margin_px: float) -> RenderSpec:
+    x0, x1, y0, y1 = undistorted_bounds(model, margin_px)
+    f = max(model.fx, model.fy)
     rw, rh = int(math.ceil(f * (x1 - x0))), int(math.ceil(f * (y1 - y0)))
     # l = −(c + 0.5)/f = x0  ⇒  c = −x0 f − 0.5
     return RenderSpec(rw, rh, float(f), float(-x0 * f - 0.5), float(-y0 * f - 0.5))
+
+
+def overscan_px(model: OpenCVModel, margin_px: float = 2.0) -> tuple[int, int, int, int]:
+    r"""Pixels (left, top, right, bottom) a render made with the calibration's own K must reach
+    beyond its W × H image so that no output pixel is unfilled. The render's column u covers
+    [u − ½, u + ½]; with (x_0, x_1, y_0, y_1) the bounds of the undistorted output border
+    (:func:`undistorted_bounds` without the model's own frustum) a side falls short by
+
+    .. math::
+
+        l = -\tfrac12 - (f_x x_0 + c_x), \qquad r = f_x x_1 + c_x - (W - \tfrac12)
+
+    (t, b likewise with f_y, c_y, y_0, y_1, H), and needs ⌈l + margin⌉ px where l > 0, else none
+    (a pincushion lens needs no overscan; the margin is the resampling filter's support). This is
+    the overscan to set in a renderer that writes an EXR data window beyond the display window
+    (Nuke's ScanlineRender ``overscan``); the data window is (−L, −T) − (W − 1 + R, H − 1 + B)."""
+    x0, x1, y0, y1 = undistorted_bounds(model, 0.0, own_frustum=False)
+    if not math.isfinite(x0):
+        return 0, 0, 0, 0
+    w, h = model.width, model.height
+
+    def need(short):  # whole pixels, with a hair of tolerance for float round-off
+        return int(math.ceil(short + margin_px - 1e-9)) if short > 1e-9 else 0
+
+    return (need(-0.5 - (model.fx * x0 + model.cx)), need(-0.5 - (model.fy * y0 + model.cy)),
+            need(model.fx * x1 + model.cx - (w - 0.5)), need(model.fy * y1 + model.cy - (h - 0.5)))
 
 
 def render_intrinsics(model: OpenCVModel, size: tuple[int, int]) -> tuple[float, float, float, float] | None:

@@ -102,10 +102,21 @@ detection, depth and velocity conversions both ways); :mod:`clpost.exr.io` reads
 
 Windows
 -------
-A data window inside the display window is placed at its offset; pixels outside it are "no
-data": color 0, alpha 0, depth ``+inf``, velocity 0 (an alpha plane is created if the file has
-none). A data window reaching outside the display window (overscan) is refused — never
-silently cropped or misplaced. All parts used must share one data and display window.
+Both windows are kept, as Nuke keeps a Read node's format and bounding box: the arrays cover the
+bounding box of the data window and the display window (:attr:`clpost.Frame.windows`), pixels
+outside the data window are "no data" (color 0, alpha 0, depth ``+inf``, velocity 0; an alpha
+plane is created if the file has none), and :func:`write_frame` writes the data window's pixels
+back with both windows. A data window larger than the display window is overscan (the
+distortion stage samples it); parts with different data windows (each pass's bounding box) are
+placed in their union. All parts share one display window (OpenEXR requires it).
+
+Other files
+-----------
+Luminance/chroma (Y, RY, BY) and luminance-only (Y) images become RGB as OpenEXR's RGBA
+interface makes them (:mod:`clpost.exr.yca`, with the file's ``chromaticities``); a lone R, G or
+B channel is grey. Multi-view files (``multiView`` attribute, or parts with a ``view``) give one
+view, the default unless ``view=``/``--view`` names another. Tiled and mip-mapped files give
+level 0. Deep images are flattened front to back (:mod:`clpost.exr.deep`).
 
 Writing
 -------
@@ -118,8 +129,8 @@ References: OpenEXR file layout and multi-part files, https://openexr.com/en/lat
 Blender manual, "Render Passes" (Depth, Vector); Foundry Nuke reference guide, ScanlineRender,
 ZDefocus, VectorBlur; Autodesk Arnold user guide, "AOVs" and the ``motion_vector`` shader.
 """
-from .io import (CAMERA_ATTRIBUTES, COMPRESSIONS, MAX_CHANNELS, MAX_SIDE, PartHeader, check_header, format_info, info,
-                 quiet_openexr, read_attributes, read_frame, read_header, write_frame)
+from .io import (CAMERA_ATTRIBUTES, COMPRESSIONS, MAX_CHANNELS, MAX_SIDE, PartHeader, ReadSpec, check_header,
+                 format_info, info, quiet_openexr, read_attributes, read_frame, read_header, window_str, write_frame)
 from .layouts import (BLENDER_VIEW_LAYER, DEPTH_KINDS, LAYOUTS, REGISTRY, SKY_DEPTH_M,
                       ArnoldLayout, BlenderLayout, ClpostLayout, DepthConventionWarning, Layout,
                       NukeLayout, detect_layout, get_layout, planar_to_radial, radial_to_planar)
@@ -127,6 +138,6 @@ from .layouts import (BLENDER_VIEW_LAYER, DEPTH_KINDS, LAYOUTS, REGISTRY, SKY_DE
 __all__ = [
     "CAMERA_ATTRIBUTES", "read_attributes", "ArnoldLayout", "BLENDER_VIEW_LAYER", "BlenderLayout", "COMPRESSIONS", "ClpostLayout", "DEPTH_KINDS",
     "DepthConventionWarning", "LAYOUTS", "Layout", "MAX_CHANNELS", "MAX_SIDE", "NukeLayout", "PartHeader",
-    "REGISTRY", "SKY_DEPTH_M", "check_header", "detect_layout", "format_info", "get_layout", "info",
+    "REGISTRY", "ReadSpec", "window_str", "SKY_DEPTH_M", "check_header", "detect_layout", "format_info", "get_layout", "info",
     "planar_to_radial", "quiet_openexr", "radial_to_planar", "read_frame", "read_header", "write_frame",
 ]

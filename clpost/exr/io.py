@@ -28,7 +28,8 @@ import OpenEXR
 
 from ..atomic import atomic_path
 from ..errors import InputError, OutputError
-from ..frame import Frame
+from ..frame import Frame, Window, Windows, bbox, window_size
+from . import deep, yca
 from .layouts import (DEPTH_KINDS, DepthConventionWarning, depth_to_planar,
                       detect_layout, get_layout)
 
@@ -38,9 +39,6 @@ _RESERVED_ATTRS = frozenset({
     "channels", "compression", "dataWindow", "displayWindow", "lineOrder", "pixelAspectRatio",
     "screenWindowCenter", "screenWindowWidth", "type", "name", "tiles", "chunkCount", "version",
 })
-
-Window = tuple[tuple[int, int], tuple[int, int]]
-"""((x_min, y_min), (x_max, y_max)), inclusive, as in the EXR header."""
 
 MAGIC = b"\x76\x2f\x31\x01"
 MAX_SIDE = 1 << 17
@@ -278,8 +276,6 @@ def check_header(path: Path, parts: Sequence[PartHeader]) -> None:
                                       ("channels", ph.channels)) if not v]
             raise InputError(f"{path}: EXR header of {label} lacks {', '.join(missing)}; the file is corrupt "
                              "or truncated — re-render or re-copy it")
-        if ph.type.startswith("deep"):
-            raise InputError(f"{path}: {label} is a deep image ({ph.type}); flatten it to a regular EXR first")
         for what, win in (("data", ph.data_window), ("display", ph.display_window)):
             w, h = _side(win)
             if not (1 <= w <= MAX_SIDE and 1 <= h <= MAX_SIDE):
@@ -335,7 +331,9 @@ def quiet_openexr() -> Iterator[None]:
 
 @dataclass(frozen=True)
 class _Part:
-    """One part of a file as read: its channels already as numpy planes of the data window."""
+    """One part of a file as read: its channels already as numpy planes of the data window
+    (subsampled chroma at its own resolution; a deep part's planes as per-pixel sample arrays
+    until :func:`_flat`)."""
 
     index: int
     name: str
@@ -344,6 +342,17 @@ class _Part:
     types: dict[str, str]
     data_window: Window
     display_window: Window
+    deep: bool = False
+
+
+@dataclass(frozen=True)
+class ReadSpec:
+    """How to read a file where a plain layout name is not enough: the ``layout`` (None: detect)
+    and the ``view`` of a multi-view file (None: its default view). Accepted wherever a layout
+    name is (``read_frame(path, ReadSpec(...))``, the batch functions' ``layout``)."""
+
+    layout: str | None = None
+    view: str | None = None
 
 
 def _window(header: dict, key: str) -> Window:
@@ -391,82 +400,174 @@ def _load(path: str | os.PathLike) -> list[_Part]:
     return [_part(p, i, rp) for i, rp in enumerate(raw_parts)]
 
 
+_CHROMA = ("RY", "BY")
+"""The channels OpenEXR subsamples 2 × 2 in luminance/chroma images (:mod:`clpost.exr.yca`)."""
+
+
 def _part(path: Path, index: int, rp: Any) -> _Part:
     header = dict(rp.header)
     name = str(rp.name() or header.get("name") or "")
     label = f"part {index}" + (f" '{name}'" if name else "")
     storage = rp.type()
-    if storage not in (OpenEXR.scanlineimage, OpenEXR.tiledimage):
-        raise InputError(f"{path}: {label} is a deep image ({storage.name}); flatten it to a regular EXR first")
+    is_deep = storage in (OpenEXR.deepscanline, OpenEXR.deeptile)
+    if storage not in (OpenEXR.scanlineimage, OpenEXR.tiledimage) and not is_deep:
+        raise InputError(f"{path}: {label} has storage {storage.name}, which clpost cannot read; "
+                         "convert it to a scanline or tiled EXR")
     dw, disp = _window(header, "dataWindow"), _window(header, "displayWindow")
     shape = (dw[1][1] - dw[0][1] + 1, dw[1][0] - dw[0][0] + 1)
     planes: dict[str, np.ndarray] = {}
     types: dict[str, str] = {}
     for cname, ch in rp.channels.items():
-        if ch.xSampling != 1 or ch.ySampling != 1:
-            raise InputError(f"{path}: channel {cname!r} in {label} is subsampled "
-                             f"({ch.xSampling}×{ch.ySampling}); write full-resolution channels")
+        xs, ys = ch.xSampling, ch.ySampling
+        if (xs, ys) != (1, 1) and not (cname.rsplit(".", 1)[-1] in _CHROMA and (xs, ys) == (2, 2)):
+            raise InputError(f"{path}: channel {cname!r} in {label} is subsampled ({xs}×{ys}); clpost reads "
+                             "subsampled channels only as the RY/BY chroma of luminance/chroma images — "
+                             "write full-resolution channels")
         px = np.asarray(ch.pixels)
-        if px.shape != shape:
+        want = (-(-shape[0] // ys), -(-shape[1] // xs))
+        if px.shape != want:
             raise InputError(f"{path}: channel {cname!r} in {label} has {px.shape} pixels, data window "
-                             f"{window_str(dw)} needs {shape}; the file is corrupt or truncated — re-render it")
+                             f"{window_str(dw)} needs {want}; the file is corrupt or truncated — re-render it")
         planes[cname] = px
         types[cname] = ch.type().name.lower()
-    return _Part(index, name, header, planes, types, dw, disp)
+    return _Part(index, name, header, planes, types, dw, disp, is_deep)
 
 
-def _merge(path: Path, parts: Sequence[_Part]) -> tuple[dict[str, np.ndarray], Window, Window]:
-    """Channels of all parts in one dict, after checking the parts agree on their windows."""
+def _flat(part: _Part) -> _Part:
+    """A deep part flattened front to back (:mod:`clpost.exr.deep`); other parts as they are."""
+    if not part.deep:
+        return part
+    return _Part(part.index, part.name, part.header, deep.flatten(part.planes), part.types,
+                 part.data_window, part.display_window)
+
+
+def _view_of(channel: str, views: Sequence[str]) -> tuple[str, str]:
+    """(view, name without the view) of a channel of a single-part multi-view file (OpenEXR
+    ``ImfMultiView``: the view is the next-to-last period-separated field when it names a view;
+    otherwise the channel belongs to the default view, the first of ``multiView``)."""
+    fields = channel.split(".")
+    if len(fields) >= 2 and fields[-2] in views:
+        return fields[-2], ".".join(fields[:-2] + fields[-1:])
+    return views[0], channel
+
+
+def _select_view(path: Path, parts: Sequence[_Part], view: str | None) -> list[_Part]:
+    """The parts and channels of one view of a multi-view file, with the view's name taken out of
+    the channel names (so ``left.R`` reads as ``R``). Single-part files list their views in the
+    ``multiView`` attribute (the first is the default); multi-part files name each part's
+    ``view`` (the first part's is the default; parts without one belong to every view)."""
+    multi = parts[0].header.get("multiView")
+    part_views = [pt.header.get("view") for pt in parts]
+    if len(parts) == 1 and multi:
+        views = [str(v) for v in multi]
+    else:
+        views = list(dict.fromkeys(str(v) for v in part_views if v))
+    if not views:
+        if view is not None:
+            raise InputError(f"{path}: --view {view}: the file has no views; leave --view out")
+        return list(parts)
+    chosen = views[0] if view is None else view
+    if chosen not in views:
+        raise InputError(f"{path}: --view {chosen}: the file's views are {', '.join(views)}; pick one of them")
+    if len(parts) == 1 and multi:
+        pt = parts[0]
+        planes, types = {}, {}
+        for cname, px in pt.planes.items():
+            v, bare = _view_of(cname, views)
+            if v == chosen:
+                planes[bare], types[bare] = px, pt.types[cname]
+        return [_Part(pt.index, pt.name, pt.header, planes, types, pt.data_window, pt.display_window, pt.deep)]
+    return [pt for pt, v in zip(parts, part_views) if not v or str(v) == chosen]
+
+
+def _merge(path: Path, parts: Sequence[_Part]) -> tuple[dict[str, np.ndarray], dict[str, Window], Window, Window]:
+    """Channels of all parts in one dict, each with its part's data window; the union of the data
+    windows and the display window, which the parts must share."""
     first = parts[0]
     planes: dict[str, np.ndarray] = {}
+    windows: dict[str, Window] = {}
     for part in parts:
-        if (part.data_window, part.display_window) != (first.data_window, first.display_window):
+        if part.display_window != first.display_window:
             raise InputError(
-                f"{path}: part {part.index} '{part.name}' has data window {window_str(part.data_window)} / "
-                f"display window {window_str(part.display_window)} but part 0 has "
-                f"{window_str(first.data_window)} / {window_str(first.display_window)}; "
-                "write all passes at one resolution and one region"
-            )
+                f"{path}: part {part.index} '{part.name}' has display window {window_str(part.display_window)} "
+                f"but part {first.index} has {window_str(first.display_window)}; write all passes of one "
+                "image with one display window")
+        _check_windows(path, part.data_window)
         for cname, px in part.planes.items():
             if cname in planes:
                 raise InputError(f"{path}: channel {cname!r} appears in more than one part; "
                                  "rename one of them so the layout is unambiguous")
             planes[cname] = px
-    return planes, first.data_window, first.display_window
+            windows[cname] = part.data_window
+    return planes, windows, bbox(*(p.data_window for p in parts)), first.display_window
 
 
-def _place(plane: np.ndarray, data: Window, display: Window, fill: float) -> np.ndarray:
-    """The data-window plane put at its place in a display-window-sized plane."""
-    (dx0, dy0), (dx1, dy1) = data
-    (ox0, oy0), (ox1, oy1) = display
-    if (dx0, dy0, dx1, dy1) == (ox0, oy0, ox1, oy1):
+def _place(plane: np.ndarray, window: Window, extent: Window, fill: float) -> np.ndarray:
+    """A plane of ``window`` put at its place in an ``extent``-sized plane filled with ``fill``."""
+    if window == extent:
         return plane
-    out = np.full((oy1 - oy0 + 1, ox1 - ox0 + 1), fill, dtype=plane.dtype)
+    (dx0, dy0), (dx1, dy1) = window
+    (ox0, oy0), _ = extent
+    w, h = window_size(extent)
+    out = np.full((h, w), fill, dtype=plane.dtype)
     out[dy0 - oy0:dy1 - oy0 + 1, dx0 - ox0:dx1 - ox0 + 1] = plane
     return out
 
 
-def _check_windows(path: Path, data: Window, display: Window) -> None:
+def _check_windows(path: Path, data: Window) -> None:
     (dx0, dy0), (dx1, dy1) = data
-    (ox0, oy0), (ox1, oy1) = display
     if dx1 < dx0 or dy1 < dy0:
         raise InputError(f"{path}: empty data window {window_str(data)}; re-render the frame")
-    if dx0 < ox0 or dy0 < oy0 or dx1 > ox1 or dy1 > oy1:
-        raise InputError(
-            f"{path}: data window {window_str(data)} extends beyond the display window "
-            f"{window_str(display)} (overscan); clpost will not crop or misplace pixels — "
-            "render without overscan or crop to the display window (e.g. oiiotool --crop)"
-        )
+
+
+def _rgb_planes(path: Path, planes: dict[str, np.ndarray], windows: dict[str, Window],
+                header: dict) -> tuple[dict[str, np.ndarray], dict[str, Window]]:
+    """R, G, B made from what the file has when it has no R, G and B: luminance/chroma (Y, RY,
+    BY) converted with the file's chromaticities, luminance (Y) as grey (:mod:`clpost.exr.yca`),
+    or a lone R, G or B as grey (a monochrome image; two of the three stay an error)."""
+    if {"R", "G", "B"} <= planes.keys() or any(n.endswith(".Combined.R") for n in planes):
+        return planes, windows
+    planes, windows = dict(planes), dict(windows)
+    if "Y" in planes:
+        y = planes.pop("Y")
+        win = windows.pop("Y")
+        chroma = [planes.pop(c, None) for c in _CHROMA]
+        for c in _CHROMA:
+            windows.pop(c, None)
+        if chroma[0] is not None and chroma[1] is not None:
+            cr = header.get("chromaticities") or yca.REC709_CHROMATICITIES
+            try:
+                rgb = yca.yca_to_rgb(y, chroma[0], chroma[1], cr)
+            except InputError as e:
+                raise InputError(f"{path}: {e}") from None
+            rgb_planes = [rgb[..., i] for i in range(3)]
+        else:
+            grey = np.asarray(y, np.float32)
+            rgb_planes = [grey, grey, grey]
+    elif len(present := [c for c in "RGB" if c in planes]) == 1:
+        win = windows.pop(present[0])
+        grey = np.asarray(planes.pop(present[0]), np.float32)
+        rgb_planes = [grey, grey, grey]
+    else:
+        return planes, windows
+    for c, plane in zip("RGB", rgb_planes):
+        planes[c], windows[c] = plane, win
+    return planes, windows
 
 
 def _str_attrs(header: dict) -> dict[str, str]:
     return {str(k): v for k, v in header.items() if isinstance(v, str)}
 
 
-def _frame_from_parts(path: Path, parts: Sequence[_Part], layout: str | None, depth: str | None,
+def _frame_from_parts(path: Path, parts: Sequence[_Part], layout: "str | ReadSpec | None", depth: str | None,
                       focal_px: float | tuple[float, float] | None,
                       velocity_y_up: bool | None) -> Frame:
-    planes, data, display = _merge(path, parts)
+    view = None
+    if isinstance(layout, ReadSpec):
+        layout, view = layout.layout, layout.view
+    parts = [_flat(pt) for pt in _select_view(path, parts, view)]
+    planes, wins, data, display = _merge(path, parts)
+    planes, wins = _rgb_planes(path, planes, wins, parts[0].header)
     if layout is None:
         try:
             layout = detect_layout(planes)
@@ -476,50 +577,71 @@ def _frame_from_parts(path: Path, parts: Sequence[_Part], layout: str | None, de
     kind = depth or lay.depth_kind
     if kind not in DEPTH_KINDS:
         raise InputError(f"depth={depth!r} is unknown; use one of {', '.join(DEPTH_KINDS)}")
-    _check_windows(path, data, display)
     m = lay.map_channels(path, planes)
+    window_of = {id(px): wins[name] for name, px in planes.items()}
+    extent = bbox(data, display)
 
-    color = np.stack([_place(c, data, display, 0.0) for c in m.color], axis=-1)
+    def place(plane, fill):
+        return _place(plane, window_of[id(plane)], extent, fill)
+
+    color = np.stack([place(c, 0.0) for c in m.color], axis=-1)
     alpha = None
     if m.alpha is not None:
         # Filters with negative lobes overshoot coverage a hair; only that much is clipped.
         a = np.asarray(m.alpha)
         a = np.where((a > 1) & (a <= 1 + 1e-3), 1, np.where((a < 0) & (a >= -1e-3), 0, a)).astype(a.dtype)
-        alpha = _place(a, data, display, 0.0)
-    elif data != display:
-        alpha = _place(np.ones_like(m.color[0]), data, display, 0.0)
+        alpha = _place(a, window_of[id(m.alpha)], extent, 0.0)
+    elif window_of[id(m.color[0])] != extent:
+        alpha = _place(np.ones(m.color[0].shape, np.float32), window_of[id(m.color[0])], extent, 0.0)
     depth_m, kind_out = None, "planar"
     if m.depth is not None:
-        depth_m, kind_out = depth_to_planar(path, _place(m.depth, data, display, np.inf), kind, focal_px)
+        # placed with a neutral 1 (radial depth converts by pixel position), no data → +inf after
+        depth_m, kind_out = depth_to_planar(path, place(m.depth, 1.0), kind, focal_px)
+        covered = _place(np.ones(m.depth.shape, bool), window_of[id(m.depth)], extent, False)
+        depth_m = np.where(covered, depth_m, np.float32(np.inf)).astype(np.float32)
     vel = None
     if m.velocity is not None:
+        win = window_of[id(m.velocity[0])]
         vel = lay.velocity(m, velocity_y_up)
-        vel = np.stack([_place(vel[..., i], data, display, 0.0) for i in range(2)], axis=-1)
-    metadata = {"path": str(path), "layout": layout, "header": _str_attrs(parts[0].header),
-                "attributes": _camera_attrs(parts[0].header), "depth_kind": kind_out}
+        vel = np.stack([_place(vel[..., i], win, extent, 0.0) for i in range(2)], axis=-1)
+    header = parts[0].header
+    metadata = {"path": str(path), "layout": layout, "header": _str_attrs(header),
+                "attributes": _camera_attrs(header), "depth_kind": kind_out,
+                "windows": Windows(data, display)}
+    if view is not None or header.get("multiView") or header.get("view"):
+        metadata["view"] = view or str(header.get("view") or header["multiView"][0])
+    if header.get("chromaticities") is not None:
+        metadata["chromaticities"] = tuple(float(c) for c in header["chromaticities"])
     try:
         return Frame(color=color, depth=depth_m, velocity=vel, alpha=alpha, metadata=metadata, copy=False)
     except InputError as e:
         raise InputError(f"{path} (layout {layout}): {e}") from None
 
 
-def read_frame(path: str | os.PathLike, layout: str | None = None, *, depth: str | None = None,
+def read_frame(path: str | os.PathLike, layout: "str | ReadSpec | None" = None, *, depth: str | None = None,
                focal_px: float | tuple[float, float] | None = None,
-               velocity_y_up: bool | None = None) -> Frame:
-    """Read one EXR (single- or multi-part, half or float) into a :class:`Frame`.
+               velocity_y_up: bool | None = None, view: str | None = None) -> Frame:
+    """Read one EXR (single- or multi-part, scanline or tiled — level 0 of a mip-map —, flat or
+    deep, half or float) into a :class:`Frame`.
 
-    ``layout`` (one of :data:`LAYOUTS`) overrides auto-detection. The keyword options override
-    a layout's documented assumptions (:mod:`clpost.exr`): ``depth`` is one of
+    ``layout`` (one of :data:`LAYOUTS`, or a :class:`ReadSpec`) overrides auto-detection;
+    ``view`` picks a view of a multi-view file (default: its default view). The keyword options
+    override a layout's documented assumptions (:mod:`clpost.exr`): ``depth`` is one of
     :data:`DEPTH_KINDS`; ``focal_px`` (focal length in pixels, scalar or ``(f_x, f_y)``) lets
     radial depth be converted to planar; ``velocity_y_up`` sets the vector's y sign for the
     clpost, nuke and arnold layouts (Blender's verified convention is fixed).
 
-    ``metadata`` = ``{"path", "layout", "header": str attributes of the first part,
-    "attributes": its camera standard attributes (:data:`CAMERA_ATTRIBUTES`, floats),
-    "depth_kind": "planar" | "radial"}``. Color is required; depth and velocity are optional
-    (``None`` when the file has no such pass).
+    The arrays cover the data and display windows (``Frame.windows``; outside the data window:
+    color 0, alpha 0, depth ``+inf``, velocity 0). ``metadata`` = ``{"path", "layout", "header":
+    str attributes of the first part, "attributes": its camera standard attributes
+    (:data:`CAMERA_ATTRIBUTES`, floats), "depth_kind": "planar" | "radial", "windows"}``, plus
+    ``"view"`` for a multi-view file and ``"chromaticities"`` when the file declares them. Color is
+    required; depth and velocity are optional (``None`` when the file has no such pass).
     """
     p = Path(path)
+    if view is not None:
+        base = layout.layout if isinstance(layout, ReadSpec) else layout
+        layout = ReadSpec(base, view)
     return _frame_from_parts(p, _load(p), layout, depth, focal_px, velocity_y_up)
 
 
@@ -580,9 +702,34 @@ COMPRESSIONS = {
 """Lossless compressions offered for writing (lossy DWA/B44 are not: outputs are data)."""
 
 
+def _box2i(w: Window) -> tuple[np.ndarray, np.ndarray]:
+    return np.array(w[0], np.int32), np.array(w[1], np.int32)
+
+
+def _data_crop(frame: Frame, a: np.ndarray | None) -> np.ndarray | None:
+    """``a`` (one of the frame's arrays, or a plane of its size) cut to the frame's data window."""
+    win = frame.windows
+    if a is None or window_size(win.data) == frame.size:
+        return a
+    (dx0, dy0), (dx1, dy1) = win.data
+    ox, oy = win.origin
+    return np.ascontiguousarray(a[dy0 - oy:dy1 - oy + 1, dx0 - ox:dx1 - ox + 1])
+
+
+def _data_only(frame: Frame) -> Frame:
+    """The frame's data window alone (what an EXR stores), its arrays cropped to it."""
+    if window_size(frame.windows.data) == frame.size:
+        return frame
+    return frame.replace(color=_data_crop(frame, frame.color), depth=_data_crop(frame, frame.depth),
+                         velocity=_data_crop(frame, frame.velocity), alpha=_data_crop(frame, frame.alpha),
+                         validate=False)
+
+
 def _build_file(parts: list[tuple[str, dict[str, np.ndarray]]], attrs: dict[str, str],
-                compression: str = "zip") -> Any:
+                compression: str = "zip", windows: Windows | None = None) -> Any:
     base = {"compression": getattr(OpenEXR, COMPRESSIONS[compression][0]), "type": OpenEXR.scanlineimage}
+    if windows is not None:
+        base.update(dataWindow=_box2i(windows.data), displayWindow=_box2i(windows.display))
     if len(parts) == 1 and not parts[0][0]:
         return OpenEXR.File({**base, **attrs}, parts[0][1])
     # Blender tags its multilayer files so other tools recognise the layer.pass.channel naming.
@@ -606,9 +753,11 @@ def write_frame(path: str | os.PathLike, frame: Frame, header: dict[str, str] | 
     attributes (added to every part). ``half`` stores color/alpha/velocity as float16 (depth
     stays float32). ``compression`` is one of :data:`COMPRESSIONS` (lossless). For ``arnold``,
     ``focal_px`` writes Z as radial distance (what the reader assumes); without it Z is written
-    planar. ``extra``: further (H, W) channels by full name (e.g. ``coc.Y``, :mod:`clpost.aovs`),
-    float32, added to the first part. Any failure leaves an existing ``path`` untouched and no
-    temporary file behind.
+    planar. The frame's data and display windows (:attr:`Frame.windows`) are written as the file's:
+    the data window's pixels, placed where they were read. ``extra``: further (H, W) channels by
+    full name (e.g. ``coc.Y``, :mod:`clpost.aovs`), float32, the frame's size, added to the first
+    part (cut to the data window as the image is). Any failure leaves an existing ``path``
+    untouched and no temporary file behind.
     """
     p = Path(path)
     get_layout(p, layout)
@@ -616,13 +765,13 @@ def write_frame(path: str | os.PathLike, frame: Frame, header: dict[str, str] | 
         raise InputError(f"{p}: write_frame needs a clpost.frame.Frame, got {type(frame).__name__}")
     if compression not in COMPRESSIONS:
         raise InputError(f"{p}: compression {compression!r} is unknown; use one of {', '.join(COMPRESSIONS)}")
-    parts = _layout_parts(p, frame, layout, half, focal_px)
+    parts = _layout_parts(p, _data_only(frame), layout, half, focal_px)
     for name, plane in (extra or {}).items():
         if any(name in ch for _, ch in parts) or np.shape(plane) != (frame.height, frame.width):
             raise InputError(f"{p}: extra channel {name!r} clashes with a written channel or is not "
                              f"{frame.height}x{frame.width}; name it differently / give an (H, W) plane")
-        parts[0][1][name] = np.ascontiguousarray(plane, dtype=np.float32)
-    exr_file = _build_file(parts, _user_header(p, header), compression)
+        parts[0][1][name] = np.ascontiguousarray(_data_crop(frame, plane), dtype=np.float32)
+    exr_file = _build_file(parts, _user_header(p, header), compression, frame.windows)
     # Whatever goes wrong (including Ctrl-C), the old output stays and no temp file remains.
     with atomic_path(p) as tmp:
         try:

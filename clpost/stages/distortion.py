@@ -14,10 +14,23 @@ on the host in float64 and kept on the device; each frame costs one resampling p
 (Lambers, Sommerhoff & Kolb, "Realistic Lens Distortion Rendering", WSCG 2018, sec. 3).
 
 The render's intrinsics come from ``frame.metadata["intrinsics"]`` (the pyvista renderer records
-them) or, for EXRs, from the frame size: the calibration's own size means "rendered with the
-calibration's K", the size of :func:`clpost.calibration.required_render` means "rendered with
-that frustum" (use it: barrel distortion then leaves no unfilled pixel). Any other size is an
-error. The output has the calibration's size.
+them) or, for EXRs, from the size of the frame's **display window** (:attr:`clpost.Frame.windows`):
+the calibration's own size means "rendered with the calibration's K", the size of
+:func:`clpost.calibration.required_render` means "rendered with that frustum" (use it: barrel
+distortion then leaves no unfilled pixel). Any other size is an error. A data window beyond the
+display window is **overscan**: the same camera's pixels around the image (c shifted by the
+display window's offset in the arrays), which the map samples like any other — render with
+:func:`clpost.calibration.overscan_px` of them (``clpost render-size``) and no output pixel is
+unfilled. The output has the calibration's size; its data window is its display window.
+
+Fill (``Camera.fill``, ``--fill``) says what happens to output pixels the render does not cover:
+``overscan`` (default) samples the overscan and, where the render still falls short, leaves
+them black with alpha 0 and warns once (one line naming the overscan needed and the other
+modes: never a silent border); ``border`` does the same without the warning (a compositor's
+choice, as Nuke's LensDistortion leaves its bounding box); ``crop`` magnifies the distorted image
+about the principal point by the least factor s ≥ 1 that fills every output pixel
+(:func:`crop_scale`: the map of a model with focal lengths s·f, same c and coefficients — the
+field of view narrows by s, as scaling a plate up to hide the border does).
 
 Quality: ``draft``/``preview`` bilinear (4 taps); ``final`` cubic B-spline *interpolation*
 (Unser, "Splines: a perfect fit for signal and image processing", IEEE SPM 1999): the render's
@@ -50,9 +63,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..calibration import OpenCVModel, required_render, undistort
+from ..calibration import OpenCVModel, overscan_px, required_render, undistort
 from ..errors import InputError
-from ..params import boolean, param, parse_on_off
+from ..params import boolean, exact_g, one_of, param, parse_on_off
 from . import _field as fld
 from .base import GatherStage
 
@@ -86,6 +99,10 @@ def _parse_calibration(text):
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+FILLS = ("overscan", "crop", "border")
+"""``Camera.fill`` modes (see the module docstring)."""
+
+
 @dataclass(frozen=True)
 class DistortionParams:
     """distortion: a calibration's OpenCV model, or a traced lens's own curve."""
@@ -100,6 +117,11 @@ class DistortionParams:
         True, unit="on/off", flag="--lens-distortion", parse=parse_on_off, check=boolean, scalar=False,
         header="clpost.lensDistortion",
         help="a lens_data lens without --calibration distorts by its traced curve: on/off")
+    fill: str = param(
+        "overscan", unit="mode", flag="--fill", check=one_of(*FILLS), header="clpost.fill", scalar=False,
+        help="output pixels of the distorted image the render does not cover: overscan (sample the EXR data "
+             "window beyond the display window; black, alpha 0 and a warning where it falls short), crop "
+             "(magnify until every pixel is covered), border (black, alpha 0, no warning)")
 
 
 INVALID = -1.0e30
@@ -107,16 +129,69 @@ INVALID = -1.0e30
 
 
 def source_intrinsics(model: OpenCVModel, frame) -> tuple[float, float, float, float]:
-    """(f_x, f_y, c_x, c_y) of the pinhole render in ``frame`` (see the module docstring)."""
-    k = fld.render_intrinsics_px(model, frame.width, frame.height, fld.frame_intrinsics(frame))
+    """(f_x, f_y, c_x, c_y) of the pinhole render in ``frame``'s arrays (see the module docstring)."""
+    recorded = fld.frame_intrinsics(frame)
+    if recorded is not None:
+        return recorded
+    win = frame.windows
+    dw, dh = win.display_size
+    k = fld.render_intrinsics_px(model, dw, dh)
     if k is not None:
-        return k
+        ox, oy = win.display_offset
+        return k[0], k[1], k[2] + ox, k[3] + oy
     spec = required_render(model)
+    left, top, right, bottom = overscan_px(model)
     raise InputError(
-        f"distortion: the frame is {frame.width}x{frame.height} but the calibration{model._where()} is "
-        f"{model.width}x{model.height}; render at {model.width}x{model.height} (the calibration's K) or at "
-        f"{spec.width}x{spec.height} (f={spec.f:.6g}, c=({spec.cx:.6g}, {spec.cy:.6g}): no unfilled pixels), "
-        "or record the render's intrinsics in frame.metadata['intrinsics']")
+        f"distortion: the frame is {dw}x{dh} but the calibration{model._where()} is "
+        f"{model.width}x{model.height}; render at {model.width}x{model.height} (the calibration's K; with "
+        f"{left}/{top}/{right}/{bottom} px of overscan left/top/right/bottom as an EXR data window for no "
+        f"unfilled pixels) or at {spec.width}x{spec.height} (f={spec.f:.6g}, c=({spec.cx:.6g}, {spec.cy:.6g})): "
+        "clpost render-size says how, or record the render's intrinsics in frame.metadata['intrinsics']")
+
+
+def _covered(model: OpenCVModel, src_size: tuple[int, int], src_k: tuple[float, float, float, float],
+             scale: float) -> bool:
+    """Whether every output pixel of ``model`` magnified by ``scale`` has a preimage inside the
+    render: its border (4 samples a pixel) maps inside [−½, size − ½] (for the radial models the
+    border bounds the interior)."""
+    m = _scaled(model, scale)
+    w, h = m.width, m.height
+    t = np.linspace(-0.5, w - 0.5, 4 * w + 1)
+    r = np.linspace(-0.5, h - 0.5, 4 * h + 1)
+    u = np.concatenate([t, t, np.full_like(r, -0.5), np.full_like(r, w - 0.5)])
+    v = np.concatenate([np.full_like(t, -0.5), np.full_like(t, h - 0.5), r, r])
+    x, y, ok = undistort(m, u, v)
+    fx, fy, cx, cy = src_k
+    sx, sy = fx * x + cx, fy * y + cy
+    sw, sh = src_size
+    return bool(np.all(ok & (sx >= -0.5) & (sx <= sw - 0.5) & (sy >= -0.5) & (sy <= sh - 0.5)))
+
+
+def _scaled(model: OpenCVModel, scale: float) -> OpenCVModel:
+    if scale == 1.0:
+        return model
+    from dataclasses import replace
+
+    return replace(model, fx=model.fx * scale, fy=model.fy * scale)
+
+
+@lru_cache(maxsize=8)
+def crop_scale(model: OpenCVModel, src_size: tuple[int, int], src_k: tuple[float, float, float, float]) -> float:
+    """The least magnification s ≥ 1 (to 1e-6) about the principal point for which every output
+    pixel has a preimage in the render (``--fill crop``), by bisection on :func:`_covered`."""
+    if _covered(model, src_size, src_k, 1.0):
+        return 1.0
+    hi = 1.0
+    while not _covered(model, src_size, src_k, hi * 2.0):
+        hi *= 2.0
+        if hi > 64:
+            raise InputError(f"distortion: --fill crop: the render covers no centred part of the calibration"
+                             f"{model._where()}'s image; render with the overscan clpost render-size states")
+    lo, hi = hi, hi * 2.0
+    while hi - lo > 1e-6 * lo:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if _covered(model, src_size, src_k, mid) else (mid, hi)
+    return hi
 
 
 @lru_cache(maxsize=8)
@@ -382,32 +457,75 @@ class Distortion(GatherStage):
         """1: bilinear (draft, preview); 3: cubic B-spline interpolation (final)."""
         return 3 if self.quality == "final" else 1
 
-    def _model(self, camera) -> OpenCVModel | None:
+    def _calibration(self, camera) -> OpenCVModel | None:
         return getattr(camera, "distortion", None)
 
+    def _source_k(self, camera, frame) -> tuple[float, float, float, float]:
+        return source_intrinsics(self._calibration(camera), frame)
+
+    def _model(self, camera, frame) -> OpenCVModel:
+        """The model the map is made of: the calibration, magnified by :func:`crop_scale` under
+        ``--fill crop``."""
+        model = self._calibration(camera)
+        if getattr(camera, "fill", "overscan") != "crop":
+            return model
+        return _scaled(model, crop_scale(model, frame.size, self._source_k(camera, frame)))
+
     def skip_reason(self, camera, frame):
-        model = self._model(camera)
+        model = self._calibration(camera)
         if model is None:
             return "no distortion model (Camera.distortion / --calibration)"
-        k = source_intrinsics(model, frame)
+        k = self._source_k(camera, frame)
         if model.is_identity and frame.size == (model.width, model.height) and np.allclose(
                 k, (model.fx, model.fy, model.cx, model.cy), rtol=0, atol=1e-9):
             return "all distortion coefficients are 0 and the render already has the calibration's intrinsics"
         return None
 
     def reason_needed(self, camera, frame):
-        model = self._model(camera)
+        model = self._calibration(camera)
         m, ok = self._host_map(camera, frame)
         nz = ", ".join(f"{n}={getattr(model, n):.4g}" for n in model.coeff_names[:5] if getattr(model, n))
-        return (f"{'OpenCV fisheye' if model.is_fisheye else 'OpenCV'} model {nz or '(intrinsics only)'} → {model.width}x{model.height}, "
-                f"{'cubic B-spline' if self.filter_taps == 3 else 'bilinear'}; {int((~ok).sum())} pixel(s) without data (alpha 0)")
+        return (f"{'OpenCV fisheye' if model.is_fisheye else 'OpenCV'} model {nz or '(intrinsics only)'} → "
+                f"{model.width}x{model.height}, "
+                f"{'cubic B-spline' if self.filter_taps == 3 else 'bilinear'}; {self.coverage(camera, frame)}; "
+                f"{int((~ok).sum())} pixel(s) without data (alpha 0)")
+
+    def coverage(self, camera, frame) -> str:
+        """One line: the overscan the calibration needs, what the frame has, and the fill."""
+        model = self._calibration(camera)
+        need = overscan_px(model)
+        fill = getattr(camera, "fill", "overscan")
+        have = frame.windows.overscan
+        text = (f"needs {'/'.join(map(str, need))} px overscan (left/top/right/bottom) at the calibration's K, "
+                f"the frame has {'/'.join(map(str, have))}")
+        if fill == "crop":
+            text += f"; --fill crop magnifies x{crop_scale(model, frame.size, self._source_k(camera, frame)):.6g}"
+        else:
+            text += f"; --fill {fill}"
+        return text
 
     def _host_map(self, camera, frame):
-        model = self._model(camera)
-        return distortion_map(model, frame.size, source_intrinsics(model, frame))
+        return distortion_map(self._model(camera, frame), frame.size, self._source_k(camera, frame))
+
+    def _warn_unfilled(self, camera, frame) -> None:
+        """The one-line warning of ``--fill overscan`` when the render leaves pixels black."""
+        if getattr(camera, "fill", "overscan") != "overscan":
+            return
+        _, ok = self._host_map(camera, frame)
+        missing = int(ok.size - np.count_nonzero(ok))
+        if missing:
+            import warnings
+
+            model = self._calibration(camera)
+            left, top, right, bottom = overscan_px(model)
+            warnings.warn(
+                f"distortion: {missing} output pixel(s) have no data in the {frame.width}x{frame.height} render "
+                f"(black, alpha 0): render with {left}/{top}/{right}/{bottom} px of overscan (left/top/right/"
+                f"bottom; clpost render-size --calibration/--lens says how), or pass --fill crop (magnify to "
+                "fill) or --fill border (keep the border)", stacklevel=2)
 
     def output_size(self, camera, frame) -> tuple[int, int]:
-        model = self._model(camera)
+        model = self._calibration(camera)
         return model.width, model.height
 
     def defines(self, camera):
@@ -422,8 +540,8 @@ class Distortion(GatherStage):
 
         from ..runtime import kernel_source
 
-        model = self._model(camera)
-        kkey = source_intrinsics(model, frame)
+        model = self._model(camera, frame)
+        kkey = self._source_k(camera, frame)
         bspline = self.filter_taps == 3
         sw, sh = frame.size
         pw, ph = coef_pitch(sw), -(-(sh + 2 * PAD) // FIR_ROWS) * FIR_ROWS  # coefficient planes
@@ -434,6 +552,7 @@ class Distortion(GatherStage):
         key = (id(rt), model, frame.size, kkey, self.filter_taps)
         bufs = self._dev_maps.get(key)
         if bufs is None:
+            self._warn_unfilled(camera, frame)  # once per map (a sequence), not per frame
             if bspline:  # the tap table, the map, the two tile lists, then scratch for the coefficients
                 host = (*tap_table(model, frame.size, kkey),
                         np.ascontiguousarray(self._host_map(camera, frame)[0], dtype=np.float32),
@@ -497,14 +616,15 @@ class Distortion(GatherStage):
 
         if frame.alpha is not None:  # a coverage input is resampled bilinearly on the host
             return self.host_buffers(camera, frame), []
-        model = self._model(camera)
-        g = _map_geometry(model, frame.size, source_intrinsics(model, frame))
+        model = self._model(camera, frame)
+        kkey = self._source_k(camera, frame)
+        g = _map_geometry(model, frame.size, kkey)
         out: dict = {"alpha": g.alpha}
         if frame.depth is None and frame.velocity is None:
             return out, []
         h, w = g.alpha.shape
         n = w * h
-        key = ("distortion_aux", model, frame.size, source_intrinsics(model, frame))
+        key = ("distortion_aux", model, frame.size, kkey)
         flat = rt.constant(lambda: _aux_flat(g), key=key + ("flat",))
         jinv = rt.constant(lambda: np.ascontiguousarray(g.inv, np.float32), key=key + ("jinv",))
         q, events = rt.queue, []
@@ -530,15 +650,15 @@ class Distortion(GatherStage):
     def aux_bytes(self, camera, frame) -> int:
         """Bytes ``distortion_aux`` moves (``clpost bench``): per output pixel its index and
         inverse Jacobian, and depth and velocity read and written."""
-        model = self._model(camera)
+        model = self._calibration(camera)
         n = model.width * model.height
         return n * (4 + 16 + (8 if frame.depth is not None else 0) + (16 if frame.velocity is not None else 0))
 
     def host_buffers(self, camera, frame) -> dict:
         """alpha, depth and velocity of the distorted image (see the module docstring)."""
-        model = self._model(camera)
+        model = self._model(camera, frame)
         m, ok = self._host_map(camera, frame)
-        g = _map_geometry(model, frame.size, source_intrinsics(model, frame))
+        g = _map_geometry(model, frame.size, self._source_k(camera, frame))
         alpha = g.alpha
         if frame.alpha is not None:
             alpha = alpha * np.clip(resample(frame.alpha.astype(np.float64), m, 1), 0.0, 1.0).astype(np.float32)
