@@ -12,7 +12,11 @@
  * Final: cubic B-spline interpolation: the B-spline coefficients of the
  * source (`distortion_fir_rows` then `_cols`: the prefilter of Unser 1999 as a separable FIR,
  * |k| <= DISTORTION_FIR_K) and 16 taps with B-spline weights (`distortion_bspline_tiles` on the
- * tiles whose taps fit a tile-uniform window, `distortion_table` elsewhere), clamped below at 0 so HDR edges cannot ring to negative values. Why not
+ * tiles whose taps fit a tile-uniform window, `distortion_table` elsewhere), made HDR-safe by
+ * clamping to the least and largest of the position's 2x2 samples and handing over to bilinear
+ * where the local contrast is high (`distortion_dering` writes the edge-extended samples and the
+ * hand-over weight; formula and source: resample and hdr_weight in clpost/stages/distortion.py).
+ * Why not
  * Keys' cubic convolution (OpenCV's INTER_CUBIC): it is only first-order and moves an edge by up
  * to ~0.03 px depending on its sub-pixel phase, which cost 5-8 % in the recovered k2/p2 of the
  * checkerboard calibration; the B-spline is exact for cubics and keeps every parameter within 1 %
@@ -208,7 +212,8 @@ __kernel void distortion_fir_cols(__global const float *restrict tmp, __global f
  * of DISTORTION_TILE^2 per listed tile (x0, y0). */
 __kernel void distortion_table(__global const float *restrict src, __global float *restrict dst,
                                __global const int *restrict base, __global const float *restrict wts,
-                               __global const int *restrict tiles,
+                               __global const int *restrict tiles, __global const float *restrict psrc,
+                               __global const float *restrict hdr,
                                const int src_w, const int src_h, const int width, const int height)
 {
     const int2 t = vload2(get_global_id(2), tiles);
@@ -223,6 +228,10 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
         wx[k] = wts[k * n + i];
         wy[k] = wts[(4 + k) * n + i];
     }
+    /* the 2x2 cell: samples at window (1, 1) ... (2, 2) of the 4x4 taps */
+    const float tx = wts[8 * n + i], ty = wts[9 * n + i];
+    const int cell = b + src_w + 1;
+    const float th = mix(mix(hdr[cell], hdr[cell + 1], tx), mix(hdr[cell + src_w], hdr[cell + src_w + 1], tx), ty);
     for (int c = 0; c < 3; ++c) {
         const int plane = c * sn + b;
         float acc = 0.0f;
@@ -232,8 +241,12 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
                 row += wx[k] * src[plane + m * src_w + k];
             acc += wy[m] * row;
         }
-        acc = acc > 0.0f ? acc : 0.0f;
-        dst[c * n + i] = b0 < 0 ? 0.0f : acc;
+        const int q = c * sn + cell;
+        const float a = psrc[q], e = psrc[q + 1], d = psrc[q + src_w], f = psrc[q + src_w + 1];
+        const float lo = fmin(fmin(a, e), fmin(d, f)), hi = fmax(fmax(a, e), fmax(d, f));
+        const float lin = mix(mix(a, e, tx), mix(d, f, tx), ty);
+        const float v = mix(clamp(acc, lo, hi), lin, th);
+        dst[c * n + i] = b0 < 0 ? 0.0f : v;
     }
 }
 
@@ -258,6 +271,7 @@ inline float16 distortion_beta3(const float16 d)
  * (x0, y0, ox, oy); coef planes of pitch x ch_rows with DISTORTION_PAD pixels around the render. */
 __kernel void distortion_bspline_tiles(__global const float *restrict coef, __global float *restrict dst,
                                        __global const float *restrict map, __global const int *restrict tiles,
+                                       __global const float *restrict psrc, __global const float *restrict hdr,
                                        const int pitch, const int ch_rows, const int width, const int height)
 {
     const int row = get_global_id(0), tile = get_global_id(1);
@@ -276,7 +290,20 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
         wx[m] = distortion_beta3(fx + (float)(1 - m));
         wy[m] = distortion_beta3(fy + (float)(1 - m));
     }
+    /* bilinear weights of the 3x3 samples at (x + ox, y + oy): the lane's 2x2 cell is columns
+     * 0-1 (f < 1) or 1-2, one of the three weights is 0 (as distortion_tiles) */
+    const float16 bx0 = fmax(1.0f - fx, 0.0f), bx2 = fmax(fx - 1.0f, 0.0f), bx1 = 1.0f - bx0 - bx2;
+    const float16 by0 = fmax(1.0f - fy, 0.0f), by2 = fmax(fy - 1.0f, 0.0f), by1 = 1.0f - by0 - by2;
+    const int16 right = fx >= 1.0f, down = fy >= 1.0f;
     const size_t base = (size_t)(y + t.w - 1 + DISTORTION_PAD) * pitch + (size_t)(t.x + t.z - 1 + DISTORTION_PAD);
+    const size_t cell = base + pitch + 1;
+    float16 th = (float16)(0.0f);
+#pragma unroll
+    for (int r = 0; r < 3; ++r) {
+        __global const float *q = hdr + cell + (size_t)r * pitch;
+        th = mad(r == 0 ? by0 : (r == 1 ? by1 : by2),
+                 bx0 * vload16(0, q) + bx1 * vload16(0, q + 1) + bx2 * vload16(0, q + 2), th);
+    }
     for (int c = 0; c < 3; ++c) {
         __global const float *p = coef + c * sn + base;
         float16 acc = (float16)(0.0f);
@@ -288,7 +315,80 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
             for (int m = 1; m < 5; ++m) rowv = mad(wx[m], vload16(0, q + m), rowv);
             acc = mad(wy[r], rowv, acc);
         }
-        vstore16(select((float16)(0.0f), fmax(acc, 0.0f), ok), 0, dst + c * n + i);
+        /* the cell's samples: least, largest and bilinear */
+        float16 lo[3], hi[3], lin = (float16)(0.0f);
+#pragma unroll
+        for (int r = 0; r < 3; ++r) {
+            __global const float *q = psrc + c * sn + cell + (size_t)r * pitch;
+            const float16 v0 = vload16(0, q), v1 = vload16(0, q + 1), v2 = vload16(0, q + 2);
+            const float16 side = select(v0, v2, right);
+            lo[r] = fmin(v1, side);
+            hi[r] = fmax(v1, side);
+            lin = mad(r == 0 ? by0 : (r == 1 ? by1 : by2), bx0 * v0 + bx1 * v1 + bx2 * v2, lin);
+        }
+        const float16 cl = fmin(lo[1], select(lo[0], lo[2], down)), ch = fmax(hi[1], select(hi[0], hi[2], down));
+        const float16 v = mix(clamp(acc, cl, ch), lin, th);
+        vstore16(select((float16)(0.0f), v, ok), 0, dst + c * n + i);
+    }
+}
+
+/* HDR-safe final filter, preparation (clpost/stages/distortion.py: resample, hdr_weight): for every
+ * position of the coefficient planes (pitch x ch_rows, DISTORTION_PAD pixels around the render,
+ * so the gathers address samples as they address coefficients), psrc = the source sample at the
+ * clamped position (edge repeated) and hdr = the hand-over weight of that sample: over its 5x5
+ * neighbourhood (edge repeated) per channel, clamp((hi - R1 lo) / ((R2 - R1) lo), 0, 1) for lo > 0,
+ * 1 where lo <= 0 < hi - lo; the largest over the channels. One work-item: 16 positions of one
+ * row; vector loads with constant shuffles where the 20-wide window lies in the row, a scalar
+ * loop per lane at the edges (5 of ~80 work-items per row at 1080p). */
+#define DISTORTION_R1 32.0f
+#define DISTORTION_R2 128.0f
+inline float16 distortion_hdr_t(const float16 lo, const float16 hi)
+{
+    const float16 r = clamp((hi - DISTORTION_R1 * lo) / ((DISTORTION_R2 - DISTORTION_R1) * lo), 0.0f, 1.0f);
+    return select(select((float16)(0.0f), (float16)(1.0f), hi > lo), r, lo > 0.0f);
+}
+__kernel void distortion_dering(__global const float *restrict src, __global float *restrict psrc,
+                                __global float *restrict hdr, const int src_w, const int src_h,
+                                const int pitch, const int ch_rows)
+{
+    const int g = get_global_id(0), q = get_global_id(1);
+    const size_t sn = (size_t)pitch * ch_rows, o = (size_t)q * pitch + 16 * g;
+    const int sy = clamp(q - DISTORTION_PAD, 0, src_h - 1);
+    const int x0 = 16 * g - DISTORTION_PAD;  /* source column of lane 0 */
+    float16 w = (float16)(0.0f);
+    if (x0 - 2 >= 0 && x0 + 29 <= src_w - 1) {
+        for (int c = 0; c < 3; ++c) {
+            float16 lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
+            for (int dr = -2; dr <= 2; ++dr) {
+                __global const float *s = src + ((size_t)c * src_h + clamp(sy + dr, 0, src_h - 1)) * src_w + x0 - 2;
+                const float16 a = vload16(0, s), b = vload16(1, s);
+                const float16 v1 = DISTORTION_SHIFT(a, b, 1), v2 = DISTORTION_SHIFT(a, b, 2);
+                const float16 v3 = DISTORTION_SHIFT(a, b, 3), v4 = DISTORTION_SHIFT(a, b, 4);
+                lo = fmin(lo, fmin(fmin(a, v1), fmin(fmin(v2, v3), v4)));
+                hi = fmax(hi, fmax(fmax(a, v1), fmax(fmax(v2, v3), v4)));
+                if (dr == 0) vstore16(v2, 0, psrc + c * sn + o);
+            }
+            w = fmax(w, distortion_hdr_t(lo, hi));
+        }
+        vstore16(w, 0, hdr + o);
+        return;
+    }
+    for (int l = 0; l < 16; ++l) {
+        const int sx = clamp(x0 + l, 0, src_w - 1);
+        float wl = 0.0f;
+        for (int c = 0; c < 3; ++c) {
+            __global const float *s = src + (size_t)c * src_h * src_w;
+            float lo = INFINITY, hi = -INFINITY;
+            for (int dr = -2; dr <= 2; ++dr)
+                for (int dc = -2; dc <= 2; ++dc) {
+                    const float v = s[(size_t)clamp(sy + dr, 0, src_h - 1) * src_w + clamp(sx + dc, 0, src_w - 1)];
+                    lo = fmin(lo, v);
+                    hi = fmax(hi, v);
+                }
+            psrc[c * sn + o + l] = s[(size_t)sy * src_w + sx];
+            wl = fmax(wl, distortion_hdr_t((float16)(lo), (float16)(hi)).s0);
+        }
+        hdr[o + l] = wl;
     }
 }
 
