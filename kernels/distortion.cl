@@ -292,8 +292,8 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
     }
     /* bilinear weights of the 3x3 samples at (x + ox, y + oy): the lane's 2x2 cell is columns
      * 0-1 (f < 1) or 1-2, one of the three weights is 0 (as distortion_tiles) */
-    const float16 bx0 = fmax(1.0f - fx, 0.0f), bx2 = fmax(fx - 1.0f, 0.0f), bx1 = 1.0f - bx0 - bx2;
-    const float16 by0 = fmax(1.0f - fy, 0.0f), by2 = fmax(fy - 1.0f, 0.0f), by1 = 1.0f - by0 - by2;
+    const float16 bx0 = max(1.0f - fx, 0.0f), bx2 = max(fx - 1.0f, 0.0f), bx1 = 1.0f - bx0 - bx2;
+    const float16 by0 = max(1.0f - fy, 0.0f), by2 = max(fy - 1.0f, 0.0f), by1 = 1.0f - by0 - by2;
     const int16 right = fx >= 1.0f, down = fy >= 1.0f;
     const size_t base = (size_t)(y + t.w - 1 + DISTORTION_PAD) * pitch + (size_t)(t.x + t.z - 1 + DISTORTION_PAD);
     const size_t cell = base + pitch + 1;
@@ -322,11 +322,11 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
             __global const float *q = psrc + c * sn + cell + (size_t)r * pitch;
             const float16 v0 = vload16(0, q), v1 = vload16(0, q + 1), v2 = vload16(0, q + 2);
             const float16 side = select(v0, v2, right);
-            lo[r] = fmin(v1, side);
-            hi[r] = fmax(v1, side);
+            lo[r] = min(v1, side);
+            hi[r] = max(v1, side);
             lin = mad(r == 0 ? by0 : (r == 1 ? by1 : by2), bx0 * v0 + bx1 * v1 + bx2 * v2, lin);
         }
-        const float16 cl = fmin(lo[1], select(lo[0], lo[2], down)), ch = fmax(hi[1], select(hi[0], hi[2], down));
+        const float16 cl = min(lo[1], select(lo[0], lo[2], down)), ch = max(hi[1], select(hi[0], hi[2], down));
         const float16 v = mix(clamp(acc, cl, ch), lin, th);
         vstore16(select((float16)(0.0f), v, ok), 0, dst + c * n + i);
     }
@@ -335,11 +335,11 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
 /* HDR-safe final filter, preparation (clpost/stages/distortion.py: resample, hdr_weight): for every
  * position of the coefficient planes (pitch x ch_rows, DISTORTION_PAD pixels around the render,
  * so the gathers address samples as they address coefficients), psrc = the source sample at the
- * clamped position (edge repeated) and hdr = the hand-over weight of that sample: over its 5x5
- * neighbourhood (edge repeated) per channel, clamp((hi - R1 lo) / ((R2 - R1) lo), 0, 1) for lo > 0,
- * 1 where lo <= 0 < hi - lo; the largest over the channels. One work-item: 16 positions of one
- * row; vector loads with constant shuffles where the 20-wide window lies in the row, a scalar
- * loop per lane at the edges (5 of ~80 work-items per row at 1080p). */
+ * clamped position and hdr = the hand-over weight there: over the 5x5 neighbourhood of the
+ * edge-extended source per channel, clamp((hi - R1 lo) / ((R2 - R1) lo), 0, 1) for lo > 0, 1 where
+ * lo <= 0 < hi - lo; the largest over the channels. One work-item: 16 positions of one row, the
+ * 5-wide row min/max by constant shuffles of a 32-wide window (vector loads, or a private copy
+ * with clamped indices at the row's ends). */
 #define DISTORTION_R1 32.0f
 #define DISTORTION_R2 128.0f
 inline float16 distortion_hdr_t(const float16 lo, const float16 hi)
@@ -353,43 +353,33 @@ __kernel void distortion_dering(__global const float *restrict src, __global flo
 {
     const int g = get_global_id(0), q = get_global_id(1);
     const size_t sn = (size_t)pitch * ch_rows, o = (size_t)q * pitch + 16 * g;
-    const int sy = clamp(q - DISTORTION_PAD, 0, src_h - 1);
+    const int sy = q - DISTORTION_PAD;       /* source row of this row (before the edge repeat) */
     const int x0 = 16 * g - DISTORTION_PAD;  /* source column of lane 0 */
+    const int inside = x0 - 2 >= 0 && x0 + 29 <= src_w - 1;
     float16 w = (float16)(0.0f);
-    if (x0 - 2 >= 0 && x0 + 29 <= src_w - 1) {
-        for (int c = 0; c < 3; ++c) {
-            float16 lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
-            for (int dr = -2; dr <= 2; ++dr) {
-                __global const float *s = src + ((size_t)c * src_h + clamp(sy + dr, 0, src_h - 1)) * src_w + x0 - 2;
-                const float16 a = vload16(0, s), b = vload16(1, s);
-                const float16 v1 = DISTORTION_SHIFT(a, b, 1), v2 = DISTORTION_SHIFT(a, b, 2);
-                const float16 v3 = DISTORTION_SHIFT(a, b, 3), v4 = DISTORTION_SHIFT(a, b, 4);
-                lo = fmin(lo, fmin(fmin(a, v1), fmin(fmin(v2, v3), v4)));
-                hi = fmax(hi, fmax(fmax(a, v1), fmax(fmax(v2, v3), v4)));
-                if (dr == 0) vstore16(v2, 0, psrc + c * sn + o);
+    for (int c = 0; c < 3; ++c) {
+        float16 lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
+        for (int dr = -2; dr <= 2; ++dr) {
+            __global const float *s = src + ((size_t)c * src_h + clamp(sy + dr, 0, src_h - 1)) * src_w;
+            float16 a, b;
+            if (inside) {
+                a = vload16(0, s + x0 - 2);
+                b = vload16(1, s + x0 - 2);
+            } else {  /* the row's edge repeated: a private copy (as distortion_fir_rows) */
+                float win[32];
+                for (int k = 0; k < 32; ++k) win[k] = s[clamp(x0 - 2 + k, 0, src_w - 1)];
+                a = vload16(0, win);
+                b = vload16(1, win);
             }
-            w = fmax(w, distortion_hdr_t(lo, hi));
+            const float16 v1 = DISTORTION_SHIFT(a, b, 1), v2 = DISTORTION_SHIFT(a, b, 2);
+            const float16 v3 = DISTORTION_SHIFT(a, b, 3), v4 = DISTORTION_SHIFT(a, b, 4);
+            lo = min(lo, min(min(a, v1), min(min(v2, v3), v4)));
+            hi = max(hi, max(max(a, v1), max(max(v2, v3), v4)));
+            if (dr == 0) vstore16(v2, 0, psrc + c * sn + o);
         }
-        vstore16(w, 0, hdr + o);
-        return;
+        w = max(w, distortion_hdr_t(lo, hi));
     }
-    for (int l = 0; l < 16; ++l) {
-        const int sx = clamp(x0 + l, 0, src_w - 1);
-        float wl = 0.0f;
-        for (int c = 0; c < 3; ++c) {
-            __global const float *s = src + (size_t)c * src_h * src_w;
-            float lo = INFINITY, hi = -INFINITY;
-            for (int dr = -2; dr <= 2; ++dr)
-                for (int dc = -2; dc <= 2; ++dc) {
-                    const float v = s[(size_t)clamp(sy + dr, 0, src_h - 1) * src_w + clamp(sx + dc, 0, src_w - 1)];
-                    lo = fmin(lo, v);
-                    hi = fmax(hi, v);
-                }
-            psrc[c * sn + o + l] = s[(size_t)sy * src_w + sx];
-            wl = fmax(wl, distortion_hdr_t((float16)(lo), (float16)(hi)).s0);
-        }
-        hdr[o + l] = wl;
-    }
+    vstore16(w, 0, hdr + o);
 }
 
 /* The distorted image's depth and velocity (the colour kernels' companions, so the host does no

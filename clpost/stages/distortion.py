@@ -369,8 +369,8 @@ def resample(plane: np.ndarray, m: np.ndarray, filt: int, hdr: np.ndarray | None
         v = (1 - t)\,\operatorname{clamp}(s, lo, hi) + t\,b
 
     with lo, hi the least and largest of the 2 × 2 samples around the position, b their bilinear
-    interpolation and t the bilinear interpolation of :func:`hdr_weight` (``hdr``: of the whole
-    colour image; by default of ``plane`` alone). The clamp is the anti-ringing clamp of
+    interpolation and t the bilinear interpolation of :func:`hdr_weight` of the source extended by
+    its edge (``hdr``: of the whole colour image padded by 1 pixel; by default of ``plane`` alone). The clamp is the anti-ringing clamp of
     libplacebo's ``antiring`` (and of the neighbourhood clamp in temporal AA, Karis, "High Quality
     Temporal Supersampling", SIGGRAPH 2014 course): no output below the least or above the largest
     sample of its cell, so no dark ring or negative value around a highlight. The clamp alone
@@ -384,9 +384,9 @@ def resample(plane: np.ndarray, m: np.ndarray, filt: int, hdr: np.ndarray | None
     tx, ty = sx - x0, sy - y0
     x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
 
-    def bilinear(p):
-        a, b = _taps(p, x0, y0), _taps(p, x0 + 1, y0)
-        d, e = _taps(p, x0, y0 + 1), _taps(p, x0 + 1, y0 + 1)
+    def bilinear(p, o=0):  # o: the padding of p
+        a, b = _taps(p, x0 + o, y0 + o), _taps(p, x0 + 1 + o, y0 + o)
+        d, e = _taps(p, x0 + o, y0 + 1 + o), _taps(p, x0 + 1 + o, y0 + 1 + o)
         return (a * (1 - tx) + b * tx) * (1 - ty) + (d * (1 - tx) + e * tx) * ty, (a, b, d, e)
 
     lin, cell = bilinear(plane)
@@ -397,7 +397,9 @@ def resample(plane: np.ndarray, m: np.ndarray, filt: int, hdr: np.ndarray | None
 
         s = map_coordinates(plane, [sy, sx], order=3, mode="nearest")
         lo, hi = np.minimum.reduce(cell), np.maximum.reduce(cell)
-        t = bilinear(hdr_weight(plane) if hdr is None else hdr)[0]
+        # the weight of the edge-extended source (1 pixel around it: cell corners lie in [-1, size])
+        hdr = hdr_weight(np.pad(plane, 1, mode="edge")) if hdr is None else hdr
+        t = bilinear(hdr, 1)[0]
         v = (1.0 - t) * np.clip(s, lo, hi) + t * lin
     return np.where(ok, v, 0.0)
 
@@ -545,7 +547,7 @@ class Distortion(GatherStage):
     def reference(self, camera, frame, color):
         m, _ = self._host_map(camera, frame)
         m = m.astype(np.float32).astype(np.float64)  # the device's map, to compare filters alone
-        hdr = hdr_weight(color[..., :3]) if self.filter_taps == 3 else None
+        hdr = hdr_weight(np.pad(color[..., :3], ((1, 1), (1, 1), (0, 0)), mode="edge")) if self.filter_taps == 3 else None
         return np.stack([resample(np.asarray(color[..., c], np.float64), m, self.filter_taps, hdr)
                          for c in range(3)], -1)
 
