@@ -14,8 +14,8 @@
  * |k| <= DISTORTION_FIR_K) and 16 taps with B-spline weights (`distortion_bspline_tiles` on the
  * tiles whose taps fit a tile-uniform window, `distortion_table` elsewhere), made HDR-safe by
  * clamping to the least and largest of the position's 2x2 samples and handing over to bilinear
- * where the local contrast is high (`distortion_dering` writes the edge-extended samples and the
- * hand-over weight; formula and source: resample and hdr_weight in clpost/stages/distortion.py).
+ * where the local contrast is high (`distortion_dering` writes the hand-over weight; formula and
+ * source: resample and hdr_weight in clpost/stages/distortion.py).
  * Why not
  * Keys' cubic convolution (OpenCV's INTER_CUBIC): it is only first-order and moves an edge by up
  * to ~0.03 px depending on its sub-pixel phase, which cost 5-8 % in the recovered k2/p2 of the
@@ -212,8 +212,7 @@ __kernel void distortion_fir_cols(__global const float *restrict tmp, __global f
  * of DISTORTION_TILE^2 per listed tile (x0, y0). */
 __kernel void distortion_table(__global const float *restrict src, __global float *restrict dst,
                                __global const int *restrict base, __global const float *restrict wts,
-                               __global const int *restrict tiles, __global const float *restrict psrc,
-                               __global const float *restrict hdr,
+                               __global const int *restrict tiles, __global const float *restrict hdr,
                                const int src_w, const int src_h, const int width, const int height)
 {
     const int2 t = vload2(get_global_id(2), tiles);
@@ -228,22 +227,27 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
         wx[k] = wts[k * n + i];
         wy[k] = wts[(4 + k) * n + i];
     }
-    /* the 2x2 cell: samples at window (1, 1) ... (2, 2) of the 4x4 taps */
+    /* the 2x2 cell: samples at window (1, 1) ... (2, 2) of the 4x4 taps, from the coefficients
+     * (36 f = (1 4 1) (x) (1 4 1) c, the B-spline at the knots) */
     const float tx = wts[8 * n + i], ty = wts[9 * n + i];
     const int cell = b + src_w + 1;
     const float th = mix(mix(hdr[cell], hdr[cell + 1], tx), mix(hdr[cell + src_w], hdr[cell + src_w + 1], tx), ty);
     for (int c = 0; c < 3; ++c) {
         const int plane = c * sn + b;
-        float acc = 0.0f;
+        float acc = 0.0f, h1[4], h2[4];
         for (int m = 0; m < 4; ++m) {
-            float row = 0.0f;
-            for (int k = 0; k < 4; ++k)
-                row += wx[k] * src[plane + m * src_w + k];
+            float row = 0.0f, cm[4];
+            for (int k = 0; k < 4; ++k) {
+                cm[k] = src[plane + m * src_w + k];
+                row += wx[k] * cm[k];
+            }
             acc += wy[m] * row;
+            h1[m] = cm[0] + 4.0f * cm[1] + cm[2];
+            h2[m] = cm[1] + 4.0f * cm[2] + cm[3];
         }
-        const int q = c * sn + cell;
-        const float a = psrc[q], e = psrc[q + 1], d = psrc[q + src_w], f = psrc[q + src_w + 1];
-        const float lo = fmin(fmin(a, e), fmin(d, f)), hi = fmax(fmax(a, e), fmax(d, f));
+        const float a = (h1[0] + 4.0f * h1[1] + h1[2]) * (1.0f / 36.0f), e = (h2[0] + 4.0f * h2[1] + h2[2]) * (1.0f / 36.0f);
+        const float d = (h1[1] + 4.0f * h1[2] + h1[3]) * (1.0f / 36.0f), f = (h2[1] + 4.0f * h2[2] + h2[3]) * (1.0f / 36.0f);
+        const float lo = min(min(a, e), min(d, f)), hi = max(max(a, e), max(d, f));
         const float lin = mix(mix(a, e, tx), mix(d, f, tx), ty);
         const float v = mix(clamp(acc, lo, hi), lin, th);
         dst[c * n + i] = b0 < 0 ? 0.0f : v;
@@ -271,7 +275,7 @@ inline float16 distortion_beta3(const float16 d)
  * (x0, y0, ox, oy); coef planes of pitch x ch_rows with DISTORTION_PAD pixels around the render. */
 __kernel void distortion_bspline_tiles(__global const float *restrict coef, __global float *restrict dst,
                                        __global const float *restrict map, __global const int *restrict tiles,
-                                       __global const float *restrict psrc, __global const float *restrict hdr,
+                                       __global const float *restrict hdr,
                                        const int pitch, const int ch_rows, const int width, const int height)
 {
     const int row = get_global_id(0), tile = get_global_id(1);
@@ -307,20 +311,31 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
     for (int c = 0; c < 3; ++c) {
         __global const float *p = coef + c * sn + base;
         float16 acc = (float16)(0.0f);
+        /* the samples at window columns 1-3 of every row, 6 f = c[m-1] + 4 c[m] + c[m+1] (the
+         * B-spline at the knots), so the cell's samples cost no loads */
+        float16 h1[5], h2[5], h3[5];
 #pragma unroll
         for (int r = 0; r < 5; ++r) {
             __global const float *q = p + (size_t)r * pitch;
-            float16 rowv = wx[0] * vload16(0, q);
-#pragma unroll
-            for (int m = 1; m < 5; ++m) rowv = mad(wx[m], vload16(0, q + m), rowv);
+            const float16 c0 = vload16(0, q), c1 = vload16(0, q + 1), c2 = vload16(0, q + 2);
+            const float16 c3 = vload16(0, q + 3), c4 = vload16(0, q + 4);
+            float16 rowv = wx[0] * c0;
+            rowv = mad(wx[1], c1, rowv);
+            rowv = mad(wx[2], c2, rowv);
+            rowv = mad(wx[3], c3, rowv);
+            rowv = mad(wx[4], c4, rowv);
             acc = mad(wy[r], rowv, acc);
+            h1[r] = mad(4.0f, c1, c0 + c2);
+            h2[r] = mad(4.0f, c2, c1 + c3);
+            h3[r] = mad(4.0f, c3, c2 + c4);
         }
         /* the cell's samples: least, largest and bilinear */
         float16 lo[3], hi[3], lin = (float16)(0.0f);
 #pragma unroll
         for (int r = 0; r < 3; ++r) {
-            __global const float *q = psrc + c * sn + cell + (size_t)r * pitch;
-            const float16 v0 = vload16(0, q), v1 = vload16(0, q + 1), v2 = vload16(0, q + 2);
+            const float16 v0 = mad(4.0f, h1[r + 1], h1[r] + h1[r + 2]) * (1.0f / 36.0f);
+            const float16 v1 = mad(4.0f, h2[r + 1], h2[r] + h2[r + 2]) * (1.0f / 36.0f);
+            const float16 v2 = mad(4.0f, h3[r + 1], h3[r] + h3[r + 2]) * (1.0f / 36.0f);
             const float16 side = select(v0, v2, right);
             lo[r] = min(v1, side);
             hi[r] = max(v1, side);
@@ -334,52 +349,59 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
 
 /* HDR-safe final filter, preparation (clpost/stages/distortion.py: resample, hdr_weight): for every
  * position of the coefficient planes (pitch x ch_rows, DISTORTION_PAD pixels around the render,
- * so the gathers address samples as they address coefficients), psrc = the source sample at the
- * clamped position and hdr = the hand-over weight there: over the 5x5 neighbourhood of the
- * edge-extended source per channel, clamp((hi - R1 lo) / ((R2 - R1) lo), 0, 1) for lo > 0, 1 where
- * lo <= 0 < hi - lo; the largest over the channels. One work-item: 16 positions of one row, the
- * 5-wide row min/max by constant shuffles of a 32-wide window (vector loads, or a private copy
- * with clamped indices at the row's ends). */
+ * so the gathers address it as they address coefficients), hdr = the hand-over weight there: over
+ * the 5x5 neighbourhood of the edge-extended source's channel sum R + G + B, with its least lo and
+ * largest hi, clamp((hi - R1 lo) / ((R2 - R1) lo), 0, 1) for lo > 0, 1 where lo <= 0 < hi - lo
+ * (one plane for all channels: a third of the work of a per-channel weight). One work-item: 16
+ * positions of one row, the 5-wide row min/max by constant shuffles of a 32-wide window (vector
+ * loads, or a private copy with clamped indices at the row's ends). The gathers take the 2x2
+ * cell's samples from the coefficients they load anyway (36 f = (1 4 1) (x) (1 4 1) c): no loads. */
 #define DISTORTION_R1 32.0f
 #define DISTORTION_R2 128.0f
 inline float16 distortion_hdr_t(const float16 lo, const float16 hi)
 {
-    const float16 r = clamp((hi - DISTORTION_R1 * lo) / ((DISTORTION_R2 - DISTORTION_R1) * lo), 0.0f, 1.0f);
+    /* native_divide: PoCL's correctly rounded float16 division is not vectorised (half the
+     * kernel's time); a weight needs no last ulp */
+    const float16 r = clamp(native_divide(hi - DISTORTION_R1 * lo, (DISTORTION_R2 - DISTORTION_R1) * lo), 0.0f, 1.0f);
     return select(select((float16)(0.0f), (float16)(1.0f), hi > lo), r, lo > 0.0f);
 }
-__kernel void distortion_dering(__global const float *restrict src, __global float *restrict psrc,
-                                __global float *restrict hdr, const int src_w, const int src_h,
+/* lo, hi (float16) take the least and largest of the 5 values at lanes l ... l + 4 of a:b */
+#define DISTORTION_MINMAX5(a, b, lo, hi) do { \
+        const float16 v1 = DISTORTION_SHIFT(a, b, 1), v2 = DISTORTION_SHIFT(a, b, 2); \
+        const float16 v3 = DISTORTION_SHIFT(a, b, 3), v4 = DISTORTION_SHIFT(a, b, 4); \
+        lo = min(lo, min(min(a, v1), min(min(v2, v3), v4))); \
+        hi = max(hi, max(max(a, v1), max(max(v2, v3), v4))); \
+    } while (0)
+__kernel void distortion_dering(__global const float *restrict src, __global float *restrict hdr,
+                                const int src_w, const int src_h,
                                 const int pitch, const int ch_rows)
 {
     const int g = get_global_id(0), q = get_global_id(1);
-    const size_t sn = (size_t)pitch * ch_rows, o = (size_t)q * pitch + 16 * g;
+    const size_t o = (size_t)q * pitch + 16 * g, sn = (size_t)src_w * src_h;
     const int sy = q - DISTORTION_PAD;       /* source row of this row (before the edge repeat) */
     const int x0 = 16 * g - DISTORTION_PAD;  /* source column of lane 0 */
     const int inside = x0 - 2 >= 0 && x0 + 29 <= src_w - 1;
-    float16 w = (float16)(0.0f);
-    for (int c = 0; c < 3; ++c) {
-        float16 lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
+    float16 lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
+    if (inside) {  /* the loops twice, so the branch is not taken per row */
         for (int dr = -2; dr <= 2; ++dr) {
-            __global const float *s = src + ((size_t)c * src_h + clamp(sy + dr, 0, src_h - 1)) * src_w;
-            float16 a, b;
-            if (inside) {
-                a = vload16(0, s + x0 - 2);
-                b = vload16(1, s + x0 - 2);
-            } else {  /* the row's edge repeated: a private copy (as distortion_fir_rows) */
-                float win[32];
-                for (int k = 0; k < 32; ++k) win[k] = s[clamp(x0 - 2 + k, 0, src_w - 1)];
-                a = vload16(0, win);
-                b = vload16(1, win);
-            }
-            const float16 v1 = DISTORTION_SHIFT(a, b, 1), v2 = DISTORTION_SHIFT(a, b, 2);
-            const float16 v3 = DISTORTION_SHIFT(a, b, 3), v4 = DISTORTION_SHIFT(a, b, 4);
-            lo = min(lo, min(min(a, v1), min(min(v2, v3), v4)));
-            hi = max(hi, max(max(a, v1), max(max(v2, v3), v4)));
-            if (dr == 0) vstore16(v2, 0, psrc + c * sn + o);
+            __global const float *s = src + (size_t)clamp(sy + dr, 0, src_h - 1) * src_w + x0 - 2;
+            const float16 a = vload16(0, s) + vload16(0, s + sn) + vload16(0, s + 2 * sn);
+            const float16 b = vload16(1, s) + vload16(1, s + sn) + vload16(1, s + 2 * sn);
+            DISTORTION_MINMAX5(a, b, lo, hi);
         }
-        w = max(w, distortion_hdr_t(lo, hi));
+    } else {  /* the row's edge repeated: a private copy (as distortion_fir_rows) */
+        for (int dr = -2; dr <= 2; ++dr) {
+            __global const float *s = src + (size_t)clamp(sy + dr, 0, src_h - 1) * src_w;
+            float win[32];
+            for (int k = 0; k < 32; ++k) {
+                const int x = clamp(x0 - 2 + k, 0, src_w - 1);
+                win[k] = s[x] + s[sn + x] + s[2 * sn + x];
+            }
+            const float16 a = vload16(0, win), b = vload16(1, win);
+            DISTORTION_MINMAX5(a, b, lo, hi);
+        }
     }
-    vstore16(w, 0, hdr + o);
+    vstore16(distortion_hdr_t(lo, hi), 0, hdr + o);
 }
 
 /* The distorted image's depth and velocity (the colour kernels' companions, so the host does no

@@ -330,32 +330,28 @@ emitters (250–1000 × diffuse white in the demo) are far beyond R_2."""
 
 
 def hdr_weight(color: np.ndarray) -> np.ndarray:
-    r"""Per source pixel, how much of the final filter is bilinear (float64 (h, w) in [0, 1]):
-    over the 5 × 5 neighbourhood (edge repeated) of each channel c, with its minimum lo_c and
-    maximum hi_c,
+    r"""Per source pixel, how much of the final filter is bilinear (float64 (h, w) in [0, 1]): over
+    the 5 × 5 neighbourhood (edge repeated) of the channel sum :math:`S = R + G + B` (of the
+    one plane given), with its least value lo and largest hi,
 
     .. math::
 
-        w = \max_c \operatorname{clamp}\Big(\frac{hi_c - R_1\,lo_c}{(R_2 - R_1)\,lo_c}, 0, 1\Big)
-        \quad (lo_c > 0), \qquad 1 \text{ where } lo_c \le 0 < hi_c - lo_c
+        w = \operatorname{clamp}\Big(\frac{hi - R_1\,lo}{(R_2 - R_1)\,lo}, 0, 1\Big)
+        \quad (lo > 0), \qquad 1 \text{ where } lo \le 0 < hi - lo, \ 0 \text{ where } hi = lo \le 0
 
     (:data:`DERING_RATIO`). 5 × 5: the bilinear interpolation of w over an output pixel's 2 × 2
-    cell reaches 1 wherever a high-contrast sample lies inside the 4 × 4 support of the B-spline."""
+    cell reaches 1 wherever a high-contrast sample lies inside the 4 × 4 support of the B-spline.
+    One weight for all channels (a per-channel weight costs three times the work; the clamp of
+    :func:`resample` is per channel either way)."""
     from scipy.ndimage import maximum_filter, minimum_filter
 
     r1, r2 = DERING_RATIO
     color = np.asarray(color, np.float64)
-    if color.ndim == 2:
-        color = color[..., None]
-    w = np.zeros(color.shape[:2])
-    for c in range(color.shape[2]):
-        lo = minimum_filter(color[..., c], 5, mode="nearest")
-        hi = maximum_filter(color[..., c], 5, mode="nearest")
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(lo > 0, np.clip((hi - r1 * lo) / ((r2 - r1) * lo), 0.0, 1.0),
-                         (hi > lo).astype(np.float64))
-        w = np.maximum(w, t)
-    return w
+    total = color.sum(axis=-1) if color.ndim == 3 else color
+    lo = minimum_filter(total, 5, mode="nearest")
+    hi = maximum_filter(total, 5, mode="nearest")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(lo > 0, np.clip((hi - r1 * lo) / ((r2 - r1) * lo), 0.0, 1.0), (hi > lo).astype(np.float64))
 
 
 def resample(plane: np.ndarray, m: np.ndarray, filt: int, hdr: np.ndarray | None = None) -> np.ndarray:
@@ -504,8 +500,8 @@ class Distortion(GatherStage):
             bufs = tuple(rt.empty(a.shape, a.dtype) for a in host)
             for b, a in zip(bufs, host):
                 cl.enqueue_copy(rt.queue, b, np.ascontiguousarray(a))
-            if bspline:  # coefficients, the row pass's planes, the padded samples, the hand-over weight
-                bufs += (rt.empty((3, ph, pw)), rt.empty((3, th, pw)), rt.empty((3, ph, pw)), rt.empty((ph, pw)))
+            if bspline:  # coefficients, the row pass's planes, the hand-over weight
+                bufs += (rt.empty((3, ph, pw)), rt.empty((3, th, pw)), rt.empty((ph, pw)))
             self._dev_maps = {key: bufs}  # one camera and size at a time: the map is static
         source = kernel_source("common") + kernel_source("distortion")
 
@@ -524,23 +520,23 @@ class Distortion(GatherStage):
                     kern.set_args(src, dst, bufs[0], buf, np.int32(sw), np.int32(sh), *out)
                     events.append(cl.enqueue_nd_range_kernel(q, kern, gsize, None))
             return events
-        base, wts, fmap, tiles_b, rest_b, coef, tmp, psrc, hdr = bufs
+        base, wts, fmap, tiles_b, rest_b, coef, tmp, hdr = bufs
         tiles, rest = bspline_tiles(model, frame.size, kkey)
         rows, cols = kernel("distortion_fir_rows"), kernel("distortion_fir_cols")
         dering = kernel("distortion_dering")
         rows.set_args(src, tmp, np.int32(sw), np.int32(sh), np.int32(pw), np.int32(th))
         cols.set_args(tmp, coef, np.int32(pw), np.int32(th), np.int32(ph))
-        dering.set_args(src, psrc, hdr, np.int32(sw), np.int32(sh), np.int32(pw), np.int32(ph))
+        dering.set_args(src, hdr, np.int32(sw), np.int32(sh), np.int32(pw), np.int32(ph))
         events = [cl.enqueue_nd_range_kernel(q, rows, (pw // 16, th, 3), None),
                   cl.enqueue_nd_range_kernel(q, cols, (pw // 16, ph // FIR_ROWS, 3), None),
                   cl.enqueue_nd_range_kernel(q, dering, (pw // 16, ph), None)]
         if len(tiles):
             kern = kernel("distortion_bspline_tiles")
-            kern.set_args(coef, dst, fmap, tiles_b, psrc, hdr, np.int32(pw), np.int32(ph), *out)
+            kern.set_args(coef, dst, fmap, tiles_b, hdr, np.int32(pw), np.int32(ph), *out)
             events.append(cl.enqueue_nd_range_kernel(q, kern, (TILE, len(tiles)), None))
         if len(rest):
             kern = kernel("distortion_table")
-            kern.set_args(coef, dst, base, wts, rest_b, psrc, hdr, np.int32(pw), np.int32(ph), *out)
+            kern.set_args(coef, dst, base, wts, rest_b, hdr, np.int32(pw), np.int32(ph), *out)
             events.append(cl.enqueue_nd_range_kernel(q, kern, (TILE, TILE, len(rest)), None))
         return events
 
