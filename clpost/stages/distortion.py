@@ -24,15 +24,18 @@ Quality: ``draft``/``preview`` bilinear (4 taps); ``final`` cubic B-spline *inte
 B-spline coefficients (the prefilter as a separable FIR along rows, then columns, :func:`fir_taps`,
 stored with :data:`PAD` edge pixels around the render) sampled by 16 taps with B-spline weights —
 computed per lane on the tiles whose taps fit a tile-uniform 5 × 5 window (:func:`bspline_tiles`,
-vector loads), from a per-pixel table built with the map elsewhere (:func:`tap_table`) — clamped
-below at 0 (no negative HDR values). It passes
+vector loads), from a per-pixel table built with the map elsewhere (:func:`tap_table`) — made
+HDR-safe by :func:`resample`'s clamp to the 2 × 2 samples around the position and hand-over to
+bilinear where the local contrast exceeds 32 : 1 (:func:`hdr_weight`, pass ``distortion_dering``):
+no ring below the background around highlights, their energy kept. It passes
 through the samples and reproduces cubics exactly, so an edge stays where it is whatever its
 sub-pixel phase. Keys' cubic convolution (OpenCV's ``INTER_CUBIC``) is only first-order — a ramp is
 off by up to 0.048 × its slope — and moves checkerboard corners
 by ≈ 0.025 px in a way correlated over the image: k2 4.7–8 % and p2 6.7 % off in the
 calibration check, against < 1 % for every parameter with the B-spline
 (tools/distortion_calibration.py, docs/distortion_calibration.md). The reference is scipy's
-``map_coordinates(order=3, mode="nearest")``, an independent implementation of the same filter.
+``map_coordinates(order=3, mode="nearest")``, an independent implementation of the same filter,
+with the clamp and hand-over in numpy.
 
 Alpha: output pixels with no preimage inside the render — outside its frustum, beyond the model's
 fold radius (clamped, see :mod:`clpost.calibration`), or where Newton did not converge — get
