@@ -353,8 +353,8 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
  * the 5x5 neighbourhood of the edge-extended source's channel sum R + G + B, with its least lo and
  * largest hi, clamp((hi - R1 lo) / ((R2 - R1) lo), 0, 1) for lo > 0, 1 where lo <= 0 < hi - lo
  * (one plane for all channels: a third of the work of a per-channel weight). One work-item: 16
- * positions of one row, the 5-wide row min/max by constant shuffles of a 32-wide window (vector
- * loads, or a private copy with clamped indices at the row's ends). The gathers take the 2x2
+ * positions of DISTORTION_FIR_ROWS rows, the 5-wide row min/max by constant shuffles of a 32-wide
+ * window (vector loads, or a private copy with clamped indices at the row's ends). The gathers take the 2x2
  * cell's samples from the coefficients they load anyway (36 f = (1 4 1) (x) (1 4 1) c): no loads. */
 #define DISTORTION_R1 32.0f
 #define DISTORTION_R2 128.0f
@@ -376,32 +376,42 @@ __kernel void distortion_dering(__global const float *restrict src, __global flo
                                 const int src_w, const int src_h,
                                 const int pitch, const int ch_rows)
 {
-    const int g = get_global_id(0), q = get_global_id(1);
-    const size_t o = (size_t)q * pitch + 16 * g, sn = (size_t)src_w * src_h;
-    const int sy = q - DISTORTION_PAD;       /* source row of this row (before the edge repeat) */
+    const int g = get_global_id(0), q0 = DISTORTION_FIR_ROWS * get_global_id(1);
+    const size_t sn = (size_t)src_w * src_h;
+    const int sy = q0 - DISTORTION_PAD;      /* source row of the first row (before the edge repeat) */
     const int x0 = 16 * g - DISTORTION_PAD;  /* source column of lane 0 */
     const int inside = x0 - 2 >= 0 && x0 + 29 <= src_w - 1;
-    float16 lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
+    /* the ROWS output rows share their 4 + ROWS input rows' 5-wide min/max (as distortion_fir_cols) */
+    float16 rlo[DISTORTION_FIR_ROWS + 4], rhi[DISTORTION_FIR_ROWS + 4];
     if (inside) {  /* the loops twice, so the branch is not taken per row */
-        for (int dr = -2; dr <= 2; ++dr) {
-            __global const float *s = src + (size_t)clamp(sy + dr, 0, src_h - 1) * src_w + x0 - 2;
+        for (int j = 0; j < DISTORTION_FIR_ROWS + 4; ++j) {
+            __global const float *s = src + (size_t)clamp(sy - 2 + j, 0, src_h - 1) * src_w + x0 - 2;
             const float16 a = vload16(0, s) + vload16(0, s + sn) + vload16(0, s + 2 * sn);
             const float16 b = vload16(1, s) + vload16(1, s + sn) + vload16(1, s + 2 * sn);
-            DISTORTION_MINMAX5(a, b, lo, hi);
+            rlo[j] = (float16)(INFINITY);
+            rhi[j] = (float16)(-INFINITY);
+            DISTORTION_MINMAX5(a, b, rlo[j], rhi[j]);
         }
     } else {  /* the row's edge repeated: a private copy (as distortion_fir_rows) */
-        for (int dr = -2; dr <= 2; ++dr) {
-            __global const float *s = src + (size_t)clamp(sy + dr, 0, src_h - 1) * src_w;
+        for (int j = 0; j < DISTORTION_FIR_ROWS + 4; ++j) {
+            __global const float *s = src + (size_t)clamp(sy - 2 + j, 0, src_h - 1) * src_w;
             float win[32];
             for (int k = 0; k < 32; ++k) {
                 const int x = clamp(x0 - 2 + k, 0, src_w - 1);
                 win[k] = s[x] + s[sn + x] + s[2 * sn + x];
             }
             const float16 a = vload16(0, win), b = vload16(1, win);
-            DISTORTION_MINMAX5(a, b, lo, hi);
+            rlo[j] = (float16)(INFINITY);
+            rhi[j] = (float16)(-INFINITY);
+            DISTORTION_MINMAX5(a, b, rlo[j], rhi[j]);
         }
     }
-    vstore16(distortion_hdr_t(lo, hi), 0, hdr + o);
+#pragma unroll
+    for (int o = 0; o < DISTORTION_FIR_ROWS; ++o) {
+        const float16 lo = min(min(min(rlo[o], rlo[o + 1]), min(rlo[o + 2], rlo[o + 3])), rlo[o + 4]);
+        const float16 hi = max(max(max(rhi[o], rhi[o + 1]), max(rhi[o + 2], rhi[o + 3])), rhi[o + 4]);
+        vstore16(distortion_hdr_t(lo, hi), 0, hdr + (size_t)(q0 + o) * pitch + 16 * g);
+    }
 }
 
 /* The distorted image's depth and velocity (the colour kernels' companions, so the host does no

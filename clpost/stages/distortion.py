@@ -532,7 +532,7 @@ class Distortion(GatherStage):
         dering.set_args(src, hdr, np.int32(sw), np.int32(sh), np.int32(pw), np.int32(ph))
         events = [cl.enqueue_nd_range_kernel(q, rows, (pw // 16, th, 3), None),
                   cl.enqueue_nd_range_kernel(q, cols, (pw // 16, ph // FIR_ROWS, 3), None),
-                  cl.enqueue_nd_range_kernel(q, dering, (pw // 16, ph), None)]
+                  cl.enqueue_nd_range_kernel(q, dering, (pw // 16, ph // FIR_ROWS), None)]
         if len(tiles):
             kern = kernel("distortion_bspline_tiles")
             kern.set_args(coef, dst, fmap, tiles_b, hdr, np.int32(pw), np.int32(ph), *out)
