@@ -12,7 +12,11 @@
  * Final: cubic B-spline interpolation: the B-spline coefficients of the
  * source (`distortion_fir_rows` then `_cols`: the prefilter of Unser 1999 as a separable FIR,
  * |k| <= DISTORTION_FIR_K) and 16 taps with B-spline weights (`distortion_bspline_tiles` on the
- * tiles whose taps fit a tile-uniform window, `distortion_table` elsewhere), clamped below at 0 so HDR edges cannot ring to negative values. Why not
+ * tiles whose taps fit a tile-uniform window, `distortion_table` elsewhere), made HDR-safe by
+ * clamping to the least and largest of the position's 2x2 samples and handing over to bilinear
+ * where the local contrast is high (`distortion_dering` writes the hand-over weight; formula and
+ * source: resample and hdr_weight in clpost/stages/distortion.py).
+ * Why not
  * Keys' cubic convolution (OpenCV's INTER_CUBIC): it is only first-order and moves an edge by up
  * to ~0.03 px depending on its sub-pixel phase, which cost 5-8 % in the recovered k2/p2 of the
  * checkerboard calibration; the B-spline is exact for cubics and keeps every parameter within 1 %
@@ -208,7 +212,7 @@ __kernel void distortion_fir_cols(__global const float *restrict tmp, __global f
  * of DISTORTION_TILE^2 per listed tile (x0, y0). */
 __kernel void distortion_table(__global const float *restrict src, __global float *restrict dst,
                                __global const int *restrict base, __global const float *restrict wts,
-                               __global const int *restrict tiles,
+                               __global const int *restrict tiles, __global const float *restrict hdr,
                                const int src_w, const int src_h, const int width, const int height)
 {
     const int2 t = vload2(get_global_id(2), tiles);
@@ -223,17 +227,30 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
         wx[k] = wts[k * n + i];
         wy[k] = wts[(4 + k) * n + i];
     }
+    /* the 2x2 cell: samples at window (1, 1) ... (2, 2) of the 4x4 taps, from the coefficients
+     * (36 f = (1 4 1) (x) (1 4 1) c, the B-spline at the knots) */
+    const float tx = wts[8 * n + i], ty = wts[9 * n + i];
+    const int cell = b + src_w + 1;
+    const float th = mix(mix(hdr[cell], hdr[cell + 1], tx), mix(hdr[cell + src_w], hdr[cell + src_w + 1], tx), ty);
     for (int c = 0; c < 3; ++c) {
         const int plane = c * sn + b;
-        float acc = 0.0f;
+        float acc = 0.0f, h1[4], h2[4];
         for (int m = 0; m < 4; ++m) {
-            float row = 0.0f;
-            for (int k = 0; k < 4; ++k)
-                row += wx[k] * src[plane + m * src_w + k];
+            float row = 0.0f, cm[4];
+            for (int k = 0; k < 4; ++k) {
+                cm[k] = src[plane + m * src_w + k];
+                row += wx[k] * cm[k];
+            }
             acc += wy[m] * row;
+            h1[m] = cm[0] + 4.0f * cm[1] + cm[2];
+            h2[m] = cm[1] + 4.0f * cm[2] + cm[3];
         }
-        acc = acc > 0.0f ? acc : 0.0f;
-        dst[c * n + i] = b0 < 0 ? 0.0f : acc;
+        const float a = (h1[0] + 4.0f * h1[1] + h1[2]) * (1.0f / 36.0f), e = (h2[0] + 4.0f * h2[1] + h2[2]) * (1.0f / 36.0f);
+        const float d = (h1[1] + 4.0f * h1[2] + h1[3]) * (1.0f / 36.0f), f = (h2[1] + 4.0f * h2[2] + h2[3]) * (1.0f / 36.0f);
+        const float lo = min(min(a, e), min(d, f)), hi = max(max(a, e), max(d, f));
+        const float lin = mix(mix(a, e, tx), mix(d, f, tx), ty);
+        const float v = mix(clamp(acc, lo, hi), lin, th);
+        dst[c * n + i] = b0 < 0 ? 0.0f : v;
     }
 }
 
@@ -258,6 +275,7 @@ inline float16 distortion_beta3(const float16 d)
  * (x0, y0, ox, oy); coef planes of pitch x ch_rows with DISTORTION_PAD pixels around the render. */
 __kernel void distortion_bspline_tiles(__global const float *restrict coef, __global float *restrict dst,
                                        __global const float *restrict map, __global const int *restrict tiles,
+                                       __global const float *restrict hdr,
                                        const int pitch, const int ch_rows, const int width, const int height)
 {
     const int row = get_global_id(0), tile = get_global_id(1);
@@ -276,19 +294,123 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
         wx[m] = distortion_beta3(fx + (float)(1 - m));
         wy[m] = distortion_beta3(fy + (float)(1 - m));
     }
+    /* bilinear weights of the 3x3 samples at (x + ox, y + oy): the lane's 2x2 cell is columns
+     * 0-1 (f < 1) or 1-2, one of the three weights is 0 (as distortion_tiles) */
+    const float16 bx0 = max(1.0f - fx, 0.0f), bx2 = max(fx - 1.0f, 0.0f), bx1 = 1.0f - bx0 - bx2;
+    const float16 by0 = max(1.0f - fy, 0.0f), by2 = max(fy - 1.0f, 0.0f), by1 = 1.0f - by0 - by2;
+    const int16 right = fx >= 1.0f, down = fy >= 1.0f;
     const size_t base = (size_t)(y + t.w - 1 + DISTORTION_PAD) * pitch + (size_t)(t.x + t.z - 1 + DISTORTION_PAD);
+    const size_t cell = base + pitch + 1;
+    float16 th = (float16)(0.0f);
+#pragma unroll
+    for (int r = 0; r < 3; ++r) {
+        __global const float *q = hdr + cell + (size_t)r * pitch;
+        th = mad(r == 0 ? by0 : (r == 1 ? by1 : by2),
+                 bx0 * vload16(0, q) + bx1 * vload16(0, q + 1) + bx2 * vload16(0, q + 2), th);
+    }
     for (int c = 0; c < 3; ++c) {
         __global const float *p = coef + c * sn + base;
         float16 acc = (float16)(0.0f);
+        /* the samples at window columns 1-3 of every row, 6 f = c[m-1] + 4 c[m] + c[m+1] (the
+         * B-spline at the knots), so the cell's samples cost no loads */
+        float16 h1[5], h2[5], h3[5];
 #pragma unroll
         for (int r = 0; r < 5; ++r) {
             __global const float *q = p + (size_t)r * pitch;
-            float16 rowv = wx[0] * vload16(0, q);
-#pragma unroll
-            for (int m = 1; m < 5; ++m) rowv = mad(wx[m], vload16(0, q + m), rowv);
+            const float16 c0 = vload16(0, q), c1 = vload16(0, q + 1), c2 = vload16(0, q + 2);
+            const float16 c3 = vload16(0, q + 3), c4 = vload16(0, q + 4);
+            float16 rowv = wx[0] * c0;
+            rowv = mad(wx[1], c1, rowv);
+            rowv = mad(wx[2], c2, rowv);
+            rowv = mad(wx[3], c3, rowv);
+            rowv = mad(wx[4], c4, rowv);
             acc = mad(wy[r], rowv, acc);
+            h1[r] = mad(4.0f, c1, c0 + c2);
+            h2[r] = mad(4.0f, c2, c1 + c3);
+            h3[r] = mad(4.0f, c3, c2 + c4);
         }
-        vstore16(select((float16)(0.0f), fmax(acc, 0.0f), ok), 0, dst + c * n + i);
+        /* the cell's samples: least, largest and bilinear */
+        float16 lo[3], hi[3], lin = (float16)(0.0f);
+#pragma unroll
+        for (int r = 0; r < 3; ++r) {
+            const float16 v0 = mad(4.0f, h1[r + 1], h1[r] + h1[r + 2]) * (1.0f / 36.0f);
+            const float16 v1 = mad(4.0f, h2[r + 1], h2[r] + h2[r + 2]) * (1.0f / 36.0f);
+            const float16 v2 = mad(4.0f, h3[r + 1], h3[r] + h3[r + 2]) * (1.0f / 36.0f);
+            const float16 side = select(v0, v2, right);
+            lo[r] = min(v1, side);
+            hi[r] = max(v1, side);
+            lin = mad(r == 0 ? by0 : (r == 1 ? by1 : by2), bx0 * v0 + bx1 * v1 + bx2 * v2, lin);
+        }
+        const float16 cl = min(lo[1], select(lo[0], lo[2], down)), ch = max(hi[1], select(hi[0], hi[2], down));
+        const float16 v = mix(clamp(acc, cl, ch), lin, th);
+        vstore16(select((float16)(0.0f), v, ok), 0, dst + c * n + i);
+    }
+}
+
+/* HDR-safe final filter, preparation (clpost/stages/distortion.py: resample, hdr_weight): for every
+ * position of the coefficient planes (pitch x ch_rows, DISTORTION_PAD pixels around the render,
+ * so the gathers address it as they address coefficients), hdr = the hand-over weight there: over
+ * the 5x5 neighbourhood of the edge-extended source's channel sum R + G + B, with its least lo and
+ * largest hi, clamp((hi - R1 lo) / ((R2 - R1) lo), 0, 1) for lo > 0, 1 where lo <= 0 < hi - lo
+ * (one plane for all channels: a third of the work of a per-channel weight). One work-item: 16
+ * positions of DISTORTION_FIR_ROWS rows, the 5-wide row min/max by constant shuffles of a 32-wide
+ * window (vector loads, or a private copy with clamped indices at the row's ends). The gathers take the 2x2
+ * cell's samples from the coefficients they load anyway (36 f = (1 4 1) (x) (1 4 1) c): no loads. */
+#define DISTORTION_R1 32.0f
+#define DISTORTION_R2 128.0f
+inline float16 distortion_hdr_t(const float16 lo, const float16 hi)
+{
+    /* native_divide: PoCL's correctly rounded float16 division is not vectorised (half the
+     * kernel's time); a weight needs no last ulp */
+    const float16 r = clamp(native_divide(hi - DISTORTION_R1 * lo, (DISTORTION_R2 - DISTORTION_R1) * lo), 0.0f, 1.0f);
+    return select(select((float16)(0.0f), (float16)(1.0f), hi > lo), r, lo > 0.0f);
+}
+/* lo, hi (float16) take the least and largest of the 5 values at lanes l ... l + 4 of a:b */
+#define DISTORTION_MINMAX5(a, b, lo, hi) do { \
+        const float16 v1 = DISTORTION_SHIFT(a, b, 1), v2 = DISTORTION_SHIFT(a, b, 2); \
+        const float16 v3 = DISTORTION_SHIFT(a, b, 3), v4 = DISTORTION_SHIFT(a, b, 4); \
+        lo = min(lo, min(min(a, v1), min(min(v2, v3), v4))); \
+        hi = max(hi, max(max(a, v1), max(max(v2, v3), v4))); \
+    } while (0)
+__kernel void distortion_dering(__global const float *restrict src, __global float *restrict hdr,
+                                const int src_w, const int src_h,
+                                const int pitch, const int ch_rows)
+{
+    const int g = get_global_id(0), q0 = DISTORTION_FIR_ROWS * get_global_id(1);
+    const size_t sn = (size_t)src_w * src_h;
+    const int sy = q0 - DISTORTION_PAD;      /* source row of the first row (before the edge repeat) */
+    const int x0 = 16 * g - DISTORTION_PAD;  /* source column of lane 0 */
+    const int inside = x0 - 2 >= 0 && x0 + 29 <= src_w - 1;
+    /* the ROWS output rows share their 4 + ROWS input rows' 5-wide min/max (as distortion_fir_cols) */
+    float16 rlo[DISTORTION_FIR_ROWS + 4], rhi[DISTORTION_FIR_ROWS + 4];
+    if (inside) {  /* the loops twice, so the branch is not taken per row */
+        for (int j = 0; j < DISTORTION_FIR_ROWS + 4; ++j) {
+            __global const float *s = src + (size_t)clamp(sy - 2 + j, 0, src_h - 1) * src_w + x0 - 2;
+            const float16 a = vload16(0, s) + vload16(0, s + sn) + vload16(0, s + 2 * sn);
+            const float16 b = vload16(1, s) + vload16(1, s + sn) + vload16(1, s + 2 * sn);
+            rlo[j] = (float16)(INFINITY);
+            rhi[j] = (float16)(-INFINITY);
+            DISTORTION_MINMAX5(a, b, rlo[j], rhi[j]);
+        }
+    } else {  /* the row's edge repeated: a private copy (as distortion_fir_rows) */
+        for (int j = 0; j < DISTORTION_FIR_ROWS + 4; ++j) {
+            __global const float *s = src + (size_t)clamp(sy - 2 + j, 0, src_h - 1) * src_w;
+            float win[32];
+            for (int k = 0; k < 32; ++k) {
+                const int x = clamp(x0 - 2 + k, 0, src_w - 1);
+                win[k] = s[x] + s[sn + x] + s[2 * sn + x];
+            }
+            const float16 a = vload16(0, win), b = vload16(1, win);
+            rlo[j] = (float16)(INFINITY);
+            rhi[j] = (float16)(-INFINITY);
+            DISTORTION_MINMAX5(a, b, rlo[j], rhi[j]);
+        }
+    }
+#pragma unroll
+    for (int o = 0; o < DISTORTION_FIR_ROWS; ++o) {
+        const float16 lo = min(min(min(rlo[o], rlo[o + 1]), min(rlo[o + 2], rlo[o + 3])), rlo[o + 4]);
+        const float16 hi = max(max(max(rhi[o], rhi[o + 1]), max(rhi[o + 2], rhi[o + 3])), rhi[o + 4]);
+        vstore16(distortion_hdr_t(lo, hi), 0, hdr + (size_t)(q0 + o) * pitch + 16 * g);
     }
 }
 

@@ -96,3 +96,22 @@ def test_tile_model_matches_the_exact_map_and_most_tiles_are_fast():
         assert st.tile_plan(cam, w, h)["fast"].mean() >= fast_min
     # strong lateral colour: no tile fits one bilinear cell, all take the per-pixel map
     assert not st.tile_plan(Camera(lateral_color_mm=-30.0), 64, 48)["fast"].any()
+
+
+def test_hdr_points_and_lines_leave_no_dark_ring():
+    """HDR-safe resampling (issue 16): lateral colour resamples bilinearly (weights ≥ 0 on the
+    2×2 cell), so HDR spots and one-pixel lines on a dim background never pull a pixel below what
+    the background alone gives there (the channel's Jacobian included), and each channel keeps its
+    flux."""
+    w, h = 161, 121
+    rng = np.random.default_rng(16)
+    img = np.full((h, w), 0.1)
+    for _ in range(12):
+        img[rng.integers(10, h - 10), rng.integers(10, w - 10)] = 1e3
+    img[h // 4, 10:w - 10] = img[10:h - 10, w // 4] = 1e3  # lines stopping short of the edges: all flux stays
+    pipe = Pipeline(Camera(lateral_color_mm=0.6), stages=["lateral_color"])
+    out = pipe.run(Frame(np.repeat(img[..., None], 3, -1).astype(np.float32))).color.astype(np.float64)
+    floor = pipe.run(Frame(np.full((h, w, 3), 0.1, np.float32))).color.astype(np.float64)
+    assert np.all(out >= floor * (1 - 1e-5)), float((floor - out).max())
+    for c in range(3):
+        assert out[..., c].sum() == pytest.approx(floor[..., c].sum() + (img - 0.1).sum(), rel=0.01)

@@ -37,15 +37,18 @@ Quality: ``draft``/``preview`` bilinear (4 taps); ``final`` cubic B-spline *inte
 B-spline coefficients (the prefilter as a separable FIR along rows, then columns, :func:`fir_taps`,
 stored with :data:`PAD` edge pixels around the render) sampled by 16 taps with B-spline weights —
 computed per lane on the tiles whose taps fit a tile-uniform 5 × 5 window (:func:`bspline_tiles`,
-vector loads), from a per-pixel table built with the map elsewhere (:func:`tap_table`) — clamped
-below at 0 (no negative HDR values). It passes
+vector loads), from a per-pixel table built with the map elsewhere (:func:`tap_table`) — made
+HDR-safe by :func:`resample`'s clamp to the 2 × 2 samples around the position and hand-over to
+bilinear where the local contrast exceeds 32 : 1 (:func:`hdr_weight`, pass ``distortion_dering``):
+no ring below the background around highlights, their energy kept. It passes
 through the samples and reproduces cubics exactly, so an edge stays where it is whatever its
 sub-pixel phase. Keys' cubic convolution (OpenCV's ``INTER_CUBIC``) is only first-order — a ramp is
 off by up to 0.048 × its slope — and moves checkerboard corners
 by ≈ 0.025 px in a way correlated over the image: k2 4.7–8 % and p2 6.7 % off in the
 calibration check, against < 1 % for every parameter with the B-spline
 (tools/distortion_calibration.py, docs/distortion_calibration.md). The reference is scipy's
-``map_coordinates(order=3, mode="nearest")``, an independent implementation of the same filter.
+``map_coordinates(order=3, mode="nearest")``, an independent implementation of the same filter,
+with the clamp and hand-over in numpy.
 
 Alpha: output pixels with no preimage inside the render — outside its frustum, beyond the model's
 fold radius (clamped, see :mod:`clpost.calibration`), or where Newton did not converge — get
@@ -399,24 +402,81 @@ def bspline3(t: np.ndarray) -> list[np.ndarray]:
     return [s**3 / 6, (4 - 6 * t**2 + 3 * t**3) / 6, (1 + 3 * t + 3 * t**2 - 3 * t**3) / 6, t**3 / 6]
 
 
-def resample(plane: np.ndarray, m: np.ndarray, filt: int) -> np.ndarray:
-    """float64 oracle of the kernels: ``plane`` (h, w) sampled at the map ``m`` (2, H, W), edge
-    repeated beyond the plane; ``filt`` 1 bilinear, 3 cubic B-spline interpolation (scipy's
-    ``map_coordinates(order=3, mode="nearest")``, an independent implementation) clamped at 0."""
+DERING_RATIO = (32.0, 128.0)
+"""Local contrast max/min (R_1, R_2) over which the final filter hands over from the clamped
+B-spline to bilinear (:func:`hdr_weight`). R_1 lies above the 22.5 : 1 of the calibration
+checkerboard (0.9 and 0.04 albedo), so the calibration check runs on the B-spline alone; HDR
+emitters (250–1000 × diffuse white in the demo) are far beyond R_2."""
+
+
+def hdr_weight(color: np.ndarray) -> np.ndarray:
+    r"""Per source pixel, how much of the final filter is bilinear (float64 (h, w) in [0, 1]): over
+    the 5 × 5 neighbourhood (edge repeated) of the channel sum :math:`S = R + G + B` (of the
+    one plane given), with its least value lo and largest hi,
+
+    .. math::
+
+        w = \operatorname{clamp}\Big(\frac{hi - R_1\,lo}{(R_2 - R_1)\,lo}, 0, 1\Big)
+        \quad (lo > 0), \qquad 1 \text{ where } lo \le 0 < hi - lo, \ 0 \text{ where } hi = lo \le 0
+
+    (:data:`DERING_RATIO`). 5 × 5: the bilinear interpolation of w over an output pixel's 2 × 2
+    cell reaches 1 wherever a high-contrast sample lies inside the 4 × 4 support of the B-spline.
+    One weight for all channels (a per-channel weight costs three times the work; the clamp of
+    :func:`resample` is per channel either way)."""
+    from scipy.ndimage import maximum_filter, minimum_filter
+
+    r1, r2 = DERING_RATIO
+    color = np.asarray(color, np.float64)
+    total = color.sum(axis=-1) if color.ndim == 3 else color
+    lo = minimum_filter(total, 5, mode="nearest")
+    hi = maximum_filter(total, 5, mode="nearest")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(lo > 0, np.clip((hi - r1 * lo) / ((r2 - r1) * lo), 0.0, 1.0), (hi > lo).astype(np.float64))
+
+
+def resample(plane: np.ndarray, m: np.ndarray, filt: int, hdr: np.ndarray | None = None) -> np.ndarray:
+    r"""float64 oracle of the kernels: ``plane`` (h, w) sampled at the map ``m`` (2, H, W), edge
+    repeated beyond the plane; ``filt`` 1 bilinear, 3 the final filter: cubic B-spline
+    interpolation s (scipy's ``map_coordinates(order=3, mode="nearest")``, an independent
+    implementation) made HDR-safe,
+
+    .. math::
+
+        v = (1 - t)\,\operatorname{clamp}(s, lo, hi) + t\,b
+
+    with lo, hi the least and largest of the 2 × 2 samples around the position, b their bilinear
+    interpolation and t the bilinear interpolation of :func:`hdr_weight` of the source extended by
+    its edge (``hdr``: of the whole colour image padded by 1 pixel; by default of ``plane`` alone). The clamp is the anti-ringing clamp of
+    libplacebo's ``antiring`` (and of the neighbourhood clamp in temporal AA, Karis, "High Quality
+    Temporal Supersampling", SIGGRAPH 2014 course): no output below the least or above the largest
+    sample of its cell, so no dark ring or negative value around a highlight. The clamp alone
+    keeps the B-spline's main lobe, 1.2–1.44 × the energy of a one-pixel highlight (its negative
+    lobes clamped away); bilinear preserves it exactly, hence the hand-over by contrast
+    (measurements: docs/distortion_calibration.md#hdr-safe-final-filter)."""
     sx, sy = m
     ok = sx > -1e29
     sx, sy = np.where(ok, sx, 0.0), np.where(ok, sy, 0.0)
+    x0, y0 = np.floor(sx), np.floor(sy)
+    tx, ty = sx - x0, sy - y0
+    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+
+    def bilinear(p, o=0):  # o: the padding of p
+        a, b = _taps(p, x0 + o, y0 + o), _taps(p, x0 + 1 + o, y0 + o)
+        d, e = _taps(p, x0 + o, y0 + 1 + o), _taps(p, x0 + 1 + o, y0 + 1 + o)
+        return (a * (1 - tx) + b * tx) * (1 - ty) + (d * (1 - tx) + e * tx) * ty, (a, b, d, e)
+
+    lin, cell = bilinear(plane)
     if filt == 1:
-        x0, y0 = np.floor(sx), np.floor(sy)
-        tx, ty = sx - x0, sy - y0
-        x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
-        a, b = _taps(plane, x0, y0), _taps(plane, x0 + 1, y0)
-        d, e = _taps(plane, x0, y0 + 1), _taps(plane, x0 + 1, y0 + 1)
-        v = (a * (1 - tx) + b * tx) * (1 - ty) + (d * (1 - tx) + e * tx) * ty
+        v = lin
     else:
         from scipy.ndimage import map_coordinates
 
-        v = np.maximum(map_coordinates(plane, [sy, sx], order=3, mode="nearest"), 0.0)
+        s = map_coordinates(plane, [sy, sx], order=3, mode="nearest")
+        lo, hi = np.minimum.reduce(cell), np.maximum.reduce(cell)
+        # the weight of the edge-extended source (1 pixel around it: cell corners lie in [-1, size])
+        hdr = hdr_weight(np.pad(plane, 1, mode="edge")) if hdr is None else hdr
+        t = bilinear(hdr, 1)[0]
+        v = (1.0 - t) * np.clip(s, lo, hi) + t * lin
     return np.where(ok, v, 0.0)
 
 
@@ -425,7 +485,8 @@ def tap_table(model: OpenCVModel, src_size: tuple[int, int],
               src_k: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
     """The per-pixel taps of ``distortion_table`` (kernels/distortion.cl, the final filter): the
     index of the top-left tap in a coefficient plane padded by :data:`PAD` with row pitch
-    :func:`coef_pitch` (int32, −1 where there is no preimage) and the B-spline weights (float32 (8, H, W): 4 horizontal, then 4 vertical).
+    :func:`coef_pitch` (int32, −1 where there is no preimage) and the B-spline weights (float32 (10, H, W): 4 horizontal,
+    4 vertical, then the fractions x − ⌊x⌋, y − ⌊y⌋ that weigh the 2 × 2 cell of :func:`resample`).
     Positions are the float32 map the reference also samples; the weights are computed from them in
     float64. Valid positions lie in [−½, size − ½], so the 4×4 window stays inside the padding."""
     sw, sh = src_size
@@ -434,7 +495,7 @@ def tap_table(model: OpenCVModel, src_size: tuple[int, int],
     fx, fy = np.floor(m[0]), np.floor(m[1])
     bx, by = fx.astype(np.int64) - 1 + PAD, fy.astype(np.int64) - 1 + PAD
     base = np.where(ok, by * coef_pitch(sw) + bx, -1).astype(np.int32)
-    w = np.stack(bspline3(m[0] - fx) + bspline3(m[1] - fy))
+    w = np.stack(bspline3(m[0] - fx) + bspline3(m[1] - fy) + [m[0] - fx, m[1] - fy])
     w = np.where(ok, w, 0.0).astype(np.float32)
     for a in (base, w):
         a.setflags(write=False)
@@ -563,8 +624,8 @@ class Distortion(GatherStage):
             bufs = tuple(rt.empty(a.shape, a.dtype) for a in host)
             for b, a in zip(bufs, host):
                 cl.enqueue_copy(rt.queue, b, np.ascontiguousarray(a))
-            if bspline:
-                bufs += (rt.empty((3, ph, pw)), rt.empty((3, th, pw)))
+            if bspline:  # coefficients, the row pass's planes, the hand-over weight
+                bufs += (rt.empty((3, ph, pw)), rt.empty((3, th, pw)), rt.empty((ph, pw)))
             self._dev_maps = {key: bufs}  # one camera and size at a time: the map is static
         source = kernel_source("common") + kernel_source("distortion")
 
@@ -583,27 +644,31 @@ class Distortion(GatherStage):
                     kern.set_args(src, dst, bufs[0], buf, np.int32(sw), np.int32(sh), *out)
                     events.append(cl.enqueue_nd_range_kernel(q, kern, gsize, None))
             return events
-        base, wts, fmap, tiles_b, rest_b, coef, tmp = bufs
+        base, wts, fmap, tiles_b, rest_b, coef, tmp, hdr = bufs
         tiles, rest = bspline_tiles(model, frame.size, kkey)
         rows, cols = kernel("distortion_fir_rows"), kernel("distortion_fir_cols")
+        dering = kernel("distortion_dering")
         rows.set_args(src, tmp, np.int32(sw), np.int32(sh), np.int32(pw), np.int32(th))
         cols.set_args(tmp, coef, np.int32(pw), np.int32(th), np.int32(ph))
+        dering.set_args(src, hdr, np.int32(sw), np.int32(sh), np.int32(pw), np.int32(ph))
         events = [cl.enqueue_nd_range_kernel(q, rows, (pw // 16, th, 3), None),
-                  cl.enqueue_nd_range_kernel(q, cols, (pw // 16, ph // FIR_ROWS, 3), None)]
+                  cl.enqueue_nd_range_kernel(q, cols, (pw // 16, ph // FIR_ROWS, 3), None),
+                  cl.enqueue_nd_range_kernel(q, dering, (pw // 16, ph // FIR_ROWS), None)]
         if len(tiles):
             kern = kernel("distortion_bspline_tiles")
-            kern.set_args(coef, dst, fmap, tiles_b, np.int32(pw), np.int32(ph), *out)
+            kern.set_args(coef, dst, fmap, tiles_b, hdr, np.int32(pw), np.int32(ph), *out)
             events.append(cl.enqueue_nd_range_kernel(q, kern, (TILE, len(tiles)), None))
         if len(rest):
             kern = kernel("distortion_table")
-            kern.set_args(coef, dst, base, wts, rest_b, np.int32(pw), np.int32(ph), *out)
+            kern.set_args(coef, dst, base, wts, rest_b, hdr, np.int32(pw), np.int32(ph), *out)
             events.append(cl.enqueue_nd_range_kernel(q, kern, (TILE, TILE, len(rest)), None))
         return events
 
     def reference(self, camera, frame, color):
         m, _ = self._host_map(camera, frame)
         m = m.astype(np.float32).astype(np.float64)  # the device's map, to compare filters alone
-        return np.stack([resample(np.asarray(color[..., c], np.float64), m, self.filter_taps)
+        hdr = hdr_weight(np.pad(color[..., :3], ((1, 1), (1, 1), (0, 0)), mode="edge")) if self.filter_taps == 3 else None
+        return np.stack([resample(np.asarray(color[..., c], np.float64), m, self.filter_taps, hdr)
                          for c in range(3)], -1)
 
     def enqueue_host_buffers(self, rt, camera, frame, aux) -> tuple[dict, list]:
