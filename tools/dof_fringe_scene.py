@@ -3,7 +3,8 @@ point-sampled depth, small emitters against the sky, an in-focus emitter, a blur
 a sharp mid-ground and a far wall.
 
     PYTHONPATH=. .venv/bin/python tools/dof_fringe_scene.py [--size 480x270] [--samples 512]
-        [--out /tmp/dof16] [--qualities draft,preview,final] [--no-truth-cache]
+        [--out /tmp/dof16] [--qualities draft,preview,final] [--tag run]
+        [--blender /work/bpyvenv/bin/python]
 
 Why: clpost's own accumulation reference renders depth per view, so it never shows what other
 renderers hand over — colour filtered over the pixel (Cycles: Blackman–Harris, 1.5 px wide) and
@@ -17,7 +18,10 @@ first filter sample (random per pixel, like Cycles' depth pass taken from sample
 
 Prints, per quality: PSNR (sRGB view, diffuse white at 0.5 as clpost.dof_bench) and FLIP against
 the truth, and per emitter its saturated area (pixels above diffuse white) and energy against the
-truth's, plus the in-focus emitter's halo (pixels above 5 % of white farther than 3 px).
+truth's, plus the in-focus emitter's halo (pixels above 5 % of white farther than 3 px). With
+``--blender``, the same rows for the peer: Blender's compositor Defocus on the same pinhole
+(``tools/blender_defocus.py`` in that interpreter) and on its depth min-filtered over 3×3. The
+truth is cached in ``--out`` by size and sample count.
 """
 from __future__ import annotations
 
@@ -163,6 +167,29 @@ def emitter_stats(img, base, scene_w, kind="far"):
     return rows
 
 
+def _blender(python, camera, frame, out, min_z):
+    """Blender's Defocus node on ``frame`` (tools/blender_defocus.py in the bpy interpreter)."""
+    import subprocess
+
+    from clpost.exr import read_frame, write_frame
+    from clpost.frame import Frame
+
+    depth = frame.depth
+    if min_z:
+        p = np.pad(depth, 1, mode="edge")
+        depth = np.min([p[1 + dy:1 + dy + depth.shape[0], 1 + dx:1 + dx + depth.shape[1]]
+                        for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
+    src, dst = out / f"blender_in_{int(min_z)}.exr", out / f"blender_out_{int(min_z)}.exr"
+    write_frame(src, Frame(color=frame.color, depth=depth))
+    tool = Path(__file__).with_name("blender_defocus.py")
+    subprocess.run([python, str(tool), str(src), str(dst), "--f-number", str(camera.f_number),
+                    "--focal-mm", str(camera.focal_length_mm), "--sensor-mm", str(camera.sensor_mm[0]),
+                    "--focus-m", str(camera.focus_distance_m), "--blades", str(camera.blades),
+                    "--max-blur", "64", "--threads", "1", "--repeats", "1"],
+                   check=True, stdout=subprocess.DEVNULL)
+    return read_frame(dst).color
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--size", default="480x270")
@@ -170,6 +197,7 @@ def main(argv=None):
     ap.add_argument("--out", default="/tmp/dof16")
     ap.add_argument("--qualities", default="draft,preview,final")
     ap.add_argument("--tag", default="run")
+    ap.add_argument("--blender", help="a Python with bpy: also score Blender's Defocus node")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
     out = Path(args.out)
@@ -200,8 +228,13 @@ def main(argv=None):
     truth_in = emitter_stats(ref, base, w, "in")
     print(f"pinhole: PSNR {psnr_srgb(ref, pin):.2f} dB  FLIP {flip_ldr(ref, pin):.4f}")
     frame = Frame(color=pin.astype(np.float32), depth=depth.astype(np.float32))
-    for q in args.qualities.split(","):
-        res = Pipeline(camera, quality=q, stages=["dof"]).run(frame).color.astype(np.float64)
+    results = [(q, lambda q=q: Pipeline(camera, quality=q, stages=["dof"]).run(frame).color)
+               for q in args.qualities.split(",")]
+    if args.blender:
+        results += [("blender", lambda: _blender(args.blender, camera, frame, out, False)),
+                    ("blender-minZ", lambda: _blender(args.blender, camera, frame, out, True))]
+    for q, make in results:
+        res = np.asarray(make(), np.float64)
         write_png(str(out / f"fringe_{args.tag}_{q}.png"), res * VIEW_SCALE)
         np.save(out / f"fringe_{args.tag}_{q}.npy", res)
         print(f"{q}: PSNR {psnr_srgb(ref, res):.2f} dB  FLIP {flip_ldr(ref, res):.4f}")
