@@ -161,7 +161,7 @@ def lamp_summary(lamps):
     """(worst |area ratio − 1|, area ratios range, halo test/truth pairs, energy ratio range)."""
     areas = [l_["area_ratio"] for l_ in lamps if l_.get("area_ratio") is not None]
     halos = [(l_["halo_test"], l_["halo_truth"]) for l_ in lamps if l_["in_focus"]]
-    energy = [l_["energy_ratio"] for l_ in lamps]
+    energy = [l_["energy_ratio"] for l_ in lamps if l_["energy_ratio"] is not None]
     return areas, halos, energy
 
 
