@@ -27,8 +27,8 @@ Edge pixels whose colour and depth disagree (CONVENTIONS.md: renderers give anti
 and one-sample depth — the fringe of a small bright light carries the light's colour and the sky's
 depth): the *fringe rule* (:func:`effective_depth`) explains p's luminance as a mix
 :math:`Y_p = \alpha Y_n + (1-\alpha) Y_f` of a nearer surface seen in its 3×3 neighbourhood and
-p's own surface, and gives p the nearer surface's depth when that surface covers at least half of
-p or brings at least half of its light. A light's fringe then keeps the light's depth (its energy
+p's own surface, and gives p the nearest depth of its 3×3 when that surface covers at least half
+of p or brings at least half of its light. A light's fringe then keeps the light's depth (its energy
 goes into the light's bokeh instead of a sky-sized halo), a silhouette's half-covered pixels go
 with the surface in front (no sharp ghost line of a blurred foreground), and on a smooth far
 surface nothing else moves; depths only ever move nearer. Rejected alternative: splitting each
@@ -289,28 +289,26 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     :math:`Y_p = \alpha Y_n + (1-\alpha) Y_f` of a near and a far surface; two hypotheses:
 
     * bright near (a light over the sky): :math:`Y_n` the brightest near pixel, :math:`Y_f` the
-      darkest of p's surface; p takes the near pixel's depth when the near surface covers at least
-      half of p (:math:`\alpha \ge \tfrac12`) or brings at least half of its light
+      darkest of p's surface; the near surface explains p when it covers at least half of it
+      (:math:`\alpha \ge \tfrac12`) or brings at least half of its light
       (:math:`\alpha Y_n \ge \tfrac12 Y_p`) — the energy test is what catches a light's faint
       fringe, whose same-depth neighbours are equally bright fringe;
     * dark near (a pole over the sky): :math:`Y_n` the darkest near pixel, :math:`Y_f` the
-      brightest of p's surface; p takes its depth when :math:`\alpha \ge \tfrac12`.
+      brightest of p's surface; it explains p when :math:`\alpha \ge \tfrac12`.
 
-    With :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are written without a division.
-    A depth only ever moves nearer, and a pixel with no near neighbour keeps its own."""
+    When either holds p takes the nearest depth of its 3×3. With
+    :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are written without a division. A depth
+    only ever moves nearer; a pixel with no near neighbour keeps its own."""
     d = np.asarray(depth, dtype=np.float64)
     lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
     dn, ln = _neighbourhood(d), _neighbourhood(lum)
-    inf = np.inf
-    bright_n, bright_d = np.full_like(d, -inf), d.copy()   # brightest near pixel and its depth
-    dark_n, dark_d = np.full_like(d, inf), d.copy()        # darkest near pixel and its depth
-    own_min, own_max = lum.copy(), lum.copy()              # p's own surface (p included)
+    nearest = np.minimum.reduce(dn)
+    bright_n, dark_n = np.full_like(d, -np.inf), np.full_like(d, np.inf)  # near pixels' extremes
+    own_min, own_max = lum.copy(), lum.copy()                            # p's own surface, p included
     for dq, lq in zip(dn[1:], ln[1:]):
         near = dq < MIXED_SAME_DEPTH * d
-        up = near & (lq > bright_n)
-        bright_n, bright_d = np.where(up, lq, bright_n), np.where(up, dq, bright_d)
-        dn_ = near & (lq < dark_n)
-        dark_n, dark_d = np.where(dn_, lq, dark_n), np.where(dn_, dq, dark_d)
+        bright_n = np.where(near, np.maximum(bright_n, lq), bright_n)
+        dark_n = np.where(near, np.minimum(dark_n, lq), dark_n)
         own_min = np.where(near, own_min, np.minimum(own_min, lq))
         own_max = np.where(near, own_max, np.maximum(own_max, lq))
     with np.errstate(invalid="ignore"):
@@ -318,7 +316,7 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
         bright = (span > 0) & ((2 * part >= span) | (2 * part * bright_n >= lum * span))
         span, part = own_max - dark_n, own_max - lum
         dark = (span > 0) & (2 * part >= span)
-    return np.where(bright, bright_d, np.where(dark, dark_d, d))
+    return np.where(bright | dark, nearest, d)
 
 
 # ---------------------------------------------------------------------------------------------
