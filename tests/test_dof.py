@@ -316,6 +316,26 @@ def test_half_covered_pixel_of_a_dark_pole_takes_the_poles_depth():
     assert np.isinf(D.effective_depth(color.astype(np.float64), depth)[:, 10]).all()
 
 
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_fringe_rule_kernel_matches_its_reference_on_random_lights_and_steps(rng, quality):
+    """Random depth steps (0.5 m … sky) under random HDR lights with anti-aliased fringes, at an odd
+    size whose rows have both the kernel's 16-pixel groups and its per-pixel edge path."""
+    h, w = 29, 53
+    depth = np.where(rng.random((h, w)) < 0.3, np.inf, rng.choice([0.5, 1.0, 3.0, 9.0], (h, w))).astype(np.float32)
+    depth = np.repeat(np.repeat(depth[::3, ::3], 3, 0), 3, 1)[:h, :w].copy()   # 3-px blocks: real steps
+    color = (rng.random((h, w, 3)) * 0.5).astype(np.float32)
+    for _ in range(12):                                                            # lights and fringes
+        y, x = rng.integers(1, h - 1), rng.integers(1, w - 1)
+        color[y - 1:y + 2, x - 1:x + 2] += rng.random() * 30
+        color[y, x] += rng.random() * 300
+    cam = Camera(**{**CAM, "focus_distance_m": 1.0})
+    eff = D.effective_depth(color.astype(np.float64), depth)
+    assert (eff <= depth).all() and (eff != depth).any()          # only ever nearer, and it fired
+    frame = Frame(color, depth=depth)
+    out, pipe = run(cam, frame, quality)
+    assert_matches_reference(pipe, frame, out, rtol=1e-3)
+
+
 @pytest.mark.parametrize("space", ["rec709", "acescg"])
 def test_highlight_edge_test_uses_the_working_spaces_luminance(space):
     """A reddish edge pixel on a blue sky is 'brighter than its same-depth neighbours' in ACEScg
