@@ -4,32 +4,51 @@
  * Structural: DOF_SCALE (working-resolution divisor).
  */
 
-#define DOF_MIXED_BRIGHTER 1.5f
 #define DOF_MIXED_SAME_DEPTH 0.8f
 
 inline float dof_luma(__global const float *src, const size_t i, const size_t n) {
     return DOF_LUMA_R * src[i] + DOF_LUMA_G * src[n + i] + DOF_LUMA_B * src[2 * n + i];
 }
 
-/* Full-resolution signed CoC radius (px) of one pixel. A pixel brighter than 1.5x every
- * same-depth neighbour takes the nearest depth of its 3x3 neighbourhood (anti-aliased colour vs
- * one-sample depth). Neighbour rows/columns clamped to the image. */
+/* The fringe rule (effective_depth in clpost/stages/dof.py): p, a mix of a near and a far surface
+ * Y_p = a Y_n + (1 - a) Y_f, takes the nearest depth of its 3x3 when the near surface (brightest near
+ * neighbour) covers half of p or brings half its light (Y_f: the darkest of p's own surface), or when
+ * the near surface (darkest near neighbour) covers half of p (Y_f: the brightest of p's own surface).
+ * Both tests without a division; `span > 0` also rejects "no near neighbour" (+-inf). */
+inline float dof_fringe_depth(const float d, const float lum, const float nearest, const float bright_n,
+                              const float dark_n, const float own_min, const float own_max)
+{
+    const float sb = bright_n - own_min, pb = lum - own_min;
+    const float sd = own_max - dark_n, pd = own_max - lum;
+    const int take = (sb > 0.0f && (2.0f * pb >= sb || 2.0f * pb * bright_n >= lum * sb))
+                     || (sd > 0.0f && 2.0f * pd >= sd);
+    return take ? nearest : d;
+}
+
+/* Full-resolution signed CoC radius (px) of one pixel, depth by the fringe rule above. Neighbour
+ * rows/columns clamped to the image. */
 inline float dof_coc_px(__global const float *src, __global const float *depth, const int x, const int y,
                         const int width, const int height, const float k, const float inv_u, const float limit)
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float d = depth[i];
     const float lum = dof_luma(src, i, n);
-    float nearest = d, brightest_same = 0.0f;
+    float nearest = d, bright_n = -INFINITY, dark_n = INFINITY, own_min = lum, own_max = lum;
     for (int b = -1; b <= 1; ++b)
         for (int a = -1; a <= 1; ++a) {
+            if (a == 0 && b == 0) continue;
             const size_t j = (size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1);
-            const float dq = depth[j];
+            const float dq = depth[j], lq = dof_luma(src, j, n);
             nearest = fmin(nearest, dq);
-            const float lq = (a == 0 && b == 0) ? 0.0f : dof_luma(src, j, n);
-            brightest_same = fmax(brightest_same, dq >= DOF_MIXED_SAME_DEPTH * d ? lq : 0.0f);
+            if (dq < DOF_MIXED_SAME_DEPTH * d) {
+                bright_n = fmax(bright_n, lq);
+                dark_n = fmin(dark_n, lq);
+            } else {
+                own_min = fmin(own_min, lq);
+                own_max = fmax(own_max, lq);
+            }
         }
-    const float s = (lum > DOF_MIXED_BRIGHTER * brightest_same && nearest < d) ? nearest : d;
+    const float s = dof_fringe_depth(d, lum, nearest, bright_n, dark_n, own_min, own_max);
     const float inv_s = isinf(s) ? 0.0f : 1.0f / s;
     return clamp(k * (inv_u - inv_s), -limit, limit);
 }
@@ -50,19 +69,39 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     if (x >= 1 && x + 16 <= width - 1) {
         const float16 d = vload16(0, depth + i);
-        const float16 lum = dof_luma16(src + i, n);
-        float16 nearest = d, brightest_same = (float16)(0.0f);
+        const float16 near_lim = DOF_MIXED_SAME_DEPTH * d;
         const size_t rows[3] = {(size_t)max(y - 1, 0) * width + x, i, (size_t)min(y + 1, height - 1) * width + x};
+        float16 nearest = d;
 #pragma unroll
         for (int b = 0; b < 3; ++b)
 #pragma unroll
-            for (int a = -1; a <= 1; ++a) {
-                const float16 dq = vload16(0, depth + rows[b] + a);
-                nearest = fmin(nearest, dq);
-                const float16 lq = (a == 0 && b == 1) ? (float16)(0.0f) : dof_luma16(src + rows[b] + a, n);
-                brightest_same = fmax(brightest_same, select((float16)(0.0f), lq, dq >= DOF_MIXED_SAME_DEPTH * d));
-            }
-        const float16 s = select(d, nearest, (lum > DOF_MIXED_BRIGHTER * brightest_same) & (nearest < d));
+            for (int a = -1; a <= 1; ++a)
+                nearest = fmin(nearest, vload16(0, depth + rows[b] + a));
+        float16 s = d;
+        /* no depth step in any of the 16 neighbourhoods (most of an image): no colour test */
+        if (any(nearest < near_lim)) {
+            const float16 lum = dof_luma16(src + i, n);
+            float16 bright_n = (float16)(-INFINITY), dark_n = (float16)(INFINITY);
+            float16 own_min = lum, own_max = lum;
+    #pragma unroll
+            for (int b = 0; b < 3; ++b)
+    #pragma unroll
+                for (int a = -1; a <= 1; ++a) {
+                    if (a == 0 && b == 1) continue;
+                    const float16 dq = vload16(0, depth + rows[b] + a);
+                    const float16 lq = dof_luma16(src + rows[b] + a, n);
+                    const int16 near = dq < near_lim;
+                    bright_n = fmax(bright_n, select((float16)(-INFINITY), lq, near));
+                    dark_n = fmin(dark_n, select((float16)(INFINITY), lq, near));
+                    own_min = fmin(own_min, select(lq, (float16)(INFINITY), near));
+                    own_max = fmax(own_max, select(lq, (float16)(-INFINITY), near));
+                }
+            const float16 sb = bright_n - own_min, pb = lum - own_min;
+            const float16 sd = own_max - dark_n, pd = own_max - lum;
+            const int16 take = ((sb > 0.0f) & ((2.0f * pb >= sb) | (2.0f * pb * bright_n >= lum * sb)))
+                               | ((sd > 0.0f) & (2.0f * pd >= sd));
+            s = select(d, nearest, take);
+        }
         const float16 inv_s = select(1.0f / s, (float16)(0.0f), isinf(s));
         vstore16(clamp(k * (inv_u - inv_s), -limit, limit), 0, coc + i);
         return;

@@ -258,6 +258,84 @@ def test_antialiased_light_edge_takes_the_lights_depth():
     assert out[20, 21, 0] == pytest.approx(200.0, rel=1e-3)
 
 
+def _light_with_fringe(h=41, w=41, light_m=1.0):
+    """A 2×2 light (300× the sky) at ``light_m``; the 12 fringe pixels around it are equally
+    bright (30× the sky: a tenth covered) and carry the sky's depth — the case where every fringe
+    pixel's same-depth neighbours are fringe too (the rule before issue 16 missed it)."""
+    color = np.full((h, w, 3), 0.1, np.float32)
+    depth = np.full((h, w), np.inf, np.float32)
+    color[19:23, 19:23] = 3.0          # fringe ring
+    color[20:22, 20:22] = 30.0         # the light
+    depth[20:22, 20:22] = light_m
+    return color, depth
+
+
+def test_fringe_of_a_light_takes_the_lights_depth():
+    color, depth = _light_with_fringe()
+    eff = D.effective_depth(color.astype(np.float64), depth)
+    assert (eff[19:23, 19:23] == 1.0).all()        # light and fringe: the light's depth
+    assert np.isinf(eff[17, 17]) and np.isinf(eff[19, 17])  # the sky around stays sky
+    cam = Camera(**{**CAM, "focus_distance_m": 1.0})  # the light in focus, the sky's CoC 6 px
+    for q in ("draft", "preview", "final"):
+        out, pipe = run(cam, Frame(color, depth=depth), q)
+        assert_matches_reference(pipe, Frame(color, depth=depth), out, rtol=1e-3)
+        # in focus: no sky-sized halo (issue 16: pixels above 5 % of white beyond 3 px)
+        yy, xx = np.mgrid[0:41, 0:41]
+        beyond = np.hypot(yy - 20.5, xx - 20.5) > 3 + 2
+        assert np.count_nonzero(out[beyond, 1] - 0.1 > 0.05) == 0, q
+        assert out[..., 1].sum() == pytest.approx(color[..., 1].sum(), rel=0.01)  # issue 16: 3 %
+
+
+def test_fringe_of_a_defocused_light_spreads_with_the_lights_coc():
+    # focus at 0.5 m: the light (1 m) and the sky blur differently; the fringe must go with the light
+    color, depth = _light_with_fringe()
+    cam = Camera(**{**CAM, "focus_distance_m": 0.5})
+    r_light = float(D.coc_px(cam, 1.0, 41))
+    r_sky = float(D.coc_px(cam, np.inf, 41))
+    assert r_sky > r_light + 0.5
+    yy, xx = np.mgrid[0:41, 0:41]
+    beyond = np.hypot(yy - 20.5, xx - 20.5) > r_light + 3
+    # the light's energy beyond its own bokeh (+ the lattice's widening): with the sky's CoC the
+    # fringe put 3.4 % (final) / 5.6 % (draft) there
+    for q, most in (("final", 0.005), ("draft", 0.03)):
+        out, _ = run(cam, Frame(color, depth=depth), q)
+        e = out[..., 1] - 0.1
+        assert e[beyond].sum() < most * e.sum(), q
+
+
+def test_half_covered_pixel_of_a_dark_pole_takes_the_poles_depth():
+    h, w = 21, 21
+    color = np.full((h, w, 3), 1.0, np.float32)
+    depth = np.full((h, w), np.inf, np.float32)
+    color[:, :10] = 0.05; depth[:, :10] = 0.8     # a dark pole
+    color[:, 10] = 0.5                            # its anti-aliased edge: half pole, sky's depth
+    eff = D.effective_depth(color.astype(np.float64), depth)
+    pole = np.float32(0.8)
+    assert (eff[:, 10] == pole).all() and np.isinf(eff[:, 11:]).all() and (eff[:, :10] == pole).all()
+    color[:, 10] = 0.9                            # a tenth covered: stays with the sky
+    assert np.isinf(D.effective_depth(color.astype(np.float64), depth)[:, 10]).all()
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_fringe_rule_kernel_matches_its_reference_on_random_lights_and_steps(rng, quality):
+    """Random depth steps (0.5 m … sky) under random HDR lights with anti-aliased fringes, at an odd
+    size whose rows have both the kernel's 16-pixel groups and its per-pixel edge path."""
+    h, w = 29, 53
+    depth = np.where(rng.random((h, w)) < 0.3, np.inf, rng.choice([0.5, 1.0, 3.0, 9.0], (h, w))).astype(np.float32)
+    depth = np.repeat(np.repeat(depth[::3, ::3], 3, 0), 3, 1)[:h, :w].copy()   # 3-px blocks: real steps
+    color = (rng.random((h, w, 3)) * 0.5).astype(np.float32)
+    for _ in range(12):                                                            # lights and fringes
+        y, x = rng.integers(1, h - 1), rng.integers(1, w - 1)
+        color[y - 1:y + 2, x - 1:x + 2] += rng.random() * 30
+        color[y, x] += rng.random() * 300
+    cam = Camera(**{**CAM, "focus_distance_m": 1.0})
+    eff = D.effective_depth(color.astype(np.float64), depth)
+    assert (eff <= depth).all() and (eff != depth).any()          # only ever nearer, and it fired
+    frame = Frame(color, depth=depth)
+    out, pipe = run(cam, frame, quality)
+    assert_matches_reference(pipe, frame, out, rtol=1e-3)
+
+
 @pytest.mark.parametrize("space", ["rec709", "acescg"])
 def test_highlight_edge_test_uses_the_working_spaces_luminance(space):
     """A reddish edge pixel on a blue sky is 'brighter than its same-depth neighbours' in ACEScg

@@ -23,12 +23,19 @@ lens). The two agree for u ≫ f (1.7 % apart at u = 3 m with f = 50 mm).
 Depth → 0⁺ gives c → −∞: r is clamped to ±``max_coc_px`` of the quality level (below), which is
 also the largest blur the gather supports — larger CoC saturates there (never NaN, never a hole).
 
-Edge pixels whose colour and depth disagree (CONVENTIONS.md: anti-aliased colour, one-sample
-depth — the edge of a small bright light carries the light's colour and the sky's depth): a
-pixel brighter than 1.5× every neighbour of its own depth (3×3, depth ≥ 0.8× its own) takes the
-nearest depth of its 3×3 neighbourhood. This keeps the light's energy in the light's bokeh instead
-of smearing it into a sky-sized halo, and never fires on ordinary edges (a pixel is not brighter
-than all of its own surface).
+Edge pixels whose colour and depth disagree (CONVENTIONS.md: renderers give anti-aliased colour
+and one-sample depth — the fringe of a small bright light carries the light's colour and the sky's
+depth): the *fringe rule* (:func:`effective_depth`) explains p's luminance as a mix
+:math:`Y_p = \alpha Y_n + (1-\alpha) Y_f` of a nearer surface seen in its 3×3 neighbourhood and
+p's own surface, and gives p the nearest depth of its 3×3 when that surface covers at least half
+of p or brings at least half of its light. A light's fringe then keeps the light's depth (its energy
+goes into the light's bokeh instead of a sky-sized halo), a silhouette's half-covered pixels go
+with the surface in front (no sharp ghost line of a blurred foreground), and on a smooth far
+surface nothing else moves; depths only ever move nearer. Rejected alternative: splitting each
+fringe pixel into two sources (foreground and background colour and CoC, Dr.Bokeh-style layers)
+doubles the gather's taps; per-pixel energy goes almost wholly to one surface at the fringes that
+matter (a light is 100–1000× its background), so one depth per pixel chosen by energy keeps the
+single-layer gather.
 
 Gather (scatter-as-gather, one pass, per 16×16 tile, fixed tap budget)
 -----------------------------------------------------------------------
@@ -204,8 +211,8 @@ def luma_weights(camera=None) -> np.ndarray:
     return luminance_weights(WORKING_SPACES[getattr(camera, "working_space", "rec709")])
 
 
-MIXED_BRIGHTER = 1.5
 MIXED_SAME_DEPTH = 0.8
+"""Neighbours nearer than this × a pixel's depth are another surface (the fringe rule)."""
 FRONT_MARGIN_PX = 1.0
 
 
@@ -274,17 +281,42 @@ def _neighbourhood(a: np.ndarray):
 
 
 def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | None = None) -> np.ndarray:
-    """Depth with the colour/depth disagreement at edges resolved (see the module docstring);
-    ``luma``: the working space's luminance weights (:func:`luma_weights`)."""
+    r"""Depth with the colour/depth disagreement of anti-aliased edges resolved (the fringe rule of
+    the module docstring); ``luma``: the working space's luminance weights (:func:`luma_weights`).
+
+    In the 3×3 neighbourhood of p, the *near* pixels are those with :math:`d_q <` 0.8 :math:`d_p`
+    and p's own surface those with :math:`d_q \ge` 0.8 :math:`d_p` (p included). p is a mix
+    :math:`Y_p = \alpha Y_n + (1-\alpha) Y_f` of a near and a far surface; two hypotheses:
+
+    * bright near (a light over the sky): :math:`Y_n` the brightest near pixel, :math:`Y_f` the
+      darkest of p's surface; the near surface explains p when it covers at least half of it
+      (:math:`\alpha \ge \tfrac12`) or brings at least half of its light
+      (:math:`\alpha Y_n \ge \tfrac12 Y_p`) — the energy test is what catches a light's faint
+      fringe, whose same-depth neighbours are equally bright fringe;
+    * dark near (a pole over the sky): :math:`Y_n` the darkest near pixel, :math:`Y_f` the
+      brightest of p's surface; it explains p when :math:`\alpha \ge \tfrac12`.
+
+    When either holds p takes the nearest depth of its 3×3. With
+    :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are written without a division. A depth
+    only ever moves nearer; a pixel with no near neighbour keeps its own."""
     d = np.asarray(depth, dtype=np.float64)
     lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
     dn, ln = _neighbourhood(d), _neighbourhood(lum)
     nearest = np.minimum.reduce(dn)
-    brightest_same = np.zeros_like(d)
+    bright_n, dark_n = np.full_like(d, -np.inf), np.full_like(d, np.inf)  # near pixels' extremes
+    own_min, own_max = lum.copy(), lum.copy()                            # p's own surface, p included
     for dq, lq in zip(dn[1:], ln[1:]):
-        brightest_same = np.maximum(brightest_same, np.where(dq >= MIXED_SAME_DEPTH * d, lq, 0.0))
-    mixed = (lum > MIXED_BRIGHTER * brightest_same) & (nearest < d)
-    return np.where(mixed, nearest, d)
+        near = dq < MIXED_SAME_DEPTH * d
+        bright_n = np.where(near, np.maximum(bright_n, lq), bright_n)
+        dark_n = np.where(near, np.minimum(dark_n, lq), dark_n)
+        own_min = np.where(near, own_min, np.minimum(own_min, lq))
+        own_max = np.where(near, own_max, np.maximum(own_max, lq))
+    with np.errstate(invalid="ignore"):
+        span, part = bright_n - own_min, lum - own_min
+        bright = (span > 0) & ((2 * part >= span) | (2 * part * bright_n >= lum * span))
+        span, part = own_max - dark_n, own_max - lum
+        dark = (span > 0) & (2 * part >= span)
+    return np.where(bright | dark, nearest, d)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,0 +1,133 @@
+"""clpost on Blender/Cycles exports against Cycles' own truths (tests/data/cycles, docs/fidelity.md).
+
+The pinhole EXRs are read exactly as Blender wrote them; the floors below are today's measured
+levels (tools/cycles_compare.py, the table in docs/fidelity.md) minus a margin, so a change that
+makes clpost worse on a renderer's output fails here. They are NOT the issue's targets (final
+within 4 dB of the noise floor, FLIP ≤ 0.03, bokeh discs within 10 %, no in-focus halo, energy
+within 3 %): docs/fidelity.md lists those as the goal. Raise a floor when clpost improves.
+"""
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+import pytest
+
+from clpost import fidelity as fd
+from clpost.exr import read_frame
+from clpost.frame import Frame
+from clpost.pipeline import Pipeline
+
+DATA = Path(__file__).parent / "data" / "cycles"
+MANIFEST = json.loads((DATA / "manifest.json").read_text())
+STAGES = {"dof": ["dof"], "motion": ["motion_blur"], "dofmotion": ["dof", "motion_blur"]}
+MARGIN_DB = 0.5
+
+# PSNR of the sRGB view vs the Cycles truth, measured with tools/cycles_compare.py (docs/fidelity.md):
+# (scene, truth, quality) -> dB
+MEASURED_PSNR = {
+    ("emitters", "dof", "draft"): 32.32,
+    ("emitters", "dof", "final"): 34.12,
+}
+
+
+def _channels(path: Path, prefix: str) -> np.ndarray:
+    for part in OpenEXR.File(str(path), separate_channels=True).parts:
+        ch = part.channels
+        for pre in [prefix] + [n[:-1] for n in ch if prefix and n.endswith("." + prefix + "R")]:
+            if all(pre + c in ch for c in "RGB"):
+                return np.stack([ch[pre + c].pixels for c in "RGB"], -1).astype(np.float32)
+    raise AssertionError(f"{path}: no {prefix}R/G/B")
+
+
+def _scene(name):
+    entry = MANIFEST["scenes"][name]
+    return entry, read_frame(DATA / entry["pinhole"]["file"])
+
+
+def _run(entry, frame, kind, quality):
+    w, h = entry["size"]
+    cam = fd.cycles_camera(entry["shot"], w, h, dof=kind != "motion", motion=kind != "dof")
+    return Pipeline(cam, quality=quality, stages=STAGES[kind]).run(frame).color[..., :3]
+
+
+def test_pinhole_exports_read_as_blender_writes_them():
+    """Every pinhole is Blender's multilayer layout: planar depth with the 1e10 sky read as +inf,
+    the lamps' depth where they are, and vectors (static scenes: zero)."""
+    for name, entry in MANIFEST["scenes"].items():
+        frame = read_frame(DATA / entry["pinhole"]["file"])
+        w, h = entry["size"]
+        assert frame.metadata["layout"] == "blender", name
+        assert frame.color.shape[:2] == (h, w) and frame.velocity is not None, name
+        assert np.all(np.isinf(frame.depth) | (frame.depth < 1000)), name
+        if not entry["shot"]["motion"]:
+            assert np.abs(frame.velocity).max() < 0.01, name
+        for lamp in entry["lamps"]:
+            i, j = round(lamp["x_px"]), round(lamp["y_px"])
+            if 0 <= i < w and 0 <= j < h and frame.depth[j, i] < 1000 and lamp["diameter_px"] >= 2:
+                if abs(frame.depth[j, i] - lamp["depth_m"]) < 0.05 * lamp["depth_m"]:
+                    continue
+                # a lamp hidden behind a nearer surface
+                assert frame.depth[j, i] < lamp["depth_m"], (name, lamp["name"])
+
+
+@pytest.mark.skipif("motion" not in MANIFEST["scenes"], reason="no motion scene stored")
+def test_blender_vectors_are_forward_y_down_after_reading():
+    """Blender 5.0's Vector pass as clpost reads it (docs/conventions.md): the ball moves −0.12 m
+    in x and −0.09 m in z per frame at ≈ 2.35 m (its front), i.e. left and down in the image:
+    (−34, +25.5) px/frame at 480 wide; the cube slides right."""
+    entry, frame = _scene("motion")
+    f_px = entry["shot"]["focal_mm"] * entry["size"][0] / entry["shot"]["sensor_mm"]
+    # the ball's centre (x 0.33, z 1.2 at frame 1, depth 2.5) in pixels
+    x = (entry["size"][0] - 1) / 2 + f_px * 0.33 / 2.5
+    y = (entry["size"][1] - 1) / 2 - f_px * (1.2 - 1.5) / 2.5
+    v = frame.velocity[round(y) - 2:round(y) + 3, round(x) - 2:round(x) + 3].reshape(-1, 2)
+    depth = float(np.median(frame.depth[round(y) - 2:round(y) + 3, round(x) - 2:round(x) + 3]))
+    expect = np.array([-0.12, 0.09]) * f_px / depth
+    assert np.allclose(np.median(v, axis=0), expect, rtol=0.05), (np.median(v, axis=0), expect)
+
+
+@pytest.mark.parametrize("scene,kind,quality", sorted(MEASURED_PSNR))
+def test_psnr_floor_vs_cycles(scene, kind, quality):
+    entry, frame = _scene(scene)
+    truth = _channels(DATA / entry["truths"][kind]["file"], "")
+    out = _run(entry, frame, kind, quality)
+    psnr = fd.psnr_srgb(truth, out)
+    assert psnr >= MEASURED_PSNR[scene, kind, quality] - MARGIN_DB, f"{scene} {kind} {quality}: {psnr:.2f} dB"
+
+
+def test_truths_are_defocused_beyond_their_noise():
+    """Guards the data: each truth differs from its pinhole far more than its own seed-to-seed noise,
+    and the floors recorded are the ≥ 36 dB the suite promises."""
+    for name, entry in MANIFEST["scenes"].items():
+        frame = read_frame(DATA / entry["pinhole"]["file"])
+        for kind, t in entry["truths"].items():
+            truth = _channels(DATA / t["file"], "")
+            assert t["noise_floor_psnr_srgb_db"] >= 36.0, (name, kind)
+            assert fd.psnr_srgb(truth, frame.color) < t["noise_floor_psnr_srgb_db"] - 3.0, (name, kind)
+
+
+def test_emitter_regressions_on_the_emitters_scene():
+    """clpost final's per-lamp behaviour may not get worse than measured (issue 16: today the discs
+    are up to 2.1× Cycles' area and in-focus lamps get ≈ 100-pixel halos; the goal is 1 ± 0.1 and
+    ≤ 2× Cycles' halo)."""
+    entry, frame = _scene("emitters")
+    t = entry["truths"]["dof"]
+    truth, truth_lamps = _channels(DATA / t["file"], ""), _channels(DATA / t["file"], "emit.")
+    emit = _channels(DATA / entry["pinhole"]["file"], "Emission.")
+    out = _run(entry, frame, "dof", "final")
+    dark = Frame(color=np.maximum(frame.color[..., :3] - emit, 0).astype(np.float32), depth=frame.depth,
+                 velocity=frame.velocity)
+    lamps_out = out - _run(entry, dark, "dof", "final")
+    m = [fd.emitter_metrics(out, truth, lamps_out, truth_lamps, lamp, entry["shot"], 0.6) for lamp in entry["lamps"]]
+    areas = [x["area_ratio"] for x in m if x.get("area_ratio") is not None]
+    energy = [x["energy_ratio"] for x in m if x["energy_ratio"] is not None]
+    halo = sum(x["halo_test"] for x in m if x["in_focus"])
+    assert max(areas) <= MEASURED_EMITTERS["area_ratio_max"] + 0.1, areas
+    assert halo <= MEASURED_EMITTERS["halo_px_sum"] * 1.2, halo
+    assert min(energy) >= MEASURED_EMITTERS["energy_min"] - 0.03, energy
+    assert max(abs(e - 1) for e in energy) < 0.5 and not any(math.isnan(e) for e in energy)
+
+
+MEASURED_EMITTERS = {"area_ratio_max": 2.13, "halo_px_sum": 129 + 108 + 146 + 35, "energy_min": 0.857}

@@ -1,0 +1,147 @@
+"""Render and store the whole Cycles ground-truth suite (tests/data/cycles/).
+
+    /work/bpyvenv/bin/python tools/cycles_truth/make.py [--scenes emitters,thin] [--spp 512] \\
+        [--pinhole-spp 256] [--threads 2] [--raw /tmp/cycles/raw] [--out tests/data/cycles]
+
+Per scene (each render in its own Blender process, tools/cycles_truth/render.py):
+
+- ``pinhole.exr``: the artist's export, byte for byte as Blender wrote it (multilayer, float,
+  ZIP; Combined, Depth, Vector, and Emit for the metrics), seed 0.
+- ``dof.exr`` (every scene), ``motion.exr`` and ``dofmotion.exr`` (scenes with motion): the mean
+  of two Cycles renders with seeds 1 and 2, stored as half-float RGB (ZIP), with the Emit pass (the
+  lamps alone) as emit.R/G/B. The two seeds'
+  PSNR (sRGB view, :func:`clpost.fidelity.psnr_srgb`) is the scene's **noise floor**; the stored
+  mean is √2 less noisy than one seed (6 dB better against the true image than the floor).
+
+``manifest.json`` records the command, Blender version, samples, seeds, render times, the noise
+floors and each scene's camera and lamps (pixel position, depth, size), which is all that
+tools/cycles_compare.py and the tests need — neither needs Blender.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+import numpy as np
+import OpenEXR
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+CAM_Z = 1.5  # scenes.CAM_Z (not imported: scenes.py needs bpy)
+
+
+def read_pass(path, name="Combined"):
+    """RGB of one pass of a Blender multilayer EXR (float64)."""
+    f = OpenEXR.File(path, separate_channels=True)
+    for part in f.parts:
+        ch = part.channels
+        names = [n for n in ch if n.endswith(f".{name}.R")]
+        if names:
+            pre = names[0][:-1]
+            return np.stack([ch[pre + c].pixels for c in "RGB"], -1).astype(np.float64)
+    raise SystemExit(f"{path}: no {name} pass")
+
+
+def srgb_view(x):
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def psnr_srgb(a, b):
+    mse = float(np.mean((srgb_view(a) - srgb_view(b)) ** 2))
+    return float("inf") if mse == 0 else 10 * math.log10(1.0 / mse)
+
+
+def write_truth(path, rgb, emit):
+    """Half-float R, G, B (the image) and emit.R/G/B (the lamps alone), ZIP, atomically."""
+    chans = {c: np.ascontiguousarray(rgb[..., i], dtype=np.float16) for i, c in enumerate("RGB")}
+    chans.update({f"emit.{c}": np.ascontiguousarray(emit[..., i], dtype=np.float16) for i, c in enumerate("RGB")})
+    tmp = path + ".tmp.exr"
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, chans).write(tmp)
+    os.replace(tmp, path)
+
+
+def render(scene, kind, path, spp, seed, threads, threshold, reuse=False):
+    if reuse and os.path.exists(path + ".json"):
+        with open(path + ".json") as fh:
+            info = json.load(fh)
+        if (info["spp"], info["seed"], info["adaptive_threshold"]) == (spp, seed, threshold):
+            return info
+    cmd = [sys.executable, os.path.join(HERE, "render.py"), scene, kind, path, "--spp", str(spp),
+           "--seed", str(seed), "--threads", str(threads), "--threshold", str(threshold)]
+    print(" ".join(cmd), flush=True)
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    with open(path + ".json") as fh:
+        return json.load(fh)
+
+
+def lamps_px(shot, w, h):
+    """Each lamp's pixel centre (OpenCV convention: pixel (i, j) centred at (i, j)), depth and size."""
+    f_px = shot["focal_mm"] * w / shot["sensor_mm"]
+    out = []
+    for name, (x, y, z), radius in shot["lamps"]:
+        out.append({"name": name, "x_px": (w - 1) / 2 + f_px * x / y, "y_px": (h - 1) / 2 - f_px * (z - CAM_Z) / y,
+                    "depth_m": y, "diameter_px": 2 * radius * f_px / y})
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--scenes", default="emitters,highlights,thin,occluder,transparent,macro,motion")
+    p.add_argument("--spp", type=int, default=512, help="samples of each truth render")
+    p.add_argument("--pinhole-spp", type=int, default=256)
+    p.add_argument("--threshold", type=float, default=0.0, help="adaptive sampling threshold (0: off)")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--raw", default="/tmp/cycles/raw")
+    p.add_argument("--reuse", action="store_true", help="keep raw renders already in --raw with the same settings")
+    p.add_argument("--out", default=os.path.join(HERE, "..", "..", "tests", "data", "cycles"))
+    a = p.parse_args(argv)
+    os.makedirs(a.raw, exist_ok=True)
+    out = os.path.abspath(a.out)
+    os.makedirs(out, exist_ok=True)
+    man_path = os.path.join(out, "manifest.json")
+    manifest = json.load(open(man_path)) if os.path.exists(man_path) else {"scenes": {}}
+    for scene in a.scenes.split(","):
+        t0 = time.time()
+        d = os.path.join(out, scene)
+        os.makedirs(d, exist_ok=True)
+        pin_raw = os.path.join(a.raw, f"{scene}_pinhole.exr")
+        info = render(scene, "pinhole", pin_raw, a.pinhole_spp, 0, a.threads, a.threshold, a.reuse)
+        shutil.copyfile(pin_raw, os.path.join(d, "pinhole.exr"))
+        shot = info["shot"]
+        w, h = info["size"]
+        entry = {"size": [w, h], "blender": info["blender"], "shot": shot, "lamps": lamps_px(shot, w, h),
+                 "pinhole": {"file": f"{scene}/pinhole.exr", "spp": a.pinhole_spp, "seed": 0,
+                             "render_s": info["render_s"]}, "truths": {}}
+        kinds = ["dof"] + (["motion", "dofmotion"] if shot["motion"] else [])
+        for kind in kinds:
+            imgs, emits, times = [], [], []
+            for seed in (1, 2):
+                raw = os.path.join(a.raw, f"{scene}_{kind}_s{seed}.exr")
+                times.append(render(scene, kind, raw, a.spp, seed, a.threads, a.threshold, a.reuse)["render_s"])
+                imgs.append(read_pass(raw))
+                emits.append(read_pass(raw, "Emission"))
+            floor = psnr_srgb(imgs[0], imgs[1])
+            write_truth(os.path.join(d, f"{kind}.exr"), (imgs[0] + imgs[1]) / 2, (emits[0] + emits[1]) / 2)
+            entry["truths"][kind] = {"file": f"{scene}/{kind}.exr", "spp": a.spp, "seeds": [1, 2],
+                                     "adaptive_threshold": a.threshold, "render_s": times,
+                                     "noise_floor_psnr_srgb_db": round(floor, 2)}
+            print(f"{scene} {kind}: floor {floor:.2f} dB, {times} s", flush=True)
+        entry["wall_s"] = round(time.time() - t0, 1)
+        manifest["scenes"][scene] = entry
+        manifest["command"] = ("/work/bpyvenv/bin/python tools/cycles_truth/make.py " + " ".join(argv or sys.argv[1:])).strip()
+        manifest["note"] = "written by tools/cycles_truth/make.py; see tests/data/cycles/README.md"
+        tmp = man_path + ".tmp"
+        with open(tmp, "w") as fh:
+            json.dump(manifest, fh, indent=1)
+        os.replace(tmp, man_path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
