@@ -38,6 +38,9 @@ MEASURED_PSNR = {
     ("motion", "motion", "draft"): 34.10,
     ("motion", "motion", "final"): 34.52,
     ("motion", "dofmotion", "final"): 34.62,
+    ("transparent", "dof", "final"): 41.24,
+    ("macro", "dof", "draft"): 28.62,
+    ("macro", "dof", "final"): 33.87,
 }
 
 
