@@ -248,7 +248,7 @@ def main(argv=None) -> int:
             results[name][kind] = rows
             panels = [pinhole, truth] + ([final] if final is not None else []) + ([peer] if peer is not None else [])
             labels = ["pinhole", f"Cycles {kind}"] + (["clpost final"] if final is not None else []) + \
-                     (["Blender peer"] if peer is not None else [])
+                     ([f"Blender {'Defocus' if kind == 'dof' else 'Vector Blur'}"] if peer is not None else [])
             sheet(panels, labels, sheets / f"sheet_{name}_{kind}.png")
             if name == "emitters" and kind == "dof" and a.figure and len(panels) == 4:
                 sheet(panels, labels, Path(a.figure))
