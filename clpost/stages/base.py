@@ -37,7 +37,11 @@ How the planner calls a stage (:mod:`clpost.pipeline`):
   (channel c of pixel i at ``c*W*H + i``), ``aux["depth"]`` / ``aux["velocity"]`` device
   buffers for what it ``reads``; it gets its kernels from ``rt.kernel`` (cached), its tables from
   ``rt.constant`` and its work buffers from ``rt.scratch(self, name, shape)``, and launches with
-  ``rt.launch``. Returns the events it enqueued (profiled).
+  ``rt.launch`` (plan-time work: ``rt.launch_once``; transfers: ``rt.copy``). Returns the events
+  it enqueued (profiled). The plan records these launches and replays them on later frames
+  without running ``enqueue`` (:mod:`clpost.runtime_record`) while the camera and
+  :meth:`GatherStage.replay_key` stay the same: enqueue through ``rt`` only, and read nothing
+  back from the device.
 - ``reference()`` gets float64 color and the host Frame; tests compare the two on odd sizes,
   after asserting that the stage is planned (``tests/conftest.py``: ``assert_planned``; an
   unplanned stage is the identity on both sides).
@@ -165,6 +169,19 @@ class GatherStage(Stage):
     @abstractmethod
     def enqueue(self, rt: "Runtime", camera: "Camera", frame: "Frame", src, dst, aux: dict) -> list:
         """Enqueue the stage reading planar ``src`` and writing planar ``dst``; return events."""
+
+    def replay_key(self, camera: "Camera", frame: "Frame") -> object:
+        """What this stage's launches depend on besides the camera (a plan compares the camera
+        itself): a plan records the launches of :meth:`enqueue` and :meth:`enqueue_host_buffers`
+        once and replays them while the camera and this key stay the same
+        (:mod:`clpost.runtime_record`). Default: the frame's size, its recorded intrinsics and which
+        buffers it has. A stage whose launches read more of the frame (its index for noise, a
+        statistic of its pixels) adds it; None: run the stage's code this frame (not replayable).
+        Launch sizes and arguments must never depend on pixel data read back from the device."""
+        from ._field import frame_intrinsics
+
+        return (frame.size, frame_intrinsics(frame), frame.depth is None, frame.velocity is None,
+                frame.alpha is None)
 
     def output_size(self, camera: "Camera", frame: "Frame") -> tuple[int, int]:
         """(width, height) of ``dst``; the planner runs every later node at this size. Default:
