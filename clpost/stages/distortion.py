@@ -429,7 +429,7 @@ class Distortion(GatherStage):
         if bspline and 3 * max(pw * th, model.width * model.height) >= 2**31:
             raise InputError(f"distortion: {sw}x{sh} is too large for the final filter's 32-bit tap "
                              "indices; use --quality preview (bilinear)")
-        key = (id(rt), model, frame.size, kkey, self.filter_taps)
+        key = (id(rt.context), model, frame.size, kkey, self.filter_taps)  # buffers belong to a context
         bufs = self._dev_maps.get(key)
         if bufs is None:
             if bspline:  # the tap table, the map, the two tile lists, then scratch for the coefficients
