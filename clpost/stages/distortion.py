@@ -509,8 +509,11 @@ class Distortion(GatherStage):
         events, dev = [], {}
         for name, shape in (("depth", (frame.height, frame.width)), ("velocity", (frame.height, frame.width, 2))):
             host = getattr(frame, name)
-            dev[name] = rt.scratch(self, f"aux_in_{name}", shape if host is not None else (1,))
             dev[name + "_out"] = rt.scratch(self, f"aux_out_{name}", (h, w) + shape[2:] if host is not None else (1,))
+            if host is not None and name in aux and aux[name].size == host.nbytes:
+                dev[name] = aux[name]  # the plan uploaded it for an earlier stage: not again
+                continue
+            dev[name] = rt.scratch(self, f"aux_in_{name}", shape if host is not None else (1,))
             if host is not None:
                 events.append(("upload", rt.copy(dev[name], host)))
         kern = rt.kernel(kernel_source("common") + kernel_source("distortion"), "distortion_aux", {}, "distortion")
