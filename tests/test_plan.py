@@ -157,21 +157,24 @@ def test_changed_scalars_set_only_the_arguments_that_changed(rng, monkeypatch):
     np.testing.assert_array_equal(out.color, Pipeline(brighter, quality="final", stages=stages).run(frame).color)
 
 
-def test_a_frame_index_reaches_the_stages_that_hash_it(rng):
-    """Motion blur hashes the frame index into its sample jitter: a replay must not keep the
-    recorded index (GatherStage.replay_key)."""
+@pytest.mark.parametrize("stages, cam", [
+    (["motion_blur"], Camera(shutter_s=1 / 48, frame_rate_fps=24.0)),
+    (["sensor"], Camera(sensor_preset="smartphone")),
+])
+def test_a_frame_index_reaches_the_stages_that_hash_it(rng, stages, cam):
+    """Motion blur (gather) and the sensor's noise (pointwise) hash the frame index: a replay must
+    not keep the recorded index (Stage.replay_key)."""
     w, h = 40, 24
     velocity = np.zeros((h, w, 2), np.float32)
     velocity[..., 0] = np.linspace(0, 9, w)[None, :]
-    cam = Camera(shutter_s=1 / 48, frame_rate_fps=24.0)
-    frames = [Frame(rng.uniform(0, 1, (h, w, 3)).astype(np.float32), depth=np.full((h, w), 3.0, np.float32),
-                    velocity=velocity, metadata={"frame_index": i}) for i in (0, 1)]
-    frames[1] = frames[1].replace(color=frames[0].color)
-    pipe = Pipeline(cam, stages=["motion_blur"])
-    assert pipe.plan(frames[0]) == ["motion_blur"]
+    color = rng.uniform(0, 1, (h, w, 3)).astype(np.float32)
+    frames = [Frame(color, depth=np.full((h, w), 3.0, np.float32), velocity=velocity, metadata={"frame_index": i})
+              for i in (0, 1)]
+    pipe = Pipeline(cam, stages=["exposure", *stages])  # sensor requires exposure (an identity here)
+    assert pipe.plan(frames[0]) == stages
     a, b = (pipe.run(f).color for f in frames)
-    assert np.any(a != b)  # the jitter changes with the index
-    np.testing.assert_array_equal(b, Pipeline(cam, stages=["motion_blur"]).run(frames[1]).color)
+    assert np.any(a != b)  # the noise changes with the index
+    np.testing.assert_array_equal(b, Pipeline(cam, stages=["exposure", *stages]).run(frames[1]).color)
 
 
 def test_plans_that_share_a_stage_take_turns(rng):

@@ -138,6 +138,21 @@ class Stage(ABC):
         """Structural ``#define``s (part of the program key); none by default."""
         return {}
 
+    def replay_key(self, camera: "Camera", frame: "Frame") -> object:
+        """What this stage's launches depend on besides the camera (a plan compares the camera
+        itself). A plan records a gather stage's launches (:meth:`GatherStage.enqueue`,
+        :meth:`GatherStage.enqueue_host_buffers`) once and replays them while the camera and this
+        key stay the same (:mod:`clpost.runtime_record`); a pointwise stage's :meth:`values` are
+        computed again only when they change. Default: the frame's size, its recorded intrinsics
+        and which buffers it has. A stage whose launches or values read more of the frame (its
+        index for noise, a statistic of its pixels) adds it; None: run the stage's code every
+        frame. Launch sizes and arguments must never depend on pixel data read back from the
+        device."""
+        from ._field import frame_intrinsics
+
+        return (frame.size, frame_intrinsics(frame), frame.depth is None, frame.velocity is None,
+                frame.alpha is None)
+
 
 class PointwiseStage(Stage):
     """A per-pixel function, fused with neighbouring pointwise stages into one kernel.
@@ -169,19 +184,6 @@ class GatherStage(Stage):
     @abstractmethod
     def enqueue(self, rt: "Runtime", camera: "Camera", frame: "Frame", src, dst, aux: dict) -> list:
         """Enqueue the stage reading planar ``src`` and writing planar ``dst``; return events."""
-
-    def replay_key(self, camera: "Camera", frame: "Frame") -> object:
-        """What this stage's launches depend on besides the camera (a plan compares the camera
-        itself): a plan records the launches of :meth:`enqueue` and :meth:`enqueue_host_buffers`
-        once and replays them while the camera and this key stay the same
-        (:mod:`clpost.runtime_record`). Default: the frame's size, its recorded intrinsics and which
-        buffers it has. A stage whose launches read more of the frame (its index for noise, a
-        statistic of its pixels) adds it; None: run the stage's code this frame (not replayable).
-        Launch sizes and arguments must never depend on pixel data read back from the device."""
-        from ._field import frame_intrinsics
-
-        return (frame.size, frame_intrinsics(frame), frame.depth is None, frame.velocity is None,
-                frame.alpha is None)
 
     def output_size(self, camera: "Camera", frame: "Frame") -> tuple[int, int]:
         """(width, height) of ``dst``; the planner runs every later node at this size. Default:
