@@ -2,8 +2,8 @@
 
 Host time is the calling thread's CPU time (``time.thread_time``) over one ``Pipeline.run`` —
 resolving the camera, planning, tables, argument setting, enqueueing — so it leaves out the
-device's threads and the waits for them. Median of 7 frames after 2 warm-ups, 1920×1080 bench
-scenes, interleaved per case (old, then this tree); the extended-frustum row renders at
+device's threads and the waits for them. Median of 15 frames after 2 warm-ups, 1920×1080 bench
+scenes, old and this tree interleaved frame by frame; the extended-frustum row renders at
 ``required_render``'s size for the calibration, the case that solves the render's intrinsics.
 
 ``--against`` also gives ``Plan.run`` alone (the target: ≤ 1 ms besides the kernels), for a fixed
@@ -43,24 +43,26 @@ def _animated(cam, i: int):
     return cam.with_(focus_distance_m=cam.focus_distance_m * (1.0 + 0.01 * (i % 16)))
 
 
-def host_ms(pkg, scene_name: str, quality: str, w: int, h: int, extended: bool, frames: int = 7,
-            plan_only: bool = False, animated: bool = False) -> float:
-    """Median host ms of ``Pipeline.run`` (``plan_only``: of ``Plan.run`` alone, the pipeline's
-    plan for the frame) over ``frames`` after 2 warm-ups; ``animated``: a focus pull."""
-    pipe, frame, cam = _case(pkg, scene_name, quality, w, h, extended)
-    times = []
+def host_ms(pkgs, scene_name: str, quality: str, w: int, h: int, extended: bool, frames: int = 15,
+            plan_only: bool = False, animated: bool = False) -> list[float]:
+    """Median host ms per package in ``pkgs`` of ``Pipeline.run`` (``plan_only``: of ``Plan.run``
+    alone, the pipeline's plan for the frame) over ``frames`` after 2 warm-ups, the packages
+    interleaved frame by frame (load drifts hit all alike); ``animated``: a focus pull."""
+    cases = [_case(pkg, scene_name, quality, w, h, extended) for pkg in pkgs]
+    times: list[list[float]] = [[] for _ in pkgs]
     for i in range(frames + 2):
-        c = _animated(cam, i) if animated else cam
-        if plan_only:
-            resolved = pipe.camera_for(frame, c)
-            plan = pipe.plan_for(frame, resolved)
-            plan.run(frame, resolved)
-            times.append(plan.last_host_ms)
-        else:
-            t0 = time.thread_time()
-            pipe.run(frame, c)
-            times.append((time.thread_time() - t0) * 1e3)
-    return statistics.median(times[2:])
+        for (pipe, frame, cam), t in zip(cases, times):
+            c = _animated(cam, i) if animated else cam
+            if plan_only:
+                resolved = pipe.camera_for(frame, c)
+                plan = pipe.plan_for(frame, resolved)
+                plan.run(frame, resolved)
+                t.append(plan.last_host_ms)
+            else:
+                t0 = time.thread_time()
+                pipe.run(frame, c)
+                t.append((time.thread_time() - t0) * 1e3)
+    return [statistics.median(t[2:]) for t in times]
 
 
 def breakdown(scene_name: str, quality: str, w: int, h: int, frames: int = 15, extended: bool = False) -> str:
@@ -134,8 +136,7 @@ def main(argv=None) -> int:
     for scene, quality, extended in cases:
         row = []
         for plan_only, animated in ((False, False), (True, False), (True, True)):
-            for pkg in (old, clpost):
-                row.append(host_ms(pkg, scene, quality, w, h, extended, plan_only=plan_only, animated=animated))
+            row += host_ms((old, clpost), scene, quality, w, h, extended, plan_only=plan_only, animated=animated)
         label = f"{scene}{', extended frustum' if extended else ''}"
         print(f"| {label} | {quality} | " + " | ".join(f"{v:.2f}" for v in row) + " |", flush=True)
     return 0
