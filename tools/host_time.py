@@ -11,6 +11,7 @@ camera and for a focus pull (the focus changes every frame: the stages' launch c
 sets the changed arguments).
 
     PYTHONPATH=. python -W ignore tools/host_time.py --against a4db22e
+    PYTHONPATH=. python -W ignore tools/host_time.py --against 89893fe --python-only  # Python alone
     PYTHONPATH=. python -W ignore tools/host_time.py --breakdown    # where Plan.run's time goes
 """
 from __future__ import annotations
@@ -109,11 +110,46 @@ def breakdown(scene_name: str, quality: str, w: int, h: int, frames: int = 15, e
             + " | ".join(f"{part[k]:.2f} ({n[k]})" for k in part) + f" | {rest:.2f} |")
 
 
+def python_only(pkgs, scene_name: str, quality: str, w: int, h: int, extended: bool, runs: int = 200) -> list[float]:
+    """Median host ms of ``Plan.run`` per package with every pyopencl enqueue (kernels, copies)
+    replaced by a no-op: the Python part alone, which the device's threads do not slow down (on a
+    loaded box they inflate the rest); the packages interleaved run by run."""
+    import pyopencl as cl
+
+    class Event:
+        def wait(self):
+            pass
+
+    event = Event()
+    cases = []
+    for pkg in pkgs:
+        pipe, frame, cam = _case(pkg, scene_name, quality, w, h, extended)
+        cam = pipe.camera_for(frame, cam)
+        plan = pipe.plan_for(frame, cam)
+        for _ in range(3):
+            plan.run(frame, cam)
+        cases.append((plan, frame, cam))
+    saved = cl.enqueue_nd_range_kernel, cl.enqueue_copy, cl.NannyEvent
+    cl.enqueue_nd_range_kernel = cl.enqueue_copy = lambda *a, **k: event
+    cl.NannyEvent = Event
+    times: list[list[float]] = [[] for _ in pkgs]
+    try:
+        for _ in range(runs):
+            for (plan, frame, cam), t in zip(cases, times):
+                plan.run(frame, cam)
+                t.append(plan.last_host_ms)
+    finally:
+        cl.enqueue_nd_range_kernel, cl.enqueue_copy, cl.NannyEvent = saved
+    return [statistics.median(t) for t in times]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--against", help="git revision to compare with")
     ap.add_argument("--breakdown", action="store_true",
                     help="this tree only: Plan.run's host ms split into pyopencl calls and the rest")
+    ap.add_argument("--python-only", action="store_true",
+                    help="with --against: Plan.run's Python alone (pyopencl's enqueues made no-ops)")
     ap.add_argument("--size", default="1920x1080")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.split("x"))
@@ -128,11 +164,19 @@ def main(argv=None) -> int:
     if not args.against:
         ap.error("give --against REV or --breakdown")
     old = load_revision(args.against)
+    cases = [(s, q, False) for s in ("worst", "no_defocus", "full") for q in ("draft", "final")]
+    cases += [("worst", q, True) for q in ("draft", "final")]
+    if args.python_only:
+        print(f"| scene {w}x{h} | quality | Python of Plan.run: {args.against} ms | this tree ms |")
+        print("|---|---|---:|---:|")
+        for scene, quality, extended in cases:
+            a, b = python_only((old, clpost), scene, quality, w, h, extended)
+            label = f"{scene}{', extended frustum' if extended else ''}"
+            print(f"| {label} | {quality} | {a:.2f} | {b:.2f} |", flush=True)
+        return 0
     print(f"| scene {w}x{h} | quality | Pipeline.run {args.against} | this tree | Plan.run {args.against} "
           f"| this tree | Plan.run, focus pull: {args.against} | this tree |")
     print("|---|---|---:|---:|---:|---:|---:|---:|")
-    cases = [(s, q, False) for s in ("worst", "no_defocus", "full") for q in ("draft", "final")]
-    cases += [("worst", q, True) for q in ("draft", "final")]
     for scene, quality, extended in cases:
         row = []
         for plan_only, animated in ((False, False), (True, False), (True, True)):
