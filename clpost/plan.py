@@ -73,6 +73,8 @@ class _Node:
     key: tuple | None = None
     """What a pointwise launch's arguments were computed from (buffers, the stages' replay keys)."""
     size: tuple | None = None
+    tables: list = field(default_factory=list)
+    """(buffer key, host array) of the tables a pointwise launch's arguments point to."""
     recording: object = None
     """A gather launch's :class:`clpost.runtime_record.Recording` (its commands, replayed)."""
 
@@ -344,13 +346,17 @@ class Plan:
                 w, h = size
                 keys = [s.replay_key(cam, view) for s in node.stages]
                 key = None if None in keys else (src, dst, *aux.values(), *keys)
-                if not (same_camera and key is not None and key == node.key):  # else: as set last frame
+                if not (same_camera and key is not None and key == node.key
+                        and all(bufs.uploaded.get(k) is a for k, a in node.tables)):  # else: as set last frame
                     args = [src, dst, np.int32(w), np.int32(h)]
                     args += [aux[b] for b in AUX_BUFFERS if any(b in s.reads for s in node.stages)]
                     for s in node.stages:
                         args += self.arg_values(s, cam, view)
                     self._set_changed(node, args, patched)
                     node.key = key
+                    # the tables in the buffers (shared by the pipeline's plans of this size) now
+                    node.tables = [(k, bufs.uploaded.get(k)) for s in node.stages
+                                   for k in ((s.name, arg) for t, arg in s.args if "*" in t)]
                     node.size = global_size(node.stages, node.src_layout, node.dst_layout, w, h)
                 events.append((node.name, cl.enqueue_nd_range_kernel(q, node.kernel, node.size, None)))
             src = dst

@@ -201,3 +201,16 @@ def test_a_recorded_stage_cannot_read_the_device_back(rng):
     buf = rt.empty((4,))
     with pytest.raises(RuntimeError, match="reads nothing back"):
         rec.copy(np.empty(4, np.float32), buf, blocking=True)
+
+
+def test_pointwise_tables_shared_between_plans_are_not_replayed_stale(rng):
+    """Two plans of one pipeline and size share the pointwise tables' buffers (vignetting's RI
+    plane): a plan whose arguments are unchanged still re-uploads its table after the other plan
+    wrote the buffer."""
+    frame = scene(rng, w=64, h=32)
+    cams = [Camera(vignetting="natural", lens=lens, depth_of_field=False) for lens in ("thin:24", "thin:85")]
+    pipe = Pipeline(cams[0], stages=["vignetting"])
+    first = [pipe.run(frame, c).color for c in cams]
+    assert pipe.plan_for(frame, cams[0]) is not pipe.plan_for(frame, cams[1]) and np.any(first[0] != first[1])
+    for c, want in zip(cams, first):
+        np.testing.assert_array_equal(pipe.run(frame, c).color, want)
