@@ -68,6 +68,15 @@ class _Node:
     src_layout: str
     dst_layout: str
     kernel: object = None
+    args: list | None = None
+    """A pointwise launch's argument values as set on ``kernel`` (only changed ones are set again)."""
+    key: tuple | None = None
+    """What a pointwise launch's arguments were computed from (buffers, the stages' replay keys)."""
+    size: tuple | None = None
+    tables: list = field(default_factory=list)
+    """(buffer key, host array) of the tables a pointwise launch's arguments point to."""
+    recording: object = None
+    """A gather launch's :class:`clpost.runtime_record.Recording` (its commands, replayed)."""
 
     @property
     def name(self) -> str:
@@ -140,10 +149,16 @@ class Plan:
         self.principal_point = principal_point_px(camera, *frame.size, frame_intrinsics(frame))
         """The optical axis (px) in the plan's input frame: the one definition every stage uses."""
         self.nodes = group_nodes(self.stages)
+        self._aux_names = [b for b in AUX_BUFFERS if any(b in s.reads for s in self.stages)]
         self.launches = self._launches(camera, frame)
         self.buffers = buffers
         self._events: list = []
         self._timings: dict[str, float] = {}
+        self._camera_seen = None  # the camera of the last run (its scalars are what is recorded)
+        self.last_patched: list[tuple[str, int]] = []
+        """(launch, argument index) of every kernel argument set in the last :meth:`run` because its
+        value changed (a per-frame scalar; every argument, the first time a launch is recorded
+        or a pointwise kernel runs)."""
         self.last_host_ms = 0.0
         """CPU time of the calling thread in the last :meth:`run` (host work: planning checks,
         tables, argument setting, enqueueing; the device's threads and waits are not in it)."""
@@ -264,7 +279,7 @@ class Plan:
         if frame.size != self.size:
             raise InputError(f"Plan.run: the frame is {frame.width}x{frame.height} but the plan was built "
                              f"for {self.size[0]}x{self.size[1]}; use Pipeline.run, which plans per size")
-        if camera is not self.camera and structure_key(camera) != self.structure:
+        if camera is not self.camera and camera is not self._camera_seen and structure_key(camera) != self.structure:
             raise InputError("Plan.run: the camera differs from the plan's in more than its per-frame "
                              "scalars (lens, blades, stock …); use Pipeline.run, which re-plans")
 
@@ -282,19 +297,21 @@ class Plan:
         import pyopencl as cl
 
         self.check(frame, cam)
+        same_camera = cam is self._camera_seen or cam == self._camera_seen
+        self._camera_seen = cam
         self._events, self._timings = [], {}
+        patched = self.last_patched = []
         meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
         if not self.stages:
             return frame.replace(metadata=meta, validate=False)
         rt, q, bufs = self.runtime, self.runtime.queue, self.buffers
         events = [("upload", cl.enqueue_copy(q, bufs.color_in, frame.color, is_blocking=False))]
-        for name in AUX_BUFFERS:
-            if any(name in s.reads for s in self.stages):
-                host = getattr(frame, name)
-                buf = bufs.aux.get(name)
-                if buf is None:
-                    buf = bufs.aux[name] = rt.empty(host.shape)
-                events.append(("upload", cl.enqueue_copy(q, buf, host, is_blocking=False)))
+        for name in self._aux_names:
+            host = getattr(frame, name)
+            buf = bufs.aux.get(name)
+            if buf is None:
+                buf = bufs.aux[name] = rt.empty(host.shape)
+            events.append(("upload", cl.enqueue_copy(q, buf, host, is_blocking=False)))
         src, planar_k = bufs.color_in, 0
         size, host_out, aux = self.size, {}, bufs.aux
         view = frame  # the frame as the next stage sees it: resampling stages change its size
@@ -307,11 +324,18 @@ class Plan:
                 planar_k ^= 1
             if node.gather:
                 stage = node.stages[0]
-                for ev in stage.enqueue(rt, cam, view, src, dst, aux):
-                    events.append((stage.name, ev))
-                host, evs = stage.enqueue_host_buffers(rt, cam, view, aux)
-                host_out.update(host)
+                rec = node.recording
+                key = stage.replay_key(cam, view)
+                io = (src, dst, *aux.values())
+                if (rec is not None and same_camera and key is not None and key == rec.key and rec.io == io
+                        and stage.__dict__.get("_replayed") is rec):
+                    evs, host = rec.replay(q, view)
+                else:  # first frame, or what the launches depend on changed: run the stage's code
+                    rec, evs, host = self._record(node, stage, cam, view, src, dst, aux, key)
+                    rec.io = io
+                    patched += [(f"{stage.name}[{i}]", j) for i, j in rec.patched]
                 events += evs
+                host_out.update(host)
                 if out_size != size:
                     view = resized_view(frame, out_size, host_out, stage.name)
                     later = [s for n in self.nodes[k + 1:] for s in n.stages]
@@ -320,13 +344,21 @@ class Plan:
                 size = out_size
             else:
                 w, h = size
-                args = [src, dst, np.int32(w), np.int32(h)]
-                args += [aux[b] for b in AUX_BUFFERS if any(b in s.reads for s in node.stages)]
-                for s in node.stages:
-                    args += self.arg_values(s, cam, view)
-                node.kernel.set_args(*args)
-                gsize = global_size(node.stages, node.src_layout, node.dst_layout, w, h)
-                events.append((node.name, cl.enqueue_nd_range_kernel(q, node.kernel, gsize, None)))
+                keys = [s.replay_key(cam, view) for s in node.stages]
+                key = None if None in keys else (src, dst, *aux.values(), *keys)
+                if not (same_camera and key is not None and key == node.key
+                        and all(bufs.uploaded.get(k) is a for k, a in node.tables)):  # else: as set last frame
+                    args = [src, dst, np.int32(w), np.int32(h)]
+                    args += [aux[b] for b in AUX_BUFFERS if any(b in s.reads for s in node.stages)]
+                    for s in node.stages:
+                        args += self.arg_values(s, cam, view)
+                    self._set_changed(node, args, patched)
+                    node.key = key
+                    # the tables in the buffers (shared by the pipeline's plans of this size) now
+                    node.tables = [(k, bufs.uploaded.get(k)) for s in node.stages
+                                   for k in ((s.name, arg) for t, arg in s.args if "*" in t)]
+                    node.size = global_size(node.stages, node.src_layout, node.dst_layout, w, h)
+                events.append((node.name, cl.enqueue_nd_range_kernel(q, node.kernel, node.size, None)))
             src = dst
         w, h = size
         out = np.empty((h, w, 3), np.float32)
@@ -339,6 +371,37 @@ class Plan:
                 ev.wait()
         self._events = events  # read into last_timings only when asked (profiling queries cost host time)
         return frame.replace(color=out, metadata=meta, validate=False, **host_out)
+
+    def _record(self, node: _Node, stage: GatherStage, cam, view: Frame, src, dst, aux, key):
+        """Run a gather stage's code through a :class:`~clpost.runtime_record.Recorder` (its
+        commands are enqueued and recorded; the node's previous recording lends its kernel
+        objects, so only changed arguments are set); the recording replaces the node's."""
+        from .runtime_record import Recorder
+
+        recorder = Recorder(self.runtime, view, key, node.recording)
+        returned = [(stage.name, ev) for ev in stage.enqueue(recorder, cam, view, src, dst, aux)]
+        host, evs = stage.enqueue_host_buffers(recorder, cam, view, aux)
+        returned += evs
+        rec = recorder.finish(returned, stage.name, host)
+        node.recording = rec
+        stage.__dict__["_replayed"] = rec  # the stage's scratch state is this recording's now
+        return rec, returned, host
+
+    @staticmethod
+    def _set_changed(node: _Node, args: list, patched: list) -> None:
+        """Set the pointwise kernel's arguments whose values differ from those set last time."""
+        from .runtime_record import _same, _typed
+
+        old, knl = node.args, node.kernel
+        if old is None or len(old) != len(args):
+            knl.set_args(*args)
+            patched += [(node.name, j) for j in range(len(args))]
+        else:
+            for j, (a, b) in enumerate(zip(old, args)):
+                if not _same(a, b):
+                    knl.set_arg(j, _typed(knl, j, b))
+                    patched.append((node.name, j))
+        node.args = args
 
     @property
     def last_timings(self) -> dict[str, float]:

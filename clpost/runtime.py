@@ -80,7 +80,44 @@ def typed_kernel(kernel: "cl.Kernel") -> "cl.Kernel":
     except cl.Error:
         return kernel
     kernel.set_scalar_arg_dtypes(dtypes)
+    kernel._clpost_dtypes = dtypes
     return kernel
+
+
+def private_kernel(kernel: "cl.Kernel") -> "cl.Kernel":
+    """A new ``cl.Kernel`` of the same program and function as ``kernel``, typed like it: a kernel
+    object holds its arguments, so a recorded launch (:mod:`clpost.runtime_record`) owns one whose
+    arguments are set once."""
+    clone = cl.Kernel(kernel.program, kernel.function_name)
+    dtypes = getattr(kernel, "_clpost_dtypes", None)
+    if dtypes is None:
+        return typed_kernel(clone)
+    clone.set_scalar_arg_dtypes(dtypes)
+    clone._clpost_dtypes = dtypes
+    return clone
+
+class Captured:
+    """A kernel as a stage sees it through a :class:`clpost.runtime_record.Recorder`: ``set_args``
+    / ``set_arg`` are kept for the next launch, the shared kernel object itself is not touched.
+    A stage's plan-time objects may keep one (e.g. in :meth:`Runtime.cached`): :meth:`Runtime.launch`
+    then sets the kept arguments and launches the kernel."""
+
+    __slots__ = ("kernel", "args")
+
+    def __init__(self, kernel: "cl.Kernel") -> None:
+        self.kernel = kernel
+        self.args: list = []
+
+    def set_args(self, *args) -> None:
+        self.args = list(args)
+
+    def set_arg(self, index: int, value) -> None:
+        self.args += [None] * (index + 1 - len(self.args))
+        self.args[index] = value
+
+    def __getattr__(self, name):  # function_name, num_args, program …
+        return getattr(self.kernel, name)
+
 
 INSTALL_HINT = (
     "install the PoCL CPU driver with `pip install 'pyopencl[pocl]'` (Linux) — on CPUs newer than "
@@ -213,7 +250,10 @@ class Runtime:
     - :meth:`scratch`: a work buffer per (owner, name), reused across frames while its shape and
       dtype stay the same; :meth:`cached`: a plan-time object per (owner, name) rebuilt only when
       its structural key changes;
-    - :meth:`launch`: enqueue with the global size rounded up to whole work-groups.
+    - :meth:`launch`: enqueue with the global size rounded up to whole work-groups;
+      :meth:`launch_once` for plan-time work; :meth:`copy` for a per-frame transfer. Plans run
+      gather stages through a :class:`clpost.runtime_record.Recorder` with the same methods, which
+      records these launches and copies to replay them on the next frames.
     """
 
     device: "cl.Device"
@@ -323,6 +363,8 @@ class Runtime:
         to whole ``local_size`` work-groups (the kernel guards its bounds). Why round: left to
         itself PoCL picks tiny work-groups for sizes like 706×426 and runs many times slower
         (docs/measurements.md#kernel-forms-on-pocl)."""
+        if type(kernel) is Captured:
+            args, kernel = args or tuple(kernel.args), kernel.kernel
         if args:
             kernel.set_args(*args)
         glob = tuple(int(g) for g in global_size)
@@ -330,6 +372,17 @@ class Runtime:
             local_size = tuple(int(v) for v in local_size)
             glob = tuple(round_up(g, l) for g, l in zip(glob, local_size))
         return cl.enqueue_nd_range_kernel(self.queue, kernel, glob, local_size)
+
+    def launch_once(self, kernel: "cl.Kernel", global_size, local_size=None, *args) -> "cl.Event":
+        """:meth:`launch` for plan-time work (a table computed on the device once per camera and
+        size): the same now, but a recording (:class:`clpost.runtime_record.Recorder`) does not
+        replay it with the frame's launches."""
+        return self.launch(kernel, global_size, local_size, *args)
+
+    def copy(self, dst, src, blocking: bool = False) -> "cl.Event":
+        """Enqueue a copy between a device buffer and a host array (or two buffers): a frame's
+        per-frame transfer, which a recording replays."""
+        return cl.enqueue_copy(self.queue, dst, src, is_blocking=blocking)
 
     def empty(self, shape: tuple[int, ...], dtype=np.float32) -> "cl.Buffer":
         nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize

@@ -24,9 +24,11 @@
  * unit radial vector (e_x, e_y) from the host and the tile's largest (a_s, a_t) from
  * astigmatism_tiles.
  * Tile classes: astigmatism_tiles appends each tile to one list per class (copy, 4, 8, ...
- * ASTIGMATISM_TAPS taps, exact); the host reads the counts and launches astigmatism_copy, the
- * gather kernels (astigmatism_t<n> and astigmatism for the full count; one compile-time tap count
- * each) and astigmatism_exact on their lists, one work-group per listed tile. The tap table holds
+ * ASTIGMATISM_TAPS taps, exact); the host launches astigmatism_copy, the gather kernels
+ * (astigmatism_t<n> and astigmatism for the full count; one compile-time tap count each) and
+ * astigmatism_exact with one work-group per tile of the frame — the most a list can hold, so the
+ * host never reads the counts (no sync) — and the work-groups past their class's count return at
+ * once (ASTIGMATISM_LISTED; a few ns each on PoCL). The tap table holds
  * the spirals of 4, 8, ..., ASTIGMATISM_TAPS points one after the other.
  * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE, ASTIGMATISM_TILE_W,
  * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch),
@@ -351,12 +353,19 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
     astigmatism_store16(dst, r, g, b, x, y, width, height);
 }
 
+/* return from a work-group past its class's count (list0 = class × tiles_x × tiles_y: the row of
+ * the class in lists, whose length astigmatism_tiles counted in counts[class]) */
+#define ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y) \
+    if ((int)get_group_id(0) >= (counts)[(list0) / ((tiles_x) * (tiles_y))]) return
+
 #define ASTIGMATISM_GATHER_ARGS __global const float *restrict padded, __global const float *restrict src, \
     __global const int *restrict inner, __global const int *restrict reach, __global const float *restrict axes, \
     __global float *restrict dst, __global const float *restrict tiles, __global const int *restrict list, \
-    const int list0, const int tiles_x, const int tiles_y, const int width, const int height
+    __global const int *restrict counts, const int list0, const int tiles_x, const int tiles_y, const int width, \
+    const int height
 /* the reach test is group-uniform (one tile per work-group): two inlined copies of the loop */
 #define ASTIGMATISM_GATHER_CALL(n, t0) \
+    ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y); \
     if (reach[list[list0 + (int)get_group_id(0)]]) \
         astigmatism_gather(padded, src, inner, 1, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0); \
     else \
@@ -371,9 +380,10 @@ __kernel void astigmatism(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(AST
  * work-item, the gather's geometry) */
 __kernel void astigmatism_copy(__global const float *restrict padded, __global const float *restrict src,
                                __global const int *restrict inner, __global float *restrict dst,
-                               __global const int *restrict list, const int list0, const int tiles_x, const int tiles_y,
-                               const int width, const int height)
+                               __global const int *restrict list, __global const int *restrict counts,
+                               const int list0, const int tiles_x, const int tiles_y, const int width, const int height)
 {
+    ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y);
     const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
                                ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 16);
     const int tile_id = t.id, x = t.x, y = t.y, jc = t.jc;
@@ -390,10 +400,11 @@ __kernel void astigmatism_copy(__global const float *restrict padded, __global c
  * ASTIGMATISM_TAPS spiral points */
 __kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict src,
                        __global const int *restrict inner, __global const float *restrict axes,
-                       __global float *restrict dst, __global const int *restrict list, const int list0,
-                       const int tiles_x, const int tiles_y,
+                       __global float *restrict dst, __global const int *restrict list,
+                       __global const int *restrict counts, const int list0, const int tiles_x, const int tiles_y,
                        const int width, const int height, const float cx, const float cy)
 {
+    ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y);
     const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
                                ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 1);
     const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;

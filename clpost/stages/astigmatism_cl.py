@@ -3,8 +3,10 @@
 Kept apart from :mod:`clpost.stages.astigmatism` (physics, tile planner and float64 oracle), as
 :mod:`clpost.stages.dof_cl` is from dof. Launch sequence: ``astigmatism_offsets`` (per-pixel focal
 offsets; once per camera and size) → ``astigmatism_pad`` (padded copy + per-pixel semi-axes) →
-``astigmatism_tiles`` (tile bounds and class lists) → ``astigmatism_reach`` → one read of the class
-counts (the stage's one sync) → per class: copy, one kernel per tap count, exact per-pixel.
+``astigmatism_tiles`` (tile bounds and class lists) → ``astigmatism_reach`` → per class: copy, one
+kernel per tap count, exact per-pixel, each over every tile of the frame (the work-groups past the
+class's count return at once: nothing is read back, so the launches are data-independent and a
+plan records them once).
 
 Everything that depends only on the camera's structure and the frame size — the program source
 with its tap table, the tile directions, the inner-tile mask and its ring, the focal-offset LUT —
@@ -92,53 +94,49 @@ def device_plan(stage, rt, camera, w, h, k=None) -> dict:
 
 
 def enqueue_astigmatism(stage, rt, camera, frame, src, dst, aux):
-    import pyopencl as cl
-
     from .astigmatism import thin_lens
 
-    q = rt.queue
     w, h = frame.width, frame.height
     b = device_plan(stage, rt, camera, w, h, fld.frame_intrinsics(frame))
     kernel, ntx, nty, nclass = b["kernel"], b["ntx"], b["nty"], b["nclass"]
     pw, ph = b["pw"], b["ph"]
     aperture, v, f = thin_lens(camera)
-    events = [cl.enqueue_copy(q, b["tiles"], b["tiles_host"], is_blocking=False)]
+    events = [rt.copy(b["tiles"], b["tiles_host"])]
     if not b["offsets_done"]:
         # the per-pixel focal offsets depend on the camera and frame size only: once, not per frame
-        events.append(rt.launch(kernel("astigmatism_offsets"), (pw // 16, ph), None,
-                                b["lut"], b["offs"], *b["sizes"], *b["geometry"]))
+        events.append(rt.launch_once(kernel("astigmatism_offsets"), (pw // 16, ph), None,
+                                     b["lut"], b["offs"], *b["sizes"], *b["geometry"]))
         b["offsets_done"] = True
     # 16 pixels of a padded row per work-item (pw is a multiple of 16)
     events.append(rt.launch(kernel("astigmatism_pad"), (pw // 16, ph), None,
                             src, aux["depth"], b["offs"], b["pad"], b["axes"], *b["sizes"], b["geometry"][2],
                             np.float32(aperture), np.float32(v), np.float32(1.0 / f), *b["ring"]))
-    events.append(cl.enqueue_copy(q, b["counts"], b["zeros"], is_blocking=False))
+    events.append(rt.copy(b["counts"], b["zeros"]))
     events.append(rt.launch(kernel("astigmatism_tiles"), (ntx, nty), None,
                             b["axes"], b["tiles"], b["tmin"], b["counts"], b["lists"], np.int32(w), np.int32(h),
                             np.int32(ntx), np.int32(nty)))
     # which tiles' gathers can skip the reach test (every weight of it is 1 there)
     events.append(rt.launch(kernel("astigmatism_reach"), (ntx, nty), None,
                             b["tiles"], b["tmin"], b["reach"], np.int32(ntx), np.int32(nty)))
-    # the tile lists' lengths set the launch sizes: a few ints read, the one sync of this stage
-    counts = np.empty(nclass, np.int32)
-    cl.enqueue_copy(q, counts, b["counts"], wait_for=[events[-1]], is_blocking=True)
+    # every class is launched over as many work-groups as the frame has tiles, the most its list
+    # can hold; those past the class's count return at once (ASTIGMATISM_LISTED in
+    # kernels/astigmatism.cl), so the host reads nothing back and the launches can be recorded
+    n = ntx * nty
     args = (np.int32(ntx), np.int32(nty), np.int32(w), np.int32(h))
     group = (fld.TILE_W // 16, fld.TILE_H)  # 16 pixels (a float16) per work-item
-    for c, n in enumerate(counts):
-        if n == 0:
-            continue
-        sub = (b["lists"], np.int32(c * ntx * nty))  # this class's row of the lists
+    for c in range(nclass):
+        sub = (b["lists"], b["counts"], np.int32(c * n))  # this class's row of the lists, its count
         if c == 0:
-            events.append(rt.launch(kernel("astigmatism_copy"), (int(n) * group[0], group[1]), group,
+            events.append(rt.launch(kernel("astigmatism_copy"), (n * group[0], group[1]), group,
                                     b["pad"], src, b["inner"], dst, *sub, *args))
         elif c == nclass - 1:
-            events.append(rt.launch(kernel("astigmatism_exact"), (int(n) * fld.TILE_W, fld.TILE_H),
+            events.append(rt.launch(kernel("astigmatism_exact"), (n * fld.TILE_W, fld.TILE_H),
                                     (fld.TILE_W, fld.TILE_H), b["pad"], src, b["inner"], b["axes"], dst, *sub,
                                     *args, *b["geometry"][:2]))
         else:
             n_taps = b["classes"][c - 1]
             # one kernel per tap count (compile-time loop; offsets n - 4 in the table)
             name = "astigmatism" if n_taps == stage.taps else f"astigmatism_t{n_taps}"
-            events.append(rt.launch(kernel(name), (int(n) * group[0], group[1]), group,
+            events.append(rt.launch(kernel(name), (n * group[0], group[1]), group,
                                     b["pad"], src, b["inner"], b["reach"], b["axes"], dst, b["tiles"], *sub, *args))
     return events

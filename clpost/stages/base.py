@@ -37,7 +37,11 @@ How the planner calls a stage (:mod:`clpost.pipeline`):
   (channel c of pixel i at ``c*W*H + i``), ``aux["depth"]`` / ``aux["velocity"]`` device
   buffers for what it ``reads``; it gets its kernels from ``rt.kernel`` (cached), its tables from
   ``rt.constant`` and its work buffers from ``rt.scratch(self, name, shape)``, and launches with
-  ``rt.launch``. Returns the events it enqueued (profiled).
+  ``rt.launch`` (plan-time work: ``rt.launch_once``; transfers: ``rt.copy``). Returns the events
+  it enqueued (profiled). The plan records these launches and replays them on later frames
+  without running ``enqueue`` (:mod:`clpost.runtime_record`) while the camera and
+  :meth:`GatherStage.replay_key` stay the same: enqueue through ``rt`` only, and read nothing
+  back from the device.
 - ``reference()`` gets float64 color and the host Frame; tests compare the two on odd sizes,
   after asserting that the stage is planned (``tests/conftest.py``: ``assert_planned``; an
   unplanned stage is the identity on both sides).
@@ -133,6 +137,22 @@ class Stage(ABC):
     def defines(self, camera: "Camera") -> dict[str, object]:
         """Structural ``#define``s (part of the program key); none by default."""
         return {}
+
+    def replay_key(self, camera: "Camera", frame: "Frame") -> object:
+        """What this stage's launches depend on besides the camera (a plan compares the camera
+        itself). A plan records a gather stage's launches (:meth:`GatherStage.enqueue`,
+        :meth:`GatherStage.enqueue_host_buffers`) once and replays them while the camera and this
+        key stay the same (:mod:`clpost.runtime_record`); a pointwise stage's :meth:`values` are
+        computed again only when they change. Default: the frame's size, its data and display
+        windows (overscan moves the principal point in the arrays), its recorded intrinsics and
+        which buffers it has. A stage whose launches or values read more of the frame (its
+        index for noise, a statistic of its pixels) adds it; None: run the stage's code every
+        frame. Launch sizes and arguments must never depend on pixel data read back from the
+        device."""
+        from ._field import frame_intrinsics
+
+        return (frame.size, frame.windows, frame_intrinsics(frame), frame.depth is None, frame.velocity is None,
+                frame.alpha is None)
 
 
 class PointwiseStage(Stage):

@@ -75,7 +75,7 @@ def enqueue_coma(stage, rt, camera, frame, src, dst, aux):
         # frame's content): computed once, kept on the device for the next frames
         lut = rt.constant(stage._lut(camera))
         tiles = rt.constant(stage.tile_axes_px(camera, w, h, k).astype(np.float32))
-        events.append(rt.launch(kernel("coma_shape"), (ow, oh), None, shape, lut, np.int32(ow), np.int32(oh),
+        events.append(rt.launch_once(kernel("coma_shape"), (ow, oh), None, shape, lut, np.int32(ow), np.int32(oh),
                                 np.float32(cx), np.float32(cy), np.float32(pitch),
                                 np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera))))
         return dict(tiles=tiles, lists=_tile_lists(stage, rt, camera, w, h, k))

@@ -610,7 +610,7 @@ class Distortion(GatherStage):
         if bspline and 3 * max(pw * th, model.width * model.height) >= 2**31:
             raise InputError(f"distortion: {sw}x{sh} is too large for the final filter's 32-bit tap "
                              "indices; use --quality preview (bilinear)")
-        key = (id(rt), model, frame.size, kkey, self.filter_taps)
+        key = (id(rt.context), model, frame.size, kkey, self.filter_taps)  # buffers belong to a context
         bufs = self._dev_maps.get(key)
         if bufs is None:
             self._warn_unfilled(camera, frame)  # once per map (a sequence), not per frame
@@ -633,7 +633,6 @@ class Distortion(GatherStage):
             return rt.kernel(source, name, {}, "distortion")
 
         out = (np.int32(model.width), np.int32(model.height))
-        q = rt.queue
         if not bspline:
             tiles, rest = bilinear_tiles(model, frame.size, kkey)
             events = []
@@ -641,27 +640,27 @@ class Distortion(GatherStage):
                                         ("distortion_rest", bufs[2], len(rest), (TILE, TILE, len(rest)))):
                 if n:
                     kern = kernel(name)
-                    kern.set_args(src, dst, bufs[0], buf, np.int32(sw), np.int32(sh), *out)
-                    events.append(cl.enqueue_nd_range_kernel(q, kern, gsize, None))
+                    events.append(rt.launch(kern, gsize, None, src, dst, bufs[0], buf, np.int32(sw),
+                                            np.int32(sh), *out))
             return events
         base, wts, fmap, tiles_b, rest_b, coef, tmp, hdr = bufs
         tiles, rest = bspline_tiles(model, frame.size, kkey)
         rows, cols = kernel("distortion_fir_rows"), kernel("distortion_fir_cols")
         dering = kernel("distortion_dering")
-        rows.set_args(src, tmp, np.int32(sw), np.int32(sh), np.int32(pw), np.int32(th))
-        cols.set_args(tmp, coef, np.int32(pw), np.int32(th), np.int32(ph))
-        dering.set_args(src, hdr, np.int32(sw), np.int32(sh), np.int32(pw), np.int32(ph))
-        events = [cl.enqueue_nd_range_kernel(q, rows, (pw // 16, th, 3), None),
-                  cl.enqueue_nd_range_kernel(q, cols, (pw // 16, ph // FIR_ROWS, 3), None),
-                  cl.enqueue_nd_range_kernel(q, dering, (pw // 16, ph // FIR_ROWS), None)]
+        events = [rt.launch(rows, (pw // 16, th, 3), None, src, tmp, np.int32(sw), np.int32(sh), np.int32(pw),
+                            np.int32(th)),
+                  rt.launch(cols, (pw // 16, ph // FIR_ROWS, 3), None, tmp, coef, np.int32(pw), np.int32(th),
+                            np.int32(ph)),
+                  rt.launch(dering, (pw // 16, ph // FIR_ROWS), None, src, hdr, np.int32(sw), np.int32(sh),
+                            np.int32(pw), np.int32(ph))]
         if len(tiles):
             kern = kernel("distortion_bspline_tiles")
-            kern.set_args(coef, dst, fmap, tiles_b, hdr, np.int32(pw), np.int32(ph), *out)
-            events.append(cl.enqueue_nd_range_kernel(q, kern, (TILE, len(tiles)), None))
+            events.append(rt.launch(kern, (TILE, len(tiles)), None, coef, dst, fmap, tiles_b, hdr, np.int32(pw),
+                                    np.int32(ph), *out))
         if len(rest):
             kern = kernel("distortion_table")
-            kern.set_args(coef, dst, base, wts, rest_b, hdr, np.int32(pw), np.int32(ph), *out)
-            events.append(cl.enqueue_nd_range_kernel(q, kern, (TILE, TILE, len(rest)), None))
+            events.append(rt.launch(kern, (TILE, TILE, len(rest)), None, coef, dst, base, wts, rest_b, hdr,
+                                    np.int32(pw), np.int32(ph), *out))
         return events
 
     def reference(self, camera, frame, color):
@@ -671,12 +670,14 @@ class Distortion(GatherStage):
         return np.stack([resample(np.asarray(color[..., c], np.float64), m, self.filter_taps, hdr)
                          for c in range(3)], -1)
 
+    def replay_key(self, camera, frame):
+        # a coverage (alpha) input is resampled on the host from the frame's pixels: not replayable
+        return None if frame.alpha is not None else super().replay_key(camera, frame)
+
     def enqueue_host_buffers(self, rt, camera, frame, aux) -> tuple[dict, list]:
         """:meth:`host_buffers` computed on the device (kernel ``distortion_aux``): depth and
         velocity are gathered there and downloaded without blocking into fresh arrays, which the
         plan's final (blocking) download completes; the map's static tables are uploaded once."""
-        import pyopencl as cl
-
         from ..runtime import kernel_source
 
         if frame.alpha is not None:  # a coverage input is resampled bilinearly on the host
@@ -692,24 +693,26 @@ class Distortion(GatherStage):
         key = ("distortion_aux", model, frame.size, kkey)
         flat = rt.constant(lambda: _aux_flat(g), key=key + ("flat",))
         jinv = rt.constant(lambda: np.ascontiguousarray(g.inv, np.float32), key=key + ("jinv",))
-        q, events = rt.queue, []
-        dev = {}
+        events, dev = [], {}
         for name, shape in (("depth", (frame.height, frame.width)), ("velocity", (frame.height, frame.width, 2))):
             host = getattr(frame, name)
-            dev[name] = rt.scratch(self, f"aux_in_{name}", shape if host is not None else (1,))
             dev[name + "_out"] = rt.scratch(self, f"aux_out_{name}", (h, w) + shape[2:] if host is not None else (1,))
+            if host is not None and name in aux and aux[name].size == host.nbytes:
+                dev[name] = aux[name]  # the plan uploaded it for an earlier stage: not again
+                continue
+            dev[name] = rt.scratch(self, f"aux_in_{name}", shape if host is not None else (1,))
             if host is not None:
-                events.append(("upload", cl.enqueue_copy(q, dev[name], host, is_blocking=False)))
+                events.append(("upload", rt.copy(dev[name], host)))
         kern = rt.kernel(kernel_source("common") + kernel_source("distortion"), "distortion_aux", {}, "distortion")
         events.append((self.name + "_aux", rt.launch(kern, (n,), (64,), dev["depth"], dev["velocity"], flat, jinv,
                                             dev["depth_out"], dev["velocity_out"], np.int32(n),
                                             np.int32(frame.depth is not None), np.int32(frame.velocity is not None))))
         if frame.depth is not None:
             out["depth"] = np.empty((h, w), np.float32)
-            events.append(("download", cl.enqueue_copy(q, out["depth"], dev["depth_out"], is_blocking=False)))
+            events.append(("download", rt.copy(out["depth"], dev["depth_out"])))
         if frame.velocity is not None:
             out["velocity"] = np.empty((h, w, 2), np.float32)
-            events.append(("download", cl.enqueue_copy(q, out["velocity"], dev["velocity_out"], is_blocking=False)))
+            events.append(("download", rt.copy(out["velocity"], dev["velocity_out"])))
         return out, events
 
     def aux_bytes(self, camera, frame) -> int:

@@ -158,6 +158,9 @@ class Grain(GatherStage):
         _, (a, _) = gaussian_tables(round(r, 12), span, _stats_samples(r))
         return 3 * (1 if a == 0.0 else 9)
 
+    def replay_key(self, camera, frame):
+        return (super().replay_key(camera, frame), frame_index(frame))  # the noise hash's frame counter
+
     def enqueue(self, rt, camera, frame, src, dst, aux):
         from ..codegen import library
         from ..runtime import kernel_source

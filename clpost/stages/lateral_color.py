@@ -237,9 +237,6 @@ class LateralColor(GatherStage):
         return rec, np.flatnonzero(~fast.ravel()).astype(np.int32)
 
     def enqueue(self, rt, camera, frame, src, dst, aux):
-        import pyopencl as cl
-
-        q = rt.queue
         w, h = frame.width, frame.height
         k = fld.frame_intrinsics(frame)
         cx, cy = fld.principal_point_px(camera, w, h, k)
@@ -256,13 +253,14 @@ class LateralColor(GatherStage):
         tile = (fld.TILE_W, fld.TILE_H)
         if b["n_fast"]:
             k = self._kernel(rt, camera, "lateral_color_tiles")
-            k.set_args(src, dst, b["rec"], np.int32(w), np.int32(h))
-            events.append(cl.enqueue_nd_range_kernel(q, k, (fld.TILE_W * b["n_fast"], fld.TILE_H), tile))
+            events.append(rt.launch(k, (fld.TILE_W * b["n_fast"], fld.TILE_H), tile,
+                                    src, dst, b["rec"], np.int32(w), np.int32(h)))
         if b["n_rest"]:
             k = self._kernel(rt, camera, "lateral_color")
-            k.set_args(src, dst, b["lut"], b["rest"], np.int32(w), np.int32(h), np.float32(cx), np.float32(cy),
-                       np.float32(fld.pitch_mm(camera, w) * (fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
-            events.append(cl.enqueue_nd_range_kernel(q, k, (fld.TILE_W * b["n_rest"], fld.TILE_H), tile))
+            events.append(rt.launch(k, (fld.TILE_W * b["n_rest"], fld.TILE_H), tile,
+                                    src, dst, b["lut"], b["rest"], np.int32(w), np.int32(h), np.float32(cx),
+                                    np.float32(cy), np.float32(fld.pitch_mm(camera, w) * (fld.LUT_SIZE - 1)
+                                                               / fld.lut_range_mm(camera))))
         return events
 
     # -- the oracle -------------------------------------------------------------------------

@@ -204,10 +204,12 @@ class MotionBlur(GatherStage):
                     tile=rt.scratch(self, "tile", (3, th, tw)), nmax=rt.scratch(self, "nmax", (2, th, tw)),
                     tmp=rt.scratch(self, "tmp", (3, h, w)), tw=tw, th=th)
 
-    def enqueue(self, rt, camera, frame, src, dst, aux):
-        import pyopencl as cl
+    def replay_key(self, camera, frame):
+        # the noise hash takes the frame index; which passes run depends on the frame's velocities
+        return (super().replay_key(camera, frame), frame.index, _blur_needed(camera, frame),
+                _rolling_needed(camera, frame))
 
-        q = rt.queue
+    def enqueue(self, rt, camera, frame, src, dst, aux):
         w, h = frame.width, frame.height
         b = self._buffers(rt, w, h)
         tw, th = b["tw"], b["th"]
@@ -236,7 +238,7 @@ class MotionBlur(GatherStage):
                        np.float32(camera.readout_time_s * camera.frame_rate_fps))
             events.append(rt.launch(k, (w, h)))
         if not events:  # only reachable when forced past skip_reason (e.g. a test): copy through
-            events.append(cl.enqueue_copy(q, dst, src))
+            events.append(rt.copy(dst, src))
         return events
 
     # -- the oracle -------------------------------------------------------------------------

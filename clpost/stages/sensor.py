@@ -110,6 +110,9 @@ class Sensor(PointwiseStage):
         return (f"{camera.sensor_preset}: {e_sat:.0f} e⁻ at saturation (FW {p.full_well_e:g}, ISO {camera.iso:g}/"
                 f"{p.base_iso:g}), read noise {p.read_noise_e:g} e⁻, {p.bits} bit, black {p.black_level_dn}")
 
+    def replay_key(self, camera, frame):
+        return (super().replay_key(camera, frame), frame_index(frame))  # the noise hash's frame counter
+
     def values(self, camera, frame):
         p, e_sat, white = sensor_scalars(camera)
         return (np.float32(e_sat), np.float32(p.full_well_e), np.float32(p.read_noise_e),

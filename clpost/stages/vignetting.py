@@ -158,6 +158,7 @@ class Vignetting(PointwiseStage):
     def __init__(self, quality: str = "final") -> None:
         super().__init__(quality)
         self._plane: tuple = (None, None)
+        self._radius: tuple = (None, None)
 
     def skip_reason(self, camera, frame):
         ri = relative_illumination(camera)
@@ -184,6 +185,17 @@ class Vignetting(PointwiseStage):
     def defines(self, camera):
         return {}
 
+    def _radius_plane(self, sensor_w_mm: float, ox: float, oy: float, w: int, h: int) -> np.ndarray:
+        """Image height (mm) of every pixel, kept while only the LUT changes (a focus pull moves
+        the exit pupil, so the LUT changes every frame; the pixels' radii do not)."""
+        key = (sensor_w_mm, ox, oy, w, h)
+        if self._radius[0] != key:
+            pitch = sensor_w_mm / w
+            x = (np.arange(w) - 0.5 * (w - 1)) * pitch - ox
+            y = (np.arange(h) - 0.5 * (h - 1)) * pitch - oy
+            self._radius = (key, np.hypot(x[None, :], y[:, None]))
+        return self._radius[1]
+
     def ri_plane(self, camera, w: int, h: int, intrinsics=None) -> np.ndarray:
         """RI at every pixel (float32 (h, w), read-only): the LUT interpolated in float64 at the
         pixel's image height. Built once per curve, principal point and size and uploaded once
@@ -194,10 +206,7 @@ class Vignetting(PointwiseStage):
         ox, oy = principal_offset_mm(camera, w, h, intrinsics)
         key = (lut.tobytes(), float(camera.sensor_mm[0]), ox, oy, w, h)
         if self._plane[0] != key:
-            pitch = camera.sensor_mm[0] / w
-            x = (np.arange(w) - 0.5 * (w - 1)) * pitch - ox
-            y = (np.arange(h) - 0.5 * (h - 1)) * pitch - oy
-            r = np.hypot(x[None, :], y[:, None])
+            r = self._radius_plane(float(camera.sensor_mm[0]), ox, oy, w, h)
             grid = np.linspace(0.0, self._r_max(camera), LUT_SIZE)
             plane = np.interp(r, grid, lut.astype(np.float64)).astype(np.float32)
             plane.setflags(write=False)
