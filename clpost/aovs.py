@@ -22,9 +22,9 @@ Formulas — the same code as the stages that produce the effect, one place each
 * CoC: the dof stage's thin-lens formula (:func:`clpost.stages.dof.coc_coefficients`,
   Hecht §5.2; Potmesil & Chakravarty 1981) :math:`c = 2k\,(1/u - 1/S)` px, with
   :math:`k = fF/(2Np)` (f focal length, F the render focal length, N the f-number, p the pixel
-  pitch at the output's width, u the focused depth, S the pixel's planar depth; sky S = ∞ gives the
+  pitch at the output's image (display window) width, u the focused depth, S the pixel's planar depth; sky S = ∞ gives the
   finite far limit). Unlike the stage's internal CoC it is not clamped to the gather's largest
-  radius and does not apply the stage's edge rule (brightest-pixel nearest depth): it is the lens's
+  radius and does not apply the stage's fringe rule (a pixel taking a nearer neighbour's depth): it is the lens's
   CoC of each pixel's depth.
 * Focus matte: :math:`m = \mathrm{clamp}(2 - |c|/c_{lim}, 0, 1)` with the depth-of-field CoC limit
   :math:`c_{lim}` = sensor diagonal / 1500 (:func:`coc_limit_mm`; 0.0288 mm on 36 × 24 mm, the
@@ -45,6 +45,7 @@ import math
 import numpy as np
 
 from .errors import InputError
+from .stages._field import image_width_px
 
 AOVS = {
     # name: (EXR channel, what it needs, the fix when it is missing)
@@ -109,14 +110,14 @@ def reference(camera, frame, names) -> dict[str, np.ndarray]:
     _check(camera, frame, names)
     out = {}
     if any(AOVS[n][1] == "depth" for n in names):
-        c = 2.0 * coc_px(camera, frame.depth, frame.width)
-        _, _, inv_lim, _ = _constants(camera, frame.width)
+        c = 2.0 * coc_px(camera, frame.depth, image_width_px(frame))
+        _, _, inv_lim, _ = _constants(camera, image_width_px(frame))
         if "coc" in names:
             out["coc.Y"] = c
         if "focus" in names:
             out["focus.A"] = np.clip(2.0 - np.abs(c) * inv_lim, 0.0, 1.0)
     if "blur" in names:
-        _, _, _, s = _constants(camera, frame.width)
+        _, _, _, s = _constants(camera, image_width_px(frame))
         out["blur.Y"] = s * np.hypot(frame.velocity[..., 0].astype(np.float64), frame.velocity[..., 1])
     return out
 
@@ -132,7 +133,7 @@ def compute(runtime, camera, frame, names) -> dict[str, np.ndarray]:
     n = w * h
     coc = any(AOVS[nm][1] == "depth" for nm in names)
     blur = "blur" in names
-    k2, inv_u, inv_lim, s = _constants(camera, w)
+    k2, inv_u, inv_lim, s = _constants(camera, image_width_px(frame))
     knl = runtime.kernel(kernel_source("aovs"), "aovs", {"AOVS_COC": int(coc), "AOVS_BLUR": int(blur)})
     q = runtime.queue
     mf = cl.mem_flags

@@ -144,9 +144,9 @@ class Plan:
         self.size = frame.size
         self.stages = list(stages)
         self.structure = structure_key(camera)
-        from .stages._field import frame_intrinsics, principal_point_px
+        from .stages._field import field_centre_px
 
-        self.principal_point = principal_point_px(camera, *frame.size, frame_intrinsics(frame))
+        self.principal_point = field_centre_px(camera, frame)
         """The optical axis (px) in the plan's input frame: the one definition every stage uses."""
         self.nodes = group_nodes(self.stages)
         self._aux_names = [b for b in AUX_BUFFERS if any(b in s.reads for s in self.stages)]

@@ -229,3 +229,28 @@ def test_explain_states_the_windows_and_the_overscan_the_calibration_needs(tmp_p
     (x0, y0), (x1, y1) = render_size(MODEL).data_window
     assert f"windows: display (0,0)-(95,63), data ({x0},{y0})-({x1},{y1})" in text
     assert f"needs {'/'.join(map(str, need))} px overscan" in text and f"the frame has {'/'.join(map(str, need))}" in text
+
+
+@pytest.mark.parametrize("stage", ["dof", "vignetting"])
+def test_stages_before_distortion_see_the_image_not_the_overscan(stage):
+    """An overscan frame's pixels are the image's pixels: its pitch comes from the display
+    window's width and its optical centre from the display window's place in the arrays, so the
+    processed overscan frame, cut to its display window, is the processed image (away from the
+    edges, where the image alone lacks the overscan's neighbours)."""
+    w, h, left, top, right, bottom = 96, 64, 11, 5, 7, 9
+    rng = np.random.default_rng(3)
+    big_w, big_h = w + left + right, h + top + bottom
+    color = (0.2 + rng.random((big_h, big_w, 3))).astype(np.float32)
+    depth = np.where(np.arange(big_w)[None, :] % 23 < 11, 1.2, 7.0) * np.ones((big_h, 1))
+    win = Windows(((-left, -top), (w - 1 + right, h - 1 + bottom)), ((0, 0), (w - 1, h - 1)))
+    over = Frame(color, depth=depth.astype(np.float32), metadata={"windows": win})
+    image = Frame(np.ascontiguousarray(color[top:top + h, left:left + w]),
+                  depth=np.ascontiguousarray(depth[top:top + h, left:left + w]).astype(np.float32))
+    cam = Camera(lens="thin:35", f_number=1.4, focus_distance_m=1.2, depth_of_field=stage == "dof",
+                 vignetting="natural" if stage == "vignetting" else "off")
+    out_over = Pipeline(cam, quality="final", stages=[stage]).run(over)
+    out_image = Pipeline(cam, quality="final", stages=[stage]).run(image)
+    cut = out_over.color[top:top + h, left:left + w]
+    m = 0 if stage == "vignetting" else 24  # the gather's reach at this CoC
+    a, b = cut[m:h - m, m:w - m], out_image.color[m:h - m, m:w - m]
+    assert np.abs(a - b).max() < 1e-4 * np.abs(b).max(), np.abs(a - b).max()

@@ -68,6 +68,26 @@ def principal_point_px(camera, w: int, h: int, intrinsics=None) -> tuple[float, 
     return 0.5 * (w - 1), 0.5 * (h - 1)
 
 
+def image_width_px(frame) -> int:
+    """Pixels across the sensor's width in ``frame``: its display window's width (the image spans
+    the sensor width, CONVENTIONS; an EXR's overscan beyond the display window lies outside the
+    sensor, its pixels the same size). Every pixel pitch of a frame is taken from this width."""
+    return frame.windows.display_size[0]
+
+
+def field_centre_px(camera, frame) -> tuple[float, float]:
+    """The optical centre in ``frame``'s arrays: the render's recorded intrinsics, else
+    :func:`principal_point_px` of its display window moved by the window's place in the arrays
+    (an overscan frame's arrays start left of and above the image)."""
+    k = frame_intrinsics(frame)
+    if k is not None:
+        return k[2], k[3]
+    win = frame.windows
+    (dw, dh), (ox, oy) = win.display_size, win.display_offset
+    cx, cy = principal_point_px(camera, dw, dh)
+    return cx + ox, cy + oy
+
+
 def pitch_mm(camera, w: int) -> float:
     return camera.sensor_mm[0] / float(w)
 

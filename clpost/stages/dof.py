@@ -139,6 +139,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..params import boolean, finite, in_range, param, parse_fraction, parse_on_off
+from . import _field as fld
 from .base import GatherStage
 
 
@@ -615,12 +616,15 @@ def mixed_mask(rw: np.ndarray, coc: np.ndarray, quality: str) -> np.ndarray:
     return np.kron(tiles, np.ones((scale * TILE, scale * TILE), bool))[:h, :w]
 
 
-def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "final") -> np.ndarray:
-    """float64 numpy implementation of the whole stage (the oracle of the OpenCL kernels)."""
+def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "final",
+                  width_px: int | None = None) -> np.ndarray:
+    """float64 numpy implementation of the whole stage (the oracle of the OpenCL kernels);
+    ``width_px``: the pixels across the sensor (:func:`clpost.stages._field.image_width_px`; the
+    array's width when None)."""
     scale, rmax, budget = QUALITY[quality]
     color = np.asarray(color, dtype=np.float64)
     h, w = depth.shape
-    coc = coc_px(camera, effective_depth(color, depth, luma_weights(camera)), w, limit_px=scale * rmax)
+    coc = coc_px(camera, effective_depth(color, depth, luma_weights(camera)), width_px or w, limit_px=scale * rmax)
     if scale > 1:
         return _half_composite(camera, color, coc, scale, rmax, budget)[0]
     out, _ = gather_reference(color, coc, rmax, budget, camera.blades, camera.blade_rotation_deg,
@@ -651,7 +655,7 @@ class Dof(GatherStage):
             return "Camera.depth_of_field is off (pinhole: everything in focus)"
         if frame.depth is None:
             return None  # the planner then asks for the depth buffer
-        k, inv_u = coc_coefficients(camera, frame.width)
+        k, inv_u = coc_coefficients(camera, fld.image_width_px(frame))
         near, far, sky = frame.depth_range
         inv = [0.0] if sky else []
         if math.isfinite(far):
@@ -662,7 +666,7 @@ class Dof(GatherStage):
         return None
 
     def reason_needed(self, camera, frame):
-        coc = coc_px(camera, frame.depth, frame.width)
+        coc = coc_px(camera, frame.depth, fld.image_width_px(frame))
         return (f"CoC radius {np.min(coc):.3g} … {np.max(coc):.3g} px (max {max_coc_px(self.quality):g} px, "
                 f"{self.quality}), {camera.blades or 'round'} blades")
 
@@ -676,7 +680,7 @@ class Dof(GatherStage):
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
 
     def reference(self, camera, frame, color):
-        return dof_reference(camera, color, frame.depth, self.quality)
+        return dof_reference(camera, color, frame.depth, self.quality, fld.image_width_px(frame))
 
     def enqueue(self, rt, camera, frame, src, dst, aux):
         from .dof_cl import enqueue_dof

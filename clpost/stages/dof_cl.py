@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from . import _field as fld
 from . import dof as D
 
 
@@ -173,7 +174,7 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
 
     cache = rt.cached(stage, "dof", key, make)
     c = cache["main"]
-    kc, inv_u = D.coc_coefficients(camera, w)
+    kc, inv_u = D.coc_coefficients(camera, fld.image_width_px(frame))
     i32, f32 = np.int32, np.float32
     evs = []
     c["k"]["dof_coc"].set_args(src, aux["depth"], cache["coc"], i32(w), i32(h), f32(kc), f32(inv_u),

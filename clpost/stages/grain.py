@@ -46,6 +46,7 @@ from .. import random as rnd
 from ..film_stock import load_stock
 from ..grain_model import LN10, grain_radius_um, pixel_covariance
 from ..params import at_least, param, positive
+from . import _field as fld
 from .base import GatherStage, per_camera
 from .sensor import frame_index
 
@@ -129,10 +130,10 @@ class Grain(GatherStage):
         return None
 
     def reason_needed(self, camera, frame):
-        r = grain_radius_px(camera, frame.width)
+        r = grain_radius_px(camera, fld.image_width_px(frame))
         how = ("Boolean model (Newson 2017), 64 samples/px" if use_boolean(self.quality, r)
                else "Gaussian clear fraction matched to the Boolean model")
-        return (f"grain radius {r:.3g} px ({r * camera.pixel_pitch_mm(frame.width) * 1e3:.3g} µm), amount "
+        return (f"grain radius {r:.3g} px ({r * camera.pixel_pitch_mm(fld.image_width_px(frame)) * 1e3:.3g} µm), amount "
                 f"{camera.grain_amount:g}: {how}")
 
     # -- host tables --------------------------------------------------------------------------
@@ -152,7 +153,7 @@ class Grain(GatherStage):
     def taps_per_pixel(self, camera, frame) -> int | None:
         """Normals drawn per pixel, all three layers, on the Gaussian path (1 or 3×3 per layer,
         for ``clpost bench`` taps/s); None on the Boolean path, whose work varies with density."""
-        _, _, _, span, r, boolean = self._setup(camera, frame.width)
+        _, _, _, span, r, boolean = self._setup(camera, fld.image_width_px(frame))
         if boolean:
             return None
         _, (a, _) = gaussian_tables(round(r, 12), span, _stats_samples(r))
@@ -165,7 +166,7 @@ class Grain(GatherStage):
         from ..codegen import library
         from ..runtime import kernel_source
 
-        stock, d_min, d_max, span, r, boolean = self._setup(camera, frame.width)
+        stock, d_min, d_max, span, r, boolean = self._setup(camera, fld.image_width_px(frame))
         w, h = frame.width, frame.height
         params = np.concatenate([d_min, d_max]).astype(np.float32)
         seed, fr = np.uint32(camera.noise_seed), np.uint32(frame_index(frame))
@@ -184,7 +185,7 @@ class Grain(GatherStage):
 
     # -- float64 reference --------------------------------------------------------------------
     def reference(self, camera, frame, color):
-        stock, d_min, d_max, span, r, boolean = self._setup(camera, frame.width)
+        stock, d_min, d_max, span, r, boolean = self._setup(camera, fld.image_width_px(frame))
         seed, fr = camera.noise_seed, frame_index(frame)
         d = np.asarray(color, np.float64)
         d_img = np.clip(d - d_min, 0.0, None)

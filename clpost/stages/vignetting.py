@@ -137,14 +137,19 @@ def relative_illumination(camera) -> RelativeIllumination | None:
     return lambda x: np.interp(np.asarray(x, np.float64), r, ri)
 
 
-def principal_offset_mm(camera, w: int, h: int, intrinsics=None) -> tuple[float, float]:
-    """Principal point minus image centre on the sensor (mm) of a w × h image
-    (:func:`clpost.stages._field.principal_point_px`)."""
-    from ._field import principal_point_px
+def field_geometry(camera, frame) -> tuple[float, float, float]:
+    """(pixel pitch mm, c_x, c_y px in the frame's arrays): the sensor spans the image (display
+    window) width, image height is measured from the optical centre
+    (:func:`clpost.stages._field.image_width_px`, :func:`~clpost.stages._field.field_centre_px`)."""
+    cx, cy = fld.field_centre_px(camera, frame)
+    return camera.sensor_mm[0] / fld.image_width_px(frame), cx, cy
 
-    cx, cy = principal_point_px(camera, w, h, intrinsics)
-    pitch = camera.sensor_mm[0] / w
-    return (cx - 0.5 * (w - 1)) * pitch, (cy - 0.5 * (h - 1)) * pitch
+
+def image_height_mm(pitch: float, cx: float, cy: float, w: int, h: int) -> np.ndarray:
+    """(h, w) float64: each pixel centre's distance from the optical centre on the film (mm)."""
+    x = (np.arange(w) - cx) * pitch
+    y = (np.arange(h) - cy) * pitch
+    return np.hypot(x[None, :], y[:, None])
 
 
 class Vignetting(PointwiseStage):
@@ -185,28 +190,26 @@ class Vignetting(PointwiseStage):
     def defines(self, camera):
         return {}
 
-    def _radius_plane(self, sensor_w_mm: float, ox: float, oy: float, w: int, h: int) -> np.ndarray:
+    def _radius_plane(self, pitch: float, cx: float, cy: float, w: int, h: int) -> np.ndarray:
         """Image height (mm) of every pixel, kept while only the LUT changes (a focus pull moves
         the exit pupil, so the LUT changes every frame; the pixels' radii do not)."""
-        key = (sensor_w_mm, ox, oy, w, h)
+        key = (pitch, cx, cy, w, h)
         if self._radius[0] != key:
-            pitch = sensor_w_mm / w
-            x = (np.arange(w) - 0.5 * (w - 1)) * pitch - ox
-            y = (np.arange(h) - 0.5 * (h - 1)) * pitch - oy
-            self._radius = (key, np.hypot(x[None, :], y[:, None]))
+            self._radius = (key, image_height_mm(pitch, cx, cy, w, h))
         return self._radius[1]
 
-    def ri_plane(self, camera, w: int, h: int, intrinsics=None) -> np.ndarray:
+    def ri_plane(self, camera, frame) -> np.ndarray:
         """RI at every pixel (float32 (h, w), read-only): the LUT interpolated in float64 at the
         pixel's image height. Built once per curve, principal point and size and uploaded once
         (the pipeline does not re-copy an unchanged read-only table); the kernel reads one float
         per pixel — PoCL cannot vectorise data-dependent loads, so a per-pixel LUT lookup in the
         kernel would be most of the stage's cost (docs/measurements.md#kernel-forms-on-pocl)."""
         lut = self._lut(camera)
-        ox, oy = principal_offset_mm(camera, w, h, intrinsics)
-        key = (lut.tobytes(), float(camera.sensor_mm[0]), ox, oy, w, h)
+        pitch, cx, cy = field_geometry(camera, frame)
+        w, h = frame.size
+        key = (lut.tobytes(), pitch, cx, cy, w, h)
         if self._plane[0] != key:
-            r = self._radius_plane(float(camera.sensor_mm[0]), ox, oy, w, h)
+            r = self._radius_plane(pitch, cx, cy, w, h)
             grid = np.linspace(0.0, self._r_max(camera), LUT_SIZE)
             plane = np.interp(r, grid, lut.astype(np.float64)).astype(np.float32)
             plane.setflags(write=False)
@@ -214,14 +217,10 @@ class Vignetting(PointwiseStage):
         return self._plane[1]
 
     def values(self, camera, frame):
-        return (self.ri_plane(camera, frame.width, frame.height, fld.frame_intrinsics(frame)),)
+        return (self.ri_plane(camera, frame),)
 
     def reference(self, camera, frame, color):
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
-        pitch = camera.sensor_mm[0] / w
-        ox, oy = principal_offset_mm(camera, w, h, fld.frame_intrinsics(frame))
-        x = (np.arange(w) - 0.5 * (w - 1)) * pitch - ox
-        y = (np.arange(h) - 0.5 * (h - 1)) * pitch - oy
-        r = np.minimum(np.hypot(x[None, :], y[:, None]), self._r_max(camera))
+        r = np.minimum(image_height_mm(*field_geometry(camera, frame), w, h), self._r_max(camera))
         return color * relative_illumination(camera)(r)[..., None]
