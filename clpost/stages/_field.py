@@ -25,6 +25,7 @@ keeps (or approximates) the per-pixel shape within a tile.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -56,12 +57,37 @@ def render_intrinsics_px(model, w: int, h: int, intrinsics=None):
     return None
 
 
+@dataclass(frozen=True)
+class FieldGeometry:
+    """A frame's pixel pitch (mm) and optical centre (px in its arrays) when they are not the
+    array's (an EXR's overscan: :func:`frame_geometry`). Passed where the field functions take
+    ``intrinsics``; :func:`principal_point_px` and :func:`pitch_mm` honour it."""
+
+    pitch: float
+    cx: float
+    cy: float
+
+
+def frame_geometry(camera, frame):
+    """What the field stages pass as ``intrinsics`` for ``frame``: a :class:`FieldGeometry` when
+    the frame has a display window inside larger arrays (pitch from :func:`image_width_px`, centre
+    from :func:`field_centre_px`), else the render's recorded intrinsics (or None)."""
+    k = frame_intrinsics(frame)
+    if frame.windows.display_size == frame.size and frame.windows.display_offset == (0, 0):
+        return k
+    cx, cy = field_centre_px(camera, frame)
+    return FieldGeometry(camera.sensor_mm[0] / image_width_px(frame), cx, cy)
+
+
 def principal_point_px(camera, w: int, h: int, intrinsics=None) -> tuple[float, float]:
     """The optical centre (px) of a w × h image: the one definition every stage uses (the field
     stages and vignetting measure image height from it, distortion maps around it). The render's
     recorded ``intrinsics`` when given, else a calibrated camera's (:func:`render_intrinsics_px`:
     before ``distortion`` the render's, after it — at the calibration's size — the calibration's
-    own c), else the image centre ((W−1)/2, (H−1)/2) of the pixel-centre convention."""
+    own c), else the image centre ((W−1)/2, (H−1)/2) of the pixel-centre convention. A
+    :class:`FieldGeometry` gives its own centre."""
+    if isinstance(intrinsics, FieldGeometry):
+        return intrinsics.cx, intrinsics.cy
     k = render_intrinsics_px(getattr(camera, "distortion", None), w, h, intrinsics)
     if k is not None:
         return k[2], k[3]
@@ -88,7 +114,10 @@ def field_centre_px(camera, frame) -> tuple[float, float]:
     return cx + ox, cy + oy
 
 
-def pitch_mm(camera, w: int) -> float:
+def pitch_mm(camera, w: int, intrinsics=None) -> float:
+    """Pixel pitch (mm) of a w-pixel-wide image spanning the sensor, or a :class:`FieldGeometry`'s."""
+    if isinstance(intrinsics, FieldGeometry):
+        return intrinsics.pitch
     return camera.sensor_mm[0] / float(w)
 
 

@@ -269,7 +269,7 @@ class Astigmatism(GatherStage):
         r = np.linspace(0.0, fld.corner_mm(camera), 256)
         ds, dt = focal_offsets(camera)(r)
         i = int(np.argmax(np.abs(ds - dt)))
-        s, t = point_source_axes_px(camera, float(r[i]), camera.focus_distance_m, frame.width)
+        s, t = point_source_axes_px(camera, float(r[i]), camera.focus_distance_m, fld.image_width_px(frame))
         return (f"largest astigmatism at {r[i]:.3g} mm: sagittal {float(ds[i]):+.3g} mm, tangential "
                 f"{float(dt[i]):+.3g} mm (in focus: {s:.2g} × {t:.2g} px); {self.taps} taps")
 
@@ -332,8 +332,9 @@ class Astigmatism(GatherStage):
     def semi_axes_px(self, camera, frame):
         """(a_s/2p, a_t/2p, e_x, e_y): per-pixel semi-axes (px) and radial unit vector, float64."""
         w, h = frame.width, frame.height
-        cx, cy = fld.principal_point_px(camera, w, h, fld.frame_intrinsics(frame))
-        pitch = fld.pitch_mm(camera, w)
+        k = fld.frame_geometry(camera, frame)
+        cx, cy = fld.principal_point_px(camera, w, h, k)
+        pitch = fld.pitch_mm(camera, w, k)
         _, _, r, ex, ey = fld.radial_frame(w, h, cx, cy)
         ds, dt = focal_offsets(camera)(r * pitch)
         depth = np.full((h, w), np.inf) if frame.depth is None else frame.depth
@@ -358,7 +359,7 @@ class Astigmatism(GatherStage):
         (0 = copied; exact tiles take the quality's N)."""
         w, h = frame.width, frame.height
         a_s, a_t, _, _ = self.semi_axes_px(camera, frame)
-        cx, cy = fld.principal_point_px(camera, w, h, fld.frame_intrinsics(frame))
+        cx, cy = fld.principal_point_px(camera, w, h, fld.frame_geometry(camera, frame))
         _, _, r, tex, tey = fld.tile_centres(w, h, cx, cy)
         ntx, nty = fld.tiles(w, h)
         big = np.full((2, nty * fld.TILE_H, ntx * fld.TILE_W), np.nan)

@@ -55,7 +55,7 @@ def program_source(classes: tuple[int, ...]) -> str:
     return kernel_source("common") + head + table + kernel_source("astigmatism") + kernels
 
 
-def _plan(stage, rt, camera, w, h, cx, cy, lut):
+def _plan(stage, rt, camera, w, h, cx, cy, pitch, lut):
     """Device buffers and host constants of one (tap count, size, principal point, LUT)."""
     classes = tuple(stage.tap_classes())
     ntx, nty = fld.tiles(w, h)
@@ -65,7 +65,7 @@ def _plan(stage, rt, camera, w, h, cx, cy, lut):
     defines = {**stage.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole)}
     source = program_source(classes)
     sizes = (np.int32(w), np.int32(h), np.int32(pw), np.int32(ph))
-    geometry = (np.float32(cx), np.float32(cy), np.float32(fld.pitch_mm(camera, w)),
+    geometry = (np.float32(cx), np.float32(cy), np.float32(pitch),
                 np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
     return dict(
         kernel=lambda name: rt.kernel(source, name, defines, "astigmatism"),
@@ -88,16 +88,17 @@ def device_plan(stage, rt, camera, w, h, k=None) -> dict:
     """The cached plan of :func:`_plan` for this camera and size (tests read its buffers)."""
     cx, cy = fld.principal_point_px(camera, w, h, k)
     lut = stage._lut(camera).astype(np.float32)
-    key = (stage.taps, w, h, cx, cy, lut.tobytes(), fld.pitch_mm(camera, w), fld.lut_range_mm(camera),
+    pitch = fld.pitch_mm(camera, w, k)
+    key = (stage.taps, w, h, cx, cy, lut.tobytes(), pitch, fld.lut_range_mm(camera),
            tuple(sorted(stage.defines(camera).items())))
-    return rt.cached(stage, "plan", key, lambda: _plan(stage, rt, camera, w, h, cx, cy, lut))
+    return rt.cached(stage, "plan", key, lambda: _plan(stage, rt, camera, w, h, cx, cy, pitch, lut))
 
 
 def enqueue_astigmatism(stage, rt, camera, frame, src, dst, aux):
     from .astigmatism import thin_lens
 
     w, h = frame.width, frame.height
-    b = device_plan(stage, rt, camera, w, h, fld.frame_intrinsics(frame))
+    b = device_plan(stage, rt, camera, w, h, fld.frame_geometry(camera, frame))
     kernel, ntx, nty, nclass = b["kernel"], b["ntx"], b["nty"], b["nclass"]
     pw, ph = b["pw"], b["ph"]
     aperture, v, f = thin_lens(camera)

@@ -192,7 +192,7 @@ class Coma(GatherStage):
         r = np.linspace(0.0, fld.corner_mm(camera), 256)
         c = coma_curve(camera)(r)
         i = int(np.argmax(np.abs(c)))
-        g = comet_geometry_px(camera, float(r[i]), frame.width)
+        g = comet_geometry_px(camera, float(r[i]), fld.image_width_px(frame))
         return f"longest comet at {r[i]:.3g} mm: 3C = {3 * c[i] * 1000:+.3g} µm ({g['length']:+.2g} px); {self.taps} taps"
 
     def defines(self, camera):
@@ -215,7 +215,7 @@ class Coma(GatherStage):
                 & (y0 >= fld.PAD) & (y0 + fld.TILE_H + fld.PAD <= h))
 
     def _uniform_key(self, camera, w, h, k=None):
-        return (self._lut(camera).tobytes(), w, h, fld.pitch_mm(camera, w), self.taps,
+        return (self._lut(camera).tobytes(), w, h, fld.pitch_mm(camera, w, k), self.taps,
                 fld.principal_point_px(camera, w, h, k))
 
     def tile_uniform(self, camera, w: int, h: int, k=None) -> np.ndarray:
@@ -330,7 +330,7 @@ class Coma(GatherStage):
         """(tiles_y, tiles_x, 4) float64: per tile the gather offsets −C e_s and −C e_r (px; x
         and y each) of its centre's comet (C capped) — what the kernel's windows are placed by."""
         cx, cy = fld.principal_point_px(camera, w, h, k)
-        pitch = fld.pitch_mm(camera, w)
+        pitch = fld.pitch_mm(camera, w, k)
         _, _, r, ex, ey = fld.tile_centres(w, h, cx, cy)
         c = np.clip(coma_curve(camera)(r * pitch) / pitch, -MAX_TAIL_PX / 3.0, MAX_TAIL_PX / 3.0)
         return np.stack([ey * c, -ex * c, -ex * c, -ey * c], -1)
@@ -353,7 +353,7 @@ class Coma(GatherStage):
         """Per pixel: C in px (capped so the tail 3C ≤ 15 px), C' = dC/dr, C/r and the radial
         unit vector (float64)."""
         cx, cy = fld.principal_point_px(camera, w, h, k)
-        pitch = fld.pitch_mm(camera, w)
+        pitch = fld.pitch_mm(camera, w, k)
         _, _, r, ex, ey = fld.radial_frame(w, h, cx, cy)
         fn = coma_curve(camera)
         c = fn(r * pitch) / pitch
@@ -370,7 +370,7 @@ class Coma(GatherStage):
         Jacobian where ``tile_jacobian`` allows)."""
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
-        k = fld.frame_intrinsics(frame)
+        k = fld.frame_geometry(camera, frame)
         c, dc, q, ex, ey = self.c_px(camera, w, h, k)
         tsxx, tsxy, trxx, trxy = np.moveaxis(fld.per_pixel(self.tile_axes_px(camera, w, h, k), w, h), -1, 0)
         xs, ys = np.mgrid[0:h, 0:w].astype(np.float64)[::-1]

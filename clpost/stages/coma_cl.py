@@ -52,12 +52,12 @@ def _tile_lists(stage, rt, camera, w, h, k=None) -> dict:
 
 def enqueue_coma(stage, rt, camera, frame, src, dst, aux):
     w, h = frame.width, frame.height
-    k = fld.frame_intrinsics(frame)
+    k = fld.frame_geometry(camera, frame)
     cx, cy = fld.principal_point_px(camera, w, h, k)
     ntx, nty = fld.tiles(w, h)
     ow, oh = ntx * fld.TILE_W, nty * fld.TILE_H
     whole = (ow, oh) == (w, h)
-    pitch = fld.pitch_mm(camera, w)
+    pitch = fld.pitch_mm(camera, w, k)
     # COMA_WHOLE_TILES (the frame is whole tiles: stores need no branch) is a property of the
     # frame size, not of the camera, so it is added here rather than in defines()
     source, defines = program_source(stage.taps), {**stage.defines(camera), "COMA_WHOLE_TILES": int(whole)}

@@ -167,7 +167,7 @@ class LateralColor(GatherStage):
         r = np.linspace(0.0, fld.corner_mm(camera), 256)
         d = channel_shifts(camera)(r)
         i = int(np.argmax(np.abs(d[0] - d[2])))
-        p = fld.pitch_mm(camera, frame.width)
+        p = fld.pitch_mm(camera, fld.image_width_px(frame))
         return (f"largest R−B at {r[i]:.3g} mm: {(d[0, i] - d[2, i]) * 1000:+.3g} µm ({(d[0, i] - d[2, i]) / p:+.2g} px); "
                 f"channels at {', '.join(f'{w:g}' for w in channel_wavelengths_nm())} nm")
 
@@ -186,7 +186,7 @@ class LateralColor(GatherStage):
         the cell offset ``b`` (x, y; int), the affine fractions ``f`` (x, y) × (a0, ax, ay) and
         Jacobian ``jac`` (a0, ax, ay) of the module docstring (memoised per camera map and size)."""
         lut = self._lut(camera)
-        pitch = fld.pitch_mm(camera, w)
+        pitch = fld.pitch_mm(camera, w, k)
         key = (lut.tobytes(), w, h, pitch, fld.principal_point_px(camera, w, h, k))
         if self._plan_key != key:
             self._plan_key, self._plan = key, self._tile_plan(camera, w, h, k)
@@ -196,7 +196,7 @@ class LateralColor(GatherStage):
         tw, th = fld.TILE_W, fld.TILE_H
         ntx, nty = fld.tiles(w, h)
         cx, cy = fld.principal_point_px(camera, w, h, k)
-        pitch = fld.pitch_mm(camera, w)
+        pitch = fld.pitch_mm(camera, w, k)
         ty, tx = np.mgrid[0:nty, 0:ntx].astype(np.float64)
         x0, y0 = tx * tw, ty * th
 
@@ -238,9 +238,9 @@ class LateralColor(GatherStage):
 
     def enqueue(self, rt, camera, frame, src, dst, aux):
         w, h = frame.width, frame.height
-        k = fld.frame_intrinsics(frame)
-        cx, cy = fld.principal_point_px(camera, w, h, k)
-        plan = self.tile_plan(camera, w, h, k)
+        g = fld.frame_geometry(camera, frame)
+        cx, cy = fld.principal_point_px(camera, w, h, g)
+        plan = self.tile_plan(camera, w, h, g)
         key = (id(rt.context), w, h, self._plan_key)
         if key not in self._scratch:
             # the records depend only on the camera's map and the frame size: uploaded once
@@ -259,7 +259,7 @@ class LateralColor(GatherStage):
             k = self._kernel(rt, camera, "lateral_color")
             events.append(rt.launch(k, (fld.TILE_W * b["n_rest"], fld.TILE_H), tile,
                                     src, dst, b["lut"], b["rest"], np.int32(w), np.int32(h), np.float32(cx),
-                                    np.float32(cy), np.float32(fld.pitch_mm(camera, w) * (fld.LUT_SIZE - 1)
+                                    np.float32(cy), np.float32(fld.pitch_mm(camera, w, g) * (fld.LUT_SIZE - 1)
                                                                / fld.lut_range_mm(camera))))
         return events
 
@@ -268,7 +268,7 @@ class LateralColor(GatherStage):
         """Per pixel and channel (3, h, w) float64: source x, y of the exact map, and its Jacobian."""
         cx, cy = fld.principal_point_px(camera, w, h, k)
         xs, ys, r, _, _ = fld.radial_frame(w, h, cx, cy)
-        ratio, jac = inverse_map(camera, r * fld.pitch_mm(camera, w))
+        ratio, jac = inverse_map(camera, r * fld.pitch_mm(camera, w, k))
         return cx + (xs - cx) * ratio, cy + (ys - cy) * ratio, jac
 
     def model_positions(self, camera, w: int, h: int, k=None):
@@ -301,7 +301,7 @@ class LateralColor(GatherStage):
         the exact map, no LUT, elsewhere)."""
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
-        k = fld.frame_intrinsics(frame)
+        k = fld.frame_geometry(camera, frame)
         sx, sy, jac = self.model_positions(camera, w, h, k)
         out = np.empty_like(color)
         for c in range(3):
