@@ -205,6 +205,8 @@ def main(argv=None) -> int:
     p.add_argument("--work", default="/tmp/cycles/compare")
     p.add_argument("--sheets", default="/tmp/cycles", help="contact sheets go here")
     p.add_argument("--doc", default=str(ROOT / "docs" / "fidelity.md"), help="'' to skip")
+    p.add_argument("--merge", action="store_true",
+                   help="keep the other scenes' results already in --work/results.json (one table for all)")
     p.add_argument("--figure", default=str(ROOT / "docs" / "figures" / "cycles_emitters.png"))
     a = p.parse_args(argv)
     data, work, sheets = Path(a.data), Path(a.work), Path(a.sheets)
@@ -213,6 +215,8 @@ def main(argv=None) -> int:
     manifest = json.loads((data / "manifest.json").read_text())
     names = a.scenes.split(",") if a.scenes else list(manifest["scenes"])
     results = {}
+    if a.merge and (work / "results.json").exists():
+        results = json.loads((work / "results.json").read_text())
     for name in names:
         entry, frame, emit, truths = load_scene(name, data)
         pinhole = frame.color[..., :3]
@@ -256,7 +260,9 @@ def main(argv=None) -> int:
         old = doc.read_text() if doc.exists() else f"{BEGIN}\n{END}\n"
         if BEGIN not in old:
             old += f"\n{BEGIN}\n{END}\n"
-        cmd = "Command: `.venv/bin/python tools/cycles_compare.py " + " ".join(argv if argv is not None else sys.argv[1:]) + "`"
+        args = " ".join(argv if argv is not None else sys.argv[1:])
+        cmd = f"Written by `.venv/bin/python tools/cycles_compare.py {args}`" + \
+            (" (scenes merged from earlier runs of the same command in --work)" if a.merge else "")
         new = re.sub(re.escape(BEGIN) + ".*?" + re.escape(END), lambda _: f"{BEGIN}\n{cmd}\n\n{text}\n{END}", old,
                      flags=re.S)
         doc.write_text(new)

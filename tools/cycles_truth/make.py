@@ -133,6 +133,8 @@ def main(argv=None) -> int:
                                      "noise_floor_psnr_srgb_db": round(floor, 2)}
             print(f"{scene} {kind}: floor {floor:.2f} dB, {times} s", flush=True)
         entry["wall_s"] = round(time.time() - t0, 1)
+        if os.path.exists(man_path):  # another make.py may have added scenes meanwhile
+            manifest = json.load(open(man_path))
         manifest["scenes"][scene] = entry
         manifest["command"] = ("/work/bpyvenv/bin/python tools/cycles_truth/make.py " + " ".join(argv or sys.argv[1:])).strip()
         manifest["note"] = "written by tools/cycles_truth/make.py; see tests/data/cycles/README.md"

@@ -347,7 +347,9 @@ def scene_macro(width):
     cylinder("stalk", (-0.08, 0.26, CAM_Z - 0.06), (-0.06, 0.26, CAM_Z + 0.06), 0.0015, diffuse("stalk_mat", (0.2, 0.5, 0.1)))
     box("wall", (0, 6.0, 2.0), (8, 0.2, 4), checker("wall_mat", (0.7, 0.7, 0.72), (0.35, 0.38, 0.4), 2.0))
     f = f_px_of(shot, width)
-    for i, (x, y, z, px, k) in enumerate([(0.6, 5.0, 2.2, 2, 400), (-0.9, 5.0, 1.9, 3, 200), (0.2, 2.0, 1.75, 2, 300)]):
+    # lamp globes 6–12 px wide: a 2 px lamp spread over a 37 px disc is a 0.3 % target for aperture
+    # samples, which would need thousands of samples per pixel for a 36 dB truth
+    for i, (x, y, z, px, k) in enumerate([(0.6, 5.0, 2.2, 12, 100), (-0.9, 5.0, 1.9, 10, 60), (0.2, 2.0, 1.75, 6, 100)]):
         lamp(shot, f"lamp{i:02d}", (x, y, z), px, k, f)
     return shot
 
