@@ -30,7 +30,12 @@ inline float motion_blur_len2(float2 v) {
 }
 
 /* motion_blur (the gather, below) needs: half-vector h = v * k (k = shutter fraction / 2), clamped to |h| <= K keeping its direction;
- * inverse depth for the soft depth test (0 for the sky, so no inf - inf). */
+ * inverse depth for the soft depth test (0 for the sky, so no inf - inf).
+ * Fringe rule first: renderers average the vector over the pixel filter but point-sample depth, so
+ * an anti-aliased edge pixel carries a fraction of the moving surface's velocity. A pixel whose
+ * speed is > MOTION_BLUR_FRINGE times the fastest of its 3 x 3 neighbours (first in scan order on
+ * ties) takes that neighbour's velocity and depth: its colour is (partly) that surface's. */
+#define MOTION_BLUR_FRINGE2 0.01f  /* MOTION_BLUR_FRINGE = 0.1, squared */
 __kernel void motion_blur_prep(__global const float *restrict velocity,
                                __global const float *restrict depth,
                                __global float *restrict hv, __global float *restrict iz,
@@ -41,6 +46,22 @@ __kernel void motion_blur_prep(__global const float *restrict velocity,
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
     float2 v = (float2)(velocity[2 * i], velocity[2 * i + 1]);
+    const float own2 = motion_blur_len2(v);
+    float best2 = own2;
+    size_t bi = i;
+    for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+            const int sx = clamp(x + dx, 0, width - 1), sy = clamp(y + dy, 0, height - 1);
+            const size_t j = (size_t)sy * (size_t)width + (size_t)sx;
+            const float s2 = motion_blur_len2((float2)(velocity[2 * j], velocity[2 * j + 1]));
+            if (s2 > best2) { best2 = s2; bi = j; }
+        }
+    }
+    float z = depth[i];
+    if (own2 > 0.0f && own2 > MOTION_BLUR_FRINGE2 * best2) {
+        v = (float2)(velocity[2 * bi], velocity[2 * bi + 1]);
+        z = depth[bi];
+    }
     /* scale by the inf-norm first: |v| up to FLT_MAX never overflows to inf */
     const float m = fmax(fabs(v.x), fabs(v.y));
     float2 h = (float2)(0.0f, 0.0f);
@@ -54,7 +75,6 @@ __kernel void motion_blur_prep(__global const float *restrict velocity,
     hv[i] = h.x;
     hv[n + i] = h.y;
     hv[2 * n + i] = len;
-    const float z = depth[i];
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
 }
 
@@ -106,10 +126,6 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
     nmax[tn + t] = best.y;
 }
 
-inline float motion_blur_cone(float dist, float len) {
-    return clamp(1.0f - dist / len, 0.0f, 1.0f);
-}
-
 inline float motion_blur_cylinder(float dist, float len) {
     return 1.0f - smoothstep(0.95f * len, 1.05f * len, dist);
 }
@@ -140,17 +156,27 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
         return;
     }
     const float2 hx = (float2)(hv[i], hv[n + i]);
-    const float lx = fmax(sqrt(motion_blur_len2(hx)), 0.5f);
+    const float lhx = sqrt(motion_blur_len2(hx));
+    const float lx = fmax(lhx, 0.5f);
+    const float2 vx = lhx > 0.5f ? hx : vn;        /* odd taps follow X's own motion */
+    const float ln = sqrt(motion_blur_len2(vn));
+    const float lv = sqrt(motion_blur_len2(vx));
     const float wx = iz[i];
     const float j = motion_blur_jitter(seed, frame, x, y);
-    float weight = 1.0f / lx;
-    float3 sum = cx * weight;
+    /* front: surfaces at or in front of X smeared over it, weighted by coverage; back: the
+     * background behind X (revealed when X's surface moves away) */
+    const float wc = fmin((ln + lv) * inv_s1 / (2.0f * lx), 1.0f);
+    float cov = wc;
+    float3 front = cx * wc;
+    float wb = 1e-3f;
+    float3 back = cx * wb;
     for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
         if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre tap is X itself */
+        const float2 dir = (s & 1) ? vx : vn;
         const float u = ((float)(s + 1) + j) * inv_s1;
         const float tt = 2.0f * u - 1.0f;
-        const float ox = vn.x * tt;
-        const float oy = vn.y * tt;
+        const float ox = dir.x * tt;
+        const float oy = dir.y * tt;
         const int sx = clamp((int)floor((float)x + ox + 0.5f), 0, width - 1);
         const int sy = clamp((int)floor((float)y + oy + 0.5f), 0, height - 1);
         const size_t k = (size_t)sy * (size_t)width + (size_t)sx;
@@ -161,12 +187,16 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
         const float wy = iz[k];
         const float f = motion_blur_front(wy, wx);    /* Y in front of X */
         const float b = motion_blur_front(wx, wy);    /* X in front of Y */
-        const float a = f * motion_blur_cone(dist, ly) + b * motion_blur_cone(dist, lx)
-                      + motion_blur_cylinder(dist, ly) * motion_blur_cylinder(dist, lx) * 2.0f;
-        weight += a;
-        sum += a * load_planar(src, k, n);
+        const float delta = 2.0f * ((s & 1) ? lv : ln) * inv_s1;   /* path length per tap */
+        const float af = f * motion_blur_cylinder(dist, ly) * delta / (2.0f * ly);
+        const float ab = b * (1.0f - f) * motion_blur_cylinder(dist, lx);
+        const float3 cy = load_planar(src, k, n);
+        cov += af;
+        front += af * cy;
+        wb += ab;
+        back += ab * cy;
     }
-    store_planar(dst, i, n, sum / weight);
+    store_planar(dst, i, n, cov >= 1.0f ? front / cov : front + (1.0f - cov) * (back / wb));
 }
 
 /* rolling shutter: row y is exposed tau_y = r (y/(H-1) - 1/2) frames after the frame time, so it

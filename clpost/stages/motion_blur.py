@@ -111,6 +111,8 @@ SAMPLES = {"draft": 7, "preview": 15, "final": 31}
 """S per quality level (odd: the centre tap is the pixel itself)."""
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
 SOFT_Z = 0.05
+FRINGE = 0.1
+"""A pixel faster than FRINGE × its fastest 3×3 neighbour takes that neighbour's motion (fringe rule)."""
 
 
 def shutter_from_angle(angle_deg: float, fps: float) -> float:
@@ -274,6 +276,20 @@ def half_vectors(velocity: np.ndarray, k: float, with_length: bool = False) -> n
     return np.concatenate([h, length], axis=-1) if with_length else h
 
 
+def half_vectors32(velocity: np.ndarray, k: float) -> np.ndarray:
+    """``half_vectors(..., with_length=True)`` in float32, operation for operation as
+    ``motion_blur_prep`` computes them (the kernel steps along them: tap positions must round the
+    same way)."""
+    v = np.asarray(velocity, dtype=np.float32)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        m = np.max(np.abs(v), axis=-1, keepdims=True)
+        u = v / np.where(m > 0, m, np.float32(1))
+        l2 = (u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1])[..., None]
+        length = np.sqrt(l2) * m * np.float32(k)
+        h = u * (np.minimum(length, np.float32(TILE)) / np.sqrt(l2))
+    return np.where(m > 0, np.concatenate([h, length], axis=-1), np.float32(0)).astype(np.float32)
+
+
 def _argmax_len(vecs: np.ndarray) -> np.ndarray:
     """vecs (..., N, 3) → the one of the N with the largest key (component 2; first on ties)."""
     idx = np.argmax(vecs[..., 2], axis=-1)
@@ -295,9 +311,18 @@ def tile_max(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return tmax, _argmax_len(neigh)
 
 
-def _smoothstep(e0, e1, x):
-    t = np.clip((x - e0) / np.where(e1 > e0, e1 - e0, 1.0), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
+def _len32(v32: np.ndarray) -> np.ndarray:
+    """|v| of float32 2-vectors as the kernel computes it: sqrt(x·x + y·y) in float32."""
+    return np.sqrt(v32[..., 0] * v32[..., 0] + v32[..., 1] * v32[..., 1])
+
+
+def _cylinder32(dist: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """1 − smoothstep(0.95 l, 1.05 l, d) in float32, as the kernel rounds it (a tap just at the
+    edge can carry a huge colour: its weight must round the same way)."""
+    d, l = np.asarray(dist, np.float32), np.asarray(length, np.float32)
+    e0, e1 = np.float32(0.95) * l, np.float32(1.05) * l
+    t = np.clip((d - e0) / (e1 - e0), np.float32(0), np.float32(1))
+    return (np.float32(1) - t * t * (np.float32(3) - np.float32(2) * t)).astype(np.float64)
 
 
 def _front(wa, wb):
@@ -305,43 +330,80 @@ def _front(wa, wb):
     return np.clip(1.0 - (wb - wa) / (SOFT_Z * m), 0.0, 1.0)
 
 
+def effective_velocity(velocity: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The fringe rule (module docstring): a pixel whose speed exceeds FRINGE × the fastest of its
+    3×3 neighbours (edge-clamped; first in scan order on ties) takes that neighbour's velocity and
+    depth. Speeds compared as float32 squares, as the kernel compares them."""
+    v = np.asarray(velocity, dtype=np.float32)
+    z = np.asarray(depth, dtype=np.float64)
+    hh, ww = v.shape[:2]
+    with np.errstate(over="ignore", invalid="ignore"):
+        s2 = v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1]
+    ys, xs = np.mgrid[0:hh, 0:ww]
+    best, by, bx = s2.copy(), ys.copy(), xs.copy()
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            ny, nx = np.clip(ys + dy, 0, hh - 1), np.clip(xs + dx, 0, ww - 1)
+            m = s2[ny, nx] > best
+            best = np.where(m, s2[ny, nx], best)
+            by, bx = np.where(m, ny, by), np.where(m, nx, bx)
+    with np.errstate(over="ignore", invalid="ignore"):
+        take = (s2 > 0) & (s2 > np.float32(FRINGE * FRINGE) * best)
+    by, bx = np.where(take, by, ys), np.where(take, bx, xs)
+    return v[by, bx], z[by, bx]
+
+
 def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | None, fraction: float,
                    samples: int, frame_index: int = 0, seed: int = SEED) -> np.ndarray:
     """The reconstruction filter of the module docstring in float64 (H×W×3 in and out)."""
     hh, ww = color.shape[:2]
-    hk = half_vectors(velocity, fraction / 2.0, with_length=True)
-    h = hk[..., :2]
-    _, nmax = tile_max(hk)
+    z = np.full((hh, ww), np.inf) if depth is None else np.asarray(depth, dtype=np.float64)
+    velocity, z = effective_velocity(velocity, z)
+    hk = half_vectors32(velocity, np.float32(fraction / 2.0))
+    h32 = hk[..., :2]
+    h = h32.astype(np.float64)
+    _, nmax = tile_max(hk.astype(np.float64))
     ys, xs = np.mgrid[0:hh, 0:ww]
     vn = nmax[ys // TILE, xs // TILE, :2]
     vn32 = vn.astype(np.float32)
-    z = np.full((hh, ww), np.inf) if depth is None else np.asarray(depth, dtype=np.float64)
     iz = np.where(np.isinf(z), 0.0, 1.0 / np.where(np.isinf(z), 1.0, z))
-    lx = np.maximum(np.hypot(h[..., 0], h[..., 1]), 0.5)
+    lhx = _len32(h32)
+    lx32 = np.maximum(lhx, np.float32(0.5))
+    lx = lx32.astype(np.float64)
+    vx32 = np.where((lhx > 0.5)[..., None], h32, vn32)   # odd taps: X's own motion
+    ln = _len32(vn32).astype(np.float64)
+    lv = _len32(vx32).astype(np.float64)
     j = jitter(seed, frame_index, xs, ys)
     inv = np.float32(1.0 / (samples + 1))
-    weight = 1.0 / lx
-    total = color * weight[..., None]
+    wc = np.minimum((ln + lv) * float(inv) / (2.0 * lx), 1.0)
+    cov, front = wc.copy(), color * wc[..., None]
+    wb = np.full((hh, ww), 1e-3)
+    back = color * wb[..., None]
     for s in range(samples):
         if s == samples // 2:
             continue
+        d32 = vx32 if s % 2 else vn32
         u = (np.float32(s + 1) + j) * inv
         t = np.float32(2.0) * u - np.float32(1.0)
-        ox, oy = vn32[..., 0] * t, vn32[..., 1] * t
+        ox, oy = d32[..., 0] * t, d32[..., 1] * t
         sx = np.clip(np.floor(xs.astype(np.float32) + ox + np.float32(0.5)).astype(np.int64), 0, ww - 1)
         sy = np.clip(np.floor(ys.astype(np.float32) + oy + np.float32(0.5)).astype(np.int64), 0, hh - 1)
-        dist = np.hypot(sx - xs, sy - ys)
-        hy = h[sy, sx]
-        ly = np.maximum(np.hypot(hy[..., 0], hy[..., 1]), 0.5)
+        dx32, dy32 = (sx - xs).astype(np.float32), (sy - ys).astype(np.float32)
+        dist = np.sqrt(dx32 * dx32 + dy32 * dy32)
+        ly32 = np.maximum(_len32(h32[sy, sx]), np.float32(0.5))
+        ly = ly32.astype(np.float64)
         wy = iz[sy, sx]
         f, b = _front(wy, iz), _front(iz, wy)
-        cone_y = np.clip(1.0 - dist / ly, 0.0, 1.0)
-        cone_x = np.clip(1.0 - dist / lx, 0.0, 1.0)
-        cyl = (1.0 - _smoothstep(0.95 * ly, 1.05 * ly, dist)) * (1.0 - _smoothstep(0.95 * lx, 1.05 * lx, dist))
-        a = f * cone_y + b * cone_x + 2.0 * cyl
-        weight = weight + a
-        total = total + a[..., None] * color[sy, sx]
-    out = total / weight[..., None]
+        delta = 2.0 * (lv if s % 2 else ln) * float(inv)
+        af = f * _cylinder32(dist, ly32) * delta / (2.0 * ly)
+        ab = b * (1.0 - f) * _cylinder32(dist, lx32)
+        cy = color[sy, sx]
+        cov = cov + af
+        front = front + af[..., None] * cy
+        wb = wb + ab
+        back = back + ab[..., None] * cy
+    out = np.where((cov >= 1.0)[..., None], front / np.maximum(cov, 1.0)[..., None],
+                   front + (1.0 - cov)[..., None] * back / wb[..., None])
     still = vn[..., 0] ** 2 + vn[..., 1] ** 2 <= 0.25
     out[still] = color[still]
     return out
