@@ -15,6 +15,8 @@
 /* FP_CONTRACT OFF: no a*b+c fusion, so tap positions round exactly as in the numpy reference. */
 
 #define MOTION_BLUR_SOFT_Z 0.05f   /* relative depth difference over which fore/background blend */
+#define MOTION_BLUR_AGREE0 0.8f    /* cos(v_N, h_X) below which the tap sets split (AGREE0/1 in the .py) */
+#define MOTION_BLUR_AGREE1 0.95f
 
 inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
     /* j in [-0.5, 0.5): the counter hash of (seed, frame, x, y) of kernels/random.cl, per
@@ -161,6 +163,10 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
     const float2 vx = lhx > 0.5f ? hx : vn;        /* odd taps follow X's own motion */
     const float ln = sqrt(motion_blur_len2(vn));
     const float lv = sqrt(motion_blur_len2(vx));
+    /* where X's own motion leaves v_N's direction, the tap sets split the work: odd taps (on X's
+     * path) carry X's own surface, even taps (on v_N) the surfaces in front of X */
+    const float cosang = (vn.x * vx.x + vn.y * vx.y) / fmax(ln * lv, 1e-30f);
+    const float agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
     const float wx = iz[i];
     const float j = motion_blur_jitter(seed, frame, x, y);
     /* front: surfaces at or in front of X smeared over it, weighted by coverage; back: the
@@ -188,7 +194,8 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
         const float f = motion_blur_front(wy, wx);    /* Y in front of X */
         const float b = motion_blur_front(wx, wy);    /* X in front of Y */
         const float delta = 2.0f * ((s & 1) ? lv : ln) * inv_s1;   /* path length per tap */
-        const float af = f * motion_blur_cylinder(dist, ly) * delta / (2.0f * ly);
+        const float split = (s & 1) ? 2.0f * b : 2.0f * (1.0f - b);
+        const float af = f * motion_blur_cylinder(dist, ly) * delta / (2.0f * ly) * (agree + (1.0f - agree) * split);
         const float ab = b * (1.0f - f) * motion_blur_cylinder(dist, lx);
         const float3 cy = load_planar(src, k, n);
         cov += af;

@@ -112,6 +112,8 @@ SAMPLES = {"draft": 7, "preview": 15, "final": 31}
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
 SOFT_Z = 0.05
 FRINGE = 0.1
+AGREE0, AGREE1 = 0.8, 0.95
+"""cos(angle) between v_N and X's own half-vector below which the two tap sets split the work."""
 """A pixel faster than FRINGE × its fastest 3×3 neighbour takes that neighbour's motion (fringe rule)."""
 
 
@@ -373,6 +375,8 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     vx32 = np.where((lhx > 0.5)[..., None], h32, vn32)   # odd taps: X's own motion
     ln = _len32(vn32).astype(np.float64)
     lv = _len32(vx32).astype(np.float64)
+    cosang = (vn32[..., 0] * vx32[..., 0] + vn32[..., 1] * vx32[..., 1]) / np.maximum(ln * lv, 1e-30)
+    agree = np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0)
     j = jitter(seed, frame_index, xs, ys)
     inv = np.float32(1.0 / (samples + 1))
     wc = np.minimum((ln + lv) * float(inv) / (2.0 * lx), 1.0)
@@ -395,7 +399,8 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         wy = iz[sy, sx]
         f, b = _front(wy, iz), _front(iz, wy)
         delta = 2.0 * (lv if s % 2 else ln) * float(inv)
-        af = f * _cylinder32(dist, ly32) * delta / (2.0 * ly)
+        split = 2.0 * b if s % 2 else 2.0 * (1.0 - b)     # own-surface taps on X's path, others on vN's
+        af = f * _cylinder32(dist, ly32) * delta / (2.0 * ly) * (agree + (1.0 - agree) * split)
         ab = b * (1.0 - f) * _cylinder32(dist, lx32)
         cy = color[sy, sx]
         cov = cov + af
