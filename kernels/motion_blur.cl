@@ -171,7 +171,8 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
     const float j = motion_blur_jitter(seed, frame, x, y);
     /* front: surfaces at or in front of X smeared over it, weighted by coverage; back: the
      * background behind X (revealed when X's surface moves away) */
-    const float wc = fmin((ln + lv) * inv_s1 / (2.0f * lx), 1.0f);
+    const float hdn = ln * inv_s1, hdv = lv * inv_s1;   /* half the path length per tap, per set */
+    const float wc = fmin(0.5f * (hdn + hdv) / lx, 1.0f);
     float cov = wc;
     float3 front = cx * wc;
     float wb = 1e-3f;
@@ -191,11 +192,14 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
         const float2 hy = (float2)(hv[k], hv[n + k]);
         const float ly = fmax(sqrt(motion_blur_len2(hy)), 0.5f);
         const float wy = iz[k];
-        const float f = motion_blur_front(wy, wx);    /* Y in front of X */
-        const float b = motion_blur_front(wx, wy);    /* X in front of Y */
-        const float delta = 2.0f * ((s & 1) ? lv : ln) * inv_s1;   /* path length per tap */
+        /* soft depth test: f = Y in front of X, b = X in front of Y (motion_blur_front, one division) */
+        const float r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f));
+        const float f = clamp(1.0f - r, 0.0f, 1.0f);
+        const float b = clamp(1.0f + r, 0.0f, 1.0f);
         const float split = (s & 1) ? 2.0f * b : 2.0f * (1.0f - b);
-        const float af = f * motion_blur_cylinder(dist, ly) * delta / (2.0f * ly) * (agree + (1.0f - agree) * split);
+        /* coverage: path length per tap (2 |dir| / (S + 1)) over Y's streak length 2 |h_Y| */
+        const float af = f * motion_blur_cylinder(dist, ly) * ((s & 1) ? hdv : hdn) / ly
+                       * (agree + (1.0f - agree) * split);
         const float ab = b * (1.0f - f) * motion_blur_cylinder(dist, lx);
         const float3 cy = load_planar(src, k, n);
         cov += af;

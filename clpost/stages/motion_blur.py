@@ -107,7 +107,7 @@ class MotionBlurParams:
 
 TILE = 20
 """K: tile size and the largest blur half-length in px."""
-SAMPLES = {"draft": 7, "preview": 15, "final": 31}
+SAMPLES = {"draft": 5, "preview": 11, "final": 27}
 """S per quality level (odd: the centre tap is the pixel itself)."""
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
 SOFT_Z = 0.05
