@@ -143,7 +143,7 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
                                  __global const float *restrict hv, __global const float *restrict iz,
                                  __global const float *restrict nmax,
                                  const int width, const int height, const int tw, const int th,
-                                 const uint seed, const uint frame, const float inv_s1)
+                                 const uint seed, const uint frame, const float inv_s)
 {
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
@@ -169,18 +169,16 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
     const float agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
     const float wx = iz[i];
     const float j = motion_blur_jitter(seed, frame, x, y);
-    /* front: surfaces at or in front of X smeared over it, weighted by coverage; back: the
-     * background behind X (revealed when X's surface moves away) */
-    const float hdn = ln * inv_s1, hdv = lv * inv_s1;   /* half the path length per tap, per set */
-    const float wc = fmin(0.5f * (hdn + hdv) / lx, 1.0f);
-    float cov = wc;
-    float3 front = cx * wc;
-    float wb = 1e-3f;
-    float3 back = cx * wb;
+    /* three layers: surfaces in front of X (coverage cf), X's own surface smeared along its path
+     * (coverage co, X itself weighted wc), the background behind X (revealed as X moves away) */
+    const float hdn = ln * inv_s, hdv = lv * inv_s;   /* half the path length per tap, per set */
+    const float wc = 0.5f * (hdn + hdv) / lx;
+    float cf = 0.0f, co = wc, wb = 1e-3f;
+    float3 sf = (float3)(0.0f), so = cx * wc, sb = cx * wb;
     for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
-        if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre tap is X itself */
+        if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre stratum is X itself */
         const float2 dir = (s & 1) ? vx : vn;
-        const float u = ((float)(s + 1) + j) * inv_s1;
+        const float u = ((float)s + 0.5f + j) * inv_s;   /* S strata covering the whole path */
         const float tt = 2.0f * u - 1.0f;
         const float ox = dir.x * tt;
         const float oy = dir.y * tt;
@@ -196,18 +194,25 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
         const float r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f));
         const float f = clamp(1.0f - r, 0.0f, 1.0f);
         const float b = clamp(1.0f + r, 0.0f, 1.0f);
-        const float split = (s & 1) ? 2.0f * b : 2.0f * (1.0f - b);
-        /* coverage: path length per tap (2 |dir| / (S + 1)) over Y's streak length 2 |h_Y| */
-        const float af = f * motion_blur_cylinder(dist, ly) * ((s & 1) ? hdv : hdn) / ly
-                       * (agree + (1.0f - agree) * split);
+        /* Y's surface passes over X for (path length per tap) / (Y's streak 2 |h_Y|) of the shutter;
+         * where the tap sets split, odd taps carry X's own surface and even taps what is in front */
+        const float a = motion_blur_cylinder(dist, ly) * ((s & 1) ? hdv : hdn) / ly;
+        const float af = f * (1.0f - b) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
+        const float ao = f * b * a * (agree + (1.0f - agree) * ((s & 1) ? 2.0f : 0.0f));
         const float ab = b * (1.0f - f) * motion_blur_cylinder(dist, lx);
         const float3 cy = load_planar(src, k, n);
-        cov += af;
-        front += af * cy;
+        cf += af;
+        sf += af * cy;
+        co += ao;
+        so += ao * cy;
         wb += ab;
-        back += ab * cy;
+        sb += ab * cy;
     }
-    store_planar(dst, i, n, cov >= 1.0f ? front / cov : front + (1.0f - cov) * (back / wb));
+    /* out = cf' F + (1 - cf') [co' O + (1 - co') B], coverages clamped to 1, layer colours normalised */
+    const float cfc = fmin(cf, 1.0f), coc = fmin(co, 1.0f);
+    const float3 own = coc * (so / co) + (1.0f - coc) * (sb / wb);
+    const float3 fr = cf > 0.0f ? sf / cf : cx;
+    store_planar(dst, i, n, cfc * fr + (1.0f - cfc) * own);
 }
 
 /* rolling shutter: row y is exposed tau_y = r (y/(H-1) - 1/2) frames after the frame time, so it

@@ -107,7 +107,7 @@ class MotionBlurParams:
 
 TILE = 20
 """K: tile size and the largest blur half-length in px."""
-SAMPLES = {"draft": 5, "preview": 11, "final": 27}
+SAMPLES = {"draft": 5, "preview": 11, "final": 23}
 """S per quality level (odd: the centre tap is the pixel itself)."""
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
 SOFT_Z = 0.05
@@ -232,7 +232,7 @@ class MotionBlur(GatherStage):
             k = self._kernel(rt, camera, "motion_blur")
             k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], np.int32(w), np.int32(h),
                        np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(frame.index),
-                       np.float32(1.0 / (self.samples + 1)))
+                       np.float32(1.0 / self.samples))
             events.append(rt.launch(k, (w, h)))
         if rolling:
             k = self._kernel(rt, camera, "motion_blur_rolling")
@@ -378,16 +378,17 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     cosang = (vn32[..., 0] * vx32[..., 0] + vn32[..., 1] * vx32[..., 1]) / np.maximum(ln * lv, 1e-30)
     agree = np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0)
     j = jitter(seed, frame_index, xs, ys)
-    inv = np.float32(1.0 / (samples + 1))
-    wc = np.minimum((ln + lv) * float(inv) / (2.0 * lx), 1.0)
-    cov, front = wc.copy(), color * wc[..., None]
+    inv = np.float32(1.0 / samples)
+    wc = (ln + lv) * float(inv) / (2.0 * lx)
+    cf, sf = np.zeros((hh, ww)), np.zeros_like(color)          # surfaces in front of X
+    co, so = wc.copy(), color * wc[..., None]                  # X's own surface along its path
     wb = np.full((hh, ww), 1e-3)
-    back = color * wb[..., None]
+    sb = color * wb[..., None]                                  # the background behind X
     for s in range(samples):
         if s == samples // 2:
             continue
         d32 = vx32 if s % 2 else vn32
-        u = (np.float32(s + 1) + j) * inv
+        u = (np.float32(s) + np.float32(0.5) + j) * inv
         t = np.float32(2.0) * u - np.float32(1.0)
         ox, oy = d32[..., 0] * t, d32[..., 1] * t
         sx = np.clip(np.floor(xs.astype(np.float32) + ox + np.float32(0.5)).astype(np.int64), 0, ww - 1)
@@ -398,17 +399,18 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         ly = ly32.astype(np.float64)
         wy = iz[sy, sx]
         f, b = _front(wy, iz), _front(iz, wy)
-        delta = 2.0 * (lv if s % 2 else ln) * float(inv)
-        split = 2.0 * b if s % 2 else 2.0 * (1.0 - b)     # own-surface taps on X's path, others on vN's
-        af = f * _cylinder32(dist, ly32) * delta / (2.0 * ly) * (agree + (1.0 - agree) * split)
+        a = _cylinder32(dist, ly32) * (lv if s % 2 else ln) * float(inv) / ly
+        af = f * (1.0 - b) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
+        ao = f * b * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
         ab = b * (1.0 - f) * _cylinder32(dist, lx32)
         cy = color[sy, sx]
-        cov = cov + af
-        front = front + af[..., None] * cy
-        wb = wb + ab
-        back = back + ab[..., None] * cy
-    out = np.where((cov >= 1.0)[..., None], front / np.maximum(cov, 1.0)[..., None],
-                   front + (1.0 - cov)[..., None] * back / wb[..., None])
+        cf, sf = cf + af, sf + af[..., None] * cy
+        co, so = co + ao, so + ao[..., None] * cy
+        wb, sb = wb + ab, sb + ab[..., None] * cy
+    cfc, coc = np.minimum(cf, 1.0)[..., None], np.minimum(co, 1.0)[..., None]
+    own = coc * so / co[..., None] + (1.0 - coc) * sb / wb[..., None]
+    fr = np.where((cf > 0)[..., None], sf / np.where(cf > 0, cf, 1.0)[..., None], color)
+    out = cfc * fr + (1.0 - cfc) * own
     still = vn[..., 0] ** 2 + vn[..., 1] ** 2 <= 0.25
     out[still] = color[still]
     return out
