@@ -96,10 +96,10 @@ def test_energy_of_a_dot_with_uniform_motion_is_conserved():
     mean = (row * xs).sum() / row.sum()
     var = (row * (xs - mean) ** 2).sum() / row.sum()
     assert abs(mean - 40) < 0.5
-    # the true streak is a box of length L = v·s = 12 px: variance L²/12 = 12 px². McGuire's
-    # weights (cones + cylinders) taper the ends, so its spread lies between a triangle of the
-    # same extent (L²/24 = 6 px²) and the box; measured 8.7 px²
-    assert 6.0 < var < 12.0, var
+    # the true streak is a box of length L = v·s = 12 px: variance L²/12 = 12 px². The coverage
+    # weights give a box up to the taps' rounding to pixels: measured 10.7 px² (McGuire's cones
+    # gave 8.7, between the box and a triangle of the same extent, L²/24 = 6 px²)
+    assert 9.0 < var < 14.0, var
 
 
 @pytest.mark.parametrize("quality", list(SAMPLES))

@@ -12,35 +12,57 @@ whose half-vector is
 
     h = v\,\frac{s}{2}, \qquad |h| \le K
 
-**Reconstruction filter** (McGuire, Hennessy, Bukowski, Osman 2012, "A Reconstruction Filter for
-Plausible Motion Blur", I3D; Jimenez 2014, "Next Generation Post Processing in Call of Duty:
-Advanced Warfare", SIGGRAPH course): the image is cut in K×K tiles; TileMax holds each tile's
-longest h (ranked by the unclamped length, first in scan order on ties) and NeighborMax the
-longest of its 3×3 tiles, :math:`v_N`, so a fast object blurs over a
-static background *and* a static pixel receives the smear of a neighbour. Output at pixel X, with
-S taps along :math:`v_N`:
+**Reconstruction filter**, a gather after McGuire, Hennessy, Bukowski, Osman 2012 ("A
+Reconstruction Filter for Plausible Motion Blur", I3D) with Guertin, McGuire, Nowrouzezahrai 2014
+("A Fast and Stable Feature-Aware Motion Blur Filter", HPG: taps along the pixel's own motion as
+well) and coverage weights instead of McGuire's cones: the image is cut in K×K tiles; TileMax
+holds each tile's longest h (ranked by the unclamped length, first in scan order on ties) and
+NeighborMax the longest of its 3×3 tiles, :math:`v_N`, so a fast object blurs over a static
+background *and* a static pixel receives the smear of a neighbour.
+
+*Fringe rule* (renderer input, issue 16): renderers average the vector pass over the pixel filter
+but point-sample depth, so an anti-aliased edge pixel carries a fraction of the moving surface's
+velocity and often the background's depth. A pixel whose speed exceeds FRINGE = 0.1 × the fastest
+of its 3×3 neighbours (edge-clamped, first in scan order on ties) takes that neighbour's velocity
+and depth: its colour is (partly) that surface's, and spreads with it.
+
+*Taps.* S taps along two directions: even i along :math:`v_N`, odd i along X's own half-vector
+:math:`h_X` (:math:`v_N` where :math:`|h_X| \le 0.5`), stratified over the whole path,
 
 .. math::
 
-    C'(X) = \frac{C(X)/|h_X| + \sum_{i \ne c} \alpha_i\,C(Y_i)}{1/|h_X| + \sum_{i \ne c} \alpha_i},
-    \quad Y_i = \Big\lfloor X + v_N\,t_i + \tfrac12 \Big\rfloor,
-    \quad t_i = -1 + 2\,\frac{i + 1 + j}{S + 1}
+    Y_i = \Big\lfloor X + d_i\,t_i + \tfrac12 \Big\rfloor, \quad t_i = -1 + 2\,\frac{i + \tfrac12 + j}{S},
+    \quad i \ne \tfrac{S-1}{2}
+
+with :math:`j \in [-\tfrac12, \tfrac12)` a per-pixel jitter from a counter-based hash of (seed,
+frame index, x, y) (CONVENTIONS "Randomness"); the centre stratum is X itself.
+
+*Coverage.* A surface Y moving with half-vector :math:`h_Y` passes over X, |X − Y| = d, for the
+fraction :math:`\delta_i / (2|h_Y|)` of the shutter per tap (:math:`\delta_i = 2|d_i|/S` the path
+length a tap stands for; cylinder cyl(d, l) = 1 − smoothstep(0.95 l, 1.05 l, d) limits it to Y's
+streak). With f = "Y in front of X", b = "X in front of Y" by a soft depth test on inverse depth
+(ramp over 5 % relative depth, the sky's inverse depth 0) and :math:`a_i = \mathrm{cyl}(d,
+|h_Y|)\,\delta_i / (2|h_Y|)`, three layers are gathered:
+
+- in front of X: :math:`c_F = \sum f(1-b)\,a_i\,g_i^F`, colour F = their weighted mean;
+- X's own surface along its path: :math:`c_O = w_c + \sum f\,b\,a_i\,g_i^O` with X itself at
+  :math:`w_c = \bar\delta / (2|h_X|)`, colour O = weighted mean (a box for uniform motion);
+- behind X (revealed as X's surface moves away): weights :math:`b(1-f)\,\mathrm{cyl}(d, |h_X|)`,
+  colour B (X itself at weight 10⁻³ when there is none);
 
 .. math::
 
-    \alpha = f\,\mathrm{cone}(d, |h_Y|) + b\,\mathrm{cone}(d, |h_X|)
-           + 2\,\mathrm{cyl}(d, |h_Y|)\,\mathrm{cyl}(d, |h_X|)
+    C'(X) = \bar c_F F + (1 - \bar c_F)\big(\bar c_O O + (1 - \bar c_O) B\big),
+    \qquad \bar c = \min(c, 1)
 
-with :math:`d = |X - Y|`, cone(d, l) = clamp(1 − d/l, 0, 1), cyl(d, l) = 1 − smoothstep(0.95 l,
-1.05 l, d), f = "Y in front of X" and b = "X in front of Y" by a soft depth test on inverse depth
-(ramp over 5 % relative depth; the sky's inverse depth is 0), |h| clamped to ≥ 0.5 px, and
-:math:`j \in [-\tfrac12, \tfrac12)` a per-pixel jitter from a counter-based hash of (seed, frame
-index, x, y) (CONVENTIONS "Randomness") that turns banding into fine noise. If :math:`|v_N| \le
-0.5` px the pixel is left exactly as it is — hence the stage is *not planned* when no pixel's half-
-vector reaches 0.5 px (skipped ⇔ identity).
+|h| clamped to ≥ 0.5 px. Where :math:`h_X` leaves :math:`v_N`'s direction (agreement g =
+clamp((cos∠ − 0.8)/0.15, 0, 1)) the tap sets split the work: odd taps carry X's own surface
+(:math:`g^O = g + 2(1-g)`, :math:`g^F = g`), even taps what is in front (:math:`g^F = g +
+2(1-g)`, :math:`g^O = g`). If :math:`|v_N| \le 0.5` px the pixel is left exactly as it is —
+hence the stage is *not planned* when no pixel's half-vector reaches 0.5 px (skipped ⇔ identity).
 
 **Quality** sets S (taps per pixel; measured error and cost in ``docs/motion_blur.md``):
-draft 7, preview 15, final 31. K = 20 px for all levels.
+draft 5, preview 11, final 23. K = 20 px for all levels.
 
 **Clamping.** :math:`|h|` is limited to K = 20 px (a streak of at most 40 px, i.e. 2K) keeping
 its direction: faster motion blurs as if it moved 2K px during the exposure, so its streak is
@@ -108,7 +130,8 @@ class MotionBlurParams:
 TILE = 20
 """K: tile size and the largest blur half-length in px."""
 SAMPLES = {"draft": 5, "preview": 11, "final": 23}
-"""S per quality level (odd: the centre tap is the pixel itself)."""
+"""S per quality level (odd: the centre stratum is the pixel itself). Chosen so that no level is
+slower than the McGuire filter's 7/15/31 taps it replaced (docs/motion_blur.md)."""
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
 SOFT_Z = 0.05
 FRINGE = 0.1
