@@ -172,7 +172,9 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
     /* three layers: surfaces in front of X (coverage cf), X's own surface smeared along its path
      * (coverage co, X itself weighted wc), the background behind X (revealed as X moves away) */
     const float hdn = ln * inv_s, hdv = lv * inv_s;   /* half the path length per tap, per set */
-    const float wc = 0.5f * (hdn + hdv) / lx;
+    /* X's own point covers X for (its footprint: the centre stratum's path, at least the pixel)
+     * over its streak 2 |h_X|: a static pixel (|h_X| <= 0.5) is its own surface all the time */
+    const float wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
     float cf = 0.0f, co = wc, wb = 1e-3f;
     float3 sf = (float3)(0.0f), so = cx * wc, sb = cx * wb;
     for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
@@ -195,11 +197,14 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
         const float f = clamp(1.0f - r, 0.0f, 1.0f);
         const float b = clamp(1.0f + r, 0.0f, 1.0f);
         /* Y's surface passes over X for (path length per tap) / (Y's streak 2 |h_Y|) of the shutter;
-         * where the tap sets split, odd taps carry X's own surface and even taps what is in front */
-        const float a = motion_blur_cylinder(dist, ly) * ((s & 1) ? hdv : hdn) / ly;
-        const float af = f * (1.0f - b) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
-        const float ao = f * b * a * (agree + (1.0f - agree) * ((s & 1) ? 2.0f : 0.0f));
-        const float ab = b * (1.0f - f) * motion_blur_cylinder(dist, lx);
+         * where the tap sets split, odd taps carry X's own surface and even taps what is in front.
+         * Background estimate (ab): surfaces behind X, or level with it whose streak misses X. */
+        const float cly = motion_blur_cylinder(dist, ly);
+        const float a = cly * ((s & 1) ? hdv : hdn) / ly;
+        const float own = b * motion_blur_cylinder(dist, lx);   /* level with X and on X's path */
+        const float af = f * (1.0f - own) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
+        const float ao = f * own * a * (agree + (1.0f - agree) * ((s & 1) ? 2.0f : 0.0f));
+        const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx);
         const float3 cy = load_planar(src, k, n);
         cf += af;
         sf += af * cy;

@@ -42,13 +42,18 @@ fraction :math:`\delta_i / (2|h_Y|)` of the shutter per tap (:math:`\delta_i = 2
 length a tap stands for; cylinder cyl(d, l) = 1 − smoothstep(0.95 l, 1.05 l, d) limits it to Y's
 streak). With f = "Y in front of X", b = "X in front of Y" by a soft depth test on inverse depth
 (ramp over 5 % relative depth, the sky's inverse depth 0) and :math:`a_i = \mathrm{cyl}(d,
-|h_Y|)\,\delta_i / (2|h_Y|)`, three layers are gathered:
+|h_Y|)\,\delta_i / (2|h_Y|)`, :math:`o_i = b\,\mathrm{cyl}(d, |h_X|)` ("level with X and on X's
+own path"), three layers are gathered:
 
-- in front of X: :math:`c_F = \sum f(1-b)\,a_i\,g_i^F`, colour F = their weighted mean;
-- X's own surface along its path: :math:`c_O = w_c + \sum f\,b\,a_i\,g_i^O` with X itself at
-  :math:`w_c = \bar\delta / (2|h_X|)`, colour O = weighted mean (a box for uniform motion);
-- behind X (revealed as X's surface moves away): weights :math:`b(1-f)\,\mathrm{cyl}(d, |h_X|)`,
-  colour B (X itself at weight 10⁻³ when there is none);
+- in front of X (or level but off X's path, e.g. a light sliding over a wall at its depth):
+  :math:`c_F = \sum f(1-o_i)\,a_i\,g_i^F`, colour F = their weighted mean;
+- X's own surface along its path: :math:`c_O = w_c + \sum f\,o_i\,a_i\,g_i^O` with X itself at
+  :math:`w_c = \max(\bar\delta, 1) / (2|h_X|)` (its footprint: the centre stratum's path, at least
+  the pixel; a static pixel is its own surface all the time), colour O = weighted mean (a box for
+  uniform motion);
+- behind X (revealed as X's surface moves away): weights :math:`b\,\big((1-f) + f\,(1 -
+  \mathrm{cyl}(d, |h_Y|))\big)\,\mathrm{cyl}(d, |h_X|)` (surfaces behind X, or level with it whose
+  streak misses X), colour B (X itself at weight 10⁻³ when there is none);
 
 .. math::
 
@@ -402,7 +407,7 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     agree = np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0)
     j = jitter(seed, frame_index, xs, ys)
     inv = np.float32(1.0 / samples)
-    wc = (ln + lv) * float(inv) / (2.0 * lx)
+    wc = np.maximum((ln + lv) * float(inv), 1.0) / (2.0 * lx)   # at least the pixel's own footprint
     cf, sf = np.zeros((hh, ww)), np.zeros_like(color)          # surfaces in front of X
     co, so = wc.copy(), color * wc[..., None]                  # X's own surface along its path
     wb = np.full((hh, ww), 1e-3)
@@ -422,10 +427,12 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         ly = ly32.astype(np.float64)
         wy = iz[sy, sx]
         f, b = _front(wy, iz), _front(iz, wy)
-        a = _cylinder32(dist, ly32) * (lv if s % 2 else ln) * float(inv) / ly
-        af = f * (1.0 - b) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
-        ao = f * b * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
-        ab = b * (1.0 - f) * _cylinder32(dist, lx32)
+        cly = _cylinder32(dist, ly32)
+        a = cly * (lv if s % 2 else ln) * float(inv) / ly
+        own = b * _cylinder32(dist, lx32)        # level with X and on X's own path
+        af = f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
+        ao = f * own * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
+        ab = b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
         cy = color[sy, sx]
         cf, sf = cf + af, sf + af[..., None] * cy
         co, so = co + ao, so + ao[..., None] * cy
