@@ -15,6 +15,8 @@
 /* FP_CONTRACT OFF: no a*b+c fusion, so tap positions round exactly as in the numpy reference. */
 
 #define MOTION_BLUR_SOFT_Z 0.05f   /* relative depth difference over which fore/background blend */
+#define MOTION_BLUR_AGREE0 0.8f    /* cos(v_N, h_X) below which the tap sets split (AGREE0/1 in the .py) */
+#define MOTION_BLUR_AGREE1 0.95f
 
 inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
     /* j in [-0.5, 0.5): the counter hash of (seed, frame, x, y) of kernels/random.cl, per
@@ -30,7 +32,12 @@ inline float motion_blur_len2(float2 v) {
 }
 
 /* motion_blur (the gather, below) needs: half-vector h = v * k (k = shutter fraction / 2), clamped to |h| <= K keeping its direction;
- * inverse depth for the soft depth test (0 for the sky, so no inf - inf). */
+ * inverse depth for the soft depth test (0 for the sky, so no inf - inf).
+ * Fringe rule first: renderers average the vector over the pixel filter but point-sample depth, so
+ * an anti-aliased edge pixel carries a fraction of the moving surface's velocity. A pixel whose
+ * speed is > MOTION_BLUR_FRINGE times the fastest of its 3 x 3 neighbours (first in scan order on
+ * ties) takes that neighbour's velocity and depth: its colour is (partly) that surface's. */
+#define MOTION_BLUR_FRINGE2 0.01f  /* MOTION_BLUR_FRINGE = 0.1, squared */
 __kernel void motion_blur_prep(__global const float *restrict velocity,
                                __global const float *restrict depth,
                                __global float *restrict hv, __global float *restrict iz,
@@ -41,6 +48,22 @@ __kernel void motion_blur_prep(__global const float *restrict velocity,
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
     float2 v = (float2)(velocity[2 * i], velocity[2 * i + 1]);
+    const float own2 = motion_blur_len2(v);
+    float best2 = own2;
+    size_t bi = i;
+    for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+            const int sx = clamp(x + dx, 0, width - 1), sy = clamp(y + dy, 0, height - 1);
+            const size_t j = (size_t)sy * (size_t)width + (size_t)sx;
+            const float s2 = motion_blur_len2((float2)(velocity[2 * j], velocity[2 * j + 1]));
+            if (s2 > best2) { best2 = s2; bi = j; }
+        }
+    }
+    float z = depth[i];
+    if (own2 > 0.0f && own2 > MOTION_BLUR_FRINGE2 * best2) {
+        v = (float2)(velocity[2 * bi], velocity[2 * bi + 1]);
+        z = depth[bi];
+    }
     /* scale by the inf-norm first: |v| up to FLT_MAX never overflows to inf */
     const float m = fmax(fabs(v.x), fabs(v.y));
     float2 h = (float2)(0.0f, 0.0f);
@@ -54,7 +77,6 @@ __kernel void motion_blur_prep(__global const float *restrict velocity,
     hv[i] = h.x;
     hv[n + i] = h.y;
     hv[2 * n + i] = len;
-    const float z = depth[i];
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
 }
 
@@ -106,10 +128,6 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
     nmax[tn + t] = best.y;
 }
 
-inline float motion_blur_cone(float dist, float len) {
-    return clamp(1.0f - dist / len, 0.0f, 1.0f);
-}
-
 inline float motion_blur_cylinder(float dist, float len) {
     return 1.0f - smoothstep(0.95f * len, 1.05f * len, dist);
 }
@@ -125,7 +143,7 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
                                  __global const float *restrict hv, __global const float *restrict iz,
                                  __global const float *restrict nmax,
                                  const int width, const int height, const int tw, const int th,
-                                 const uint seed, const uint frame, const float inv_s1)
+                                 const uint seed, const uint frame, const float inv_s)
 {
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
@@ -140,17 +158,32 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
         return;
     }
     const float2 hx = (float2)(hv[i], hv[n + i]);
-    const float lx = fmax(sqrt(motion_blur_len2(hx)), 0.5f);
+    const float lhx = sqrt(motion_blur_len2(hx));
+    const float lx = fmax(lhx, 0.5f);
+    const float2 vx = lhx > 0.5f ? hx : vn;        /* odd taps follow X's own motion */
+    const float ln = sqrt(motion_blur_len2(vn));
+    const float lv = sqrt(motion_blur_len2(vx));
+    /* where X's own motion leaves v_N's direction, the tap sets split the work: odd taps (on X's
+     * path) carry X's own surface, even taps (on v_N) the surfaces in front of X */
+    const float cosang = (vn.x * vx.x + vn.y * vx.y) / fmax(ln * lv, 1e-30f);
+    const float agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
     const float wx = iz[i];
     const float j = motion_blur_jitter(seed, frame, x, y);
-    float weight = 1.0f / lx;
-    float3 sum = cx * weight;
+    /* three layers: surfaces in front of X (coverage cf), X's own surface smeared along its path
+     * (coverage co, X itself weighted wc), the background behind X (revealed as X moves away) */
+    const float hdn = ln * inv_s, hdv = lv * inv_s;   /* half the path length per tap, per set */
+    /* X's own point covers X for (its footprint: the centre stratum's path, at least the pixel)
+     * over its streak 2 |h_X|: a static pixel (|h_X| <= 0.5) is its own surface all the time */
+    const float wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
+    float cf = 0.0f, co = wc, wb = 1e-3f;
+    float3 sf = (float3)(0.0f), so = cx * wc, sb = cx * wb;
     for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
-        if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre tap is X itself */
-        const float u = ((float)(s + 1) + j) * inv_s1;
+        if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre stratum is X itself */
+        const float2 dir = (s & 1) ? vx : vn;
+        const float u = ((float)s + 0.5f + j) * inv_s;   /* S strata covering the whole path */
         const float tt = 2.0f * u - 1.0f;
-        const float ox = vn.x * tt;
-        const float oy = vn.y * tt;
+        const float ox = dir.x * tt;
+        const float oy = dir.y * tt;
         const int sx = clamp((int)floor((float)x + ox + 0.5f), 0, width - 1);
         const int sy = clamp((int)floor((float)y + oy + 0.5f), 0, height - 1);
         const size_t k = (size_t)sy * (size_t)width + (size_t)sx;
@@ -159,14 +192,32 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
         const float2 hy = (float2)(hv[k], hv[n + k]);
         const float ly = fmax(sqrt(motion_blur_len2(hy)), 0.5f);
         const float wy = iz[k];
-        const float f = motion_blur_front(wy, wx);    /* Y in front of X */
-        const float b = motion_blur_front(wx, wy);    /* X in front of Y */
-        const float a = f * motion_blur_cone(dist, ly) + b * motion_blur_cone(dist, lx)
-                      + motion_blur_cylinder(dist, ly) * motion_blur_cylinder(dist, lx) * 2.0f;
-        weight += a;
-        sum += a * load_planar(src, k, n);
+        /* soft depth test: f = Y in front of X, b = X in front of Y (motion_blur_front, one division) */
+        const float r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f));
+        const float f = clamp(1.0f - r, 0.0f, 1.0f);
+        const float b = clamp(1.0f + r, 0.0f, 1.0f);
+        /* Y's surface passes over X for (path length per tap) / (Y's streak 2 |h_Y|) of the shutter;
+         * where the tap sets split, odd taps carry X's own surface and even taps what is in front.
+         * Background estimate (ab): surfaces behind X, or level with it whose streak misses X. */
+        const float cly = motion_blur_cylinder(dist, ly);
+        const float a = cly * ((s & 1) ? hdv : hdn) / ly;
+        const float own = b * motion_blur_cylinder(dist, lx);   /* level with X and on X's path */
+        const float af = f * (1.0f - own) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
+        const float ao = f * own * a * (agree + (1.0f - agree) * ((s & 1) ? 2.0f : 0.0f));
+        const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx);
+        const float3 cy = load_planar(src, k, n);
+        cf += af;
+        sf += af * cy;
+        co += ao;
+        so += ao * cy;
+        wb += ab;
+        sb += ab * cy;
     }
-    store_planar(dst, i, n, sum / weight);
+    /* out = cf' F + (1 - cf') [co' O + (1 - co') B], coverages clamped to 1, layer colours normalised */
+    const float cfc = fmin(cf, 1.0f), coc = fmin(co, 1.0f);
+    const float3 own = coc * (so / co) + (1.0f - coc) * (sb / wb);
+    const float3 fr = cf > 0.0f ? sf / cf : cx;
+    store_planar(dst, i, n, cfc * fr + (1.0f - cfc) * own);
 }
 
 /* rolling shutter: row y is exposed tau_y = r (y/(H-1) - 1/2) frames after the frame time, so it

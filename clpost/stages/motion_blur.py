@@ -12,35 +12,62 @@ whose half-vector is
 
     h = v\,\frac{s}{2}, \qquad |h| \le K
 
-**Reconstruction filter** (McGuire, Hennessy, Bukowski, Osman 2012, "A Reconstruction Filter for
-Plausible Motion Blur", I3D; Jimenez 2014, "Next Generation Post Processing in Call of Duty:
-Advanced Warfare", SIGGRAPH course): the image is cut in K×K tiles; TileMax holds each tile's
-longest h (ranked by the unclamped length, first in scan order on ties) and NeighborMax the
-longest of its 3×3 tiles, :math:`v_N`, so a fast object blurs over a
-static background *and* a static pixel receives the smear of a neighbour. Output at pixel X, with
-S taps along :math:`v_N`:
+**Reconstruction filter**, a gather after McGuire, Hennessy, Bukowski, Osman 2012 ("A
+Reconstruction Filter for Plausible Motion Blur", I3D) with Guertin, McGuire, Nowrouzezahrai 2014
+("A Fast and Stable Feature-Aware Motion Blur Filter", HPG: taps along the pixel's own motion as
+well) and coverage weights instead of McGuire's cones: the image is cut in K×K tiles; TileMax
+holds each tile's longest h (ranked by the unclamped length, first in scan order on ties) and
+NeighborMax the longest of its 3×3 tiles, :math:`v_N`, so a fast object blurs over a static
+background *and* a static pixel receives the smear of a neighbour.
+
+*Fringe rule* (renderer input, issue 16): renderers average the vector pass over the pixel filter
+but point-sample depth, so an anti-aliased edge pixel carries a fraction of the moving surface's
+velocity and often the background's depth. A pixel whose speed exceeds FRINGE = 0.1 × the fastest
+of its 3×3 neighbours (edge-clamped, first in scan order on ties) takes that neighbour's velocity
+and depth: its colour is (partly) that surface's, and spreads with it.
+
+*Taps.* S taps along two directions: even i along :math:`v_N`, odd i along X's own half-vector
+:math:`h_X` (:math:`v_N` where :math:`|h_X| \le 0.5`), stratified over the whole path,
 
 .. math::
 
-    C'(X) = \frac{C(X)/|h_X| + \sum_{i \ne c} \alpha_i\,C(Y_i)}{1/|h_X| + \sum_{i \ne c} \alpha_i},
-    \quad Y_i = \Big\lfloor X + v_N\,t_i + \tfrac12 \Big\rfloor,
-    \quad t_i = -1 + 2\,\frac{i + 1 + j}{S + 1}
+    Y_i = \Big\lfloor X + d_i\,t_i + \tfrac12 \Big\rfloor, \quad t_i = -1 + 2\,\frac{i + \tfrac12 + j}{S},
+    \quad i \ne \tfrac{S-1}{2}
+
+with :math:`j \in [-\tfrac12, \tfrac12)` a per-pixel jitter from a counter-based hash of (seed,
+frame index, x, y) (CONVENTIONS "Randomness"); the centre stratum is X itself.
+
+*Coverage.* A surface Y moving with half-vector :math:`h_Y` passes over X, |X − Y| = d, for the
+fraction :math:`\delta_i / (2|h_Y|)` of the shutter per tap (:math:`\delta_i = 2|d_i|/S` the path
+length a tap stands for; cylinder cyl(d, l) = 1 − smoothstep(0.95 l, 1.05 l, d) limits it to Y's
+streak). With f = "Y in front of X", b = "X in front of Y" by a soft depth test on inverse depth
+(ramp over 5 % relative depth, the sky's inverse depth 0) and :math:`a_i = \mathrm{cyl}(d,
+|h_Y|)\,\delta_i / (2|h_Y|)`, :math:`o_i = b\,\mathrm{cyl}(d, |h_X|)` ("level with X and on X's
+own path"), three layers are gathered:
+
+- in front of X (or level but off X's path, e.g. a light sliding over a wall at its depth):
+  :math:`c_F = \sum f(1-o_i)\,a_i\,g_i^F`, colour F = their weighted mean;
+- X's own surface along its path: :math:`c_O = w_c + \sum f\,o_i\,a_i\,g_i^O` with X itself at
+  :math:`w_c = \max(\bar\delta, 1) / (2|h_X|)` (its footprint: the centre stratum's path, at least
+  the pixel; a static pixel is its own surface all the time), colour O = weighted mean (a box for
+  uniform motion);
+- behind X (revealed as X's surface moves away): weights :math:`b\,\big((1-f) + f\,(1 -
+  \mathrm{cyl}(d, |h_Y|))\big)\,\mathrm{cyl}(d, |h_X|)` (surfaces behind X, or level with it whose
+  streak misses X), colour B (X itself at weight 10⁻³ when there is none);
 
 .. math::
 
-    \alpha = f\,\mathrm{cone}(d, |h_Y|) + b\,\mathrm{cone}(d, |h_X|)
-           + 2\,\mathrm{cyl}(d, |h_Y|)\,\mathrm{cyl}(d, |h_X|)
+    C'(X) = \bar c_F F + (1 - \bar c_F)\big(\bar c_O O + (1 - \bar c_O) B\big),
+    \qquad \bar c = \min(c, 1)
 
-with :math:`d = |X - Y|`, cone(d, l) = clamp(1 − d/l, 0, 1), cyl(d, l) = 1 − smoothstep(0.95 l,
-1.05 l, d), f = "Y in front of X" and b = "X in front of Y" by a soft depth test on inverse depth
-(ramp over 5 % relative depth; the sky's inverse depth is 0), |h| clamped to ≥ 0.5 px, and
-:math:`j \in [-\tfrac12, \tfrac12)` a per-pixel jitter from a counter-based hash of (seed, frame
-index, x, y) (CONVENTIONS "Randomness") that turns banding into fine noise. If :math:`|v_N| \le
-0.5` px the pixel is left exactly as it is — hence the stage is *not planned* when no pixel's half-
-vector reaches 0.5 px (skipped ⇔ identity).
+|h| clamped to ≥ 0.5 px. Where :math:`h_X` leaves :math:`v_N`'s direction (agreement g =
+clamp((cos∠ − 0.8)/0.15, 0, 1)) the tap sets split the work: odd taps carry X's own surface
+(:math:`g^O = g + 2(1-g)`, :math:`g^F = g`), even taps what is in front (:math:`g^F = g +
+2(1-g)`, :math:`g^O = g`). If :math:`|v_N| \le 0.5` px the pixel is left exactly as it is —
+hence the stage is *not planned* when no pixel's half-vector reaches 0.5 px (skipped ⇔ identity).
 
 **Quality** sets S (taps per pixel; measured error and cost in ``docs/motion_blur.md``):
-draft 7, preview 15, final 31. K = 20 px for all levels.
+draft 5, preview 11, final 23. K = 20 px for all levels.
 
 **Clamping.** :math:`|h|` is limited to K = 20 px (a streak of at most 40 px, i.e. 2K) keeping
 its direction: faster motion blurs as if it moved 2K px during the exposure, so its streak is
@@ -107,10 +134,15 @@ class MotionBlurParams:
 
 TILE = 20
 """K: tile size and the largest blur half-length in px."""
-SAMPLES = {"draft": 7, "preview": 15, "final": 31}
-"""S per quality level (odd: the centre tap is the pixel itself)."""
+SAMPLES = {"draft": 5, "preview": 11, "final": 23}
+"""S per quality level (odd: the centre stratum is the pixel itself). Chosen so that no level is
+slower than the McGuire filter's 7/15/31 taps it replaced (docs/motion_blur.md)."""
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
 SOFT_Z = 0.05
+FRINGE = 0.1
+AGREE0, AGREE1 = 0.8, 0.95
+"""cos(angle) between v_N and X's own half-vector below which the two tap sets split the work."""
+"""A pixel faster than FRINGE × its fastest 3×3 neighbour takes that neighbour's motion (fringe rule)."""
 
 
 def shutter_from_angle(angle_deg: float, fps: float) -> float:
@@ -230,7 +262,7 @@ class MotionBlur(GatherStage):
             k = self._kernel(rt, camera, "motion_blur")
             k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], np.int32(w), np.int32(h),
                        np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(frame.index),
-                       np.float32(1.0 / (self.samples + 1)))
+                       np.float32(1.0 / self.samples))
             events.append(rt.launch(k, (w, h)))
         if rolling:
             k = self._kernel(rt, camera, "motion_blur_rolling")
@@ -276,6 +308,20 @@ def half_vectors(velocity: np.ndarray, k: float, with_length: bool = False) -> n
     return np.concatenate([h, length], axis=-1) if with_length else h
 
 
+def half_vectors32(velocity: np.ndarray, k: float) -> np.ndarray:
+    """``half_vectors(..., with_length=True)`` in float32, operation for operation as
+    ``motion_blur_prep`` computes them (the kernel steps along them: tap positions must round the
+    same way)."""
+    v = np.asarray(velocity, dtype=np.float32)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        m = np.max(np.abs(v), axis=-1, keepdims=True)
+        u = v / np.where(m > 0, m, np.float32(1))
+        l2 = (u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1])[..., None]
+        length = np.sqrt(l2) * m * np.float32(k)
+        h = u * (np.minimum(length, np.float32(TILE)) / np.sqrt(l2))
+    return np.where(m > 0, np.concatenate([h, length], axis=-1), np.float32(0)).astype(np.float32)
+
+
 def _argmax_len(vecs: np.ndarray) -> np.ndarray:
     """vecs (..., N, 3) → the one of the N with the largest key (component 2; first on ties)."""
     idx = np.argmax(vecs[..., 2], axis=-1)
@@ -297,9 +343,18 @@ def tile_max(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return tmax, _argmax_len(neigh)
 
 
-def _smoothstep(e0, e1, x):
-    t = np.clip((x - e0) / np.where(e1 > e0, e1 - e0, 1.0), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
+def _len32(v32: np.ndarray) -> np.ndarray:
+    """|v| of float32 2-vectors as the kernel computes it: sqrt(x·x + y·y) in float32."""
+    return np.sqrt(v32[..., 0] * v32[..., 0] + v32[..., 1] * v32[..., 1])
+
+
+def _cylinder32(dist: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """1 − smoothstep(0.95 l, 1.05 l, d) in float32, as the kernel rounds it (a tap just at the
+    edge can carry a huge colour: its weight must round the same way)."""
+    d, l = np.asarray(dist, np.float32), np.asarray(length, np.float32)
+    e0, e1 = np.float32(0.95) * l, np.float32(1.05) * l
+    t = np.clip((d - e0) / (e1 - e0), np.float32(0), np.float32(1))
+    return (np.float32(1) - t * t * (np.float32(3) - np.float32(2) * t)).astype(np.float64)
 
 
 def _front(wa, wb):
@@ -307,43 +362,87 @@ def _front(wa, wb):
     return np.clip(1.0 - (wb - wa) / (SOFT_Z * m), 0.0, 1.0)
 
 
+def effective_velocity(velocity: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The fringe rule (module docstring): a pixel whose speed exceeds FRINGE × the fastest of its
+    3×3 neighbours (edge-clamped; first in scan order on ties) takes that neighbour's velocity and
+    depth. Speeds compared as float32 squares, as the kernel compares them."""
+    v = np.asarray(velocity, dtype=np.float32)
+    z = np.asarray(depth, dtype=np.float64)
+    hh, ww = v.shape[:2]
+    with np.errstate(over="ignore", invalid="ignore"):
+        s2 = v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1]
+    ys, xs = np.mgrid[0:hh, 0:ww]
+    best, by, bx = s2.copy(), ys.copy(), xs.copy()
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            ny, nx = np.clip(ys + dy, 0, hh - 1), np.clip(xs + dx, 0, ww - 1)
+            m = s2[ny, nx] > best
+            best = np.where(m, s2[ny, nx], best)
+            by, bx = np.where(m, ny, by), np.where(m, nx, bx)
+    with np.errstate(over="ignore", invalid="ignore"):
+        take = (s2 > 0) & (s2 > np.float32(FRINGE * FRINGE) * best)
+    by, bx = np.where(take, by, ys), np.where(take, bx, xs)
+    return v[by, bx], z[by, bx]
+
+
 def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | None, fraction: float,
                    samples: int, frame_index: int = 0, seed: int = SEED) -> np.ndarray:
     """The reconstruction filter of the module docstring in float64 (H×W×3 in and out)."""
     hh, ww = color.shape[:2]
-    hk = half_vectors(velocity, fraction / 2.0, with_length=True)
-    h = hk[..., :2]
-    _, nmax = tile_max(hk)
+    z = np.full((hh, ww), np.inf) if depth is None else np.asarray(depth, dtype=np.float64)
+    velocity, z = effective_velocity(velocity, z)
+    hk = half_vectors32(velocity, np.float32(fraction / 2.0))
+    h32 = hk[..., :2]
+    h = h32.astype(np.float64)
+    _, nmax = tile_max(hk.astype(np.float64))
     ys, xs = np.mgrid[0:hh, 0:ww]
     vn = nmax[ys // TILE, xs // TILE, :2]
     vn32 = vn.astype(np.float32)
-    z = np.full((hh, ww), np.inf) if depth is None else np.asarray(depth, dtype=np.float64)
     iz = np.where(np.isinf(z), 0.0, 1.0 / np.where(np.isinf(z), 1.0, z))
-    lx = np.maximum(np.hypot(h[..., 0], h[..., 1]), 0.5)
+    lhx = _len32(h32)
+    lx32 = np.maximum(lhx, np.float32(0.5))
+    lx = lx32.astype(np.float64)
+    vx32 = np.where((lhx > 0.5)[..., None], h32, vn32)   # odd taps: X's own motion
+    ln = _len32(vn32).astype(np.float64)
+    lv = _len32(vx32).astype(np.float64)
+    cosang = (vn32[..., 0] * vx32[..., 0] + vn32[..., 1] * vx32[..., 1]) / np.maximum(ln * lv, 1e-30)
+    agree = np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0)
     j = jitter(seed, frame_index, xs, ys)
-    inv = np.float32(1.0 / (samples + 1))
-    weight = 1.0 / lx
-    total = color * weight[..., None]
+    inv = np.float32(1.0 / samples)
+    wc = np.maximum((ln + lv) * float(inv), 1.0) / (2.0 * lx)   # at least the pixel's own footprint
+    cf, sf = np.zeros((hh, ww)), np.zeros_like(color)          # surfaces in front of X
+    co, so = wc.copy(), color * wc[..., None]                  # X's own surface along its path
+    wb = np.full((hh, ww), 1e-3)
+    sb = color * wb[..., None]                                  # the background behind X
     for s in range(samples):
         if s == samples // 2:
             continue
-        u = (np.float32(s + 1) + j) * inv
+        d32 = vx32 if s % 2 else vn32
+        u = (np.float32(s) + np.float32(0.5) + j) * inv
         t = np.float32(2.0) * u - np.float32(1.0)
-        ox, oy = vn32[..., 0] * t, vn32[..., 1] * t
+        ox, oy = d32[..., 0] * t, d32[..., 1] * t
         sx = np.clip(np.floor(xs.astype(np.float32) + ox + np.float32(0.5)).astype(np.int64), 0, ww - 1)
         sy = np.clip(np.floor(ys.astype(np.float32) + oy + np.float32(0.5)).astype(np.int64), 0, hh - 1)
-        dist = np.hypot(sx - xs, sy - ys)
-        hy = h[sy, sx]
-        ly = np.maximum(np.hypot(hy[..., 0], hy[..., 1]), 0.5)
+        dx32, dy32 = (sx - xs).astype(np.float32), (sy - ys).astype(np.float32)
+        dist = np.sqrt(dx32 * dx32 + dy32 * dy32)
+        ly32 = np.maximum(_len32(h32[sy, sx]), np.float32(0.5))
+        ly = ly32.astype(np.float64)
         wy = iz[sy, sx]
         f, b = _front(wy, iz), _front(iz, wy)
-        cone_y = np.clip(1.0 - dist / ly, 0.0, 1.0)
-        cone_x = np.clip(1.0 - dist / lx, 0.0, 1.0)
-        cyl = (1.0 - _smoothstep(0.95 * ly, 1.05 * ly, dist)) * (1.0 - _smoothstep(0.95 * lx, 1.05 * lx, dist))
-        a = f * cone_y + b * cone_x + 2.0 * cyl
-        weight = weight + a
-        total = total + a[..., None] * color[sy, sx]
-    out = total / weight[..., None]
+        cly = _cylinder32(dist, ly32)
+        a = cly * (lv if s % 2 else ln) * float(inv) / ly
+        own = b * _cylinder32(dist, lx32)        # level with X and on X's own path
+        af = f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
+        ao = f * own * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
+        ab = b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
+        cy = color[sy, sx]
+        cf, sf = cf + af, sf + af[..., None] * cy
+        co, so = co + ao, so + ao[..., None] * cy
+        wb, sb = wb + ab, sb + ab[..., None] * cy
+    cfc, coc = np.minimum(cf, 1.0)[..., None], np.minimum(co, 1.0)[..., None]
+    own = coc * so / co[..., None] + (1.0 - coc) * sb / wb[..., None]
+    fr = np.where((cf > 0)[..., None], sf / np.where(cf > 0, cf, 1.0)[..., None], color)
+    out = cfc * fr + (1.0 - cfc) * own
     still = vn[..., 0] ** 2 + vn[..., 1] ** 2 <= 0.25
     out[still] = color[still]
     return out

@@ -1,0 +1,51 @@
+"""motion_blur on a renderer's export: the Cycles motion scene (tests/data/cycles/motion), scored
+inside the box around moving pixels against Cycles' own 180° motion blur (docs/motion_blur.md,
+"Renderer input"). Floors are the measured levels minus a margin; Blender 5.0's Vector Blur on
+the same export measured 32.91 dB / FLIP 0.0248 there (tools/cycles_compare.py --blender ...)."""
+import json
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+import pytest
+
+from clpost import fidelity as fd
+from clpost.exr import read_frame
+from clpost.pipeline import Pipeline
+
+DATA = Path(__file__).parent / "data" / "cycles"
+MANIFEST = json.loads((DATA / "manifest.json").read_text())
+VECTOR_BLUR = (32.91, 0.0248)
+# quality -> (PSNR dB, FLIP) in the motion box, measured; main before issue 16 item 3:
+# 30.40 / 30.57 / 30.82 dB and FLIP 0.0384 / 0.0388 / 0.0389
+MEASURED = {"draft": (32.39, 0.0290), "preview": (33.53, 0.0242), "final": (33.79, 0.0220)}
+pytestmark = pytest.mark.skipif("motion" not in MANIFEST["scenes"], reason="no motion scene stored")
+
+
+def _truth(path: Path) -> np.ndarray:
+    for part in OpenEXR.File(str(path), separate_channels=True).parts:
+        ch = part.channels
+        for pre in [""] + [n[:-1] for n in ch if n.endswith(".R")]:
+            if all(pre + c in ch for c in "RGB"):
+                return np.stack([ch[pre + c].pixels for c in "RGB"], -1).astype(np.float32)
+    raise AssertionError(f"{path}: no R/G/B")
+
+
+@pytest.mark.parametrize("quality", list(MEASURED))
+def test_motion_box_floor_vs_cycles(quality):
+    entry = MANIFEST["scenes"]["motion"]
+    frame = read_frame(DATA / entry["pinhole"]["file"])
+    truth = _truth(DATA / entry["truths"]["motion"]["file"])
+    w, h = entry["size"]
+    cam = fd.cycles_camera(entry["shot"], w, h, dof=False, motion=True)
+    out = Pipeline(cam, quality=quality, stages=["motion_blur"]).run(frame).color[..., :3]
+    y0, y1, x0, x1 = fd.motion_box(frame.velocity, entry["shot"]["shutter_frames"])
+    psnr = fd.psnr_srgb(truth[y0:y1, x0:x1], out[y0:y1, x0:x1])
+    assert psnr >= MEASURED[quality][0] - 0.3, f"{quality}: {psnr:.2f} dB"
+    if quality == "final":
+        assert psnr > VECTOR_BLUR[0] + 0.5, psnr   # issue 16's target is +1 dB: not met (docs)
+    flip = fd.flip_ldr(truth[y0:y1, x0:x1], out[y0:y1, x0:x1])
+    if flip is not None:                             # flip-evaluator installed ('.[bench]')
+        assert flip <= MEASURED[quality][1] + 0.002, f"{quality}: FLIP {flip:.4f}"
+        if quality == "final":
+            assert flip < VECTOR_BLUR[1], flip
