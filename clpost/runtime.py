@@ -233,6 +233,15 @@ def round_up(n: int, multiple: int) -> int:
     return -(-int(n) // int(multiple)) * int(multiple)
 
 
+def launch_sizes(global_size, local_size=None) -> tuple[tuple[int, ...], tuple[int, ...] | None]:
+    """(global, local) as int tuples, the global size rounded up to whole work-groups."""
+    glob = tuple(int(g) for g in global_size)
+    if local_size is None:
+        return glob, None
+    local = tuple(int(v) for v in local_size)
+    return tuple(round_up(g, l) for g, l in zip(glob, local)), local
+
+
 CONSTANT_CACHE_ENTRIES = 256
 """Read-only buffers :meth:`Runtime.constant` keeps per runtime (least recently used dropped):
 enough for every table of a plan, bounded when an animated parameter makes a new table per frame."""
@@ -367,10 +376,7 @@ class Runtime:
             args, kernel = args or tuple(kernel.args), kernel.kernel
         if args:
             kernel.set_args(*args)
-        glob = tuple(int(g) for g in global_size)
-        if local_size is not None:
-            local_size = tuple(int(v) for v in local_size)
-            glob = tuple(round_up(g, l) for g, l in zip(glob, local_size))
+        glob, local_size = launch_sizes(global_size, local_size)
         return cl.enqueue_nd_range_kernel(self.queue, kernel, glob, local_size)
 
     def launch_once(self, kernel: "cl.Kernel", global_size, local_size=None, *args) -> "cl.Event":

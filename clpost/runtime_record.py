@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from .runtime import Captured, private_kernel, round_up
+from .runtime import Captured, launch_sizes, private_kernel
 
 FRAME_ARRAYS = ("color", "depth", "velocity", "alpha")
 
@@ -137,10 +137,7 @@ class Recorder:
         cap = kernel if isinstance(kernel, Captured) else Captured(kernel)
         if args:
             cap.set_args(*args)
-        glob = tuple(int(g) for g in global_size)
-        if local_size is not None:
-            local_size = tuple(int(v) for v in local_size)
-            glob = tuple(round_up(g, l) for g, l in zip(glob, local_size))
+        glob, local_size = launch_sizes(global_size, local_size)
         rec, i = self.recording, len(self.recording.commands)
         old = self._old[i] if i < len(self._old) else None
         new_args = list(cap.args)

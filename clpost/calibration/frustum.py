@@ -60,6 +60,16 @@ def required_render(model: OpenCVModel, margin_px: float = 2.0) -> RenderSpec:
 
 
 @lru_cache(maxsize=32)
+def border_samples(w: int, h: int) -> tuple[np.ndarray, np.ndarray]:
+    """(u, v): a w × h image's outer border, pixel edges at −½ and size − ½, 4 samples a pixel —
+    for a radial model the border's preimage bounds the interior's."""
+    t = np.linspace(-0.5, w - 0.5, 4 * w + 1)
+    s = np.linspace(-0.5, h - 0.5, 4 * h + 1)
+    u = np.concatenate([t, t, np.full_like(s, -0.5), np.full_like(s, w - 0.5)])
+    v = np.concatenate([np.full_like(t, -0.5), np.full_like(t, h - 0.5), s, s])
+    return u, v
+
+
 def undistorted_bounds(model: OpenCVModel, margin_px: float = 2.0,
                        own_frustum: bool = True) -> tuple[float, float, float, float]:
     """(x0, x1, y0, y1): the normalised undistorted coordinates an image must span so that every
@@ -68,10 +78,7 @@ def undistorted_bounds(model: OpenCVModel, margin_px: float = 2.0,
     ``margin_px`` pixels at f = max(f_x, f_y) for the resampling filter. Points beyond the fold
     are left out."""
     w, h = model.width, model.height
-    t = np.linspace(-0.5, w - 0.5, 4 * w + 1)
-    s = np.linspace(-0.5, h - 0.5, 4 * h + 1)
-    u = np.concatenate([t, t, np.full_like(s, -0.5), np.full_like(s, w - 0.5)])
-    v = np.concatenate([np.full_like(t, -0.5), np.full_like(t, h - 0.5), s, s])
+    u, v = border_samples(w, h)
     x, y, ok = undistort_newton(model, u, v)
     # the model's own (pinhole) frustum
     x0, x1 = -(model.cx + 0.5) / model.fx, (w - 0.5 - model.cx) / model.fx

@@ -67,6 +67,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..calibration import OpenCVModel, overscan_px, required_render, undistort
+from ..calibration.frustum import border_samples
 from ..errors import InputError
 from ..params import boolean, exact_g, one_of, param, parse_on_off
 from . import _field as fld
@@ -158,12 +159,7 @@ def _covered(model: OpenCVModel, src_size: tuple[int, int], src_k: tuple[float, 
     render: its border (4 samples a pixel) maps inside [−½, size − ½] (for the radial models the
     border bounds the interior)."""
     m = _scaled(model, scale)
-    w, h = m.width, m.height
-    t = np.linspace(-0.5, w - 0.5, 4 * w + 1)
-    r = np.linspace(-0.5, h - 0.5, 4 * h + 1)
-    u = np.concatenate([t, t, np.full_like(r, -0.5), np.full_like(r, w - 0.5)])
-    v = np.concatenate([np.full_like(t, -0.5), np.full_like(t, h - 0.5), r, r])
-    x, y, ok = undistort(m, u, v)
+    x, y, ok = undistort(m, *border_samples(m.width, m.height))
     fx, fy, cx, cy = src_k
     sx, sy = fx * x + cx, fy * y + cy
     sw, sh = src_size
