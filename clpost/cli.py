@@ -803,7 +803,7 @@ def build_parser() -> argparse.ArgumentParser:
             q.add_argument("-o", "--output", required=True, help="output PNG")
         q.set_defaults(func=cmd_lens)
 
-    from .calibration.command import add_parser as add_calibration_parser  # issue 19: matchmove interchange
+    from .calibration.command import add_parser as add_calibration_parser
     from .stmap import add_parser as add_stmap_parser
 
     add_stmap_parser(sub, _size, camera_options())

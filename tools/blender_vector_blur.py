@@ -19,12 +19,13 @@ import argparse
 import json
 import statistics
 import sys
-import time
 
 import numpy as np
 import OpenEXR
 
 import bpy
+
+from blender_defocus import render_result, timed_renders  # the same compositor timing and read-back
 
 
 def setup(w: int, h: int, threads: int):
@@ -69,23 +70,6 @@ def build_tree(img, samples: int, shutter: float, blur: bool):
     return tree
 
 
-def timed(scene, tree, repeats: int) -> list[float]:
-    scene.compositing_node_group = tree
-    times = []
-    for i in range(repeats + 1):
-        t0 = time.perf_counter()
-        bpy.ops.render.render(write_still=False)
-        if i:
-            times.append(time.perf_counter() - t0)
-    return times
-
-
-def result(path: str) -> np.ndarray:
-    bpy.data.images["Render Result"].save_render(path)
-    ch = OpenEXR.File(path, separate_channels=True).parts[0].channels
-    return np.stack([ch[c].pixels for c in "RGB"], -1).astype(np.float32)
-
-
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("input", help="Blender multilayer EXR with Combined, Depth and Vector passes")
@@ -100,9 +84,9 @@ def main(argv=None) -> int:
     tree_pass = build_tree(img, a.samples, a.shutter, False)  # loads the image
     h, w = next(iter(OpenEXR.File(a.input, separate_channels=True).parts[0].channels.values())).pixels.shape[:2]
     scene = setup(w, h, a.threads)
-    t_pass = timed(scene, tree_pass, a.repeats)
-    t_vb = timed(scene, build_tree(img, a.samples, a.shutter, True), a.repeats)
-    res = result(a.output)
+    t_pass = timed_renders(scene, tree_pass, a.repeats)
+    t_vb = timed_renders(scene, build_tree(img, a.samples, a.shutter, True), a.repeats)
+    res = render_result(a.output)
     chans = {c: np.ascontiguousarray(res[..., i]) for i, c in enumerate("RGB")}
     OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, chans).write(a.output)
     report = {"blender": bpy.app.version_string, "size": [w, h], "samples": a.samples, "shutter": a.shutter,

@@ -20,7 +20,7 @@ holds each tile's longest h (ranked by the unclamped length, first in scan order
 NeighborMax the longest of its 3×3 tiles, :math:`v_N`, so a fast object blurs over a static
 background *and* a static pixel receives the smear of a neighbour.
 
-*Fringe rule* (renderer input, issue 16): renderers average the vector pass over the pixel filter
+*Fringe rule* (renderer input): renderers average the vector pass over the pixel filter
 but point-sample depth, so an anti-aliased edge pixel carries a fraction of the moving surface's
 velocity and often the background's depth. A pixel whose speed exceeds FRINGE = 0.1 × the fastest
 of its 3×3 neighbours (edge-clamped, first in scan order on ties) takes that neighbour's velocity
@@ -135,8 +135,8 @@ class MotionBlurParams:
 TILE = 20
 """K: tile size and the largest blur half-length in px."""
 SAMPLES = {"draft": 5, "preview": 11, "final": 23}
-"""S per quality level (odd: the centre stratum is the pixel itself). Chosen so that no level is
-slower than the McGuire filter's 7/15/31 taps it replaced (docs/motion_blur.md)."""
+"""S per quality level (odd: the centre stratum is the pixel itself); fewer than the 7/15/31 taps
+of the filter it replaced, to keep its cost (what each level costs: docs/motion_blur.md)."""
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
 SOFT_Z = 0.05
 FRINGE = 0.1
