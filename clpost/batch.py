@@ -113,7 +113,7 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
     frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(job.frame)), validate=False)
     out = pipeline.run(frame, cam)
     ws = (cam or pipeline.camera).working_space
-    chroma = input_chromaticities(display, job.src)
+    chroma = input_chromaticities(display, job.src, frame.metadata)
     extra = None
     if aovs:
         from .aovs import compute
@@ -127,14 +127,17 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
     return out
 
 
-def input_chromaticities(display, src: Path | None):
+def input_chromaticities(display, src: Path | None, metadata: dict | None = None):
     """The input file's chromaticities where an OCIO view takes its input space from them
-    (:mod:`clpost.ocio`), else None."""
+    (:mod:`clpost.ocio`), else None. ``metadata``: the read frame's, whose ``"chromaticities"``
+    the EXR reader already took from the header (else the header is read here)."""
     from .ocio import OcioView, file_chromaticities
 
-    if isinstance(display, OcioView) and display.input_colorspace is None:
-        return file_chromaticities(src)
-    return None
+    if not (isinstance(display, OcioView) and display.input_colorspace is None):
+        return None
+    if metadata is not None:
+        return metadata.get("chromaticities")
+    return file_chromaticities(src)
 
 
 def write_output(path: Path, frame: Frame, header: dict, *, display="srgb", working_space: str = "rec709",
