@@ -122,10 +122,15 @@ def reference(camera, frame, names) -> dict[str, np.ndarray]:
     return out
 
 
+class _Owner:
+    """The owner of the passes' device buffers (:meth:`clpost.runtime.Runtime.scratch`)."""
+
+
+_BUFFERS = _Owner()
+
+
 def compute(runtime, camera, frame, names) -> dict[str, np.ndarray]:
     """The passes {channel: (H, W) float32} on the device (``kernels/aovs.cl``)."""
-    import pyopencl as cl
-
     from .runtime import kernel_source
 
     _check(camera, frame, names)
@@ -135,19 +140,19 @@ def compute(runtime, camera, frame, names) -> dict[str, np.ndarray]:
     blur = "blur" in names
     k2, inv_u, inv_lim, s = _constants(camera, image_width_px(frame))
     knl = runtime.kernel(kernel_source("aovs"), "aovs", {"AOVS_COC": int(coc), "AOVS_BLUR": int(blur)})
-    q = runtime.queue
-    mf = cl.mem_flags
     dummy = np.zeros(1, np.float32)
     depth = np.ascontiguousarray(frame.depth, np.float32) if coc else dummy
     vel = np.ascontiguousarray(frame.velocity, np.float32) if blur else dummy
-    d_buf = cl.Buffer(runtime.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=depth)
-    v_buf = cl.Buffer(runtime.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=vel)
-    o_buf = runtime.empty((3, h, w))
+    # the same device buffers every frame of a sequence (runtime.scratch), not three new ones
+    d_buf = runtime.scratch(_BUFFERS, "depth", depth.shape)
+    v_buf = runtime.scratch(_BUFFERS, "velocity", vel.shape)
+    o_buf = runtime.scratch(_BUFFERS, "out", (3, h, w))
+    runtime.copy(d_buf, depth)
+    runtime.copy(v_buf, vel)
     runtime.launch(knl, (n,), (64,), d_buf, v_buf, o_buf, np.int32(n), np.float32(k2), np.float32(inv_u),
                    np.float32(inv_lim), np.float32(s))
     planes = np.empty((3, h, w), np.float32)
-    cl.enqueue_copy(q, planes, o_buf)
-    q.finish()
+    runtime.copy(planes, o_buf, blocking=True)
     out = {}
     for i, nm in enumerate(("coc", "focus", "blur")):
         if nm in names:
