@@ -109,10 +109,13 @@ def _instantiate(stages: "list[PointwiseStage]", width: int) -> str:
     return "\n".join(parts)
 
 
-def vector_path(stages: "list[PointwiseStage]") -> bool:
+def vector_path(stages: "list[PointwiseStage]", wide: bool = True) -> bool:
     """Whether :func:`fused_source` generates the :data:`VECTOR_PIXELS`-wide kernel for ``stages``:
-    every non-empty group (each stage's math is width-generic)."""
-    return bool(stages)
+    every non-empty group (each stage's math is width-generic) on a device that wants wide
+    work-items (``wide``: :attr:`clpost.runtime.Runtime.wide_pointwise` — a CPU, whose compiler
+    maps the 16 lanes onto SIMD registers; a GPU gets one pixel per work-item, so a warp's loads
+    of a plane are one contiguous, coalesced span)."""
+    return bool(stages) and wide
 
 
 def _lanes(vec: str, first: int) -> str:
@@ -129,7 +132,7 @@ def _interleave(part: int) -> str:
 
 
 def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: str,
-                 vector: bool | None = None) -> tuple[str, str]:
+                 vector: bool | None = None, wide: bool = True) -> tuple[str, str]:
     """Generate one OpenCL kernel applying ``stages`` in order to each pixel.
 
     Returns ``(kernel_name, source)``. The kernel is named after its stages joined by ``__``
@@ -137,7 +140,7 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     Parameters: ``src, dst, width, height``, then ``depth`` / ``velocity`` if any stage reads
     them, then each stage's ``args`` prefixed ``<stage>_``. A stage that reads depth or velocity
     receives those pointers right after ``p``, in that order. ``vector`` (default
-    :func:`vector_path`): :data:`VECTOR_PIXELS` pixels per work-item, else one.
+    :func:`vector_path` with ``wide``): :data:`VECTOR_PIXELS` pixels per work-item, else one.
     """
     name = "__".join(s.name for s in stages) or f"convert_{src_layout}_to_{dst_layout}"
     params = ["__global const float *restrict src", "__global float *restrict dst",
@@ -161,7 +164,7 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     load = "load_interleaved(src, i)" if src_layout == INTERLEAVED else "load_planar(src, i, n)"
     store = ("store_interleaved(dst, i, (float3)(r, g, b));" if dst_layout == INTERLEAVED
              else "store_planar(dst, i, n, (float3)(r, g, b));")
-    vec = vector_path(stages) if vector is None else vector
+    vec = vector_path(stages, wide) if vector is None else vector
     parts = [kernel_source("common"), _instantiate(stages, 1)]
     nl = "\n"
     if vec:
@@ -231,11 +234,13 @@ and one ``vstore4`` per plane (or the reverse), not one pixel per work-item with
 stride-3 access PoCL does not vectorise (docs/measurements.md#kernel-forms-on-pocl)."""
 
 
-def global_size(stages: "list[PointwiseStage]", src_layout: str, dst_layout: str, w: int, h: int) -> tuple[int, int]:
-    """NDRange of the kernel :func:`fused_source` generates for this group at ``w`` × ``h``."""
+def global_size(stages: "list[PointwiseStage]", src_layout: str, dst_layout: str, w: int, h: int,
+                wide: bool = True) -> tuple[int, int]:
+    """NDRange of the kernel :func:`fused_source` generates for this group at ``w`` × ``h``
+    (``wide`` as given to :func:`vector_path`)."""
     if not stages and src_layout != dst_layout:
         return (w + CONVERT_PIXELS - 1) // CONVERT_PIXELS, h
-    if vector_path(stages):
+    if vector_path(stages, wide):
         return (w + VECTOR_PIXELS - 1) // VECTOR_PIXELS, h
     return w, h
 

@@ -284,6 +284,12 @@ class Runtime:
     def name(self) -> str:
         return _describe(self.device)
 
+    @property
+    def wide_pointwise(self) -> bool:
+        """Whether fused pointwise kernels take 16 pixels per work-item (CPUs: SIMD lanes) or one
+        (GPUs: coalesced loads; :func:`clpost.codegen.vector_path`)."""
+        return not (self.device.type & cl.device_type.GPU)
+
     def program(self, source: str, name: str, defines: dict[str, object] | None = None) -> "cl.Program":
         """Build ``source`` once per (source, defines); ``name`` is used in error messages."""
         opts = list(BUILD_OPTIONS)

@@ -315,3 +315,21 @@ def test_static_tables_are_uploaded_once_and_changed_ones_again(rng, monkeypatch
     assert plane_bytes in copies and not np.array_equal(first, second)
     assert_planned(pipe2, frame, "vignetting", "exposure")
     np.testing.assert_allclose(second, pipe2.reference(frame), rtol=2e-5)
+
+
+def test_a_gpu_runtime_plans_one_pixel_per_work_item(rng, monkeypatch):
+    """On a device that does not want wide work-items (a GPU: coalesced loads) the plan builds the
+    one-pixel fused kernel over the whole frame; the image is the wide kernel's, bit for bit."""
+    from clpost.runtime import Runtime
+
+    kw, names = VECTOR_GROUPS["vignetting+exposure"]
+    frame = odd_frame(rng, w=37, h=5, scale=50.0)
+    cam = Camera(luminance_scale=1.0, **kw)
+    wide = Pipeline(cam, stages=names).run(frame).color
+    monkeypatch.setattr(Runtime, "wide_pointwise", property(lambda self: False))
+    pipe = Pipeline(cam, stages=names)
+    narrow = pipe.run(frame).color
+    plan = pipe.plan_for(frame, pipe.camera_for(frame))
+    node = next(n for n in plan.nodes if not n.gather and n.stages)
+    assert node.size == (37, 5)
+    assert np.array_equal(wide, narrow)
