@@ -214,3 +214,23 @@ def test_pointwise_tables_shared_between_plans_are_not_replayed_stale(rng):
     assert pipe.plan_for(frame, cams[0]) is not pipe.plan_for(frame, cams[1]) and np.any(first[0] != first[1])
     for c, want in zip(cams, first):
         np.testing.assert_array_equal(pipe.run(frame, c).color, want)
+
+
+def test_plan_run_downloads_into_a_pinned_out_array_from_pinned_inputs(rng):
+    """Frames whose arrays live in page-locked memory (Runtime.pinned_empty) and an ``out=``
+    array give the image of ordinary arrays; ``out`` is the returned colour; a wrong ``out`` is
+    refused with one line naming the shape it must have."""
+    frame = scene(rng, w=64, h=24)
+    cam = Camera(f_number=2.0, depth_of_field=True, blades=6, focus_distance_m=0.8)
+    pipe = Pipeline(cam, quality="draft")
+    plan = pipe.plan_for(frame)
+    want = plan.run(frame).color
+    rt = pipe.runtime
+    color, depth = rt.pinned_empty(frame.color.shape), rt.pinned_empty(frame.depth.shape)
+    color[...], depth[...] = frame.color, frame.depth
+    out = rt.pinned_empty(want.shape)
+    got = plan.run(frame.replace(color=color, depth=depth), out=out)
+    assert got.color is out
+    np.testing.assert_array_equal(out, want)
+    with pytest.raises(InputError, match=r"out= must be .*\(24, 64, 3\)"):
+        plan.run(frame, out=np.empty((24, 63, 3), np.float32))
