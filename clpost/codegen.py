@@ -112,7 +112,7 @@ def _instantiate(stages: "list[PointwiseStage]", width: int) -> str:
 def vector_path(stages: "list[PointwiseStage]", wide: bool = True) -> bool:
     """Whether :func:`fused_source` generates the :data:`VECTOR_PIXELS`-wide kernel for ``stages``:
     every non-empty group (each stage's math is width-generic) on a device that wants wide
-    work-items (``wide``: :attr:`clpost.runtime.Runtime.wide_pointwise` — a CPU, whose compiler
+    work-items (``wide``: :attr:`clpost.runtime.Runtime.wide` — a CPU, whose compiler
     maps the 16 lanes onto SIMD registers; a GPU gets one pixel per work-item, so a warp's loads
     of a plane are one contiguous, coalesced span)."""
     return bool(stages) and wide

@@ -178,7 +178,7 @@ class Plan:
             defines: dict = {}
             for s in node.stages:
                 defines.update(s.defines(cam))
-            kname, src = fused_source(node.stages, node.src_layout, node.dst_layout, wide=rt.wide_pointwise)
+            kname, src = fused_source(node.stages, node.src_layout, node.dst_layout, wide=rt.wide)
             node.kernel = typed_kernel(cl.Kernel(rt.program(src, kname, defines), kname))
         if self.buffers is None or self.buffers.size != self.size:
             w, h = self.size
@@ -361,7 +361,7 @@ class Plan:
                     node.tables = [(k, bufs.uploaded.get(k)) for s in node.stages
                                    for k in ((s.name, arg) for t, arg in s.args if "*" in t)]
                     node.size = global_size(node.stages, node.src_layout, node.dst_layout, w, h,
-                                            rt.wide_pointwise)
+                                            rt.wide)
                 events.append((node.name, cl.enqueue_nd_range_kernel(q, node.kernel, node.size, None)))
             src = dst
         w, h = size

@@ -285,9 +285,10 @@ class Runtime:
         return _describe(self.device)
 
     @property
-    def wide_pointwise(self) -> bool:
-        """Whether fused pointwise kernels take 16 pixels per work-item (CPUs: SIMD lanes) or one
-        (GPUs: coalesced loads; :func:`clpost.codegen.vector_path`)."""
+    def wide(self) -> bool:
+        """Whether kernels with a wide form take 16 pixels per work-item (CPUs: the lanes of SIMD
+        registers) or one (GPUs: a warp's loads coalesce; groups of a tile's pixels): the fused
+        pointwise kernels (:func:`clpost.codegen.vector_path`) and astigmatism's gather."""
         return not (self.device.type & cl.device_type.GPU)
 
     def program(self, source: str, name: str, defines: dict[str, object] | None = None) -> "cl.Program":

@@ -273,8 +273,41 @@ inline float16 astigmatism_sat16(float16 v)
 #define astigmatism_store16(dst, r, g, b, x, y, width, height) \
     clp_store16_planar(dst, r, g, b, x, y, width, height, ASTIGMATISM_WHOLE_TILES)
 
-/* One work-item = 16 consecutive pixels of a row of the tile, as explicit float16 vectors (a
- * work-group = a tile = ASTIGMATISM_TILE_W / 16 x ASTIGMATISM_TILE_H work-items). Written with
+/* The gather and copy kernels' pixels per work-item: 16 (explicit float16 vectors, for CPUs — see
+ * below) or 1 (a work-group = a tile of TILE_W x TILE_H work-items, for GPUs, where 16-wide
+ * work-items make groups of 8 and uncoalesced loads); clpost/stages/astigmatism_cl.py defines it
+ * from the device. AVEC / AVLOAD / ASAT / ASTORE are the width's type, load, clamp and store. */
+#ifndef ASTIGMATISM_LANES
+#define ASTIGMATISM_LANES 16
+#endif
+#if ASTIGMATISM_LANES == 16
+#define AVEC float16
+#define AIVEC int16
+#define AVLOAD(p) vload16(0, (p))
+#define ASAT(v) astigmatism_sat16(v)
+#define ASTORE(dst, r, g, b, x, y, width, height) astigmatism_store16(dst, r, g, b, x, y, width, height)
+#elif ASTIGMATISM_LANES == 1
+#define AVEC float
+#define AIVEC int
+#define AVLOAD(p) (*(p))
+#define ASAT(v) astigmatism_sat(v)
+inline void astigmatism_store1(__global float *restrict dst, const float r, const float g, const float b,
+                               const int x, const int y, const int width, const int height)
+{
+    if (x >= width || y >= height) return;
+    const size_t n = (size_t)width * height, i = (size_t)y * width + x;
+    dst[i] = r;
+    dst[n + i] = g;
+    dst[2 * n + i] = b;
+}
+#define ASTORE(dst, r, g, b, x, y, width, height) astigmatism_store1(dst, r, g, b, x, y, width, height)
+#else
+#error "ASTIGMATISM_LANES must be 16 or 1"
+#endif
+
+/* On a CPU one work-item = 16 consecutive pixels of a row of the tile, as explicit float16 vectors
+ * (a work-group = a tile = ASTIGMATISM_TILE_W / 16 x ASTIGMATISM_TILE_H work-items; on a GPU one
+ * pixel, ASTIGMATISM_LANES above). Written with
  * vectors rather than left to PoCL's work-item-loop vectoriser because that one needs the taps'
  * weights chained through a zero dependency on the running sum (or the SLP pass packs pairs of
  * taps and it gives up), and that chain makes the loop latency-bound; here the taps' weights are
@@ -290,7 +323,7 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
      * compile-time constants after inlining: a run-time count makes the loop slower;
      * docs/measurements.md#kernel-forms-on-pocl) */
     const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
-                               ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 16);
+                               ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, ASTIGMATISM_LANES);
     const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;
     const size_t pn = t.pn;
     /* colour: an inner tile (all its reads inside the frame) reads the source planes, the others
@@ -301,13 +334,13 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
     const size_t plane = in ? (size_t)width * height : pn;
     /* the pixels' own ellipses: 1/a^2 (a tap outside gets no weight). The 1e-3 px^2 keeps
      * a = 0 finite and the weights' argument below 4e6, where astigmatism_sat16 is exact in float */
-    const float16 as = vload16(0, axes + jc), at = vload16(0, axes + pn + jc);
-    const float16 is2 = 1.0f / (as * as + 1e-3f), it2 = 1.0f / (at * at + 1e-3f);
+    const AVEC as = AVLOAD(axes + jc), at = AVLOAD(axes + pn + jc);
+    const AVEC is2 = 1.0f / (as * as + 1e-3f), it2 = 1.0f / (at * at + 1e-3f);
     /* the tile's bounding ellipse and direction: the tap offsets are the same for all its pixels */
     __global const float *tile = tiles + 4 * tile_id;
     __constant const float *taps = astigmatism_taps + 2 * tap0;
     const float tex = tile[0], tey = tile[1], bs = tile[2], bt = tile[3];
-    float16 ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
+    AVEC ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
     /* unrolled by 4, not fully: a full unroll of 64 float16 taps takes tens of seconds to build
      * cold for about the same speed. By hand (a constant 4-trip inner loop): '#pragma unroll 4'
      * in this inlined function was refused for one of the kernels ("loop not unrolled").
@@ -327,30 +360,30 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
         /* does the source pixel's own ellipse (+ half a pixel) reach back to the target? weight 1
          * inside, 0 from 1.25 times its size (in q^2: 1 .. 1.5625). Is the tap inside the
          * target's own ellipse? weight 1 inside, 0 from q^2 = 1.125 */
-        const float16 own = astigmatism_sat16(9.0f - 8.0f * (us2 * is2 + ut2 * it2));
-        float16 w = own;
+        const AVEC own = ASAT(9.0f - 8.0f * (us2 * is2 + ut2 * it2));
+        AVEC w = own;
         if (test_reach) {  /* compile-time after inlining: 1 on the tiles astigmatism_reach flags */
             __global const float *an = axes + jc + ny * pw + nx;
-            const float16 q2 = us2 * vload16(0, an + 2 * pn) + ut2 * vload16(0, an + 3 * pn);
-            w *= astigmatism_sat16((1.5625f - q2) * (1.0f / 0.5625f));
+            const AVEC q2 = us2 * AVLOAD(an + 2 * pn) + ut2 * AVLOAD(an + 3 * pn);
+            w *= ASAT((1.5625f - q2) * (1.0f / 0.5625f));
         }
-        const float16 w00 = w * ((1.0f - fx) * (1.0f - fy)), w01 = w * (fx * (1.0f - fy));
-        const float16 w10 = w * ((1.0f - fx) * fy), w11 = w * (fx * fy);
+        const AVEC w00 = w * ((1.0f - fx) * (1.0f - fy)), w01 = w * (fx * (1.0f - fy));
+        const AVEC w10 = w * ((1.0f - fx) * fy), w11 = w * (fx * fy);
         __global const float *p = col + iy * stride + ix;
-        ar += w00 * vload16(0, p) + w01 * vload16(0, p + 1) + w10 * vload16(0, p + stride) + w11 * vload16(0, p + stride + 1);
+        ar += w00 * AVLOAD(p) + w01 * AVLOAD(p + 1) + w10 * AVLOAD(p + stride) + w11 * AVLOAD(p + stride + 1);
         p += plane;
-        ag += w00 * vload16(0, p) + w01 * vload16(0, p + 1) + w10 * vload16(0, p + stride) + w11 * vload16(0, p + stride + 1);
+        ag += w00 * AVLOAD(p) + w01 * AVLOAD(p + 1) + w10 * AVLOAD(p + stride) + w11 * AVLOAD(p + stride + 1);
         p += plane;
-        ab += w00 * vload16(0, p) + w01 * vload16(0, p + 1) + w10 * vload16(0, p + stride) + w11 * vload16(0, p + stride + 1);
+        ab += w00 * AVLOAD(p) + w01 * AVLOAD(p + 1) + w10 * AVLOAD(p + stride) + w11 * AVLOAD(p + stride + 1);
         wsum += w;
     }
     /* copy where both semi-axes are below 1e-3 px or no tap has weight */
-    const int16 keep = ((as < ASTIGMATISM_MIN_SEMI) & (at < ASTIGMATISM_MIN_SEMI)) | !(wsum > 0.0f);
-    const float16 inv = 1.0f / select(wsum, (float16)1.0f, keep);
-    const float16 r = select(ar * inv, vload16(0, col), keep);
-    const float16 g = select(ag * inv, vload16(0, col + plane), keep);
-    const float16 b = select(ab * inv, vload16(0, col + 2 * plane), keep);
-    astigmatism_store16(dst, r, g, b, x, y, width, height);
+    const AIVEC keep = ((as < ASTIGMATISM_MIN_SEMI) & (at < ASTIGMATISM_MIN_SEMI)) | !(wsum > 0.0f);
+    const AVEC inv = 1.0f / select(wsum, (AVEC)1.0f, keep);
+    const AVEC r = select(ar * inv, AVLOAD(col), keep);
+    const AVEC g = select(ag * inv, AVLOAD(col + plane), keep);
+    const AVEC b = select(ab * inv, AVLOAD(col + 2 * plane), keep);
+    ASTORE(dst, r, g, b, x, y, width, height);
 }
 
 /* return from a work-group past its class's count (list0 = class × tiles_x × tiles_y: the row of
@@ -376,8 +409,8 @@ __kernel void astigmatism(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(AST
 /* the smaller classes: astigmatism_t<n>, the spiral of n points at its table offset — generated
  * after this file from Astigmatism.tap_classes() (clpost/stages/astigmatism_cl.py) */
 
-/* the tiles whose bounding semi-axis is below ASTIGMATISM_COPY_PX: copied through (16 pixels per
- * work-item, the gather's geometry) */
+/* the tiles whose bounding semi-axis is below ASTIGMATISM_COPY_PX: copied through (the gather's
+ * geometry: ASTIGMATISM_LANES pixels per work-item) */
 __kernel void astigmatism_copy(__global const float *restrict padded, __global const float *restrict src,
                                __global const int *restrict inner, __global float *restrict dst,
                                __global const int *restrict list, __global const int *restrict counts,
@@ -385,14 +418,13 @@ __kernel void astigmatism_copy(__global const float *restrict padded, __global c
 {
     ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y);
     const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
-                               ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 16);
+                               ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, ASTIGMATISM_LANES);
     const int tile_id = t.id, x = t.x, y = t.y, jc = t.jc;
     const size_t pn = t.pn;
     const int in = inner[tile_id];  /* see astigmatism_gather */
     __global const float *col = in ? src + ((size_t)y * width + x) : padded + jc;
     const size_t plane = in ? (size_t)width * height : pn;
-    astigmatism_store16(dst, vload16(0, col), vload16(0, col + plane), vload16(0, col + 2 * plane),
-                        x, y, width, height);
+    ASTORE(dst, AVLOAD(col), AVLOAD(col + plane), AVLOAD(col + 2 * plane), x, y, width, height);
 }
 
 /* the per-pixel model (each pixel's own ellipse and direction; per-pixel addresses, so it does

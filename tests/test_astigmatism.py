@@ -363,3 +363,28 @@ def test_program_has_one_gather_per_tap_class_and_the_plan_is_built_once(rng, qu
     assert device_plan(st, pipe.runtime, cam, w, h) is plan and plan["offsets_done"]
     assert {f"astigmatism_t{n}" for n in stage.tap_classes()[:-1]} <= {
         k.function_name for k in pipe.runtime.program(src, "astigmatism", {**stage.defines(cam), "ASTIGMATISM_WHOLE_TILES": 0}).all_kernels()}
+
+
+@pytest.mark.parametrize("w,h", [(131, 77), (128, 64)])  # partial tiles, whole tiles
+def test_one_pixel_per_work_item_gather_matches_the_sixteen_wide_one(rng, monkeypatch, w, h):
+    """The gather's one-pixel form (a GPU's: a tile per work-group of 16 × 8 work-items) gives the
+    16-wide form's image (the same arithmetic per pixel) over every tile class, and the reference."""
+    from clpost.runtime import Runtime
+
+    frame = odd_frame(rng, w=w, h=h, scale=10.0)
+    depth = np.full((h, w), 3.0, np.float32)
+    depth[:, w * 3 // 4:] = np.geomspace(1.0, 50.0, w - w * 3 // 4)
+    frame = Frame(frame.color, depth=depth)
+    cam = Camera(lens="thin:50", f_number=2.0, focus_distance_m=3.0, field_curvature_mm=-0.3, astigmatism_mm=0.25)
+    wide = Pipeline(cam, stages=["astigmatism"], quality="final")
+    assert_planned(wide, frame, "astigmatism")
+    want = wide.run(frame).color
+    monkeypatch.setattr(Runtime, "wide", property(lambda self: False))
+    pipe = Pipeline(cam, stages=["astigmatism"], quality="final")
+    got = pipe.run(frame).color
+    rcam = pipe.camera_for(frame)
+    stage = pipe.plan_for(frame, rcam).stages[0]
+    assert device_plan(stage, pipe.runtime, rcam, w, h, fld.frame_geometry(rcam, frame))["lanes"] == 1
+    np.testing.assert_allclose(got, want, rtol=2e-6, atol=2e-6)
+    err, where = _max_err(got, pipe.reference(frame))
+    assert err < 1e-3 * 10.0, where

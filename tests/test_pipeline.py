@@ -326,7 +326,7 @@ def test_a_gpu_runtime_plans_one_pixel_per_work_item(rng, monkeypatch):
     frame = odd_frame(rng, w=37, h=5, scale=50.0)
     cam = Camera(luminance_scale=1.0, **kw)
     wide = Pipeline(cam, stages=names).run(frame).color
-    monkeypatch.setattr(Runtime, "wide_pointwise", property(lambda self: False))
+    monkeypatch.setattr(Runtime, "wide", property(lambda self: False))
     pipe = Pipeline(cam, stages=names)
     narrow = pipe.run(frame).color
     plan = pipe.plan_for(frame, pipe.camera_for(frame))

@@ -62,14 +62,15 @@ def _plan(stage, rt, camera, w, h, cx, cy, pitch, lut):
     pw, ph = ntx * fld.TILE_W + 2 * fld.PAD, nty * fld.TILE_H + 2 * fld.PAD
     nclass = len(classes) + 2
     whole = (ntx * fld.TILE_W, nty * fld.TILE_H) == (w, h)
-    defines = {**stage.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole)}
+    lanes = 16 if rt.wide else 1  # the gather's pixels per work-item (kernels/astigmatism.cl)
+    defines = {**stage.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole), "ASTIGMATISM_LANES": lanes}
     source = program_source(classes)
     sizes = (np.int32(w), np.int32(h), np.int32(pw), np.int32(ph))
     geometry = (np.float32(cx), np.float32(cy), np.float32(pitch),
                 np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
     return dict(
         kernel=lambda name: rt.kernel(source, name, defines, "astigmatism"),
-        classes=classes, nclass=nclass, ntx=ntx, nty=nty, pw=pw, ph=ph, sizes=sizes, geometry=geometry,
+        classes=classes, nclass=nclass, lanes=lanes, ntx=ntx, nty=nty, pw=pw, ph=ph, sizes=sizes, geometry=geometry,
         ring=tuple(np.int32(e) for e in stage.ring(w, h)),
         tiles_host=stage.tile_directions(w, h, cx, cy),
         zeros=np.zeros(nclass, np.int32),
@@ -89,7 +90,7 @@ def device_plan(stage, rt, camera, w, h, k=None) -> dict:
     cx, cy = fld.principal_point_px(camera, w, h, k)
     lut = stage._lut(camera).astype(np.float32)
     pitch = fld.pitch_mm(camera, w, k)
-    key = (stage.taps, w, h, cx, cy, lut.tobytes(), pitch, fld.lut_range_mm(camera),
+    key = (stage.taps, rt.wide, w, h, cx, cy, lut.tobytes(), pitch, fld.lut_range_mm(camera),
            tuple(sorted(stage.defines(camera).items())))
     return rt.cached(stage, "plan", key, lambda: _plan(stage, rt, camera, w, h, cx, cy, pitch, lut))
 
@@ -124,7 +125,7 @@ def enqueue_astigmatism(stage, rt, camera, frame, src, dst, aux):
     # kernels/astigmatism.cl), so the host reads nothing back and the launches can be recorded
     n = ntx * nty
     args = (np.int32(ntx), np.int32(nty), np.int32(w), np.int32(h))
-    group = (fld.TILE_W // 16, fld.TILE_H)  # 16 pixels (a float16) per work-item
+    group = (fld.TILE_W // b["lanes"], fld.TILE_H)  # a tile per work-group
     for c in range(nclass):
         sub = (b["lists"], b["counts"], np.int32(c * n))  # this class's row of the lists, its count
         if c == 0:
