@@ -808,6 +808,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_stmap_parser(sub, _size, camera_options())
     add_calibration_parser(sub, _size, camera_options())
+    from .labels.command import add_parser as add_labels_parser
+
+    add_labels_parser(sub, _size, camera_options())
     return p
 
 
