@@ -328,7 +328,8 @@ def cmd_process(args) -> int:
                                        half=args.half, compression=args.compression, progress=progress,
                                        display=display,
                                        preview_dir=None if args.preview is None else Path(args.preview),
-                                       sources=sources, aovs=tuple(args.aovs or ()))
+                                       sources=sources, aovs=tuple(args.aovs or ()),
+                                       camera_files=args.camera_files)
     finally:
         bar.close()
     for frame, err in sorted(rep.failed.items()):
@@ -361,7 +362,7 @@ def _process_distributed(args, camera, jobs, progress, sources=None, display="sr
     from .distributed import PipelineSpec, connect, disconnect, first_size, process_sequence_dask
 
     spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device,
-                        display, args.preview, tuple(args.aovs or ()))
+                        display, args.preview, tuple(args.aovs or ()), args.camera_files)
     client = connect(args.scheduler, args.workers)
     try:
         return process_sequence_dask(client, spec, jobs, layout=args.channels, overwrite=args.overwrite,
@@ -684,6 +685,10 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--aovs", type=_aovs, default=None, metavar="coc,focus,blur",
                     help="also write diagnostic passes as EXR channels: coc.Y (signed CoC diameter px, near < 0), "
                          "focus.A (depth-of-field matte), blur.Y (motion-blur length px); docs/conventions.md")
+    pr.add_argument("--camera-files", action="store_true",
+                    help="also write each output's effective camera beside it: <stem>.camera.yaml (OpenCV "
+                         "FileStorage), <stem>.kalibr.yaml, <stem>.cameras.txt (always in an .exr's header: "
+                         "clpost.camera.opencv/kalibr/colmap)")
     pr.add_argument("--compression", default="zip", choices=list(COMPRESSIONS),
                     help="lossless EXR compression of outputs (default zip; none writes fastest, largest files)")
     pr.add_argument("--quiet", action="store_true", help="no progress bar")
