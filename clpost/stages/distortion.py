@@ -137,7 +137,6 @@ class DistortionParams:
              "(magnify until every pixel is covered), border (black, alpha 0, no warning)")
     labels: str = param(
         "auto", unit="channels", flag="--labels", check=_check_labels, header="clpost.labels", scalar=False,
-        show=lambda v: None if v == "auto" else v,
         help="label channels of the input carried through the geometry by nearest sampling, never blended: auto "
              "(the id/segmentation channels it has: IndexOB, id, instance, Crypto…), all (every channel besides "
              "colour, alpha, depth, velocity), none, or comma-separated names (e.g. IndexOB,Normal); "
