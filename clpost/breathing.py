@@ -14,9 +14,9 @@ point, so each output pixel x reads the plate at
 This is an input conversion, done once per frame on the host before the stages (they all measure
 in the focused camera's pixels): colour by cubic B-spline interpolation (``scipy.ndimage``,
 ``order=3``, Unser 1999 — the distortion stage's final filter) clamped below at 0 (no negative
-lobes on HDR values); alpha bilinear; depth, velocity and label planes at the nearest plate pixel (depth
-is the scene's, unchanged; velocity in px scales by F / F_p; labels never blended). Output pixels whose source lies outside the
-plate (F_p > F) get colour 0, alpha 0 and depth +inf.
+lobes on HDR values); alpha bilinear; depth, velocity and label planes at the nearest plate pixel
+(depth is the scene's, unchanged; velocity in px scales by F / F_p; labels never blended). Output
+pixels whose source lies outside the plate (F_p > F) get colour 0, alpha 0, depth +inf, labels 0.
 """
 from __future__ import annotations
 

@@ -279,6 +279,8 @@ def cmd_process(args) -> int:
             print(f"  {e}")
         plan = pipe.plan_for(first, cam)
         print(f"kernels: {', '.join(plan.kernel_names) or '(none)'}")
+        print(f"label channels (--labels {cam.labels}): {', '.join(first.labels) or '(none)'}"
+              + (" — nearest through the geometry, never blended" if first.labels else ""))
         print(f"principal point: ({plan.principal_point[0]:.6g}, {plan.principal_point[1]:.6g}) px")
         print(cam.focus_summary(first.width))
         if plan.output_size != plan.size:

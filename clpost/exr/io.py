@@ -788,7 +788,8 @@ def write_frame(path: str | os.PathLike, frame: Frame, header: dict[str, str] | 
     planar. The frame's data and display windows (:attr:`Frame.windows`) are written as the file's:
     the data window's pixels, placed where they were read. ``extra``: further (H, W) channels by
     full name (e.g. ``coc.Y``, :mod:`clpost.aovs`), float32, the frame's size, added to the first
-    part (cut to the data window as the image is). Any failure leaves an existing ``path``
+    part (cut to the data window as the image is); so are the frame's label planes
+    (``Frame.labels``, under their names, exactly: :func:`_label_encode`). Any failure leaves an existing ``path``
     untouched and no temporary file behind.
     """
     p = Path(path)

@@ -17,7 +17,6 @@ out, never written approximately; the OpenCV form expresses every model.
 """
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 from ..errors import InputError
@@ -39,8 +38,7 @@ def effective_camera(camera, frame, stage_names, quality: str = "final"):
     if "distortion" in stage_names:
         from ..stages.distortion import Distortion
 
-        model = Distortion(quality)._model(camera, frame)
-        return replace(model, inverse="newton") if model.inverse != "newton" else model
+        return Distortion(quality)._model(camera, frame)
     win = frame.windows
     w, h = win.display_size
     k = frame_intrinsics(frame)
