@@ -334,3 +334,27 @@ def test_labels_map_errors_are_one_line(tmp_path, capsys):
                  str(cal)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "annotation 3: its image_id is not in 'images'" in err
+
+
+def test_labels_and_coco_follow_fill_crop_magnification(rng):
+    """Under --fill crop the stage samples a magnified model; labels and COCO points follow the same one."""
+    from clpost.labels.command import mapping_factory
+    from clpost.stages.distortion import _scaled, crop_scale, distortion_map
+
+    model = MODELS["barrel"]
+    frame = Frame(rng.random((H, W, 3)).astype(np.float32), labels={"id": _ids(rng, H, W)})
+    cam = Camera(distortion=model, fill="crop")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        out = Pipeline(cam, stages=["distortion"]).run(frame)
+    k = (model.fx, model.fy, model.cx, model.cy)
+    s = crop_scale(model, (W, H), k)
+    assert s > 1
+    pos, ok = distortion_map(_scaled(model, s), (W, H), k)
+    assert ok.all() and _neighbourhood_ok(frame.labels["id"], out.labels["id"], pos, ok)
+    mp = mapping_factory(model, "crop")(W, H)
+    assert mp.model.fx == pytest.approx(model.fx * s)
+    # a render point and the output pixel whose source it is agree: u(s(p)) = p
+    j, i = 7, 11
+    u, v, vis = map_points(mp, pos[0][j, i], pos[1][j, i])
+    assert vis and u == pytest.approx(i, abs=1e-6) and v == pytest.approx(j, abs=1e-6)
