@@ -322,6 +322,10 @@ def cmd_process(args) -> int:
     try:
         # The lock is held for the whole run: each frame's "exists, skip" check is made under it.
         previews = [] if args.preview is None else [Path(args.preview) / f"{j.dst.stem}.png" for j in jobs]
+        if args.camera_files:  # their stale temporary files are cleaned like the outputs'
+            from .labels.camera_files import camera_paths
+
+            previews += [p for j in jobs for p in camera_paths(j.dst).values()]
         with writing(args.output, [j.dst for j in jobs] + previews):
             if args.workers or args.scheduler:
                 rep = _process_distributed(args, camera, jobs, progress, sources, display)

@@ -171,7 +171,10 @@ def map_coco(data: dict, mapping_for, source: str = "") -> tuple[dict, MapReport
         except (KeyError, TypeError, ValueError):
             raise InputError(_where(source, f"image {im.get('id', '?') if isinstance(im, dict) else im!r} needs "
                                             "'id', 'width' and 'height'")) from None
-        mp = mapping_for(w, h)
+        try:
+            mp = mapping_for(w, h)
+        except InputError as exc:
+            raise InputError(_where(source, f"image {iid}: {exc}")) from None
         maps[iid] = mp
         im["width"], im["height"] = mp.model.width, mp.model.height
     rep = MapReport()

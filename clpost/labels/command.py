@@ -43,8 +43,8 @@ def mapping_factory(model, fill: str = "overscan", intrinsics=None):
             from ..calibration import required_render
 
             spec = required_render(model)
-            raise InputError(f"an image is {w}x{h}, but renders for the calibration{model._where()} are "
-                             f"{model.width}x{model.height} (its K) or {spec.width}x{spec.height} (clpost "
+            raise InputError(f"render size {w}x{h} is neither the calibration{model._where()}'s "
+                             f"{model.width}x{model.height} (its K) nor {spec.width}x{spec.height} (clpost "
                              "render-size); give the render's --render-intrinsics fx,fy,cx,cy")
         m = _scaled(model, crop_scale(model, (w, h), k)) if fill == "crop" else model
         return Mapping(m, k)
