@@ -358,3 +358,22 @@ def test_labels_and_coco_follow_fill_crop_magnification(rng):
     j, i = 7, 11
     u, v, vis = map_points(mp, pos[0][j, i], pos[1][j, i])
     assert vis and u == pytest.approx(i, abs=1e-6) and v == pytest.approx(j, abs=1e-6)
+
+
+def test_label_planes_are_written_exactly_whatever_their_type(rng, tmp_path):
+    ids = rng.integers(0, 2**32, (5, 7), dtype=np.uint64).astype(np.uint32)
+    neg = rng.integers(-1000, 1000, (5, 7)).astype(np.int32)
+    pos = rng.integers(0, 2**31 - 1, (5, 7)).astype(np.int32)
+    f = Frame(np.zeros((5, 7, 3), np.float32), labels={"id": ids, "neg.class": neg, "pos.class": pos,
+                                                       "N.X": rng.normal(size=(5, 7))})
+    exr.write_frame(tmp_path / "l.exr", f)
+    g = exr.read_frame(tmp_path / "l.exr", labels="all")
+    assert g.labels["id"].dtype == np.uint32 and np.array_equal(g.labels["id"], ids)
+    assert np.array_equal(g.labels["neg.class"], neg.astype(np.float32))  # FLOAT: exact below 2^24
+    assert g.labels["pos.class"].dtype == np.uint32 and np.array_equal(g.labels["pos.class"], pos)
+    assert np.array_equal(g.labels["N.X"], f.labels["N.X"])
+    assert exr.read_frame(tmp_path / "l.exr", labels="none").labels == {}
+    big = Frame(np.zeros((1, 2, 3), np.float32), labels={"x": np.array([[-(1 << 25), 0]], np.int32)})
+    with pytest.raises(InputError, match="renumber them as non-negative ids"):
+        exr.write_frame(tmp_path / "b.exr", big)
+    assert not (tmp_path / "b.exr").exists()
