@@ -60,10 +60,11 @@ def output_header(frame: Frame) -> dict[str, str]:
 def read_input(pipeline: Pipeline, path: Path, layout: str | None = None, camera=None) -> Frame:
     """Read one input frame; radial depth (Arnold's Z, see :mod:`clpost.exr`) is converted to
     planar with the camera's own focal length in pixels at the frame's resolution (``camera``:
-    this frame's, default the pipeline's)."""
+    this frame's, default the pipeline's); its ``labels`` picks the label channels read
+    (:mod:`clpost.labels.channels`)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", exr.DepthConventionWarning)
-        frame = exr.read_frame(path, layout)
+        frame = exr.read_frame(path, layout, labels=getattr(camera or pipeline.camera, "labels", "auto"))
     if frame.metadata.get("depth_kind") == "radial" and frame.depth is not None:
         fx, fy, _, _ = (camera or pipeline.camera).intrinsics(frame.width, frame.height)
         meta = dict(frame.metadata, depth_kind="planar (converted from radial with the camera's focal length)")
@@ -92,13 +93,15 @@ def frame_camera(sources, job: FrameJob):
 def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
                 half: bool = False, expect_size: tuple[int, int] | None = None,
                 compression: str = "zip", display="srgb", preview_dir: Path | None = None,
-                sources=None, aovs: tuple[str, ...] = ()) -> Frame:
+                sources=None, aovs: tuple[str, ...] = (), camera_files: bool = False) -> Frame:
     """Read, process and write one frame; returns the processed frame. An output named .png, .jpg
     or .tif is written display-encoded for ``display`` (:mod:`clpost.display_image`), an .exr
     linear with the camera in its header; ``preview_dir`` also gets ``<output stem>.png``.
     ``sources``: an animated camera (:class:`~clpost.camera_sources.CameraSources`), resolved for
     this frame. ``aovs``: diagnostic passes written as extra channels of an .exr output
-    (:mod:`clpost.aovs`)."""
+    (:mod:`clpost.aovs`). The output's effective camera (:mod:`clpost.labels.camera_files`) goes
+    into an .exr's header, and with ``camera_files`` beside the output in OpenCV, Kalibr and COLMAP
+    form."""
     cam = frame_camera(sources, job)
     frame = read_input(pipeline, job.src, layout, cam)
     # the image size is the display window's (a data window may change per frame, as a render's
@@ -119,8 +122,15 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
         from .aovs import compute
 
         extra = compute(pipeline.runtime, out.metadata.get("resolved_camera") or cam or pipeline.camera, out, aovs)
-    write_output(job.dst, out, output_header(out), display=display, working_space=ws, half=half,
+    from .labels.camera_files import camera_header, effective_camera, write_camera_files
+
+    eff = effective_camera(out.metadata.get("resolved_camera") or cam or pipeline.camera, frame,
+                           out.metadata.get("plan", ()), pipeline.quality)
+    header = {**output_header(out), **camera_header(eff)}
+    write_output(job.dst, out, header, display=display, working_space=ws, half=half,
                  compression=compression, chroma=chroma, extra=extra)
+    if camera_files:
+        write_camera_files(eff, job.dst)
     if preview_dir is not None:
         write_image(preview_path(job.dst, preview_dir), display_window(out).color, display=display,
                     working_space=ws, option="--preview", chroma=chroma)
@@ -198,7 +208,7 @@ def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | 
                      overwrite: bool = False, half: bool = False, compression: str = "zip",
                      progress: Callable[[FrameJob, float | None], None] | None = None,
                      display="srgb", preview_dir: Path | None = None, sources=None,
-                     aovs: tuple[str, ...] = ()) -> BatchReport:
+                     aovs: tuple[str, ...] = (), camera_files: bool = False) -> BatchReport:
     """Process ``jobs`` in order; ``progress(job, seconds or None if skipped)`` after each;
     ``sources``: an animated camera (per-frame, :mod:`clpost.camera_sources`)."""
     report = BatchReport()
@@ -206,7 +216,8 @@ def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | 
     size = first_size(todo)  # the inputs' size (an output may differ: a calibration's own size)
     for job in todo:
         t0 = time.perf_counter()
-        process_one(pipeline, job, layout, half, size, compression, display, preview_dir, sources, aovs)
+        process_one(pipeline, job, layout, half, size, compression, display, preview_dir, sources, aovs,
+                    camera_files)
         dt = time.perf_counter() - t0
         report.done.append(job.frame)
         report.seconds.append(dt)

@@ -14,9 +14,9 @@ point, so each output pixel x reads the plate at
 This is an input conversion, done once per frame on the host before the stages (they all measure
 in the focused camera's pixels): colour by cubic B-spline interpolation (``scipy.ndimage``,
 ``order=3``, Unser 1999 — the distortion stage's final filter) clamped below at 0 (no negative
-lobes on HDR values); alpha bilinear; depth and velocity at the nearest plate pixel (depth is the
-scene's, unchanged; velocity in px scales by F / F_p). Output pixels whose source lies outside the
-plate (F_p > F) get colour 0, alpha 0 and depth +inf.
+lobes on HDR values); alpha bilinear; depth, velocity and label planes at the nearest plate pixel
+(depth is the scene's, unchanged; velocity in px scales by F / F_p; labels never blended). Output
+pixels whose source lies outside the plate (F_p > F) get colour 0, alpha 0, depth +inf, labels 0.
 """
 from __future__ import annotations
 
@@ -77,6 +77,12 @@ def rescale_plate(frame, camera):
     if frame.velocity is not None:
         v = np.stack([sample(frame.velocity[..., c], 0) for c in range(2)], -1) * s
         changes["velocity"] = np.where(inside[..., None], v, 0.0).astype(np.float32)
+    if frame.labels:  # nearest, never blended (clpost.labels.channels); 0 outside the plate
+        from .labels.channels import nearest_labels
+
+        xi = np.clip(np.rint(xp), 0, frame.width - 1).astype(np.intp)
+        yi = np.clip(np.rint(yp), 0, frame.height - 1).astype(np.intp)
+        changes["labels"] = nearest_labels(frame.labels, yi * frame.width + xi, inside)
     meta = dict(frame.metadata)
     if k is not None:
         meta["intrinsics"] = (float(k[0]) * s, float(k[1]) * s, centre[0], centre[1])

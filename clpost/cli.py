@@ -279,6 +279,8 @@ def cmd_process(args) -> int:
             print(f"  {e}")
         plan = pipe.plan_for(first, cam)
         print(f"kernels: {', '.join(plan.kernel_names) or '(none)'}")
+        print(f"label channels (--labels {cam.labels}): {', '.join(first.labels) or '(none)'}"
+              + (" — nearest through the geometry, never blended" if first.labels else ""))
         print(f"principal point: ({plan.principal_point[0]:.6g}, {plan.principal_point[1]:.6g}) px")
         print(cam.focus_summary(first.width))
         if plan.output_size != plan.size:
@@ -320,6 +322,10 @@ def cmd_process(args) -> int:
     try:
         # The lock is held for the whole run: each frame's "exists, skip" check is made under it.
         previews = [] if args.preview is None else [Path(args.preview) / f"{j.dst.stem}.png" for j in jobs]
+        if args.camera_files:  # their stale temporary files are cleaned like the outputs'
+            from .labels.camera_files import camera_paths
+
+            previews += [p for j in jobs for p in camera_paths(j.dst).values()]
         with writing(args.output, [j.dst for j in jobs] + previews):
             if args.workers or args.scheduler:
                 rep = _process_distributed(args, camera, jobs, progress, sources, display)
@@ -328,7 +334,8 @@ def cmd_process(args) -> int:
                                        half=args.half, compression=args.compression, progress=progress,
                                        display=display,
                                        preview_dir=None if args.preview is None else Path(args.preview),
-                                       sources=sources, aovs=tuple(args.aovs or ()))
+                                       sources=sources, aovs=tuple(args.aovs or ()),
+                                       camera_files=args.camera_files)
     finally:
         bar.close()
     for frame, err in sorted(rep.failed.items()):
@@ -361,7 +368,7 @@ def _process_distributed(args, camera, jobs, progress, sources=None, display="sr
     from .distributed import PipelineSpec, connect, disconnect, first_size, process_sequence_dask
 
     spec = PipelineSpec(camera, args.quality, None if args.stages is None else tuple(args.stages), args.device,
-                        display, args.preview, tuple(args.aovs or ()))
+                        display, args.preview, tuple(args.aovs or ()), args.camera_files)
     client = connect(args.scheduler, args.workers)
     try:
         return process_sequence_dask(client, spec, jobs, layout=args.channels, overwrite=args.overwrite,
@@ -684,6 +691,10 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--aovs", type=_aovs, default=None, metavar="coc,focus,blur",
                     help="also write diagnostic passes as EXR channels: coc.Y (signed CoC diameter px, near < 0), "
                          "focus.A (depth-of-field matte), blur.Y (motion-blur length px); docs/conventions.md")
+    pr.add_argument("--camera-files", action="store_true",
+                    help="also write each output's effective camera beside it: <stem>.camera.yaml (OpenCV "
+                         "FileStorage), <stem>.kalibr.yaml, <stem>.cameras.txt (always in an .exr's header: "
+                         "clpost.camera.opencv/kalibr/colmap)")
     pr.add_argument("--compression", default="zip", choices=list(COMPRESSIONS),
                     help="lossless EXR compression of outputs (default zip; none writes fastest, largest files)")
     pr.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -808,6 +819,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_stmap_parser(sub, _size, camera_options())
     add_calibration_parser(sub, _size, camera_options())
+    from .labels.command import add_parser as add_labels_parser
+
+    add_labels_parser(sub, _size, camera_options())
     return p
 
 

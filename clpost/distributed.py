@@ -49,6 +49,8 @@ class PipelineSpec:
     """Where each frame's PNG preview goes (``--preview``), None for none."""
     aovs: tuple[str, ...] = ()
     """Diagnostic passes written into each output EXR (``--aovs``, :mod:`clpost.aovs`)."""
+    camera_files: bool = False
+    """Write each output's effective camera beside it (``--camera-files``, :mod:`clpost.labels.camera_files`)."""
 
 
 @functools.lru_cache(maxsize=4)
@@ -70,7 +72,8 @@ def process_frame_task(spec: PipelineSpec, job: FrameJob, layout: str | None, ha
     t0 = time.perf_counter()
     try:
         process_one(worker_pipeline(spec), job, layout, half, expect_size, compression, spec.display,
-                    None if spec.preview_dir is None else Path(spec.preview_dir), sources, spec.aovs)
+                    None if spec.preview_dir is None else Path(spec.preview_dir), sources, spec.aovs,
+                    spec.camera_files)
     except ClpostError as exc:
         # Deterministic and the user's to fix: a result, not an exception Dask would retry.
         return {"frame": job.frame, "skipped": False, "seconds": 0.0, "error": str(exc)}

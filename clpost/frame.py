@@ -10,7 +10,15 @@ buffer        shape       unit / meaning
 ``depth``     H×W         planar camera-space Z in metres, > 0, ``+inf`` for sky (optional)
 ``velocity``  H×W×2       forward screen-space motion, px per frame, +x right, +y down (optional)
 ``alpha``     H×W         coverage in [0, 1]; 0 marks "no data" (optional)
+``labels``    H×W each    named label planes — instance/object ids, segmentation, normals, any AOV —
+                          that follow the geometry but are never blended (optional, see below)
 ============  ==========  ====================================================================
+
+``labels`` maps a channel name (the EXR's full name, e.g. ``ViewLayer.IndexOB.X``, ``id``,
+``N.X``) to an (H, W) plane. A plane keeps its type if it is float32, int32 or uint32 (float16/64
+become float32, smaller integers int32/uint32 — exact), so ids survive bit for bit; a float plane
+must not hold NaN. The geometric stages move labels with the pixels by **nearest** sampling
+(:mod:`clpost.labels.channels`): an output label is always one of its source's values.
 
 A 4-channel ``color`` is split into ``color`` and ``alpha``. float16/32/64 input is converted
 once to float32 (explicitly, here); any other dtype is refused rather than silently cast. A
@@ -109,6 +117,36 @@ def _as_float32(name: str, a: Any, copy: bool = True) -> np.ndarray:
     return out
 
 
+_LABEL_DTYPES = {"f": np.float32, "i": np.int32, "u": np.uint32}
+
+
+def _label_plane(name: str, a: Any, shape: tuple[int, int], copy: bool) -> np.ndarray:
+    """A label plane as a 4-byte type (see the module docstring), validated."""
+    a = np.asarray(a)
+    kind = a.dtype.kind
+    if kind == "b":
+        a, kind = a.astype(np.uint32), "u"
+    if kind not in _LABEL_DTYPES or a.dtype.itemsize > 8:
+        raise InputError(f"Frame.labels[{name!r}]: dtype {a.dtype} is not a number type; give ids as integers "
+                         "or floats")
+    if kind in "iu" and a.size and a.dtype.itemsize == 8:
+        lo, hi = np.iinfo(_LABEL_DTYPES[kind]).min, np.iinfo(_LABEL_DTYPES[kind]).max
+        if a.min() < lo or a.max() > hi:
+            raise InputError(f"Frame.labels[{name!r}]: values outside {np.dtype(_LABEL_DTYPES[kind]).name}; "
+                             "labels are kept as 32-bit values — renumber the ids")
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[:, :, 0]
+    if a.shape != shape:
+        raise InputError(f"Frame.labels[{name!r}]: shape {a.shape} does not match color {shape}; give one "
+                         "(H, W) plane per channel (e.g. N.X, N.Y, N.Z for normals)")
+    out = np.ascontiguousarray(a, dtype=_LABEL_DTYPES[kind])
+    if copy and np.may_share_memory(out, a):
+        out = out.copy()
+    if kind == "f":
+        _first_bad(f"labels[{name!r}]", np.isnan(out), "are NaN", "labels are ids or finite values, never NaN")
+    return out
+
+
 def _first_bad(name: str, bad: np.ndarray, what: str, fix: str) -> None:
     n = int(np.count_nonzero(bad))
     if n:
@@ -128,6 +166,9 @@ class Frame:
     velocity: np.ndarray | None = None
     alpha: np.ndarray | None = None
     metadata: dict = field(default_factory=dict)
+    labels: dict = field(default_factory=dict)
+    """Named (H, W) label planes (module docstring); carried through the geometric stages by
+    nearest sampling."""
     copy: InitVar[bool] = True
     """``False``: the Frame takes the caller's float32 arrays over instead of copying them (a
     reader's fresh buffers); the caller must not write them afterwards."""
@@ -180,6 +221,11 @@ class Frame:
             _first_bad("alpha", np.isnan(a), "are NaN", "alpha is coverage in [0, 1]")
             _first_bad("alpha", (a < 0) | (a > 1), "are outside [0, 1]", "alpha is coverage in [0, 1]; clip it")
             object.__setattr__(self, "alpha", np.ascontiguousarray(a))
+
+        labels = {} if self.labels is None else self.labels
+        if not isinstance(labels, dict):
+            raise InputError(f"Frame.labels must be a dict of name → (H, W) plane, not {type(labels).__name__}")
+        object.__setattr__(self, "labels", {str(k): _label_plane(str(k), v, (h, w), copy) for k, v in labels.items()})
 
     @property
     def index(self) -> int:
@@ -250,7 +296,7 @@ class Frame:
         otherwise cost more than an exposure pass.
         """
         kw = dict(color=self.color, depth=self.depth, velocity=self.velocity,
-                  alpha=self.alpha, metadata=dict(self.metadata))
+                  alpha=self.alpha, metadata=dict(self.metadata), labels=dict(self.labels))
         kw.update(changes)
         if validate:
             return Frame(**kw)

@@ -50,14 +50,14 @@ class Launch:
 
 def resized_view(frame: Frame, size: tuple[int, int], host: dict, by: str) -> Frame:
     """The frame as stages after a resampling stage ``by`` see it: ``size`` (width, height), the
-    resampler's depth/velocity/alpha (``host``), and no host color (stages read color on the
+    resampler's depth/velocity/alpha/labels (``host``), and no host color (stages read color on the
     device; a zero-stride placeholder keeps shapes right without allocating)."""
     w, h = size
     placeholder = np.broadcast_to(np.zeros((1, 1, 3), np.float32), (h, w, 3))
     meta = dict(frame.metadata, resampled_by=by)
     meta.pop("intrinsics", None)  # the render's pinhole intrinsics no longer describe these pixels
     return frame.replace(color=placeholder, depth=host.get("depth"), velocity=host.get("velocity"),
-                         alpha=host.get("alpha"), metadata=meta, validate=False)
+                         alpha=host.get("alpha"), labels=host.get("labels", {}), metadata=meta, validate=False)
 
 
 @dataclass

@@ -24,7 +24,7 @@ SIZES = ((1, 1), (3, 2), (17, 5), (37, 23))
 """Odd sizes; 37×23 is not a multiple of the 16-pixel tiles and vectors in either direction."""
 
 
-def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0, intrinsics=None):
+def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0, intrinsics=None, labels=0):
     from clpost import Frame
 
     rng = np.random.default_rng(seed + 7919 * w + h)
@@ -34,7 +34,8 @@ def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0
     meta = {"frame_index": 3}
     if intrinsics is not None:
         meta["intrinsics"] = intrinsics
-    return Frame(color, depth=d, velocity=v, metadata=meta)
+    lab = {f"id{i}": rng.integers(0, 2**32, (h, w), dtype=np.uint64).astype(np.uint32) for i in range(labels)}
+    return Frame(color, depth=d, velocity=v, metadata=meta, labels=lab)
 
 
 def _run(camera, stages, quality, w, h, **frame_kw):
@@ -121,6 +122,12 @@ def cases():
             for w, h in ((3, 2), (17, 5), (37, 23), (61, 35)):
                 add(f"distortion-{label} {q} {w}x{h}",
                     lambda k=k, q=q, w=w, h=h: _run(_distortion_model(base, w, h, **k), ["distortion"], q, w, h))
+
+    # label planes (distortion_labels): fold-over leaves pixels without a preimage (index -1)
+    for w, h in ((3, 2), (37, 23)):
+        add(f"distortion-labels draft {w}x{h}",
+            lambda w=w, h=h: _run(_distortion_model(base, w, h, **dist["foldover"]), ["distortion"], "draft", w, h,
+                                  labels=2))
 
     # the render shifted by 12.6 px against the calibration (frame.metadata["intrinsics"]): the
     # edge of the data crosses the 16-pixel tiles far from the render's edge, so a tile's lanes

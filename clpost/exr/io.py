@@ -561,7 +561,7 @@ def _str_attrs(header: dict) -> dict[str, str]:
 
 def _frame_from_parts(path: Path, parts: Sequence[_Part], layout: "str | ReadSpec | None", depth: str | None,
                       focal_px: float | tuple[float, float] | None,
-                      velocity_y_up: bool | None) -> Frame:
+                      velocity_y_up: bool | None, labels: str = "auto") -> Frame:
     view = None
     if isinstance(layout, ReadSpec):
         layout, view = layout.layout, layout.view
@@ -604,6 +604,7 @@ def _frame_from_parts(path: Path, parts: Sequence[_Part], layout: "str | ReadSpe
         win = window_of[id(m.velocity[0])]
         vel = lay.velocity(m, velocity_y_up)
         vel = np.stack([_place(vel[..., i], win, extent, 0.0) for i in range(2)], axis=-1)
+    label_planes = {name: place(planes[name], 0) for name in _label_channels(path, planes, m, labels)}
     header = parts[0].header
     metadata = {"path": str(path), "layout": layout, "header": _str_attrs(header),
                 "attributes": _camera_attrs(header), "depth_kind": kind_out,
@@ -613,14 +614,29 @@ def _frame_from_parts(path: Path, parts: Sequence[_Part], layout: "str | ReadSpe
     if header.get("chromaticities") is not None:
         metadata["chromaticities"] = tuple(float(c) for c in header["chromaticities"])
     try:
-        return Frame(color=color, depth=depth_m, velocity=vel, alpha=alpha, metadata=metadata, copy=False)
+        return Frame(color=color, depth=depth_m, velocity=vel, alpha=alpha, metadata=metadata, labels=label_planes,
+                     copy=False)
     except InputError as e:
         raise InputError(f"{path} (layout {layout}): {e}") from None
 
 
+def _label_channels(path: Path, planes: dict[str, np.ndarray], m, spec: str) -> list[str]:
+    """The channels ``spec`` (``Camera.labels``, :mod:`clpost.labels.channels`) reads into
+    ``Frame.labels``, among those the layout leaves: not a plane it reads, nor in a layer it reads
+    from (Blender's Vector.X/Y beside the Z/W it uses)."""
+    from ..labels.channels import select_labels
+
+    if spec == "none":
+        return []
+    used = {id(a) for a in (*m.color, m.alpha, m.depth, *(m.velocity or ())) if a is not None}
+    layers = {n.rsplit(".", 1)[0] for n, px in planes.items() if id(px) in used and "." in n}
+    rest = [n for n, px in planes.items() if id(px) not in used and not ("." in n and n.rsplit(".", 1)[0] in layers)]
+    return select_labels(spec, rest, str(path))
+
+
 def read_frame(path: str | os.PathLike, layout: "str | ReadSpec | None" = None, *, depth: str | None = None,
                focal_px: float | tuple[float, float] | None = None,
-               velocity_y_up: bool | None = None, view: str | None = None) -> Frame:
+               velocity_y_up: bool | None = None, view: str | None = None, labels: str = "auto") -> Frame:
     """Read one EXR (single- or multi-part, scanline or tiled — level 0 of a mip-map —, flat or
     deep, half or float) into a :class:`Frame`.
 
@@ -637,12 +653,14 @@ def read_frame(path: str | os.PathLike, layout: "str | ReadSpec | None" = None, 
     (:data:`CAMERA_ATTRIBUTES`, floats), "depth_kind": "planar" | "radial", "windows"}``, plus
     ``"view"`` for a multi-view file and ``"chromaticities"`` when the file declares them. Color is
     required; depth and velocity are optional (``None`` when the file has no such pass).
+    ``labels`` (``Camera.labels``: ``auto``, ``all``, ``none`` or names; :mod:`clpost.labels.channels`)
+    picks the other channels read into ``Frame.labels`` (ids, segmentation, normals, AOVs).
     """
     p = Path(path)
     if view is not None:
         base = layout.layout if isinstance(layout, ReadSpec) else layout
         layout = ReadSpec(base, view)
-    return _frame_from_parts(p, _load(p), layout, depth, focal_px, velocity_y_up)
+    return _frame_from_parts(p, _load(p), layout, depth, focal_px, velocity_y_up, labels)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -722,7 +740,21 @@ def _data_only(frame: Frame) -> Frame:
         return frame
     return frame.replace(color=_data_crop(frame, frame.color), depth=_data_crop(frame, frame.depth),
                          velocity=_data_crop(frame, frame.velocity), alpha=_data_crop(frame, frame.alpha),
-                         validate=False)
+                         labels={k: _data_crop(frame, v) for k, v in frame.labels.items()}, validate=False)
+
+
+def _label_encode(path: Path, name: str, a: np.ndarray) -> np.ndarray:
+    """A label plane as an EXR channel, exactly: float32 → FLOAT, uint32 → UINT, int32 → UINT when
+    ≥ 0, else FLOAT when exact (|v| < 2²⁴). Never half (ids would lose bits)."""
+    a = np.ascontiguousarray(a)
+    if a.dtype == np.int32:
+        if not a.size or a.min() >= 0:
+            return a.astype(np.uint32)
+        if np.abs(a).max() >= 1 << 24:
+            raise InputError(f"{path}: label channel {name!r} has negative ids beyond ±2^24, which no EXR channel "
+                             "type holds exactly; renumber them as non-negative ids")
+        return a.astype(np.float32)
+    return a
 
 
 def _build_file(parts: list[tuple[str, dict[str, np.ndarray]]], attrs: dict[str, str],
@@ -756,7 +788,8 @@ def write_frame(path: str | os.PathLike, frame: Frame, header: dict[str, str] | 
     planar. The frame's data and display windows (:attr:`Frame.windows`) are written as the file's:
     the data window's pixels, placed where they were read. ``extra``: further (H, W) channels by
     full name (e.g. ``coc.Y``, :mod:`clpost.aovs`), float32, the frame's size, added to the first
-    part (cut to the data window as the image is). Any failure leaves an existing ``path``
+    part (cut to the data window as the image is); so are the frame's label planes
+    (``Frame.labels``, under their names, exactly: :func:`_label_encode`). Any failure leaves an existing ``path``
     untouched and no temporary file behind.
     """
     p = Path(path)
@@ -771,6 +804,11 @@ def write_frame(path: str | os.PathLike, frame: Frame, header: dict[str, str] | 
             raise InputError(f"{p}: extra channel {name!r} clashes with a written channel or is not "
                              f"{frame.height}x{frame.width}; name it differently / give an (H, W) plane")
         parts[0][1][name] = np.ascontiguousarray(_data_crop(frame, plane), dtype=np.float32)
+    for name, plane in frame.labels.items():
+        if any(name in ch for _, ch in parts):
+            raise InputError(f"{p}: label channel {name!r} clashes with a written channel; rename it in the input "
+                             "or leave it out with --labels")
+        parts[0][1][name] = _label_encode(p, name, _data_crop(frame, plane))
     exr_file = _build_file(parts, _user_header(p, header), compression, frame.windows)
     # Whatever goes wrong (including Ctrl-C), the old output stays and no temp file remains.
     with atomic_path(p) as tmp:

@@ -56,7 +56,10 @@ color 0 and **alpha 0**; elsewhere alpha is the input alpha resampled bilinearly
 Depth is looked up at the nearest source pixel (+inf where alpha is 0); velocity likewise and
 mapped into output pixels by the inverse Jacobian of the map, :math:`v_{out} = J^{-1} v_{in}`,
 :math:`J = \partial s / \partial (u, v)` by central differences (0 where alpha is 0; untransformed
-on the 1-pixel rim of the valid area, where a neighbour has no data).
+on the 1-pixel rim of the valid area, where a neighbour has no data). Label planes
+(:attr:`clpost.Frame.labels`: ids, segmentation, normals, AOVs; ``Camera.labels`` chooses which an
+EXR's are) take the same nearest source pixel, never blended (:mod:`clpost.labels.channels`,
+kernel ``distortion_labels``), 0 where alpha is 0.
 """
 from __future__ import annotations
 
@@ -103,6 +106,12 @@ def _parse_calibration(text):
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _check_labels(name, value):
+    from ..labels.channels import check_labels
+
+    return check_labels(name, value)
+
+
 FILLS = ("overscan", "crop", "border")
 """``Camera.fill`` modes (see the module docstring)."""
 
@@ -126,6 +135,12 @@ class DistortionParams:
         help="output pixels of the distorted image the render does not cover: overscan (sample the EXR data "
              "window beyond the display window; black, alpha 0 and a warning where it falls short), crop "
              "(magnify until every pixel is covered), border (black, alpha 0, no warning)")
+    labels: str = param(
+        "auto", unit="channels", flag="--labels", check=_check_labels, header="clpost.labels", scalar=False,
+        help="label channels of the input carried through the geometry by nearest sampling, never blended: auto "
+             "(the id/segmentation channels it has: IndexOB, id, instance, Crypto…), all (every channel besides "
+             "colour, alpha, depth, velocity), none, or comma-separated names (e.g. IndexOB,Normal); "
+             "clpost.labels.channels")
 
 
 INVALID = -1.0e30
@@ -667,8 +682,10 @@ class Distortion(GatherStage):
                          for c in range(3)], -1)
 
     def replay_key(self, camera, frame):
-        # a coverage (alpha) input is resampled on the host from the frame's pixels: not replayable
-        return None if frame.alpha is not None else super().replay_key(camera, frame)
+        # a coverage (alpha) input is resampled on the host from the frame's pixels, and label
+        # planes are uploaded from the frame's dict (a recording replays only its named arrays):
+        # not replayable
+        return None if frame.alpha is not None or frame.labels else super().replay_key(camera, frame)
 
     def enqueue_host_buffers(self, rt, camera, frame, aux) -> tuple[dict, list]:
         """:meth:`host_buffers` computed on the device (kernel ``distortion_aux``): depth and
@@ -682,12 +699,13 @@ class Distortion(GatherStage):
         kkey = self._source_k(camera, frame)
         g = _map_geometry(model, frame.size, kkey)
         out: dict = {"alpha": g.alpha}
-        if frame.depth is None and frame.velocity is None:
-            return out, []
-        h, w = g.alpha.shape
-        n = w * h
         key = ("distortion_aux", model, frame.size, kkey)
         flat = rt.constant(lambda: _aux_flat(g), key=key + ("flat",))
+        label_events = self._enqueue_labels(rt, frame, flat, g.alpha.shape, out)
+        if frame.depth is None and frame.velocity is None:
+            return out, label_events
+        h, w = g.alpha.shape
+        n = w * h
         jinv = rt.constant(lambda: np.ascontiguousarray(g.inv, np.float32), key=key + ("jinv",))
         events, dev = [], {}
         for name, shape in (("depth", (frame.height, frame.width)), ("velocity", (frame.height, frame.width, 2))):
@@ -709,7 +727,29 @@ class Distortion(GatherStage):
         if frame.velocity is not None:
             out["velocity"] = np.empty((h, w, 2), np.float32)
             events.append(("download", rt.copy(out["velocity"], dev["velocity_out"])))
-        return out, events
+        return out, label_events + events
+
+    def _enqueue_labels(self, rt, frame, flat, size_hw, out: dict) -> list:
+        """The frame's label planes through ``distortion_labels`` (32-bit words, nearest source
+        pixel ``flat``), downloaded without blocking into ``out["labels"]``; [] without labels."""
+        if not frame.labels:
+            return []
+        from ..runtime import kernel_source
+
+        names = list(frame.labels)
+        h, w = size_hw
+        n, n_src = w * h, frame.width * frame.height
+        host_in = np.stack([np.ascontiguousarray(frame.labels[k]).view(np.uint32) for k in names])
+        src = rt.scratch(self, "labels_in", host_in.shape, np.uint32)
+        dst = rt.scratch(self, "labels_out", (len(names), h, w), np.uint32)
+        host_out = np.empty((len(names), h, w), np.uint32)
+        kern = rt.kernel(kernel_source("distortion_labels"), "distortion_labels", {}, "distortion_labels")
+        events = [("upload", rt.copy(src, host_in)),
+                  (self.name + "_labels", rt.launch(kern, (n, len(names)), (64, 1), src, dst, flat, np.int32(n),
+                                                    np.int32(n_src))),
+                  ("download", rt.copy(host_out, dst))]
+        out["labels"] = {k: host_out[i].view(frame.labels[k].dtype) for i, k in enumerate(names)}
+        return events
 
     def aux_bytes(self, camera, frame) -> int:
         """Bytes ``distortion_aux`` moves (``clpost bench``): per output pixel its index and
@@ -738,5 +778,9 @@ class Distortion(GatherStage):
             vx = g.inv[0] * vin[..., 0] + g.inv[1] * vin[..., 1]
             vy = g.inv[2] * vin[..., 0] + g.inv[3] * vin[..., 1]
             out["velocity"] = np.stack([np.where(ok, vx, 0.0), np.where(ok, vy, 0.0)], -1).astype(np.float32)
+        if frame.labels:
+            from ..labels.channels import nearest_labels
+
+            out["labels"] = nearest_labels(frame.labels, g.flat, ok)
         return out
 
