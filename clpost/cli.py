@@ -265,6 +265,9 @@ def cmd_process(args) -> int:
     if not jobs:
         raise InputError(f"{args.input}: no input frames")
     camera = frame_camera(sources, jobs[0])
+    from .raw_io import output_kind
+
+    output_kind(camera, args.output)  # a raw mosaic named .jpg is refused before anything is read
     pipe = Pipeline(camera, quality=args.quality, stages=args.stages, device=args.device)
     if args.explain:
         _explain_sources(sources, jobs)
