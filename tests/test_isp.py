@@ -190,7 +190,7 @@ def test_cli_writes_a_camera_jpeg(tmp_path):
 
 def test_bad_input_named():
     with pytest.raises(InputError, match="needs a raw sensor to develop"):
-        Camera(isp=True)
+        Camera.from_options({"isp": True})
     with pytest.raises(InputError, match="isp_tone_white=0.5 must be 0"):
         _cam(isp_tone_white=0.5)
     with pytest.raises(InputError, match="isp_jpeg_quality=0 must be an integer from 1 to 100"):

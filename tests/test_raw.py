@@ -184,7 +184,7 @@ def test_bad_camera_settings_named():
     with pytest.raises(InputError, match="no such file and not a built-in sensor"):
         _cam(raw_calibration="/nonexistent/cal.json")
     with pytest.raises(InputError, match="needs a raw sensor"):
-        _cam(raw_calibration=None, cfa_pattern="RGGB")
+        Camera.from_options({"cfa_pattern": "RGGB"})
     with pytest.raises(InputError, match="one medium"):
         _cam(sensor_preset="smartphone")
     with pytest.raises(InputError, match="cfa_pattern='XYZW'"):

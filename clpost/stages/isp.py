@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..params import integer, param, parse_on_off, show_default, show_none
+from ..params import boolean, integer, param, parse_on_off, show_default, show_none
 from .base import GatherStage, per_camera
 from .raw import cfa_channels, camera_matrix, pattern
 
@@ -67,7 +67,7 @@ def _check_tone(name, value):
 class IspParams:
     """isp: develop the raw stage's mosaic into a camera-JPEG-like image."""
 
-    isp: bool = param(False, unit="on/off", flag="--isp", parse=parse_on_off, header="clpost.isp",
+    isp: bool = param(False, unit="on/off", flag="--isp", parse=parse_on_off, check=boolean, header="clpost.isp",
                       show=lambda v: "on" if v else None, scalar=False,
                       help="develop the raw mosaic (needs --raw-calibration): demosaic (Malvar-He-Cutler), white "
                            "balance, colour matrix, tone curve, sRGB; a .jpg/.png output gets it as is")
@@ -80,10 +80,11 @@ class IspParams:
                                   help="JPEG quality of an ISP output written as .jpg (Pillow's scale, 1-100)")
 
     @staticmethod
-    def validate(camera, inputs):
+    def check_options(camera, given):
+        # a silently idle option is worse than an error (a library Camera(isp=True) alone is the identity)
         if camera.isp and camera.raw_calibration is None:
-            raise InputError("Camera.isp=True needs a raw sensor to develop: give --raw-calibration (e.g. "
-                             "a7s2-like) or leave --isp out")
+            raise InputError("--isp on needs a raw sensor to develop: give --raw-calibration (e.g. a7s2-like) or "
+                             "leave --isp out")
 
 
 def demosaic_pattern(pat: str) -> str:
@@ -161,7 +162,9 @@ class Isp(GatherStage):
     example = {"raw_calibration": "a7s2-like", "iso": 800, "isp": True, "isp_tone_white": 4.0}
 
     def skip_reason(self, camera, frame):
-        return None if camera.isp else "no image processor (Camera.isp is off)"
+        if not camera.isp:
+            return "no image processor (Camera.isp is off)"
+        return None if camera.raw_calibration else "no raw mosaic to develop (Camera.raw_calibration is None)"
 
     def reason_needed(self, camera, frame):
         return (f"develops the {pattern(camera)} mosaic: MHC demosaic, white balance "

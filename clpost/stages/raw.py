@@ -86,11 +86,15 @@ class RawParams:
         help=f"colour filter array ({', '.join(calib.CFA_PATTERNS)}; default: the calibration's)")
 
     @staticmethod
+    def check_options(camera, given):
+        # a silently idle option is worse than an error (a library Camera(cfa_pattern=...) alone is unused)
+        if camera.raw_calibration is None and camera.cfa_pattern is not None:
+            raise InputError(f"--cfa {camera.cfa_pattern} needs a raw sensor: give --raw-calibration (e.g. "
+                             "a7s2-like) or leave --cfa out")
+
+    @staticmethod
     def validate(camera, inputs):
         if camera.raw_calibration is None:
-            if camera.cfa_pattern is not None:
-                raise InputError(f"Camera.cfa_pattern={camera.cfa_pattern!r} needs a raw sensor: give "
-                                 "--raw-calibration (e.g. a7s2-like) or leave --cfa out")
             return
         for other, flag in (("film", "--film"), ("sensor_preset", "--sensor-preset")):
             if getattr(camera, other, None) is not None:
