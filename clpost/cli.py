@@ -495,7 +495,7 @@ def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> in
     from .batch import input_chromaticities
 
     chroma = input_chromaticities(args.display, Path(expand(args.input, (frames or found)[0])))
-    write_output(out, result, header, display=args.display, working_space=ws, chroma=chroma)
+    write_output(out, result, header, display=args.display, working_space=ws, chroma=chroma, camera=camera)
     if args.png:
         write_image(args.png, result.color * (args.png_gain or 1.0), display=args.display, working_space=ws,
                     option="--png", chroma=chroma)

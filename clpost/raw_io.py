@@ -67,7 +67,7 @@ def sidecar(camera, width: int, height: int, frame_index: int = 0) -> dict:
 
     c = calib.load(camera.raw_calibration)
     n = c.at_iso(camera.iso)
-    pat = pattern(camera)
+    pat = pattern(camera)  # the raw stage starts it at the display window's top-left
     return {
         "format": RAW_FORMAT, "width": width, "height": height, "cfa_pattern": pat,
         "gain_channels": ["R", "C" if "C" in pat else "G", "B"],
@@ -88,7 +88,8 @@ def sidecar(camera, width: int, height: int, frame_index: int = 0) -> dict:
 
 
 def write_raw(path, color, camera, frame_index: int = 0) -> None:
-    """16-bit single-channel mosaic and its JSON sidecar (module docstring), atomically."""
+    """16-bit single-channel mosaic (the display window) and its JSON sidecar (module docstring),
+    atomically."""
     from PIL import Image
 
     from .atomic import atomic_path

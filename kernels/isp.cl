@@ -34,7 +34,8 @@ inline float isp_encode(const float v, const float tone_white) {
 }
 
 __kernel void isp(__global const float *restrict src, __global float *restrict dst, const int width,
-                  const int height, __constant float *table, const float tone_white) {
+                  const int height, const int phase_x, const int phase_y, __constant float *table,
+                  const float tone_white) {
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
 #define M(dx, dy) isp_at(src, x, y, dx, dy, width, height)
@@ -49,8 +50,9 @@ __kernel void isp(__global const float *restrict src, __global float *restrict d
     const float rb_at_g_col = (5.0f * c + 4.0f * axial_v - far_v - diag + 0.5f * far_h) * 0.125f;
     const float rb_at_br = (6.0f * c + 2.0f * diag - 1.5f * (far_h + far_v)) * 0.125f;
 
-    const int site = isp_channel(x, y);
-    const int red_row = isp_channel(0, y) == 0 || isp_channel(1, y) == 0;
+    /* the pattern starts at the display window's top-left: phase = its offset's parity */
+    const int site = isp_channel(x + phase_x, y + phase_y);
+    const int red_row = isp_channel(0, y + phase_y) == 0 || isp_channel(1, y + phase_y) == 0;
     float r, g, b;
     if (site == 0) { r = c; g = g_at_rb; b = rb_at_br; }
     else if (site == 2) { r = rb_at_br; g = g_at_rb; b = c; }

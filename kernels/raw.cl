@@ -23,10 +23,11 @@ inline void raw_apply(CLP_F *r, CLP_F *g, CLP_F *b, const CLP_CTX p, const float
                       const float full_well, const float gain, const float read_noise,
                       const float row_noise, const float col_noise, const float dsnu, const float prnu,
                       const float black, const float white, __global const float *matrix,
-                      const uint seed, const uint frame) {
+                      const uint phase_x, const uint phase_y, const uint seed, const uint frame) {
     const CLP_U i = CLP_INDEX(p);
     const CLP_U x = CLP_TO_U(CLP_X(p)), y = CLP_TO_U(CLP_Y(p));
-    const CLP_I xo = CLP_TO_I(x & 1u) != 0, yo = CLP_TO_I(y & 1u) != 0;
+    /* the pattern starts at the display window's top-left: phase = its offset's parity */
+    const CLP_I xo = CLP_TO_I((x + phase_x) & 1u) != 0, yo = CLP_TO_I((y + phase_y) & 1u) != 0;
     const CLP_I ch = yo ? (xo ? (CLP_I)(RAW_CFA_11) : (CLP_I)(RAW_CFA_10))
                         : (xo ? (CLP_I)(RAW_CFA_01) : (CLP_I)(RAW_CFA_00));
     const CLP_F rr = *r, gg = *g, bb = *b;

@@ -238,3 +238,30 @@ def test_cli_writes_raw_and_refuses_a_raw_jpeg(tmp_path):
     from PIL import Image
 
     assert Image.open(tmp_path / "r.png").mode in ("I;16", "I")
+
+
+def test_the_pattern_starts_at_the_display_window_with_overscan(tmp_path):
+    # overscan of 3 px left and 1 px top: the sensor (display window) still starts with the declared
+    # pattern, the kernel and the reference agree, and the written raw's sidecar says that pattern
+    from clpost import raw_io
+    from clpost.batch import display_window
+    from clpost.frame import Windows
+
+    w, h = 20, 12
+    win = Windows(((-3, -1), (w - 1 + 2, h - 1)), ((0, 0), (w - 1, h - 1)))
+    path = _one_iso(tmp_path, read_noise_dn=0.0)
+    cam = _cam(raw_calibration=path, cfa_pattern="GBRG")
+    rgb = np.array([0.6, 0.3, 0.1], np.float32)
+    frame = Frame(np.broadcast_to(rgb, (h + 1, w + 5, 3)).copy(), metadata={"windows": win, "frame_index": 2})
+    pipe = Pipeline(cam, stages=["raw"], already_applied=("exposure",))
+    assert_planned(pipe, frame, "raw")
+    out = pipe.run(frame)
+    ref = pipe.reference(frame)
+    assert np.abs(out.color - ref).max() * (A7S2.white_level_dn - A7S2.black_level_dn) <= 1.0 + 1e-3
+    sensor = display_window(out).color[..., 0]
+    m, ch = camera_matrix(cam), cfa_channels("GBRG")
+    for py in range(2):
+        for px in range(2):
+            assert sensor[py::2, px::2].mean() == pytest.approx(m[ch[py, px]] @ rgb, rel=0.01), (py, px)
+    raw_io.write_raw(tmp_path / "o.png", display_window(out).color, cam)
+    assert json.loads((tmp_path / "o.json").read_text())["cfa_pattern"] == "GBRG"

@@ -39,7 +39,7 @@ import numpy as np
 from ..errors import InputError
 from ..params import boolean, integer, param, parse_on_off, show_default, show_none
 from .base import GatherStage, per_camera
-from .raw import cfa_channels, camera_matrix, pattern
+from .raw import camera_matrix, cfa_channels, cfa_phase, pattern
 
 MHC_FILTERS = {
     "G_AT_RB": np.array([[0, 0, -1, 0, 0], [0, 0, 2, 0, 0], [-1, 2, 4, 2, -1], [0, 0, 2, 0, 0],
@@ -85,6 +85,11 @@ class IspParams:
         if camera.isp and camera.raw_calibration is None:
             raise InputError("--isp on needs a raw sensor to develop: give --raw-calibration (e.g. a7s2-like) or "
                              "leave --isp out")
+
+
+def shifted_pattern(pat: str, x0: int, y0: int) -> str:
+    """The 2×2 pattern seen from column ``x0``, row ``y0`` of a mosaic with pattern ``pat``."""
+    return "".join(pat[((y0 + dy) % 2) * 2 + (x0 + dx) % 2] for dy in (0, 1) for dx in (0, 1))
 
 
 def demosaic_pattern(pat: str) -> str:
@@ -191,11 +196,13 @@ class Isp(GatherStage):
         _check_size(frame)
         w, h = frame.width, frame.height
         knl = rt.kernel(library() + kernel_source("isp"), "isp", self.defines(camera))
-        return [rt.launch(knl, (w, h), None, src, dst, np.int32(w), np.int32(h),
+        px, py = cfa_phase(frame)
+        return [rt.launch(knl, (w, h), None, src, dst, np.int32(w), np.int32(h), np.int32(px), np.int32(py),
                           rt.constant(self._tables(camera)), np.float32(camera.isp_tone_white))]
 
     def reference(self, camera, frame, color):
         _check_size(frame)
-        rgb = mhc_demosaic(np.asarray(color, np.float64)[..., 0], demosaic_pattern(pattern(camera)))
+        rgb = mhc_demosaic(np.asarray(color, np.float64)[..., 0],
+                           shifted_pattern(demosaic_pattern(pattern(camera)), *cfa_phase(frame)))
         lin = (rgb * white_balance_gains(camera)) @ colour_matrix(camera).T
         return srgb_encode(tone(np.maximum(lin, 0.0), camera.isp_tone_white))

@@ -36,7 +36,8 @@ noise); a read noise whose tail matters needs it.
 The noise parameters come from a per-ISO calibration file (:mod:`clpost.sensor_calibration`,
 ``docs/raw_isp.md``), interpolated log–log between its ISOs. The output is the black-subtracted
 raw normalised so that 1.0 is the white level, the same value in all three channels (a
-monochrome mosaic; slightly negative values below black are kept, as raw files keep them);
+monochrome mosaic; slightly negative values below black are kept, as raw files keep them). The
+pattern starts at the display window's top-left photosite (overscan continues it);
 :mod:`clpost.raw_io` writes it as 16-bit DN with a sidecar, the ``isp`` stage develops it.
 
 Randomness: counter-based hash (``kernels/random.cl``) of (``noise_seed``, frame index, pixel
@@ -108,6 +109,13 @@ def pattern(camera) -> str:
     return camera.cfa_pattern or calib.load(camera.raw_calibration).cfa_pattern
 
 
+def cfa_phase(frame) -> tuple[int, int]:
+    """(x, y) parity of the display window's top-left in the arrays: the pattern starts there (the
+    sensor is the display window; overscan is recorded in the pattern's continuation)."""
+    ox, oy = frame.windows.display_offset
+    return ox % 2, oy % 2
+
+
 def cfa_channels(pat: str) -> np.ndarray:
     """(2, 2) channel index (0 R, 1 G, 2 B, 3 C) of the photosites at (y mod 2, x mod 2)."""
     return np.array([CHANNELS.index(ch) for ch in pat]).reshape(2, 2)
@@ -130,7 +138,7 @@ class Raw(PointwiseStage):
     args = (("float", "e_sat"), ("float", "full_well"), ("float", "gain"), ("float", "read_noise"),
             ("float", "row_noise"), ("float", "col_noise"), ("float", "dsnu"), ("float", "prnu"),
             ("float", "black"), ("float", "white"), ("__global const float *", "matrix"),
-            ("uint", "seed"), ("uint", "frame"))
+            ("uint", "phase_x"), ("uint", "phase_y"), ("uint", "seed"), ("uint", "frame"))
 
     def skip_reason(self, camera, frame):
         return None if camera.raw_calibration else "no raw sensor (Camera.raw_calibration is None)"
@@ -164,7 +172,8 @@ class Raw(PointwiseStage):
         f32 = np.float32
         return (f32(e_sat), f32(c.full_well_e), f32(n.gain_dn_per_e), f32(n.read_noise_dn), f32(n.row_noise_dn),
                 f32(n.column_noise_dn), f32(n.dsnu_dn), f32(n.prnu), f32(black), f32(white),
-                self._matrix(camera), np.uint32(camera.noise_seed), np.uint32(frame_index(frame)))
+                self._matrix(camera), *map(np.uint32, cfa_phase(frame)), np.uint32(camera.noise_seed),
+                np.uint32(frame_index(frame)))
 
     @per_camera
     def _matrix(self, camera):
@@ -176,7 +185,8 @@ class Raw(PointwiseStage):
         y, x = np.mgrid[0:h, 0:w].astype(np.uint32)
         i = y * np.uint32(w) + x
         seed, fr = camera.noise_seed, frame_index(frame)
-        ch = cfa_channels(pattern(camera))[y % 2, x % 2]
+        px, py = cfa_phase(frame)
+        ch = cfa_channels(pattern(camera))[(y + py) % 2, (x + px) % 2]
         s = np.einsum("hwk,hwk->hw", camera_matrix(camera)[ch], np.asarray(color, np.float64)[..., :3])
 
         def normal(f, a, b):
