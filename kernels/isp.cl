@@ -11,8 +11,10 @@
 #error "isp.cl needs ISP_CFA_00 .. ISP_CFA_11 (clpost/stages/isp.py defines())"
 #endif
 
+/* Mirror about the edge photosite (i in [-2, n + 1], n >= 3). The reflection below 0 goes through
+ * float fabs: the integer form compiles to llvm.abs, which Oclgrind 21.10 cannot run. */
 inline int isp_mirror(int i, const int n) {
-    i = i < 0 ? -i : i;
+    i = (int)fabs((float)i);
     return i >= n ? 2 * (n - 1) - i : i;
 }
 
