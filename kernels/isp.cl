@@ -32,7 +32,8 @@ inline float isp_encode(const float v, const float tone_white) {
     float y = fmax(v, 0.0f);
     if (tone_white > 0.0f) y = y * (1.0f + y / (tone_white * tone_white)) / (1.0f + y);
     y = clamp(y, 0.0f, 1.0f);
-    return y <= 0.0031308f ? 12.92f * y : 1.055f * pow(y, 1.0f / 2.4f) - 0.055f;
+    /* y^(1/2.4) through kernels/fastmath.cl: PoCL does not vectorise pow */
+    return y <= 0.0031308f ? 12.92f * y : 1.055f * clp_exp2(clp_log2(fmax(y, 0.0031308f)) * (1.0f / 2.4f)) - 0.055f;
 }
 
 __kernel void isp(__global const float *restrict src, __global float *restrict dst, const int width,
