@@ -16,9 +16,12 @@ is refused — the file says what was measured.
 
 Colour: ``xyz_to_camera`` is the camera's XYZ(D65) → raw matrix as Adobe's DNG ColorMatrix and
 dcraw's ``adobe_coeff`` table give it. The raw response to the working space's linear RGB is
-:math:`M = M_{XYZ\to cam}\,M_{RGB\to XYZ}` scaled so that the largest row sum is 1: a D65 white
-of signal 1 fills the most sensitive channel (green) exactly; the row sums are the per-channel
-gains, so a grey's raw values are ``M @ (1, 1, 1)`` (dcraw ``pre_mul`` = their reciprocals).
+:math:`M = M_{XYZ\to cam}\,M_{709\to XYZ}\,M_{RGB\to 709}` scaled so that the largest row sum is
+1: a white of signal 1 fills the most sensitive channel (green) exactly; the row sums are the
+per-channel gains, so a grey's raw values are ``M @ (1, 1, 1)`` (dcraw ``pre_mul`` = their
+reciprocals). :math:`M_{RGB\to 709}` (Bradford-adapted; identity for Rec. 709) takes the working
+space's white to D65, the white of the camera matrix: a render's scene white is its working space's
+white (as the ``white_balance`` stage assumes), so it records as the camera's daylight neutral.
 """
 from __future__ import annotations
 
@@ -91,9 +94,14 @@ class SensorCalibration:
 
         from .colorspace import WORKING_SPACES
 
-        cs = colour.RGB_COLOURSPACES[WORKING_SPACES[working_space]]
-        m = np.asarray(self.xyz_to_camera, np.float64) @ np.asarray(cs.matrix_RGB_to_XYZ, np.float64)
-        return m / m.sum(axis=1).max()
+        rec709 = colour.RGB_COLOURSPACES["ITU-R BT.709"]
+        m = np.asarray(self.xyz_to_camera, np.float64) @ np.asarray(rec709.matrix_RGB_to_XYZ, np.float64)
+        m = m / m.sum(axis=1).max()
+        if working_space == "rec709":
+            return m
+        to709 = colour.matrix_RGB_to_RGB(colour.RGB_COLOURSPACES[WORKING_SPACES[working_space]], rec709,
+                                         chromatic_adaptation_transform="Bradford")
+        return m @ np.asarray(to709, np.float64)
 
 
 def _fail(path, what):

@@ -223,3 +223,21 @@ def test_kernel_matches_reference_with_an_odd_overscan(rng):
     clean = camera_matrix(cam)[cfa_channels("GRBG")[(y + 3) % 2, (x + 1) % 2]] @ rgb
     out = pipe.run(Frame(np.repeat(clean[..., None], 3, axis=2).astype(np.float32), metadata={"windows": win})).color
     np.testing.assert_allclose(out, np.broadcast_to(srgb_encode(rgb), out.shape), atol=3e-6)
+
+
+def test_an_acescg_camera_develops_to_the_same_srgb():
+    # the raw stage records through the working space's matrix; the ISP always develops to sRGB:
+    # the same light given in ACEScg or in Rec. 709 gives the same picture
+    import colour
+
+    rgb709 = np.array([0.3, 0.2, 0.1])
+    aces = colour.RGB_to_RGB(rgb709, "ITU-R BT.709", "ACEScg", chromatic_adaptation_transform="Bradford")
+    outs = []
+    for ws, rgb in (("rec709", rgb709), ("acescg", aces)):
+        cam = _cam(working_space=ws)
+        y, x = np.mgrid[0:9, 0:11]
+        clean = camera_matrix(cam)[cfa_channels("RGGB")[y % 2, x % 2]] @ rgb
+        pipe, frame = _isp_only(cam, clean)
+        outs.append(pipe.run(frame).color)
+    np.testing.assert_allclose(outs[0], outs[1], atol=2e-3)
+    np.testing.assert_allclose(outs[0], np.broadcast_to(srgb_encode(rgb709), outs[0].shape), atol=3e-6)

@@ -39,7 +39,7 @@ import numpy as np
 from ..errors import InputError
 from ..params import boolean, integer, param, parse_on_off, show_default, show_none
 from .base import GatherStage, per_camera
-from .raw import camera_matrix, cfa_channels, cfa_phase, pattern
+from .raw import cfa_channels, cfa_phase, pattern
 
 MHC_FILTERS = {
     "G_AT_RB": np.array([[0, 0, -1, 0, 0], [0, 0, 2, 0, 0], [-1, 2, 4, 2, -1], [0, 0, 2, 0, 0],
@@ -97,23 +97,24 @@ def demosaic_pattern(pat: str) -> str:
     return pat.replace("C", "G")
 
 
+def _srgb_to_camera(camera) -> np.ndarray:
+    """(3, 3) linear sRGB → the pattern's raw channels R, G|C, B (whatever the working space: the
+    ISP develops to sRGB, balanced for its D65 white)."""
+    from .. import sensor_calibration as calib
+
+    m = calib.load(camera.raw_calibration).rgb_to_camera("rec709")
+    return np.vstack([m, m.sum(axis=0, keepdims=True)])[[0, 3 if "C" in pattern(camera) else 1, 2]]
+
+
 def white_balance_gains(camera) -> np.ndarray:
-    """(3,) gains of the pattern's channels R, G|C, B: reciprocal row sums of their responses."""
-    m = camera_matrix(camera)[_rows(camera)]
-    return 1.0 / m.sum(axis=1)
-
-
-def _rows(camera):
-    return [0, 3 if "C" in pattern(camera) else 1, 2]
+    """(3,) gains of the pattern's channels R, G|C, B: reciprocal row sums of their responses to D65 white."""
+    return 1.0 / _srgb_to_camera(camera).sum(axis=1)
 
 
 def colour_matrix(camera) -> np.ndarray:
     """(3, 3) white-balanced camera R, G|C, B → linear sRGB (Rec. 709): rows sum to 1."""
-    from .. import sensor_calibration as calib
-
-    m = calib.load(camera.raw_calibration).rgb_to_camera("rec709")
-    m4 = np.vstack([m, m.sum(axis=0, keepdims=True)])[_rows(camera)]
-    return np.linalg.inv(np.diag(1.0 / m4.sum(axis=1)) @ m4)
+    m = _srgb_to_camera(camera)
+    return np.linalg.inv(np.diag(1.0 / m.sum(axis=1)) @ m)
 
 
 def mhc_demosaic(mosaic: np.ndarray, bayer: str) -> np.ndarray:
