@@ -38,13 +38,15 @@ FORMAT = "clpost-sensor-calibration/1"
 CFA_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG", "RCCB")
 """2×2 colour filter arrays, read row by row from the top-left photosite (C: clear, no filter)."""
 NOISE_KEYS = ("gain_dn_per_e", "read_noise_dn", "row_noise_dn", "column_noise_dn", "dsnu_dn", "prnu")
-BUILTIN_DIR = Path(__file__).resolve().parent / "lens_data" / "sensors"
-if not BUILTIN_DIR.is_dir():  # a source checkout (lens_data/ beside clpost/)
-    BUILTIN_DIR = Path(__file__).resolve().parent.parent / "lens_data" / "sensors"
+def builtin_dir() -> Path:
+    """``lens_data/sensors`` (:func:`clpost.optics.prescription.lens_data_dir` finds lens_data)."""
+    from .optics.prescription import lens_data_dir
+
+    return lens_data_dir() / "sensors"
 
 
 def builtin_names() -> list[str]:
-    return sorted(p.stem for p in BUILTIN_DIR.glob("*.json"))
+    return sorted(p.stem for p in builtin_dir().glob("*.json"))
 
 
 @dataclass(frozen=True)
@@ -106,12 +108,12 @@ class SensorCalibration:
 
 def _fail(path, what):
     return InputError(f"{path}: {what}; see docs/raw_isp.md for the calibration file format "
-                      f"(an example: {BUILTIN_DIR / 'a7s2-like.json'})")
+                      f"(an example: {builtin_dir() / 'a7s2-like.json'})")
 
 
 def resolve(name_or_path: str) -> Path:
     """A built-in calibration's name (``lens_data/sensors/<name>.json``) or a file path."""
-    p = BUILTIN_DIR / f"{name_or_path}.json"
+    p = builtin_dir() / f"{name_or_path}.json"
     if "/" not in name_or_path and not name_or_path.endswith(".json") and p.is_file():
         return p
     q = Path(name_or_path)
