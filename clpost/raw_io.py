@@ -2,8 +2,8 @@
 
 - **Raw** (``raw`` stage, no ``isp``; output ``.png``, ``.tif``/``.tiff``): the mosaic as 16-bit
   single-channel digital numbers (DN, black level included, as the sensor's ADC gives them; a
-  value v of the frame is ``round(v·(white − black) + black)``), plus a JSON sidecar beside it with
-  the same stem (``frame.0001.png`` → ``frame.0001.json``, format :data:`RAW_FORMAT`): CFA pattern
+  value v of the frame is ``round(v·(white − black) + black)``), plus a JSON sidecar beside it
+  (``frame.0001.png`` → ``frame.0001.raw.json``, format :data:`RAW_FORMAT`): CFA pattern
   (read row by row from the top-left photosite), bits, black and white level, ISO, the white-balance
   gains and camera → sRGB colour matrix the ``isp`` stage would use, the working-space → camera
   matrix, the noise parameters at this ISO and the calibration's name. ``cv2.imread(path,
@@ -47,7 +47,9 @@ def output_kind(camera, path) -> str | None:
 
 
 def sidecar_path(path) -> Path:
-    return Path(path).with_suffix(".json")
+    """``<stem>.raw.json`` beside the image (a name no other clpost output uses)."""
+    p = Path(path)
+    return p.with_name(p.stem + ".raw.json")
 
 
 def raw_dn(frame_color, camera) -> np.ndarray:

@@ -185,7 +185,7 @@ def test_cli_writes_a_camera_jpeg(tmp_path):
         assert im.size == (16, 12) and im.mode == "RGB"
         px = np.asarray(im, np.float64)
     assert 20 < px.mean() < 235  # a developed grey, neither black nor clipped
-    assert not (tmp_path / "a.json").exists()
+    assert not (tmp_path / "a.raw.json").exists()
 
 
 def test_bad_input_named():

@@ -233,7 +233,7 @@ def test_cli_writes_raw_and_refuses_a_raw_jpeg(tmp_path):
     assert not (tmp_path / "a.jpg").exists()
     assert main(["process", str(tmp_path / "a.exr"), "-o", str(tmp_path / "r.png"), "--raw-calibration",
                  "a7s2-like", "--iso", "1600", "--cfa", "BGGR"]) == 0
-    meta = json.loads((tmp_path / "r.json").read_text())
+    meta = json.loads((tmp_path / "r.raw.json").read_text())
     assert meta["cfa_pattern"] == "BGGR" and meta["iso"] == 1600
     from PIL import Image
 
@@ -264,4 +264,4 @@ def test_the_pattern_starts_at_the_display_window_with_overscan(tmp_path):
         for px in range(2):
             assert sensor[py::2, px::2].mean() == pytest.approx(m[ch[py, px]] @ rgb, rel=0.01), (py, px)
     raw_io.write_raw(tmp_path / "o.png", display_window(out).color, cam)
-    assert json.loads((tmp_path / "o.json").read_text())["cfa_pattern"] == "GBRG"
+    assert json.loads((tmp_path / "o.raw.json").read_text())["cfa_pattern"] == "GBRG"
