@@ -124,14 +124,18 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
         extra = compute(pipeline.runtime, out.metadata.get("resolved_camera") or cam or pipeline.camera, out, aovs)
     from .labels.camera_files import camera_header, effective_camera, write_camera_files
 
-    eff = effective_camera(out.metadata.get("resolved_camera") or cam or pipeline.camera, frame,
-                           out.metadata.get("plan", ()), pipeline.quality)
+    used = out.metadata.get("resolved_camera") or cam or pipeline.camera
+    eff = effective_camera(used, frame, out.metadata.get("plan", ()), pipeline.quality)
     header = {**output_header(out), **camera_header(eff)}
     write_output(job.dst, out, header, display=display, working_space=ws, half=half,
-                 compression=compression, chroma=chroma, extra=extra)
+                 compression=compression, chroma=chroma, extra=extra, camera=used)
     if camera_files:
         write_camera_files(eff, job.dst)
-    if preview_dir is not None:
+    if preview_dir is not None and used.isp:  # already display-encoded by the camera's ISP
+        from .raw_io import write_developed
+
+        write_developed(preview_path(job.dst, preview_dir), display_window(out).color, used)
+    elif preview_dir is not None:
         write_image(preview_path(job.dst, preview_dir), display_window(out).color, display=display,
                     working_space=ws, option="--preview", chroma=chroma)
     return out
@@ -151,11 +155,16 @@ def input_chromaticities(display, src: Path | None, metadata: dict | None = None
 
 
 def write_output(path: Path, frame: Frame, header: dict, *, display="srgb", working_space: str = "rec709",
-                 half: bool = False, compression: str = "zip", chroma=None, extra=None) -> None:
+                 half: bool = False, compression: str = "zip", chroma=None, extra=None, camera=None) -> None:
     """Write ``frame`` as its name says: an .exr linear with ``header``, a .png/.jpg/.tif
     display-encoded for ``display`` (a clpost encoding or an OCIO view; ``chroma``: the input's
     chromaticities) with its ICC profile (:mod:`clpost.display_image`); ``extra``: further EXR
-    channels (:mod:`clpost.aovs`)."""
+    channels (:mod:`clpost.aovs`). A raw ``camera``'s .png/.tif/.jpg: :mod:`clpost.raw_io`
+    (16-bit mosaic with a sidecar, or the ISP's image as it is)."""
+    from . import raw_io
+
+    if raw_io.write(path, display_window(frame).color, camera, int(frame.metadata.get("frame_index", 0))):
+        return
     if output_format(path) == "EXR":
         exr.write_frame(path, frame, header=header, half=half, compression=compression, extra=extra)
     else:

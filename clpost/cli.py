@@ -265,6 +265,9 @@ def cmd_process(args) -> int:
     if not jobs:
         raise InputError(f"{args.input}: no input frames")
     camera = frame_camera(sources, jobs[0])
+    from .raw_io import output_kind
+
+    output_kind(camera, args.output)  # a raw mosaic named .jpg is refused before anything is read
     pipe = Pipeline(camera, quality=args.quality, stages=args.stages, device=args.device)
     if args.explain:
         _explain_sources(sources, jobs)
@@ -499,7 +502,7 @@ def _expose(args, out, frames, found, fps, first, t_open, t_close, camera) -> in
     from .batch import input_chromaticities
 
     chroma = input_chromaticities(args.display, Path(expand(args.input, (frames or found)[0])))
-    write_output(out, result, header, display=args.display, working_space=ws, chroma=chroma)
+    write_output(out, result, header, display=args.display, working_space=ws, chroma=chroma, camera=camera)
     if args.png:
         write_image(args.png, result.color * (args.png_gain or 1.0), display=args.display, working_space=ws,
                     option="--png", chroma=chroma)

@@ -52,3 +52,15 @@ inline CLP_F CLP_FN(rnd_poisson_inversion)(const CLP_F mean, const CLP_F u) {
     }
     return n;
 }
+
+/* Photon shot noise: Poisson(mean) exactly by inversion (uniform u) up to RND_POISSON_EXACT_MAX,
+ * above it the normal approximation round(mean + sqrt(mean) g) >= 0 with the Poisson variance
+ * (standard normal g); both branches are evaluated and selected per lane, the search getting
+ * mean 0 (one step) where the normal one is taken. clpost/random.py poisson is the numpy twin. */
+#define RND_POISSON_EXACT_MAX 32.0f
+inline CLP_F CLP_FN(rnd_poisson)(const CLP_F mean, const CLP_F u, const CLP_F g) {
+    const CLP_I normal = mean > RND_POISSON_EXACT_MAX;
+    const CLP_F e_normal = fmax(rint(mean + sqrt(mean) * g), 0.0f);
+    const CLP_F e_exact = CLP_FN(rnd_poisson_inversion)(normal ? (CLP_F)(0.0f) : mean, u);
+    return normal ? e_normal : e_exact;
+}

@@ -14,10 +14,12 @@ from clpost.stages import registry
 # camera records on film or on a sensor, not both)
 FILM = Camera(luminance_scale=1.0, f_number=4.0, shutter_s=1 / 100, iso=200.0, film="kodak-ektar-100")
 SENSOR = Camera(luminance_scale=1.0, f_number=4.0, shutter_s=1 / 100, iso=200.0, sensor_preset="apsc-cmos")
+RAW = Camera(luminance_scale=1.0, f_number=4.0, shutter_s=1 / 100, iso=200.0, raw_calibration="a7s2-like", isp=True)
 
 
 def _camera(name):
-    return SENSOR if "sensor" in _closure(name) else FILM
+    closure = _closure(name)
+    return SENSOR if "sensor" in closure else RAW if "raw" in closure else FILM
 
 
 def _pairs():

@@ -153,6 +153,11 @@ def cases():
             add(f"film+grain+print {q} {w}x{h}",
                 lambda q=q, w=w, h=h: _run(film, ["exposure", "film", "grain", "print"], q, w, h))
             add(f"sensor {q} {w}x{h}", lambda q=q, w=w, h=h: _run(sensor, ["exposure", "sensor"], q, w, h))
+    # the raw sensor (fused with exposure) and its ISP (5x5 mirrored neighbourhood: 3x3 is the
+    # smallest frame it takes, where the mirror reaches the opposite edge)
+    raw = replace(base, raw_calibration="a7s2-like", iso=800.0, isp=True, cfa_pattern="GBRG")
+    for w, h in ((3, 3), (4, 5), (37, 23)):
+        add(f"raw+isp final {w}x{h}", lambda w=w, h=h: _run(raw, ["exposure", "raw", "isp"], "final", w, h))
     # grain's Boolean model needs resolved grains (r >= 1/8 px): a fast stock, coarse grain and a
     # tiny width make pixels large on the film
     boolean = replace(base, film="fuji-superia-400", grain_size=4.0, sensor_mm=(0.05, 0.03))
