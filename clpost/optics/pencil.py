@@ -137,6 +137,24 @@ def build_pencil_map(camera, pixel_mm: float, rmax_px: float, n_defocus: int = N
     return PencilMap(table, float(rmax_px), captured, time.perf_counter() - t0)
 
 
+def depth_profile(camera, depth_m: float, edges: np.ndarray, bands=BANDS, n_rays: int = FAN_RAYS):
+    """(3, len(edges) − 1) profiles of the axial point at planar depth ``depth_m`` (the rows of
+    :func:`build_pencil_map` at an exact depth, bins ``edges`` in t = ρ/ρ₀) and ρ₀ (mm)."""
+    from ..stages.dof import coc_mm
+
+    lens = camera.optics
+    n = camera.f_number
+    pres = lens.focused(camera.focus_from_film_m * 1000.0, n)
+    stop_r = lens.stop_radius_mm(n)
+    rho0 = abs(float(coc_mm(camera, depth_m))) / 2.0
+    out = []
+    for band in bands:
+        fans = [fan_landing(lens, pres, stop_r, np.array([depth_m * 1000.0]), lam, n, n_rays) for lam in band]
+        out.append(row_profile(np.concatenate([f[0] for f in fans]), np.concatenate([f[1][0] for f in fans]),
+                               np.concatenate([f[2][0] for f in fans]), rho0, edges)[0])
+    return np.array(out), rho0
+
+
 def profile_at(pm: PencilMap, r_px: np.ndarray, t: np.ndarray) -> np.ndarray:
     r"""(…, 3) profile values at signed CoC radius ``r_px`` (working px) and normalised radius
     ``t``: bilinear in (row, bin centre) with clamped ends — the lookup the gather does (float64
