@@ -46,7 +46,7 @@ import numpy as np
 
 from .trace import OK, trace
 
-T_MAX = 1.5
+T_MAX = 1.3
 """Largest normalised radius a traced bokeh reaches in the gather (units of the thin-lens disc)."""
 N_DEFOCUS = 65
 """Signed defocus rows (odd: row (N_D−1)/2 is in focus)."""
