@@ -91,6 +91,16 @@ field and −σ in the far field for σ = ``spherical_aberration`` (undercorrect
 bokeh with a dark core and bright rim, background bokeh with a bright core fading out; σ < 0 swaps
 them). |σ| ≤ 1 keeps I ≥ 0.
 
+Traced texture (a ``lens_data`` lens; σ is then unused): the weight of a tap is multiplied per
+channel by the lens's own profile :math:`P_c(t; r_q)` — the pencil map of
+:mod:`clpost.optics.pencil`, traced through the prescription per RGB band and signed defocus,
+:math:`\int_0^{T} P_c\,2t\,dt = 1` — instead of I(t), with t unclamped up to T =
+:data:`clpost.optics.pencil.T_MAX` (the traced disc may exceed the thin-lens disc): coverage ends at
+:math:`T r\rho`, the tile plan's reach is T × |CoC|, and the layers' sums are kept per channel,
+:math:`\mathrm{out}_c = \alpha_c \frac{\sum_F w_c c}{\sum_F w_c} + (1-\alpha_c)\frac{\sum_B w_c c}{\sum_B w_c}`,
+:math:`\alpha_c = \min(1, \sum_F w_c)`, so each colour's disc keeps its own size (axial colour).
+Verified against the Kolb-style tracer in docs/bokeh_profile.md.
+
 Optical vignetting (cat's-eye): :class:`PupilModel` — the aperture intersected with a lens-barrel
 circle of the same radius displaced by :math:`\eta\,h` (η = ``optical_vignetting``, h the
 source's field position over the half diagonal, so |ηh| ≤ 1): the pupil's shape per field point.
