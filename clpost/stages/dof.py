@@ -586,20 +586,25 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
     return out, alpha[..., 1]
 
 
-def traced_profile(camera, width_px: int, quality: str):
+PROFILE_RMAX_PX = 64.0
+"""Signed CoC radius (output px) of the pencil map's outermost rows: the largest max_coc_px of
+any quality, so one map serves them all."""
+
+
+def traced_profile(camera, width_px: int, quality: str | None = None):
     """The :class:`clpost.optics.pencil.PencilMap` of ``camera``'s traced lens at its focus and
-    f-number, rows in output pixels up to ±:func:`max_coc_px` (the gather looks rows up with the
-    tap's CoC × the working-resolution divisor), or None for a thin lens (the parametric texture
-    ``spherical_aberration`` then). Built once per (lens, focus, f-number, sensor, width, quality)
-    and kept (cost: docs/bokeh_profile.md)."""
+    f-number, rows in output pixels up to ±:data:`PROFILE_RMAX_PX` (the gather looks rows up with
+    the tap's CoC × the working-resolution divisor), or None for a thin lens (the parametric
+    texture ``spherical_aberration`` then). Built once per (lens, focus, f-number, sensor, width)
+    for every quality and kept (cost: docs/bokeh_profile.md)."""
     if camera.optics is None:
         return None
-    key = (camera.lens, camera.f_number, camera.focus_distance_m, camera.sensor_mm, int(width_px), quality)
+    key = (camera.lens, camera.f_number, camera.focus_distance_m, camera.sensor_mm, int(width_px))
     pm = _PROFILES.get(key)
     if pm is None:
         if len(_PROFILES) >= 8:
             _PROFILES.pop(next(iter(_PROFILES)))
-        pm = _PROFILES[key] = pencil.build_pencil_map(camera, camera.pixel_pitch_mm(width_px), max_coc_px(quality))
+        pm = _PROFILES[key] = pencil.build_pencil_map(camera, camera.pixel_pitch_mm(width_px), PROFILE_RMAX_PX)
     return pm
 
 
@@ -733,7 +738,7 @@ class Dof(GatherStage):
         reach = pencil.T_MAX if traced else 1.0
         prof = {"DOF_PROF_ND": pencil.N_DEFOCUS, "DOF_PROF_NR": pencil.N_RADIUS,
                 "DOF_PROF_TMAX": f"{pencil.T_MAX!r}f",
-                "DOF_PROF_RK": f"{1.0 / max_coc_px(self.quality)!r}f"} if traced else {}
+                "DOF_PROF_RK": f"{1.0 / PROFILE_RMAX_PX!r}f"} if traced else {}
         return {"DOF_SCALE": scale, "DOF_RMAX": reach_rmax(rmax, reach), "DOF_TILE": TILE, "DOF_BUDGET": budget,
                 "DOF_LEVELS": levels_for(reach_rmax(rmax, reach), budget),
                 "DOF_VIGNETTING": int(camera.optical_vignetting > 0),

@@ -151,8 +151,7 @@ def _profile_buffer(rt, stage, camera, width_px):
     pm = D.traced_profile(camera, width_px, stage.quality)
     if pm is None:
         return rt.constant(np.zeros(4, np.float32), ("dof_profile", None))
-    key = ("dof_profile", camera.lens, camera.f_number, camera.focus_distance_m, camera.sensor_mm, width_px,
-           stage.quality)
+    key = ("dof_profile", camera.lens, camera.f_number, camera.focus_distance_m, camera.sensor_mm, width_px)
 
     def make():
         t = np.zeros(pm.table.shape[1:] + (4,), np.float32)

@@ -28,7 +28,8 @@ blue and green are absorbed above it and by the yellow filter layer).
 
 Implementation: K is large (r_c ≈ 12 px at 1920 px across 36 mm, its tail to 2d tan 75° ≈
 50 px), smooth and added to a blurred copy, so it is applied at a working resolution 1/f
-(f = :func:`working_factor`, the ring ≈ :data:`RING_WORK_PX` working px): f×f box mean,
+(f = :func:`working_factor`, the ring ≈ :data:`RING_WORK_PX` working px: a 2-D gather of the
+whole kernel at full resolution would be ~70² taps per pixel at 1280 px across 36 mm): f×f box mean,
 direct 2-D gather of the cell-integrated K (zero outside the frame), bilinear upsampling
 (edges clamped). Box-down then bilinear-up keeps Σ exactly away from the borders.
 
@@ -51,7 +52,7 @@ from .base import GatherStage
 
 THETA_MAX_DEG = 75.0
 """Largest reflection angle that returns (beyond it the path through the base is > 3.9 d)."""
-RING_WORK_PX = 6.0
+RING_WORK_PX = 3.0
 """Working-resolution radius of the halation ring (sets the working factor f)."""
 VISIBLE = 0.01 * 10.0 / 78.0
 """Halo level that can show: 1 % of middle grey's signal (saturation = 1)."""
