@@ -125,17 +125,18 @@ def test_profile_lookup_is_bilinear_with_clamped_ends():
 def test_profile_matches_the_kolb_tracer_on_a_held_out_lens(depth_m):
     """dgauss-50 at f/2 (the Planar at f/1.4 is in docs/bokeh_profile.md): the forward pencil
     profile (convolved with the tracer's source disc) within 5 % of the peak of the backward
-    estimator's, bin by bin, and their rim/core within 5 %."""
+    estimator's, bin by bin, and their rim/core within 5 %. Source disc 0.15 ρ₀ (≈ 4000 tracer
+    hits per bin: ≈ 1.6 % noise)."""
     from clpost.render.kolb_trace import disc_blurred, point_source_profile
 
     cam = Camera(lens="dgauss-50", f_number=2.0, focus_distance_m=2.5, depth_of_field=True, shutter_s=1 / 50)
     edges = np.linspace(0.0, pencil.T_MAX, 11)
     fine = np.linspace(0.0, pencil.T_MAX, 101)
     p, rho0 = pencil.depth_profile(cam, depth_m, fine, bands=((540.0,),))
-    blurred = disc_blurred(p[0], fine, 0.1)
+    blurred = disc_blurred(p[0], fine, 0.15)
     idx = np.minimum(np.arange(100) // 10, 9)
     pen = np.bincount(idx, blurred * np.diff(fine ** 2), 10) / np.diff(edges ** 2)
-    kolb = point_source_profile(cam, depth_m, edges, rho0, (540.0,), source_t=0.1, points_per_bin=300,
+    kolb = point_source_profile(cam, depth_m, edges, rho0, (540.0,), source_t=0.15, points_per_bin=300,
                                 rays=600, seed=3)
     assert np.max(np.abs(pen - kolb)) < 0.05 * kolb.max(), (pen, kolb)
     assert rim_core(pen, edges) == pytest.approx(rim_core(kolb, edges), rel=0.05)
