@@ -123,9 +123,9 @@ def test_profile_lookup_is_bilinear_with_clamped_ends():
 @pytest.mark.slow
 @pytest.mark.parametrize("depth_m", [1.0, 8.0])
 def test_profile_matches_the_kolb_tracer_on_a_held_out_lens(depth_m):
-    """dgauss-50 at f/2 (the Planar at f/1.4 is in docs/bokeh_profile.md): the forward pencil
-    profile (convolved with the tracer's source disc) within 5 % of the peak of the backward
-    estimator's, bin by bin, and their rim/core within 5 %. Source disc 0.15 ρ₀ (≈ 4000 tracer
+    """dgauss-50 at f/2 (clamped to its maximum aperture, f/2.02; the Planar at f/1.4 is in
+    docs/bokeh_profile.md): the forward pencil profile (convolved with the tracer's source disc)
+    within 5 % of the peak of the backward estimator's, bin by bin, and their rim/core within 5 %. Source disc 0.15 ρ₀ (≈ 4000 tracer
     hits per bin: ≈ 1.6 % noise)."""
     from clpost.render.kolb_trace import disc_blurred, point_source_profile
 
