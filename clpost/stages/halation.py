@@ -239,8 +239,8 @@ class Halation(GatherStage):
         pitch = camera.pixel_pitch_mm(fld.image_width_px(frame))
         f = working_factor(s, pitch)
         rad = kernel_taps(s, f * pitch).shape[0] // 2
-        return (f"{camera.film}: halo ≤ {s.strength[0] * self._peak(camera, frame):.3g} ≥ {VISIBLE:.3g} "
-                f"(1 % of middle grey); strengths R/G/B {s.strength}, 1/{f} resolution, {2 * rad + 1}² taps")
+        return (f"{camera.film}: halo bound s_R × peak red signal = {s.strength[0] * self._peak(camera, frame):.3g} "
+                f"≥ {VISIBLE:.3g} (1 % of middle grey); strengths R/G/B {s.strength}, 1/{f} resolution, {2 * rad + 1}² taps")
 
     def reference(self, camera, frame, color):
         return halation_reference(color, self._stock(camera), camera.pixel_pitch_mm(fld.image_width_px(frame)))
