@@ -61,8 +61,9 @@ def test_axial_colour_gives_each_channel_its_own_disc():
     assert np.max(np.abs(p[0] - p[2])) > 0.2  # red and blue discs differ (purple/green fringes)
 
 
-@pytest.mark.parametrize("quality", ["final", "draft"])
-def test_traced_kernel_matches_reference_on_odd_sizes(rng, quality):
+@pytest.mark.parametrize("quality, extra", [("final", {}), ("draft", {}),
+                                            ("preview", dict(optical_vignetting=0.7, aperture_roundness=0.3))])
+def test_traced_kernel_matches_reference_on_odd_sizes(rng, quality, extra):
     frame = odd_frame(rng)
     depth = frame.depth.copy()
     depth[rng.random(depth.shape) < 0.1] = np.inf
@@ -70,7 +71,7 @@ def test_traced_kernel_matches_reference_on_odd_sizes(rng, quality):
     color = frame.color.copy()
     color[5, 7] = 1e8
     frame = Frame(color, depth=depth)
-    cam = Camera(**PLANAR, f_number=1.4, sensor_mm=(6.0, 4.0), blades=7, blade_rotation_deg=10)
+    cam = Camera(**PLANAR, f_number=1.4, sensor_mm=(6.0, 4.0), blades=7, blade_rotation_deg=10, **extra)
     pipe = Pipeline(cam, quality=quality, stages=["dof"])
     out = pipe.run(frame).color
     assert_planned(pipe, frame, "dof")
