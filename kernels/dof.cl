@@ -53,17 +53,6 @@ typedef struct { DOF_F r, g, b, wf, fr, fg, fb, wb;
                  DOF_F wfg, wfb, wbg, wbb;
 #endif
 } DofAccV;
-#if DOF_PROFILE
-#define DOF_WF_G(acc) ((acc).wfg)
-#define DOF_WF_B(acc) ((acc).wfb)
-#define DOF_WB_G(acc) ((acc).wbg)
-#define DOF_WB_B(acc) ((acc).wbb)
-#else
-#define DOF_WF_G(acc) ((acc).wf)
-#define DOF_WF_B(acc) ((acc).wf)
-#define DOF_WB_G(acc) ((acc).wb)
-#define DOF_WB_B(acc) ((acc).wb)
-#endif
 
 #if DOF_PROFILE
 /* The traced texture (profile_at in clpost/optics/pencil.py): bilinear in (defocus row, radial
@@ -145,6 +134,7 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
 #endif
 }
 
+#if DOF_PROFILE
 /* one channel of the composite: front layer over background, each normalised by its own weight
  * (clpost/stages/dof.py); *alpha = the front layer's coverage */
 inline DOF_F dof_out(const DOF_F f, const DOF_F b, const DOF_F wf, const DOF_F wb, const DOF_F own, DOF_F *alpha)
@@ -155,6 +145,7 @@ inline DOF_F dof_out(const DOF_F f, const DOF_F b, const DOF_F wf, const DOF_F w
     *alpha = a;
     return a * inv_wf * f + (1.0f - a) * select(own, b * inv_wb, wb > 0.0f);
 }
+#endif
 
 /* launched with local size (DOF_TILE / DOF_VEC, DOF_TILE): one work-group per tile, each
  * work-item 8 pixels of a row */
@@ -219,10 +210,23 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     /* per channel (one weight for all three without DOF_PROFILE); alpha_out: green's coverage.
      * No background weight (a strong SA texture zeroes the centre tap and every other tap is in
      * front): the background is the pixel's own colour, never 0/0 */
+#if DOF_PROFILE
+    /* per channel (the traced weights differ per colour); alpha_out: green's coverage */
     DOF_F alpha, a_r, a_b;
     const DOF_F o_r = dof_out(acc.fr, acc.r, acc.wf, acc.wb, DOF_LOAD(lv + c0), &a_r);
-    const DOF_F o_g = dof_out(acc.fg, acc.g, DOF_WF_G(acc), DOF_WB_G(acc), DOF_LOAD(lv + pn + c0), &alpha);
-    const DOF_F o_b = dof_out(acc.fb, acc.b, DOF_WF_B(acc), DOF_WB_B(acc), DOF_LOAD(lv + 2 * pn + c0), &a_b);
+    const DOF_F o_g = dof_out(acc.fg, acc.g, acc.wfg, acc.wbg, DOF_LOAD(lv + pn + c0), &alpha);
+    const DOF_F o_b = dof_out(acc.fb, acc.b, acc.wfb, acc.wbb, DOF_LOAD(lv + 2 * pn + c0), &a_b);
+#else
+    const DOF_F alpha = fmin(1.0f, acc.wf);
+    const DOF_F inv_wf = select((DOF_F)(0.0f), 1.0f / acc.wf, acc.wf > 0.0f);
+    /* no background weight (a strong SA texture zeroes the centre tap and every other tap is in
+     * front): the background is the pixel's own colour, never 0/0 */
+    const DOF_F inv_wb = select((DOF_F)(0.0f), 1.0f / acc.wb, acc.wb > 0.0f);
+    const DOF_F ob = 1.0f - alpha, af = alpha * inv_wf;
+    const DOF_F o_r = af * acc.fr + ob * select(DOF_LOAD(lv + c0), acc.r * inv_wb, acc.wb > 0.0f);
+    const DOF_F o_g = af * acc.fg + ob * select(DOF_LOAD(lv + pn + c0), acc.g * inv_wb, acc.wb > 0.0f);
+    const DOF_F o_b = af * acc.fb + ob * select(DOF_LOAD(lv + 2 * pn + c0), acc.b * inv_wb, acc.wb > 0.0f);
+#endif
     if (y >= hw || x >= ww) return;
     const size_t n = (size_t)ww * hw, i = (size_t)y * ww + x;
     if (x + DOF_VEC <= ww) {
