@@ -4,7 +4,10 @@
  * (the float64 reference mirrors this line by line).
  * Structural: DOF_TILE (tile = work-group of DOF_TILE/DOF_VEC x DOF_TILE work-items), DOF_VEC,
  * DOF_RMAX, DOF_SCALE, DOF_BUDGET, DOF_LEVELS, DOF_VIGNETTING,
- * DOF_TEXTURE (spherical aberration's texture on: σ ≠ 0).
+ * DOF_TEXTURE (spherical aberration's texture on: σ ≠ 0),
+ * DOF_PROFILE (a traced lens's per-channel texture, the pencil map: clpost/optics/pencil.py; with
+ * DOF_PROF_ND rows, DOF_PROF_NR bins over [0, DOF_PROF_TMAX], DOF_PROF_RK = output px -> row
+ * units (1 / the largest CoC radius); DOF_REACH = DOF_PROF_TMAX, the bokeh's reach over its CoC radius, else 1).
  * The tap count and stride are uniform per work-group (one tile), tap offsets uniform across
  * work-items, and borders are padded, so no tap is clamped.
  */
@@ -17,15 +20,25 @@
 #ifndef DOF_VEC
 #define DOF_VEC 8
 #endif
+#ifndef DOF_PROFILE
+#define DOF_PROFILE 0
+#endif
+#if DOF_PROFILE
+#define DOF_TMAX DOF_PROF_TMAX
+#else
+#define DOF_TMAX 1.0f
+#endif
 #if DOF_VEC == 16
 #define DOF_F float16
 #define DOF_I int16
+#define DOF_CONVERT_I convert_int16
 #define DOF_LOAD(p) vload16(0, (p))
 #define DOF_STORE(v, p) vstore16((v), 0, (p))
 #define DOF_LANES ((float16)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f, 8.0f, 9.0f, 10.0f, 11.0f, 12.0f, 13.0f, 14.0f, 15.0f))
 #elif DOF_VEC == 8
 #define DOF_F float8
 #define DOF_I int8
+#define DOF_CONVERT_I convert_int8
 #define DOF_LOAD(p) vload8(0, (p))
 #define DOF_STORE(v, p) vstore8((v), 0, (p))
 #define DOF_LANES ((float8)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f))
@@ -33,7 +46,40 @@
 #error "DOF_VEC must be 8 or 16"
 #endif
 
-typedef struct { DOF_F r, g, b, wf, fr, fg, fb, wb; } DofAccV;
+/* wf, wb: the layers' weights (red's with DOF_PROFILE, whose weights differ per channel: wfg,
+ * wfb, wbg, wbb for green and blue) */
+typedef struct { DOF_F r, g, b, wf, fr, fg, fb, wb;
+#if DOF_PROFILE
+                 DOF_F wfg, wfb, wbg, wbb;
+#endif
+} DofAccV;
+
+#if DOF_PROFILE
+/* The traced texture (profile_at in clpost/optics/pencil.py): bilinear in (defocus row, radial
+ * bin centre), ends clamped; the table is float4 (R, G, B, 0) per (row, bin). Per lane: the
+ * rows differ per source. */
+inline void dof_profile(__global const float4 *restrict prof, const DOF_F rq, const DOF_F t,
+                        DOF_F *pr, DOF_F *pg, DOF_F *pb)
+{
+    const DOF_F fj = clamp((rq * (DOF_SCALE * DOF_PROF_RK) + 1.0f) * (0.5f * (DOF_PROF_ND - 1)), 0.0f,
+                           (float)(DOF_PROF_ND - 1));
+    const DOF_F fi = clamp(t * ((float)DOF_PROF_NR / DOF_PROF_TMAX) - 0.5f, 0.0f, (float)(DOF_PROF_NR - 1));
+    const DOF_F j0 = fmin(floor(fj), (float)(DOF_PROF_ND - 2)), i0 = fmin(floor(fi), (float)(DOF_PROF_NR - 2));
+    float aj[DOF_VEC], ai[DOF_VEC], vr[DOF_VEC], vg[DOF_VEC], vb[DOF_VEC];
+    int at[DOF_VEC];
+    DOF_STORE(fj - j0, aj);
+    DOF_STORE(fi - i0, ai);
+    DOF_STORE(DOF_CONVERT_I(j0) * DOF_PROF_NR + DOF_CONVERT_I(i0), at);
+    for (int l = 0; l < DOF_VEC; ++l) {
+        __global const float4 *q = prof + at[l];
+        const float4 a = q[0] + (q[1] - q[0]) * ai[l];
+        const float4 b = q[DOF_PROF_NR] + (q[DOF_PROF_NR + 1] - q[DOF_PROF_NR]) * ai[l];
+        const float4 v = a + (b - a) * aj[l];
+        vr[l] = v.x; vg[l] = v.y; vb[l] = v.z;
+    }
+    *pr = DOF_LOAD(vr); *pg = DOF_LOAD(vg); *pb = DOF_LOAD(vb);
+}
+#endif
 
 /* one source tap for 8 neighbouring target pixels: colours (cr, cg, cb), signed CoC rq and
  * iq = 1/max(|rq|, 1/2) at offset (dx, dy) px, |o| = dist px; the tap's constants (ρ and 1/ρ
@@ -44,7 +90,7 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
                      const float dist, const float rhof, const float rhon, const float irhof,
                      const float irhon, const float inv_s, const float cell, const float sa,
                      const DOF_F hx, const DOF_F hy, const int dx, const int dy, const DOF_F pvq,
-                     const float vig)
+                     const float vig, __global const float4 *restrict prof)
 {
     const DOF_I front = rq < rp - DOF_FRONT_MARGIN;
     const DOF_I behind = rq > rp + DOF_FRONT_MARGIN;
@@ -53,7 +99,7 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
     const DOF_F r = select(fmax(fabs(rq), 0.5f), arp, behind);
     const DOF_F ir = select(iq, iarp, behind);
     const DOF_F rr = r * select((DOF_F)(rhon), (DOF_F)(rhof), far);
-    const DOF_F cov = clamp((rr - dist) * inv_s + 0.5f, 0.0f, 1.0f);
+    const DOF_F cov = clamp((rr * DOF_TMAX - dist) * inv_s + 0.5f, 0.0f, 1.0f);
     DOF_F w = cov * (cell * ir * ir);
 #if DOF_TEXTURE
     {
@@ -71,10 +117,35 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
         w *= clamp((1.0f - e) * r + 0.5f, 0.0f, 1.0f) * pvq;
     }
 #endif
+#if DOF_PROFILE
+    DOF_F pr, pg, pb;
+    dof_profile(prof, rq, dist * ir * select((DOF_F)(irhon), (DOF_F)(irhof), far), &pr, &pg, &pb);
+    const DOF_F wr = w * pr, wg = w * pg, wb3 = w * pb;
+    const DOF_F fwr = select((DOF_F)(0.0f), wr, front), fwg = select((DOF_F)(0.0f), wg, front);
+    const DOF_F fwb = select((DOF_F)(0.0f), wb3, front);
+    acc->fr += fwr * cr; acc->fg += fwg * cg; acc->fb += fwb * cb;
+    acc->wf += fwr; acc->wfg += fwg; acc->wfb += fwb;
+    acc->r += (wr - fwr) * cr; acc->g += (wg - fwg) * cg; acc->b += (wb3 - fwb) * cb;
+    acc->wb += wr - fwr; acc->wbg += wg - fwg; acc->wbb += wb3 - fwb;
+#else
     const DOF_F wfr = select((DOF_F)(0.0f), w, front), wbk = w - wfr;
     acc->fr += wfr * cr; acc->fg += wfr * cg; acc->fb += wfr * cb; acc->wf += wfr;
     acc->r += wbk * cr; acc->g += wbk * cg; acc->b += wbk * cb; acc->wb += wbk;
+#endif
 }
+
+#if DOF_PROFILE
+/* one channel of the composite: front layer over background, each normalised by its own weight
+ * (clpost/stages/dof.py); *alpha = the front layer's coverage */
+inline DOF_F dof_out(const DOF_F f, const DOF_F b, const DOF_F wf, const DOF_F wb, const DOF_F own, DOF_F *alpha)
+{
+    const DOF_F a = fmin(1.0f, wf);
+    const DOF_F inv_wf = select((DOF_F)(0.0f), 1.0f / wf, wf > 0.0f);
+    const DOF_F inv_wb = select((DOF_F)(0.0f), 1.0f / wb, wb > 0.0f);
+    *alpha = a;
+    return a * inv_wf * f + (1.0f - a) * select(own, b * inv_wb, wb > 0.0f);
+}
+#endif
 
 /* launched with local size (DOF_TILE / DOF_VEC, DOF_TILE): one work-group per tile, each
  * work-item 8 pixels of a row */
@@ -87,7 +158,8 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                   __global float *restrict out, __global float *restrict alpha_out,
                   const int ww, const int hw, const int pad, const int tw,
                   const float inv_area, const float sa, const float vig,
-                  const float cx, const float cy, const float inv_half)
+                  const float cx, const float cy, const float inv_half,
+                  __global const float4 *restrict prof)
 {
     const int x = DOF_VEC * get_global_id(0), y = get_global_id(1);
     /* per work-group (= tile) values from the group id: uniform, so the tap loop's trip count
@@ -109,7 +181,11 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     const DOF_F hx0 = ((float)x + lane - cx) * inv_half;
     const float hy0 = ((float)y - cy) * inv_half;
     DofAccV acc = {(DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f),
-                   (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f)};
+                   (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f),
+#if DOF_PROFILE
+                   (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f)
+#endif
+                   };
     {
         /* centre tap: own colour, blended toward the level's as p's own bokeh outgrows the
          * lattice spacing (a point light's centre must not stay a one-pixel spike) */
@@ -120,7 +196,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                  DOF_LOAD(lv + 2 * pn + c0) * ob + DOF_LOAD(L + 2 * pn + c0) * beta,
                  rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0],
                  inv_s, cell, sa, hx0, (DOF_F)(hy0), 0, 0,
-                 DOF_VIGNETTING ? DOF_LOAD(pv + c0) : (DOF_F)(1.0f), vig);
+                 DOF_VIGNETTING ? DOF_LOAD(pv + c0) : (DOF_F)(1.0f), vig, prof);
     }
     for (int k = 1; k < count; ++k) {
         const int dx = s * tap_dx[k], dy = s * tap_dy[k];
@@ -129,8 +205,18 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                  DOF_LOAD(L + 3 * pn + q), DOF_LOAD(L + 4 * pn + q), rp, arp, iarp, fs * tap_dist[k],
                  rho_far[k], rho_near[k], inv_rho_far[k], inv_rho_near[k], inv_s, cell, sa,
                  ((float)(x + dx) + lane - cx) * inv_half, (DOF_F)(((float)(y + dy) - cy) * inv_half),
-                 dx, dy, DOF_VIGNETTING ? DOF_LOAD(pv + q) : (DOF_F)(1.0f), vig);
+                 dx, dy, DOF_VIGNETTING ? DOF_LOAD(pv + q) : (DOF_F)(1.0f), vig, prof);
     }
+    /* per channel (one weight for all three without DOF_PROFILE); alpha_out: green's coverage.
+     * No background weight (a strong SA texture zeroes the centre tap and every other tap is in
+     * front): the background is the pixel's own colour, never 0/0 */
+#if DOF_PROFILE
+    /* per channel (the traced weights differ per colour); alpha_out: green's coverage */
+    DOF_F alpha, a_r, a_b;
+    const DOF_F o_r = dof_out(acc.fr, acc.r, acc.wf, acc.wb, DOF_LOAD(lv + c0), &a_r);
+    const DOF_F o_g = dof_out(acc.fg, acc.g, acc.wfg, acc.wbg, DOF_LOAD(lv + pn + c0), &alpha);
+    const DOF_F o_b = dof_out(acc.fb, acc.b, acc.wfb, acc.wbb, DOF_LOAD(lv + 2 * pn + c0), &a_b);
+#else
     const DOF_F alpha = fmin(1.0f, acc.wf);
     const DOF_F inv_wf = select((DOF_F)(0.0f), 1.0f / acc.wf, acc.wf > 0.0f);
     /* no background weight (a strong SA texture zeroes the centre tap and every other tap is in
@@ -140,6 +226,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     const DOF_F o_r = af * acc.fr + ob * select(DOF_LOAD(lv + c0), acc.r * inv_wb, acc.wb > 0.0f);
     const DOF_F o_g = af * acc.fg + ob * select(DOF_LOAD(lv + pn + c0), acc.g * inv_wb, acc.wb > 0.0f);
     const DOF_F o_b = af * acc.fb + ob * select(DOF_LOAD(lv + 2 * pn + c0), acc.b * inv_wb, acc.wb > 0.0f);
+#endif
     if (y >= hw || x >= ww) return;
     const size_t n = (size_t)ww * hw, i = (size_t)y * ww + x;
     if (x + DOF_VEC <= ww) {

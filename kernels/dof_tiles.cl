@@ -1,6 +1,7 @@
 /* dof: per-tile max |CoC| and its dilation by the reach of neighbouring tiles (Jimenez 2014).
  * Structural: DOF_TILE (tile edge, working px), DOF_RMAX (max CoC radius, working px),
- * DOF_BUDGET (lattice radius R_b), DOF_LEVELS.
+ * DOF_BUDGET (lattice radius R_b), DOF_LEVELS, DOF_REACH (a bokeh's reach over its CoC radius: a
+ * traced profile's T_MAX, else 1; DOF_RMAX is then the largest reach).
  * Output per tile: the lattice level l (stride s = 2^l, the smallest with
  * k = ceil(R/s - 0.5) <= R_b) and the number of taps ntaps[k] of the distance-sorted unit lattice
  * table that covers every source whose bokeh can reach a pixel of the tile, packed as
@@ -18,7 +19,7 @@ __kernel void dof_tile_max(__global const float *restrict lv, __global float *re
     for (int y = ty * DOF_TILE; y < min((ty + 1) * DOF_TILE, hw); ++y)
         for (int x = tx * DOF_TILE; x < min((tx + 1) * DOF_TILE, ww); ++x)
             m = fmax(m, fabs(pr[(size_t)(y + pad) * pw + x + pad]));
-    tmax[ty * tw + tx] = m;
+    tmax[ty * tw + tx] = m * DOF_REACH;
 }
 
 /* The border replicates edge pixels, so an edge tile's own max also stands for the padding. */

@@ -134,6 +134,80 @@ def axial_blur_px(camera, depth_m: float, width_px: int, rays: int = 20000, seed
     return 2 * math.sqrt(2) * rms * camera.render_focal_length_mm / (depth_m * 1000.0) / camera.pixel_pitch_mm(width_px)
 
 
+def point_source_profile(camera, depth_m: float, edges: np.ndarray, rho0_mm: float, wavelengths_nm,
+                         source_t: float = 0.1, points_per_bin: int = 400, rays: int = 500,
+                         seed: int = 0) -> np.ndarray:
+    r"""Radial irradiance profile of a small disc source on the axis at planar depth ``depth_m``,
+    by this module's estimator (film point → uniform points of the exit-pupil disc → back through
+    the lens at ``camera``'s focus and f-number → the source plane), averaged over
+    ``wavelengths_nm``: the independent reference of the DoF stage's traced bokeh texture
+    (:mod:`clpost.optics.pencil`, which traces forward from the object point).
+
+    The source's image has radius ``source_t`` · ρ₀ (its object radius from the paraxial scale
+    F/S). Film points are stratified, ``points_per_bin`` uniform in area per bin of ``edges`` (in
+    t = ρ/ρ₀), ``rays`` per point. Returns the profile normalised to ∫ P 2t dt = 1 over the bins
+    (the pencil map's normalisation; a point source is this convolved with the source disc)."""
+    from ..optics.trace import surface_table
+
+    lens = camera.optics
+    n = camera.f_number
+    pres = lens.focused(camera.focus_from_film_m * 1000.0, n)
+    z_x, z_e = lens.paraxial.z_exit_pupil_mm, lens.paraxial.z_entrance_pupil_mm
+    table_d, zf = mirrored_table(pres, lens.stop_radius_mm(n))
+    radius = exit_pupil_disc_mm(table_d, zf, lens)
+    area = math.pi * radius * radius
+    eps_mm = source_t * rho0_mm * depth_m * 1000.0 / camera.render_focal_length_mm
+    rng = np.random.default_rng(seed)
+    nb = len(edges) - 1
+    e = np.zeros(nb)
+    for lam in wavelengths_nm:
+        fwd = surface_table(pres, lam, stop_radius_mm=lens.stop_radius_mm(n))
+        table = np.array([(zf - fwd[k, 0], -fwd[k, 1], fwd[k, 2], fwd[k - 1, 3] if k > 0 else 1.0, fwd[k, 4])
+                          for k in range(len(fwd) - 1, -1, -1)])
+        for b in range(nb):
+            m = points_per_bin * rays
+            t = np.sqrt(edges[b] ** 2 + (edges[b + 1] ** 2 - edges[b] ** 2) * rng.random(m))
+            ph = 2 * math.pi * rng.random(m)
+            film = np.stack([rho0_mm * t * np.cos(ph), rho0_mm * t * np.sin(ph)], -1)
+            rr = radius * np.sqrt(rng.random(m))
+            pp = 2 * math.pi * rng.random(m)
+            pupil = np.stack([rr * np.cos(pp), rr * np.sin(pp)], -1)
+            ray = np.concatenate([pupil - film, np.full((m, 1), z_x - zf)], 1)
+            d2 = np.einsum("ij,ij->i", ray, ray)
+            wgt = ray[:, 2] ** 2 / (d2 * d2) * area
+            o = np.concatenate([film, np.zeros((m, 1))], 1)
+            pm = np.concatenate([pupil, np.full((m, 1), zf - z_x)], 1)
+            r = trace_table(table, o, pm - o, zf + 1.0)
+            ok = r.status == OK
+            q, d = r.pos[ok].copy(), r.dir[ok].copy()
+            q[:, 2] = zf - q[:, 2]
+            d[:, 2] = -d[:, 2]
+            oc = lens_to_camera_m(q, z_e) * 1000.0
+            dc = np.stack([d[:, 0], -d[:, 1], -d[:, 2]], -1)
+            s = (depth_m * 1000.0 - oc[:, 2]) / dc[:, 2]
+            hit = np.hypot(oc[:, 0] + s * dc[:, 0], oc[:, 1] + s * dc[:, 1]) <= eps_mm
+            e[b] += float(np.sum(wgt[ok] * hit)) / m
+    return e / np.sum(e * np.diff(edges ** 2))
+
+
+def disc_blurred(profile: np.ndarray, edges: np.ndarray, source_t: float, step: float = 0.005) -> np.ndarray:
+    """A radial profile (piecewise constant on ``edges``) convolved with a uniform disc of radius
+    ``source_t`` and averaged again over the same bins: what :func:`point_source_profile` measures
+    for a source whose point profile is ``profile``."""
+    lim = edges[-1] + 2 * source_t
+    x = np.arange(-lim, lim + step / 2, step)
+    xx, yy = np.meshgrid(x, x)
+    rr = np.hypot(xx, yy)
+    idx = np.clip(np.searchsorted(edges, rr, side="right") - 1, 0, len(profile) - 1)
+    img = np.where(rr < edges[-1], profile[idx], 0.0)
+    k = (np.hypot(xx, yy) <= source_t).astype(np.float64)
+    k /= k.sum()
+    f = np.fft.irfft2(np.fft.rfft2(img) * np.fft.rfft2(np.fft.ifftshift(k)), s=img.shape)
+    b = np.searchsorted(edges, rr, side="right") - 1
+    ok = (b >= 0) & (b < len(profile))
+    return np.bincount(b[ok], f[ok], len(profile)) / np.bincount(b[ok], minlength=len(profile))
+
+
 def kolb_image(lens_name: str, f_number: float, focus_m: float, sensor_mm, size, scene: DemoScene,
                rays: int = 256, seed: int = 0, chunk: int = 200_000, axial_rays: int = 400_000) -> np.ndarray:
     """The traced image (H×W×3, radiance × relative illumination; module docstring) with the lens

@@ -91,6 +91,16 @@ field and −σ in the far field for σ = ``spherical_aberration`` (undercorrect
 bokeh with a dark core and bright rim, background bokeh with a bright core fading out; σ < 0 swaps
 them). |σ| ≤ 1 keeps I ≥ 0.
 
+Traced texture (a ``lens_data`` lens; σ is then unused): the weight of a tap is multiplied per
+channel by the lens's own profile :math:`P_c(t; r_q)` — the pencil map of
+:mod:`clpost.optics.pencil`, traced through the prescription per RGB band and signed defocus,
+:math:`\int_0^{T} P_c\,2t\,dt = 1` — instead of I(t), with t unclamped up to T =
+:data:`clpost.optics.pencil.T_MAX` (the traced disc may exceed the thin-lens disc): coverage ends at
+:math:`T r\rho`, the tile plan's reach is T × |CoC|, and the layers' sums are kept per channel,
+:math:`\mathrm{out}_c = \alpha_c \frac{\sum_F w_c c}{\sum_F w_c} + (1-\alpha_c)\frac{\sum_B w_c c}{\sum_B w_c}`,
+:math:`\alpha_c = \min(1, \sum_F w_c)`, so each colour's disc keeps its own size (axial colour).
+Verified against the Kolb-style tracer in docs/bokeh_profile.md.
+
 Optical vignetting (cat's-eye): :class:`PupilModel` — the aperture intersected with a lens-barrel
 circle of the same radius displaced by :math:`\eta\,h` (η = ``optical_vignetting``, h the
 source's field position over the half diagonal, so |ηh| ≤ 1): the pupil's shape per field point.
@@ -138,6 +148,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..errors import InputError
+from ..optics import pencil
 from ..params import boolean, finite, in_range, param, parse_fraction, parse_on_off
 from . import _field as fld
 from .base import GatherStage
@@ -461,14 +472,22 @@ def prefiltered_levels(pc: np.ndarray, pr: np.ndarray, nlevels: int):
     return cols, cocs
 
 
-def tile_plan(coc: np.ndarray, rmax: int, budget: int) -> tuple[np.ndarray, np.ndarray]:
+def reach_rmax(rmax: int, reach: float) -> int:
+    """Largest tap reach (working px) of a gather whose bokeh reaches ``reach`` × its CoC radius
+    (a traced profile: :data:`clpost.optics.pencil.T_MAX`; else 1)."""
+    return int(math.ceil(rmax * reach))
+
+
+def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     r"""Per tile (Jimenez 2014: tile max, dilated by the reach of the neighbouring tiles) the
-    lattice level ℓ and tap count: R = the largest |CoC| that can reach a pixel of the tile,
-    ℓ the smallest level with :math:`k = \lceil R/2^\ell - \tfrac12\rceil \le R_b`, taps =
-    ntaps[k] of the unit lattice table. Returns per-pixel (level, count) arrays."""
+    lattice level ℓ and tap count: R = the largest reach (``reach`` × |CoC|) that can reach a
+    pixel of the tile, ℓ the smallest level with :math:`k = \lceil R/2^\ell - \tfrac12\rceil \le R_b`,
+    taps = ntaps[k] of the unit lattice table. Returns per-pixel (level, count) arrays."""
     h, w = coc.shape
     tw, th = -(-w // TILE), -(-h // TILE)
-    a = np.pad(np.abs(coc), ((0, th * TILE - h), (0, tw * TILE - w)))
+    rmax = reach_rmax(rmax, reach)
+    a = np.pad((np.abs(coc).astype(np.float32) * np.float32(reach)).astype(np.float64),
+               ((0, th * TILE - h), (0, tw * TILE - w)))
     tmax = a.reshape(th, TILE, tw, TILE).max(axis=(1, 3)).astype(np.float32).astype(np.float64)
     ntaps = tap_table(budget, 0, 0.0, 0.0)[5]
     reach = (rmax + TILE) // TILE
@@ -495,18 +514,20 @@ def tile_plan(coc: np.ndarray, rmax: int, budget: int) -> tuple[np.ndarray, np.n
 
 def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int, blades: int,
                      rotation_deg: float, roundness: float, sa: float,
-                     vignetting: float) -> tuple[np.ndarray, np.ndarray]:
-    """The lattice gather in float64 (see the module docstring), tile plan included. Returns
-    (colour, front coverage α)."""
+                     vignetting: float, profile=None) -> tuple[np.ndarray, np.ndarray]:
+    """The lattice gather in float64 (see the module docstring), tile plan included. ``profile``:
+    ``(PencilMap, scale)`` of a traced lens (the traced texture, per channel; ``sa`` unused) or
+    None. Returns (colour, front coverage α of green)."""
     h, w = coc.shape
+    reach = pencil.T_MAX if profile is not None else 1.0
     dxs, dys, dists, rf, rn, _ = tap_table(budget, blades, rotation_deg, roundness)
     area = aperture_area(blades, rotation_deg, roundness)
-    nlev = levels_for(rmax, budget)
-    pad = gather_pad(rmax, budget)
+    nlev = levels_for(reach_rmax(rmax, reach), budget)
+    pad = gather_pad(reach_rmax(rmax, reach), budget)
     pc = np.pad(color, ((pad, pad), (pad, pad), (0, 0)), mode="edge")
     pr = np.pad(coc, pad, mode="edge")
     cols, cocs = prefiltered_levels(pc, pr, nlev)
-    lvl, cnt = tile_plan(coc, rmax, budget)
+    lvl, cnt = tile_plan(coc, rmax, budget, reach)
     s = (2 ** lvl).astype(np.float64)
     ys, xs = np.mgrid[0:h, 0:w]
     pupil = PupilModel(vignetting)
@@ -516,8 +537,8 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
     beta = np.clip(np.abs(rp) / s, 0.0, 1.0)
     own = pc[pad:pad + h, pad:pad + w]
     lvl_c = np.stack(cols)[lvl, ys + pad, xs + pad]
-    F = np.zeros((h, w, 3)); Wf = np.zeros((h, w))
-    B = np.zeros((h, w, 3)); Wb = np.zeros((h, w))
+    F = np.zeros((h, w, 3)); Wf = np.zeros((h, w, 3))  # per channel: a traced profile differs
+    B = np.zeros((h, w, 3)); Wb = np.zeros((h, w, 3))  # per colour (axial colour)
     col_stack, coc_stack = np.stack(cols), np.stack(cocs)
     for k in range(int(cnt.max())):
         live = k < cnt
@@ -536,28 +557,65 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
         far = rq >= 0
         rho = np.where(far, rf[k], rn[k])
         rr = r * rho
-        cov = np.clip((rr - dist) / s + 0.5, 0.0, 1.0)
-        t = np.minimum(dist / rr, 1.0)
-        a = np.where(far, -sa, sa)
-        wgt = cov * (1.0 + a * (2 * t * t - 1.0)) * s * s / (area * r * r)
+        cov = np.clip((rr * reach - dist) / s + 0.5, 0.0, 1.0)
+        if profile is None:
+            t = np.minimum(dist / rr, 1.0)
+            a = np.where(far, -sa, sa)
+            wgt = cov * (1.0 + a * (2 * t * t - 1.0)) * s * s / (area * r * r)
+            prof = np.ones(3)
+        else:
+            wgt = cov * s * s / (area * r * r)
+            prof = profile_weight(profile, rq, dist / rr)
         if vignetting > 0:
             hx, hy = field_position(xs + dx, ys + dy, w, h)
             sgn = np.where(far, 1.0, -1.0)
             ax, ay = -dx / (r * sgn), -dy / (r * sgn)
             e = np.hypot(ax - vignetting * hx, ay - vignetting * hy)
             wgt = wgt * np.clip((1.0 - e) * r + 0.5, 0.0, 1.0) / pupil.area_fraction(np.hypot(hx, hy))
-        wgt = np.where(live, wgt, 0.0)
-        wf = np.where(front, wgt, 0.0)
+        wgt = np.where(live, wgt, 0.0)[..., None] * prof
+        wf = np.where(front[..., None], wgt, 0.0)
         wb = wgt - wf
-        F += wf[..., None] * cq; Wf += wf
-        B += wb[..., None] * cq; Wb += wb
+        F += wf * cq; Wf += wf
+        B += wb * cq; Wb += wb
     alpha = np.minimum(1.0, Wf)
-    fr = np.where((Wf > 0)[..., None], F / np.where(Wf > 0, Wf, 1.0)[..., None], 0.0)
+    fr = np.where(Wf > 0, F / np.where(Wf > 0, Wf, 1.0), 0.0)
     # no background weight at all (a strong spherical-aberration texture zeroes the centre tap
     # and every other tap is in front): the background is the pixel's own colour, never 0/0
-    bg = np.where((Wb > 0)[..., None], B / np.where(Wb > 0, Wb, 1.0)[..., None], own)
-    out = alpha[..., None] * fr + (1 - alpha)[..., None] * bg
-    return out, alpha
+    bg = np.where(Wb > 0, B / np.where(Wb > 0, Wb, 1.0), own)
+    out = alpha * fr + (1 - alpha) * bg
+    return out, alpha[..., 1]
+
+
+PROFILE_RMAX_PX = 64.0
+"""Signed CoC radius (output px) of the pencil map's outermost rows: the largest max_coc_px of
+any quality, so one map serves them all."""
+
+
+def traced_profile(camera, width_px: int, quality: str | None = None):
+    """The :class:`clpost.optics.pencil.PencilMap` of ``camera``'s traced lens at its focus and
+    f-number, rows in output pixels up to ±:data:`PROFILE_RMAX_PX` (the gather looks rows up with
+    the tap's CoC × the working-resolution divisor), or None for a thin lens (the parametric
+    texture ``spherical_aberration`` then). Built once per (lens, focus, f-number, sensor, width)
+    for every quality and kept (cost: docs/bokeh_profile.md)."""
+    if camera.optics is None:
+        return None
+    key = (camera.lens, camera.f_number, camera.focus_distance_m, camera.sensor_mm, int(width_px))
+    pm = _PROFILES.get(key)
+    if pm is None:
+        if len(_PROFILES) >= 8:
+            _PROFILES.pop(next(iter(_PROFILES)))
+        pm = _PROFILES[key] = pencil.build_pencil_map(camera, camera.pixel_pitch_mm(width_px), PROFILE_RMAX_PX)
+    return pm
+
+
+_PROFILES: dict = {}
+
+
+def profile_weight(profile, rq: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(…, 3) traced texture of a tap: ``profile`` = (PencilMap, working-resolution divisor), ``rq``
+    the source's signed CoC (working px), ``t`` its distance over its bokeh radius."""
+    pm, scale = profile
+    return pencil.profile_at(pm, rq * scale, t)
 
 
 def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.ndarray, scale: int):
@@ -582,20 +640,20 @@ def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.nda
     return acc / wsum[..., None], acc_a / wsum
 
 
-def _half_composite(camera, color, coc, scale, rmax, budget):
+def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
     """The half-resolution path (draft, preview, and final's large-reach tiles): gather at the
     working resolution, depth-aware upsampling, composite with the full-resolution colour.
-    Returns (output, working CoC)."""
+    ``pm``: the traced profile (:func:`traced_profile`) or None. Returns (output, working CoC)."""
     cw, rw = _working(color, coc, scale)
     out, alpha = gather_reference(cw, rw, rmax, budget, camera.blades, camera.blade_rotation_deg,
                                   camera.aperture_roundness, camera.spherical_aberration,
-                                  camera.optical_vignetting)
+                                  camera.optical_vignetting, None if pm is None else (pm, scale))
     up, up_alpha = _upsample(out, alpha, rw, coc, scale)
     b = np.maximum(np.clip(np.abs(coc) - 0.5, 0.0, 1.0), up_alpha)
     return color + (up - color) * b[..., None], rw
 
 
-def mixed_mask(rw: np.ndarray, coc: np.ndarray, quality: str) -> np.ndarray:
+def mixed_mask(rw: np.ndarray, coc: np.ndarray, quality: str, reach: float = 1.0) -> np.ndarray:
     r"""Full-resolution pixels that ``quality`` takes from the half-resolution path: those in a
     working tile whose half-resolution plan (:func:`tile_plan`) has level ≥ :data:`MIXED_LEVEL`,
     or one of whose full-resolution child tiles has a level above :data:`MIXED_FULL_LEVELS` in
@@ -604,8 +662,8 @@ def mixed_mask(rw: np.ndarray, coc: np.ndarray, quality: str) -> np.ndarray:
     _, full_rmax, full_budget = QUALITY[quality]
     h, w = coc.shape
     hw, ww = rw.shape
-    lvl, _ = tile_plan(rw, rmax, budget)
-    lvl_full, _ = tile_plan(coc, full_rmax, full_budget)
+    lvl, _ = tile_plan(rw, rmax, budget, reach)
+    lvl_full, _ = tile_plan(coc, full_rmax, full_budget, reach)
     big = np.zeros((hw * scale, ww * scale), bool)
     big[:h, :w] = lvl_full > MIXED_FULL_LEVELS
     big = big.reshape(hw, scale, ww, scale).any(axis=(1, 3))  # per working pixel
@@ -625,15 +683,16 @@ def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "
     color = np.asarray(color, dtype=np.float64)
     h, w = depth.shape
     coc = coc_px(camera, effective_depth(color, depth, luma_weights(camera)), width_px or w, limit_px=scale * rmax)
+    pm = traced_profile(camera, width_px or w, quality)
     if scale > 1:
-        return _half_composite(camera, color, coc, scale, rmax, budget)[0]
+        return _half_composite(camera, color, coc, scale, rmax, budget, pm)[0]
     out, _ = gather_reference(color, coc, rmax, budget, camera.blades, camera.blade_rotation_deg,
                               camera.aperture_roundness, camera.spherical_aberration,
-                              camera.optical_vignetting)
+                              camera.optical_vignetting, None if pm is None else (pm, 1))
     if quality not in MIXED:
         return out
-    half, rw = _half_composite(camera, color, coc, *MIXED[quality])
-    return np.where(mixed_mask(rw, coc, quality)[..., None], half, out)
+    half, rw = _half_composite(camera, color, coc, *MIXED[quality], pm)
+    return np.where(mixed_mask(rw, coc, quality, 1.0 if pm is None else pencil.T_MAX)[..., None], half, out)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -667,15 +726,24 @@ class Dof(GatherStage):
 
     def reason_needed(self, camera, frame):
         coc = coc_px(camera, frame.depth, fld.image_width_px(frame))
+        texture = (f"bokeh texture traced from {camera.lens} per channel (pencil map, "
+                   f"{pencil.N_DEFOCUS}×{pencil.N_RADIUS} per channel)" if camera.optics is not None
+                   else f"parametric spherical aberration {camera.spherical_aberration:g}")
         return (f"CoC radius {np.min(coc):.3g} … {np.max(coc):.3g} px (max {max_coc_px(self.quality):g} px, "
-                f"{self.quality}), {camera.blades or 'round'} blades")
+                f"{self.quality}), {camera.blades or 'round'} blades, {texture}")
 
     def defines(self, camera):
         scale, rmax, budget = QUALITY[self.quality]
-        return {"DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_TILE": TILE, "DOF_BUDGET": budget,
-                "DOF_LEVELS": levels_for(rmax, budget),
+        traced = camera.optics is not None
+        reach = pencil.T_MAX if traced else 1.0
+        prof = {"DOF_PROF_ND": pencil.N_DEFOCUS, "DOF_PROF_NR": pencil.N_RADIUS,
+                "DOF_PROF_TMAX": f"{pencil.T_MAX!r}f",
+                "DOF_PROF_RK": f"{1.0 / PROFILE_RMAX_PX!r}f"} if traced else {}
+        return {"DOF_SCALE": scale, "DOF_RMAX": reach_rmax(rmax, reach), "DOF_TILE": TILE, "DOF_BUDGET": budget,
+                "DOF_LEVELS": levels_for(reach_rmax(rmax, reach), budget),
                 "DOF_VIGNETTING": int(camera.optical_vignetting > 0),
-                "DOF_TEXTURE": int(camera.spherical_aberration != 0),
+                "DOF_TEXTURE": int(camera.spherical_aberration != 0 and not traced),
+                "DOF_PROFILE": int(traced), "DOF_REACH": f"{reach!r}f", **prof,
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
 

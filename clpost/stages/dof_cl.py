@@ -74,6 +74,7 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
     every tile that would need a coarser level to the half-resolution gather). Scratch buffers
     are ``owner``'s, named with ``tag`` (one set per configuration)."""
 
+    rmax = D.reach_rmax(rmax, float(defines["DOF_REACH"].rstrip("f")))  # a traced bokeh reaches T_MAX r
     nlev = D.levels_for(rmax, budget)
     T = D.TILE
     ww, hw = -(-w // scale), -(-h // scale)
@@ -128,10 +129,11 @@ def _enqueue_plan(rt, c, src, coc, w, h):
     return evs
 
 
-def _enqueue_gather(rt, c, target, tn, camera, inv_area, vec):
+def _enqueue_gather(rt, c, target, tn, camera, inv_area, vec, prof):
     T, i32, f32 = D.TILE, np.int32, np.float32
     c["k"]["dof"].set_args(c["lv"], c["pv"], tn, *c["taps"], target, c["alpha"], i32(c["ww"]), i32(c["hw"]),
-                           i32(c["pad"]), i32(c["tw"]), inv_area, f32(camera.spherical_aberration), *c["field"])
+                           i32(c["pad"]), i32(c["tw"]), inv_area, f32(camera.spherical_aberration), *c["field"],
+                           prof)
     # one work-group per tile, DOF_VEC pixels of a row per work-item (dof.cl)
     return rt.launch(c["k"]["dof"], (c["tw"] * T // vec, c["th"] * T), (T // vec, T))
 
@@ -141,6 +143,22 @@ def _enqueue_upsample(rt, c, src, coc, dst, w, h, tn_mix):
     c["k"]["dof_upsample"].set_args(src, coc, c["blur"], c["alpha"], c["lv"], dst, i32(w), i32(h), i32(c["ww"]),
                                     i32(c["hw"]), i32(c["pad"]), tn_mix, i32(c["tw"]))
     return _launch_rows(rt, c["k"]["dof_upsample"], (w, h))
+
+
+def _profile_buffer(rt, stage, camera, width_px):
+    """The traced lens's pencil map (:func:`dof.traced_profile`) as float4 (R, G, B, 0) per (row,
+    bin), uploaded once per content; a one-element dummy for a thin lens."""
+    pm = D.traced_profile(camera, width_px, stage.quality)
+    if pm is None:
+        return rt.constant(np.zeros(4, np.float32), ("dof_profile", None))
+    key = ("dof_profile", camera.lens, camera.f_number, camera.focus_distance_m, camera.sensor_mm, width_px)
+
+    def make():
+        t = np.zeros(pm.table.shape[1:] + (4,), np.float32)
+        t[..., :3] = np.moveaxis(pm.table, 0, -1)
+        return t
+
+    return rt.constant(make, key)
 
 
 def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
@@ -174,6 +192,7 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
 
     cache = rt.cached(stage, "dof", key, make)
     c = cache["main"]
+    prof = _profile_buffer(rt, stage, camera, fld.image_width_px(frame))
     kc, inv_u = D.coc_coefficients(camera, fld.image_width_px(frame))
     i32, f32 = np.int32, np.float32
     evs = []
@@ -188,10 +207,10 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
                                          i32(hc["tw"]), i32(hc["th"]), i32(c["tw"]), i32(c["th"]))
         evs.append(_launch(rt, hc["k"]["dof_tile_mix"], (hc["tw"], hc["th"]), 4))
     evs.append(_enqueue_gather(rt, c, dst if scale == 1 else c["blur"], cache["tn_full"] if mixed else c["tn"],
-                               camera, cache["inv_area"], vec))
+                               camera, cache["inv_area"], vec, prof))
     if scale > 1:
         evs.append(_enqueue_upsample(rt, c, src, cache["coc"], dst, w, h, c["tn"]))
     if mixed:
-        evs.append(_enqueue_gather(rt, hc, hc["blur"], hc["tn_gather"], camera, cache["inv_area"], vec))
+        evs.append(_enqueue_gather(rt, hc, hc["blur"], hc["tn_gather"], camera, cache["inv_area"], vec, prof))
         evs.append(_enqueue_upsample(rt, hc, src, cache["coc"], dst, w, h, hc["mix"]))
     return evs
