@@ -139,14 +139,14 @@ inline float motion_blur_front(float wa, float wb) {
     return clamp(1.0f - (wb - wa) / (MOTION_BLUR_SOFT_Z * m), 0.0f, 1.0f);
 }
 
-__kernel void motion_blur(__global const float *restrict src, __global float *restrict dst,
-                                 __global const float *restrict hv, __global const float *restrict iz,
-                                 __global const float *restrict nmax,
-                                 const int width, const int height, const int tw, const int th,
-                                 const uint seed, const uint frame, const float inv_s)
+/* One pixel (the row's last 1-15 pixels of the kernel below); motion_blur_16 is the same
+ * arithmetic in 16 lanes. */
+inline void motion_blur_px(__global const float *restrict src, __global float *restrict dst,
+                           __global const float *restrict hv, __global const float *restrict iz,
+                           __global const float *restrict nmax, const int x, const int y,
+                           const int width, const int height, const int tw, const int th,
+                           const uint seed, const uint frame, const float inv_s)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= width || y >= height) return;
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
     const size_t tn = (size_t)tw * (size_t)th;
@@ -218,6 +218,113 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
     const float3 own = coc * (so / co) + (1.0f - coc) * (sb / wb);
     const float3 fr = cf > 0.0f ? sf / cf : cx;
     store_planar(dst, i, n, cfc * fr + (1.0f - cfc) * own);
+}
+
+
+/* The gather on 16 consecutive pixels of a row (x0 .. x0 + 15), every lane the arithmetic of
+ * motion_blur_px operation for operation (FP_CONTRACT OFF; the same roundings, so the same tap
+ * positions): PoCL does not vectorise the one-pixel form (float3, sqrt, smoothstep, data-dependent
+ * loads), explicit float16 compiles to 16-lane vector code. Taps are per-lane gathers. */
+#define MB_GATHER(buf, k) CLP_GATHER16(buf, k)
+inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
+    return 1.0f - smoothstep(0.95f * len, 1.05f * len, dist);
+}
+
+inline void motion_blur_16(__global const float *restrict src, __global float *restrict dst,
+                           __global const float *restrict hv, __global const float *restrict iz,
+                           __global const float *restrict nmax, const int x0, const int y,
+                           const int width, const int height, const int tw, const int th,
+                           const uint seed, const uint frame, const float inv_s)
+{
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
+    const size_t tn = (size_t)tw * (size_t)th;
+    const int16 xs = (int16)(x0) + convert_int16(CLP_ULANES16);
+    const int16 t = (int16)((y / MOTION_BLUR_TILE) * tw) + xs / MOTION_BLUR_TILE;
+    const float16 vnx = MB_GATHER(nmax, t), vny = MB_GATHER(nmax + tn, t);
+    const float16 cxr = vload16(0, src + i0), cxg = vload16(0, src + n + i0), cxb = vload16(0, src + 2 * n + i0);
+    const float16 l2n = vnx * vnx + vny * vny;
+    const int16 still = l2n <= 0.25f;             /* nothing in reach moves by half a pixel */
+    if (all(still)) {
+        vstore16(cxr, 0, dst + i0); vstore16(cxg, 0, dst + n + i0); vstore16(cxb, 0, dst + 2 * n + i0);
+        return;
+    }
+    const float16 hx = vload16(0, hv + i0), hy = vload16(0, hv + n + i0);
+    const float16 lhx = sqrt(hx * hx + hy * hy);
+    const float16 lx = fmax(lhx, 0.5f);
+    const int16 own_dir = lhx > 0.5f;
+    const float16 vxx = own_dir ? hx : vnx, vxy = own_dir ? hy : vny;   /* odd taps follow X's own motion */
+    const float16 ln = sqrt(l2n);
+    const float16 lv = sqrt(vxx * vxx + vxy * vxy);
+    const float16 cosang = (vnx * vxx + vny * vxy) / fmax(ln * lv, 1e-30f);
+    const float16 agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
+    const float16 wx = vload16(0, iz + i0);
+    const uint16 hj = rnd_hash4_w16(seed, frame, convert_uint16(xs), (uint16)((uint)y));
+    const float16 j = convert_float16(hj >> 8) * (1.0f / 16777216.0f) - 0.5f;   /* motion_blur_jitter */
+    const float16 hdn = ln * inv_s, hdv = lv * inv_s;
+    const float16 wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
+    const float16 xf = convert_float16(xs), yf = (float16)((float)y);
+    float16 cf = 0.0f, co = wc, wb = 1e-3f;
+    float16 sfr = 0.0f, sfg = 0.0f, sfb = 0.0f;
+    float16 sor = cxr * wc, sog = cxg * wc, sob = cxb * wc;
+    float16 sbr = cxr * wb, sbg = cxg * wb, sbb = cxb * wb;
+    for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
+        if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre stratum is X itself */
+        const int odd = s & 1;
+        const float16 dx = odd ? vxx : vnx, dy = odd ? vxy : vny;
+        const float16 u = ((float)s + 0.5f + j) * inv_s;
+        const float16 tt = 2.0f * u - 1.0f;
+        const float16 ox = dx * tt;
+        const float16 oy = dy * tt;
+        const int16 sx = clamp(convert_int16(floor(xf + ox + 0.5f)), 0, width - 1);
+        const int16 sy = clamp(convert_int16(floor(yf + oy + 0.5f)), 0, height - 1);
+        const int16 k = sy * width + sx;
+        const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y);
+        const float16 dist = sqrt(ddx * ddx + ddy * ddy);
+        const float16 hyx = MB_GATHER(hv, k), hyy = MB_GATHER(hv + n, k);
+        const float16 ly = fmax(sqrt(hyx * hyx + hyy * hyy), 0.5f);
+        const float16 wy = MB_GATHER(iz, k);
+        const float16 r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f));
+        const float16 f = clamp(1.0f - r, 0.0f, 1.0f);
+        const float16 b = clamp(1.0f + r, 0.0f, 1.0f);
+        const float16 cly = motion_blur_cyl16(dist, ly);
+        const float16 a = cly * (odd ? hdv : hdn) / ly;
+        const float16 clx = motion_blur_cyl16(dist, lx);
+        const float16 own = b * clx;
+        const float16 af = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f));
+        const float16 ao = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f));
+        const float16 ab = b * ((1.0f - f) + f * (1.0f - cly)) * clx;
+        const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k);
+        cf += af; sfr += af * cr; sfg += af * cg; sfb += af * cb;
+        co += ao; sor += ao * cr; sog += ao * cg; sob += ao * cb;
+        wb += ab; sbr += ab * cr; sbg += ab * cg; sbb += ab * cb;
+    }
+    const float16 cfc = fmin(cf, 1.0f), coc = fmin(co, 1.0f);
+    const int16 front = cf > 0.0f;
+    const float16 our = coc * (sor / co) + (1.0f - coc) * (sbr / wb);
+    const float16 oug = coc * (sog / co) + (1.0f - coc) * (sbg / wb);
+    const float16 oub = coc * (sob / co) + (1.0f - coc) * (sbb / wb);
+    const float16 frr = front ? sfr / cf : cxr, frg = front ? sfg / cf : cxg, frb = front ? sfb / cf : cxb;
+    vstore16(still ? cxr : cfc * frr + (1.0f - cfc) * our, 0, dst + i0);
+    vstore16(still ? cxg : cfc * frg + (1.0f - cfc) * oug, 0, dst + n + i0);
+    vstore16(still ? cxb : cfc * frb + (1.0f - cfc) * oub, 0, dst + 2 * n + i0);
+}
+
+/* 16 pixels of a row per work-item (x0 = 16 gid0); the row's last 1-15 one by one */
+__kernel void motion_blur(__global const float *restrict src, __global float *restrict dst,
+                          __global const float *restrict hv, __global const float *restrict iz,
+                          __global const float *restrict nmax,
+                          const int width, const int height, const int tw, const int th,
+                          const uint seed, const uint frame, const float inv_s)
+{
+    const int x0 = get_global_id(0) * 16, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    if (x0 + 16 <= width) {
+        motion_blur_16(src, dst, hv, iz, nmax, x0, y, width, height, tw, th, seed, frame, inv_s);
+    } else {
+        for (int x = x0; x < width; ++x)
+            motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame, inv_s);
+    }
 }
 
 /* rolling shutter: row y is exposed tau_y = r (y/(H-1) - 1/2) frames after the frame time, so it
