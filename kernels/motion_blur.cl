@@ -38,13 +38,11 @@ inline float motion_blur_len2(float2 v) {
  * speed is > MOTION_BLUR_FRINGE times the fastest of its 3 x 3 neighbours (first in scan order on
  * ties) takes that neighbour's velocity and depth: its colour is (partly) that surface's. */
 #define MOTION_BLUR_FRINGE2 0.01f  /* MOTION_BLUR_FRINGE = 0.1, squared */
-__kernel void motion_blur_prep(__global const float *restrict velocity,
-                               __global const float *restrict depth,
-                               __global float *restrict hv, __global float *restrict iz,
-                               const int width, const int height, const float k)
+inline void motion_blur_prep_px(__global const float *restrict velocity,
+                                __global const float *restrict depth,
+                                __global float *restrict hv, __global float *restrict iz,
+                                const int x, const int y, const int width, const int height, const float k)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= width || y >= height) return;
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
     float2 v = (float2)(velocity[2 * i], velocity[2 * i + 1]);
@@ -78,6 +76,69 @@ __kernel void motion_blur_prep(__global const float *restrict velocity,
     hv[n + i] = h.y;
     hv[2 * n + i] = len;
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
+}
+
+/* motion_blur_prep_px on 16 pixels of a row (x0 - 1 >= 0 and x0 + 16 < width: no column clamp),
+ * lane for lane the same operations; neighbours are row loads at offsets -1, 0, +1 (velocity
+ * interleaved: even/odd lanes of 32 floats). */
+inline void motion_blur_prep_16(__global const float *restrict velocity,
+                                __global const float *restrict depth,
+                                __global float *restrict hv, __global float *restrict iz,
+                                const int x0, const int y, const int width, const int height, const float k)
+{
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
+    float16 vx = (float16)(vload16(0, velocity + 2 * i0).even, vload16(1, velocity + 2 * i0).even);
+    float16 vy = (float16)(vload16(0, velocity + 2 * i0).odd, vload16(1, velocity + 2 * i0).odd);
+    float16 z = vload16(0, depth + i0);
+    const float16 own2 = vx * vx + vy * vy;
+    float16 best2 = own2, bx = vx, by = vy, bz = z;
+    for (int dy = -1; dy <= 1; ++dy) {
+        const int sy = clamp(y + dy, 0, height - 1);
+        for (int dx = -1; dx <= 1; ++dx) {
+            const size_t j = (size_t)sy * (size_t)width + (size_t)(x0 + dx);
+            const float16 a = vload16(0, velocity + 2 * j), b = vload16(1, velocity + 2 * j);
+            const float16 nx = (float16)(a.even, b.even), ny = (float16)(a.odd, b.odd);
+            const float16 s2 = nx * nx + ny * ny;
+            const int16 m = s2 > best2;
+            best2 = m ? s2 : best2;
+            bx = m ? nx : bx;
+            by = m ? ny : by;
+            bz = m ? vload16(0, depth + j) : bz;
+        }
+    }
+    const int16 take = own2 > 0.0f && own2 > MOTION_BLUR_FRINGE2 * best2;
+    vx = take ? bx : vx;
+    vy = take ? by : vy;
+    z = take ? bz : z;
+    const float16 m = fmax(fabs(vx), fabs(vy));
+    const int16 moving = m > 0.0f;
+    const float16 ux = vx / m, uy = vy / m;
+    const float16 lu = sqrt(ux * ux + uy * uy);
+    const float16 len = lu * m * k;
+    const float16 r = fmin(len, (float)MOTION_BLUR_TILE);
+    const float16 hx = ux * (r / lu), hy = uy * (r / lu);
+    vstore16(moving ? hx : 0.0f, 0, hv + i0);
+    vstore16(moving ? hy : 0.0f, 0, hv + n + i0);
+    vstore16(moving ? len : 0.0f, 0, hv + 2 * n + i0);
+    vstore16(isinf(z) ? 0.0f : 1.0f / z, 0, iz + i0);
+}
+
+/* h, |h| key and 1/depth per pixel: 16 pixels of a row per work-item (x0 = 16 gid0); groups that
+ * touch the left or right edge one pixel at a time (their neighbours clamp) */
+__kernel void motion_blur_prep(__global const float *restrict velocity,
+                               __global const float *restrict depth,
+                               __global float *restrict hv, __global float *restrict iz,
+                               const int width, const int height, const float k)
+{
+    const int x0 = get_global_id(0) * 16, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    if (x0 >= 1 && x0 + 16 < width) {
+        motion_blur_prep_16(velocity, depth, hv, iz, x0, y, width, height, k);
+    } else {
+        for (int x = x0; x < min(x0 + 16, width); ++x)
+            motion_blur_prep_px(velocity, depth, hv, iz, x, y, width, height, k);
+    }
 }
 
 /* largest half-vector (by length; first in scan order on ties) of each K x K tile */

@@ -252,7 +252,7 @@ class MotionBlur(GatherStage):
             k = self._kernel(rt, camera, "motion_blur_prep")
             k.set_args(aux["velocity"], aux["depth"], b["hv"], b["iz"], np.int32(w), np.int32(h),
                        np.float32(shutter_fraction(camera) / 2.0))
-            events.append(rt.launch(k, (w, h)))
+            events.append(rt.launch(k, (-(-w // 16), h), (8, 1)))
             k = self._kernel(rt, camera, "motion_blur_tilemax")
             k.set_args(b["hv"], b["tile"], np.int32(w), np.int32(h), np.int32(tw), np.int32(th))
             events.append(rt.launch(k, (tw, th)))
