@@ -4,7 +4,7 @@
  *
  * Buffers: colour planar (c*n + i); velocity interleaved (2i, 2i+1) px per frame, forward,
  * +x right, +y down; depth planar metres (+inf sky). Scratch: hv = clamped half-vectors and
- * their unclamped length (3 planes: x, y, key), iz = 1/depth (0 for sky), tile and
+ * their unclamped length and max(|h|, 0.5) (4 planes: x, y, key, length), iz = 1/depth (0 for sky), tile and
  * neighbour-max (3 planes each). Maxima are ranked by the unclamped length: clamped vectors all
  * have length K, and ranking them by a rounding-level difference would not be reproducible.
  *
@@ -75,6 +75,7 @@ inline void motion_blur_prep_px(__global const float *restrict velocity,
     hv[i] = h.x;
     hv[n + i] = h.y;
     hv[2 * n + i] = len;
+    hv[3 * n + i] = fmax(sqrt(motion_blur_len2(h)), 0.5f);   /* the gather's |h| (>= 0.5), one load per tap */
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
 }
 
@@ -118,9 +119,11 @@ inline void motion_blur_prep_16(__global const float *restrict velocity,
     const float16 len = lu * m * k;
     const float16 r = fmin(len, (float)MOTION_BLUR_TILE);
     const float16 hx = ux * (r / lu), hy = uy * (r / lu);
-    vstore16(moving ? hx : 0.0f, 0, hv + i0);
-    vstore16(moving ? hy : 0.0f, 0, hv + n + i0);
+    const float16 hx0 = moving ? hx : 0.0f, hy0 = moving ? hy : 0.0f;
+    vstore16(hx0, 0, hv + i0);
+    vstore16(hy0, 0, hv + n + i0);
     vstore16(moving ? len : 0.0f, 0, hv + 2 * n + i0);
+    vstore16(fmax(sqrt(hx0 * hx0 + hy0 * hy0), 0.5f), 0, hv + 3 * n + i0);
     vstore16(isinf(z) ? 0.0f : 1.0f / z, 0, iz + i0);
 }
 
@@ -311,9 +314,8 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
         return;
     }
     const float16 hx = vload16(0, hv + i0), hy = vload16(0, hv + n + i0);
-    const float16 lhx = sqrt(hx * hx + hy * hy);
-    const float16 lx = fmax(lhx, 0.5f);
-    const int16 own_dir = lhx > 0.5f;
+    const float16 lx = vload16(0, hv + 3 * n + i0);   /* max(|h_X|, 0.5) */
+    const int16 own_dir = lx > 0.5f;                   /* |h_X| > 0.5 */
     const float16 vxx = own_dir ? hx : vnx, vxy = own_dir ? hy : vny;   /* odd taps follow X's own motion */
     const float16 ln = sqrt(l2n);
     const float16 lv = sqrt(vxx * vxx + vxy * vxy);
@@ -342,8 +344,7 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
         const int16 k = sy * width + sx;
         const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y);
         const float16 dist = sqrt(ddx * ddx + ddy * ddy);
-        const float16 hyx = MB_GATHER(hv, k), hyy = MB_GATHER(hv + n, k);
-        const float16 ly = fmax(sqrt(hyx * hyx + hyy * hyy), 0.5f);
+        const float16 ly = MB_GATHER(hv + 3 * n, k);   /* max(|h_Y|, 0.5) */
         const float16 wy = MB_GATHER(iz, k);
         const float16 r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f));
         const float16 f = clamp(1.0f - r, 0.0f, 1.0f);

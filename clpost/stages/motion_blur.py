@@ -232,7 +232,7 @@ class MotionBlur(GatherStage):
 
     def _buffers(self, rt, w, h):
         tw, th = -(-w // TILE), -(-h // TILE)
-        return dict(hv=rt.scratch(self, "hv", (3, h, w)), iz=rt.scratch(self, "iz", (h, w)),
+        return dict(hv=rt.scratch(self, "hv", (4, h, w)), iz=rt.scratch(self, "iz", (h, w)),
                     tile=rt.scratch(self, "tile", (3, th, tw)), nmax=rt.scratch(self, "nmax", (2, th, tw)),
                     tmp=rt.scratch(self, "tmp", (3, h, w)), tw=tw, th=th)
 
