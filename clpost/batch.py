@@ -8,8 +8,8 @@ with an error naming it (the outputs already written are complete and stay).
 Overlap (:func:`process_sequence`): frame k+1 is read by a reader thread and frame k−1 written by
 a writer thread while frame k runs on the device, so a sequence costs about the slowest of read,
 process and write per frame instead of their sum (OpenEXR's decoding and encoding, numpy copies
-and OpenCL waits release the GIL). At most one read ahead and one write behind: three frames in
-memory. Errors keep the serial loop's order: frame k's error is raised only after every earlier
+and OpenCL waits release the GIL; OpenEXR also gets one thread per CPU, :func:`exr_threads`). At
+most one read ahead and one write behind: three frames in memory. Errors keep the serial loop's order: frame k's error is raised only after every earlier
 frame's output is complete.
 """
 from __future__ import annotations
@@ -225,6 +225,17 @@ def first_size(jobs: list[FrameJob]) -> tuple[int, int] | None:
     return None
 
 
+def exr_threads() -> None:
+    """Let OpenEXR (de)compress a file's line blocks on its own threads, one per CPU (its default is
+    none): only where nobody set a count before (a caller's choice stays)."""
+    import os
+
+    import OpenEXR
+
+    if hasattr(OpenEXR, "set_global_thread_count") and OpenEXR.global_thread_count() == 0:
+        OpenEXR.set_global_thread_count(os.cpu_count() or 1)
+
+
 def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | None = None,
                      overwrite: bool = False, half: bool = False, compression: str = "zip",
                      progress: Callable[[FrameJob, float | None], None] | None = None,
@@ -239,6 +250,7 @@ def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | 
     size = first_size(todo)  # the inputs' size (an output may differ: a calibration's own size)
     if not todo:
         return report
+    exr_threads()
     t_last = time.perf_counter()
 
     def finished(job: FrameJob, write) -> None:
