@@ -10,8 +10,11 @@ For every (scene, resolution, quality) the plan of :class:`~clpost.pipeline.Pipe
   (float32 RGB in and out, N pixels; the depth/velocity terms when the launch reads them) — a
   stage with a ``bench_bytes(camera, frame)`` method declares its own;
 * achieved GB/s and its percentage of the **copy-kernel bandwidth measured in the same run**
-  (a one-line ``float4`` copy kernel over a buffer of one RGB frame; ``clEnqueueCopyBuffer``
-  is slower than a kernel on some drivers, which gave > 100 %);
+  (a one-line ``float4`` copy kernel over a buffer of one RGB frame, run once after each timed
+  plan run so it sees the same load, median; ``clEnqueueCopyBuffer`` is slower than a kernel on
+  some drivers, which gave > 100 %), and **×copy**: device ms as a multiple of one copy pass over
+  the frame at the run's copy bandwidth (median over the rows) — the unit of the targets
+  (:data:`TARGET_COPY_PASSES`), comparable across machines;
 * taps/s for gathers, from the stage's ``taps_per_pixel(camera, frame)`` (colour samples per
   output pixel, all channels);
 * end to end: the sum of device time (no transfers) and the wall time of ``Pipeline.run``
@@ -206,24 +209,36 @@ _COPY_SRC = """__kernel void bench_copy(__global const float4 *restrict a, __glo
 }"""
 
 
+class CopyKernel:
+    """A float4 copy kernel over ``nbytes`` (one RGB frame): :meth:`gbps` runs it once and returns
+    its bandwidth (read + write bytes / device time). The bench runs it right after each timed
+    plan run, so it sees the same load as that run (load moves it by 2–3× within minutes)."""
+
+    def __init__(self, rt, nbytes: int) -> None:
+        import pyopencl as cl
+
+        self.rt, self.n4 = rt, max(1, nbytes // 16)
+        self.a, self.b = rt.empty((self.n4 * 4,)), rt.empty((self.n4 * 4,))
+        cl.enqueue_fill_buffer(rt.queue, self.a, np.float32(1), 0, self.n4 * 16).wait()
+        self.k = rt.kernel(_COPY_SRC, "bench_copy")
+        self.k.set_args(self.a, self.b)
+        for _ in range(2):  # first launches
+            self.gbps()
+
+    def gbps(self) -> float:
+        import pyopencl as cl
+
+        from .runtime import event_ms
+
+        ev = cl.enqueue_nd_range_kernel(self.rt.queue, self.k, (self.n4,), None)
+        ev.wait()
+        return 2 * self.n4 * 16 / (event_ms(ev) * 1e-3) / 1e9
+
+
 def copy_kernel_gbps(rt, nbytes: int, repeats: int) -> float:
     """Device copy bandwidth (read + write bytes / time) of a float4 copy kernel, median."""
-    import pyopencl as cl
-
-    from .runtime import event_ms
-
-    n4 = max(1, nbytes // 16)
-    a, b = rt.empty((n4 * 4,)), rt.empty((n4 * 4,))
-    cl.enqueue_fill_buffer(rt.queue, a, np.float32(1), 0, n4 * 16).wait()
-    k = rt.kernel(_COPY_SRC, "bench_copy")
-    k.set_args(a, b)
-    times = []
-    for i in range(repeats + 2):
-        ev = cl.enqueue_nd_range_kernel(rt.queue, k, (n4,), None)
-        ev.wait()
-        if i >= 2:
-            times.append(event_ms(ev))
-    return 2 * n4 * 16 / (statistics.median(times) * 1e-3) / 1e9
+    c = CopyKernel(rt, nbytes)
+    return statistics.median(c.gbps() for _ in range(max(1, repeats)))
 
 
 def cv2_remap_ms(stage, cam: Camera, frame: Frame, repeats: int) -> float | None:
@@ -277,7 +292,8 @@ def _bench_case(scene: Scene, width: int, height: int, *, quality: str = "final"
         not_available[f"Camera.{f}"] = "field not in this build"
     plan = launches(pipe, frame, rcam)
     per: dict[str, list[float]] = {}
-    walls, hosts = [], []
+    walls, hosts, copies = [], [], []
+    copier = CopyKernel(pipe.runtime, width * height * BYTES_PER_PIXEL["color"])
     for i in range(warmup + repeats):
         t0 = time.perf_counter()
         pipe.run(frame)
@@ -287,8 +303,9 @@ def _bench_case(scene: Scene, width: int, height: int, *, quality: str = "final"
             hosts.append(pipe.last_plan.last_host_ms if pipe.last_plan else 0.0)
             for k, v in pipe.last_timings.items():
                 per.setdefault(k, []).append(v)
+            copies.append(copier.gbps())  # interleaved with the plan's runs: the same load
     med = {k: statistics.median(v) for k, v in per.items()}
-    copy = copy_kernel_gbps(pipe.runtime, width * height * BYTES_PER_PIXEL["color"], repeats)
+    copy = statistics.median(copies) if copies else copier.gbps()
     kernels = []
     for L in plan:
         ms = med.get(L["kernel"], 0.0)
