@@ -151,8 +151,10 @@ class Grain(GatherStage):
         return {}
 
     def taps_per_pixel(self, camera, frame) -> int | None:
-        """Normals drawn per pixel, all three layers, on the Gaussian path (1 or 3×3 per layer,
-        for ``clpost bench`` taps/s); None on the Boolean path, whose work varies with density."""
+        """Filter taps per pixel, all three layers, on the Gaussian path (1 or 3×3 normals per
+        layer, for ``clpost bench`` taps/s — the kernel draws ≈ 1.5 per pixel and layer and filters
+        them separably, :data:`GAUSSIAN_ROWS`); None on the Boolean path, whose work varies with
+        density."""
         _, _, _, span, r, boolean = self._setup(camera, fld.image_width_px(frame))
         if boolean:
             return None
