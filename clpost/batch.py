@@ -1,14 +1,22 @@
-"""Process a frame sequence: read → plan → run → write, one frame at a time.
+"""Process a frame sequence: read → plan → run → write, frames in order.
 
 The one loop behind ``clpost process`` (and the demo). Each output is written atomically, so an
 interrupted run leaves only complete frames; existing outputs are skipped unless ``overwrite``,
 so a rerun resumes. Frames of a sequence must share one size: a frame that differs stops the run
 with an error naming it (the outputs already written are complete and stay).
+
+Overlap (:func:`process_sequence`): frame k+1 is read by a reader thread and frame k−1 written by
+a writer thread while frame k runs on the device, so a sequence costs about the slowest of read,
+process and write per frame instead of their sum (OpenEXR's decoding and encoding, numpy copies
+and OpenCL waits release the GIL; OpenEXR also gets one thread per CPU, :func:`exr_threads`). At
+most one read ahead and one write behind: three frames in memory. Errors keep the serial loop's order: frame k's error is raised only after every earlier
+frame's output is complete.
 """
 from __future__ import annotations
 
 import time
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -102,6 +110,16 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
     (:mod:`clpost.aovs`). The output's effective camera (:mod:`clpost.labels.camera_files`) goes
     into an .exr's header, and with ``camera_files`` beside the output in OpenCV, Kalibr and COLMAP
     form."""
+    cam, frame = load_job(pipeline, job, layout, expect_size, sources)
+    out, store = run_job(pipeline, job, cam, frame, display, aovs)
+    store_job(job, out, store, half, compression, display, preview_dir, camera_files)
+    return out
+
+
+def load_job(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
+             expect_size: tuple[int, int] | None = None, sources=None) -> tuple:
+    """Read step of :func:`process_one`: (this frame's camera or None, the input frame with its
+    frame index) — checked against the sequence's size."""
     cam = frame_camera(sources, job)
     frame = read_input(pipeline, job.src, layout, cam)
     # the image size is the display window's (a data window may change per frame, as a render's
@@ -114,6 +132,14 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
         )
     # The frame number seeds grain/sensor noise (CONVENTIONS "Randomness"): frames differ, reruns agree.
     frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(job.frame)), validate=False)
+    return cam, frame
+
+
+def run_job(pipeline: Pipeline, job: FrameJob, cam, frame: Frame, display="srgb",
+            aovs: tuple[str, ...] = ()) -> tuple[Frame, tuple]:
+    """Device step of :func:`process_one` (the pipeline's thread): the processed frame and what
+    :func:`store_job` needs (working space, input chromaticities, AOV channels, the camera used
+    and the effective camera)."""
     out = pipeline.run(frame, cam)
     ws = (cam or pipeline.camera).working_space
     chroma = input_chromaticities(display, job.src, frame.metadata)
@@ -122,10 +148,19 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
         from .aovs import compute
 
         extra = compute(pipeline.runtime, out.metadata.get("resolved_camera") or cam or pipeline.camera, out, aovs)
-    from .labels.camera_files import camera_header, effective_camera, write_camera_files
+    from .labels.camera_files import effective_camera
 
     used = out.metadata.get("resolved_camera") or cam or pipeline.camera
     eff = effective_camera(used, frame, out.metadata.get("plan", ()), pipeline.quality)
+    return out, (ws, chroma, extra, used, eff)
+
+
+def store_job(job: FrameJob, out: Frame, store: tuple, half: bool = False, compression: str = "zip",
+              display="srgb", preview_dir: Path | None = None, camera_files: bool = False) -> None:
+    """Write step of :func:`process_one`: the output (atomically), its camera files and preview."""
+    from .labels.camera_files import camera_header, write_camera_files
+
+    ws, chroma, extra, used, eff = store
     header = {**output_header(out), **camera_header(eff)}
     write_output(job.dst, out, header, display=display, working_space=ws, half=half,
                  compression=compression, chroma=chroma, extra=extra, camera=used)
@@ -138,7 +173,6 @@ def process_one(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
     elif preview_dir is not None:
         write_image(preview_path(job.dst, preview_dir), display_window(out).color, display=display,
                     working_space=ws, option="--preview", chroma=chroma)
-    return out
 
 
 def input_chromaticities(display, src: Path | None, metadata: dict | None = None):
@@ -213,23 +247,64 @@ def first_size(jobs: list[FrameJob]) -> tuple[int, int] | None:
     return None
 
 
+def exr_threads() -> None:
+    """Let OpenEXR (de)compress a file's line blocks on its own threads, one per CPU (its default is
+    none): only where nobody set a count before (a caller's choice stays)."""
+    import os
+
+    import OpenEXR
+
+    if hasattr(OpenEXR, "set_global_thread_count") and OpenEXR.global_thread_count() == 0:
+        OpenEXR.set_global_thread_count(os.cpu_count() or 1)
+
+
 def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | None = None,
                      overwrite: bool = False, half: bool = False, compression: str = "zip",
                      progress: Callable[[FrameJob, float | None], None] | None = None,
                      display="srgb", preview_dir: Path | None = None, sources=None,
                      aovs: tuple[str, ...] = (), camera_files: bool = False) -> BatchReport:
-    """Process ``jobs`` in order; ``progress(job, seconds or None if skipped)`` after each;
-    ``sources``: an animated camera (per-frame, :mod:`clpost.camera_sources`)."""
+    """Process ``jobs`` in order, reading ahead and writing behind (module docstring);
+    ``progress(job, seconds or None if skipped)`` after each output is complete, seconds = the
+    time since the previous frame completed (the sequence's pace per frame); ``sources``: an
+    animated camera (per-frame, :mod:`clpost.camera_sources`)."""
     report = BatchReport()
     todo = pending(jobs, overwrite, report, progress)
     size = first_size(todo)  # the inputs' size (an output may differ: a calibration's own size)
-    for job in todo:
-        t0 = time.perf_counter()
-        process_one(pipeline, job, layout, half, size, compression, display, preview_dir, sources, aovs,
-                    camera_files)
-        dt = time.perf_counter() - t0
+    if not todo:
+        return report
+    exr_threads()
+    t_last = time.perf_counter()
+
+    def finished(job: FrameJob, write) -> None:
+        nonlocal t_last
+        write.result()  # a failed write raises here, before any later frame's error
+        now = time.perf_counter()
         report.done.append(job.frame)
-        report.seconds.append(dt)
+        report.seconds.append(now - t_last)
+        t_last = now
         if progress:
-            progress(job, dt)
+            progress(job, report.seconds[-1])
+
+    with ThreadPoolExecutor(1, thread_name_prefix="clpost-read") as reader, \
+            ThreadPoolExecutor(1, thread_name_prefix="clpost-write") as writer:
+        ahead = reader.submit(load_job, pipeline, todo[0], layout, size, sources)
+        behind = None  # (job, future) of the write in flight
+        try:
+            for k, job in enumerate(todo):
+                cam, frame = ahead.result()
+                if k + 1 < len(todo):
+                    ahead = reader.submit(load_job, pipeline, todo[k + 1], layout, size, sources)
+                out, store = run_job(pipeline, job, cam, frame, display, aovs)
+                if behind is not None:
+                    done, behind = behind, None
+                    finished(*done)
+                behind = (job, writer.submit(store_job, job, out, store, half, compression, display,
+                                                    preview_dir, camera_files))
+            done, behind = behind, None
+            finished(*done)
+        except BaseException:
+            ahead.cancel()
+            if behind is not None:  # frame k failed: frame k-1's output completes first (its own
+                finished(*behind)   # write error, if any, is raised instead, as the serial loop would)
+            raise
     return report

@@ -101,6 +101,14 @@ def library(width: int = 1, suffix: str = "") -> str:
     return kernel_source("common") + width_block(width, suffix) + "".join(kernel_source(n) for n in LIBRARIES)
 
 
+@functools.lru_cache(maxsize=None)
+def library_lanes16() -> str:
+    """The width-generic libraries at :data:`VECTOR_PIXELS` lanes (``clp_log2_w16``,
+    ``rnd_hash4_w16``, ...), to follow :func:`library` in a gather's program that works on 16
+    pixels of a row per work-item (grain, motion_blur)."""
+    return width_block(VECTOR_PIXELS) + "".join(kernel_source(n) for n in LIBRARIES)
+
+
 def _instantiate(stages: "list[PointwiseStage]", width: int) -> str:
     """The libraries and every stage's source at ``width``; entry points ``<name>_apply_w<width>``."""
     parts = [width_block(width)] + [kernel_source(n) for n in LIBRARIES]

@@ -189,8 +189,11 @@ class Frame:
         h, w = color.shape[:2]
         if h < 1 or w < 1:
             raise InputError(f"Frame.color: empty image of shape {color.shape}")
-        _first_bad("color", np.isnan(color).any(axis=2), "are NaN", "fix the renderer output (NaN is never valid)")
-        _first_bad("color", np.isinf(color).any(axis=2), "are ±inf", "clamp color to finite values")
+        # one fast scan of the whole buffer; the per-pixel search (a slow reduction over the channel
+        # axis) only to name the first bad pixel — a reader's frame is validated every frame
+        if not np.isfinite(color).all():
+            _first_bad("color", np.isnan(color).any(axis=2), "are NaN", "fix the renderer output (NaN is never valid)")
+            _first_bad("color", np.isinf(color).any(axis=2), "are ±inf", "clamp color to finite values")
         object.__setattr__(self, "color", color)
 
         if self.depth is not None:
@@ -199,9 +202,10 @@ class Frame:
                 depth = np.ascontiguousarray(depth[:, :, 0])
             if depth.shape != (h, w):
                 raise InputError(f"Frame.depth: shape {depth.shape} does not match color {(h, w)}; give H×W planar depth")
-            _first_bad("depth", np.isnan(depth), "are NaN", "use +inf for background, never NaN")
-            _first_bad("depth", ~(depth > 0), "are <= 0 or -inf",
-                       "depth is planar camera-space Z in metres (> 0); convert negative eye-space z or NDC depth first")
+            if not (depth > 0).all():  # NaN, <= 0 and -inf all fail `> 0`
+                _first_bad("depth", np.isnan(depth), "are NaN", "use +inf for background, never NaN")
+                _first_bad("depth", ~(depth > 0), "are <= 0 or -inf",
+                           "depth is planar camera-space Z in metres (> 0); convert negative eye-space z or NDC depth first")
             object.__setattr__(self, "depth", depth)
             self.depth_range  # noqa: B018 — computed with the validation scans, not per plan run
 
@@ -209,8 +213,9 @@ class Frame:
             vel = _as_float32("velocity", self.velocity, copy)
             if vel.shape != (h, w, 2):
                 raise InputError(f"Frame.velocity: shape {vel.shape} is not (H, W, 2) = {(h, w, 2)}")
-            _first_bad("velocity", np.isnan(vel).any(axis=2), "are NaN", "fix the renderer's vector pass")
-            _first_bad("velocity", np.isinf(vel).any(axis=2), "are ±inf", "clamp velocity to finite pixels per frame")
+            if not np.isfinite(vel).all():
+                _first_bad("velocity", np.isnan(vel).any(axis=2), "are NaN", "fix the renderer's vector pass")
+                _first_bad("velocity", np.isinf(vel).any(axis=2), "are ±inf", "clamp velocity to finite pixels per frame")
             object.__setattr__(self, "velocity", vel)
             self.velocity_max  # noqa: B018 — with the validation scans, not per plan run
 

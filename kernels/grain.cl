@@ -3,6 +3,9 @@
  * clpost/stages/grain.py and clpost/grain_model.py. Coordinates: pixel x covers [x, x+1).
  */
 #define GRAIN_LN10 2.302585093f
+#if !GRAIN_BOOLEAN && GRAIN_TAPS != 1 && GRAIN_ROWS != 6
+#error "grain_gaussian16 packs the 2 x (GRAIN_ROWS + 2) edge normals in one float16: GRAIN_ROWS must be 6"
+#endif
 
 inline float grain_to_density(const float t, const float dmin, const float dmax) {
     /* clear fraction -> density, clamped to the stock's [D_min, D_max] (t = 0 would be +inf) */
@@ -10,20 +13,15 @@ inline float grain_to_density(const float t, const float dmin, const float dmax)
 }
 
 /* draft/preview, and final with unresolved grains: Gaussian clear fraction with the model's
- * pixel variance (LUT over image density) and lag-1 correlation (separable [a, b, a]). */
-inline void grain_gaussian(__global const float *restrict src, __global float *restrict dst,
-                             const int width, const int height, __global const float *params,
-                             __global const float *sigma_lut, const float lut_scale,
-                             const float a, const float b, const float amount, const uint seed,
-                             const uint frame) {
-    const int x = get_global_id(0);
-    const int y = get_global_id(1);
-    if (x >= width || y >= height) return;
+ * pixel variance (LUT over image density) and lag-1 correlation (separable [a, b, a]).
+ * One pixel (the row's last 1-15 pixels of grain_gaussian16, below). */
+inline void grain_gaussian_px(__global const float *restrict src, __global float *restrict dst,
+                              const int x, const int y, const int width, const int height,
+                              __global const float *params, __global const float *sigma_lut,
+                              const float lut_scale, const float a, const float b, const float amount,
+                              const uint seed, const uint frame) {
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
-#if GRAIN_TAPS != 1
-    const float w3[3] = {a, b, a};
-#endif
     for (uint c = 0; c < 3; ++c) {
         const float dmin = params[c], dmax = params[3 + c];
         const float d_img = fmax(src[c * n + i] - dmin, 0.0f);
@@ -34,16 +32,100 @@ inline void grain_gaussian(__global const float *restrict src, __global float *r
         const uint h0 = rnd_hash4(seed, frame, (uint)(x + 1), ((uint)(y + 1) << 2) | c);
         const float g = rnd_normal(h0, rnd_mix(h0 ^ 0x68e31da4u));
 #else
-        float g = 0.0f;
+        /* counters are pixel coordinates (+1 so the border neighbours are >= 0); separable, in
+         * the order grain_gaussian16 sums: rows filtered [a, b, a], then the three rows */
+        float hr[3];
         for (int j = 0; j < 3; ++j) {
+            float nq[3];
             for (int q = 0; q < 3; ++q) {
-                /* counters are pixel coordinates (+1 so the border neighbours are >= 0) */
                 const uint hh = rnd_hash4(seed, frame, (uint)(x + q), ((uint)(y + j) << 2) | c);
-                g += w3[j] * w3[q] * rnd_normal(hh, rnd_mix(hh ^ 0x68e31da4u));
+                nq[q] = rnd_normal(hh, rnd_mix(hh ^ 0x68e31da4u));
             }
+            hr[j] = a * nq[0] + b * nq[1] + a * nq[2];
         }
+        const float g = a * hr[0] + b * hr[1] + a * hr[2];
 #endif
         dst[c * n + i] = grain_to_density(clp_exp2(-3.32192809f * d_img) + amount * sigma * g, dmin, dmax);  /* 10^-d */
+    }
+}
+
+/* The normal of counter (X, Y) = pixel (X - 1, Y - 1) of layer c; 16 lanes from X = x0. */
+inline float16 grain_normal16(const uint seed, const uint frame, const int x0, const int yc, const uint c) {
+    const uint16 hh = rnd_hash4_w16(seed, frame, (uint16)((uint)x0) + CLP_ULANES16, (uint16)(((uint)yc << 2) | c));
+    return rnd_normal_w16(hh, rnd_mix_w16(hh ^ 0x68e31da4u));
+}
+
+/* The 2 x (GRAIN_ROWS + 2) normals right of 16 lanes from x0: lane 2r + k is counter
+ * (x0 + 16 + k, y0 + r). */
+inline float16 grain_normal16x(const uint seed, const uint frame, const int x0, const int y0, const uint c) {
+    const uint16 xs = (uint16)((uint)x0 + 16u) + (CLP_ULANES16 & 1u);
+    const uint16 ys = (uint16)((uint)y0) + (CLP_ULANES16 >> 1);
+    const uint16 hh = rnd_hash4_w16(seed, frame, xs, (ys << 2) | c);
+    return rnd_normal_w16(hh, rnd_mix_w16(hh ^ 0x68e31da4u));
+}
+
+/* [a, b, a] along the row of counters from x0: 16 normals and the next two (e0, e1) per row
+ * instead of 16 x 3 */
+inline float16 grain_hrow16(const uint seed, const uint frame, const int x0, const int yc, const uint c,
+                            const float a, const float b, const float e0, const float e1) {
+    const float16 n0 = grain_normal16(seed, frame, x0, yc, c);
+    const float16 n1 = (float16)(n0.s1234, n0.s5678, n0.s9abc, n0.sdef, e0);
+    const float16 n2 = (float16)(n0.s2345, n0.s6789, n0.sabcd, n0.sef, e0, e1);
+    return a * n0 + b * n1 + a * n2;
+}
+
+/* 16 pixels of GRAIN_ROWS rows per work-item (x0 = 16 gid0, y0 = GRAIN_ROWS gid1): the separable
+ * filter reuses each filtered row for three output rows, so a pixel costs (1 + 2/GRAIN_ROWS) x 18/16
+ * normals per layer instead of 9, all in float16 lanes (kernels/random.cl at width 16): the two
+ * normals past each row's 16 (counters x0 + 16, x0 + 17 of the GRAIN_ROWS + 2 rows) are one more
+ * float16 per layer (GRAIN_ROWS = 6: 2 x 8 = 16 lanes). */
+inline void grain_gaussian16(__global const float *restrict src, __global float *restrict dst,
+                             const int width, const int height, __global const float *params,
+                             __global const float *sigma_lut, const float lut_scale,
+                             const float a, const float b, const float amount, const uint seed,
+                             const uint frame) {
+    const int x0 = get_global_id(0) * 16;
+    const int y0 = get_global_id(1) * GRAIN_ROWS;
+    if (x0 >= width || y0 >= height) return;
+    if (x0 + 16 > width) {   /* the row's last 1-15 pixels, one by one */
+        const int y1 = min(y0 + GRAIN_ROWS, height);
+        for (int y = y0; y < y1; ++y)
+            for (int x = x0; x < width; ++x)
+                grain_gaussian_px(src, dst, x, y, width, height, params, sigma_lut, lut_scale, a, b,
+                                  amount, seed, frame);
+        return;
+    }
+    const size_t n = (size_t)width * (size_t)height;
+    for (uint c = 0; c < 3; ++c) {
+        const float dmin = params[c], dmax = params[3 + c];
+#if GRAIN_TAPS != 1
+        float ex[16];   /* lane 2r + k: counter (x0 + 16 + k, y0 + r) */
+        vstore16(grain_normal16x(seed, frame, x0, y0, c), 0, ex);
+        float16 h0 = grain_hrow16(seed, frame, x0, y0, c, a, b, ex[0], ex[1]);
+        float16 h1 = grain_hrow16(seed, frame, x0, y0 + 1, c, a, b, ex[2], ex[3]);
+#endif
+        for (int r = 0; r < GRAIN_ROWS; ++r) {
+            const int y = y0 + r;
+#if GRAIN_TAPS == 1
+            const float16 g = grain_normal16(seed, frame, x0 + 1, y + 1, c);
+#else
+            const float16 h2 = grain_hrow16(seed, frame, x0, y + 2, c, a, b, ex[2 * r + 4], ex[2 * r + 5]);
+            const float16 g = a * h0 + b * h1 + a * h2;
+            h0 = h1;
+            h1 = h2;
+#endif
+            if (y >= height) break;
+            const size_t i = (size_t)y * (size_t)width + (size_t)x0;
+            const float16 d_img = fmax(vload16(0, src + c * n + i) - dmin, 0.0f);
+            const float16 u = fmin(d_img * lut_scale, (float)(GRAIN_LUT_SIZE - 1));
+            const int16 k = min(convert_int16(u), GRAIN_LUT_SIZE - 2);
+            const float16 sigma = mix(CLP_GATHER16(sigma_lut, k), CLP_GATHER16(sigma_lut, k + 1),
+                                      u - convert_float16(k));
+            const float16 t = clp_exp2_w16(-3.32192809f * d_img) + amount * sigma * g;  /* 10^-d */
+            /* grain_to_density in lanes */
+            vstore16(clamp(dmin - 0.30102999566f * clp_log2_w16(fmax(t, 1e-30f)), dmin, dmax), 0,
+                     dst + c * n + i);
+        }
     }
 }
 
@@ -107,6 +189,6 @@ __kernel void grain(__global const float *restrict src, __global float *restrict
     grain_boolean(src, dst, width, height, params, r, amount, seed, frame);
 #else
     (void)r;
-    grain_gaussian(src, dst, width, height, params, sigma_lut, lut_scale, a, b, amount, seed, frame);
+    grain_gaussian16(src, dst, width, height, params, sigma_lut, lut_scale, a, b, amount, seed, frame);
 #endif
 }

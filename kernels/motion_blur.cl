@@ -4,7 +4,7 @@
  *
  * Buffers: colour planar (c*n + i); velocity interleaved (2i, 2i+1) px per frame, forward,
  * +x right, +y down; depth planar metres (+inf sky). Scratch: hv = clamped half-vectors and
- * their unclamped length (3 planes: x, y, key), iz = 1/depth (0 for sky), tile and
+ * their unclamped length and max(|h|, 0.5) (4 planes: x, y, key, length), iz = 1/depth (0 for sky), tile and
  * neighbour-max (3 planes each). Maxima are ranked by the unclamped length: clamped vectors all
  * have length K, and ranking them by a rounding-level difference would not be reproducible.
  *
@@ -38,13 +38,11 @@ inline float motion_blur_len2(float2 v) {
  * speed is > MOTION_BLUR_FRINGE times the fastest of its 3 x 3 neighbours (first in scan order on
  * ties) takes that neighbour's velocity and depth: its colour is (partly) that surface's. */
 #define MOTION_BLUR_FRINGE2 0.01f  /* MOTION_BLUR_FRINGE = 0.1, squared */
-__kernel void motion_blur_prep(__global const float *restrict velocity,
-                               __global const float *restrict depth,
-                               __global float *restrict hv, __global float *restrict iz,
-                               const int width, const int height, const float k)
+inline void motion_blur_prep_px(__global const float *restrict velocity,
+                                __global const float *restrict depth,
+                                __global float *restrict hv, __global float *restrict iz,
+                                const int x, const int y, const int width, const int height, const float k)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= width || y >= height) return;
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
     float2 v = (float2)(velocity[2 * i], velocity[2 * i + 1]);
@@ -77,7 +75,73 @@ __kernel void motion_blur_prep(__global const float *restrict velocity,
     hv[i] = h.x;
     hv[n + i] = h.y;
     hv[2 * n + i] = len;
+    hv[3 * n + i] = fmax(sqrt(motion_blur_len2(h)), 0.5f);   /* the gather's |h| (>= 0.5), one load per tap */
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
+}
+
+/* motion_blur_prep_px on 16 pixels of a row (x0 - 1 >= 0 and x0 + 16 < width: no column clamp),
+ * lane for lane the same operations; neighbours are row loads at offsets -1, 0, +1 (velocity
+ * interleaved: even/odd lanes of 32 floats). */
+inline void motion_blur_prep_16(__global const float *restrict velocity,
+                                __global const float *restrict depth,
+                                __global float *restrict hv, __global float *restrict iz,
+                                const int x0, const int y, const int width, const int height, const float k)
+{
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
+    float16 vx = (float16)(vload16(0, velocity + 2 * i0).even, vload16(1, velocity + 2 * i0).even);
+    float16 vy = (float16)(vload16(0, velocity + 2 * i0).odd, vload16(1, velocity + 2 * i0).odd);
+    float16 z = vload16(0, depth + i0);
+    const float16 own2 = vx * vx + vy * vy;
+    float16 best2 = own2, bx = vx, by = vy, bz = z;
+    for (int dy = -1; dy <= 1; ++dy) {
+        const int sy = clamp(y + dy, 0, height - 1);
+        for (int dx = -1; dx <= 1; ++dx) {
+            const size_t j = (size_t)sy * (size_t)width + (size_t)(x0 + dx);
+            const float16 a = vload16(0, velocity + 2 * j), b = vload16(1, velocity + 2 * j);
+            const float16 nx = (float16)(a.even, b.even), ny = (float16)(a.odd, b.odd);
+            const float16 s2 = nx * nx + ny * ny;
+            const int16 m = s2 > best2;
+            best2 = m ? s2 : best2;
+            bx = m ? nx : bx;
+            by = m ? ny : by;
+            bz = m ? vload16(0, depth + j) : bz;
+        }
+    }
+    const int16 take = own2 > 0.0f && own2 > MOTION_BLUR_FRINGE2 * best2;
+    vx = take ? bx : vx;
+    vy = take ? by : vy;
+    z = take ? bz : z;
+    const float16 m = fmax(fabs(vx), fabs(vy));
+    const int16 moving = m > 0.0f;
+    const float16 ux = vx / m, uy = vy / m;
+    const float16 lu = sqrt(ux * ux + uy * uy);
+    const float16 len = lu * m * k;
+    const float16 r = fmin(len, (float)MOTION_BLUR_TILE);
+    const float16 hx = ux * (r / lu), hy = uy * (r / lu);
+    const float16 hx0 = moving ? hx : 0.0f, hy0 = moving ? hy : 0.0f;
+    vstore16(hx0, 0, hv + i0);
+    vstore16(hy0, 0, hv + n + i0);
+    vstore16(moving ? len : 0.0f, 0, hv + 2 * n + i0);
+    vstore16(fmax(sqrt(hx0 * hx0 + hy0 * hy0), 0.5f), 0, hv + 3 * n + i0);
+    vstore16(isinf(z) ? 0.0f : 1.0f / z, 0, iz + i0);
+}
+
+/* h, |h| key and 1/depth per pixel: 16 pixels of a row per work-item (x0 = 16 gid0); groups that
+ * touch the left or right edge one pixel at a time (their neighbours clamp) */
+__kernel void motion_blur_prep(__global const float *restrict velocity,
+                               __global const float *restrict depth,
+                               __global float *restrict hv, __global float *restrict iz,
+                               const int width, const int height, const float k)
+{
+    const int x0 = get_global_id(0) * 16, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    if (x0 >= 1 && x0 + 16 < width) {
+        motion_blur_prep_16(velocity, depth, hv, iz, x0, y, width, height, k);
+    } else {
+        for (int x = x0; x < min(x0 + 16, width); ++x)
+            motion_blur_prep_px(velocity, depth, hv, iz, x, y, width, height, k);
+    }
 }
 
 /* largest half-vector (by length; first in scan order on ties) of each K x K tile */
@@ -139,14 +203,14 @@ inline float motion_blur_front(float wa, float wb) {
     return clamp(1.0f - (wb - wa) / (MOTION_BLUR_SOFT_Z * m), 0.0f, 1.0f);
 }
 
-__kernel void motion_blur(__global const float *restrict src, __global float *restrict dst,
-                                 __global const float *restrict hv, __global const float *restrict iz,
-                                 __global const float *restrict nmax,
-                                 const int width, const int height, const int tw, const int th,
-                                 const uint seed, const uint frame, const float inv_s)
+/* One pixel (the row's last 1-15 pixels of the kernel below); motion_blur_16 is the same
+ * arithmetic in 16 lanes. */
+inline void motion_blur_px(__global const float *restrict src, __global float *restrict dst,
+                           __global const float *restrict hv, __global const float *restrict iz,
+                           __global const float *restrict nmax, const int x, const int y,
+                           const int width, const int height, const int tw, const int th,
+                           const uint seed, const uint frame, const float inv_s)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= width || y >= height) return;
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
     const size_t tn = (size_t)tw * (size_t)th;
@@ -218,6 +282,111 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
     const float3 own = coc * (so / co) + (1.0f - coc) * (sb / wb);
     const float3 fr = cf > 0.0f ? sf / cf : cx;
     store_planar(dst, i, n, cfc * fr + (1.0f - cfc) * own);
+}
+
+
+/* The gather on 16 consecutive pixels of a row (x0 .. x0 + 15), every lane the arithmetic of
+ * motion_blur_px operation for operation (FP_CONTRACT OFF; the same roundings, so the same tap
+ * positions): PoCL does not vectorise the one-pixel form (float3, sqrt, smoothstep, data-dependent
+ * loads), explicit float16 compiles to 16-lane vector code. Taps are per-lane gathers. */
+#define MB_GATHER(buf, k) CLP_GATHER16(buf, k)
+inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
+    return 1.0f - smoothstep(0.95f * len, 1.05f * len, dist);
+}
+
+inline void motion_blur_16(__global const float *restrict src, __global float *restrict dst,
+                           __global const float *restrict hv, __global const float *restrict iz,
+                           __global const float *restrict nmax, const int x0, const int y,
+                           const int width, const int height, const int tw, const int th,
+                           const uint seed, const uint frame, const float inv_s)
+{
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
+    const size_t tn = (size_t)tw * (size_t)th;
+    const int16 xs = (int16)(x0) + convert_int16(CLP_ULANES16);
+    const int16 t = (int16)((y / MOTION_BLUR_TILE) * tw) + xs / MOTION_BLUR_TILE;
+    const float16 vnx = MB_GATHER(nmax, t), vny = MB_GATHER(nmax + tn, t);
+    const float16 cxr = vload16(0, src + i0), cxg = vload16(0, src + n + i0), cxb = vload16(0, src + 2 * n + i0);
+    const float16 l2n = vnx * vnx + vny * vny;
+    const int16 still = l2n <= 0.25f;             /* nothing in reach moves by half a pixel */
+    if (all(still)) {
+        vstore16(cxr, 0, dst + i0); vstore16(cxg, 0, dst + n + i0); vstore16(cxb, 0, dst + 2 * n + i0);
+        return;
+    }
+    const float16 hx = vload16(0, hv + i0), hy = vload16(0, hv + n + i0);
+    const float16 lx = vload16(0, hv + 3 * n + i0);   /* max(|h_X|, 0.5) */
+    const int16 own_dir = lx > 0.5f;                   /* |h_X| > 0.5 */
+    const float16 vxx = own_dir ? hx : vnx, vxy = own_dir ? hy : vny;   /* odd taps follow X's own motion */
+    const float16 ln = sqrt(l2n);
+    const float16 lv = sqrt(vxx * vxx + vxy * vxy);
+    const float16 cosang = (vnx * vxx + vny * vxy) / fmax(ln * lv, 1e-30f);
+    const float16 agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
+    const float16 wx = vload16(0, iz + i0);
+    const uint16 hj = rnd_hash4_w16(seed, frame, convert_uint16(xs), (uint16)((uint)y));
+    const float16 j = convert_float16(hj >> 8) * (1.0f / 16777216.0f) - 0.5f;   /* motion_blur_jitter */
+    const float16 hdn = ln * inv_s, hdv = lv * inv_s;
+    const float16 wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
+    const float16 xf = convert_float16(xs), yf = (float16)((float)y);
+    float16 cf = 0.0f, co = wc, wb = 1e-3f;
+    float16 sfr = 0.0f, sfg = 0.0f, sfb = 0.0f;
+    float16 sor = cxr * wc, sog = cxg * wc, sob = cxb * wc;
+    float16 sbr = cxr * wb, sbg = cxg * wb, sbb = cxb * wb;
+    for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
+        if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre stratum is X itself */
+        const int odd = s & 1;
+        const float16 dx = odd ? vxx : vnx, dy = odd ? vxy : vny;
+        const float16 u = ((float)s + 0.5f + j) * inv_s;
+        const float16 tt = 2.0f * u - 1.0f;
+        const float16 ox = dx * tt;
+        const float16 oy = dy * tt;
+        const int16 sx = clamp(convert_int16(floor(xf + ox + 0.5f)), 0, width - 1);
+        const int16 sy = clamp(convert_int16(floor(yf + oy + 0.5f)), 0, height - 1);
+        const int16 k = sy * width + sx;
+        const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y);
+        const float16 dist = sqrt(ddx * ddx + ddy * ddy);
+        const float16 ly = MB_GATHER(hv + 3 * n, k);   /* max(|h_Y|, 0.5) */
+        const float16 wy = MB_GATHER(iz, k);
+        const float16 r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f));
+        const float16 f = clamp(1.0f - r, 0.0f, 1.0f);
+        const float16 b = clamp(1.0f + r, 0.0f, 1.0f);
+        const float16 cly = motion_blur_cyl16(dist, ly);
+        const float16 a = cly * (odd ? hdv : hdn) / ly;
+        const float16 clx = motion_blur_cyl16(dist, lx);
+        const float16 own = b * clx;
+        const float16 af = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f));
+        const float16 ao = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f));
+        const float16 ab = b * ((1.0f - f) + f * (1.0f - cly)) * clx;
+        const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k);
+        cf += af; sfr += af * cr; sfg += af * cg; sfb += af * cb;
+        co += ao; sor += ao * cr; sog += ao * cg; sob += ao * cb;
+        wb += ab; sbr += ab * cr; sbg += ab * cg; sbb += ab * cb;
+    }
+    const float16 cfc = fmin(cf, 1.0f), coc = fmin(co, 1.0f);
+    const int16 front = cf > 0.0f;
+    const float16 our = coc * (sor / co) + (1.0f - coc) * (sbr / wb);
+    const float16 oug = coc * (sog / co) + (1.0f - coc) * (sbg / wb);
+    const float16 oub = coc * (sob / co) + (1.0f - coc) * (sbb / wb);
+    const float16 frr = front ? sfr / cf : cxr, frg = front ? sfg / cf : cxg, frb = front ? sfb / cf : cxb;
+    vstore16(still ? cxr : cfc * frr + (1.0f - cfc) * our, 0, dst + i0);
+    vstore16(still ? cxg : cfc * frg + (1.0f - cfc) * oug, 0, dst + n + i0);
+    vstore16(still ? cxb : cfc * frb + (1.0f - cfc) * oub, 0, dst + 2 * n + i0);
+}
+
+/* 16 pixels of a row per work-item (x0 = 16 gid0); the row's last 1-15 one by one */
+__kernel void motion_blur(__global const float *restrict src, __global float *restrict dst,
+                          __global const float *restrict hv, __global const float *restrict iz,
+                          __global const float *restrict nmax,
+                          const int width, const int height, const int tw, const int th,
+                          const uint seed, const uint frame, const float inv_s)
+{
+    const int x0 = get_global_id(0) * 16, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    if (x0 + 16 <= width) {
+        motion_blur_16(src, dst, hv, iz, nmax, x0, y, width, height, tw, th, seed, frame, inv_s);
+    } else {
+        for (int x = x0; x < width; ++x)
+            motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame, inv_s);
+    }
 }
 
 /* rolling shutter: row y is exposed tau_y = r (y/(H-1) - 1/2) frames after the frame time, so it

@@ -151,8 +151,10 @@ class Grain(GatherStage):
         return {}
 
     def taps_per_pixel(self, camera, frame) -> int | None:
-        """Normals drawn per pixel, all three layers, on the Gaussian path (1 or 3×3 per layer,
-        for ``clpost bench`` taps/s); None on the Boolean path, whose work varies with density."""
+        """Filter taps per pixel, all three layers, on the Gaussian path (1 or 3×3 normals per
+        layer, for ``clpost bench`` taps/s — the kernel draws ≈ 1.5 per pixel and layer and filters
+        them separably, :data:`GAUSSIAN_ROWS`); None on the Boolean path, whose work varies with
+        density."""
         _, _, _, span, r, boolean = self._setup(camera, fld.image_width_px(frame))
         if boolean:
             return None
@@ -163,9 +165,6 @@ class Grain(GatherStage):
         return (super().replay_key(camera, frame), frame_index(frame))  # the noise hash's frame counter
 
     def enqueue(self, rt, camera, frame, src, dst, aux):
-        from ..codegen import library
-        from ..runtime import kernel_source
-
         stock, d_min, d_max, span, r, boolean = self._setup(camera, fld.image_width_px(frame))
         w, h = frame.width, frame.height
         params = np.concatenate([d_min, d_max]).astype(np.float32)
@@ -177,9 +176,14 @@ class Grain(GatherStage):
             k = 1
             sigma, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
         defines = {"GRAIN_BOOLEAN": int(boolean), "GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k,
-                   "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE, "GRAIN_TAPS": 1 if a == 0.0 else 3}
-        knl = rt.kernel(library() + kernel_source("grain"), "grain", defines)
-        return [rt.launch(knl, (w, h), None, src, dst, np.int32(w), np.int32(h), rt.constant(params),
+                   "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE, "GRAIN_TAPS": 1 if a == 0.0 else 3,
+                   "GRAIN_ROWS": GAUSSIAN_ROWS}
+        knl = rt.kernel(_program_source(), "grain", defines)
+        # the Gaussian path: 16 pixels × GAUSSIAN_ROWS rows per work-item, 8×1 work-groups
+        # (kernels/grain.cl); the Boolean path one pixel per work-item
+        size, local = (((w, h), None) if boolean else
+                       ((-(-w // 16), -(-h // GAUSSIAN_ROWS)), (8, 1)))
+        return [rt.launch(knl, size, local, src, dst, np.int32(w), np.int32(h), rt.constant(params),
                           rt.constant(sigma.astype(np.float32)), np.float32((GRAIN_LUT_SIZE - 1) / span),
                           np.float32(a), np.float32(b), np.float32(r), np.float32(camera.grain_amount), seed, fr)]
 
@@ -199,6 +203,20 @@ class Grain(GatherStage):
             ) * correlated_normal(color.shape[0], color.shape[1], a, b, seed, fr)
         t_floor = 10.0 ** -(d_max - d_min)
         return d_min + -np.log10(np.clip(t, t_floor, 1.0))
+
+
+GAUSSIAN_ROWS = 6
+"""Rows per work-item of the Gaussian path: each [a, b, a]-filtered row of normals serves three
+output rows, so 6 rows cost 8 filtered rows (9 normals per pixel and layer before, 1.5 now); 6 makes
+the normals right of the 16 lanes (2 per filtered row) one float16 per layer (kernels/grain.cl)."""
+
+
+def _program_source() -> str:
+    """common.cl, the one-pixel libraries (plain names) and the 16-lane ones (``_w16``), grain.cl."""
+    from ..codegen import library, library_lanes16
+    from ..runtime import kernel_source
+
+    return library() + library_lanes16() + kernel_source("grain")
 
 
 def correlated_normal(h, w, a, b, seed, fr):

@@ -224,15 +224,15 @@ class MotionBlur(GatherStage):
 
     # -- OpenCL -----------------------------------------------------------------------------
     def _kernel(self, rt, camera, name):
-        from ..codegen import library
+        from ..codegen import library, library_lanes16
         from ..runtime import kernel_source
 
-        src = library() + "\n" + kernel_source("motion_blur")
+        src = library() + library_lanes16() + "\n" + kernel_source("motion_blur")
         return rt.kernel(src, name, self.defines(camera), "motion_blur")
 
     def _buffers(self, rt, w, h):
         tw, th = -(-w // TILE), -(-h // TILE)
-        return dict(hv=rt.scratch(self, "hv", (3, h, w)), iz=rt.scratch(self, "iz", (h, w)),
+        return dict(hv=rt.scratch(self, "hv", (4, h, w)), iz=rt.scratch(self, "iz", (h, w)),
                     tile=rt.scratch(self, "tile", (3, th, tw)), nmax=rt.scratch(self, "nmax", (2, th, tw)),
                     tmp=rt.scratch(self, "tmp", (3, h, w)), tw=tw, th=th)
 
@@ -252,7 +252,7 @@ class MotionBlur(GatherStage):
             k = self._kernel(rt, camera, "motion_blur_prep")
             k.set_args(aux["velocity"], aux["depth"], b["hv"], b["iz"], np.int32(w), np.int32(h),
                        np.float32(shutter_fraction(camera) / 2.0))
-            events.append(rt.launch(k, (w, h)))
+            events.append(rt.launch(k, (-(-w // 16), h), (8, 1)))
             k = self._kernel(rt, camera, "motion_blur_tilemax")
             k.set_args(b["hv"], b["tile"], np.int32(w), np.int32(h), np.int32(tw), np.int32(th))
             events.append(rt.launch(k, (tw, th)))
@@ -263,7 +263,8 @@ class MotionBlur(GatherStage):
             k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], np.int32(w), np.int32(h),
                        np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(frame.index),
                        np.float32(1.0 / self.samples))
-            events.append(rt.launch(k, (w, h)))
+            # 16 pixels of a row per work-item, 8×1 work-groups (kernels/motion_blur.cl)
+            events.append(rt.launch(k, (-(-w // 16), h), (8, 1)))
         if rolling:
             k = self._kernel(rt, camera, "motion_blur_rolling")
             k.set_args(blur_dst if blur else src, dst, aux["velocity"], np.int32(w), np.int32(h),
