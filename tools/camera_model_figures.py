@@ -23,13 +23,13 @@ W, H = 320, 240
 
 MODELS = {
     "opencv": OpenCVModel(W, H, 210.0, 210.0, 159.5, 119.5, k1=-0.3, k2=0.09, p1=1e-3),
-    "fisheye": OpenCVModel(W, H, 120.0, 120.0, 159.5, 119.5, k1=0.05, k2=-0.01, distortion_model="fisheye"),
-    "thinprism": OpenCVModel(W, H, 120.0, 120.0, 159.5, 119.5, k1=0.02, k2=0.01, p1=0.004, p2=0.002,
+    "fisheye": OpenCVModel(W, H, 165.0, 165.0, 159.5, 119.5, k1=0.05, k2=-0.01, distortion_model="fisheye"),
+    "thinprism": OpenCVModel(W, H, 165.0, 165.0, 159.5, 119.5, k1=0.02, k2=0.01, p1=0.004, p2=0.002,
                              s1=0.01, s3=0.005, distortion_model="thinprism"),
-    "ftheta": OpenCVModel(W, H, 115.0, 115.0, 159.5, 119.5, k1=-0.06, k2=0.02, distortion_model="ftheta"),
-    "fov": OpenCVModel(W, H, 150.0, 150.0, 159.5, 119.5, omega=1.0, distortion_model="fov"),
-    "ucm": OpenCVModel(W, H, 250.0, 250.0, 159.5, 119.5, xi=0.9, k1=-0.05, distortion_model="ucm"),
-    "ds": OpenCVModel(W, H, 95.0, 95.0, 159.5, 119.5, xi=-0.2, alpha=0.59, distortion_model="ds"),
+    "ftheta": OpenCVModel(W, H, 160.0, 160.0, 159.5, 119.5, k1=-0.06, k2=0.02, distortion_model="ftheta"),
+    "fov": OpenCVModel(W, H, 160.0, 160.0, 159.5, 119.5, omega=1.0, distortion_model="fov"),
+    "ucm": OpenCVModel(W, H, 270.0, 270.0, 159.5, 119.5, xi=0.9, k1=-0.05, distortion_model="ucm"),
+    "ds": OpenCVModel(W, H, 130.0, 130.0, 159.5, 119.5, xi=-0.2, alpha=0.59, distortion_model="ds"),
 }
 
 
@@ -53,7 +53,7 @@ def scene(spec, ss: int = 4) -> np.ndarray:
 
 
 def main(out_dir: str) -> None:
-    import imageio.v3 as iio  # noqa: F401  (pyvista brings imageio)
+    import cv2  # the [test] extra's OpenCV writes the PNGs
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -62,7 +62,7 @@ def main(out_dir: str) -> None:
         frame = Frame(scene(spec), metadata={"intrinsics": spec.intrinsics()})
         img = Pipeline(Camera(distortion=m), quality="final", stages=["distortion"]).run(frame).color
         png = np.clip(np.rint(np.clip(img, 0, 1) ** (1 / 2.2) * 255), 0, 255).astype(np.uint8)
-        iio.imwrite(out / f"camera_model_{name}.png", png)
+        cv2.imwrite(str(out / f"camera_model_{name}.png"), png[..., ::-1])
         print(f"{name}: render {spec.width}x{spec.height} -> {out / f'camera_model_{name}.png'}")
 
 
