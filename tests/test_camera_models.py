@@ -163,20 +163,29 @@ def test_bad_parameters_are_one_line(kwargs, msg):
 
 @pytest.mark.parametrize("name", [n for n in FAMILIES if n != "opencv"])
 def test_the_distortion_map_of_every_family_samples_each_pixels_ray(name):
-    """The stage's map (clpost/stages/distortion.py distortion_map) at the required render: each
+    """The stage's map (clpost/stages/distortion.py distortion_map) at the required render — the
+    pinhole of required_render, or the cubemap where the camera sees beyond 75° off axis: each
     output pixel with data samples the render where its own unprojected ray lands."""
+    from clpost.calibration import PINHOLE_LIMIT_DEG, max_ray_angle_deg, required_cubemap
     from clpost.stages.distortion import distortion_map
 
-    m = FAMILIES[name]
-    small = m.scaled_to(160, 120)
-    spec = required_render(small)
-    mp, ok = distortion_map(small, (spec.width, spec.height), spec.intrinsics())
+    small = FAMILIES[name].scaled_to(160, 120)
     vv, uu = np.mgrid[0:120, 0:160].astype(np.float64)
     X, Y, Z, okr = small.unproject(uu, vv)
-    sel = ok & okr & (Z > 0)
-    assert sel.mean() > 0.5
-    np.testing.assert_allclose(mp[0][sel], spec.f * X[sel] / Z[sel] + spec.cx, atol=1e-6)
-    np.testing.assert_allclose(mp[1][sel], spec.f * Y[sel] / Z[sel] + spec.cy, atol=1e-6)
+    if max_ray_angle_deg(small) > PINHOLE_LIMIT_DEG:
+        spec = required_cubemap(small)
+        mp, ok = distortion_map(small, (spec.width, spec.height), spec)
+        sx, sy = spec.positions(X, Y, Z)
+        sel = ok & okr
+        assert sel.mean() > 0.9
+    else:
+        spec = required_render(small)
+        mp, ok = distortion_map(small, (spec.width, spec.height), spec.intrinsics())
+        sel = ok & okr & (Z > 0)
+        assert sel.mean() > 0.9
+        sx, sy = spec.f * X / np.where(sel, Z, 1) + spec.cx, spec.f * Y / np.where(sel, Z, 1) + spec.cy
+    np.testing.assert_allclose(mp[0][sel], sx[sel], atol=1e-6)
+    np.testing.assert_allclose(mp[1][sel], sy[sel], atol=1e-6)
 
 
 def test_kalibr_double_sphere_file_reads_and_projects():
@@ -186,3 +195,80 @@ def test_kalibr_double_sphere_file_reads_and_projects():
     assert m.distortion_model == "ds"
     u, v, ok = m.project_rays(np.array([0.0]), np.array([0.0]), np.array([1.0]))
     assert ok[0] and (u[0], v[0]) == (m.cx, m.cy)
+
+
+# -- cubemap renders for fields of view beyond a pinhole's ------------------------------------------
+
+WIDE = OpenCVModel(480, 480, 120.0, 120.0, 239.5, 239.5, xi=-0.15, alpha=0.6, distortion_model="ds")  # ≈ 230°
+
+
+def _direction_pattern(x, y, z):
+    """A smooth function of the direction (no preferred face): what a cubemap should carry."""
+    n = np.sqrt(x * x + y * y + z * z)
+    x, y, z = x / n, y / n, z / n
+    return 0.5 + 0.2 * np.sin(3 * x) * np.cos(2 * y) + 0.2 * z
+
+
+def _synthetic_atlas(spec):
+    from clpost.calibration.cubemap import face_rotation
+
+    f, _, c, _ = spec.intrinsics()
+    vv, uu = np.mgrid[0:spec.size, 0:spec.size].astype(np.float64)
+    faces = []
+    for i in range(6):
+        d = np.stack([(uu - c) / f, (vv - c) / f, np.ones_like(uu)], -1) @ face_rotation(i).T
+        faces.append(_direction_pattern(d[..., 0], d[..., 1], d[..., 2]))
+    return np.repeat(np.concatenate(faces, axis=1)[..., None], 3, -1).astype(np.float32)
+
+
+def test_cubemap_positions_land_on_the_rays_face_and_back():
+    from clpost.calibration.cubemap import CubemapSpec, face_rotation
+
+    spec = CubemapSpec(64)
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(5000, 3))
+    sx, sy = spec.positions(p[:, 0], p[:, 1], p[:, 2])
+    i = np.floor(sx / spec.size).astype(int)
+    f, _, c, _ = spec.intrinsics()
+    a, b = (sx - i * spec.size - c) / f, (sy - c) / f
+    assert np.abs(a).max() <= 1 + 1e-12 and np.abs(b).max() <= 1 + 1e-12  # inside the face's 90°
+    back = np.einsum("nij,nj->ni", np.stack([face_rotation(k) for k in i]), np.c_[a, b, np.ones_like(a)])
+    cosang = np.sum(back * p, 1) / np.linalg.norm(back, axis=1) / np.linalg.norm(p, axis=1)
+    assert cosang.min() > 1 - 1e-12
+
+
+def test_beyond_150_degrees_render_size_asks_for_a_cubemap_and_the_stage_samples_it():
+    from clpost import Camera, Frame, Pipeline
+    from clpost.calibration import max_ray_angle_deg, required_cubemap
+    from clpost.render_size import report
+
+    assert max_ray_angle_deg(WIDE) > 100
+    with pytest.raises(InputError, match="render a cubemap of six 240 px faces"):
+        required_render(WIDE)
+    assert "render a cubemap: six 240 px faces" in report(WIDE, "calibration")
+    spec = required_cubemap(WIDE)
+    frame = Frame(_synthetic_atlas(spec), metadata={"cubemap": (spec.face, spec.pad)})
+    out = Pipeline(Camera(distortion=WIDE), quality="final", stages=["distortion"]).run(frame)
+    vv, uu = np.mgrid[0:480, 0:480].astype(np.float64)
+    x, y, z, ok = WIDE.unproject(uu, vv)
+    assert ok.mean() > 0.7 and (np.degrees(np.arccos(z[ok])) > 100).any()
+    np.testing.assert_array_equal(out.alpha > 0, ok)
+    err = np.abs(out.color[..., 0] - _direction_pattern(x, y, z))[ok]
+    assert err.max() < 2e-3, err.max()  # cubic B-spline of a smooth pattern, float32, across face seams
+
+
+def test_render_cubemap_faces_are_the_rotated_pinhole_renders():
+    from clpost import Camera
+    from clpost.calibration.cubemap import CubemapSpec
+    from clpost.render import DemoScene, PyVistaRenderer
+
+    spec = CubemapSpec(48)
+    r = PyVistaRenderer(DemoScene.default())
+    try:
+        atlas = r.render_cubemap(Camera(), spec, 0)
+        front = r.render(Camera(), (spec.size, spec.size), 0, spec.intrinsics())
+    finally:
+        r.close()
+    assert atlas.color.shape == (spec.size, 6 * spec.size, 3) and atlas.metadata["cubemap"] == (48, spec.pad)
+    np.testing.assert_array_equal(atlas.color[:, 4 * spec.size:5 * spec.size], front.color)  # +z is the camera's view
+    assert all(atlas.color[:, k * spec.size:(k + 1) * spec.size].std() > 0 for k in range(6))

@@ -113,11 +113,14 @@ def _required_render(model: OpenCVModel, margin_px: float) -> RenderSpec:
     if theta > PINHOLE_LIMIT_DEG:
         from ..errors import InputError
 
+        from .cubemap import required_cubemap
+
+        cube = required_cubemap(model)
         raise InputError(
             f"the calibration{model._where()} sees {theta:.1f}° off axis (a {2 * theta:.0f}° field of view): no pinhole "
-            f"render covers more than {2 * PINHOLE_LIMIT_DEG:.0f}°, it needs a cubemap render, which clpost does not "
-            "sample yet; render at the calibration's own K (pixels beyond the render get alpha 0) or use a "
-            "narrower calibration")
+            f"render covers more than {2 * PINHOLE_LIMIT_DEG:.0f}°; render a cubemap of six {cube.face} px faces "
+            f"({cube.width}x{cube.height} atlas: clpost.calibration.required_cubemap, "
+            "PyVistaRenderer.render_cubemap), which the distortion stage samples")
     x0, x1, y0, y1 = undistorted_bounds(model, margin_px)
     f = max(model.fx, model.fy)
     rw, rh = int(math.ceil(f * (x1 - x0))), int(math.ceil(f * (y1 - y0)))
@@ -163,6 +166,8 @@ def render_intrinsics(model: OpenCVModel, size: tuple[int, int]) -> tuple[float,
 def _render_intrinsics(model: OpenCVModel, size: tuple[int, int]) -> tuple[float, float, float, float] | None:
     if tuple(size) == (model.width, model.height):
         return float(model.fx), float(model.fy), float(model.cx), float(model.cy)
+    if max_ray_angle_deg(model) > PINHOLE_LIMIT_DEG:
+        return None  # no pinhole render is made for it (a cubemap: clpost.calibration.cubemap)
     spec = required_render(model)
     if tuple(size) == (spec.width, spec.height):
         return spec.intrinsics()
