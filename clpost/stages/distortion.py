@@ -587,8 +587,8 @@ class Distortion(GatherStage):
 
     def _warn_unfilled(self, camera, frame) -> None:
         """The one-line warning of ``--fill overscan`` when the render leaves pixels black."""
-        if getattr(camera, "fill", "overscan") != "overscan":
-            return
+        if getattr(camera, "fill", "overscan") != "overscan" or isinstance(self._source_k(camera, frame), CubemapSpec):
+            return  # a cubemap holds every ray: its pixels without data are the ones without a ray
         _, ok = self._host_map(camera, frame)
         missing = int(ok.size - np.count_nonzero(ok))
         if missing:
