@@ -272,3 +272,31 @@ def test_render_cubemap_faces_are_the_rotated_pinhole_renders():
     assert atlas.color.shape == (spec.size, 6 * spec.size, 3) and atlas.metadata["cubemap"] == (48, spec.pad)
     np.testing.assert_array_equal(atlas.color[:, 4 * spec.size:5 * spec.size], front.color)  # +z is the camera's view
     assert all(atlas.color[:, k * spec.size:(k + 1) * spec.size].std() > 0 for k in range(6))
+
+
+def _cli(argv, capsys):
+    from clpost.cli import main
+
+    rc = main(argv)
+    return rc, capsys.readouterr()
+
+
+def test_cli_show_render_size_and_bad_files(tmp_path, capsys):
+    from clpost.calibration import calibration_text
+
+    wide = tmp_path / "wide.yaml"
+    wide.write_text(calibration_text(WIDE, "kalibr"))
+    rc, io = _cli(["calibration", "show", str(wide)], capsys)
+    assert rc == 0 and "model=ds" in io.out and "cubemap of six 240 px faces" in io.out, io.err
+    rc, io = _cli(["render-size", "--calibration", str(wide)], capsys)
+    assert rc == 0 and "render a cubemap: six 240 px faces" in io.out, io.err
+    narrow = tmp_path / "narrow.yaml"
+    narrow.write_text(calibration_text(FAMILIES["ds"].scaled_to(160, 120), "opencv-yaml"))
+    rc, io = _cli(["calibration", "show", str(narrow)], capsys)
+    assert rc == 0 and "model=ds" in io.out, io.err
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("cam0:\n  camera_model: ds\n  intrinsics: [0.1, 0.6, 300, 300, 320]\n  distortion_model: none\n"
+                   "  distortion_coeffs: []\n  resolution: [640, 480]\n")
+    rc, io = _cli(["calibration", "show", str(bad)], capsys)
+    assert rc == 2 and str(bad) in io.err and "intrinsics must be [xi, alpha, fx, fy, cx, cy]" in io.err
+    assert len(io.err.strip().splitlines()) == 1

@@ -1,9 +1,12 @@
 r"""distortion: resample the undistorted pinhole render into the image of a calibrated camera.
 
 Each output pixel (u, v) of the distorted image asks where its light came from: the exact inverse
-of the OpenCV standard model (:func:`clpost.calibration.undistort_newton`, or the Heikkilä fit if
+of the camera model (any family of :class:`clpost.calibration.OpenCVModel`, docs/camera_models.md:
+:func:`clpost.calibration.undistort_newton`, or the Heikkilä fit if
 ``OpenCVModel.inverse == "heikkila"``) gives undistorted normalised coordinates (x', y'), and the
-render's pinhole intrinsics (f_r, c_r) give the source position
+render's pinhole intrinsics (f_r, c_r) give the source position (:func:`source_positions`; a
+cubemap render, for fields of view beyond 150°, is sampled at the pixel's ray instead:
+:mod:`clpost.calibration.cubemap`)
 
 .. math::
 
