@@ -300,3 +300,19 @@ def test_cli_show_render_size_and_bad_files(tmp_path, capsys):
     rc, io = _cli(["calibration", "show", str(bad)], capsys)
     assert rc == 2 and str(bad) in io.err and "intrinsics must be [xi, alpha, fx, fy, cx, cy]" in io.err
     assert len(io.err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("name", [n for n in FAMILIES if n != "opencv"])
+def test_stmap_distort_and_undistort_invert_each_other(name):
+    """clpost.stmap's two directions (distorted pixel → undistorted image at the calibration's K, and back)
+    for every family, where the pixel's ray is within 80° of the axis (the undistorted image is a pinhole's)."""
+    from clpost.stmap import map_points
+
+    m = FAMILIES[name]
+    vv, uu = np.mgrid[0:m.height:9, 0:m.width:9].astype(np.float64)
+    x, y, ok = map_points(m, "distort", uu, vv)
+    _, _, z, _ = m.unproject(uu, vv)
+    ok &= z > math.cos(math.radians(80))
+    u2, v2, ok2 = map_points(m, "undistort", x[ok], y[ok])
+    assert ok.mean() > 0.5 and ok2.all()
+    assert np.hypot(u2 - uu[ok], v2 - vv[ok]).max() < 1e-6

@@ -181,7 +181,7 @@ def calibrate_double_sphere(img: list, size: tuple[int, int]) -> tuple[dict, flo
 
 DS_SETS = [
     dict(fx=300.0, fy=299.0, cx=321.3, cy=238.2, xi=-0.2, alpha=0.59),
-    dict(fx=360.0, fy=361.0, cx=317.0, cy=243.0, xi=0.1, alpha=0.55),
+    dict(fx=290.0, fy=291.0, cx=317.0, cy=243.0, xi=-0.25, alpha=0.62),
     dict(fx=330.0, fy=329.5, cx=322.5, cy=239.5, xi=-0.1, alpha=0.5),
 ]
 
