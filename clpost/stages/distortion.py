@@ -566,7 +566,9 @@ class Distortion(GatherStage):
         model = self._calibration(camera)
         m, ok = self._host_map(camera, frame)
         nz = ", ".join(f"{n}={getattr(model, n):.4g}" for n in model.coeff_names[:5] if getattr(model, n))
-        return (f"{'OpenCV fisheye' if model.is_fisheye else 'OpenCV'} model {nz or '(intrinsics only)'} → "
+        from ..calibration.model import FAMILY_TITLES
+
+        return (f"{FAMILY_TITLES[model.distortion_model]} model {nz or '(intrinsics only)'} → "
                 f"{model.width}x{model.height}, "
                 f"{'cubic B-spline' if self.filter_taps == 3 else 'bilinear'}; {self.coverage(camera, frame)}; "
                 f"{int((~ok).sum())} pixel(s) without data (alpha 0)")
