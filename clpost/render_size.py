@@ -66,6 +66,18 @@ def render_size(model: OpenCVModel, margin_px: float = 2.0) -> RenderSize:
 
 def report(model: OpenCVModel, what: str, sensor_width_mm: float | None = None, margin_px: float = 2.0) -> str:
     """The text of ``clpost render-size``."""
+    from .calibration import PINHOLE_LIMIT_DEG, max_ray_angle_deg, required_cubemap
+
+    theta = max_ray_angle_deg(model)
+    if theta > PINHOLE_LIMIT_DEG:  # no pinhole render covers it: a cubemap (clpost.calibration.cubemap)
+        cube = required_cubemap(model)
+        return "\n".join([
+            f"{what}: {model.width}x{model.height}, {model.distortion_model} model, sees {theta:.1f}° off axis "
+            f"({2 * theta:.0f}° field of view, beyond a pinhole render's {2 * PINHOLE_LIMIT_DEG:.0f}°)",
+            f"  render a cubemap: six {cube.face} px faces of 90° plus {cube.pad} px each side "
+            f"(f={cube.intrinsics()[0]:.6g} px, c=({cube.intrinsics()[2]:.6g}, {cube.intrinsics()[3]:.6g}) px per "
+            f"{cube.size}x{cube.size} face), side by side +x -x +y -y +z -z in a {cube.width}x{cube.height} atlas "
+            "with metadata['cubemap'] = (face, pad) (PyVistaRenderer.render_cubemap)"])
     r = render_size(model, margin_px)
     (x0, y0), (x1, y1) = r.data_window
     left, top, right, bottom = r.overscan

@@ -17,7 +17,9 @@ calibration's own K, as ``cv2.initUndistortRectifyMap(K, D, None, K)`` makes it)
 * **distort** (default): the map has the distorted image's size; each pixel (u, v) holds where the
   *undistorted* image is sampled, :math:`x_\text{src} = f_x x' + c_x`, :math:`y_\text{src} = f_y y' + c_y`
   with (x', y') the exact inverse of the model (:func:`clpost.calibration.undistort_newton`, the
-  distortion stage's inverse; always Newton, also for a model that asks the stage for Heikkilä's fit). Applied to an undistorted plate or a CG render it gives the lens's
+  distortion stage's inverse, for every camera model family of docs/camera_models.md — a ray at or
+  beyond 90° has no place in the undistorted image: alpha 0; always Newton, also for a model that asks
+  the stage for Heikkilä's fit). Applied to an undistorted plate or a CG render it gives the lens's
   image. A render with overscan (its EXR data window beyond the display window, the size
   ``clpost render-size`` states) is sampled at s, t outside [0, 1].
 * **undistort** (``--undistort``): each pixel (x, y) of the undistorted image holds where the

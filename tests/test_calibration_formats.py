@@ -49,6 +49,13 @@ EXPECTED = {
     "cameras.txt#8": dict(distortion_model="fisheye", fx=290.5, k1=0.021, k2=0.0),
     "camchain.yaml#cam0": dict(width=752, height=480, fx=461.629, cx=362.680, k1=-0.27695497, p2=0.00011556),
     "camchain.yaml#1": dict(distortion_model="fisheye", fy=457.296, k1=-0.0084, k4=0.0061),
+    "cameras.txt#9": dict(distortion_model="fov", fx=285.72, cx=642.31, omega=0.93),
+    "cameras.txt#10": dict(distortion_model="thinprism", fy=286.0, k1=0.01, k2=0.02, p1=0.001, p2=0.002, k3=0.0003,
+                           k4=0.0004, s1=0.0001, s3=0.0002, cx=639.5),
+    "camchain.yaml#cam2": dict(distortion_model="ucm", xi=0.8, fx=461.629, cx=362.680, k1=-0.27695497,
+                               p2=0.00011556),
+    "camchain_ds.yaml#cam0": dict(distortion_model="ds", xi=-0.2, alpha=0.59, fx=347.0, cy=510.8, width=1024),
+    "camchain_ds.yaml#cam1": dict(distortion_model="fov", omega=0.92, fx=276.3, cx=376.8),
 }
 
 
@@ -74,10 +81,7 @@ def test_opencv_files_agree_with_opencvs_own_reader(name):
 
 
 @pytest.mark.parametrize("name,msg", [
-    ("cameras.txt#9", "COLMAP model FOV is not supported"),
-    ("cameras.txt#10", "COLMAP model THIN_PRISM_FISHEYE"),
     ("cameras.txt", "10 cameras"),
-    ("camchain.yaml#cam2", "camera_model 'omni'"),
     ("camchain.yaml", "3 cameras"),
     ("camchain.yaml#cam7", "no camera 'cam7'"),
 ])
@@ -90,12 +94,20 @@ def test_models_clpost_cannot_express_are_refused_in_one_line_naming_them(name, 
 @pytest.mark.parametrize("text,msg", [
     ("image_width: 6\nimage_height: 4\nK: [5, 0, 1, 0, 5, 1, 0, 0, 1]\ncamera_matrix: [6, 0, 1, 0, 5, 1, 0, 0, 1]\n"
      "D: [0, 0, 0, 0]\n", "given twice"),
+    ("image_width: 6\nimage_height: 4\nK: [5, 0, 1, 0, 5, 1, 0, 0, 1]\nD: [0, 0, 0, 0]\ndistortion_model: kb8\n",
+     "'kb8' is not a model"),
     ("image_width: 6\nimage_height: 4\nK: [5, 0, 1, 0, 5, 1, 0, 0, 1]\nD: [0, 0, 0, 0]\ndistortion_model: fov\n",
-     "'fov' is not a model"),
+     "fov model needs omega"),
+    ("1 RAD_TAN_THIN_PRISM_FISHEYE 640 480 500 500 320 240 0 0 0 0 0 0 0 0 0 0 0 0\n",
+     "COLMAP model RAD_TAN_THIN_PRISM_FISHEYE is not supported"),
+    ("cam0:\n  camera_model: omni\n  intrinsics: [0.8, 1, 1, 1, 1]\n  distortion_model: equidistant\n"
+     "  distortion_coeffs: [0, 0, 0, 0]\n  resolution: [4, 4]\n", "omni-equidistant is not supported"),
+    ("cam0:\n  camera_model: eucm\n  intrinsics: [0.6, 1.1, 1, 1, 1, 1]\n  distortion_model: none\n"
+     "  distortion_coeffs: []\n  resolution: [4, 4]\n", "camera_model 'eucm' is not supported"),
+    ("cam0:\n  camera_model: ds\n  intrinsics: [0.1, 0.6, 1, 1, 1]\n  distortion_model: none\n"
+     "  distortion_coeffs: []\n  resolution: [4, 4]\n", r"ds intrinsics must be \[xi, alpha, fx, fy, cx, cy\]"),
     ("image_width: 6\nimage_height: 4\nK: [5, 0, 1, 0, 5, 1, 0, 0, 1]\nD: [0, 0, 0, 0, 0]\n"
      "distortion_model: equidistant\n", "fisheye .*has 4"),
-    ("cam0:\n  camera_model: pinhole\n  intrinsics: [1, 1, 1, 1]\n  distortion_model: fov\n"
-     "  distortion_coeffs: [0.9]\n  resolution: [4, 4]\n", "distortion_model 'fov'"),
     ("cam0:\n  camera_model: pinhole\n  intrinsics: [1, 1, 1, 1]\n  distortion_model: radtan\n"
      "  distortion_coeffs: [0.1, 0.2]\n  resolution: [4, 4]\n", "needs 4 distortion_coeffs"),
     ('<?xml version="1.0"?>\n<storage><a>1</a></storage>\n', "not an OpenCV FileStorage"),
@@ -120,9 +132,21 @@ MODELS = {
                            k4=0.0069, distortion_model="fisheye"),
     "pinhole": OpenCVModel(320, 200, 300.0, 300.0, 159.5, 99.5),
     "thin_prism_tilt": OpenCVModel(640, 480, 500.0, 500.0, 319.5, 239.5, k1=-0.1, s1=1e-3, tau_y=0.01),
+    "ucm": OpenCVModel(752, 480, 461.629, 460.152, 362.68, 246.049, xi=0.8, k1=-0.27695497, p2=0.00011556,
+                       distortion_model="ucm"),
+    "ucm_plain": OpenCVModel(752, 480, 461.629, 460.152, 362.68, 246.049, xi=1.2, distortion_model="ucm"),
+    "ds": OpenCVModel(1024, 1024, 347.0, 346.5, 511.2, 510.8, xi=-0.2, alpha=0.59, distortion_model="ds"),
+    "fov": OpenCVModel(752, 480, 276.3, 276.1, 376.8, 239.9, omega=0.92, distortion_model="fov"),
+    "ftheta": OpenCVModel(1920, 1208, 530.1, 530.1, 959.2, 603.7, k1=-0.012, k2=0.0031, k3=-4e-4, k4=1e-5,
+                          distortion_model="ftheta"),
+    "thinprism": OpenCVModel(1280, 800, 285.0, 286.0, 639.5, 399.5, k1=0.01, k2=0.02, p1=0.001, p2=0.002,
+                             k3=0.0003, k4=0.0004, s1=0.0001, s3=0.0002, distortion_model="thinprism"),
 }
 CANNOT = {("rational", "kalibr"), ("thin_prism_tilt", "ros"), ("thin_prism_tilt", "colmap"),
           ("thin_prism_tilt", "kalibr"), ("plumb_bob", "kalibr")}
+CANNOT |= {(n, "ros") for n in ("ucm", "ucm_plain", "ds", "fov", "ftheta", "thinprism")}
+CANNOT |= {(n, "colmap") for n in ("ucm", "ucm_plain", "ds", "ftheta")}
+CANNOT |= {(n, "kalibr") for n in ("ftheta", "thinprism")}
 
 
 @pytest.mark.parametrize("fmt", FORMATS)
@@ -141,9 +165,12 @@ def test_every_writer_reads_back_exactly_or_refuses(tmp_path, fmt, name):
     if fmt.startswith("opencv"):  # OpenCV reads what clpost writes, to the bit
         fs = cv2.FileStorage(str(out), cv2.FILE_STORAGE_READ)
         np.testing.assert_array_equal(fs.getNode("camera_matrix").mat(), m.matrix())
-        d = fs.getNode("distortion_coefficients").mat().ravel()
-        np.testing.assert_array_equal(d, m.coefficients()[:d.size])
-        assert not np.any(m.coefficients()[d.size:])
+        node = fs.getNode("distortion_coefficients")
+        d = node.mat().ravel() if not node.empty() else np.zeros(0)
+        ref = np.array([getattr(m, n) for n in m.coeff_names if n not in ("xi", "alpha", "omega")])
+        np.testing.assert_array_equal(d, ref[:d.size])
+        if m.distortion_model in ("opencv", "fisheye"):
+            assert not np.any(m.coefficients()[d.size:])
         assert int(fs.getNode("fisheye_model").real()) == int(m.is_fisheye)
 
 
@@ -167,7 +194,7 @@ def test_header_named_fields_read_back_exactly(name):
     text = header_text(m)
     assert text.startswith(f"model={m.distortion_model} width={m.width} height={m.height} fx=")
     assert _same(model_from_header(text), m)
-    if not m.is_fisheye:
+    if m.distortion_model == "opencv":
         assert "k1=" in text and "p2=" in text and "k3=" in text
 
 

@@ -51,11 +51,20 @@ def cmd_calibration(args) -> int:
 
     model = model_from_source(args)
     if args.calibration_command == "show":
+        from .cubemap import required_cubemap
+        from .frustum import PINHOLE_LIMIT_DEG, max_ray_angle_deg
+
         print(f"{model.source or 'model'}: {header_text(model)}")
         rf = model.fold_radius()
-        spec = required_render(model)
-        print(f"fold radius: {'none' if math.isinf(rf) else f'{rf:.6g} (normalised)'}; "
-              f"render that covers it: {spec.width}x{spec.height} (f={spec.f:.6g}, c=({spec.cx:.6g}, {spec.cy:.6g}))")
+        theta = max_ray_angle_deg(model)
+        if theta > PINHOLE_LIMIT_DEG:
+            cube = required_cubemap(model)
+            cover = (f"{theta:.1f}° off axis, beyond a pinhole render: a cubemap of six {cube.face} px faces "
+                     f"({cube.width}x{cube.height} atlas)")
+        else:
+            spec = required_render(model)
+            cover = f"{spec.width}x{spec.height} (f={spec.f:.6g}, c=({spec.cx:.6g}, {spec.cy:.6g}))"
+        print(f"fold radius: {'none' if math.isinf(rf) else f'{rf:.6g} (normalised)'}; render that covers it: {cover}")
         return 0
     from ..outputs import check_paths
 

@@ -16,7 +16,8 @@ r"""Calibration files → :class:`~clpost.calibration.model.OpenCVModel` (reader
 * **COLMAP** ``cameras.txt`` (``CAMERA_ID MODEL WIDTH HEIGHT PARAMS…``, the models of
   :data:`COLMAP_MODELS`; ``cameras.txt#2`` picks camera 2);
 * **Kalibr** camchain YAML (``cam0: {camera_model: pinhole, intrinsics: [fu, fv, pu, pv],
-  distortion_model: radtan | equidistant, distortion_coeffs, resolution: [w, h]}``;
+  distortion_model: radtan | equidistant | fov, distortion_coeffs, resolution: [w, h]}``, and
+  ``camera_model: omni`` (+ ``radtan``/``none``) and ``ds`` (:data:`KALIBR_CAMERAS`);
   ``camchain.yaml#cam1`` picks cam1).
 
 Pixel conventions: OpenCV, ROS and Kalibr (whose corners come from OpenCV's detector) put the centre of
@@ -33,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .model import COEFF_NAMES, FISHEYE_COEFF_NAMES, OpenCVModel
+from .model import COEFF_NAMES, FAMILY_PARAMS, FISHEYE_COEFF_NAMES, OpenCVModel
 
 MATRIX_KEYS = ("camera_matrix", "cameraMatrix", "K", "k", "mtx", "intrinsic_matrix", "intrinsics_matrix")
 """Keys of the 3×3 camera matrix, in the order they are looked for."""
@@ -47,6 +48,12 @@ FISHEYE_NAMES = ("equidistant", "fisheye", "opencv_fisheye", "kannala_brandt")
 """``distortion_model`` values meaning OpenCV's fisheye model (ROS, Kalibr and others)."""
 STANDARD_NAMES = ("plumb_bob", "rational_polynomial", "radtan", "opencv", "pinhole", "none")
 """``distortion_model`` values meaning the standard OpenCV model."""
+OTHER_NAMES = {"ucm": "ucm", "omni": "ucm", "omnidir": "ucm", "unified": "ucm", "mei": "ucm",
+               "ds": "ds", "double_sphere": "ds", "ftheta": "ftheta", "f-theta": "ftheta", "fov": "fov",
+               "thinprism": "thinprism", "thin_prism_fisheye": "thinprism"}
+"""``distortion_model`` values of a FileStorage file (as clpost writes them) meaning the other
+families; their scalars ``xi``, ``alpha``, ``omega`` are keys of their own (``xi`` alone, as
+``cv::omnidir::calibrate``'s output has it, means the unified model with radtan)."""
 
 
 def _read_opencv_yaml(text: str) -> dict:
@@ -150,9 +157,11 @@ def _family(name, path: str, where: str = "distortion_model") -> str:
         return "fisheye"
     if n in STANDARD_NAMES:
         return "opencv"
+    if n in OTHER_NAMES:
+        return OTHER_NAMES[n]
     raise InputError(f"{path}: {where} {name!r} is not a model clpost has; it reads "
-                     f"{', '.join(STANDARD_NAMES[:3])} (OpenCV standard) and {', '.join(FISHEYE_NAMES[:2])} "
-                     "(OpenCV fisheye)")
+                     f"{', '.join(STANDARD_NAMES[:3])} (OpenCV standard), {', '.join(FISHEYE_NAMES[:2])} "
+                     f"(OpenCV fisheye) and {', '.join(sorted(set(OTHER_NAMES.values())))}")
 
 
 def _from_mapping(d: dict, path: str) -> OpenCVModel:
@@ -166,16 +175,30 @@ def _from_mapping(d: dict, path: str) -> OpenCVModel:
     k = _matrix_value(knode, kkey, path).reshape(-1)
     if k.size != 9:
         raise InputError(f"{path}: {kkey} must have 9 values, has {k.size}")
+    family = _family(d.get("distortion_model"), path)
+    if family == "opencv" and "distortion_model" not in d and "xi" in d:
+        family = "ucm"  # cv::omnidir (Mei's model): K, D (k1, k2, p1, p2), xi
+    scalars = {}
+    for name in ("xi", "alpha", "omega"):
+        if name in FAMILY_PARAMS[family]:
+            if name not in d:
+                raise InputError(f"{path}: the {family} model needs {name}; add it as a number")
+            try:
+                scalars[name] = float(_matrix_value(d[name], name, path).reshape(-1)[0]
+                                      if isinstance(d[name], (dict, list)) else d[name])
+            except (TypeError, ValueError):
+                raise InputError(f"{path}: {name} must be a number") from None
     dkey, dnode = _lookup(d, DISTORTION_KEYS, "the distortion coefficients", path)
+    if dnode is None and family in ("ds", "fov"):
+        dkey, dnode = "distortion_coefficients", []
     if dnode is None:
         raise InputError(f"{path}: no distortion coefficients (looked for {', '.join(DISTORTION_KEYS[:6])}); add "
                          f"them (OpenCV order {', '.join(COEFF_NAMES[:5])}, …)")
     dist = _matrix_value(dnode, dkey, path).reshape(-1)
-    family = _family(d.get("distortion_model"), path)
     if family == "opencv" and str(d.get("fisheye_model", 0)).strip().lower() in ("1", "true"):
         family = "fisheye"  # OpenCV's calibration tutorial's flag
     w, h = _size_from(d, path)
-    return OpenCVModel.from_vector(w, h, k.reshape(3, 3), dist, source=path, distortion_model=family)
+    return OpenCVModel.from_vector(w, h, k.reshape(3, 3), dist, source=path, distortion_model=family, **scalars)
 
 
 COLMAP_MODELS = {
@@ -190,9 +213,11 @@ COLMAP_MODELS = {
     # θ_d = θ(1 + k θ²) and θ(1 + k1 θ² + k2 θ⁴): truncations of OpenCV's fisheye model
     "SIMPLE_RADIAL_FISHEYE": (("f", "cx", "cy", "k1"), "fisheye"),
     "RADIAL_FISHEYE": (("f", "cx", "cy", "k1", "k2"), "fisheye"),
+    "FOV": (("fx", "fy", "cx", "cy", "omega"), "fov"),
+    "THIN_PRISM_FISHEYE": (("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "s1", "s3"), "thinprism"),
 }
-"""COLMAP camera models clpost's models express (FOV, THIN_PRISM_FISHEYE and
-RAD_TAN_THIN_PRISM_FISHEYE are other models and are refused)."""
+"""COLMAP camera models clpost's models express (THIN_PRISM_FISHEYE's sx1, sy1 are s1, s3;
+RAD_TAN_THIN_PRISM_FISHEYE is another model and is refused)."""
 
 COLMAP_PIXEL_OFFSET = 0.5
 r"""COLMAP's principal point minus OpenCV's: COLMAP puts the image's top-left *corner* at (0, 0)
@@ -232,8 +257,14 @@ def _read_colmap(text: str, path: str, camera_id: str | None) -> OpenCVModel:
 
 
 KALIBR_DISTORTIONS = {"radtan": ("opencv", ("k1", "k2", "p1", "p2")), "equidistant": ("fisheye", FISHEYE_COEFF_NAMES),
-                      "none": ("opencv", ())}
-"""Kalibr ``distortion_model`` → (clpost family, coefficient names); Kalibr's ``fov`` is another model."""
+                      "fov": ("fov", ("omega",)), "none": ("opencv", ())}
+"""Kalibr ``distortion_model`` of a ``pinhole`` camera → (clpost family, coefficient names)."""
+
+KALIBR_CAMERAS = {"pinhole": ("fx", "fy", "cx", "cy"), "omni": ("xi", "fx", "fy", "cx", "cy"),
+                  "ds": ("xi", "alpha", "fx", "fy", "cx", "cy")}
+"""Kalibr ``camera_model`` → its ``intrinsics`` (Kalibr wiki, "Supported models"); ``omni`` is the
+unified model (clpost ``ucm``) with ``radtan`` or ``none`` distortion, ``ds`` the double sphere
+with ``none``."""
 
 
 def _is_kalibr(d) -> bool:
@@ -255,27 +286,31 @@ def _read_kalibr(d: dict, path: str, cam: str | None) -> OpenCVModel:
     if not isinstance(c, dict) or "camera_model" not in c:
         raise InputError(f"{path}: no camera {cam!r}; it has {', '.join(cams)}")
     where = f"{path}#{cam}"
-    if c["camera_model"] != "pinhole":
-        raise InputError(f"{where}: Kalibr camera_model {c['camera_model']!r} is not supported; clpost reads "
-                         "pinhole (with radtan or equidistant distortion)")
+    cm = c["camera_model"]
+    if cm not in KALIBR_CAMERAS:
+        raise InputError(f"{where}: Kalibr camera_model {cm!r} is not supported; clpost reads "
+                         f"{', '.join(KALIBR_CAMERAS)} (fix camera_model or convert the calibration)")
     dm = c.get("distortion_model", "none")
-    if dm not in KALIBR_DISTORTIONS:
-        raise InputError(f"{where}: Kalibr distortion_model {dm!r} is not supported; clpost reads "
-                         f"{', '.join(KALIBR_DISTORTIONS)}")
+    allowed = KALIBR_DISTORTIONS if cm == "pinhole" else ({"radtan", "none"} if cm == "omni" else {"none"})
+    if dm not in allowed:
+        raise InputError(f"{where}: Kalibr {cm}-{dm} is not supported; with camera_model {cm} clpost reads "
+                         f"distortion_model {', '.join(sorted(allowed))}")
     family, names = KALIBR_DISTORTIONS[dm]
+    family = {"omni": "ucm", "ds": "ds"}.get(cm, family)
+    inames = KALIBR_CAMERAS[cm]
     intr = _matrix_value(c.get("intrinsics"), "intrinsics", where).reshape(-1)
     coeffs = _matrix_value(c.get("distortion_coeffs", []), "distortion_coeffs", where).reshape(-1)
-    if intr.size != 4:
-        raise InputError(f"{where}: pinhole intrinsics must be [fu, fv, pu, pv], got {intr.size} values")
+    if intr.size != len(inames):
+        raise InputError(f"{where}: {cm} intrinsics must be [{', '.join(inames)}], got {intr.size} values")
     if coeffs.size != len(names):
         raise InputError(f"{where}: {dm} needs {len(names)} distortion_coeffs ({', '.join(names) or 'none'}), "
                          f"got {coeffs.size}")
     res = c.get("resolution")
     if not (isinstance(res, (list, tuple)) and len(res) == 2):
         raise InputError(f"{where}: no resolution [width, height]; add it")
-    fu, fv, pu, pv = intr.tolist()
-    return OpenCVModel(int(res[0]), int(res[1]), fu, fv, pu, pv, source=where, distortion_model=family,
-                       **dict(zip(names, coeffs.tolist())))
+    p = dict(zip(inames, intr.tolist()))
+    p.update(zip(names, coeffs.tolist()))
+    return OpenCVModel(int(res[0]), int(res[1]), source=where, distortion_model=family, **p)
 
 
 def load_calibration(path: str | Path) -> OpenCVModel:

@@ -92,8 +92,35 @@ def undistorted_bounds(model: OpenCVModel, margin_px: float = 2.0,
     return float(x0 - m), float(x1 + m), float(y0 - m), float(y1 + m)
 
 
+PINHOLE_LIMIT_DEG = 75.0
+"""The largest angle to the axis (half the field of view, 150° in all) a pinhole render is asked to
+cover: a pinhole pixel at θ spans cos³θ of the solid angle of a central one, so at 75° the render
+spends 58 × the centre's pixels per solid angle, and its size diverges at 90°."""
+
+
+def max_ray_angle_deg(model: OpenCVModel) -> float:
+    """The largest angle to the optical axis of any output pixel's ray (degrees; the image border,
+    4 samples a pixel, for these radial models; 180 if some border pixel has no ray)."""
+    x, y, z, ok = model.unproject(*border_samples(model.width, model.height))
+    if not ok.any():
+        return 180.0
+    return float(np.degrees(np.arccos(np.clip(z[ok].min(), -1.0, 1.0))))
+
+
 @lru_cache(maxsize=32)
 def _required_render(model: OpenCVModel, margin_px: float) -> RenderSpec:
+    theta = max_ray_angle_deg(model)
+    if theta > PINHOLE_LIMIT_DEG:
+        from ..errors import InputError
+
+        from .cubemap import required_cubemap
+
+        cube = required_cubemap(model)
+        raise InputError(
+            f"the calibration{model._where()} sees {theta:.1f}° off axis (a {2 * theta:.0f}° field of view): no pinhole "
+            f"render covers more than {2 * PINHOLE_LIMIT_DEG:.0f}°; render a cubemap of six {cube.face} px faces "
+            f"({cube.width}x{cube.height} atlas: clpost.calibration.required_cubemap, "
+            "PyVistaRenderer.render_cubemap), which the distortion stage samples")
     x0, x1, y0, y1 = undistorted_bounds(model, margin_px)
     f = max(model.fx, model.fy)
     rw, rh = int(math.ceil(f * (x1 - x0))), int(math.ceil(f * (y1 - y0)))
@@ -139,6 +166,8 @@ def render_intrinsics(model: OpenCVModel, size: tuple[int, int]) -> tuple[float,
 def _render_intrinsics(model: OpenCVModel, size: tuple[int, int]) -> tuple[float, float, float, float] | None:
     if tuple(size) == (model.width, model.height):
         return float(model.fx), float(model.fy), float(model.cx), float(model.cy)
+    if max_ray_angle_deg(model) > PINHOLE_LIMIT_DEG:
+        return None  # no pinhole render is made for it (a cubemap: clpost.calibration.cubemap)
     spec = required_render(model)
     if tuple(size) == (spec.width, spec.height):
         return spec.intrinsics()

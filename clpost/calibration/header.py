@@ -24,7 +24,7 @@ _ALWAYS = ("k1", "k2", "p1", "p2", "k3")
 
 def header_text(m: OpenCVModel) -> str:
     """``model=… width=… height=… fx=… fy=… cx=… cy=… k1=…`` (module docstring)."""
-    names = m.coeff_names if m.is_fisheye else [n for n in COEFF_NAMES if n in _ALWAYS or getattr(m, n)]
+    names = m.coeff_names if m.distortion_model != "opencv" else [n for n in COEFF_NAMES if n in _ALWAYS or getattr(m, n)]
     fields = [("width", m.width), ("height", m.height), ("fx", m.fx), ("fy", m.fy), ("cx", m.cx), ("cy", m.cy)]
     fields += [(n, getattr(m, n)) for n in names]
     return " ".join([f"model={m.distortion_model}"] + [f"{k}={exact_g(float(v))}" for k, v in fields])
@@ -47,7 +47,7 @@ def model_from_header(text: str, source: str = "header") -> OpenCVModel:
             raise InputError(f"{source}: clpost.distortion field {tok!r} is not name=value (or given twice)")
         d[key] = val
     family = d.pop("model", "opencv")
-    allowed = {"width", "height", "fx", "fy", "cx", "cy", *COEFF_NAMES}
+    allowed = {"width", "height", "fx", "fy", "cx", "cy", *COEFF_NAMES, "xi", "alpha", "omega"}
     unknown = sorted(set(d) - allowed)
     if unknown:
         raise InputError(f"{source}: clpost.distortion has unknown fields {', '.join(unknown)}")

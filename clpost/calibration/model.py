@@ -53,10 +53,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields, replace
+from functools import lru_cache
 
 import numpy as np
 
 from ..errors import InputError
+from . import projections
 
 COEFF_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tau_x", "tau_y")
 """OpenCV's order of the distortion vector (4, 5, 8, 12 or 14 entries)."""
@@ -64,9 +66,29 @@ COEFF_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3",
 FISHEYE_COEFF_NAMES = ("k1", "k2", "k3", "k4")
 """``cv::fisheye``'s distortion vector (exactly 4 entries)."""
 
-DISTORTION_MODELS = ("opencv", "fisheye")
+THINPRISM_COEFF_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "s1", "s3")
+"""COLMAP ``THIN_PRISM_FISHEYE``'s distortion parameters (its sx1, sy1 are clpost's s1, s3)."""
+
+FAMILY_PARAMS = {
+    "opencv": COEFF_NAMES,
+    "fisheye": FISHEYE_COEFF_NAMES,
+    "thinprism": THINPRISM_COEFF_NAMES,
+    "ftheta": ("k1", "k2", "k3", "k4"),
+    "fov": ("omega",),
+    "ucm": ("xi", "k1", "k2", "p1", "p2"),
+    "ds": ("xi", "alpha"),
+}
+"""Each family's parameters besides K, in its vector's order (formulas: :mod:`.projections`)."""
+
+DISTORTION_MODELS = tuple(FAMILY_PARAMS)
 """``OpenCVModel.distortion_model``: the standard (rational, tangential, thin-prism, tilt) model,
-or OpenCV's fisheye (equidistant, Kannala–Brandt) model."""
+OpenCV's fisheye (equidistant, Kannala–Brandt), COLMAP's thin-prism fisheye, the f-theta
+polynomial, the FOV model, the unified camera model (+ radtan) and the double sphere
+(:mod:`clpost.calibration.projections`)."""
+
+FAMILY_TITLES = {"opencv": "OpenCV", "fisheye": "OpenCV fisheye (Kannala–Brandt)",
+                 "thinprism": "thin-prism fisheye (COLMAP)", "ftheta": "f-theta polynomial",
+                 "fov": "FOV (Devernay–Faugeras)", "ucm": "unified (Mei, + radtan)", "ds": "double sphere"}
 
 
 @dataclass(frozen=True)
@@ -94,6 +116,12 @@ class OpenCVModel:
     s4: float = 0.0
     tau_x: float = 0.0
     tau_y: float = 0.0
+    xi: float = 0.0
+    """UCM / double sphere ξ (dimensionless)."""
+    alpha: float = 0.0
+    """Double sphere α in [0, 1)."""
+    omega: float = 0.0
+    """FOV model ω (radians)."""
     inverse: str = "newton"
     """How the stage inverts the model: ``newton`` (exact) or ``heikkila`` (the paper's fit)."""
     distortion_model: str = "opencv"
@@ -127,14 +155,21 @@ class OpenCVModel:
         if self.distortion_model not in DISTORTION_MODELS:
             raise InputError(f"OpenCVModel.distortion_model={self.distortion_model!r} must be one of "
                              f"{', '.join(DISTORTION_MODELS)}{self._where()}")
-        if self.is_fisheye:
-            extra = [n for n in COEFF_NAMES if n not in FISHEYE_COEFF_NAMES and getattr(self, n)]
-            if extra:
-                raise InputError(f"OpenCVModel: the fisheye model has only k1..k4; {', '.join(extra)} must be 0"
-                                 f"{self._where()}")
+        extra = [n for n in COEFF_NAMES + ("xi", "alpha", "omega") if n not in self.coeff_names and getattr(self, n)]
+        if extra:
+            raise InputError(f"OpenCVModel: the {self.distortion_model} model has only "
+                             f"{', '.join(self.coeff_names)}; {', '.join(extra)} must be 0{self._where()}")
+        if self.distortion_model != "opencv":
             if self.inverse == "heikkila":
-                raise InputError(f"OpenCVModel: the Heikkilä inverse is for the standard model, not fisheye; "
-                                 f"use inverse='newton'{self._where()}")
+                raise InputError(f"OpenCVModel: the Heikkilä inverse is for the standard model, not "
+                                 f"{self.distortion_model}; use inverse='newton'{self._where()}")
+        if self.distortion_model == "ucm" and self.xi < 0:
+            raise InputError(f"OpenCVModel: UCM xi={self.xi} must be >= 0{self._where()}")
+        if self.distortion_model == "ds" and not (0 <= self.alpha < 1 and self.xi > -1):
+            raise InputError(f"OpenCVModel: double sphere needs 0 <= alpha < 1 and xi > -1, got alpha={self.alpha}, "
+                             f"xi={self.xi}{self._where()}")
+        if self.distortion_model == "fov" and not (0 <= self.omega < math.pi):
+            raise InputError(f"OpenCVModel: FOV omega={self.omega} must be in [0, pi) radians{self._where()}")
 
     def _where(self) -> str:
         return f" (from {self.source})" if self.source else ""
@@ -142,9 +177,10 @@ class OpenCVModel:
     # -- construction -----------------------------------------------------------------------
     @staticmethod
     def from_vector(width: int, height: int, k: np.ndarray, d, source: str = "",
-                    distortion_model: str = "opencv") -> "OpenCVModel":
-        """From a 3×3 camera matrix and an OpenCV distortion vector of 4/5/8/12/14 entries
-        (``fisheye``: ``cv::fisheye``'s 4)."""
+                    distortion_model: str = "opencv", **scalars) -> "OpenCVModel":
+        """From a 3×3 camera matrix and a distortion vector: OpenCV's 4/5/8/12/14 entries, or the
+        family's coefficients (:data:`FAMILY_PARAMS` without the ``scalars`` xi, alpha, omega given
+        by name; ``fisheye``: ``cv::fisheye``'s 4)."""
         k = np.asarray(k, dtype=np.float64)
         d = np.asarray(d, dtype=np.float64).reshape(-1)
         where = f" in {source}" if source else ""
@@ -153,18 +189,21 @@ class OpenCVModel:
         if abs(k[0, 1]) > 1e-9 * abs(k[0, 0]) or k[1, 0] or k[2, 0] or k[2, 1] or abs(k[2, 2] - 1) > 1e-12:
             raise InputError(f"camera_matrix{where} must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] "
                              f"(no skew); got {k.tolist()}")
-        if distortion_model == "fisheye":
-            if d.size != 4:
-                raise InputError(f"distortion_coefficients{where} has {d.size} entries; the fisheye (equidistant) "
-                                 f"model has 4 ({', '.join(FISHEYE_COEFF_NAMES)})")
-            coeffs = dict(zip(FISHEYE_COEFF_NAMES, d.tolist()))
+        if distortion_model not in FAMILY_PARAMS:
+            raise InputError(f"distortion model {distortion_model!r}{where} must be one of {', '.join(FAMILY_PARAMS)}")
+        if distortion_model != "opencv":
+            names = [n for n in FAMILY_PARAMS[distortion_model] if n not in ("xi", "alpha", "omega")]
+            if d.size != len(names):
+                raise InputError(f"distortion_coefficients{where} has {d.size} entries; the {distortion_model} "
+                                 f"model has {len(names)} ({', '.join(names) or 'none'})")
+            coeffs = dict(zip(names, d.tolist()))
         elif d.size not in (4, 5, 8, 12, 14):
             raise InputError(f"distortion_coefficients{where} has {d.size} entries; OpenCV uses 4, 5, 8, 12 "
                              f"or 14 ({', '.join(COEFF_NAMES)})")
         else:
             coeffs = dict(zip(COEFF_NAMES, d.tolist()))
         return OpenCVModel(width, height, k[0, 0], k[1, 1], k[0, 2], k[1, 2], source=source,
-                           distortion_model=distortion_model, **coeffs)
+                           distortion_model=distortion_model, **coeffs, **scalars)
 
     @staticmethod
     def from_camera(camera, size: tuple[int, int], **coeffs) -> "OpenCVModel":
@@ -174,9 +213,9 @@ class OpenCVModel:
 
     def vector(self) -> np.ndarray:
         """The 14-entry OpenCV distortion vector (standard model only; see :meth:`coefficients`)."""
-        if self.is_fisheye:
-            raise InputError(f"OpenCVModel.vector(): a fisheye model has no standard OpenCV vector; use "
-                             f"coefficients(){self._where()}")
+        if self.distortion_model != "opencv":
+            raise InputError(f"OpenCVModel.vector(): a {self.distortion_model} model has no standard OpenCV vector; "
+                             f"use coefficients(){self._where()}")
         return np.array([getattr(self, n) for n in COEFF_NAMES])
 
     @property
@@ -185,8 +224,8 @@ class OpenCVModel:
 
     @property
     def coeff_names(self) -> tuple[str, ...]:
-        """The names of this family's coefficients, in its vector's order."""
-        return FISHEYE_COEFF_NAMES if self.is_fisheye else COEFF_NAMES
+        """The names of this family's coefficients, in its vector's order (:data:`FAMILY_PARAMS`)."""
+        return FAMILY_PARAMS[self.distortion_model]
 
     def coefficients(self) -> np.ndarray:
         """The family's own distortion vector: 14 OpenCV entries, or fisheye's k1..k4."""
@@ -208,8 +247,8 @@ class OpenCVModel:
 
     @property
     def is_identity(self) -> bool:
-        """No distortion (the equidistant projection is one even with k = 0)."""
-        return not self.is_fisheye and not np.any(self.vector())
+        """No distortion: the pinhole (every other family's projection is one even with k = 0)."""
+        return self.distortion_model == "opencv" and not np.any(self.vector())
 
     # -- the forward model --------------------------------------------------------------------
     def _tilt(self) -> np.ndarray:
@@ -228,26 +267,31 @@ class OpenCVModel:
         return num / den
 
     def fisheye_scale(self, r: np.ndarray) -> np.ndarray:
-        """θ_d(arctan r)/r of the fisheye model (1 at r = 0)."""
+        """θ_d(arctan r)/r of the fisheye model (1 at r = 0; ρ(θ) of :mod:`.projections`)."""
         r = np.asarray(r, np.float64)
         th = np.arctan(r)
-        t2 = th * th
-        thd = th * (1 + t2 * (self.k1 + t2 * (self.k2 + t2 * (self.k3 + t2 * self.k4))))
         safe = np.where(r > 1e-12, r, 1.0)
-        return np.where(r > 1e-12, thd / safe, 1 + t2 * self.k1)
+        return np.where(r > 1e-12, projections._rho(self, th) / safe, 1 + th * th * self.k1)
 
-    def distorted_radius(self, r: np.ndarray) -> np.ndarray:
-        """ρ(r): the radial part of the model at undistorted normalised radius r."""
-        r = np.asarray(r, np.float64)
-        return r * (self.fisheye_scale(r) if self.is_fisheye else self.radial(r * r))
+    @property
+    def has_plane_distortion(self) -> bool:
+        """Whether D (:meth:`distort_plane`) is more than the identity."""
+        fam = self.distortion_model
+        return fam in ("opencv", "ucm", "thinprism") and any(getattr(self, n) for n in self.coeff_names
+                                                             if n not in ("xi",))
 
-    def distort_normalized(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Undistorted normalised (x', y') → distorted normalised (x''', y''') (float64)."""
-        if self.is_fisheye:
-            sc = self.fisheye_scale(np.hypot(x, y))
-            return x * sc, y * sc
+    def distort_plane(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """D: plane coordinates of the family's projection P → distorted plane coordinates
+        (float64): OpenCV's standard model (module docstring; for ``ucm`` its radtan k1, k2, p1,
+        p2, as Kalibr's ``omni-radtan``), COLMAP's thin-prism polynomial for ``thinprism``
+        (radial :math:`1 + k_1 r^2 + k_2 r^4 + k_3 r^6 + k_4 r^8`, the same tangential and
+        s1 = sx1, s3 = sy1 terms), the identity for the other families."""
+        fam = self.distortion_model
+        if fam not in ("opencv", "ucm", "thinprism"):
+            return x, y
         r2 = x * x + y * y
-        rad = self.radial(r2)
+        rad = (1 + r2 * (self.k1 + r2 * (self.k2 + r2 * (self.k3 + r2 * self.k4)))) if fam == "thinprism" \
+            else self.radial(r2)
         xd = x * rad + 2 * self.p1 * x * y + self.p2 * (r2 + 2 * x * x) + self.s1 * r2 + self.s2 * r2 * r2
         yd = y * rad + self.p1 * (r2 + 2 * y * y) + 2 * self.p2 * x * y + self.s3 * r2 + self.s4 * r2 * r2
         if self.tau_x or self.tau_y:
@@ -255,6 +299,58 @@ class OpenCVModel:
             w = t[2, 0] * xd + t[2, 1] * yd + t[2, 2]
             xd, yd = (t[0, 0] * xd + t[0, 1] * yd + t[0, 2]) / w, (t[1, 0] * xd + t[1, 1] * yd + t[1, 2]) / w
         return xd, yd
+
+    def plane_radius(self, rho: np.ndarray) -> np.ndarray:
+        """The radial part of D at plane radius ρ (ρ for the families without D)."""
+        rho = np.asarray(rho, np.float64)
+        if not self.has_plane_distortion:
+            return rho
+        return self.distort_plane(rho, np.zeros_like(rho))[0] if self.distortion_model == "thinprism" \
+            else rho * self.radial(rho * rho)
+
+    def distorted_radius(self, r: np.ndarray) -> np.ndarray:
+        """ρ(r): the radial part of the model at undistorted (pinhole) normalised radius r."""
+        r = np.asarray(r, np.float64)
+        if self.distortion_model == "opencv":
+            return r * self.radial(r * r)
+        mx, _, ok = projections.project(self, r, np.zeros_like(r), np.ones_like(r))
+        return np.where(ok, self.plane_radius(mx), np.nan)
+
+    def distort_normalized(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Undistorted (pinhole) normalised (x', y') → distorted normalised coordinates (float64):
+        D(P(x', y', 1)); NaN where the ray (x', y', 1) is outside P's domain."""
+        if self.distortion_model == "opencv":
+            return self.distort_plane(x, y)
+        x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+        mx, my, ok = projections.project(self, x, y, np.ones_like(x))
+        xd, yd = self.distort_plane(mx, my)
+        return np.where(ok, xd, np.nan), np.where(ok, yd, np.nan)
+
+    def project_rays(self, x: np.ndarray, y: np.ndarray, z: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Camera-frame rays (any length; z forward, y down) → pixels (u, v) and whether the ray
+        has an image: inside P's domain and D's monotonic branch. The forward model of every
+        family; (0, 0) where invalid."""
+        mx, my, ok = projections.project(self, x, y, z)
+        if self.has_plane_distortion:
+            ok &= np.hypot(mx, my) < self.plane_fold_radius()
+        xd, yd = self.distort_plane(mx, my)
+        u, v = self.fx * xd + self.cx, self.fy * yd + self.cy
+        ok &= np.isfinite(u) & np.isfinite(v)
+        return np.where(ok, u, 0.0), np.where(ok, v, 0.0), ok
+
+    def unproject(self, u: np.ndarray, v: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Pixels → unit camera-frame rays (x, y, z) and validity: the exact inverse of
+        :meth:`project_rays` (:func:`unproject_plane` for D, then :func:`.projections.unproject`)."""
+        if self.distortion_model == "opencv":
+            x, y, ok = undistort_newton(self, u, v)
+            n = np.sqrt(x * x + y * y + 1)
+            return x / n, y / n, 1 / n, ok
+        mx, my, ok = unproject_plane(self, u, v)
+        x, y, z, ok2 = projections.unproject(self, mx, my)
+        ok &= ok2
+        return np.where(ok, x, 0.0), np.where(ok, y, 0.0), np.where(ok, z, 1.0), ok
 
     def project(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Undistorted normalised coordinates → distorted pixel coordinates (u, v)."""
@@ -269,14 +365,18 @@ class OpenCVModel:
     def fold_radius(self, r_max: float = 20.0, n: int = 200001) -> float:
         r"""First undistorted radius r (normalised) where :math:`\rho(r)` (:meth:`distorted_radius`)
         stops increasing or the denominator of R reaches 0; ``inf`` if none up to ``r_max``."""
-        r = np.linspace(0.0, r_max, n)
-        r2 = r * r
-        den = np.ones_like(r) if self.is_fisheye else 1 + r2 * (self.k4 + r2 * (self.k5 + r2 * self.k6))
-        rho = self.distorted_radius(np.where(den > 0, r, 0.0))
-        bad = (den <= 0)[1:] | (np.diff(rho) <= 0)
-        if not bad.any():
+        return _first_fold(self.distorted_radius, self.distortion_model == "opencv" and self._den, r_max, n)
+
+    def _den(self, r2: np.ndarray) -> np.ndarray:
+        return 1 + r2 * (self.k4 + r2 * (self.k5 + r2 * self.k6))
+
+    def plane_fold_radius(self) -> float:
+        """:meth:`fold_radius` of D alone, in plane coordinates (inf for the families without D)."""
+        if not self.has_plane_distortion:
             return math.inf
-        return float(r[int(np.argmax(bad))])
+        if self.distortion_model == "opencv":
+            return self.fold_radius()
+        return _fold_cached(self)
 
     def fold_distorted_radius(self) -> float:
         """ρ(r_fold): the largest distorted radius the monotonic branch reaches (inf if none)."""
@@ -286,41 +386,49 @@ class OpenCVModel:
         return float(self.distorted_radius(np.array(rf)))
 
 
+def _first_fold(rho_fn, den_fn, r_max: float, n: int) -> float:
+    r = np.linspace(0.0, r_max, n)
+    den = den_fn(r * r) if den_fn else np.ones_like(r)
+    with np.errstate(all="ignore"):
+        rho = rho_fn(np.where(den > 0, r, 0.0))
+        bad = (den <= 0)[1:] | ~(np.diff(rho) > 0)
+    if not bad.any():
+        return math.inf
+    return float(r[int(np.argmax(bad))])
+
+
+@lru_cache(maxsize=64)
+def _fold_cached(model: OpenCVModel) -> float:
+    return _first_fold(model.plane_radius, None, 20.0, 200001)
+
+
 # ---------------------------------------------------------------------------------------------
 # Inverses
 # ---------------------------------------------------------------------------------------------
 
 
-def undistort_newton(model: OpenCVModel, u: np.ndarray, v: np.ndarray, tol_px: float = 1e-6,
-                     max_iter: int = 60) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    r"""Exact inverse: distorted pixels (u, v) → undistorted normalised (x', y') and a validity mask.
-
-    Newton iteration :math:`x_{k+1} = x_k - J^{-1}(D(x_k) - x_d)` on the full model D in pixel
-    units, J by central differences (h = 1e-7), steps limited to 0.5 normalised units so a
-    strong model cannot jump across the fold. Valid ⇔ converged to ``tol_px`` within
-    ``max_iter`` iterations, finite, and inside the monotonic branch (r < r_fold).
-    """
+def _newton_solve(model: OpenCVModel, fn, u, v, tol_px: float, max_iter: int):
+    r"""Newton iteration :math:`x_{k+1} = x_k - J^{-1}(F(x_k) - p)` on ``fn`` (normalised
+    coordinates → pixels) started from the normalised target p, J by central differences
+    (h = 1e-7), steps limited to 0.5 normalised units so a strong model cannot jump across the
+    fold. Returns (x, y, residual px)."""
     u = np.asarray(u, np.float64)
     v = np.asarray(v, np.float64)
     x, y = model.normalize(u, v)
     x, y = x.copy(), y.copy()
     h = 1e-7
-    rf = model.fold_radius()
-    done = np.zeros(u.shape, bool)
-    err = np.full(u.shape, np.inf)
     with np.errstate(all="ignore"):
         for _ in range(max_iter):
-            pu, pv = model.project(x, y)
+            pu, pv = fn(x, y)
             eu, ev = pu - u, pv - v
-            err = np.hypot(eu, ev)
-            done = err < tol_px
+            done = np.hypot(eu, ev) < tol_px
             if done.all():
                 break
-            a, c = model.project(x + h, y)
-            b, d = model.project(x - h, y)
+            a, c = fn(x + h, y)
+            b, d = fn(x - h, y)
             j11, j21 = (a - b) / (2 * h), (c - d) / (2 * h)
-            a, c = model.project(x, y + h)
-            b, d = model.project(x, y - h)
+            a, c = fn(x, y + h)
+            b, d = fn(x, y - h)
             j12, j22 = (a - b) / (2 * h), (c - d) / (2 * h)
             det = j11 * j22 - j12 * j21
             dx = (j22 * eu - j12 * ev) / det
@@ -330,9 +438,46 @@ def undistort_newton(model: OpenCVModel, u: np.ndarray, v: np.ndarray, tol_px: f
             upd = ~done & np.isfinite(dx) & np.isfinite(dy)
             x = np.where(upd, x - scale * dx, x)
             y = np.where(upd, y - scale * dy, y)
-        pu, pv = model.project(x, y)
+        pu, pv = fn(x, y)
         err = np.hypot(pu - u, pv - v)
-    valid = (err < tol_px) & np.isfinite(x) & np.isfinite(y) & (np.hypot(x, y) < rf)
+    return x, y, err
+
+
+def undistort_newton(model: OpenCVModel, u: np.ndarray, v: np.ndarray, tol_px: float = 1e-6,
+                     max_iter: int = 60) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""Exact inverse: distorted pixels (u, v) → undistorted (pinhole) normalised (x', y') and a
+    validity mask.
+
+    Standard model: Newton (:func:`_newton_solve`) on the full model in pixel units. Valid ⇔
+    converged to ``tol_px`` within ``max_iter`` iterations, finite, and inside the monotonic
+    branch (r < r_fold). Other families: :meth:`OpenCVModel.unproject`'s ray (x, y, z) as
+    (x/z, y/z), valid where z > 0 (a ray at or beyond 90° has no pinhole image).
+    """
+    if model.distortion_model != "opencv":
+        x, y, z, ok = model.unproject(u, v)
+        ok = ok & (z > 1e-9)
+        zs = np.where(ok, z, 1.0)
+        return np.where(ok, x / zs, 0.0), np.where(ok, y / zs, 0.0), ok
+    x, y, err = _newton_solve(model, model.project, u, v, tol_px, max_iter)
+    valid = (err < tol_px) & np.isfinite(x) & np.isfinite(y) & (np.hypot(x, y) < model.fold_radius())
+    return np.where(valid, x, 0.0), np.where(valid, y, 0.0), valid
+
+
+def unproject_plane(model: OpenCVModel, u: np.ndarray, v: np.ndarray, tol_px: float = 1e-6,
+                    max_iter: int = 60) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixels → plane coordinates of the family's projection P: the inverse of K·D
+    (:meth:`OpenCVModel.distort_plane`; Newton as :func:`undistort_newton` where D is not the
+    identity, valid inside D's monotonic branch)."""
+    if not model.has_plane_distortion:
+        x, y = model.normalize(u, v)
+        return x, y, np.ones(x.shape, bool)
+
+    def fn(x, y):
+        xd, yd = model.distort_plane(x, y)
+        return model.fx * xd + model.cx, model.fy * yd + model.cy
+
+    x, y, err = _newton_solve(model, fn, u, v, tol_px, max_iter)
+    valid = (err < tol_px) & np.isfinite(x) & np.isfinite(y) & (np.hypot(x, y) < model.plane_fold_radius())
     return np.where(valid, x, 0.0), np.where(valid, y, 0.0), valid
 
 

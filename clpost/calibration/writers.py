@@ -75,8 +75,24 @@ def _standard_vector(m: OpenCVModel) -> list[float]:
     return v[:n].tolist()
 
 
+SCALARS = ("xi", "alpha", "omega")
+"""Parameters of the other families written as keys of their own in FileStorage files."""
+
+
 def _coefficients(m: OpenCVModel) -> list[float]:
-    return m.coefficients().tolist() if m.is_fisheye else _standard_vector(m)
+    if m.distortion_model == "opencv":
+        return _standard_vector(m)
+    return [getattr(m, n) for n in m.coeff_names if n not in SCALARS]
+
+
+def _family_keys(m: OpenCVModel) -> dict:
+    """FileStorage keys beyond OpenCV's for the families other than opencv and fisheye:
+    ``distortion_model`` and the scalars (what :mod:`.formats` reads back)."""
+    if m.distortion_model in ("opencv", "fisheye"):
+        return {}
+    out = {"distortion_model": m.distortion_model}
+    out.update({n: getattr(m, n) for n in m.coeff_names if n in SCALARS})
+    return out
 
 
 def _refuse(m: OpenCVModel, fmt: str, names) -> None:
@@ -95,7 +111,10 @@ def _opencv_yaml(m: OpenCVModel) -> str:
     out = f"%YAML:1.0\n---\nimage_width: {m.width}\nimage_height: {m.height}\n"
     if m.is_fisheye:
         out += "fisheye_model: 1\n"
-    return out + mat("camera_matrix", 3, 3, m.matrix().ravel()) + mat("distortion_coefficients", 1, len(d), d)
+    for k, v in _family_keys(m).items():
+        out += f"{k}: {v if isinstance(v, str) else _num(v)}\n"
+    return out + mat("camera_matrix", 3, 3, m.matrix().ravel()) + (
+        mat("distortion_coefficients", 1, len(d), d) if d else "")
 
 
 def _opencv_xml(m: OpenCVModel) -> str:
@@ -108,8 +127,10 @@ def _opencv_xml(m: OpenCVModel) -> str:
            f"<image_height>{m.height}</image_height>\n")
     if m.is_fisheye:
         out += "<fisheye_model>1</fisheye_model>\n"
-    return (out + mat("camera_matrix", 3, 3, m.matrix().ravel()) + mat("distortion_coefficients", 1, len(d), d)
-            + "</opencv_storage>\n")
+    for k, v in _family_keys(m).items():
+        out += f"<{k}>{v if isinstance(v, str) else _num(v)}</{k}>\n"
+    return (out + mat("camera_matrix", 3, 3, m.matrix().ravel())
+            + (mat("distortion_coefficients", 1, len(d), d) if d else "") + "</opencv_storage>\n")
 
 
 def _opencv_json(m: OpenCVModel) -> str:
@@ -120,12 +141,20 @@ def _opencv_json(m: OpenCVModel) -> str:
     out: dict = {"image_width": m.width, "image_height": m.height}
     if m.is_fisheye:
         out["fisheye_model"] = 1
+    out.update(_family_keys(m))
     out["camera_matrix"] = mat(3, 3, m.matrix().ravel())
-    out["distortion_coefficients"] = mat(1, len(d), d)
+    if d:
+        out["distortion_coefficients"] = mat(1, len(d), d)
     return json.dumps(out, indent=4) + "\n"
 
 
+def _family_only(m: OpenCVModel, fmt: str, families, instead: str) -> None:
+    if m.distortion_model not in families:
+        raise InputError(f"{fmt} cannot express the {m.distortion_model} model{m._where()}; write {instead} instead")
+
+
 def _ros(m: OpenCVModel) -> str:
+    _family_only(m, "ROS camera_info", ("opencv", "fisheye"), "opencv-yaml")
     _refuse(m, "ROS camera_info", COEFF_NAMES[8:])
     if m.is_fisheye:
         name, d = "equidistant", m.coefficients().tolist()
@@ -145,8 +174,10 @@ def _ros(m: OpenCVModel) -> str:
 
 def _colmap(m: OpenCVModel) -> str:
     cx, cy = m.cx + COLMAP_PIXEL_OFFSET, m.cy + COLMAP_PIXEL_OFFSET
-    if m.is_fisheye:
-        name, params = "OPENCV_FISHEYE", [m.fx, m.fy, cx, cy, *m.coefficients().tolist()]
+    _family_only(m, "COLMAP", ("opencv", "fisheye", "fov", "thinprism"), "opencv-yaml")
+    if m.distortion_model in ("fisheye", "fov", "thinprism"):
+        name = {"fisheye": "OPENCV_FISHEYE", "fov": "FOV", "thinprism": "THIN_PRISM_FISHEYE"}[m.distortion_model]
+        params = [m.fx, m.fy, cx, cy, *m.coefficients().tolist()]
     else:
         _refuse(m, "COLMAP", COEFF_NAMES[8:])
         v = m.vector()
@@ -161,13 +192,23 @@ def _colmap(m: OpenCVModel) -> str:
 
 
 def _kalibr(m: OpenCVModel) -> str:
+    _family_only(m, "Kalibr", ("opencv", "fisheye", "fov", "ucm", "ds"), "opencv-yaml")
+    cam, intr = "pinhole", [m.fx, m.fy, m.cx, m.cy]
     if m.is_fisheye:
         name, d = "equidistant", m.coefficients().tolist()
+    elif m.distortion_model == "fov":
+        name, d = "fov", [m.omega]
+    elif m.distortion_model == "ds":
+        cam, intr, name, d = "ds", [m.xi, m.alpha, *intr], "none", []
+    elif m.distortion_model == "ucm":
+        d = [m.k1, m.k2, m.p1, m.p2]
+        cam, intr, name = "omni", [m.xi, *intr], ("radtan" if any(d) else "none")
+        d = d if any(d) else []
     else:
         _refuse(m, "Kalibr radtan (k1, k2, p1, p2)", COEFF_NAMES[4:])
         name, d = "radtan", m.vector()[:4].tolist()
-    return ("cam0:\n  camera_model: pinhole\n"
-            f"  intrinsics: [{', '.join(_num(x) for x in (m.fx, m.fy, m.cx, m.cy))}]\n"
+    return (f"cam0:\n  camera_model: {cam}\n"
+            f"  intrinsics: [{', '.join(_num(x) for x in intr)}]\n"
             f"  distortion_model: {name}\n  distortion_coeffs: [{', '.join(_num(x) for x in d)}]\n"
             f"  resolution: [{m.width}, {m.height}]\n")
 

@@ -575,6 +575,32 @@ class PyVistaRenderer:
             },
         )
 
+    def render_cubemap(self, camera: Camera, spec, frame_index: int) -> Frame:
+        """Frame ``frame_index`` as the cubemap atlas ``spec``
+        (:class:`clpost.calibration.cubemap.CubemapSpec`): six square pinhole renders from the
+        camera's centre, face i rotated by :func:`clpost.calibration.cubemap.face_rotation` (the
+        scene's camera rotation times :math:`R_i`), side by side; ``metadata["cubemap"] = (face, pad)``.
+        Colour only: depth and velocity are per face (planar along each face's axis, in each face's
+        pixels) and have no meaning across the atlas, so they are left out."""
+        from dataclasses import replace
+
+        from ..calibration.cubemap import face_rotation
+
+        scene, motion = self.scene, self.scene.camera_motion
+        base = np.asarray(motion.base_rotation, dtype=np.float64)
+        faces = []
+        try:
+            for i in range(6):
+                rot = base @ face_rotation(i)
+                self.scene = replace(scene, camera_motion=replace(
+                    motion, base_rotation=tuple(tuple(float(v) for v in row) for row in rot)))
+                faces.append(self.render(camera, (spec.size, spec.size), frame_index, spec.intrinsics()).color)
+        finally:
+            self.scene = scene
+        return Frame(color=np.concatenate(faces, axis=1),
+                     metadata={"renderer": "PyVistaRenderer", "frame_index": int(frame_index),
+                               "cubemap": (spec.face, spec.pad)})
+
     def close(self) -> None:
         """Release the OpenGL context (also released when the renderer is garbage-collected)."""
         self._pass.close()

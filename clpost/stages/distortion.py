@@ -1,9 +1,12 @@
 r"""distortion: resample the undistorted pinhole render into the image of a calibrated camera.
 
 Each output pixel (u, v) of the distorted image asks where its light came from: the exact inverse
-of the OpenCV standard model (:func:`clpost.calibration.undistort_newton`, or the Heikkilä fit if
+of the camera model (any family of :class:`clpost.calibration.OpenCVModel`, docs/camera_models.md:
+:func:`clpost.calibration.undistort_newton`, or the Heikkilä fit if
 ``OpenCVModel.inverse == "heikkila"``) gives undistorted normalised coordinates (x', y'), and the
-render's pinhole intrinsics (f_r, c_r) give the source position
+render's pinhole intrinsics (f_r, c_r) give the source position (:func:`source_positions`; a
+cubemap render, for fields of view beyond 150°, is sampled at the pixel's ray instead:
+:mod:`clpost.calibration.cubemap`)
 
 .. math::
 
@@ -70,6 +73,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..calibration import OpenCVModel, overscan_px, required_render, undistort
+from ..calibration.cubemap import CubemapSpec
 from ..calibration.frustum import border_samples
 from ..errors import InputError
 from ..params import boolean, exact_g, one_of, param, parse_on_off
@@ -147,8 +151,18 @@ INVALID = -1.0e30
 """Map value marking an output pixel without a preimage (the kernel writes 0, alpha is 0)."""
 
 
-def source_intrinsics(model: OpenCVModel, frame) -> tuple[float, float, float, float]:
-    """(f_x, f_y, c_x, c_y) of the pinhole render in ``frame``'s arrays (see the module docstring)."""
+def source_intrinsics(model: OpenCVModel, frame):
+    """(f_x, f_y, c_x, c_y) of the pinhole render in ``frame``'s arrays (see the module docstring),
+    or the :class:`~clpost.calibration.cubemap.CubemapSpec` of a cubemap atlas
+    (``frame.metadata["cubemap"] = (face, pad)``)."""
+    cube = frame.metadata.get("cubemap") if isinstance(frame.metadata, dict) else None
+    if cube is not None:
+        spec = CubemapSpec(*(int(t) for t in cube))
+        if frame.size != (spec.width, spec.height):
+            raise InputError(f"distortion: the frame is {frame.width}x{frame.height} but its metadata['cubemap'] = "
+                             f"{tuple(cube)} makes a {spec.width}x{spec.height} atlas; render it with "
+                             "PyVistaRenderer.render_cubemap or fix the metadata")
+        return spec
     recorded = fld.frame_intrinsics(frame)
     if recorded is not None:
         return recorded
@@ -174,9 +188,7 @@ def _covered(model: OpenCVModel, src_size: tuple[int, int], src_k: tuple[float, 
     render: its border (4 samples a pixel) maps inside [−½, size − ½] (for the radial models the
     border bounds the interior)."""
     m = _scaled(model, scale)
-    x, y, ok = undistort(m, *border_samples(m.width, m.height))
-    fx, fy, cx, cy = src_k
-    sx, sy = fx * x + cx, fy * y + cy
+    sx, sy, ok = source_positions(m, *border_samples(m.width, m.height), src_k)
     sw, sh = src_size
     return bool(np.all(ok & (sx >= -0.5) & (sx <= sw - 0.5) & (sy >= -0.5) & (sy <= sh - 0.5)))
 
@@ -208,14 +220,26 @@ def crop_scale(model: OpenCVModel, src_size: tuple[int, int], src_k: tuple[float
     return hi
 
 
+def source_positions(model: OpenCVModel, u: np.ndarray, v: np.ndarray, src_k):
+    """Where output pixels (u, v) of ``model`` sample the render: through the model's exact inverse
+    to undistorted coordinates and the render's pinhole intrinsics ``src_k`` (module docstring), or,
+    for a cubemap atlas (``src_k`` a :class:`~clpost.calibration.cubemap.CubemapSpec`), the pixel's
+    ray (:meth:`OpenCVModel.unproject`) looked up on its face. Returns (s_x, s_y, has a preimage)."""
+    if isinstance(src_k, CubemapSpec):
+        x, y, z, ok = model.unproject(u, v)
+        sx, sy = src_k.positions(x, y, z)
+        return sx, sy, ok
+    x, y, ok = undistort(model, u, v)
+    fx, fy, cx, cy = src_k
+    return fx * x + cx, fy * y + cy, ok
+
+
 @lru_cache(maxsize=8)
 def distortion_map(model: OpenCVModel, src_size: tuple[int, int],
                    src_k: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
     """float64 source positions (2, H, W) for every output pixel and the validity mask (H, W)."""
     vv, uu = np.mgrid[0:model.height, 0:model.width].astype(np.float64)
-    x, y, ok = undistort(model, uu, vv)
-    fx, fy, cx, cy = src_k
-    sx, sy = fx * x + cx, fy * y + cy
+    sx, sy, ok = source_positions(model, uu, vv, src_k)
     sw, sh = src_size
     ok &= (sx >= -0.5) & (sx <= sw - 0.5) & (sy >= -0.5) & (sy <= sh - 0.5)
     m = np.stack([np.where(ok, sx, INVALID), np.where(ok, sy, INVALID)])
@@ -548,7 +572,7 @@ class Distortion(GatherStage):
         if model is None:
             return "no distortion model (Camera.distortion / --calibration)"
         k = self._source_k(camera, frame)
-        if model.is_identity and frame.size == (model.width, model.height) and np.allclose(
+        if model.is_identity and not isinstance(k, CubemapSpec) and frame.size == (model.width, model.height) and np.allclose(
                 k, (model.fx, model.fy, model.cx, model.cy), rtol=0, atol=1e-9):
             return "all distortion coefficients are 0 and the render already has the calibration's intrinsics"
         return None
@@ -557,7 +581,9 @@ class Distortion(GatherStage):
         model = self._calibration(camera)
         m, ok = self._host_map(camera, frame)
         nz = ", ".join(f"{n}={getattr(model, n):.4g}" for n in model.coeff_names[:5] if getattr(model, n))
-        return (f"{'OpenCV fisheye' if model.is_fisheye else 'OpenCV'} model {nz or '(intrinsics only)'} → "
+        from ..calibration.model import FAMILY_TITLES
+
+        return (f"{FAMILY_TITLES[model.distortion_model]} model {nz or '(intrinsics only)'} → "
                 f"{model.width}x{model.height}, "
                 f"{'cubic B-spline' if self.filter_taps == 3 else 'bilinear'}; {self.coverage(camera, frame)}; "
                 f"{int((~ok).sum())} pixel(s) without data (alpha 0)")
@@ -581,8 +607,8 @@ class Distortion(GatherStage):
 
     def _warn_unfilled(self, camera, frame) -> None:
         """The one-line warning of ``--fill overscan`` when the render leaves pixels black."""
-        if getattr(camera, "fill", "overscan") != "overscan":
-            return
+        if getattr(camera, "fill", "overscan") != "overscan" or isinstance(self._source_k(camera, frame), CubemapSpec):
+            return  # a cubemap holds every ray: its pixels without data are the ones without a ray
         _, ok = self._host_map(camera, frame)
         missing = int(ok.size - np.count_nonzero(ok))
         if missing:
