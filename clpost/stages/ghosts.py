@@ -14,8 +14,9 @@ scene value that saturates the sensor; :func:`clpost.photometry.exposure_gain`) 
 source. The frame is cut into 16 × 16 tiles; the tiles holding the most flux above threshold (the
 sum of their above-threshold pixels' luminance; at most ``ghost_sources``) are the sources, each
 at its above-threshold pixels' luminance-weighted centroid with their summed RGB flux. The sources
-are found on the host from the frame's input pixels (one pass, ~5 ms at 960 × 540; positions are
-the input render's, before distortion moves them by its few pixels).
+are found on the host from the frame's input pixels (one pass, ~5 ms at 960 × 540), so the stage
+runs in the render's geometry, before distortion (which then moves the ghosts with the image:
+a first-order ghost carries no distortion of its own).
 
 **Energy.** A source's above-threshold pixels keep :math:`1 - \sum_g \rho_g` of their value; each
 ghost spreads :math:`\rho_g` of the source's flux over its area (the 1-px coverage ramp of the
@@ -97,9 +98,9 @@ def find_sources(color: np.ndarray, threshold: float, max_sources: int, tile: in
 
 class Ghosts(GatherStage):
     name = "ghosts"
-    order = 52.0
-    role = "light reflected twice between lens surfaces, imaged through the aperture"
-    domains = ("image", "image")
+    order = 45.0
+    role = "light reflected twice between lens surfaces, imaged through the aperture (before distortion: it finds its sources in the render's pixels)"
+    domains = ("render", "render")
     params = GhostsParams
     example = dict(lens="zeiss-planar-50-f1.4", f_number=4.0, ghosts=True, ghost_threshold=0.5,
                    ghost_sources=4, blades=6)

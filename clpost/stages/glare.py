@@ -94,9 +94,9 @@ def working_f_number(camera) -> float:
 
 class Glare(GatherStage):
     name = "glare"
-    order = 54.0
-    role = "diffraction at the aperture and scattered light, spread from the highlights"
-    domains = ("image", "image")
+    order = 47.0
+    role = "diffraction at the aperture and scattered light, spread from the highlights (beside the ghosts, before distortion)"
+    domains = ("render", "render")
     params = GlareParams
     example = dict(f_number=11.0, diffraction=True, veiling_glare=0.02, blades=6, glare_threshold=0.5)
     turn_off = "give --diffraction off and --veiling-glare 0"
