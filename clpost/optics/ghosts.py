@@ -184,8 +184,11 @@ def ghosts(pres: Prescription, stop_radius_mm: float, wavelength_nm: float,
 # -- full traces ------------------------------------------------------------------------------
 
 def trace_path(pres: Prescription, ghost, origins, directions, wavelength_nm: float,
-               stop_radius_mm: float | None = None, clip: bool = True, z_film: float | None = None):
-    """Real rays along a path (module docstring): (positions at the film (N, 3), status (N,))."""
+               stop_radius_mm: float | None = None, clip: bool = True, z_film: float | None = None,
+               aperture: tuple[int, float, float] | None = None):
+    """Real rays along a path (module docstring): (positions at the film (N, 3), status (N,)).
+    ``aperture``: (blades, rotation °, roundness) of a bladed stop (the DoF stage's shape, angle
+    atan2(y, x) of the stop plane's coordinates); None: a round stop."""
     n = pres.indices(wavelength_nm)
     zs = pres.vertex_z
     zf = film_z(pres) if z_film is None else z_film
@@ -215,6 +218,10 @@ def trace_path(pres: Prescription, ghost, origins, directions, wavelength_nm: fl
             q = p + t[:, None] * d
             sd = stop_radius_mm if (s.stop and stop_radius_mm is not None) else s.semi_diameter_mm
             if clip or s.stop:
+                if s.stop and aperture is not None:
+                    from ..stages.dof import aperture_radius
+
+                    sd = sd * aperture_radius(np.arctan2(q[:, 1], q[:, 0]), *aperture)
                 out = alive & (q[:, 0] ** 2 + q[:, 1] ** 2 > sd * sd)
                 status[out] = STOP if s.stop else CLIPPED
                 alive &= ~out
