@@ -21,7 +21,7 @@ __kernel void glare_split(__global const float *src, __global float *dst, __glob
     }
 }
 
-__kernel void glare_multiply(__global float2 *spec, __constant float2 *kern, const int n)
+__kernel void glare_multiply(__global float2 *spec, __global const float2 *kern, const int n)
 {
     const int i = get_global_id(0);
     if (i >= n) return;
