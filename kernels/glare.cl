@@ -1,8 +1,8 @@
-// glare: the highlights' split, the spectrum product and the sum (clpost/stages/glare.py).
+// glare: the highlights split off (kernel glare), the spectrum product and the sum (clpost/stages/glare.py).
 // Planar float32 colour (channel c of pixel i at c*W*H + i); hi and conv: (3, hf, wf) grids
 // with the frame at their top-left corner and zeros elsewhere.
 
-__kernel void glare_split(__global const float *src, __global float *dst, __global float *hi,
+__kernel void glare(__global const float *src, __global float *dst, __global float *hi,
                           const int w, const int h, const int wf, const int hf, const float threshold)
 {
     const int x = get_global_id(0), y = get_global_id(1);

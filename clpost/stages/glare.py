@@ -182,7 +182,7 @@ class Glare(GatherStage):
         a_conv = cla.Array(q, (3, hf, wf), np.float32, data=conv)
         progs = rt.kernels(kernel_source("glare"), "glare")
         t = np.float32(threshold_scene(camera))
-        events = [rt.launch(progs["glare_split"], (wf, hf), None, src, dst, hi, np.int32(w), np.int32(h),
+        events = [rt.launch(progs["glare"], (wf, hf), None, src, dst, hi, np.int32(w), np.int32(h),
                             np.int32(wf), np.int32(hf), t)]
         app.fft(a_hi, a_fq)
         n_c = 3 * hf * (wf // 2 + 1)
