@@ -135,3 +135,16 @@ def test_bladed_stop_passes_the_polygon_area_share():
     _, round_ = gh.trace_path(pres, None, o, d, 550.0, r)
     closed = 3 * math.sin(2 * math.pi / 6) / math.pi  # hexagon / circumscribed circle
     assert (hexagon == 0).sum() / (round_ == 0).sum() == pytest.approx(closed, rel=0.02)  # measured +1.1 %
+
+
+def test_a_moving_source_moves_its_ghosts_on_the_next_frame():
+    """The plan replays the stage's launches while its sources stay; a source that moves (a new
+    replay key) runs the stage's code again, so frame 2's ghosts are frame 2's."""
+    pipe = Pipeline(_camera(), stages=["ghosts"], quality="draft")
+    first, second = _lamp_frame(x=52, y=12), _lamp_frame(x=20, y=30)
+    pipe.run(first)
+    out = pipe.run(second).color
+    ref = pipe.reference(second)
+    assert np.abs(out - ref).max() <= 2e-6 * np.abs(ref).max()
+    again = pipe.run(second).color  # replayed
+    assert np.array_equal(again, out)
