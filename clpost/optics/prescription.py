@@ -15,6 +15,8 @@ key                   meaning
 ``V_d``               Abbe number of that medium (omit for air or when unknown: no dispersion)
 ``semi_diameter_mm``  clear semi-diameter (for the stop: its fully open semi-diameter)
 ``stop``              ``true`` on the aperture stop (exactly one surface)
+``coating``           optional: ``"none"`` (bare), ``"mgf2"`` (quarter-wave MgF₂ at 550 nm, the
+                      default on air–glass surfaces) or ``{index = n, thickness_nm = d}`` (ghosts)
 ====================  ==========================================================================
 
 Dispersion: a two-term Cauchy fit through n_d and the principal dispersion implied by V_d,
@@ -76,6 +78,9 @@ class Surface:
     v_d: float | None
     semi_diameter_mm: float
     stop: bool = False
+    coating: tuple[float, float] | None = None
+    """(layer index, thickness nm) of a single-layer coating from the lens file; None: the
+    default of :func:`clpost.optics.ghosts.surface_coating`."""
 
     @property
     def curvature(self) -> float:
@@ -159,6 +164,23 @@ def _num(where: str, key: str, value, fix: str) -> float:
     return float(value)
 
 
+def _coating(where: str, value) -> tuple[float, float] | None:
+    """A surface's ``coating`` field as (layer index, thickness nm), or None (not given)."""
+    if value is None:
+        return None
+    if value == "none":
+        return (1.0, 0.0)
+    if value == "mgf2":
+        return (1.38, 550.0 / (4 * 1.38))
+    if isinstance(value, dict) and set(value) == {"index", "thickness_nm"}:
+        n = _num(where, "coating.index", value["index"], "the layer's refractive index, e.g. 1.38")
+        d = _num(where, "coating.thickness_nm", value["thickness_nm"], "the layer's thickness in nm, e.g. 99.6")
+        if math.isfinite(n) and n >= 1.0 and math.isfinite(d) and d >= 0.0:
+            return (n, d)
+    raise InputError(f"{where}: field 'coating' = {value!r} must be \"none\", \"mgf2\" or "
+                     "{index = <n >= 1>, thickness_nm = <d >= 0>}")
+
+
 def parse_prescription(data: dict, path: str) -> Prescription:
     """Validate a decoded lens file; every error names the file, the surface and the field."""
     for key in ("name", "focal_length_mm", "f_number", "surface", "provenance"):
@@ -205,7 +227,7 @@ def parse_prescription(data: dict, path: str) -> Prescription:
             raise InputError(f"{where}: field 'stop' = {stop!r} must be true or false")
         if stop and not math.isinf(r):
             raise InputError(f"{where}: the stop must be a plane (radius_mm = 0)")
-        surfaces.append(Surface(r, t, n, v, sd, stop))
+        surfaces.append(Surface(r, t, n, v, sd, stop, _coating(where, s.get("coating"))))
     stops = [i for i, s in enumerate(surfaces, 1) if s.stop]
     if len(stops) != 1:
         raise InputError(f"{path}: {'no surface is' if not stops else f'surfaces {stops} are'} marked "
