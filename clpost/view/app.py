@@ -78,7 +78,6 @@ class ViewApp:
             if c.kind == "slider":
                 st.change(_slider_key(c))(self._slider_handler(c))
         st.change("frame_index", "split", "overlay", "quality")(lambda **_: self.request("view"))
-        ctrl.tap = self.tap
         ctrl.add_key = self.add_key
         ctrl.save_track = self.save_track
         ctrl.on_server_ready.add(self._start_loop)
@@ -260,10 +259,11 @@ class ViewApp:
                             style=("zoom === 'fit' ? 'width: 100%; display: block; cursor: crosshair' : "
                                    "`width: ${width * parseInt(zoom)}px; image-rendering: pixelated; "
                                    "display: block; cursor: crosshair`",),
-                            click="trigger('tap', [$event.offsetX, $event.offsetY, $event.target.clientWidth, "
-                                  "$event.target.clientHeight])",
+                            click=(self.tap, "[$event.offsetX, $event.offsetY, $event.target.clientWidth, "
+                                             "$event.target.clientHeight]"),
                         )
                     html.Div("{{ error }}", id="error", style="color: #f66; min-height: 1.2em")
+                    html.Div("{{ renders }}", id="renders", style="display: none")  # frames shown (tests wait on it)
                     with v.VRow(classes="mt-2"):
                         with v.VCol(cols=4):
                             html.Div("histogram (display code values)", classes="text-caption")
@@ -336,15 +336,14 @@ class ViewApp:
             with v.VRow(dense=True, align="center", no_gutters=True):
                 if c.kind == "slider":
                     lo, hi, step = c.slider_range
-                    with v.VCol(cols=7):
+                    with v.VCol(cols=7), html.Div(id=f"slider-{c.label}"):
                         v.VSlider(v_model_number=(_slider_key(c),), min=lo, max=hi, step=step,
-                                  label=f"{c.label}{tag}", hide_details=True, density="compact",
-                                  id=f"slider-{c.label}")
-                with v.VCol(cols=5 if c.kind == "slider" else 12):
+                                  label=f"{c.label}{tag}", hide_details=True, density="compact")
+                with v.VCol(cols=5 if c.kind == "slider" else 12), html.Div(id=f"text-{c.label}"):
                     # set on Enter or leaving the field (a half-typed "thin:3" must not build a plan)
                     v.VTextField(model_value=(_key(c),), density="compact", hide_details=True,
                                  label=None if c.kind == "slider" else f"{c.label}{tag}",
-                                 id=f"text-{c.label}", change=f"set('{_key(c)}', $event.target.value)")
+                                 change=f"set('{_key(c)}', $event.target.value)")
 
 
 def _shutter(t: float) -> str:

@@ -70,7 +70,6 @@ def _check_port(port: int) -> int:
 
 def cmd_view(args) -> int:
     from ..camera import Camera
-    from ..cli import camera_from_args
 
     try:
         import trame  # noqa: F401
@@ -79,8 +78,8 @@ def cmd_view(args) -> int:
         raise InputError("clpost view needs trame: pip install 'clpost[view]'") from None
     from .session import DEMO_FRAMES, DEMO_SIZE, ViewSession, open_input
 
-    camera = camera_from_args(args, **({} if args.input else VIEW_CAMERA_DEFAULTS))
-    assert isinstance(camera, Camera)
+    given = {k[4:]: v for k, v in vars(args).items() if k.startswith("cam_")}  # as clpost.cli.camera_from_args
+    camera = Camera.from_options(given, None if args.input else VIEW_CAMERA_DEFAULTS)
     if args.input is not None and (args.size or args.frames):
         raise InputError("--size and --frames shape the demo scene; an INPUT is shown at its own size, all frames")
     port = _check_port(args.port)

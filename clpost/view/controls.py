@@ -89,7 +89,7 @@ def _closure(check) -> dict:
 def _is_number_type(spec: ParamSpec) -> tuple[bool, bool]:
     """(numeric, integer) from the declared type text and default."""
     t = str(spec.type)
-    if isinstance(spec.default, bool) or "bool" in t:
+    if isinstance(spec.default, (bool, tuple)) or "bool" in t or "tuple" in t:
         return False, False
     if "int" in t.split("|")[0]:
         return True, True
