@@ -155,3 +155,16 @@ def test_binds_loopback_only():
         s.listen()
         with pytest.raises(InputError, match="in use"):
             _check_port(port)
+
+
+@pytest.mark.parametrize("working_space, display", [("rec709", "srgb"), ("acescg", "srgb"), ("rec709", "display-p3")])
+def test_table_display_encoding_matches_the_exact_one(working_space, display):
+    from clpost.colorspace import display_encode
+    from clpost.view.session import fast_display_encode
+
+    rng = np.random.default_rng(3)
+    lin = (rng.random((64, 64, 3)) ** 3 * 1.3).astype(np.float32)  # darks densely, and over 1
+    exact = display_encode(lin, working_space, display, 8).astype(int)
+    fast = fast_display_encode(lin, working_space, display).astype(int)
+    assert np.abs(fast - exact).max() <= 1
+    assert (fast == exact).mean() > 0.99

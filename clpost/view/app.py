@@ -204,7 +204,7 @@ class ViewApp:
         r = s.render(index, quality)
         img = r.display
         if overlay == "false colour":
-            img = false_colour(r.linear)
+            img = false_colour(r.linear, r.camera.working_space)
         elif overlay == "zebras":
             img = zebras(img)
         if split < 1.0:
