@@ -168,3 +168,31 @@ def test_table_display_encoding_matches_the_exact_one(working_space, display):
     fast = fast_display_encode(lin, working_space, display).astype(int)
     assert np.abs(fast - exact).max() <= 1
     assert (fast == exact).mean() > 0.99
+
+
+def test_a_camera_that_fails_to_render_is_put_back(monkeypatch):
+    """The page keeps working after a setting the pipeline refuses: one line, the last camera back."""
+    pytest.importorskip("trame")
+    import asyncio
+
+    from clpost.view.app import ViewApp
+
+    app = ViewApp(session())
+    good = app.session.camera
+
+    async def show():
+        await app._show(asyncio.get_running_loop(), "draft")
+
+    def fail(*a):
+        raise InputError("Camera.blades=7: refused for this test")
+
+    app.apply({"blades": 7}, "blades")
+    monkeypatch.setattr(app, "_render_page", fail)
+    asyncio.run(show())
+    assert "refused for this test" in app.server.state.error and "last working" not in app.server.state.error
+    app._good = good
+    app.apply({"blades": 8}, "blades")
+    asyncio.run(show())
+    assert app.session.camera == good and "last working settings" in app.server.state.error
+    assert app.server.state["p_blades"] == "0"
+    app.close()

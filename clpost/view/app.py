@@ -51,6 +51,7 @@ class ViewApp:
         self._generation = 0
         self._last_change: str | None = None
         self._lens_shown: tuple | None = None
+        self._good = None  # the last camera that rendered
         self._init_state()
         self._bind()
         self._layout()
@@ -116,6 +117,16 @@ class ViewApp:
                 return
             self.server.state[_key(c)] = value_text(c, value)
         return handler
+
+    def _sync_controls(self) -> None:
+        """Every control's state from the session's camera (after it was put back)."""
+        st = self.server.state
+        for c in self.controls:
+            v = getattr(self.session.camera, c.name)
+            st[_key(c)] = v if c.kind == "switch" else value_text(c, v)
+            if c.kind == "slider" and c.to_slider(v) is not None:
+                st[_slider_key(c)] = c.to_slider(v)
+        st.command = self.session.command()
 
     def apply(self, values: dict[str, Any], changed: str) -> None:
         """Set camera values (InputError leaves the camera as it was) and render."""
@@ -188,12 +199,19 @@ class ViewApp:
     async def _show(self, loop, quality: str) -> None:
         st = self.server.state
         args = (st.frame_index, quality, st.split, st.overlay)
+        camera = self.session.camera
         try:
             page = await loop.run_in_executor(self._executor, self._render_page, *args)
-        except InputError as exc:
+        except Exception as exc:  # noqa: BLE001 - one line on the page; the loop and the server go on
+            msg = str(exc) if isinstance(exc, InputError) else f"{type(exc).__name__}: {exc}"
+            if self._good is not None and self.session.camera is camera:
+                self.session.set_camera(self._good)  # back to the last camera that rendered
+                msg += " (the last working settings are kept)"
             with st:
-                st.error = str(exc)
+                st.error = " ".join(msg.split())
+                self._sync_controls()
             return
+        self._good = camera
         with st:
             st.update(page)
 
