@@ -194,9 +194,24 @@ def test_page_drag_and_tap_to_focus(server, browser):
     assert hist_after.shape == hist_before.shape
     assert np.abs(hist_after - hist_before).mean() > 3.0
 
-    # the command line carries the settings
+    # a structural parameter builds a plan, and the page says so
+    field = d.find_element(By.CSS_SELECTOR, "#text-blades input")
+    n = renders(d)
+    field.clear()
+    field.send_keys("5\n")
+    settle(d, n)
+    assert "plan built" in status(d) and "blades: structural" in status(d), status(d)
+
+    # the command line carries the settings; the copy button raises nothing in the page
+    copy = d.find_element(By.ID, "copy")
+    d.execute_script("arguments[0].scrollIntoView({block: 'center'});", copy)
+    time.sleep(0.3)
+    copy.click()
+    time.sleep(0.5)
+    errors = [e for e in d.get_log("browser") if e["level"] == "SEVERE" and "/paraview/" not in e["message"]]
+    assert not errors, errors
     cmd = d.find_element(By.ID, "command").get_attribute("value")
-    assert cmd.startswith("clpost process ") and "--ev +3" in cmd and "--focus " in cmd, cmd
+    assert cmd.startswith("clpost process ") and "--ev +3" in cmd and "--focus " in cmd and "--blades 5" in cmd, cmd
 
 
 def test_sigint_stops_cleanly(server, browser):

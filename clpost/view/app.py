@@ -67,8 +67,9 @@ class ViewApp:
         st.update(dict(
             image="", histogram="", datasheet="", status="starting…", timings=[], plan_text="", error="",
             frame_index=0, n_frames=len(s.frame_numbers), frame_label=str(s.frame_numbers[0]),
+            track_text=s.track_json(0),
             split=1.0, zoom="fit", overlay="none", quality=s.final_quality, command=s.command(),
-            track_path="camera-track.json", track_text="", saved="", rendered_quality="", focus_mark="",
+            track_path="camera-track.json", saved="", rendered_quality="", focus_mark="",
             renders=0, width=s.frame(0).windows.display_size[0], height=s.frame(0).windows.display_size[1],
         ))
 
@@ -135,6 +136,7 @@ class ViewApp:
         st = self.server.state
         st.error = ""
         st.command = self.session.command()
+        st.track_text = self.session.track_json(st.frame_index)
         self._last_change = changed
         self.request(changed)
 
@@ -254,7 +256,7 @@ class ViewApp:
     # -- layout ------------------------------------------------------------------------------------
     def _layout(self) -> None:
         from trame.ui.vuetify3 import SinglePageWithDrawerLayout
-        from trame.widgets import client, html
+        from trame.widgets import html
         from trame.widgets import vuetify3 as v
 
         with SinglePageWithDrawerLayout(self.server, full_height=True) as layout:
@@ -267,7 +269,6 @@ class ViewApp:
             with layout.drawer:
                 self._controls_panel(v, html)
             with layout.content:
-                client.JSEval(ref="clip", exec="navigator.clipboard && navigator.clipboard.writeText($event)")
                 with v.VContainer(fluid=True, classes="pa-2"):
                     self._toolbar(v, html)
                     with html.Div(style="overflow: auto; max-height: 70vh; border: 1px solid #444",
@@ -298,12 +299,17 @@ class ViewApp:
                         with v.VCol(cols=12):
                             v.VTextField(v_model=("command",), label="as a clpost process command",
                                          readonly=True, density="compact", id="command")
-                            v.VBtn("copy as command", click="trame.refs.clip.exec(command)", size="small",
+                            v.VBtn("copy as command", size="small",
+                                   click="utils.get('navigator.clipboard') && "
+                                         "utils.get('navigator.clipboard').writeText(command).catch(() => 0)",
                                    classes="mr-2", id="copy")
                             v.VBtn("add key at this frame", click=self.add_key, size="small", classes="mr-2")
                             v.VTextField(v_model=("track_path",), label="camera track file (.json)",
                                          density="compact", style="max-width: 360px; display: inline-block")
-                            v.VBtn("save camera track", click=self.save_track, size="small", id="save-track")
+                            v.VBtn("save camera track", click=self.save_track, size="small", id="save-track",
+                                   classes="mr-2")
+                            v.VBtn("download", size="small", id="download-track",
+                                   click="utils.download(track_path, track_text, 'application/json')")
                             html.Span("{{ saved }}", classes="text-caption ml-2")
                             html.Pre("{{ track_text }}", classes="text-caption")
 
