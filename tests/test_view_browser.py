@@ -29,6 +29,7 @@ pytest.importorskip("trame", reason="trame (pip install '.[view]')")
 from PIL import Image  # noqa: E402
 from selenium.webdriver.common.action_chains import ActionChains  # noqa: E402
 from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.common.keys import Keys  # noqa: E402
 
 SHOTS = Path(os.environ.get("CLPOST_VIEW_SHOTS", "")) if os.environ.get("CLPOST_VIEW_SHOTS") else None
 
@@ -135,7 +136,7 @@ NEAR = (0.10, 0.75, 0.32, 0.98)
 """The red-white checker ball in the demo's bottom-left corner (≈ 1.4 m; the far wall ≈ 10+ m)."""
 
 
-def test_page_drag_and_tap_to_focus(server, browser):
+def test_page_drag_and_tap_to_focus(server, browser, tmp_path):
     d = browser
     wait_for(d, lambda: renders(d) > 0, what="the first frame")
     settle(d, 0)
@@ -212,6 +213,22 @@ def test_page_drag_and_tap_to_focus(server, browser):
     assert not errors, errors
     cmd = d.find_element(By.ID, "command").get_attribute("value")
     assert cmd.startswith("clpost process ") and "--ev +3" in cmd and "--focus " in cmd and "--blades 5" in cmd, cmd
+
+    # save the camera track: a file clpost process --camera-track reads, with the page's values
+    from clpost.camera_track import load_track
+
+    path = d.find_element(By.CSS_SELECTOR, "#track-path input")
+    path.send_keys(Keys.CONTROL, "a")
+    path.send_keys(str(tmp_path / "track.json"))
+    save = d.find_element(By.ID, "save-track")
+    d.execute_script("arguments[0].scrollIntoView({block: 'center'});", save)
+    wait_for(d, lambda: d.execute_script("return document.querySelector('#track-path input').value")
+             .endswith("track.json"), timeout=10, what="the track path")
+    time.sleep(0.5)
+    save.click()
+    wait_for(d, lambda: (tmp_path / "track.json").exists(), timeout=20, what="the track file")
+    values = load_track(tmp_path / "track.json").values_at(1)
+    assert values["blades"] == 5 and values["exposure_compensation_ev"] == 3.0
 
 
 def test_sigint_stops_cleanly(server, browser):

@@ -304,8 +304,9 @@ class ViewApp:
                                          "utils.get('navigator.clipboard').writeText(command).catch(() => 0)",
                                    classes="mr-2", id="copy")
                             v.VBtn("add key at this frame", click=self.add_key, size="small", classes="mr-2")
-                            v.VTextField(v_model=("track_path",), label="camera track file (.json)",
-                                         density="compact", style="max-width: 360px; display: inline-block")
+                            with html.Div(id="track-path", style="max-width: 420px; display: inline-block"):
+                                v.VTextField(v_model=("track_path",), label="camera track file (.json)",
+                                             density="compact", hide_details=True)
                             v.VBtn("save camera track", click=self.save_track, size="small", id="save-track",
                                    classes="mr-2")
                             v.VBtn("download", size="small", id="download-track",
