@@ -196,3 +196,34 @@ def test_a_camera_that_fails_to_render_is_put_back(monkeypatch):
     assert app.session.camera == good and "last working settings" in app.server.state.error
     assert app.server.state["p_blades"] == "0"
     app.close()
+
+
+def test_sequence_frames_are_scrubbed_and_cached():
+    frames = [scene(), scene().replace(color=scene().color * 0.25)]
+    loads = []
+
+    def load(i):
+        loads.append(i)
+        return frames[i]
+
+    camera = Camera(lens="thin:50", exposure_compensation_ev=0.5)
+    s = ViewSession([101, 102], load, camera, "in.####.exr")
+    a, b = s.render(0, "draft"), s.render(1, "draft")
+    assert not np.array_equal(a.display, b.display)
+    s.render(0, "draft")
+    assert loads == [0, 1]
+    s.add_key(1)
+    assert json.loads(s.track_json(1))["keys"][0]["frame"] == 102
+
+
+@pytest.mark.slow
+def test_lens_datasheet_for_traced_lenses_only():
+    pytest.importorskip("matplotlib")
+    import base64
+
+    from clpost.view.session import lens_datasheet
+
+    assert lens_datasheet(Camera(lens="thin:50")) is None
+    url = lens_datasheet(Camera(lens="zeiss-planar-50-f1.4", focus_distance_m=3.0))
+    assert url.startswith("data:image/png;base64,")
+    assert base64.b64decode(url.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n"

@@ -231,6 +231,20 @@ def test_page_drag_and_tap_to_focus(server, browser, tmp_path):
     assert values["blades"] == 5 and values["exposure_compensation_ev"] == 3.0
 
 
+def test_listens_on_loopback_only(server):
+    port = int(server[1].rstrip("/").rsplit(":", 1)[1])
+    tcp = Path("/proc/net/tcp")
+    if not tcp.exists():
+        pytest.skip("no /proc/net/tcp to read the listening address from")
+    listening = [line.split()[1] for line in tcp.read_text().splitlines()[1:]
+                 if line.split()[3] == "0A" and int(line.split()[1].split(":")[1], 16) == port]
+    assert listening == ["0100007F:%04X" % port], listening  # 127.0.0.1 only (no 0.0.0.0, no IPv6 any)
+    tcp6 = Path("/proc/net/tcp6")
+    if tcp6.exists():
+        assert not [line for line in tcp6.read_text().splitlines()[1:]
+                    if line.split()[3] == "0A" and int(line.split()[1].split(":")[1], 16) == port]
+
+
 def test_sigint_stops_cleanly(server, browser):
     p, _ = server
     p.send_signal(signal.SIGINT)
