@@ -79,10 +79,16 @@ class ViewApp:
             st.change(_key(c))(self._text_handler(c))
             if c.kind == "slider":
                 st.change(_slider_key(c))(self._slider_handler(c))
-        st.change("frame_index", "split", "overlay", "quality")(lambda **_: self.request("view"))
+        st.change("frame_index", "split", "overlay")(lambda **_: self.request("view"))
+        st.change("quality")(self._quality_changed)
         ctrl.add_key = self.add_key
         ctrl.save_track = self.save_track
         ctrl.on_server_ready.add(self._start_loop)
+
+    def _quality_changed(self, quality, **_) -> None:
+        self.session.final_quality = quality
+        self.server.state.command = self.session.command()
+        self.request("quality")
 
     def _text_handler(self, c: Control):
         def handler(**kw):
@@ -197,6 +203,24 @@ class ViewApp:
             quality = self.server.state.quality
             if quality != DRAFT and self._generation == gen:
                 await self._show(loop, quality)
+            if self._generation == gen:
+                await self._show_datasheet(loop)
+
+    async def _show_datasheet(self, loop) -> None:
+        """The traced lens's datasheet, when idle and when lens, sensor or focus changed (matplotlib: ~1 s)."""
+        cam = self.session.camera
+        key = (cam.lens, cam.sensor_mm, round(cam.focus_distance_m, 3))
+        if key == self._lens_shown:
+            return
+        self._lens_shown = key
+        try:
+            url = await loop.run_in_executor(self._executor, lens_datasheet, cam)
+        except Exception as exc:  # noqa: BLE001 - the frame matters more than its datasheet
+            url, msg = None, f"lens datasheet: {type(exc).__name__}: {exc}"
+            with self.server.state as st:
+                st.error = " ".join(msg.split())
+        with self.server.state as st:
+            st.datasheet = url or ""
 
     async def _show(self, loop, quality: str) -> None:
         st = self.server.state
@@ -231,10 +255,6 @@ class ViewApp:
             img = ab_split(img, s.pinhole(index, r.camera), split)
         page = {"image": data_url(img), "histogram": data_url(histogram(r.display), "PNG"),
                 "rendered_quality": quality, "frame_label": str(s.frame_numbers[index])}
-        lens_key = (s.camera.lens, s.camera.sensor_mm, round(s.camera.focus_distance_m, 3))
-        if quality != DRAFT and lens_key != self._lens_shown:  # the datasheet when idle (matplotlib: ~1 s)
-            self._lens_shown = lens_key
-            page["datasheet"] = lens_datasheet(s.camera) or ""
         total = (time.perf_counter() - t0) * 1e3
         change = self._last_change
         scalar = next((c.scalar for c in self.controls if c.name == change), None)
@@ -304,7 +324,8 @@ class ViewApp:
                                          "utils.get('navigator.clipboard').writeText(command).catch(() => 0)",
                                    classes="mr-2", id="copy")
                             v.VBtn("add key at this frame", click=self.add_key, size="small", classes="mr-2")
-                            with html.Div(id="track-path", style="max-width: 420px; display: inline-block"):
+                            with html.Div(id="track-path", style="width: 360px; display: inline-block; vertical-align: middle",
+                                          classes="mr-2"):
                                 v.VTextField(v_model=("track_path",), label="camera track file (.json)",
                                              density="compact", hide_details=True)
                             v.VBtn("save camera track", click=self.save_track, size="small", id="save-track",
