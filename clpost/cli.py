@@ -820,7 +820,11 @@ def build_parser() -> argparse.ArgumentParser:
     from .calibration.command import add_parser as add_calibration_parser
     from .stmap import add_parser as add_stmap_parser
 
+    from .view.command import VIEW_CAMERA_DEFAULTS
+    from .view.command import add_parser as add_view_parser
+
     add_stmap_parser(sub, _size, camera_options())
+    add_view_parser(sub, _size, camera_options(defaults=VIEW_CAMERA_DEFAULTS))
     add_calibration_parser(sub, _size, camera_options())
     from .labels.command import add_parser as add_labels_parser
 

@@ -30,6 +30,7 @@ Metering patterns (weights over the image, documented per mode):
 """
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 
@@ -47,8 +48,11 @@ SPOT_AREA_FRACTION = 0.03
 CENTRE_SIGMA_OF_HEIGHT = 0.25
 
 
+@functools.lru_cache(maxsize=8)
 def metering_weights(mode: str, height: int, width: int) -> np.ndarray:
-    """Normalised (sum 1) weights of a metering pattern, float64 (H, W)."""
+    """Normalised (sum 1) weights of a metering pattern, float64 (H, W), read-only: cached per
+    (mode, size), as every frame of a sequence (and every redraw of ``clpost view``) meters
+    with the same pattern."""
     y, x = np.mgrid[0:height, 0:width].astype(np.float64)
     r2 = (x - (width - 1) / 2) ** 2 + (y - (height - 1) / 2) ** 2
     if mode == "average":
@@ -63,7 +67,9 @@ def metering_weights(mode: str, height: int, width: int) -> np.ndarray:
             w = (r2 <= r2.min()).astype(np.float64)
     else:
         raise InputError(f"metering mode {mode!r} is unknown: use average, centre or spot")
-    return w / w.sum()
+    w = w / w.sum()
+    w.flags.writeable = False
+    return w
 
 
 def metered_luminance(camera, frame) -> float:
