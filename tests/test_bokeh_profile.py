@@ -141,3 +141,24 @@ def test_profile_matches_the_kolb_tracer_on_a_held_out_lens(depth_m):
                                 rays=600, seed=3)
     assert np.max(np.abs(pen - kolb)) < 0.05 * kolb.max(), (pen, kolb)
     assert rim_core(pen, edges) == pytest.approx(rim_core(kolb, edges), rel=0.05)
+
+
+def test_a_focus_pull_reuses_a_traced_table_within_its_tolerance(monkeypatch):
+    """Frames whose focus moves by less than PROFILE_FOCUS_TOLERANCE of a traced table's focus use
+    that table (no re-trace per frame); beyond it a new table is traced; the device cache's key
+    names the table's own focus."""
+    from clpost.optics import pencil
+    from clpost.stages import dof as D
+
+    built = []
+    real = pencil.build_pencil_map
+    monkeypatch.setattr(pencil, "build_pencil_map", lambda cam, *a, **k: built.append(cam.focus_distance_m) or real(cam, *a, **k))
+    monkeypatch.setattr(D, "_PROFILES", {})
+    cam = Camera(lens="zeiss-planar-50-f1.4", f_number=2.0, focus_distance_m=2.0)
+    k0, pm0 = D.traced_profile_entry(cam, 320)
+    for f in (2.004, 2.01, 1.985):
+        k, pm = D.traced_profile_entry(cam.with_(focus_distance_m=f), 320)
+        assert pm is pm0 and k == k0
+    k1, pm1 = D.traced_profile_entry(cam.with_(focus_distance_m=2.05), 320)
+    assert pm1 is not pm0 and k1[-1] == 2.05
+    assert built == [2.0, 2.05]

@@ -148,10 +148,10 @@ def _enqueue_upsample(rt, c, src, coc, dst, w, h, tn_mix):
 def _profile_buffer(rt, stage, camera, width_px):
     """The traced lens's pencil map (:func:`dof.traced_profile`) as float4 (R, G, B, 0) per (row,
     bin), uploaded once per content; a one-element dummy for a thin lens."""
-    pm = D.traced_profile(camera, width_px, stage.quality)
-    if pm is None:
+    entry = D.traced_profile_entry(camera, width_px)
+    if entry is None:
         return rt.constant(np.zeros(4, np.float32), ("dof_profile", None))
-    key = ("dof_profile", camera.lens, camera.f_number, camera.focus_distance_m, camera.sensor_mm, width_px)
+    key, pm = ("dof_profile", *entry[0]), entry[1]  # a focus pull reuses a table within its tolerance
 
     def make():
         t = np.zeros(pm.table.shape[1:] + (4,), np.float32)
