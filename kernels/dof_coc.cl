@@ -111,7 +111,7 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
 }
 
 /* Padded working buffers (level 0 of `lv`, see dof_levels.cl): colour = mean of the DOF_SCALE^2 block, CoC = nearest (min signed) of
- * the block in working px; the border of width `pad` replicates the edge (no clamp per tap).
+ * the block in working px, at half resolution the variance-matched radius DOF_HALF_R of it; the border of width `pad` replicates the edge (no clamp per tap).
  * Returns (R, G, B, CoC) of padded pixel (gx, gy). */
 inline float4 dof_prepare_px(__global const float *src, __global const float *coc, const int gx, const int gy,
                              const int width, const int height, const int ww, const int hw, const int pad)
@@ -130,7 +130,7 @@ inline float4 dof_prepare_px(__global const float *src, __global const float *co
                                 + (float3)(src[j01], src[n + j01], src[2 * n + j01])
                                 + (float3)(src[j10], src[n + j10], src[2 * n + j10])
                                 + (float3)(src[j11], src[n + j11], src[2 * n + j11]));
-    const float r = fmin(fmin(coc[j00], coc[j01]), fmin(coc[j10], coc[j11]));
+    const float r = DOF_HALF_R(fmin(fmin(coc[j00], coc[j01]), fmin(coc[j10], coc[j11])));
 #else
 #error "DOF_SCALE must be 1 or 2"
 #endif
@@ -172,8 +172,8 @@ __kernel void dof_prepare(__global const float *restrict src, __global const flo
         }
         const float16 a0 = vload16(0, coc + j0), b0 = vload16(0, coc + j1);
         const float16 a1 = vload16(1, coc + j0), b1 = vload16(1, coc + j1);
-        const float16 r = (float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)),
-                                    fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd))) / DOF_SCALE;
+        const float16 r = DOF_HALF_R((float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)),
+                                               fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd)))) / DOF_SCALE;
 #endif
         vstore16(r, 0, lv + 3 * pn + o);
         vstore16(DOF_INV_R(r), 0, lv + 4 * pn + o);

@@ -582,16 +582,44 @@ def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.nda
     return acc / wsum[..., None], acc_a / wsum
 
 
+HALF_PATH_VAR_PX2 = 1.0
+r"""Variance (px², per axis) the half-resolution path adds to any gather: the 2×2 box mean (1/4)
+plus the bilinear upsampling at phases ¼, ¾ (¾·½² + ¼·(3/2)² = 3/4)."""
+HALF_RAMP_VAR_PX2 = 1.0 / 3.0
+r"""Variance (px², per axis) of the gather's one-working-pixel coverage ramp: a box of width 2 px,
+4/12 (measured on the lattice disc: within 0.01 working px² of r²/4 + 1/12 for r ≥ 1)."""
+
+
+def half_radius(coc: np.ndarray) -> np.ndarray:
+    r"""Radius the half-resolution path gathers with for a CoC r (px, signed): the disc's variance
+    :math:`r^2/4` less what the path adds anyway (box, upsampling, ramp),
+    :math:`r' = \operatorname{sgn}(r)\sqrt{\max(r^2 - 4(V_{path} + V_{ramp}), 0)}` — without it a
+    1.5 px blur came out with 3.4× the truth's variance (docs/fidelity.md, "Half resolution").
+    Monotone in r, so depth order and the nearest-CoC min commute with it."""
+    c = np.asarray(coc, dtype=np.float64)
+    return np.sign(c) * np.sqrt(np.maximum(c * c - 4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2), 0.0))
+
+
+def half_blend(coc: np.ndarray) -> np.ndarray:
+    r"""Weight of the half-resolution blur in the composite with the sharp full-resolution pixel:
+    :math:`b = \min(1, r^2 / (4 V_{path}))`, the mix whose variance :math:`b V_{path}` is the
+    disc's :math:`r^2/4` where the path's own blur is already too wide (r < 2 px)."""
+    c = np.asarray(coc, dtype=np.float64)
+    return np.minimum(c * c / (4.0 * HALF_PATH_VAR_PX2), 1.0)
+
+
 def _half_composite(camera, color, coc, scale, rmax, budget):
     """The half-resolution path (draft, preview, and final's large-reach tiles): gather at the
-    working resolution, depth-aware upsampling, composite with the full-resolution colour.
-    Returns (output, working CoC)."""
-    cw, rw = _working(color, coc, scale)
+    working resolution with the variance-matched radius (:func:`half_radius`), depth-aware
+    upsampling, composite with the full-resolution colour (:func:`half_blend`, or the front
+    layer's coverage). Returns (output, working CoC)."""
+    hr = half_radius(coc)
+    cw, rw = _working(color, hr, scale)
     out, alpha = gather_reference(cw, rw, rmax, budget, camera.blades, camera.blade_rotation_deg,
                                   camera.aperture_roundness, camera.spherical_aberration,
                                   camera.optical_vignetting)
-    up, up_alpha = _upsample(out, alpha, rw, coc, scale)
-    b = np.maximum(np.clip(np.abs(coc) - 0.5, 0.0, 1.0), up_alpha)
+    up, up_alpha = _upsample(out, alpha, rw, hr, scale)
+    b = np.maximum(half_blend(coc), up_alpha)
     return color + (up - color) * b[..., None], rw
 
 
@@ -676,6 +704,8 @@ class Dof(GatherStage):
                 "DOF_LEVELS": levels_for(rmax, budget),
                 "DOF_VIGNETTING": int(camera.optical_vignetting > 0),
                 "DOF_TEXTURE": int(camera.spherical_aberration != 0),
+                "DOF_HALF_SHRINK": f"{4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2)!r}f",
+                "DOF_HALF_BLEND": f"{1.0 / (4.0 * HALF_PATH_VAR_PX2)!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
 
