@@ -108,8 +108,13 @@ preview    half               64 px (32 work)   5    109 (dense up to 5 work px,
 final      mixed (below)      64 px             8    249 (dense up to 8 px, stride 2 up to 17 px; beyond: half res)
 =========  =================  ================  ===  =====================================================
 Half-resolution levels composite with the full-resolution image by
-:math:`\mathrm{lerp}(c_{full}, \mathrm{up}(c_{blur}), \max(\mathrm{clamp}(|r|-0.5, 0, 1), \mathrm{up}(\alpha)))`
+:math:`\mathrm{lerp}(c_{full}, \mathrm{up}(c_{blur}), \max(\min(1, r^2/4), \mathrm{up}(\alpha)))`
 (depth-aware bilinear upsampling, :func:`_upsample`), so in-focus pixels stay at full resolution.
+The path itself blurs: the 2×2 box and the bilinear upsampling add 1 px² of variance per axis and
+the working-resolution coverage ramp 1/3 px², so it gathers with the variance-matched radius
+:math:`r' = \sqrt{r^2 - 16/3}` (:func:`half_radius`) and, below r = 2 px, where even r' = 0 is too
+wide, blends the sharp pixel with the path's narrowest blur by variance, :math:`b = r^2/4`
+(:func:`half_blend`); effect on the Cycles truths: docs/fidelity.md, "The half-resolution path".
 
 Mixed resolution (final, :data:`MIXED`): a working tile (16×16 at half resolution = 32×32 px) is
 *big* when its half-resolution plan (max CoC 32 working px, R_b = 8) needs lattice level ≥ 1
@@ -591,19 +596,16 @@ r"""Variance (px², per axis) of the gather's one-working-pixel coverage ramp: a
 
 
 def half_radius(coc: np.ndarray) -> np.ndarray:
-    r"""Radius the half-resolution path gathers with for a CoC r (px, signed): the disc's variance
-    :math:`r^2/4` less what the path adds anyway (box, upsampling, ramp),
-    :math:`r' = \operatorname{sgn}(r)\sqrt{\max(r^2 - 4(V_{path} + V_{ramp}), 0)}` — without it a
-    1.5 px blur came out with 3.4× the truth's variance (docs/fidelity.md, "Half resolution").
+    r"""Radius the half-resolution path gathers with for a CoC r (px, signed):
+    :math:`\operatorname{sgn}(r)\sqrt{\max(r^2 - 4(V_{path} + V_{ramp}), 0)}` (module docstring).
     Monotone in r, so depth order and the nearest-CoC min commute with it."""
     c = np.asarray(coc, dtype=np.float64)
     return np.sign(c) * np.sqrt(np.maximum(c * c - 4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2), 0.0))
 
 
 def half_blend(coc: np.ndarray) -> np.ndarray:
-    r"""Weight of the half-resolution blur in the composite with the sharp full-resolution pixel:
-    :math:`b = \min(1, r^2 / (4 V_{path}))`, the mix whose variance :math:`b V_{path}` is the
-    disc's :math:`r^2/4` where the path's own blur is already too wide (r < 2 px)."""
+    r"""Weight of the half-resolution blur against the sharp pixel, :math:`\min(1, r^2/(4V_{path}))`
+    (module docstring)."""
     c = np.asarray(coc, dtype=np.float64)
     return np.minimum(c * c / (4.0 * HALF_PATH_VAR_PX2), 1.0)
 
