@@ -344,6 +344,28 @@ def test_half_covered_pixel_of_a_dark_pole_takes_the_poles_depth():
     assert np.isinf(D.effective_depth(color.astype(np.float64), depth)[:, 10]).all()
 
 
+def test_despeckle_takes_the_median_where_depth_flips_but_colour_does_not():
+    """Stochastic-transparency depth (a pane's depth on 1 pixel in 3, the colour smooth): an
+    isolated pane-depth pixel whose luminance lies within its wall neighbours' takes the 3×3
+    median; a lamp brighter than its surround and a dark wire keep their depth."""
+    h, w = 9, 9
+    col = np.full((h, w, 3), 0.5, np.float32)
+    col[:, 5:] = 0.8  # a colour edge, unrelated to depth
+    depth = np.full((h, w), 3.0, np.float32)
+    depth[4, 5] = 1.5  # speckle on the edge: luminance 0.8, within its neighbours' 0.5 … 0.8
+    depth[2, 2] = 1.5  # speckle inside the flat part
+    out = D.despeckle_depth(col, depth)
+    assert out[4, 5] == 3.0 and out[2, 2] == 3.0
+    lamp, wire = col.copy(), col.copy()
+    lamp[4, 2] = 50.0
+    wire[:, 6] = 0.05
+    d_lamp, d_wire = depth.copy(), depth.copy()
+    d_lamp[4, 2] = 9.0
+    d_wire[:, 6] = 1.0
+    assert D.despeckle_depth(lamp, d_lamp)[4, 2] == 9.0
+    assert np.all(D.despeckle_depth(wire, d_wire)[:, 6] == 1.0)
+
+
 @pytest.mark.parametrize("quality", ["draft", "final"])
 def test_fringe_rule_kernel_matches_its_reference_on_random_lights_and_steps(rng, quality):
     """Random depth steps (0.5 m … sky) under random HDR lights with anti-aliased fringes, at an odd

@@ -286,6 +286,34 @@ def _neighbourhood(a: np.ndarray):
     return [p[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy, dx in offs]
 
 
+SPECKLE_MAX_SAME = 3
+"""A pixel with at most this many of its 8 neighbours at its own depth (within 0.8×) is a speckle
+candidate (:func:`despeckle_depth`)."""
+
+
+def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | None = None) -> np.ndarray:
+    r"""Depth with stochastic-transparency speckle removed: a renderer's depth pass under a
+    semi-transparent surface flips per pixel between the surface and what is behind it while the
+    colour stays smooth. p takes the median depth of its 3×3 when its depth class (neighbours
+    within 0.8× of :math:`d_p` either way) has at most :data:`SPECKLE_MAX_SAME` of its 8
+    neighbours *and* its luminance lies within the range of its other-depth neighbours' (its colour
+    is explained without its own surface). A wire, a lamp or a silhouette pixel brighter or darker
+    than everything around it keeps its depth. Applied before the fringe rule
+    (:func:`effective_depth`)."""
+    d = np.asarray(depth, dtype=np.float64)
+    lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
+    dn, ln = _neighbourhood(d), _neighbourhood(lum)
+    same = np.zeros(d.shape, int)
+    lo, hi = np.full_like(d, np.inf), np.full_like(d, -np.inf)
+    for dq, lq in zip(dn[1:], ln[1:]):
+        s = (dq >= MIXED_SAME_DEPTH * d) & (d >= MIXED_SAME_DEPTH * dq)
+        same += s
+        lo = np.where(s, lo, np.minimum(lo, lq))
+        hi = np.where(s, hi, np.maximum(hi, lq))
+    speckle = (same <= SPECKLE_MAX_SAME) & (lum >= lo) & (lum <= hi)
+    return np.where(speckle, np.median(np.stack(dn), axis=0), d)
+
+
 def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | None = None) -> np.ndarray:
     r"""Depth with the colour/depth disagreement of anti-aliased edges resolved (the fringe rule of
     the module docstring); ``luma``: the working space's luminance weights (:func:`luma_weights`).
@@ -302,10 +330,11 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     * dark near (a pole over the sky): :math:`Y_n` the darkest near pixel, :math:`Y_f` the
       brightest of p's surface; it explains p when :math:`\alpha \ge \tfrac12`.
 
-    When either holds p takes the nearest depth of its 3×3. With
+    When either holds p takes the nearest depth of its 3×3. The depth is first despeckled
+    (:func:`despeckle_depth`). With
     :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are written without a division. A depth
     only ever moves nearer; a pixel with no near neighbour keeps its own."""
-    d = np.asarray(depth, dtype=np.float64)
+    d = despeckle_depth(color, depth, luma)
     lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
     dn, ln = _neighbourhood(d), _neighbourhood(lum)
     nearest = np.minimum.reduce(dn)
