@@ -244,8 +244,9 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
 }
 
 /* Half-resolution levels: keep in-focus pixels at full resolution, take the upsampled blur where
- * the full-resolution CoC or the front layer's coverage says so. Upsampling is bilinear weighted
- * by CoC similarity g = 1/(1/4 + (r - s r_i)^2) (see _upsample in clpost/stages/dof.py).
+ * the full-resolution CoC (DOF_HALF_B) or the front layer's coverage says so. Upsampling is bilinear
+ * weighted by CoC similarity g = 1/(1/4 + (r' - s r_i)^2), r' = DOF_HALF_R(r) the radius the working
+ * CoC r_i was made with (see _upsample and _half_composite in clpost/stages/dof.py).
  * One output pixel (the edge groups of dof_upsample). */
 inline float3 dof_upsample_px(__global const float *src, __global const float *coc, __global const float *blur,
                               __global const float *alpha, __global const float *pr, const int x, const int y,
@@ -257,10 +258,10 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
     const float fx = clamp(sx - (float)x0, 0.0f, 1.0f), fy = clamp(sy - (float)y0, 0.0f, 1.0f);
     const int x1 = min(x0 + 1, ww - 1), y1 = min(y0 + 1, hw - 1);
     const size_t n = (size_t)width * height, i = (size_t)y * width + x, nw = (size_t)ww * hw;
-    const float r = coc[i];
+    const float r = coc[i], hr = DOF_HALF_R(r);
 #define DOF_CORNER(XS, YS, BW) { \
         const size_t j = (size_t)(YS) * ww + (XS); \
-        const float dr = r - DOF_SCALE * pr[(size_t)((YS) + pad) * pw + (XS) + pad]; \
+        const float dr = hr - DOF_SCALE * pr[(size_t)((YS) + pad) * pw + (XS) + pad]; \
         const float g = (BW) / (0.25f + dr * dr); \
         acc += g * (float4)(blur[j], blur[nw + j], blur[2 * nw + j], alpha[j]); \
         wsum += g; }
@@ -272,7 +273,7 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
     DOF_CORNER(x1, y1, fx * fy)
 #undef DOF_CORNER
     acc /= wsum;
-    const float b = fmax(clamp(fabs(r) - 0.5f, 0.0f, 1.0f), acc.w);
+    const float b = fmax(DOF_HALF_B(r), acc.w);
     const float3 c = (float3)(src[i], src[n + i], src[2 * n + i]);
     return c * (1.0f - b) + acc.xyz * b;  /* exact at b = 1 even for 1e8 highlights */
 }
@@ -317,14 +318,14 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         const float fy = clamp(sy - (float)y0, 0.0f, 1.0f);
         const float16 fx = (float16)(0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f,
                                       0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f);
-        const float16 r = vload16(0, coc + i);
+        const float16 r = vload16(0, coc + i), hr = DOF_HALF_R(r);
         float16 ar = (float16)(0.0f), ag = ar, ab = ar, aa = ar, wsum = ar;
 #define DOF_ROW(YS, WL, WR) { \
             const size_t j = (size_t)(YS) * ww + m - 1; \
             const float16 vr = vload16(0, blur + j), vg = vload16(0, blur + nw + j); \
             const float16 vb = vload16(0, blur + 2 * nw + j), va = vload16(0, alpha + j); \
             const float16 vc = DOF_SCALE * vload16(0, pr + (size_t)((YS) + pad) * pw + m - 1 + pad); \
-            const float16 dl = r - DOF_LEFT(vc), dr = r - DOF_RIGHT(vc); \
+            const float16 dl = hr - DOF_LEFT(vc), dr = hr - DOF_RIGHT(vc); \
             const float16 gl = (WL) / (0.25f + dl * dl), gr = (WR) / (0.25f + dr * dr); \
             ar += gl * DOF_LEFT(vr); ag += gl * DOF_LEFT(vg); ab += gl * DOF_LEFT(vb); aa += gl * DOF_LEFT(va); \
             wsum += gl; \
@@ -334,7 +335,7 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         DOF_ROW(y1, (1.0f - fx) * fy, fx * fy)
 #undef DOF_ROW
         const float16 inv = 1.0f / wsum;
-        const float16 b = fmax(clamp(fabs(r) - 0.5f, 0.0f, 1.0f), aa * inv);
+        const float16 b = fmax(DOF_HALF_B(r), aa * inv);
         const float16 ob = 1.0f - b;
         vstore16(vload16(0, src + i) * ob + ar * inv * b, 0, dst + i);
         vstore16(vload16(0, src + n + i) * ob + ag * inv * b, 0, dst + n + i);

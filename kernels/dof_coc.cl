@@ -25,6 +25,108 @@ inline float dof_fringe_depth(const float d, const float lum, const float neares
     return take ? nearest : d;
 }
 
+inline float16 dof_luma16(__global const float *p, const size_t n) {
+    return DOF_LUMA_R * vload16(0, p) + DOF_LUMA_G * vload16(0, p + n) + DOF_LUMA_B * vload16(0, p + 2 * n);
+}
+
+#define DOF_SPECKLE_MAX_SAME 3
+/* one exchange of the median network, on v[] of floats or float16s (generic fmin/fmax) */
+#define DOF_SORT2(a, b) { const __typeof__(v[0]) t_ = fmin(v[a], v[b]); v[b] = fmax(v[a], v[b]); v[a] = t_; }
+
+/* Stochastic-depth speckle (despeckle_depth in clpost/stages/dof.py): p takes the median depth of
+ * its 3x3 when at most DOF_SPECKLE_MAX_SAME of its 8 neighbours share its depth (within 0.8x either
+ * way) and its luminance lies within its other-depth neighbours' range. Neighbours clamped to the
+ * image; the median by the 19-exchange network for 9 values (Paeth, Graphics Gems 1990). */
+inline float dof_despeckle_px(__global const float *src, __global const float *depth, const int x, const int y,
+                              const int width, const int height)
+{
+    const size_t n = (size_t)width * height, i = (size_t)y * width + x;
+    const float d = depth[i], lum = dof_luma(src, i, n);
+    float v[9];
+    float lo = INFINITY, hi = -INFINITY;
+    int same = 0, k = 0;
+    for (int b = -1; b <= 1; ++b)
+        for (int a = -1; a <= 1; ++a) {
+            const size_t j = (size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1);
+            const float dq = depth[j];
+            v[k++] = dq;
+            if (a == 0 && b == 0) continue;
+            if (dq >= DOF_MIXED_SAME_DEPTH * d && d >= DOF_MIXED_SAME_DEPTH * dq) {
+                ++same;
+            } else {
+                const float lq = dof_luma(src, j, n);
+                lo = fmin(lo, lq);
+                hi = fmax(hi, lq);
+            }
+        }
+    if (same > DOF_SPECKLE_MAX_SAME || lum < lo || lum > hi)
+        return d;
+    DOF_SORT2(1, 2) DOF_SORT2(4, 5) DOF_SORT2(7, 8) DOF_SORT2(0, 1) DOF_SORT2(3, 4) DOF_SORT2(6, 7)
+    DOF_SORT2(1, 2) DOF_SORT2(4, 5) DOF_SORT2(7, 8) DOF_SORT2(0, 3) DOF_SORT2(5, 8) DOF_SORT2(4, 7)
+    DOF_SORT2(3, 6) DOF_SORT2(1, 4) DOF_SORT2(2, 5) DOF_SORT2(4, 7) DOF_SORT2(4, 2) DOF_SORT2(6, 4)
+    DOF_SORT2(4, 2)
+    return v[4];
+}
+
+/* 16 pixels of a row per work-item: the same-depth count in float16 (9 row loads); a group with
+ * no candidate (every lane has more than DOF_SPECKLE_MAX_SAME same-depth neighbours: most of an
+ * image) copies its depth, the others take the luminance test and the median lane-wise; the
+ * groups at the left/right edge go per pixel.
+ * Launched over (ceil(width / 16), height). */
+__kernel void dof_despeckle(__global const float *restrict src, __global const float *restrict depth,
+                            __global float *restrict out, const int width, const int height)
+{
+    const int x = 16 * get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    const size_t i = (size_t)y * width + x;
+    if (x >= 1 && x + 16 <= width - 1) {
+        const float16 d = vload16(0, depth + i);
+        const float16 lim = DOF_MIXED_SAME_DEPTH * d;
+        const size_t rows[3] = {(size_t)max(y - 1, 0) * width + x, i, (size_t)min(y + 1, height - 1) * width + x};
+        int16 same = (int16)(0);
+#pragma unroll
+        for (int b = 0; b < 3; ++b)
+#pragma unroll
+            for (int a = -1; a <= 1; ++a) {
+                if (a == 0 && b == 1) continue;
+                const float16 dq = vload16(0, depth + rows[b] + a);
+                same -= (dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq);  /* true lanes are -1 */
+            }
+        if (!any(same <= DOF_SPECKLE_MAX_SAME)) {
+            vstore16(d, 0, out + i);
+            return;
+        }
+        /* candidates: the luminance test and the 9-value median, lane-wise */
+        const size_t n = (size_t)width * height;
+        const float16 lum = dof_luma16(src + i, n);
+        float16 lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
+        float16 v[9];
+        int k = 0;
+#pragma unroll
+        for (int b = 0; b < 3; ++b)
+#pragma unroll
+            for (int a = -1; a <= 1; ++a) {
+                const float16 dq = vload16(0, depth + rows[b] + a);
+                v[k++] = dq;
+                if (a == 0 && b == 1) continue;
+                const int16 sm = (dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq);
+                const float16 lq = dof_luma16(src + rows[b] + a, n);
+                lo = select(fmin(lo, lq), lo, sm);
+                hi = select(fmax(hi, lq), hi, sm);
+            }
+        DOF_SORT2(1, 2) DOF_SORT2(4, 5) DOF_SORT2(7, 8) DOF_SORT2(0, 1) DOF_SORT2(3, 4) DOF_SORT2(6, 7)
+        DOF_SORT2(1, 2) DOF_SORT2(4, 5) DOF_SORT2(7, 8) DOF_SORT2(0, 3) DOF_SORT2(5, 8) DOF_SORT2(4, 7)
+        DOF_SORT2(3, 6) DOF_SORT2(1, 4) DOF_SORT2(2, 5) DOF_SORT2(4, 7) DOF_SORT2(4, 2) DOF_SORT2(6, 4)
+        DOF_SORT2(4, 2)
+        const int16 speckle = (same <= DOF_SPECKLE_MAX_SAME) & (lum >= lo) & (lum <= hi);
+        vstore16(select(d, v[4], speckle), 0, out + i);
+        return;
+    }
+    for (int xi = x; xi < min(x + 16, width); ++xi)
+        out[(size_t)y * width + xi] = dof_despeckle_px(src, depth, xi, y, width, height);
+}
+#undef DOF_SORT2
+
 /* Full-resolution signed CoC radius (px) of one pixel, depth by the fringe rule above. Neighbour
  * rows/columns clamped to the image. */
 inline float dof_coc_px(__global const float *src, __global const float *depth, const int x, const int y,
@@ -51,10 +153,6 @@ inline float dof_coc_px(__global const float *src, __global const float *depth, 
     const float s = dof_fringe_depth(d, lum, nearest, bright_n, dark_n, own_min, own_max);
     const float inv_s = isinf(s) ? 0.0f : 1.0f / s;
     return clamp(k * (inv_u - inv_s), -limit, limit);
-}
-
-inline float16 dof_luma16(__global const float *p, const size_t n) {
-    return DOF_LUMA_R * vload16(0, p) + DOF_LUMA_G * vload16(0, p + n) + DOF_LUMA_B * vload16(0, p + 2 * n);
 }
 
 /* 16 pixels of a row per work-item in explicit float16 (PoCL does not vectorise the per-pixel form;
@@ -111,7 +209,7 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
 }
 
 /* Padded working buffers (level 0 of `lv`, see dof_levels.cl): colour = mean of the DOF_SCALE^2 block, CoC = nearest (min signed) of
- * the block in working px; the border of width `pad` replicates the edge (no clamp per tap).
+ * the block in working px, at half resolution the variance-matched radius DOF_HALF_R of it; the border of width `pad` replicates the edge (no clamp per tap).
  * Returns (R, G, B, CoC) of padded pixel (gx, gy). */
 inline float4 dof_prepare_px(__global const float *src, __global const float *coc, const int gx, const int gy,
                              const int width, const int height, const int ww, const int hw, const int pad)
@@ -130,7 +228,7 @@ inline float4 dof_prepare_px(__global const float *src, __global const float *co
                                 + (float3)(src[j01], src[n + j01], src[2 * n + j01])
                                 + (float3)(src[j10], src[n + j10], src[2 * n + j10])
                                 + (float3)(src[j11], src[n + j11], src[2 * n + j11]));
-    const float r = fmin(fmin(coc[j00], coc[j01]), fmin(coc[j10], coc[j11]));
+    const float r = DOF_HALF_R(fmin(fmin(coc[j00], coc[j01]), fmin(coc[j10], coc[j11])));
 #else
 #error "DOF_SCALE must be 1 or 2"
 #endif
@@ -172,8 +270,8 @@ __kernel void dof_prepare(__global const float *restrict src, __global const flo
         }
         const float16 a0 = vload16(0, coc + j0), b0 = vload16(0, coc + j1);
         const float16 a1 = vload16(1, coc + j0), b1 = vload16(1, coc + j1);
-        const float16 r = (float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)),
-                                    fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd))) / DOF_SCALE;
+        const float16 r = DOF_HALF_R((float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)),
+                                               fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd)))) / DOF_SCALE;
 #endif
         vstore16(r, 0, lv + 3 * pn + o);
         vstore16(DOF_INV_R(r), 0, lv + 4 * pn + o);

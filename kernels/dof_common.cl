@@ -8,3 +8,9 @@
 #define DOF_INV_R(c) (1.0f / fmax(fabs(c), 0.5f))
 
 #define DOF_PW(n, pad) (DOF_TILE * (((n) + DOF_TILE - 1) / DOF_TILE) + 2 * (pad))
+
+/* The half-resolution path's variance-matched radius and composite weight (half_radius and
+ * half_blend in clpost/stages/dof.py): r' = sgn(r) sqrt(max(r^2 - DOF_HALF_SHRINK, 0)) and
+ * b = min(1, r^2 DOF_HALF_BLEND); scalar or vector r (generic built-ins only). */
+#define DOF_HALF_R(r) copysign(sqrt(fmax((r) * (r) - DOF_HALF_SHRINK, 0.0f)), (r))
+#define DOF_HALF_B(r) fmin((r) * (r) * DOF_HALF_BLEND, 1.0f)

@@ -166,6 +166,34 @@ def test_defocused_flat_field_stays_flat(rng, quality):
     assert np.abs(out / 3.0 - 1).max() < 0.01
 
 
+def _edge_spread_px2(out_row):
+    """Variance (px²) of the line-spread function (the derivative of a step edge's profile)."""
+    lsf = np.diff(np.asarray(out_row, np.float64))
+    x = np.arange(lsf.size) + 0.5
+    m = (lsf * x).sum() / lsf.sum()
+    return float((lsf * (x - m) ** 2).sum() / lsf.sum())
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview"])
+@pytest.mark.parametrize("r_px", [1.0, 1.5, 4.0, 6.0])
+def test_half_resolution_path_blurs_an_edge_like_the_disc(quality, r_px):
+    """A step edge blurred by a disc of radius r has a line-spread variance of r²/4 (the disc's
+    marginal). The half-resolution path's box and upsampling add 1 px² and depend on the edge's
+    phase against the 2×2 blocks, so the mean over both phases is compared: within 12 % of r²/4
+    (half_radius, half_blend; before them a 1.5 px CoC gave 3.5× the variance)."""
+    h, w = 40, 96
+    cam = Camera(**CAM)
+    k, inv_u = D.coc_coefficients(cam, w)
+    depth = np.full((h, w), 1.0 / (inv_u - r_px / k), np.float32)
+    spread = []
+    for phase in (0, 1):
+        col = np.zeros((h, w, 3), np.float32)
+        col[:, w // 2 + phase:] = 1.0
+        out, _ = run(cam, Frame(col, depth=depth), quality)
+        spread.append(_edge_spread_px2(out[h // 2, :, 0]))
+    assert np.mean(spread) == pytest.approx(r_px * r_px / 4, rel=0.12)
+
+
 @pytest.mark.parametrize("sa, near_rim_brighter", [(0.7, True), (-0.7, False)])
 def test_spherical_aberration_textures_near_and_far_oppositely(sa, near_rim_brighter):
     cam = Camera(**CAM, blades=0, spherical_aberration=sa)
@@ -314,6 +342,28 @@ def test_half_covered_pixel_of_a_dark_pole_takes_the_poles_depth():
     assert (eff[:, 10] == pole).all() and np.isinf(eff[:, 11:]).all() and (eff[:, :10] == pole).all()
     color[:, 10] = 0.9                            # a tenth covered: stays with the sky
     assert np.isinf(D.effective_depth(color.astype(np.float64), depth)[:, 10]).all()
+
+
+def test_despeckle_takes_the_median_where_depth_flips_but_colour_does_not():
+    """Stochastic-transparency depth (a pane's depth on 1 pixel in 3, the colour smooth): an
+    isolated pane-depth pixel whose luminance lies within its wall neighbours' takes the 3×3
+    median; a lamp brighter than its surround and a dark wire keep their depth."""
+    h, w = 9, 9
+    col = np.full((h, w, 3), 0.5, np.float32)
+    col[:, 5:] = 0.8  # a colour edge, unrelated to depth
+    depth = np.full((h, w), 3.0, np.float32)
+    depth[4, 5] = 1.5  # speckle on the edge: luminance 0.8, within its neighbours' 0.5 … 0.8
+    depth[2, 2] = 1.5  # speckle inside the flat part
+    out = D.despeckle_depth(col, depth)
+    assert out[4, 5] == 3.0 and out[2, 2] == 3.0
+    lamp, wire = col.copy(), col.copy()
+    lamp[4, 2] = 50.0
+    wire[:, 6] = 0.05
+    d_lamp, d_wire = depth.copy(), depth.copy()
+    d_lamp[4, 2] = 9.0
+    d_wire[:, 6] = 1.0
+    assert D.despeckle_depth(lamp, d_lamp)[4, 2] == 9.0
+    assert np.all(D.despeckle_depth(wire, d_wire)[:, 6] == 1.0)
 
 
 @pytest.mark.parametrize("quality", ["draft", "final"])

@@ -118,8 +118,13 @@ preview    half               64 px (32 work)   5    109 (dense up to 5 work px,
 final      mixed (below)      64 px             8    249 (dense up to 8 px, stride 2 up to 17 px; beyond: half res)
 =========  =================  ================  ===  =====================================================
 Half-resolution levels composite with the full-resolution image by
-:math:`\mathrm{lerp}(c_{full}, \mathrm{up}(c_{blur}), \max(\mathrm{clamp}(|r|-0.5, 0, 1), \mathrm{up}(\alpha)))`
+:math:`\mathrm{lerp}(c_{full}, \mathrm{up}(c_{blur}), \max(\min(1, r^2/4), \mathrm{up}(\alpha)))`
 (depth-aware bilinear upsampling, :func:`_upsample`), so in-focus pixels stay at full resolution.
+The path itself blurs: the 2×2 box and the bilinear upsampling add 1 px² of variance per axis and
+the working-resolution coverage ramp 1/3 px², so it gathers with the variance-matched radius
+:math:`r' = \sqrt{r^2 - 16/3}` (:func:`half_radius`) and, below r = 2 px, where even r' = 0 is too
+wide, blends the sharp pixel with the path's narrowest blur by variance, :math:`b = r^2/4`
+(:func:`half_blend`); effect on the Cycles truths: docs/fidelity.md, "The half-resolution path".
 
 Mixed resolution (final, :data:`MIXED`): a working tile (16×16 at half resolution = 32×32 px) is
 *big* when its half-resolution plan (max CoC 32 working px, R_b = 8) needs lattice level ≥ 1
@@ -292,6 +297,34 @@ def _neighbourhood(a: np.ndarray):
     return [p[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy, dx in offs]
 
 
+SPECKLE_MAX_SAME = 3
+"""A pixel with at most this many of its 8 neighbours at its own depth (within 0.8×) is a speckle
+candidate (:func:`despeckle_depth`)."""
+
+
+def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | None = None) -> np.ndarray:
+    r"""Depth with stochastic-transparency speckle removed: a renderer's depth pass under a
+    semi-transparent surface flips per pixel between the surface and what is behind it while the
+    colour stays smooth. p takes the median depth of its 3×3 when its depth class (neighbours
+    within 0.8× of :math:`d_p` either way) has at most :data:`SPECKLE_MAX_SAME` of its 8
+    neighbours *and* its luminance lies within the range of its other-depth neighbours' (its colour
+    is explained without its own surface). A wire, a lamp or a silhouette pixel brighter or darker
+    than everything around it keeps its depth. Applied before the fringe rule
+    (:func:`effective_depth`)."""
+    d = np.asarray(depth, dtype=np.float64)
+    lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
+    dn, ln = _neighbourhood(d), _neighbourhood(lum)
+    same = np.zeros(d.shape, int)
+    lo, hi = np.full_like(d, np.inf), np.full_like(d, -np.inf)
+    for dq, lq in zip(dn[1:], ln[1:]):
+        s = (dq >= MIXED_SAME_DEPTH * d) & (d >= MIXED_SAME_DEPTH * dq)
+        same += s
+        lo = np.where(s, lo, np.minimum(lo, lq))
+        hi = np.where(s, hi, np.maximum(hi, lq))
+    speckle = (same <= SPECKLE_MAX_SAME) & (lum >= lo) & (lum <= hi)
+    return np.where(speckle, np.median(np.stack(dn), axis=0), d)
+
+
 def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | None = None) -> np.ndarray:
     r"""Depth with the colour/depth disagreement of anti-aliased edges resolved (the fringe rule of
     the module docstring); ``luma``: the working space's luminance weights (:func:`luma_weights`).
@@ -308,10 +341,11 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     * dark near (a pole over the sky): :math:`Y_n` the darkest near pixel, :math:`Y_f` the
       brightest of p's surface; it explains p when :math:`\alpha \ge \tfrac12`.
 
-    When either holds p takes the nearest depth of its 3×3. With
+    When either holds p takes the nearest depth of its 3×3. The depth is first despeckled
+    (:func:`despeckle_depth`). With
     :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are written without a division. A depth
     only ever moves nearer; a pixel with no near neighbour keeps its own."""
-    d = np.asarray(depth, dtype=np.float64)
+    d = despeckle_depth(color, depth, luma)
     lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
     dn, ln = _neighbourhood(d), _neighbourhood(lum)
     nearest = np.minimum.reduce(dn)
@@ -664,16 +698,42 @@ def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.nda
     return acc / wsum[..., None], acc_a / wsum
 
 
+HALF_PATH_VAR_PX2 = 1.0
+r"""Variance (px², per axis) the half-resolution path adds to any gather: the 2×2 box mean (1/4)
+plus the bilinear upsampling at phases ¼, ¾ (¾·½² + ¼·(3/2)² = 3/4)."""
+HALF_RAMP_VAR_PX2 = 1.0 / 3.0
+r"""Variance (px², per axis) of the gather's one-working-pixel coverage ramp: a box of width 2 px,
+4/12 (measured on the lattice disc: within 0.01 working px² of r²/4 + 1/12 for r ≥ 1)."""
+
+
+def half_radius(coc: np.ndarray) -> np.ndarray:
+    r"""Radius the half-resolution path gathers with for a CoC r (px, signed):
+    :math:`\operatorname{sgn}(r)\sqrt{\max(r^2 - 4(V_{path} + V_{ramp}), 0)}` (module docstring).
+    Monotone in r, so depth order and the nearest-CoC min commute with it."""
+    c = np.asarray(coc, dtype=np.float64)
+    return np.sign(c) * np.sqrt(np.maximum(c * c - 4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2), 0.0))
+
+
+def half_blend(coc: np.ndarray) -> np.ndarray:
+    r"""Weight of the half-resolution blur against the sharp pixel, :math:`\min(1, r^2/(4V_{path}))`
+    (module docstring)."""
+    c = np.asarray(coc, dtype=np.float64)
+    return np.minimum(c * c / (4.0 * HALF_PATH_VAR_PX2), 1.0)
+
+
 def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
     """The half-resolution path (draft, preview, and final's large-reach tiles): gather at the
-    working resolution, depth-aware upsampling, composite with the full-resolution colour.
-    ``pm``: the traced profile (:func:`traced_profile`) or None. Returns (output, working CoC)."""
-    cw, rw = _working(color, coc, scale)
+    working resolution with the variance-matched radius (:func:`half_radius`), depth-aware
+    upsampling, composite with the full-resolution colour (:func:`half_blend`, or the front
+    layer's coverage). ``pm``: the traced profile (:func:`traced_profile`) or None. Returns
+    (output, working CoC)."""
+    hr = half_radius(coc)
+    cw, rw = _working(color, hr, scale)
     out, alpha = gather_reference(cw, rw, rmax, budget, camera.blades, camera.blade_rotation_deg,
                                   camera.aperture_roundness, camera.spherical_aberration,
                                   camera.optical_vignetting, None if pm is None else (pm, scale))
-    up, up_alpha = _upsample(out, alpha, rw, coc, scale)
-    b = np.maximum(np.clip(np.abs(coc) - 0.5, 0.0, 1.0), up_alpha)
+    up, up_alpha = _upsample(out, alpha, rw, hr, scale)
+    b = np.maximum(half_blend(coc), up_alpha)
     return color + (up - color) * b[..., None], rw
 
 
@@ -768,6 +828,8 @@ class Dof(GatherStage):
                 "DOF_VIGNETTING": int(camera.optical_vignetting > 0),
                 "DOF_TEXTURE": int(camera.spherical_aberration != 0 and not traced),
                 "DOF_PROFILE": int(traced), "DOF_REACH": f"{reach!r}f", **prof,
+                "DOF_HALF_SHRINK": f"{4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2)!r}f",
+                "DOF_HALF_BLEND": f"{1.0 / (4.0 * HALF_PATH_VAR_PX2)!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
 
