@@ -112,6 +112,13 @@ def film_point_footprint(lens_name: str, f_number: float, focus_m: float, film_x
     fx, fy = (float(v) for v in film_xy_mm)
     o = np.tile([fx, fy, 0.0], (rays, 1))
     pm = np.stack([rr * np.cos(ph), rr * np.sin(ph), np.full(rays, zf - z_x)], -1)
+    return _object_plane_hits(table, o, pm, zf, z_e, depth_m)[1]
+
+
+def _object_plane_hits(table, o, pm, zf: float, z_e: float, depth_m: float):
+    """Trace rays from film points ``o`` toward exit-pupil points ``pm`` through the mirrored
+    ``table`` (:func:`mirrored_table`) and intersect the ones that leave the lens with the plane at
+    planar depth ``depth_m`` (camera space, mm): (mask of the rays that pass, hits N×2)."""
     r = trace_table(table, o, pm - o, zf + 1.0)
     ok = r.status == OK
     q, d = r.pos[ok].copy(), r.dir[ok].copy()
@@ -120,7 +127,7 @@ def film_point_footprint(lens_name: str, f_number: float, focus_m: float, film_x
     oc = lens_to_camera_m(q, z_e) * 1000.0
     dc = np.stack([d[:, 0], -d[:, 1], -d[:, 2]], -1)
     t = (depth_m * 1000.0 - oc[:, 2]) / dc[:, 2]
-    return oc[:, :2] + t[:, None] * dc[:, :2]
+    return ok, oc[:, :2] + t[:, None] * dc[:, :2]
 
 
 def axial_blur_px(camera, depth_m: float, width_px: int, rays: int = 20000, seed: int = 0) -> float:
@@ -177,15 +184,8 @@ def point_source_profile(camera, depth_m: float, edges: np.ndarray, rho0_mm: flo
             wgt = ray[:, 2] ** 2 / (d2 * d2) * area
             o = np.concatenate([film, np.zeros((m, 1))], 1)
             pm = np.concatenate([pupil, np.full((m, 1), zf - z_x)], 1)
-            r = trace_table(table, o, pm - o, zf + 1.0)
-            ok = r.status == OK
-            q, d = r.pos[ok].copy(), r.dir[ok].copy()
-            q[:, 2] = zf - q[:, 2]
-            d[:, 2] = -d[:, 2]
-            oc = lens_to_camera_m(q, z_e) * 1000.0
-            dc = np.stack([d[:, 0], -d[:, 1], -d[:, 2]], -1)
-            s = (depth_m * 1000.0 - oc[:, 2]) / dc[:, 2]
-            hit = np.hypot(oc[:, 0] + s * dc[:, 0], oc[:, 1] + s * dc[:, 1]) <= eps_mm
+            ok, xy = _object_plane_hits(table, o, pm, zf, z_e, depth_m)
+            hit = np.hypot(xy[:, 0], xy[:, 1]) <= eps_mm
             e[b] += float(np.sum(wgt[ok] * hit)) / m
     return e / np.sum(e * np.diff(edges ** 2))
 
