@@ -51,9 +51,9 @@ __kernel void halation_conv(__global const float *restrict down, __global float 
 }
 
 /* bilinear sample of the working halo at the pixel centre (edges clamped) and the mix */
-__kernel void halation_apply(__global const float *restrict src, __global const float *restrict conv,
-                             __global float *restrict dst, const int w, const int h, const int ww,
-                             const int hw, const float sr, const float sg, const float sb)
+__kernel void halation(__global const float *restrict src, __global const float *restrict conv,
+                       __global float *restrict dst, const int w, const int h, const int ww,
+                       const int hw, const float sr, const float sg, const float sb)
 {
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= w || y >= h) return;

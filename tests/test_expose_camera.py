@@ -75,7 +75,7 @@ def test_times_follow_the_sequences_first_frame():
 def test_stages_split_by_their_input_domain():
     per_frame, once = split_stages(list(registry()))
     assert {"dof", "distortion", "vignetting", "exposure"} <= set(per_frame)
-    assert set(once) == {"film", "sensor", "grain", "print", "raw", "isp"}
+    assert set(once) == {"film", "sensor", "grain", "print", "raw", "isp", "halation"}
     for name in per_frame:
         assert registry()[name].domains[0] in PER_FRAME_DOMAINS
 

@@ -15,10 +15,13 @@ from clpost.stages import registry
 FILM = Camera(luminance_scale=1.0, f_number=4.0, shutter_s=1 / 100, iso=200.0, film="kodak-ektar-100")
 SENSOR = Camera(luminance_scale=1.0, f_number=4.0, shutter_s=1 / 100, iso=200.0, sensor_preset="apsc-cmos")
 RAW = Camera(luminance_scale=1.0, f_number=4.0, shutter_s=1 / 100, iso=200.0, raw_calibration="a7s2-like", isp=True)
+HALATION = FILM.with_(halation=True)
 
 
 def _camera(name):
     closure = _closure(name)
+    if "halation" in closure:
+        return HALATION
     return SENSOR if "sensor" in closure else RAW if "raw" in closure else FILM
 
 
@@ -37,9 +40,13 @@ def _closure(name: str) -> set[str]:
     return out
 
 
-def _frame(w=7, h=5):
+def _frame(w=7, h=5, highlight=False):
+    """A dim frame; ``highlight``: with one lamp bright enough for halation to be planned."""
     rng = np.random.default_rng(3)
-    return Frame((rng.random((h, w, 3)) * 0.5 + 0.05).astype(np.float32))
+    color = (rng.random((h, w, 3)) * 0.5 + 0.05).astype(np.float32)
+    if highlight:
+        color[h // 2, w // 2] = 5000.0
+    return Frame(color)
 
 
 def test_the_declared_prerequisites():
@@ -54,7 +61,7 @@ def test_the_declared_prerequisites():
 
 @pytest.mark.parametrize("name,req", _pairs())
 def test_a_stage_without_its_prerequisite_is_refused(name, req):
-    frame, cam = _frame(), _camera(name)
+    frame, cam = _frame(highlight="halation" in _closure(name)), _camera(name)
     selected = sorted(_closure(name) - {req}, key=lambda n: registry()[n].order)
     with pytest.raises(InputError) as exc:
         Pipeline(cam, stages=selected).plan(frame)

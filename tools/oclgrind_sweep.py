@@ -158,6 +158,16 @@ def cases():
     raw = replace(base, raw_calibration="a7s2-like", iso=800.0, isp=True, cfa_pattern="GBRG")
     for w, h in ((3, 3), (4, 5), (37, 23)):
         add(f"raw+isp final {w}x{h}", lambda w=w, h=h: _run(raw, ["exposure", "raw", "isp"], "final", w, h))
+    # halation (film base halo, its own gather before film) and ghosts (traced lens): both planned
+    # only when the frame holds light far above saturation, so these frames are bright
+    halo = replace(film, halation=True)
+    for w, h in ((1, 1), (3, 2), (37, 23)):
+        add(f"halation+film final {w}x{h}",
+            lambda w=w, h=h: _run(halo, ["exposure", "halation", "film"], "final", w, h, scale=5e4))
+    ghost = replace(base, lens="zeiss-planar-50-f1.4", f_number=8.0, ghosts=True, ghost_sources=2)
+    for q in ("draft", "final"):
+        for w, h in ((3, 2), (37, 23)):
+            add(f"ghosts {q} {w}x{h}", lambda q=q, w=w, h=h: _run(ghost, ["ghosts"], q, w, h, scale=5e4))
     # grain's Boolean model needs resolved grains (r >= 1/8 px): a fast stock, coarse grain and a
     # tiny width make pixels large on the film
     boolean = replace(base, film="fuji-superia-400", grain_size=4.0, sensor_mm=(0.05, 0.03))

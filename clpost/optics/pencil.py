@@ -18,7 +18,7 @@ profile, normalised so that
     \int_0^{T} P_c(t)\,2t\,dt = 1 \qquad (\text{a uniform disc of radius 1 is } P = 1),
 
 where :math:`\rho_0 = |c|/2` is the thin-lens disc radius the gather already uses
-(:func:`clpost.stages.dof.coc_mm`, so t = 1 is the edge of the disc the DoF stage draws, and the
+(:func:`clpost.optics.coc.coc_mm`, so t = 1 is the edge of the disc the DoF stage draws, and the
 traced disc may be larger, smaller or shifted in colour) and T = :data:`T_MAX`. Energy that the
 real lens sends beyond T (near focus, where the SA blur exceeds the thin-lens disc) is dropped and
 the rest renormalised: the gather bounds a tap's reach at T·r. Where less than half of the light
@@ -109,7 +109,7 @@ def build_pencil_map(camera, pixel_mm: float, rmax_px: float, n_defocus: int = N
     """The pencil map of ``camera``'s traced lens at its focus and f-number; ``pixel_mm``: the
     working pixel's size on the film (pixel pitch × working-resolution divisor); rows span signed
     CoC radii ±``rmax_px`` working px."""
-    from ..stages.dof import coc_mm
+    from .coc import coc_mm
 
     t0 = time.perf_counter()
     lens = camera.optics
@@ -140,7 +140,7 @@ def build_pencil_map(camera, pixel_mm: float, rmax_px: float, n_defocus: int = N
 def depth_profile(camera, depth_m: float, edges: np.ndarray, bands=BANDS, n_rays: int = FAN_RAYS):
     """(3, len(edges) − 1) profiles of the axial point at planar depth ``depth_m`` (the rows of
     :func:`build_pencil_map` at an exact depth, bins ``edges`` in t = ρ/ρ₀) and ρ₀ (mm)."""
-    from ..stages.dof import coc_mm
+    from .coc import coc_mm
 
     lens = camera.optics
     n = camera.f_number

@@ -154,6 +154,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..optics import pencil
+from ..optics.coc import coc_mm  # noqa: F401  (the stage's CoC; tests and tools use dof.coc_mm)
 from ..params import boolean, finite, in_range, param, parse_fraction, parse_on_off
 from . import _field as fld
 from .base import GatherStage
@@ -262,22 +263,6 @@ def coc_coefficients(camera, width_px: int) -> tuple[float, float]:
     k = f * v / (2.0 * camera.f_number * p) * 1e-3
     u = camera.focused_depth_m
     return k, (0.0 if math.isinf(u) else 1.0 / u)
-
-
-def coc_mm(camera, depth_m) -> np.ndarray:
-    r"""Signed CoC *diameter* on the film in mm (far > 0): :math:`c = \frac{fF}{N}(1/u - 1/S)`.
-
-    Depths S and the focus depth u are measured from the pinhole (a real lens's entrance pupil,
-    diameter f/N). The cone from a point at S through the pupil cuts the sharp plane at u in a disc
-    of diameter (f/N)·|u − S|/S, which the lens images at magnification F/u, F the
-    :attr:`~clpost.camera.Camera.render_focal_length_mm` (paraxially exact; thin lens F = v, the
-    classic f v/N (1/u − 1/S))."""
-    s = np.asarray(depth_m, dtype=np.float64)
-    u = camera.focused_depth_m
-    inv_u = 0.0 if math.isinf(u) else 1.0 / (u * 1e3)
-    with np.errstate(divide="ignore"):
-        inv_s = np.where(np.isinf(s), 0.0, 1.0 / (s * 1e3))
-    return camera.focal_length_mm * camera.render_focal_length_mm / camera.f_number * (inv_u - inv_s)
 
 
 def coc_px(camera, depth_m, width_px: int, limit_px: float = math.inf) -> np.ndarray:

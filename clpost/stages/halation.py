@@ -264,5 +264,5 @@ class Halation(GatherStage):
         i32 = np.int32
         return [rt.launch(knl["halation_down"], (ww, hw), None, src, down, i32(w), i32(h), i32(ww), i32(hw)),
                 rt.launch(knl["halation_conv"], (ww, hw), None, down, conv, taps, i32(ww), i32(hw)),
-                rt.launch(knl["halation_apply"], (w, h), None, src, conv, dst, i32(w), i32(h), i32(ww), i32(hw),
+                rt.launch(knl["halation"], (w, h), None, src, conv, dst, i32(w), i32(h), i32(ww), i32(hw),
                           s[0], s[1], s[2])]
