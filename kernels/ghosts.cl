@@ -1,7 +1,8 @@
 // ghosts: two-reflection ghosts of the frame's sources (clpost/stages/ghosts.py).
 // Planar float32 colour (channel c of pixel i at c*W*H + i). sources: n_src records of 12 floats
 // (x, y, flux R, G, B, tile x0, y0, share kept R, G, B, 0, 0); table: n_src × n_ghost records of
-// 12 floats, source-major (per channel: centre factor, signed radius px, irradiance per unit flux).
+// 12 floats, source-major (per channel: centre factor, signed radius px, irradiance per unit flux;
+// float 11 of a source's first record: how many of its records to draw).
 
 inline float ghosts_rho(float ox, float oy, float rot, float roundness)
 {
@@ -36,7 +37,8 @@ __kernel void ghosts(__global const float *src, __global float *dst, __global co
             mine = 1;
             keep[0] = s[7]; keep[1] = s[8]; keep[2] = s[9];
         }
-        for (int g = 0; g < n_ghost; ++g) {
+        const int drawn = n_ghost > 0 ? (int)table[12 * k * n_ghost + 11] : 0;  // the source's ghosts above the floor come first
+        for (int g = 0; g < drawn; ++g) {
             __global const float *t = table + 12 * (k * n_ghost + g);
             for (int c = 0; c < 3; ++c) {
                 const float f = t[3 * c], e = t[3 * c + 2];

@@ -173,3 +173,22 @@ def test_traced_fit_against_dense_traces_wide_open():
     assert tot == pytest.approx(1.0, abs=0.03)
     # the first-order model this replaces fails the same bounds
     assert max(abs(r["radius"] / r["radius_traced"] - 1) for r in rs) > 0.5
+
+
+def test_faint_ghosts_below_the_floor_are_not_drawn_and_keep_their_light(monkeypatch):
+    """GHOST_FLOOR: a source's ghosts fainter than it are neither drawn nor taken from the source."""
+    import clpost.stages.ghosts as stage_mod
+
+    frame = _lamp_frame()
+    pipe = Pipeline(_camera(), stages=["ghosts"], quality="draft")
+    cam = pipe.camera_for(frame)
+    counts = []
+    for floor in (0.0, 1e-3, 1e9):
+        monkeypatch.setattr(stage_mod, "GHOST_FLOOR", floor)
+        st = stage_mod.Ghosts("draft")
+        counts.append(int(st.table(cam, frame, st.sources(cam, frame))[0, 0, 11]))
+    assert counts[0] == 8 and counts[0] >= counts[1] and counts[2] == 0
+    ref = pipe.reference(frame)  # floor 1e9: nothing drawn, the source keeps everything
+    assert np.array_equal(ref, frame.color.astype(np.float64))
+    out = Pipeline(_camera(), stages=["ghosts"], quality="draft").run(frame).color
+    assert np.array_equal(out, frame.color)

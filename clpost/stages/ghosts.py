@@ -33,7 +33,9 @@ frame's total is conserved except for ghost light that falls outside the frame (
 exceeds T (``--explain`` names the brightest pixel in saturations).
 
 Quality: the ghosts kept, brightest first by peak irradiance :math:`\rho_g/(a_K R_g^2)`: draft 8,
-preview 24, final all (78 for the Planar).
+preview 24, final all (78 for the Planar). At every quality a source's ghost whose peak adds less
+than ``GHOST_FLOOR`` (10⁻³) × saturation is not drawn and its share stays in the source (energy
+still conserved; the large, faint defocused ghosts cost the most pixels).
 """
 from __future__ import annotations
 
@@ -49,6 +51,9 @@ from .base import GatherStage, per_camera
 TILE = 16
 MIN_RADIUS_PX = 1.0
 GHOSTS_KEPT = {"draft": 8, "preview": 24, "final": None}
+GHOST_FLOOR = 1e-3
+"""A source's ghost whose peak adds less than this × saturation (a quarter of an 8-bit step) is
+not drawn; its share stays in the source (docs/flare.md measures what it saves and costs)."""
 SRC_REC = 12
 """Floats per source: x, y (px), flux R, G, B, tile x0, y0, the share its pixels keep R, G, B, 0, 0."""
 GHOST_REC = 12
@@ -157,8 +162,11 @@ class Ghosts(GatherStage):
 
     def table(self, camera, frame, srcs) -> np.ndarray:
         """(S, G, GHOST_REC) per source the kept ghosts interpolated at its field angle: per channel
-        centre factor, signed radius px, irradiance per unit flux (1/px²)."""
+        centre factor, signed radius px, irradiance per unit flux (1/px²); a source's ghosts
+        fainter than GHOST_FLOOR (module docstring) are moved to the end of its row with zero
+        irradiance, and column 11 of its first record counts the rest (what the kernel draws)."""
         from ..optics.ghosts import fit_weights
+        from ..photometry import exposure_gain
         from .dof import aperture_area
 
         grid, direct_px, _ = self.fitted(camera, fld.image_width_px(frame))
@@ -173,6 +181,12 @@ class Ghosts(GatherStage):
                 out[k, :, 3 * c] = rec[:, 3 * c]
                 out[k, :, 3 * c + 1] = np.copysign(r, grid[:, i0, 3 * c + 1])
                 out[k, :, 3 * c + 2] = rec[:, 3 * c + 2] / (a_k * r * r)
+            peak = (out[k, :, 2:9:3] * s[2:5]).max(axis=1)  # brightest channel's irradiance, scene units
+            bright = peak >= GHOST_FLOOR / exposure_gain(camera)
+            out[k] = np.concatenate([out[k][bright], out[k][~bright]])
+            out[k, int(bright.sum()):, 2:9:3] = 0.0
+            if len(grid):
+                out[k, 0, 11] = bright.sum()
         return out
 
     def shares(self, camera, frame, srcs) -> np.ndarray:
