@@ -289,21 +289,17 @@ _FITS: dict = {}
 
 def _fit_cached(pres, r_stop):
     """:func:`clpost.optics.ghosts.fit_ghosts` at 550 nm, memoised per (prescription, stop) (a
-    few seconds of traces; shared by every camera and quality with that lens state)."""
+    few seconds of traces; shared by every camera and quality with that lens state). The key is
+    the prescription's repr: the dataclass holds dicts, so it does not hash."""
     from ..optics.ghosts import fit_ghosts
 
-    key = (pres, float(r_stop))
-    try:
-        return _FITS[key]
-    except (KeyError, TypeError):
-        pass
-    fit = fit_ghosts(pres, r_stop, 550.0)
-    try:
+    key = (repr(pres), float(r_stop))
+    fit = _FITS.get(key)
+    if fit is None:
+        fit = fit_ghosts(pres, r_stop, 550.0)
         if len(_FITS) >= 8:
             _FITS.pop(next(iter(_FITS)))
         _FITS[key] = fit
-    except TypeError:  # an unhashable prescription: no memo
-        pass
     return fit
 
 
