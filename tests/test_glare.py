@@ -1,10 +1,11 @@
-"""glare: Airy zero and spike count (closed forms), pixel PSF, kernel (pyvkfft) vs numpy reference,
+"""glare: Airy zero and spike count (closed forms), pixel PSF, kernel (pyvkfft and the host FFT) vs numpy reference,
 energy, highlights only, skip rule."""
 import numpy as np
 import pytest
 
 from clpost import Camera, Frame, InputError, Pipeline
 from clpost.optics import diffraction as dif
+from clpost.stages import glare as glare_mod
 from clpost.stages.glare import Glare, fft_shape, nice, threshold_scene
 
 from conftest import assert_planned
@@ -48,8 +49,13 @@ def _lamp(w=97, h=61):
     return Frame(c)
 
 
-def test_kernel_matches_numpy_reference_and_conserves_energy():
-    pytest.importorskip("pyvkfft")
+@pytest.mark.parametrize("backend", ["vkfft", "host"])
+def test_kernel_matches_numpy_reference_and_conserves_energy(backend, monkeypatch):
+    """Both FFT paths: VkFFT on the device (when pyvkfft is installed) and scipy on the host (the
+    default install's; forced here so it is tested where pyvkfft is installed too)."""
+    if backend == "vkfft":
+        pytest.importorskip("pyvkfft")
+    monkeypatch.setattr(glare_mod, "fft_backend", lambda: backend)
     frame = _lamp()
     pipe = Pipeline(_camera(), stages=["glare"], quality="draft")
     assert_planned(pipe, frame, "glare")
@@ -82,6 +88,15 @@ def test_not_planned_without_highlights_or_when_off():
     assert not e.planned and "no highlight above" in e.reason
     e = {x.stage: x for x in Pipeline(_camera(diffraction=False, veiling_glare=0.0)).explain(_lamp())}["glare"]
     assert not e.planned and "off" in e.reason
+
+
+def test_explain_names_the_fft_path(monkeypatch):
+    monkeypatch.setattr(glare_mod, "fft_backend", lambda: "host")
+    e = {x.stage: x for x in Pipeline(_camera()).explain(_lamp())}["glare"]
+    assert e.planned and "FFT by scipy on the host (pyvkfft not installed" in e.reason
+    monkeypatch.setattr(glare_mod, "fft_backend", lambda: "vkfft")
+    e = {x.stage: x for x in Pipeline(_camera()).explain(_lamp())}["glare"]
+    assert "FFT by VkFFT on the device" in e.reason
 
 
 def test_bad_parameter_is_named():

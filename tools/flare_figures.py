@@ -10,7 +10,7 @@ a street lamp at night. The shutter is the demo meter's at f/2 for the unboosted
 the f-number.
 
 Writes: demo_plain.png, demo_flare.png (ghosts + glare), ghosts_first_order.png and
-ghosts_traced.png (the brightest lamp's ghosts alone: the stage's first-order ghosts and full
+ghosts_traced.png (the brightest lamp's ghosts alone: the stage's ghosts (fitted from traces) and full
 traces of every kept ghost path through the real tracer, on the same pixels), starburst.png
 (a crop around the lamp), and prints the timings.
 """
@@ -50,7 +50,7 @@ def traced_ghost_image(cam: Camera, stage: Ghosts, src: np.ndarray, w: int, h: i
     r_stop = lens.stop_radius_mm(n)
     pitch = fld.pitch_mm(cam, w)
     cx, cy = fld.principal_point_px(cam, w, h)
-    table = stage.table(cam, w)
+    paths = stage.fitted(cam, w)[2]
     img = np.zeros((h, w, 3))
     for c, lam in enumerate(channel_wavelengths_nm()):
         (a0, b0), cr = gh.paraxial_path(pres, None, lam)
@@ -66,8 +66,8 @@ def traced_ghost_image(cam: Camera, stage: Ghosts, src: np.ndarray, w: int, h: i
         shape = (cam.blades, cam.blade_rotation_deg, cam.aperture_roundness)
         _, st0 = gh.trace_path(pres, None, o, dirs, lam, r_stop, aperture=shape)
         per_ray = src[2 + c] / max(int((st0 == 0).sum()), 1)
-        for row in table:
-            i, j = int(row[9]) // 100, int(row[9]) % 100
+        for code in paths:
+            i, j = int(code) // 100, int(code) % 100
             pos, st = gh.trace_path(pres, (i, j), o, dirs, lam, r_stop, aperture=shape)
             ok = st == 0
             refl = gh.surface_reflectance(pres, i, lam) * gh.surface_reflectance(pres, j, lam)
@@ -119,7 +119,8 @@ def main() -> None:
     one = np.zeros_like(c)
     ty0, tx0 = int(src[6]), int(src[5])
     one[ty0:ty0 + 16, tx0:tx0 + 16] = c[ty0:ty0 + 16, tx0:tx0 + 16]
-    first = st.reference(cam, Frame(one), one) - one * (1 - st.shares(cam, w))
+    keep = st.sources(cam, Frame(one))[0, 7:10]
+    first = st.reference(cam, Frame(one), one) - one * keep
     traced = traced_ghost_image(cam, st, src, w, h)
     del base, only
     s = 1.0 / max(first.max(), 1e-30)

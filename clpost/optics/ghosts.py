@@ -276,3 +276,101 @@ def traced_ghost(pres: Prescription, ghost, theta_rad: float, stop_radius_mm: fl
     cx = float(p[:, 0].mean())
     rms = float(np.sqrt(np.mean((p[:, 0] - cx) ** 2 + (p[:, 1] - p[:, 1].mean()) ** 2)))
     return dict(x=cx, radius=math.sqrt(2.0) * rms, fraction=float(ok.mean()), n=int(ok.sum()))
+
+
+# -- traced fit -------------------------------------------------------------------------------
+
+FIT_FIELD_DEG = (0.5, 1.5, 2.5, 4.0, 6.0, 9.0, 13.0, 18.0, 24.0)
+"""Field angles (degrees) at which :func:`fit_ghosts` traces every ghost (beyond the ends: held);
+dense near the axis, where stopped-down ghosts are cut off by element apertures within a few degrees."""
+FIT_RAYS = 27
+"""Rays across each of the two grids of one ghost and field angle (~570 in each disc)."""
+AIM_MARGIN = 1.5
+"""The aimed grid's radius over the first-order beam's r/|A_s|."""
+
+
+def _beams(pres: Prescription, ghost, thetas, stop_radius_mm: float, wavelength_nm: float,
+           z_film: float | None, n: int):
+    """Parallel beams at each field angle: a fine n × n grid aimed (first order) at the rays that
+    pass the stop on ``ghost``'s path — a disc of AIM_MARGIN · r/|A_s| around the height
+    −B_s tan θ/A_s at the first vertex — and a coarse n × n grid over the rest of the first
+    surface (real bundles of caustic ghosts pass the stop far from the paraxial aim). Returns
+    (origins, directions, angle index, ray weight mm²: its grid cell)."""
+    _, cr = paraxial_path(pres, ghost, wavelength_nm, z_film)
+    as_, bs = max(cr, key=lambda ab: abs(ab[0]))
+    h1 = pres.surfaces[0].semi_diameter_mm
+    rad = min(AIM_MARGIN * stop_radius_mm / abs(as_), h1)
+    u = np.linspace(-rad, rad, n)
+    fx, fy = (v.ravel() for v in np.meshgrid(u, u))
+    fine = fx ** 2 + fy ** 2 <= rad * rad
+    fx, fy = fx[fine], fy[fine]
+    v = np.linspace(-h1, h1, n)
+    cx_, cy_ = (w.ravel() for w in np.meshgrid(v, v))
+    coarse = cx_ ** 2 + cy_ ** 2 <= h1 * h1
+    cx_, cy_ = cx_[coarse], cy_[coarse]
+    cells = ((u[1] - u[0]) ** 2, (v[1] - v[0]) ** 2)
+    os_, ds, idx, wts = [], [], [], []
+    z0 = -5.0
+    for k, th in enumerate(thetas):
+        yc = float(np.clip(-bs * math.tan(th) / as_, -h1, h1))
+        outside = (cx_ - yc) ** 2 + cy_ ** 2 > rad * rad
+        x = np.concatenate([fx + yc, cx_[outside]])
+        y = np.concatenate([fy, cy_[outside]])
+        dvec = np.array([math.sin(th), 0.0, math.cos(th)])
+        os_.append(np.stack([x + z0 * dvec[0] / dvec[2], y, np.full_like(x, z0)], 1))
+        ds.append(np.broadcast_to(dvec, (len(x), 3)))
+        idx.append(np.full(len(x), k))
+        wts.append(np.concatenate([np.full(len(fx), cells[0]), np.full(int(outside.sum()), cells[1])]))
+    return np.concatenate(os_), np.concatenate(ds), np.concatenate(idx), np.concatenate(wts)
+
+
+def fit_ghosts(pres: Prescription, stop_radius_mm: float, wavelength_nm: float,
+               thetas_deg=FIT_FIELD_DEG, z_film: float | None = None,
+               aperture: tuple[int, float, float] | None = None, n: int = FIT_RAYS) -> dict:
+    r"""Every two-reflection ghost fitted from real traces (element apertures clip, aberrations
+    move and spread the bundle) at the field angles ``thetas_deg``: for each path and angle the
+    centroid on the film over the direct image's centroid (the centre factor), √2 × the RMS
+    distance from the centroid (a uniform disc's radius, mm) and the share
+
+    .. math:: \rho = R_i R_j\,\frac{A_\text{ghost}}{A_\text{direct}}
+
+    (A: the beam cross-section, summed over rays (each its grid cell), that reaches the film
+    along the path; the beams of :func:`_beams`; centroid and RMS weighted by cell). Returns dict of arrays:
+    ``paths`` (G, 2), ``centre`` / ``radius_mm`` / ``share`` (G, T) (share 0, centre and radius
+    NaN where no ray arrives), ``direct_mm`` (T,) the direct image's centroid, ``thetas_deg``."""
+    thetas = [math.radians(t) for t in thetas_deg]
+    nt = len(thetas)
+
+    def run(ghost):
+        o, d, idx, wt = _beams(pres, ghost, thetas, stop_radius_mm, wavelength_nm, z_film, n)
+        pos, status = trace_path(pres, ghost, o, d, wavelength_nm, stop_radius_mm, True, z_film, aperture)
+        ok = status == OK
+        i, w = idx[ok], wt[ok]
+        area = np.bincount(i, w, nt)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cx = np.bincount(i, w * pos[ok, 0], nt) / area
+            cy = np.bincount(i, w * pos[ok, 1], nt) / area
+            r2 = np.bincount(i, w * ((pos[ok, 0] - cx[i]) ** 2 + (pos[ok, 1] - cy[i]) ** 2), nt) / area
+        return cx, np.sqrt(2.0 * r2), area
+
+    dx, _, da = run(None)
+    paths = ghost_paths(pres)
+    out = dict(paths=np.array(paths), centre=np.full((len(paths), nt), np.nan),
+               radius_mm=np.full((len(paths), nt), np.nan), share=np.zeros((len(paths), nt)),
+               direct_mm=dx, thetas_deg=np.array(thetas_deg, np.float64))
+    for g, path in enumerate(paths):
+        gx, gr, ga = run(path)
+        refl = surface_reflectance(pres, path[0], wavelength_nm) * surface_reflectance(pres, path[1], wavelength_nm)
+        arrived = ga > 0
+        out["centre"][g, arrived] = gx[arrived] / dx[arrived]
+        out["radius_mm"][g, arrived] = gr[arrived]
+        out["share"][g] = np.where(arrived, refl * ga / da, 0.0)
+    return out
+
+
+def fit_weights(direct_mm: np.ndarray, height_mm: float) -> tuple[int, int, float]:
+    """(i0, i1, f): a source at image height ``height_mm`` takes (1 − f) of the fit at angle i0 and
+    f of i1 (linear in the direct image's height; held beyond the grid's ends)."""
+    t = float(np.interp(height_mm, direct_mm, np.arange(len(direct_mm))))
+    i0 = min(int(t), len(direct_mm) - 1)
+    return i0, min(i0 + 1, len(direct_mm) - 1), t - i0

@@ -24,6 +24,14 @@ as it is off the sensor), transformed with VkFFT's OpenCL backend (pyvkfft; R2C,
 three channels), multiplied by the kernels' spectra (computed once per camera on the host with
 numpy) and transformed back. The numpy reference does the same with ``numpy.fft``.
 
+**Without pyvkfft** (an optional extra, ``clpost[fft]``, that a plain ``pip install`` does not
+build) the same convolution runs on the host (:func:`fft_backend` picks it; ``--explain`` says
+which): the device splits the highlights off as above, h (3, H, W) is read back, transformed
+with ``scipy.fft`` (pocketfft, float32, all cores: ``workers=-1``) on the same padded grid,
+multiplied by the same spectra, transformed back, cropped to the frame, uploaded and added on
+the device. Same formula, same float32 precision; the cost (two transfers of 3·H·W floats and
+the host FFTs) is measured in docs/flare.md.
+
 Quality: samples across the pupil Q (the PSF spans Q λN): draft 256, preview 512, final 1024.
 
 The launches of pyvkfft go to the queue directly, not through the runtime's recorder, so this
@@ -36,7 +44,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
 from ..params import at_least, boolean, in_range, param, parse_fraction, parse_on_off
 from . import _field as fld
 from .base import GatherStage, per_camera
@@ -80,6 +87,15 @@ def nice(n: int) -> int:
         if k == 1:
             return m
         m += 1
+
+
+def fft_backend() -> str:
+    """"vkfft" when pyvkfft's OpenCL backend imports, else "host" (scipy.fft; module docstring)."""
+    try:
+        from pyvkfft.opencl import VkFFTApp  # noqa: F401
+    except ImportError:
+        return "host"
+    return "vkfft"
 
 
 def fft_shape(w: int, h: int) -> tuple[int, int]:
@@ -147,19 +163,20 @@ class Glare(GatherStage):
         t = threshold_scene(camera)
         over = float(np.mean(np.max(frame.color, axis=2) > t))
         k = self.kernels(camera, fld.image_width_px(frame))
+        fft = ("FFT by VkFFT on the device" if fft_backend() == "vkfft"
+               else "FFT by scipy on the host (pyvkfft not installed: pip install 'clpost[fft]' for the device FFT)")
         return (f"{over * 100:.3g} % of the pixels above {camera.glare_threshold:g} × saturation; f/{working_f_number(camera):.3g} "
-                f"PSF {k.shape[1]} px wide, veiling glare {camera.veiling_glare:g}")
+                f"PSF {k.shape[1]} px wide, veiling glare {camera.veiling_glare:g}; {fft}")
 
     def replay_key(self, camera, frame):
-        return None  # pyvkfft enqueues outside the recorder: run the stage's code every frame
+        return None  # pyvkfft enqueues outside the recorder, the host path reads back: run the stage's code every frame
 
     def enqueue(self, rt, camera, frame, src, dst, aux):
-        try:
-            import pyopencl.array as cla
-            from pyvkfft.opencl import VkFFTApp
-        except ImportError:
-            raise InputError("the glare stage needs pyvkfft (pip install 'clpost[fft]', built with "
-                             "VKFFT_BACKEND=opencl); or give --diffraction off --veiling-glare 0") from None
+        if fft_backend() == "host":
+            return self._enqueue_host(rt, camera, frame, src, dst)
+        import pyopencl.array as cla
+        from pyvkfft.opencl import VkFFTApp
+
         from ..runtime import kernel_source
 
         w, h = frame.width, frame.height
@@ -191,6 +208,41 @@ class Glare(GatherStage):
         events.append(rt.launch(progs["glare_add"], (w, h), None, dst, conv, np.int32(w), np.int32(h),
                                 np.int32(wf), np.int32(hf)))
         return events
+
+    def _enqueue_host(self, rt, camera, frame, src, dst):
+        """The convolution by scipy.fft on the host (module docstring, "Without pyvkfft")."""
+        import pyopencl as cl
+        import scipy.fft as sfft
+
+        from ..runtime import kernel_source
+
+        w, h = frame.width, frame.height
+        hf, wf = fft_shape(w, h)
+        spec = self.spectra_f32(camera, fld.image_width_px(frame), w, h)
+        hi = rt.scratch(self, "hi", (3, h, w))
+        conv = rt.scratch(self, "conv", (3, h, w))
+        progs = rt.kernels(kernel_source("glare"), "glare")
+        t = np.float32(threshold_scene(camera))
+        # the split on an unpadded grid (wf = w, hf = h): h leaves the device frame-sized
+        events = [rt.launch(progs["glare"], (w, h), None, src, dst, hi, np.int32(w), np.int32(h),
+                            np.int32(w), np.int32(h), t)]
+        host = np.empty((3, h, w), np.float32)
+        cl.enqueue_copy(rt.queue, host, hi, is_blocking=True)
+        out = np.zeros((3, h, w), np.float32)
+        for c in np.nonzero(host.reshape(3, -1).max(axis=1) > 0)[0]:  # a channel without highlights adds nothing
+            f = sfft.rfft2(host[c], s=(hf, wf), workers=-1)
+            f *= spec[c]
+            out[c] = sfft.irfft2(f, s=(hf, wf), workers=-1)[:h, :w]
+        self.__dict__["_upload"] = out  # alive until the non-blocking upload has read it
+        events.append(rt.copy(conv, out))
+        events.append(rt.launch(progs["glare_add"], (w, h), None, dst, conv, np.int32(w), np.int32(h),
+                                np.int32(w), np.int32(h)))
+        return events
+
+    @per_camera
+    def spectra_f32(self, camera, width: int, w: int, h: int) -> np.ndarray:
+        """:meth:`spectra` as complex64 (the host path's float32 transforms)."""
+        return np.ascontiguousarray(self.spectra(camera, width, w, h), np.complex64)
 
     def reference(self, camera, frame, color, keep_padding: bool = False):
         """float64 numpy implementation of the module docstring (``keep_padding``: also return the
