@@ -168,6 +168,10 @@ def cases():
     for q in ("draft", "final"):
         for w, h in ((3, 2), (37, 23)):
             add(f"ghosts {q} {w}x{h}", lambda q=q, w=w, h=h: _run(ghost, ["ghosts"], q, w, h, scale=5e4))
+    # glare: the starburst and veiling glare of the highlights (split, FFT convolution, add)
+    glare = replace(base, blades=6, diffraction=True, veiling_glare=0.02)
+    for w, h in ((3, 2), (37, 23)):
+        add(f"glare final {w}x{h}", lambda w=w, h=h: _run(glare, ["glare"], "final", w, h, scale=5e4))
     # grain's Boolean model needs resolved grains (r >= 1/8 px): a fast stock, coarse grain and a
     # tiny width make pixels large on the film
     boolean = replace(base, film="fuji-superia-400", grain_size=4.0, sensor_mm=(0.05, 0.03))
