@@ -9,7 +9,8 @@
  * have length K, and ranking them by a rounding-level difference would not be reproducible.
  *
  * Defines: MOTION_BLUR_TILE (tile size K = the largest blur half-length in px),
- * MOTION_BLUR_SAMPLES (S, odd; the centre tap is the pixel itself).
+ * MOTION_BLUR_SAMPLES (S_q, odd: the most taps; the centre tap is the pixel itself),
+ * MOTION_BLUR_DENSITY (taps per px of half-path: S = min(S_q, 2 ceil(DENSITY |v_N|) + 1)).
  */
 #pragma OPENCL FP_CONTRACT OFF
 /* FP_CONTRACT OFF: no a*b+c fusion, so tap positions round exactly as in the numpy reference. */
@@ -203,13 +204,20 @@ inline float motion_blur_front(float wa, float wb) {
     return clamp(1.0f - (wb - wa) / (MOTION_BLUR_SOFT_Z * m), 0.0f, 1.0f);
 }
 
+/* Taps per pixel from the length of v_N (its tile's neighbour max): the S strata of the path 2|v_N|
+ * are 2|v_N|/S px apart, so more than 2 ceil(|v_N|) + 1 of them only resample the same pixels.
+ * Odd, at most MOTION_BLUR_SAMPLES (the quality's S); the same integer in the float16 form. */
+inline int motion_blur_taps(const float ln) {
+    return min(MOTION_BLUR_SAMPLES, 2 * (int)ceil(MOTION_BLUR_DENSITY * ln) + 1);
+}
+
 /* One pixel (the row's last 1-15 pixels of the kernel below); motion_blur_16 is the same
  * arithmetic in 16 lanes. */
 inline void motion_blur_px(__global const float *restrict src, __global float *restrict dst,
                            __global const float *restrict hv, __global const float *restrict iz,
                            __global const float *restrict nmax, const int x, const int y,
                            const int width, const int height, const int tw, const int th,
-                           const uint seed, const uint frame, const float inv_s)
+                           const uint seed, const uint frame)
 {
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
@@ -233,6 +241,9 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     const float agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
     const float wx = iz[i];
     const float j = motion_blur_jitter(seed, frame, x, y);
+    /* taps of this pixel: S = min(MOTION_BLUR_SAMPLES, 2 ceil(|v_N|) + 1), strata <= 1 px apart */
+    const int ns = motion_blur_taps(ln);
+    const float inv_s = 1.0f / (float)ns;
     /* three layers: surfaces in front of X (coverage cf), X's own surface smeared along its path
      * (coverage co, X itself weighted wc), the background behind X (revealed as X moves away) */
     const float hdn = ln * inv_s, hdv = lv * inv_s;   /* half the path length per tap, per set */
@@ -241,8 +252,8 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     const float wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
     float cf = 0.0f, co = wc, wb = 1e-3f;
     float3 sf = (float3)(0.0f), so = cx * wc, sb = cx * wb;
-    for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
-        if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre stratum is X itself */
+    for (int s = 0; s < ns; ++s) {
+        if (s == ns / 2) continue;   /* the centre stratum is X itself */
         const float2 dir = (s & 1) ? vx : vn;
         const float u = ((float)s + 0.5f + j) * inv_s;   /* S strata covering the whole path */
         const float tt = 2.0f * u - 1.0f;
@@ -298,7 +309,7 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
                            __global const float *restrict hv, __global const float *restrict iz,
                            __global const float *restrict nmax, const int x0, const int y,
                            const int width, const int height, const int tw, const int th,
-                           const uint seed, const uint frame, const float inv_s)
+                           const uint seed, const uint frame)
 {
     const size_t n = (size_t)width * (size_t)height;
     const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
@@ -324,6 +335,15 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     const float16 wx = vload16(0, iz + i0);
     const uint16 hj = rnd_hash4_w16(seed, frame, convert_uint16(xs), (uint16)((uint)y));
     const float16 j = convert_float16(hj >> 8) * (1.0f / 16777216.0f) - 0.5f;   /* motion_blur_jitter */
+    /* motion_blur_taps per lane; the loop runs to the largest (a 16-pixel row spans at most two
+     * tiles), lanes past their own S or at their own centre stratum add nothing */
+    const int16 ns = min((int16)MOTION_BLUR_SAMPLES, 2 * convert_int16(ceil(MOTION_BLUR_DENSITY * ln)) + 1);
+    const int16 nc = ns / 2;
+    const float16 inv_s = 1.0f / convert_float16(ns);
+    const int8 m8 = max(ns.lo, ns.hi);
+    const int4 m4 = max(m8.lo, m8.hi);
+    const int2 m2 = max(m4.lo, m4.hi);
+    const int smax = max(m2.x, m2.y);
     const float16 hdn = ln * inv_s, hdv = lv * inv_s;
     const float16 wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
     const float16 xf = convert_float16(xs), yf = (float16)((float)y);
@@ -331,8 +351,8 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     float16 sfr = 0.0f, sfg = 0.0f, sfb = 0.0f;
     float16 sor = cxr * wc, sog = cxg * wc, sob = cxb * wc;
     float16 sbr = cxr * wb, sbg = cxg * wb, sbb = cxb * wb;
-    for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
-        if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre stratum is X itself */
+    for (int s = 0; s < smax; ++s) {
+        const int16 tap = (int16)s < ns && (int16)s != nc;   /* the centre stratum is X itself */
         const int odd = s & 1;
         const float16 dx = odd ? vxx : vnx, dy = odd ? vxy : vny;
         const float16 u = ((float)s + 0.5f + j) * inv_s;
@@ -353,9 +373,10 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
         const float16 a = cly * (odd ? hdv : hdn) / ly;
         const float16 clx = motion_blur_cyl16(dist, lx);
         const float16 own = b * clx;
-        const float16 af = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f));
-        const float16 ao = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f));
-        const float16 ab = b * ((1.0f - f) + f * (1.0f - cly)) * clx;
+        const float16 af0 = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f));
+        const float16 ao0 = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f));
+        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx;
+        const float16 af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f;
         const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k);
         cf += af; sfr += af * cr; sfg += af * cg; sfb += af * cb;
         co += ao; sor += ao * cr; sog += ao * cg; sob += ao * cb;
@@ -377,15 +398,15 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
                           __global const float *restrict hv, __global const float *restrict iz,
                           __global const float *restrict nmax,
                           const int width, const int height, const int tw, const int th,
-                          const uint seed, const uint frame, const float inv_s)
+                          const uint seed, const uint frame)
 {
     const int x0 = get_global_id(0) * 16, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     if (x0 + 16 <= width) {
-        motion_blur_16(src, dst, hv, iz, nmax, x0, y, width, height, tw, th, seed, frame, inv_s);
+        motion_blur_16(src, dst, hv, iz, nmax, x0, y, width, height, tw, th, seed, frame);
     } else {
         for (int x = x0; x < width; ++x)
-            motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame, inv_s);
+            motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame);
     }
 }
 
