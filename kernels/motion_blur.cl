@@ -305,6 +305,39 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
     return 1.0f - smoothstep(0.95f * len, 1.05f * len, dist);
 }
 
+/* one tap s of motion_blur_16 on all lanes where TAP (int16) is true; uses and updates its locals */
+#define MB_TAP16(s, TAP) do { \
+        const int odd = (s) & 1; \
+        const float16 dx = odd ? vxx : vnx, dy = odd ? vxy : vny; \
+        const float16 u = ((float)(s) + 0.5f + j) * inv_s; \
+        const float16 tt = 2.0f * u - 1.0f; \
+        const float16 ox = dx * tt; \
+        const float16 oy = dy * tt; \
+        const int16 sx = clamp(convert_int16(floor(xf + ox + 0.5f)), 0, width - 1); \
+        const int16 sy = clamp(convert_int16(floor(yf + oy + 0.5f)), 0, height - 1); \
+        const int16 k = sy * width + sx; \
+        const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y); \
+        const float16 dist = sqrt(ddx * ddx + ddy * ddy); \
+        const float16 ly = MB_GATHER(hv + 3 * n, k);   /* max(|h_Y|, 0.5) */ \
+        const float16 wy = MB_GATHER(iz, k); \
+        const float16 r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f)); \
+        const float16 f = clamp(1.0f - r, 0.0f, 1.0f); \
+        const float16 b = clamp(1.0f + r, 0.0f, 1.0f); \
+        const float16 cly = motion_blur_cyl16(dist, ly); \
+        const float16 a = cly * (odd ? hdv : hdn) / ly; \
+        const float16 clx = motion_blur_cyl16(dist, lx); \
+        const float16 own = b * clx; \
+        const float16 af0 = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f)); \
+        const float16 ao0 = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f)); \
+        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx; \
+        const int16 tap = (TAP);   /* lanes past their own S or at their centre: nothing */ \
+        const float16 af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f; \
+        const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k); \
+        cf += af; sfr += af * cr; sfg += af * cg; sfb += af * cb; \
+        co += ao; sor += ao * cr; sog += ao * cg; sob += ao * cb; \
+        wb += ab; sbr += ab * cr; sbg += ab * cg; sbb += ab * cb; \
+    } while (0)
+
 inline void motion_blur_16(__global const float *restrict src, __global float *restrict dst,
                            __global const float *restrict hv, __global const float *restrict iz,
                            __global const float *restrict nmax, const int x0, const int y,
@@ -344,6 +377,10 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     const int4 m4 = max(m8.lo, m8.hi);
     const int2 m2 = max(m4.lo, m4.hi);
     const int smax = max(m2.x, m2.y);
+    const int8 n8 = min(ns.lo, ns.hi);
+    const int4 n4 = min(n8.lo, n8.hi);
+    const int2 n2 = min(n4.lo, n4.hi);
+    const int smin = min(n2.x, n2.y);
     const float16 hdn = ln * inv_s, hdv = lv * inv_s;
     const float16 wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
     const float16 xf = convert_float16(xs), yf = (float16)((float)y);
@@ -351,36 +388,16 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     float16 sfr = 0.0f, sfg = 0.0f, sfb = 0.0f;
     float16 sor = cxr * wc, sog = cxg * wc, sob = cxb * wc;
     float16 sbr = cxr * wb, sbg = cxg * wb, sbb = cxb * wb;
-    for (int s = 0; s < smax; ++s) {
-        const int16 tap = (int16)s < ns && (int16)s != nc;   /* the centre stratum is X itself */
-        const int odd = s & 1;
-        const float16 dx = odd ? vxx : vnx, dy = odd ? vxy : vny;
-        const float16 u = ((float)s + 0.5f + j) * inv_s;
-        const float16 tt = 2.0f * u - 1.0f;
-        const float16 ox = dx * tt;
-        const float16 oy = dy * tt;
-        const int16 sx = clamp(convert_int16(floor(xf + ox + 0.5f)), 0, width - 1);
-        const int16 sy = clamp(convert_int16(floor(yf + oy + 0.5f)), 0, height - 1);
-        const int16 k = sy * width + sx;
-        const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y);
-        const float16 dist = sqrt(ddx * ddx + ddy * ddy);
-        const float16 ly = MB_GATHER(hv + 3 * n, k);   /* max(|h_Y|, 0.5) */
-        const float16 wy = MB_GATHER(iz, k);
-        const float16 r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f));
-        const float16 f = clamp(1.0f - r, 0.0f, 1.0f);
-        const float16 b = clamp(1.0f + r, 0.0f, 1.0f);
-        const float16 cly = motion_blur_cyl16(dist, ly);
-        const float16 a = cly * (odd ? hdv : hdn) / ly;
-        const float16 clx = motion_blur_cyl16(dist, lx);
-        const float16 own = b * clx;
-        const float16 af0 = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f));
-        const float16 ao0 = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f));
-        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx;
-        const float16 af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f;
-        const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k);
-        cf += af; sfr += af * cr; sfg += af * cg; sfb += af * cb;
-        co += ao; sor += ao * cr; sog += ao * cg; sob += ao * cb;
-        wb += ab; sbr += ab * cr; sbg += ab * cg; sbb += ab * cb;
+    if (smin == MOTION_BLUR_SAMPLES) {   /* every lane takes all S_q taps: the loop of a fixed S */
+        for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
+            if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre stratum is X itself */
+            MB_TAP16(s, (int16)(-1));
+        }
+    } else {
+        for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
+            if (s >= smax) break;
+            MB_TAP16(s, (int16)s < ns && (int16)s != nc);
+        }
     }
     const float16 cfc = fmin(cf, 1.0f), coc = fmin(co, 1.0f);
     const int16 front = cf > 0.0f;
