@@ -338,6 +338,18 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         wb += ab; sbr += ab * cr; sbg += ab * cg; sbb += ab * cb; \
     } while (0)
 
+/* motion_blur_16's taps 0 .. N - 1 (N its lanes' largest S): masks only where the lanes' S differ */
+#define MB_LOOP16(N) do { \
+        if (smin == (N)) { \
+            for (int s = 0; s < (N); ++s) { \
+                if (s == (N) / 2) continue;   /* the centre stratum is X itself */ \
+                MB_TAP16(s, (int16)(-1)); \
+            } \
+        } else { \
+            for (int s = 0; s < (N); ++s) MB_TAP16(s, (int16)s < ns && (int16)s != nc); \
+        } \
+    } while (0)
+
 inline void motion_blur_16(__global const float *restrict src, __global float *restrict dst,
                            __global const float *restrict hv, __global const float *restrict iz,
                            __global const float *restrict nmax, const int x0, const int y,
@@ -388,16 +400,70 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     float16 sfr = 0.0f, sfg = 0.0f, sfb = 0.0f;
     float16 sor = cxr * wc, sog = cxg * wc, sob = cxb * wc;
     float16 sbr = cxr * wb, sbg = cxg * wb, sbb = cxb * wb;
-    if (smin == MOTION_BLUR_SAMPLES) {   /* every lane takes all S_q taps: the loop of a fixed S */
-        for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
-            if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre stratum is X itself */
-            MB_TAP16(s, (int16)(-1));
-        }
-    } else {
-        for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
-            if (s >= smax) break;
-            MB_TAP16(s, (int16)s < ns && (int16)s != nc);
-        }
+    /* loops of a constant length (unrolled, odd/even and the centre resolved at compile time): the
+     * group's largest S; unmasked when every lane takes that S */
+    switch (smax) {
+#if MOTION_BLUR_SAMPLES >= 3
+    case 3: MB_LOOP16(3); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 5
+    case 5: MB_LOOP16(5); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 7
+    case 7: MB_LOOP16(7); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 9
+    case 9: MB_LOOP16(9); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 11
+    case 11: MB_LOOP16(11); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 13
+    case 13: MB_LOOP16(13); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 15
+    case 15: MB_LOOP16(15); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 17
+    case 17: MB_LOOP16(17); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 19
+    case 19: MB_LOOP16(19); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 21
+    case 21: MB_LOOP16(21); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 23
+    case 23: MB_LOOP16(23); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 25
+    case 25: MB_LOOP16(25); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 27
+    case 27: MB_LOOP16(27); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 29
+    case 29: MB_LOOP16(29); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 31
+    case 31: MB_LOOP16(31); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 33
+    case 33: MB_LOOP16(33); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 35
+    case 35: MB_LOOP16(35); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 37
+    case 37: MB_LOOP16(37); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 39
+    case 39: MB_LOOP16(39); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 41
+    case 41: MB_LOOP16(41); break;
+#endif
+    default: break;   /* S = 1: the centre only (|v_N| = 0, a still pixel) */
     }
     const float16 cfc = fmin(cf, 1.0f), coc = fmin(co, 1.0f);
     const int16 front = cf > 0.0f;

@@ -140,7 +140,7 @@ TILE = 20
 SAMPLES = {"draft": 5, "preview": 11, "final": 23}
 """S per quality level (odd: the centre stratum is the pixel itself); fewer than the 7/15/31 taps
 of the filter it replaced, to keep its cost (what each level costs: docs/motion_blur.md)."""
-DENSITY = 1.25
+DENSITY = 1.5
 """Taps per px of |v_N|: a pixel takes S = min(S_q, 2⌈DENSITY |v_N|⌉ + 1) taps (module docstring)."""
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
 SOFT_Z = 0.05
