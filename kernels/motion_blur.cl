@@ -204,9 +204,10 @@ inline float motion_blur_front(float wa, float wb) {
     return clamp(1.0f - (wb - wa) / (MOTION_BLUR_SOFT_Z * m), 0.0f, 1.0f);
 }
 
-/* Taps per pixel from the length of v_N (its tile's neighbour max): the S strata of the path 2|v_N|
- * are 2|v_N|/S px apart, so more than 2 ceil(|v_N|) + 1 of them only resample the same pixels.
- * Odd, at most MOTION_BLUR_SAMPLES (the quality's S); the same integer in the float16 form. */
+/* Taps per pixel from the length of v_N (its tile's neighbour max; <= K, so no int overflow): the
+ * S strata of the path 2|v_N| are 2|v_N|/S px apart, so more than 2 ceil(DENSITY |v_N|) + 1 of them
+ * only resample the same pixels. Odd, at most MOTION_BLUR_SAMPLES (the quality's S_q); the same
+ * integer in the float16 form. */
 inline int motion_blur_taps(const float ln) {
     return min(MOTION_BLUR_SAMPLES, 2 * (int)ceil(MOTION_BLUR_DENSITY * ln) + 1);
 }
@@ -241,7 +242,7 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     const float agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
     const float wx = iz[i];
     const float j = motion_blur_jitter(seed, frame, x, y);
-    /* taps of this pixel: S = min(MOTION_BLUR_SAMPLES, 2 ceil(|v_N|) + 1), strata <= 1 px apart */
+    /* taps of this pixel (motion_blur_taps), strata <= 1 / MOTION_BLUR_DENSITY px apart */
     const int ns = motion_blur_taps(ln);
     const float inv_s = 1.0f / (float)ns;
     /* three layers: surfaces in front of X (coverage cf), X's own surface smeared along its path

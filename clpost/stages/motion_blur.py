@@ -32,13 +32,13 @@ and depth: its colour is (partly) that surface's, and spreads with it.
 .. math::
 
     Y_i = \Big\lfloor X + d_i\,t_i + \tfrac12 \Big\rfloor, \quad t_i = -1 + 2\,\frac{i + \tfrac12 + j}{S},
-    \quad i \ne \tfrac{S-1}{2}, \qquad S = \min\big(S_q,\ 2\lceil |v_N| \rceil + 1\big)
+    \quad i \ne \tfrac{S-1}{2}, \qquad S = \min\big(S_q,\ 2\lceil D\,|v_N| \rceil + 1\big)
 
 with :math:`j \in [-\tfrac12, \tfrac12)` a per-pixel jitter from a counter-based hash of (seed,
 frame index, x, y) (CONVENTIONS "Randomness"); the centre stratum is X itself. :math:`S_q` is the
 quality's tap count; a slower neighbourhood takes fewer: the S strata of the path :math:`2|v_N|` are
-then at most 1 px apart, so more taps would only resample the same pixels (a frame's cost follows
-its motion).
+then at most 1/D px apart (D = DENSITY = 1.5), so more taps would only resample the same pixels (a
+frame's cost follows its motion; the choice of D: ``docs/motion_blur.md``).
 
 *Coverage.* A surface Y moving with half-vector :math:`h_Y` passes over X, |X − Y| = d, for the
 fraction :math:`\delta_i / (2|h_Y|)` of the shutter per tap (:math:`\delta_i = 2|d_i|/S` the path
@@ -351,7 +351,7 @@ def tile_max(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def taps(ln32: np.ndarray, samples: int) -> np.ndarray:
-    """S per pixel (module docstring, "Taps"): min(samples, 2⌈|v_N|⌉ + 1) from |v_N| in float32."""
+    """S per pixel (module docstring, "Taps"): min(samples, 2⌈DENSITY |v_N|⌉ + 1) from |v_N| in float32."""
     return np.minimum(samples, 2 * np.ceil(np.float32(DENSITY) * ln32).astype(np.int64) + 1)
 
 
