@@ -9,7 +9,8 @@
  * have length K, and ranking them by a rounding-level difference would not be reproducible.
  *
  * Defines: MOTION_BLUR_TILE (tile size K = the largest blur half-length in px),
- * MOTION_BLUR_SAMPLES (S, odd; the centre tap is the pixel itself).
+ * MOTION_BLUR_SAMPLES (S_q, odd: the most taps; the centre tap is the pixel itself),
+ * MOTION_BLUR_DENSITY (taps per px of half-path: S = min(S_q, 2 ceil(DENSITY |v_N|) + 1)).
  */
 #pragma OPENCL FP_CONTRACT OFF
 /* FP_CONTRACT OFF: no a*b+c fusion, so tap positions round exactly as in the numpy reference. */
@@ -203,13 +204,21 @@ inline float motion_blur_front(float wa, float wb) {
     return clamp(1.0f - (wb - wa) / (MOTION_BLUR_SOFT_Z * m), 0.0f, 1.0f);
 }
 
+/* Taps per pixel from the length of v_N (its tile's neighbour max; <= K, so no int overflow): the
+ * S strata of the path 2|v_N| are 2|v_N|/S px apart, so more than 2 ceil(DENSITY |v_N|) + 1 of them
+ * only resample the same pixels. Odd, at most MOTION_BLUR_SAMPLES (the quality's S_q); the same
+ * integer in the float16 form. */
+inline int motion_blur_taps(const float ln) {
+    return min(MOTION_BLUR_SAMPLES, 2 * (int)ceil(MOTION_BLUR_DENSITY * ln) + 1);
+}
+
 /* One pixel (the row's last 1-15 pixels of the kernel below); motion_blur_16 is the same
  * arithmetic in 16 lanes. */
 inline void motion_blur_px(__global const float *restrict src, __global float *restrict dst,
                            __global const float *restrict hv, __global const float *restrict iz,
                            __global const float *restrict nmax, const int x, const int y,
                            const int width, const int height, const int tw, const int th,
-                           const uint seed, const uint frame, const float inv_s)
+                           const uint seed, const uint frame)
 {
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
@@ -233,6 +242,9 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     const float agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
     const float wx = iz[i];
     const float j = motion_blur_jitter(seed, frame, x, y);
+    /* taps of this pixel (motion_blur_taps), strata <= 1 / MOTION_BLUR_DENSITY px apart */
+    const int ns = motion_blur_taps(ln);
+    const float inv_s = 1.0f / (float)ns;
     /* three layers: surfaces in front of X (coverage cf), X's own surface smeared along its path
      * (coverage co, X itself weighted wc), the background behind X (revealed as X moves away) */
     const float hdn = ln * inv_s, hdv = lv * inv_s;   /* half the path length per tap, per set */
@@ -241,8 +253,8 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     const float wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
     float cf = 0.0f, co = wc, wb = 1e-3f;
     float3 sf = (float3)(0.0f), so = cx * wc, sb = cx * wb;
-    for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
-        if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre stratum is X itself */
+    for (int s = 0; s < ns; ++s) {
+        if (s == ns / 2) continue;   /* the centre stratum is X itself */
         const float2 dir = (s & 1) ? vx : vn;
         const float u = ((float)s + 0.5f + j) * inv_s;   /* S strata covering the whole path */
         const float tt = 2.0f * u - 1.0f;
@@ -294,11 +306,56 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
     return 1.0f - smoothstep(0.95f * len, 1.05f * len, dist);
 }
 
+/* one tap s of motion_blur_16 on all lanes where TAP (int16) is true; uses and updates its locals */
+#define MB_TAP16(s, TAP) do { \
+        const int odd = (s) & 1; \
+        const float16 dx = odd ? vxx : vnx, dy = odd ? vxy : vny; \
+        const float16 u = ((float)(s) + 0.5f + j) * inv_s; \
+        const float16 tt = 2.0f * u - 1.0f; \
+        const float16 ox = dx * tt; \
+        const float16 oy = dy * tt; \
+        const int16 sx = clamp(convert_int16(floor(xf + ox + 0.5f)), 0, width - 1); \
+        const int16 sy = clamp(convert_int16(floor(yf + oy + 0.5f)), 0, height - 1); \
+        const int16 k = sy * width + sx; \
+        const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y); \
+        const float16 dist = sqrt(ddx * ddx + ddy * ddy); \
+        const float16 ly = MB_GATHER(hv + 3 * n, k);   /* max(|h_Y|, 0.5) */ \
+        const float16 wy = MB_GATHER(iz, k); \
+        const float16 r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f)); \
+        const float16 f = clamp(1.0f - r, 0.0f, 1.0f); \
+        const float16 b = clamp(1.0f + r, 0.0f, 1.0f); \
+        const float16 cly = motion_blur_cyl16(dist, ly); \
+        const float16 a = cly * (odd ? hdv : hdn) / ly; \
+        const float16 clx = motion_blur_cyl16(dist, lx); \
+        const float16 own = b * clx; \
+        const float16 af0 = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f)); \
+        const float16 ao0 = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f)); \
+        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx; \
+        const int16 tap = (TAP);   /* lanes past their own S or at their centre: nothing */ \
+        const float16 af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f; \
+        const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k); \
+        cf += af; sfr += af * cr; sfg += af * cg; sfb += af * cb; \
+        co += ao; sor += ao * cr; sog += ao * cg; sob += ao * cb; \
+        wb += ab; sbr += ab * cr; sbg += ab * cg; sbb += ab * cb; \
+    } while (0)
+
+/* motion_blur_16's taps 0 .. N - 1 (N its lanes' largest S): masks only where the lanes' S differ */
+#define MB_LOOP16(N) do { \
+        if (smin == (N)) { \
+            for (int s = 0; s < (N); ++s) { \
+                if (s == (N) / 2) continue;   /* the centre stratum is X itself */ \
+                MB_TAP16(s, (int16)(-1)); \
+            } \
+        } else { \
+            for (int s = 0; s < (N); ++s) MB_TAP16(s, (int16)s < ns && (int16)s != nc); \
+        } \
+    } while (0)
+
 inline void motion_blur_16(__global const float *restrict src, __global float *restrict dst,
                            __global const float *restrict hv, __global const float *restrict iz,
                            __global const float *restrict nmax, const int x0, const int y,
                            const int width, const int height, const int tw, const int th,
-                           const uint seed, const uint frame, const float inv_s)
+                           const uint seed, const uint frame)
 {
     const size_t n = (size_t)width * (size_t)height;
     const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
@@ -324,6 +381,19 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     const float16 wx = vload16(0, iz + i0);
     const uint16 hj = rnd_hash4_w16(seed, frame, convert_uint16(xs), (uint16)((uint)y));
     const float16 j = convert_float16(hj >> 8) * (1.0f / 16777216.0f) - 0.5f;   /* motion_blur_jitter */
+    /* motion_blur_taps per lane; the loop runs to the largest (a 16-pixel row spans at most two
+     * tiles), lanes past their own S or at their own centre stratum add nothing */
+    const int16 ns = min((int16)MOTION_BLUR_SAMPLES, 2 * convert_int16(ceil(MOTION_BLUR_DENSITY * ln)) + 1);
+    const int16 nc = ns / 2;
+    const float16 inv_s = 1.0f / convert_float16(ns);
+    const int8 m8 = max(ns.lo, ns.hi);
+    const int4 m4 = max(m8.lo, m8.hi);
+    const int2 m2 = max(m4.lo, m4.hi);
+    const int smax = max(m2.x, m2.y);
+    const int8 n8 = min(ns.lo, ns.hi);
+    const int4 n4 = min(n8.lo, n8.hi);
+    const int2 n2 = min(n4.lo, n4.hi);
+    const int smin = min(n2.x, n2.y);
     const float16 hdn = ln * inv_s, hdv = lv * inv_s;
     const float16 wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
     const float16 xf = convert_float16(xs), yf = (float16)((float)y);
@@ -331,35 +401,70 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     float16 sfr = 0.0f, sfg = 0.0f, sfb = 0.0f;
     float16 sor = cxr * wc, sog = cxg * wc, sob = cxb * wc;
     float16 sbr = cxr * wb, sbg = cxg * wb, sbb = cxb * wb;
-    for (int s = 0; s < MOTION_BLUR_SAMPLES; ++s) {
-        if (s == MOTION_BLUR_SAMPLES / 2) continue;   /* the centre stratum is X itself */
-        const int odd = s & 1;
-        const float16 dx = odd ? vxx : vnx, dy = odd ? vxy : vny;
-        const float16 u = ((float)s + 0.5f + j) * inv_s;
-        const float16 tt = 2.0f * u - 1.0f;
-        const float16 ox = dx * tt;
-        const float16 oy = dy * tt;
-        const int16 sx = clamp(convert_int16(floor(xf + ox + 0.5f)), 0, width - 1);
-        const int16 sy = clamp(convert_int16(floor(yf + oy + 0.5f)), 0, height - 1);
-        const int16 k = sy * width + sx;
-        const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y);
-        const float16 dist = sqrt(ddx * ddx + ddy * ddy);
-        const float16 ly = MB_GATHER(hv + 3 * n, k);   /* max(|h_Y|, 0.5) */
-        const float16 wy = MB_GATHER(iz, k);
-        const float16 r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f));
-        const float16 f = clamp(1.0f - r, 0.0f, 1.0f);
-        const float16 b = clamp(1.0f + r, 0.0f, 1.0f);
-        const float16 cly = motion_blur_cyl16(dist, ly);
-        const float16 a = cly * (odd ? hdv : hdn) / ly;
-        const float16 clx = motion_blur_cyl16(dist, lx);
-        const float16 own = b * clx;
-        const float16 af = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f));
-        const float16 ao = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f));
-        const float16 ab = b * ((1.0f - f) + f * (1.0f - cly)) * clx;
-        const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k);
-        cf += af; sfr += af * cr; sfg += af * cg; sfb += af * cb;
-        co += ao; sor += ao * cr; sog += ao * cg; sob += ao * cb;
-        wb += ab; sbr += ab * cr; sbg += ab * cg; sbb += ab * cb;
+    /* loops of a constant length (unrolled, odd/even and the centre resolved at compile time): the
+     * group's largest S; unmasked when every lane takes that S */
+    switch (smax) {
+#if MOTION_BLUR_SAMPLES >= 3
+    case 3: MB_LOOP16(3); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 5
+    case 5: MB_LOOP16(5); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 7
+    case 7: MB_LOOP16(7); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 9
+    case 9: MB_LOOP16(9); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 11
+    case 11: MB_LOOP16(11); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 13
+    case 13: MB_LOOP16(13); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 15
+    case 15: MB_LOOP16(15); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 17
+    case 17: MB_LOOP16(17); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 19
+    case 19: MB_LOOP16(19); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 21
+    case 21: MB_LOOP16(21); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 23
+    case 23: MB_LOOP16(23); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 25
+    case 25: MB_LOOP16(25); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 27
+    case 27: MB_LOOP16(27); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 29
+    case 29: MB_LOOP16(29); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 31
+    case 31: MB_LOOP16(31); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 33
+    case 33: MB_LOOP16(33); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 35
+    case 35: MB_LOOP16(35); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 37
+    case 37: MB_LOOP16(37); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 39
+    case 39: MB_LOOP16(39); break;
+#endif
+#if MOTION_BLUR_SAMPLES >= 41
+    case 41: MB_LOOP16(41); break;
+#endif
+    default: break;   /* S = 1: the centre only (|v_N| = 0, a still pixel) */
     }
     const float16 cfc = fmin(cf, 1.0f), coc = fmin(co, 1.0f);
     const int16 front = cf > 0.0f;
@@ -377,15 +482,15 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
                           __global const float *restrict hv, __global const float *restrict iz,
                           __global const float *restrict nmax,
                           const int width, const int height, const int tw, const int th,
-                          const uint seed, const uint frame, const float inv_s)
+                          const uint seed, const uint frame)
 {
     const int x0 = get_global_id(0) * 16, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     if (x0 + 16 <= width) {
-        motion_blur_16(src, dst, hv, iz, nmax, x0, y, width, height, tw, th, seed, frame, inv_s);
+        motion_blur_16(src, dst, hv, iz, nmax, x0, y, width, height, tw, th, seed, frame);
     } else {
         for (int x = x0; x < width; ++x)
-            motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame, inv_s);
+            motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame);
     }
 }
 

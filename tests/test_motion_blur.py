@@ -5,8 +5,8 @@ from hypothesis import given, strategies as st
 
 from clpost import Camera, Frame, Pipeline
 from clpost.errors import InputError
-from clpost.stages.motion_blur import (SAMPLES, TILE, MotionBlur, half_vectors, jitter,
-                                       shutter_fraction, shutter_from_angle)
+from clpost.stages.motion_blur import (DENSITY, SAMPLES, TILE, MotionBlur, half_vectors, jitter,
+                                       shutter_fraction, shutter_from_angle, taps)
 
 from conftest import assert_planned
 
@@ -41,6 +41,33 @@ def _frame(rng, w=37, h=23, speed=15.0, sky_rows=5):
 @pytest.mark.parametrize("quality", list(SAMPLES))
 def test_kernel_matches_reference_on_odd_size(rng, quality):
     _compare(CAM, _frame(rng), quality)
+
+
+def test_tap_count_follows_the_neighbourhood_speed():
+    # S = min(S_q, 2 ceil(DENSITY |v_N|) + 1): odd, strata at most 1/DENSITY px apart on the path 2|v_N|
+    ln = np.array([0.0, 0.5, 0.8, 1.0, 2.0, 4.0, 20.0], np.float32)
+    for s_q in SAMPLES.values():
+        s = taps(ln, s_q)
+        assert (s % 2 == 1).all() and (s <= s_q).all() and s[-1] == s_q
+        dense = s < s_q
+        assert (2 * ln[dense] / s[dense] <= 1.0 / DENSITY).all()
+    assert DENSITY == 1.5   # the values below: 2 ceil(1.5 |v_N|) + 1
+    np.testing.assert_array_equal(taps(ln, 23), [1, 3, 5, 5, 7, 13, 23])
+
+
+@pytest.mark.parametrize("quality", list(SAMPLES))
+def test_kernel_matches_reference_where_tiles_take_different_tap_counts(rng, quality):
+    # tiles of slow, medium and fast motion side by side, 16-pixel groups straddling tile edges
+    # whose lanes take different S (the float16 gather masks the lanes past their own S)
+    h, w = 2 * TILE + 3, 5 * TILE + 7
+    color = (rng.random((h, w, 3)) * 10).astype(np.float32)
+    vel = np.zeros((h, w, 2), np.float32)
+    for i, speed in enumerate([0.0, 1.5, 5.0, 0.0, 12.0, 40.0]):
+        vel[:, i * TILE:(i + 1) * TILE, 0] = speed * (1 + 0.2 * rng.random((h, min(TILE, max(w - i * TILE, 0)))))
+    vel[..., 1] = rng.normal(size=(h, w)) * 0.7
+    depth = rng.uniform(1.0, 30.0, (h, w)).astype(np.float32)
+    frame = Frame(color, depth=depth, velocity=vel, metadata={"frame_index": 3})
+    _compare(CAM, frame, quality)
 
 
 def test_adversarial_velocities_and_depths(rng):

@@ -32,10 +32,13 @@ and depth: its colour is (partly) that surface's, and spreads with it.
 .. math::
 
     Y_i = \Big\lfloor X + d_i\,t_i + \tfrac12 \Big\rfloor, \quad t_i = -1 + 2\,\frac{i + \tfrac12 + j}{S},
-    \quad i \ne \tfrac{S-1}{2}
+    \quad i \ne \tfrac{S-1}{2}, \qquad S = \min\big(S_q,\ 2\lceil D\,|v_N| \rceil + 1\big)
 
 with :math:`j \in [-\tfrac12, \tfrac12)` a per-pixel jitter from a counter-based hash of (seed,
-frame index, x, y) (CONVENTIONS "Randomness"); the centre stratum is X itself.
+frame index, x, y) (CONVENTIONS "Randomness"); the centre stratum is X itself. :math:`S_q` is the
+quality's tap count; a slower neighbourhood takes fewer: the S strata of the path :math:`2|v_N|` are
+then at most 1/D px apart (D = DENSITY = 1.5), so more taps would only resample the same pixels (a
+frame's cost follows its motion; the choice of D: ``docs/motion_blur.md``).
 
 *Coverage.* A surface Y moving with half-vector :math:`h_Y` passes over X, |X − Y| = d, for the
 fraction :math:`\delta_i / (2|h_Y|)` of the shutter per tap (:math:`\delta_i = 2|d_i|/S` the path
@@ -66,8 +69,8 @@ clamp((cos∠ − 0.8)/0.15, 0, 1)) the tap sets split the work: odd taps carry 
 2(1-g)`, :math:`g^O = g`). If :math:`|v_N| \le 0.5` px the pixel is left exactly as it is —
 hence the stage is *not planned* when no pixel's half-vector reaches 0.5 px (skipped ⇔ identity).
 
-**Quality** sets S (taps per pixel; measured error and cost in ``docs/motion_blur.md``):
-draft 5, preview 11, final 23. K = 20 px for all levels.
+**Quality** sets :math:`S_q` (the most taps per pixel; measured error and cost in
+``docs/motion_blur.md``): draft 5, preview 11, final 23. K = 20 px for all levels.
 
 **Clamping.** :math:`|h|` is limited to K = 20 px (a streak of at most 40 px, i.e. 2K) keeping
 its direction: faster motion blurs as if it moved 2K px during the exposure, so its streak is
@@ -137,6 +140,8 @@ TILE = 20
 SAMPLES = {"draft": 5, "preview": 11, "final": 23}
 """S per quality level (odd: the centre stratum is the pixel itself); fewer than the 7/15/31 taps
 of the filter it replaced, to keep its cost (what each level costs: docs/motion_blur.md)."""
+DENSITY = 1.5
+"""Taps per px of |v_N|: a pixel takes S = min(S_q, 2⌈DENSITY |v_N|⌉ + 1) taps (module docstring)."""
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
 SOFT_Z = 0.05
 FRINGE = 0.1
@@ -215,11 +220,13 @@ class MotionBlur(GatherStage):
         return out
 
     def defines(self, camera):
-        return {"MOTION_BLUR_TILE": TILE, "MOTION_BLUR_SAMPLES": self.samples}
+        return {"MOTION_BLUR_TILE": TILE, "MOTION_BLUR_SAMPLES": self.samples,
+                "MOTION_BLUR_DENSITY": f"{DENSITY!r}f"}
 
     def taps_per_pixel(self, camera, frame) -> int:
-        """Colour samples per output pixel, all channels: the centre plus ``samples`` taps
-        (``clpost bench`` taps/s; each tap also reads the tap's half-vector and depth)."""
+        """Colour samples per output pixel, all channels: the centre plus at most ``samples`` taps
+        (``clpost bench`` taps/s, an upper bound: slow tiles take fewer; each tap also reads the
+        tap's half-vector and depth)."""
         return 3 * (self.samples + 1)
 
     # -- OpenCL -----------------------------------------------------------------------------
@@ -261,8 +268,7 @@ class MotionBlur(GatherStage):
             events.append(rt.launch(k, (tw, th)))
             k = self._kernel(rt, camera, "motion_blur")
             k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], np.int32(w), np.int32(h),
-                       np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(frame.index),
-                       np.float32(1.0 / self.samples))
+                       np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(frame.index))
             # 16 pixels of a row per work-item, 8×1 work-groups (kernels/motion_blur.cl)
             events.append(rt.launch(k, (-(-w // 16), h), (8, 1)))
         if rolling:
@@ -344,6 +350,11 @@ def tile_max(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return tmax, _argmax_len(neigh)
 
 
+def taps(ln32: np.ndarray, samples: int) -> np.ndarray:
+    """S per pixel (module docstring, "Taps"): min(samples, 2⌈DENSITY |v_N|⌉ + 1) from |v_N| in float32."""
+    return np.minimum(samples, 2 * np.ceil(np.float32(DENSITY) * ln32).astype(np.int64) + 1)
+
+
 def _len32(v32: np.ndarray) -> np.ndarray:
     """|v| of float32 2-vectors as the kernel computes it: sqrt(x·x + y·y) in float32."""
     return np.sqrt(v32[..., 0] * v32[..., 0] + v32[..., 1] * v32[..., 1])
@@ -409,15 +420,16 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     cosang = (vn32[..., 0] * vx32[..., 0] + vn32[..., 1] * vx32[..., 1]) / np.maximum(ln * lv, 1e-30)
     agree = np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0)
     j = jitter(seed, frame_index, xs, ys)
-    inv = np.float32(1.0 / samples)
-    wc = np.maximum((ln + lv) * float(inv), 1.0) / (2.0 * lx)   # at least the pixel's own footprint
+    ns = taps(_len32(vn32), samples)                          # S per pixel
+    inv = np.float32(1) / ns.astype(np.float32)
+    inv64 = inv.astype(np.float64)
+    wc = np.maximum((ln + lv) * inv64, 1.0) / (2.0 * lx)    # at least the pixel's own footprint
     cf, sf = np.zeros((hh, ww)), np.zeros_like(color)          # surfaces in front of X
     co, so = wc.copy(), color * wc[..., None]                  # X's own surface along its path
     wb = np.full((hh, ww), 1e-3)
     sb = color * wb[..., None]                                  # the background behind X
     for s in range(samples):
-        if s == samples // 2:
-            continue
+        tap = (s < ns) & (s != ns // 2)          # the centre stratum is X itself
         d32 = vx32 if s % 2 else vn32
         u = (np.float32(s) + np.float32(0.5) + j) * inv
         t = np.float32(2.0) * u - np.float32(1.0)
@@ -431,11 +443,11 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         wy = iz[sy, sx]
         f, b = _front(wy, iz), _front(iz, wy)
         cly = _cylinder32(dist, ly32)
-        a = cly * (lv if s % 2 else ln) * float(inv) / ly
+        a = tap * cly * (lv if s % 2 else ln) * inv64 / ly
         own = b * _cylinder32(dist, lx32)        # level with X and on X's own path
         af = f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
         ao = f * own * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
-        ab = b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
+        ab = tap * b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
         cy = color[sy, sx]
         cf, sf = cf + af, sf + af[..., None] * cy
         co, so = co + ao, so + ao[..., None] * cy
