@@ -12,7 +12,7 @@
  * work-items, and borders are padded, so no tap is clamped.
  */
 
-#define DOF_FRONT_MARGIN 1.0f
+/* DOF_FRONT_MARGIN: FRONT_MARGIN_PX of clpost/stages/dof.py (the host passes it) */
 /* DOF_VEC pixels of a row per work-item in explicit vectors (PoCL does not vectorise across
  * work-items around a tap loop whose trip count is only known per tile): 16 where the device's
  * native float vector is 16 wide (AVX-512; docs/measurements.md#kernel-forms-on-pocl), else 8; the
