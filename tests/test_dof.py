@@ -354,6 +354,30 @@ def test_light_slightly_nearer_than_the_sky_keeps_its_energy():
         assert added == pytest.approx(4 * 29.9, rel=tol), q
 
 
+def test_in_focus_light_over_a_slightly_blurred_wall_is_not_counted_twice_at_half_resolution():
+    # issue 16 (energy within 3 %): the half-resolution path gathers with the variance-matched
+    # radius, 0 for every |r| < 2.31 px, so its depth-aware upsampling saw the in-focus light and a
+    # wall at r = 2.2 px as one surface: the wall's pixels took the light's blurred light while the
+    # light kept its own (143.8 % of its energy at draft). The upsampling now compares the original
+    # CoC.
+    cam = Camera(**CAM)
+    w = h = 61
+    k, inv_u = D.coc_coefficients(cam, w)
+    wall_m = 1.0 / (inv_u - 2.2 / k)
+    assert float(D.coc_px(cam, wall_m, w)) == pytest.approx(2.2)
+    color = np.full((h, w, 3), 0.25, np.float32)
+    depth = np.full((h, w), wall_m, np.float32)
+    depth[30:32, 30:32] = cam.focus_distance_m
+    dark = Frame(color.copy(), depth=depth)
+    color[30:32, 30:32] = 100.0
+    lit = Frame(color, depth=depth)
+    for q, tol in (("draft", 0.03), ("preview", 0.03), ("final", 0.01)):
+        out, pipe = run(cam, lit, q)
+        assert_matches_reference(pipe, lit, out, rtol=1e-3)
+        added = (out - pipe.run(dark).color)[..., 1].sum()
+        assert added == pytest.approx(4 * 99.75, rel=tol), q
+
+
 def test_half_covered_pixel_of_a_dark_pole_takes_the_poles_depth():
     h, w = 21, 21
     color = np.full((h, w, 3), 1.0, np.float32)
