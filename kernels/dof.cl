@@ -245,7 +245,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
 
 /* Half-resolution levels: keep in-focus pixels at full resolution, take the upsampled blur where
  * the full-resolution CoC (DOF_HALF_B) or the front layer's coverage says so. Upsampling is bilinear
- * weighted by CoC similarity g = 1/(1/4 + (r - m_i)^2), r the full-resolution CoC and m_i the min of
+ * weighted by CoC similarity g = 1/(DOF_UP_TOL + (r - m_i)^2) (UPSAMPLE_COC_TOL_PX2), r the full-resolution CoC and m_i the min of
  * the full-resolution CoC over corner i's DOF_SCALE^2 block: the original CoC, not the
  * variance-matched one the working pixels were gathered with, which is 0 for every |r| < 2.31 px
  * (see _upsample and _half_composite in clpost/stages/dof.py).
@@ -272,7 +272,7 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
 #define DOF_CORNER(XS, YS, BW) { \
         const size_t j = (size_t)(YS) * ww + (XS); \
         const float dr = r - dof_block_min(coc, (XS), (YS), width, height); \
-        const float g = (BW) / (0.25f + dr * dr); \
+        const float g = (BW) / (DOF_UP_TOL + dr * dr); \
         acc += g * (float4)(blur[j], blur[nw + j], blur[2 * nw + j], alpha[j]); \
         wsum += g; }
     float4 acc = (float4)(0.0f);
@@ -341,7 +341,7 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
             const float16 vc = (float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)), \
                                          fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd))); \
             const float16 dl = r - DOF_LEFT(vc), dr = r - DOF_RIGHT(vc); \
-            const float16 gl = (WL) / (0.25f + dl * dl), gr = (WR) / (0.25f + dr * dr); \
+            const float16 gl = (WL) / (DOF_UP_TOL + dl * dl), gr = (WR) / (DOF_UP_TOL + dr * dr); \
             ar += gl * DOF_LEFT(vr); ag += gl * DOF_LEFT(vg); ab += gl * DOF_LEFT(vb); aa += gl * DOF_LEFT(va); \
             wsum += gl; \
             ar += gr * DOF_RIGHT(vr); ag += gr * DOF_RIGHT(vg); ab += gr * DOF_RIGHT(vb); aa += gr * DOF_RIGHT(va); \

@@ -684,9 +684,17 @@ def profile_weight(profile, rq: np.ndarray, t: np.ndarray) -> np.ndarray:
     return pencil.profile_at(pm, rq * scale, t)
 
 
+UPSAMPLE_COC_TOL_PX2 = 0.125
+"""τ (px²) of the depth-aware upsampling's CoC similarity 1/(τ + Δr²) (:func:`_upsample`). 1/4
+before; 1/8 suppresses a working corner 2.2 px of CoC away 40× instead of 20×, which an HDR lamp
+next to a slightly blurred surface needs (draft on the Cycles suite: highlights 39.37 → 40.27 dB,
+motion 42.46 → 42.70, thin 37.59 → 37.45; 1/16 gave highlights 40.81 and motion 43.27 but thin
+37.34 with FLIP 0.0272 — docs/fidelity.md)."""
+
+
 def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.ndarray, scale: int):
     r"""Depth-aware bilinear upsampling of the working-resolution blur and α: bilinear weights
-    times :math:`g_i = 1/(1/4 + (r - s\,r_i)^2)` (r the full-resolution CoC, :math:`r_i` the
+    times :math:`g_i = 1/(\tau + (r - s\,r_i)^2)` (τ = :data:`UPSAMPLE_COC_TOL_PX2`, r the full-resolution CoC, :math:`r_i` the
     working CoC of corner i: the min of r over its block, in working px), so a blurred background
     next to a sharp edge is not mixed with the working pixels that straddle the edge (which carry
     the nearer CoC). Edges are clamped.
@@ -705,7 +713,7 @@ def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.nda
     acc = np.zeros((h, w, 3)); acc_a = np.zeros((h, w)); wsum = np.zeros((h, w))
     for ys, xs, b in ((y0, x0, (1 - fx) * (1 - fy)), (y0, x1, fx * (1 - fy)),
                       (y1, x0, (1 - fx) * fy), (y1, x1, fx * fy)):
-        g = b / (0.25 + (coc - scale * coc_w[ys][:, xs]) ** 2)
+        g = b / (UPSAMPLE_COC_TOL_PX2 + (coc - scale * coc_w[ys][:, xs]) ** 2)
         acc += g[..., None] * img[ys][:, xs]
         acc_a += g * alpha[ys][:, xs]
         wsum += g
@@ -845,7 +853,7 @@ class Dof(GatherStage):
                 "DOF_PROFILE": int(traced), "DOF_REACH": f"{reach!r}f", **prof,
                 "DOF_HALF_SHRINK": f"{4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2)!r}f",
                 "DOF_HALF_BLEND": f"{1.0 / (4.0 * HALF_PATH_VAR_PX2)!r}f",
-                "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f",
+                "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
 
