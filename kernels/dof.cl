@@ -12,7 +12,7 @@
  * work-items, and borders are padded, so no tap is clamped.
  */
 
-#define DOF_FRONT_MARGIN 1.0f
+/* DOF_FRONT_MARGIN: FRONT_MARGIN_PX of clpost/stages/dof.py (the host passes it) */
 /* DOF_VEC pixels of a row per work-item in explicit vectors (PoCL does not vectorise across
  * work-items around a tap loop whose trip count is only known per tile): 16 where the device's
  * native float vector is 16 wide (AVX-512; docs/measurements.md#kernel-forms-on-pocl), else 8; the
@@ -245,24 +245,34 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
 
 /* Half-resolution levels: keep in-focus pixels at full resolution, take the upsampled blur where
  * the full-resolution CoC (DOF_HALF_B) or the front layer's coverage says so. Upsampling is bilinear
- * weighted by CoC similarity g = 1/(1/4 + (r' - s r_i)^2), r' = DOF_HALF_R(r) the radius the working
- * CoC r_i was made with (see _upsample and _half_composite in clpost/stages/dof.py).
+ * weighted by CoC similarity g = 1/(DOF_UP_TOL + (r - m_i)^2) (UPSAMPLE_COC_TOL_PX2), r the full-resolution CoC and m_i the min of
+ * the full-resolution CoC over corner i's DOF_SCALE^2 block: the original CoC, not the
+ * variance-matched one the working pixels were gathered with, which is 0 for every |r| < 2.31 px
+ * (see _upsample and _half_composite in clpost/stages/dof.py).
  * One output pixel (the edge groups of dof_upsample). */
+inline float dof_block_min(__global const float *coc, const int xs, const int ys, const int width, const int height)
+{
+    float m = INFINITY;
+    for (int b = 0; b < DOF_SCALE; ++b)
+        for (int a = 0; a < DOF_SCALE; ++a)
+            m = fmin(m, coc[(size_t)min(DOF_SCALE * ys + b, height - 1) * width + min(DOF_SCALE * xs + a, width - 1)]);
+    return m;
+}
+
 inline float3 dof_upsample_px(__global const float *src, __global const float *coc, __global const float *blur,
-                              __global const float *alpha, __global const float *pr, const int x, const int y,
-                              const int width, const int height, const int ww, const int hw, const int pad,
-                              const int pw)
+                              __global const float *alpha, const int x, const int y,
+                              const int width, const int height, const int ww, const int hw)
 {
     const float sx = ((float)x + 0.5f) / DOF_SCALE - 0.5f, sy = ((float)y + 0.5f) / DOF_SCALE - 0.5f;
     const int x0 = clamp((int)floor(sx), 0, ww - 1), y0 = clamp((int)floor(sy), 0, hw - 1);
     const float fx = clamp(sx - (float)x0, 0.0f, 1.0f), fy = clamp(sy - (float)y0, 0.0f, 1.0f);
     const int x1 = min(x0 + 1, ww - 1), y1 = min(y0 + 1, hw - 1);
     const size_t n = (size_t)width * height, i = (size_t)y * width + x, nw = (size_t)ww * hw;
-    const float r = coc[i], hr = DOF_HALF_R(r);
+    const float r = coc[i];
 #define DOF_CORNER(XS, YS, BW) { \
         const size_t j = (size_t)(YS) * ww + (XS); \
-        const float dr = hr - DOF_SCALE * pr[(size_t)((YS) + pad) * pw + (XS) + pad]; \
-        const float g = (BW) / (0.25f + dr * dr); \
+        const float dr = r - dof_block_min(coc, (XS), (YS), width, height); \
+        const float g = (BW) / (DOF_UP_TOL + dr * dr); \
         acc += g * (float4)(blur[j], blur[nw + j], blur[2 * nw + j], alpha[j]); \
         wsum += g; }
     float4 acc = (float4)(0.0f);
@@ -293,8 +303,8 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
  * row load would leave the working row) per pixel. Launched over (ceil(width / 16), height). */
 __kernel void dof_upsample(__global const float *restrict src, __global const float *restrict coc,
                            __global const float *restrict blur, __global const float *restrict alpha,
-                           __global const float *restrict lv, __global float *restrict dst,
-                           const int width, const int height, const int ww, const int hw, const int pad,
+                           __global float *restrict dst,
+                           const int width, const int height, const int ww, const int hw,
                            __global const int *restrict tn_mix, const int tw_mix)
 {
     const int x = 16 * get_global_id(0), y = get_global_id(1);
@@ -308,25 +318,30 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         return;
 #endif
     const size_t n = (size_t)width * height, i = (size_t)y * width + x, nw = (size_t)ww * hw;
-    const int pw = DOF_PW(ww, pad);
-    __global const float *pr = lv + (size_t)3 * pw * DOF_PW(hw, pad);  /* level 0 CoC */
 #if DOF_SCALE == 2
     const int m = x / 2;
-    if (m >= 1 && m + 14 <= ww - 1 && x + 16 <= width) {
+    /* x + 30 <= width: the corners' 2x2 blocks (columns 2m - 2 .. 2m + 29) lie in the image */
+    if (m >= 1 && m + 14 <= ww - 1 && x + 30 <= width) {
         const float sy = ((float)y + 0.5f) / DOF_SCALE - 0.5f;
         const int y0 = clamp((int)floor(sy), 0, hw - 1), y1 = min(y0 + 1, hw - 1);
         const float fy = clamp(sy - (float)y0, 0.0f, 1.0f);
         const float16 fx = (float16)(0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f,
                                       0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f);
-        const float16 r = vload16(0, coc + i), hr = DOF_HALF_R(r);
+        const float16 r = vload16(0, coc + i);
         float16 ar = (float16)(0.0f), ag = ar, ab = ar, aa = ar, wsum = ar;
+        /* vc: the min CoC of the 2x2 blocks of working pixels m-1 .. m+14 in row YS */
 #define DOF_ROW(YS, WL, WR) { \
             const size_t j = (size_t)(YS) * ww + m - 1; \
             const float16 vr = vload16(0, blur + j), vg = vload16(0, blur + nw + j); \
             const float16 vb = vload16(0, blur + 2 * nw + j), va = vload16(0, alpha + j); \
-            const float16 vc = DOF_SCALE * vload16(0, pr + (size_t)((YS) + pad) * pw + m - 1 + pad); \
-            const float16 dl = hr - DOF_LEFT(vc), dr = hr - DOF_RIGHT(vc); \
-            const float16 gl = (WL) / (0.25f + dl * dl), gr = (WR) / (0.25f + dr * dr); \
+            const size_t k0 = (size_t)(2 * (YS)) * width + x - 2; \
+            const size_t k1 = (size_t)min(2 * (YS) + 1, height - 1) * width + x - 2; \
+            const float16 a0 = vload16(0, coc + k0), a1 = vload16(1, coc + k0); \
+            const float16 b0 = vload16(0, coc + k1), b1 = vload16(1, coc + k1); \
+            const float16 vc = (float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)), \
+                                         fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd))); \
+            const float16 dl = r - DOF_LEFT(vc), dr = r - DOF_RIGHT(vc); \
+            const float16 gl = (WL) / (DOF_UP_TOL + dl * dl), gr = (WR) / (DOF_UP_TOL + dr * dr); \
             ar += gl * DOF_LEFT(vr); ag += gl * DOF_LEFT(vg); ab += gl * DOF_LEFT(vb); aa += gl * DOF_LEFT(va); \
             wsum += gl; \
             ar += gr * DOF_RIGHT(vr); ag += gr * DOF_RIGHT(vg); ab += gr * DOF_RIGHT(vb); aa += gr * DOF_RIGHT(va); \
@@ -344,7 +359,7 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
     }
 #endif
     for (int xi = x; xi < min(x + 16, width); ++xi) {
-        const float3 o = dof_upsample_px(src, coc, blur, alpha, pr, xi, y, width, height, ww, hw, pad, pw);
+        const float3 o = dof_upsample_px(src, coc, blur, alpha, xi, y, width, height, ww, hw);
         const size_t ii = (size_t)y * width + xi;
         dst[ii] = o.x; dst[n + ii] = o.y; dst[2 * n + ii] = o.z;
     }

@@ -31,19 +31,19 @@ MARGIN_DB = 0.5
 # (occluder) and 1.42 dB (transparent: under a 0.3-opacity pane Cycles' depth pass is a per-pixel speckle
 # of the pane's and the wall's depth, and the rule moves checker-edge pixels to the pane) — docs/fidelity.md.
 MEASURED_PSNR = {
-    ("emitters", "dof", "draft"): 34.62,        # 33.50 before the half-resolution path's variance match
+    ("emitters", "dof", "draft"): 35.10,        # 33.50; 34.62 before the upsampling compared the original CoC
     ("emitters", "dof", "final"): 37.34,
-    ("highlights", "dof", "draft"): 38.32,
+    ("highlights", "dof", "draft"): 40.27,      # 38.32
     ("highlights", "dof", "final"): 42.64,
     ("occluder", "dof", "final"): 40.90,
     ("thin", "dof", "draft"): 37.60,            # 36.25
-    ("thin", "dof", "final"): 40.55,
-    ("motion", "dof", "draft"): 42.61,          # 39.85
-    ("motion", "dof", "final"): 48.36,
+    ("thin", "dof", "final"): 41.18,            # 40.55 before the 0.25 px front margin
+    ("motion", "dof", "draft"): 42.70,          # 39.85
+    ("motion", "dof", "final"): 48.55,          # 48.36
     ("motion", "motion", "draft"): 36.09,       # 34.10 before the coverage gather (issue 16 item 3)
     ("motion", "motion", "final"): 37.50,       # 34.52
-    ("motion", "dofmotion", "final"): 37.42,    # 34.62
-    ("transparent", "dof", "draft"): 39.61,     # 38.01; 38.73 before the despeckle
+    ("motion", "dofmotion", "final"): 37.45,    # 34.62; 37.42 before the 0.25 px front margin
+    ("transparent", "dof", "draft"): 39.96,     # 38.01; 38.73 before the despeckle; 39.61
     ("transparent", "dof", "final"): 41.10,     # 39.82 before the despeckle
     ("macro", "dof", "draft"): 28.98,           # 28.67
     ("macro", "dof", "final"): 34.44,           # 33.94 (its large-reach tiles take the half-resolution path)
@@ -149,6 +149,11 @@ def test_emitter_regressions_on_the_emitters_scene():
     assert halo <= MEASURED_EMITTERS["halo_px_sum"] * 1.2, halo
     assert min(energy) >= MEASURED_EMITTERS["energy_min"] - 0.03, energy
     assert max(abs(e - 1) for e in energy) < 0.5 and not any(math.isnan(e) for e in energy)
+    # the defocused lamps meet issue 16's energy target (3 %) since the 0.25 px front margin
+    # (the 12 m lamps kept 95.0 % / 96.3 % before); the in-focus 1 px lamp01 does not: the depth
+    # pass missed it (docs/fidelity.md, "Emitter energy")
+    defocused = {x["name"]: round(x["energy_ratio"], 3) for x in m if not x["in_focus"] and x["energy_ratio"]}
+    assert len(defocused) >= 6 and all(abs(e - 1) <= 0.03 for e in defocused.values()), defocused
 
 
 MEASURED_EMITTERS = {"area_ratio_max": 2.13, "halo_px_sum": 129 + 108 + 146 + 35, "energy_min": 0.857}

@@ -331,6 +331,53 @@ def test_fringe_of_a_defocused_light_spreads_with_the_lights_coc():
         assert e[beyond].sum() < most * e.sum(), q
 
 
+def test_light_slightly_nearer_than_the_sky_keeps_its_energy():
+    # issue 16 (each lamp's energy within 3 %): a 2x2 light 0.8 px of CoC nearer than the sky
+    # (r 3.86 vs 4.66 px) was pooled with the sky and normalised by the pool's weight, which its
+    # smaller bokeh inflates: it kept 98.2 % (final) / 95.1 % (draft) of its light with the former
+    # 1 px front margin. Lamp-only light = run with the light minus run without it, as
+    # clpost.fidelity measures it.
+    cam = Camera(**CAM)
+    w = h = 61
+    k, _ = D.coc_coefficients(cam, w)
+    light_m = k / 0.8
+    assert float(D.coc_px(cam, np.inf, w) - D.coc_px(cam, light_m, w)) == pytest.approx(0.8)
+    color = np.full((h, w, 3), 0.1, np.float32)
+    depth = np.full((h, w), np.inf, np.float32)
+    depth[30:32, 30:32] = light_m
+    dark = Frame(color.copy(), depth=depth)
+    color[30:32, 30:32] = 30.0
+    lit = Frame(color, depth=depth)
+    for q, tol in (("final", 0.01), ("draft", 0.03)):
+        pipe = Pipeline(cam, quality=q, stages=["dof"])
+        added = (pipe.run(lit).color - pipe.run(dark).color)[..., 1].sum()
+        assert added == pytest.approx(4 * 29.9, rel=tol), q
+
+
+def test_in_focus_light_over_a_slightly_blurred_wall_is_not_counted_twice_at_half_resolution():
+    # issue 16 (energy within 3 %): the half-resolution path gathers with the variance-matched
+    # radius, 0 for every |r| < 2.31 px, so its depth-aware upsampling saw the in-focus light and a
+    # wall at r = 2.2 px as one surface: the wall's pixels took the light's blurred light while the
+    # light kept its own (143.8 % of its energy at draft). The upsampling now compares the original
+    # CoC.
+    cam = Camera(**CAM)
+    w = h = 61
+    k, inv_u = D.coc_coefficients(cam, w)
+    wall_m = 1.0 / (inv_u - 2.2 / k)
+    assert float(D.coc_px(cam, wall_m, w)) == pytest.approx(2.2)
+    color = np.full((h, w, 3), 0.25, np.float32)
+    depth = np.full((h, w), wall_m, np.float32)
+    depth[30:32, 30:32] = cam.focus_distance_m
+    dark = Frame(color.copy(), depth=depth)
+    color[30:32, 30:32] = 100.0
+    lit = Frame(color, depth=depth)
+    for q, tol in (("draft", 0.03), ("preview", 0.03), ("final", 0.01)):
+        out, pipe = run(cam, lit, q)
+        assert_matches_reference(pipe, lit, out, rtol=1e-3)
+        added = (out - pipe.run(dark).color)[..., 1].sum()
+        assert added == pytest.approx(4 * 99.75, rel=tol), q
+
+
 def test_half_covered_pixel_of_a_dark_pole_takes_the_poles_depth():
     h, w = 21, 21
     color = np.full((h, w, 3), 1.0, np.float32)

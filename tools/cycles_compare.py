@@ -206,7 +206,8 @@ def main(argv=None) -> int:
     p.add_argument("--sheets", default="/tmp/cycles", help="contact sheets go here")
     p.add_argument("--doc", default=str(ROOT / "docs" / "fidelity.md"), help="'' to skip")
     p.add_argument("--merge", action="store_true",
-                   help="keep the other scenes' results already in --work/results.json (one table for all)")
+                   help="keep the other scenes' results already in --work/results.json (one table for all), "
+                        "and, without --blender, the peers' rows of the scenes run now")
     p.add_argument("--figure", default=str(ROOT / "docs" / "figures" / "cycles_emitters.png"))
     a = p.parse_args(argv)
     data, work, sheets = Path(a.data), Path(a.work), Path(a.sheets)
@@ -221,6 +222,7 @@ def main(argv=None) -> int:
         entry, frame, emit, truths = load_scene(name, data)
         pinhole = frame.color[..., :3]
         dark = without_lamps(frame, emit)
+        earlier = results.get(name, {}) if a.merge else {}
         results[name] = {}
         for kind, (truth, truth_lamps) in truths.items():
             with_lamps = kind == "dof" and bool(entry["lamps"])
@@ -245,7 +247,9 @@ def main(argv=None) -> int:
                 print(f"{name} {kind} {q}: {rows[f'clpost {q}']['psnr']:.2f} dB", flush=True)
                 if q == "final":
                     final = out
-            results[name][kind] = rows
+            # --merge without --blender: the earlier run's peer rows stay (clpost's are regenerated)
+            kept = {k: v for k, v in earlier.get(kind, {}).items() if k not in rows and not k.startswith("clpost ")}
+            results[name][kind] = {"pinhole input": rows.pop("pinhole input"), **kept, **rows}
             panels = [pinhole, truth] + ([final] if final is not None else []) + ([peer] if peer is not None else [])
             labels = ["pinhole", f"Cycles {kind}"] + (["clpost final"] if final is not None else []) + \
                      ([f"Blender {'Defocus' if kind == 'dof' else 'Vector Blur'}"] if peer is not None else [])

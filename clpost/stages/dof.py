@@ -61,7 +61,7 @@ bokehs that cover it. Ideas used, by source:
   with the coverage ramp one lattice step wide: :math:`\mathrm{cov} = \mathrm{clamp}((r\rho - |o|)/s + \tfrac12, 0, 1)`
   and the cell area :math:`s^2` in the weight.
 * Near/far separation by depth order relative to p (Jimenez's scatter-as-gather classification):
-  taps nearer than p by more than 1 px of CoC form the *front* layer F (their own radius, so a
+  taps nearer than p by more than :data:`FRONT_MARGIN_PX` of CoC form the *front* layer F (their own radius, so a
   blurred foreground spreads over the in-focus background); taps behind p have their radius
   clamped to p's own (far) CoC — Jimenez's background clamp — so background never bleeds onto a
   sharp foreground; same-depth taps use their own radius. Compositing with the front layer's
@@ -231,7 +231,15 @@ def luma_weights(camera=None) -> np.ndarray:
 
 MIXED_SAME_DEPTH = 0.8
 """Neighbours nearer than this × a pixel's depth are another surface (the fringe rule)."""
-FRONT_MARGIN_PX = 1.0
+FRONT_MARGIN_PX = 0.25
+r"""Taps whose signed CoC is below p's by more than this (working px) are p's front layer, above it
+by more than this its background; within it, p's own surface. The front layer adds unnormalised
+(each source's own bokeh weight, so its light is conserved); the own-surface pool is normalised by
+its summed weight, which loses a smaller-CoC source's light when it is pooled with a larger-CoC
+surround: a 2 px lamp at 12 m (CoC radius 4.96 px) over the sky (5.95 px) was inside the former
+1 px margin and kept 95 % of its light (docs/fidelity.md, "Emitter energy"). A sloped surface's
+taps that now leave the pool mix back as front/background layers; on the Cycles suite no scene
+and quality lost more than 0.04 dB."""
 
 
 def lattice_stride(r_px: float, budget: int) -> int:
@@ -661,11 +669,25 @@ def profile_weight(profile, rq: np.ndarray, t: np.ndarray) -> np.ndarray:
     return pencil.profile_at(pm, rq * scale, t)
 
 
+UPSAMPLE_COC_TOL_PX2 = 0.125
+"""τ (px²) of the depth-aware upsampling's CoC similarity 1/(τ + Δr²) (:func:`_upsample`). 1/4
+before; 1/8 suppresses a working corner 2.2 px of CoC away 40× instead of 20×, which an HDR lamp
+next to a slightly blurred surface needs (draft on the Cycles suite: highlights 39.37 → 40.27 dB,
+motion 42.46 → 42.70, thin 37.59 → 37.45; 1/16 gave highlights 40.81 and motion 43.27 but thin
+37.34 with FLIP 0.0272 — docs/fidelity.md)."""
+
+
 def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.ndarray, scale: int):
     r"""Depth-aware bilinear upsampling of the working-resolution blur and α: bilinear weights
-    times :math:`g_i = 1/(1/4 + (r - s\,r_i)^2)` (r the full-resolution CoC, :math:`r_i` the
-    working CoC of corner i), so a blurred background next to a sharp edge is not mixed with the
-    working pixels that straddle the edge (which carry the nearer CoC). Edges are clamped."""
+    times :math:`g_i = 1/(\tau + (r - s\,r_i)^2)` (τ = :data:`UPSAMPLE_COC_TOL_PX2`, r the full-resolution CoC, :math:`r_i` the
+    working CoC of corner i: the min of r over its block, in working px), so a blurred background
+    next to a sharp edge is not mixed with the working pixels that straddle the edge (which carry
+    the nearer CoC). Edges are clamped.
+
+    ``coc_w`` is the block min of the *original* CoC, not of the variance-matched one the gather
+    used (:func:`half_radius` maps every |r| < 2.31 px to 0, so an in-focus lamp and a wall at
+    r = 2.2 px looked alike, and the wall's pixels took the lamp's blurred light on top of the lamp
+    keeping its own: +12 % of an in-focus lamp's energy at draft; docs/fidelity.md)."""
     h, w = coc.shape
     hw, ww = coc_w.shape
     sx = (np.arange(w) + 0.5) / scale - 0.5
@@ -676,7 +698,7 @@ def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.nda
     acc = np.zeros((h, w, 3)); acc_a = np.zeros((h, w)); wsum = np.zeros((h, w))
     for ys, xs, b in ((y0, x0, (1 - fx) * (1 - fy)), (y0, x1, fx * (1 - fy)),
                       (y1, x0, (1 - fx) * fy), (y1, x1, fx * fy)):
-        g = b / (0.25 + (coc - scale * coc_w[ys][:, xs]) ** 2)
+        g = b / (UPSAMPLE_COC_TOL_PX2 + (coc - scale * coc_w[ys][:, xs]) ** 2)
         acc += g[..., None] * img[ys][:, xs]
         acc_a += g * alpha[ys][:, xs]
         wsum += g
@@ -717,7 +739,8 @@ def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
     out, alpha = gather_reference(cw, rw, rmax, budget, camera.blades, camera.blade_rotation_deg,
                                   camera.aperture_roundness, camera.spherical_aberration,
                                   camera.optical_vignetting, None if pm is None else (pm, scale))
-    up, up_alpha = _upsample(out, alpha, rw, hr, scale)
+    _, rw_orig = _working(color, coc, scale)
+    up, up_alpha = _upsample(out, alpha, rw_orig, coc, scale)
     b = np.maximum(half_blend(coc), up_alpha)
     return color + (up - color) * b[..., None], rw
 
@@ -815,6 +838,7 @@ class Dof(GatherStage):
                 "DOF_PROFILE": int(traced), "DOF_REACH": f"{reach!r}f", **prof,
                 "DOF_HALF_SHRINK": f"{4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2)!r}f",
                 "DOF_HALF_BLEND": f"{1.0 / (4.0 * HALF_PATH_VAR_PX2)!r}f",
+                "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
 

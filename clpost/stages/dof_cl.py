@@ -140,8 +140,8 @@ def _enqueue_gather(rt, c, target, tn, camera, inv_area, vec, prof):
 
 def _enqueue_upsample(rt, c, src, coc, dst, w, h, tn_mix):
     i32 = np.int32
-    c["k"]["dof_upsample"].set_args(src, coc, c["blur"], c["alpha"], c["lv"], dst, i32(w), i32(h), i32(c["ww"]),
-                                    i32(c["hw"]), i32(c["pad"]), tn_mix, i32(c["tw"]))
+    c["k"]["dof_upsample"].set_args(src, coc, c["blur"], c["alpha"], dst, i32(w), i32(h), i32(c["ww"]),
+                                    i32(c["hw"]), tn_mix, i32(c["tw"]))
     return _launch_rows(rt, c["k"]["dof_upsample"], (w, h))
 
 
