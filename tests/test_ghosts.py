@@ -157,13 +157,9 @@ def test_a_moving_source_moves_its_ghosts_on_the_next_frame():
 # off), radii within 4 % (first order: −95 … +67 %), centres within 1 % but the 1–8 (−13 %) and
 # 2–5 (+9 %) caustic ghosts; Σρ 0.99 × traced (first order 0.83 ×).
 def test_traced_fit_against_dense_traces_wide_open():
-    import sys
-    from pathlib import Path
+    from clpost.optics.ghosts import check_rows
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
-    from ghost_check import rows
-
-    rs = rows(PLANAR, 2.0, 2.0, 8)
+    rs = check_rows(PLANAR, 2.0, 2.0, 8)
     share = [abs(r["share_fit"] / r["share_traced"] - 1) for r in rs]
     radius = [abs(r["radius_fit"] / r["radius_traced"] - 1) for r in rs]
     centre = [abs(r["centre_fit"] / r["centre_traced"] - 1) for r in rs]

@@ -374,3 +374,38 @@ def fit_weights(direct_mm: np.ndarray, height_mm: float) -> tuple[int, int, floa
     t = float(np.interp(height_mm, direct_mm, np.arange(len(direct_mm))))
     i0 = min(int(t), len(direct_mm) - 1)
     return i0, min(i0 + 1, len(direct_mm) - 1), t - i0
+
+
+def check_rows(name="zeiss-planar-50-f1.4", n=8.0, field_deg=2.0, count=8, wavelength_nm=550.0) -> list[dict]:
+    """The ``count`` brightest first-order ghosts of lens ``name`` at f/``n``, ``field_deg`` off
+    axis: each one's share, centre factor and radius as first order gives them, as the stage's fit
+    gives them (:func:`fit_ghosts` interpolated by :func:`fit_weights`) and as a dense clipped
+    trace gives them (:func:`traced_ghost`) — the check of docs/flare.md (tools/ghost_check.py
+    prints it)."""
+    from . import get_lens
+
+    lens = get_lens(name)
+    pres = lens.focused(3000.0, n)
+    r = lens.stop_radius_mm(n)
+    theta = math.radians(field_deg)
+    direct = traced_ghost(pres, None, theta, r, wavelength_nm, clip=True)
+    fit = fit_ghosts(pres, r, wavelength_nm)
+    i0, i1, f = fit_weights(fit["direct_mm"], direct["x"])
+    index = {tuple(p): k for k, p in enumerate(fit["paths"])}
+    gs = sorted(ghosts(pres, r, wavelength_nm), key=lambda g: -g.share / g.radius_mm ** 2)[:count]
+    out = []
+    for g in gs:
+        t = traced_ghost(pres, g.path, theta, r, wavelength_nm, clip=True)
+        refl = surface_reflectance(pres, g.path[0], wavelength_nm) * surface_reflectance(pres, g.path[1], wavelength_nm)
+        k = index[g.path]
+
+        def at(a):
+            v0, v1 = a[k, i0], a[k, i1]
+            v0, v1 = (v1 if np.isnan(v0) else v0), (v0 if np.isnan(v1) else v1)
+            return (1 - f) * v0 + f * v1
+
+        out.append(dict(path=g.path, share=g.share, share_fit=at(fit["share"]),
+                        share_traced=refl * t["fraction"] / direct["fraction"],
+                        centre=g.centre_factor, centre_fit=at(fit["centre"]), centre_traced=t["x"] / direct["x"],
+                        radius=g.radius_mm, radius_fit=at(fit["radius_mm"]), radius_traced=t["radius"]))
+    return out
