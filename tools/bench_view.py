@@ -11,6 +11,7 @@ the websocket hop on loopback and the browser's JPEG decode (a few ms). Reported
 
     PYTHONPATH=. python tools/bench_view.py                 # demo scene, 960x540, thin 50 mm
     PYTHONPATH=. python tools/bench_view.py --lens zeiss-planar-50-f1.4 --vignetting lens
+    PYTHONPATH=. python tools/bench_view.py --input demo.exr   # a file (no renderer needed)
 """
 from __future__ import annotations
 
@@ -37,13 +38,14 @@ def main() -> None:
     ap.add_argument("--size", default="960x540")
     ap.add_argument("--lens", default=VIEW_CAMERA_DEFAULTS["lens"])
     ap.add_argument("--vignetting", default=VIEW_CAMERA_DEFAULTS["vignetting"])
+    ap.add_argument("--input", default=None, help="an EXR (or pattern) instead of rendering the demo scene")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     w, h = map(int, args.size.split("x"))
     camera = Camera(**{**VIEW_CAMERA_DEFAULTS, "lens": args.lens, "vignetting": args.vignetting})
     t0 = time.perf_counter()
-    numbers, load, label = open_input(None, camera, size=(w, h), n_frames=1)
-    print(f"demo scene {w}x{h} rendered in {time.perf_counter() - t0:.1f} s; camera {args.lens}, "
+    numbers, load, label = open_input(args.input, camera, size=(w, h), n_frames=1)
+    print(f"{args.input or 'demo scene'} {w}x{h} ready in {time.perf_counter() - t0:.1f} s; camera {args.lens}, "
           f"vignetting {args.vignetting}")
     from clpost.view.app import ViewApp
 
