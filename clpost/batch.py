@@ -14,6 +14,7 @@ frame's output is complete.
 """
 from __future__ import annotations
 
+import contextlib
 import time
 import warnings
 from concurrent.futures import ThreadPoolExecutor
@@ -302,9 +303,17 @@ def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | 
                                                     preview_dir, camera_files))
             done, behind = behind, None
             finished(*done)
-        except BaseException:
+        except Exception:
             ahead.cancel()
             if behind is not None:  # frame k failed: frame k-1's output completes first (its own
                 finished(*behind)   # write error, if any, is raised instead, as the serial loop would)
+            raise
+        except BaseException:
+            # SIGTERM (Terminated) or Ctrl-C: the signal handler has already removed the temporary
+            # file the writer is filling, so its write fails; the interruption is what to report
+            ahead.cancel()
+            if behind is not None:
+                with contextlib.suppress(Exception):
+                    behind[1].result()
             raise
     return report

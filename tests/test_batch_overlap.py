@@ -41,3 +41,32 @@ def test_error_in_a_frame_leaves_earlier_outputs_complete_and_later_unwritten(tm
     for j in jobs[:2]:
         assert exr.read_frame(j.dst).color.shape == (24, 40, 3)
     assert not [p for p in (tmp_path / "out").iterdir() if p.name not in ("out.0000.exr", "out.0001.exr")]
+
+
+def test_a_termination_is_reported_even_when_the_write_in_flight_fails(tmp_path, monkeypatch):
+    """SIGTERM removes the temporary file the writer thread is filling (clpost.atomic), so that
+    write fails; the sequence must end with the termination (exit 143), not the write's error."""
+    import threading
+
+    import clpost.batch as batch
+    from clpost.atomic import Terminated
+    from clpost.errors import OutputError
+
+    jobs = _inputs(tmp_path, 4)
+    writing = threading.Event()
+    real_run = batch.run_job
+
+    def store(job, *a, **k):
+        writing.set()
+        raise OutputError(f"{job.dst}: cannot replace it (No such file or directory)")
+
+    def run(pipeline, job, *a, **k):
+        if job.frame == 1:  # frame 0's write is in flight: the signal arrives now
+            writing.wait(10)
+            raise Terminated("signal 15")
+        return real_run(pipeline, job, *a, **k)
+
+    monkeypatch.setattr(batch, "store_job", store)
+    monkeypatch.setattr(batch, "run_job", run)
+    with pytest.raises(Terminated):
+        process_sequence(Pipeline(CAM), jobs)
