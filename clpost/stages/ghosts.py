@@ -46,6 +46,7 @@ import numpy as np
 
 from ..params import at_least, boolean, integer, param, parse_fraction, parse_on_off
 from . import _field as fld
+from ._highlights import below_threshold, scene_threshold
 from .base import GatherStage, per_camera
 
 TILE = 16
@@ -80,9 +81,7 @@ class GhostsParams:
 
 def threshold_scene(camera) -> float:
     """T: the scene value of ``ghost_threshold`` saturations (module docstring)."""
-    from ..photometry import exposure_gain
-
-    return camera.ghost_threshold / exposure_gain(camera)
+    return scene_threshold(camera, camera.ghost_threshold)
 
 
 def find_sources(color: np.ndarray, threshold: float, max_sources: int, tile: int = TILE) -> np.ndarray:
@@ -212,12 +211,7 @@ class Ghosts(GatherStage):
             return "Camera.ghosts is off"
         if camera.optics is None:
             return "thin lens: no prescription to reflect light (use a lens_data lens)"
-        t = threshold_scene(camera)
-        peak = float(np.max(frame.color)) if frame.color.size else 0.0
-        if not peak > t:
-            return (f"no source above the threshold ({camera.ghost_threshold:g} × saturation = {t:.3g}; "
-                    f"brightest pixel {peak:.3g})")
-        return None
+        return below_threshold(camera, frame, camera.ghost_threshold, "source")
 
     def reason_needed(self, camera, frame):
         t = threshold_scene(camera)

@@ -46,6 +46,7 @@ import numpy as np
 
 from ..params import at_least, boolean, in_range, param, parse_fraction, parse_on_off
 from . import _field as fld
+from ._highlights import below_threshold, scene_threshold
 from .base import GatherStage, per_camera
 
 
@@ -71,9 +72,7 @@ class GlareParams:
 
 
 def threshold_scene(camera) -> float:
-    from ..photometry import exposure_gain
-
-    return camera.glare_threshold / exposure_gain(camera)
+    return scene_threshold(camera, camera.glare_threshold)
 
 
 def nice(n: int) -> int:
@@ -152,12 +151,7 @@ class Glare(GatherStage):
     def skip_reason(self, camera, frame):
         if not camera.diffraction and camera.veiling_glare == 0:
             return "Camera.diffraction is off and Camera.veiling_glare is 0"
-        t = threshold_scene(camera)
-        peak = float(np.max(frame.color)) if frame.color.size else 0.0
-        if not peak > t:
-            return (f"no highlight above the threshold ({camera.glare_threshold:g} × saturation = {t:.3g}; "
-                    f"brightest pixel {peak:.3g})")
-        return None
+        return below_threshold(camera, frame, camera.glare_threshold, "highlight")
 
     def reason_needed(self, camera, frame):
         t = threshold_scene(camera)
