@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..params import boolean, integer, param, parse_on_off, show_default, show_none
+from ..params import boolean, integer, param, parse_on_off, show_default
 from .base import GatherStage, per_camera
 from .raw import cfa_channels, cfa_phase, pattern
 
@@ -52,14 +52,7 @@ MHC_FILTERS = {
 MHC_FILTERS["RB_AT_G_COL"] = MHC_FILTERS["RB_AT_G_ROW"].T
 
 
-def _parse_tone(text: str) -> float:
-    """``--isp-tone-white``: a white point, or ``none``/``0`` (how the header shows no tone curve)."""
-    return 0.0 if text.strip().lower() in ("none", "off") else float(text)
-
-
 def _check_tone(name, value):
-    if value is None:  # "none" in a header or on the command line: no tone curve
-        return 0.0
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -78,8 +71,8 @@ class IspParams:
                       show=lambda v: "on" if v else None, scalar=False,
                       help="develop the raw mosaic (needs --raw-calibration): demosaic (Malvar-He-Cutler), white "
                            "balance, colour matrix, tone curve, sRGB; a .jpg/.png output gets it as is")
-    isp_tone_white: float = param(0.0, unit="signal", flag="--isp-tone-white", parse=_parse_tone, check=_check_tone,
-                                  header="clpost.ispToneWhite", show=lambda v: show_none(v or None), scalar=True,
+    isp_tone_white: float = param(0.0, unit="signal", flag="--isp-tone-white", parse=float, check=_check_tone,
+                                  header="clpost.ispToneWhite", show=show_default, scalar=True,
                                   help="ISP tone curve: extended-Reinhard white point (0 = none, clip at 1)")
     isp_jpeg_quality: int = param(90, unit="quality", flag="--jpeg-quality", parse=int,
                                   check=integer(1, 101, rule="an integer from 1 to 100"),
