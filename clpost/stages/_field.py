@@ -172,6 +172,21 @@ def bilinear_padded(color: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.nda
     return top * (1 - fy) + bot * fy
 
 
+def upsample_corners(h: int, w: int, hw: int, ww: int, f: int):
+    """Bilinear upsampling of an ``hw`` × ``ww`` image at 1/``f`` to ``h`` × ``w`` (pixel centres
+    aligned, edges clamped): the four (row index, column index, weight) corners, weights
+    broadcasting to (h, w); an upsampled image is Σ weight · img[rows][:, cols]."""
+    sx = (np.arange(w) + 0.5) / f - 0.5
+    sy = (np.arange(h) + 0.5) / f - 0.5
+    x0 = np.clip(np.floor(sx), 0, ww - 1).astype(int)
+    y0 = np.clip(np.floor(sy), 0, hw - 1).astype(int)
+    fx = np.clip(sx - x0, 0, 1)[None, :]
+    fy = np.clip(sy - y0, 0, 1)[:, None]
+    x1, y1 = np.minimum(x0 + 1, ww - 1), np.minimum(y0 + 1, hw - 1)
+    return ((y0, x0, (1 - fx) * (1 - fy)), (y0, x1, fx * (1 - fy)),
+            (y1, x0, (1 - fx) * fy), (y1, x1, fx * fy))
+
+
 def tiles(w: int, h: int) -> tuple[int, int]:
     """Number of tiles (x, y) covering a w × h frame (the kernels' work-group grid)."""
     return -(-w // TILE_W), -(-h // TILE_H)

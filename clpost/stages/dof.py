@@ -689,15 +689,8 @@ def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.nda
     r = 2.2 px looked alike, and the wall's pixels took the lamp's blurred light on top of the lamp
     keeping its own: +12 % of an in-focus lamp's energy at draft; docs/fidelity.md)."""
     h, w = coc.shape
-    hw, ww = coc_w.shape
-    sx = (np.arange(w) + 0.5) / scale - 0.5
-    sy = (np.arange(h) + 0.5) / scale - 0.5
-    x0 = np.clip(np.floor(sx), 0, ww - 1).astype(int); y0 = np.clip(np.floor(sy), 0, hw - 1).astype(int)
-    fx = np.clip(sx - x0, 0, 1)[None, :]; fy = np.clip(sy - y0, 0, 1)[:, None]
-    x1 = np.minimum(x0 + 1, ww - 1); y1 = np.minimum(y0 + 1, hw - 1)
     acc = np.zeros((h, w, 3)); acc_a = np.zeros((h, w)); wsum = np.zeros((h, w))
-    for ys, xs, b in ((y0, x0, (1 - fx) * (1 - fy)), (y0, x1, fx * (1 - fy)),
-                      (y1, x0, (1 - fx) * fy), (y1, x1, fx * fy)):
+    for ys, xs, b in fld.upsample_corners(h, w, *coc_w.shape, scale):
         g = b / (UPSAMPLE_COC_TOL_PX2 + (coc - scale * coc_w[ys][:, xs]) ** 2)
         acc += g[..., None] * img[ys][:, xs]
         acc_a += g * alpha[ys][:, xs]

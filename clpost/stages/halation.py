@@ -171,15 +171,7 @@ def _conv(x: np.ndarray, k: np.ndarray) -> np.ndarray:
 
 def _up(x: np.ndarray, f: int, h: int, w: int) -> np.ndarray:
     """Bilinear upsampling of a 1/f image to h×w (pixel centres aligned, edges clamped)."""
-    hw, ww = x.shape
-    sx = (np.arange(w) + 0.5) / f - 0.5
-    sy = (np.arange(h) + 0.5) / f - 0.5
-    x0 = np.clip(np.floor(sx), 0, ww - 1).astype(int); y0 = np.clip(np.floor(sy), 0, hw - 1).astype(int)
-    fx = np.clip(sx - x0, 0, 1)[None, :]; fy = np.clip(sy - y0, 0, 1)[:, None]
-    x1 = np.minimum(x0 + 1, ww - 1); y1 = np.minimum(y0 + 1, hw - 1)
-    a = x[y0][:, x0] * (1 - fx) + x[y0][:, x1] * fx
-    b = x[y1][:, x0] * (1 - fx) + x[y1][:, x1] * fx
-    return a * (1 - fy) + b * fy
+    return sum(wt * x[ys][:, xs] for ys, xs, wt in fld.upsample_corners(h, w, *x.shape, f))
 
 
 def halation_reference(color: np.ndarray, stock: Stock, pitch_mm: float) -> np.ndarray:
