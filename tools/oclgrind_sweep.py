@@ -38,9 +38,18 @@ def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0
     return Frame(color, depth=d, velocity=v, metadata=meta, labels=lab)
 
 
-def _run(camera, stages, quality, w, h, **frame_kw):
+def _run(camera, stages, quality, w, h, *, narrow=False, **frame_kw):
+    """``narrow``: the forms a GPU runs (one pixel per work-item, :attr:`Runtime.wide` False)."""
     from clpost import Pipeline
+    from clpost.runtime import Runtime
 
+    if narrow:
+        saved = Runtime.wide
+        Runtime.wide = property(lambda self: False)
+        try:
+            return _run(camera, stages, quality, w, h, **frame_kw)
+        finally:
+            Runtime.wide = saved
     if callable(camera):  # a camera that depends on the size
         camera = camera(w, h)
     pipe = Pipeline(camera, quality=quality, stages=list(stages), device="oclgrind")
@@ -106,6 +115,13 @@ def cases():
             w, h = 61, 35
             cam = replace(aberr, sensor_mm=(w * pitch, h * pitch))
             add(f"{st}-strong{pitch * 1000:g}um final {w}x{h}", lambda st=st, cam=cam, w=w, h=h: _run(cam, [st], "final", w, h))
+
+    # the one-pixel forms a GPU runs (astigmatism's gather and copy, fused pointwise kernels)
+    for w, h in ((1, 1), (37, 23)):
+        for st, cam in (("astigmatism", aberr), ("vignetting", replace(base, vignetting="natural"))):
+            add(f"{st} narrow final {w}x{h}", lambda st=st, cam=cam, w=w, h=h: _run(cam, [st], "final", w, h, narrow=True))
+    add("astigmatism-strong20um narrow final 61x35",
+        lambda: _run(replace(aberr, sensor_mm=(61 * 0.02, 35 * 0.02)), ["astigmatism"], "final", 61, 35, narrow=True))
 
     mb = replace(base, frame_rate_fps=24.0, shutter_s=1 / 48, readout_time_s=0.01)
     for q in qualities:
