@@ -60,6 +60,14 @@ def normal(h1, h2):
     return np.sqrt(-2.0 * np.log(uniform(h1))) * np.cos(2.0 * np.pi * uniform(h2))
 
 
+def normal_pair(h1, h2):
+    """Both Box-Muller normals of one draw, as ``rnd_normal_pair``: (cosine branch — equal to
+    :func:`normal` — and sine branch), independent standard normals."""
+    rad = np.sqrt(-2.0 * np.log(uniform(h1)))
+    u2 = 2.0 * np.pi * uniform(h2)
+    return rad * np.cos(u2), rad * np.sin(u2)
+
+
 POISSON_EXACT_MAX = 32.0
 """Where :func:`poisson` switches from exact inversion to the normal approximation (error of the
 normal approximation to Poisson at mean 32: < 1 % in σ)."""

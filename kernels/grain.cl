@@ -3,8 +3,8 @@
  * clpost/stages/grain.py and clpost/grain_model.py. Coordinates: pixel x covers [x, x+1).
  */
 #define GRAIN_LN10 2.302585093f
-#if !GRAIN_BOOLEAN && GRAIN_TAPS != 1 && GRAIN_ROWS != 6
-#error "grain_gaussian16 packs the 2 x (GRAIN_ROWS + 2) edge normals in one float16: GRAIN_ROWS must be 6"
+#if !GRAIN_BOOLEAN && (GRAIN_ROWS % 2 != 0 || GRAIN_ROWS > 14)
+#error "grain_gaussian16 draws its rows in pairs and the edge normals of GRAIN_ROWS + 2 rows in one float16"
 #endif
 
 inline float grain_to_density(const float t, const float dmin, const float dmax) {
@@ -12,76 +12,102 @@ inline float grain_to_density(const float t, const float dmin, const float dmax)
     return clamp(dmin - 0.30102999566f * clp_log2(fmax(t, 1e-30f)), dmin, dmax);  /* log10, vectorising */
 }
 
-/* draft/preview, and final with unresolved grains: Gaussian clear fraction with the model's
- * pixel variance (LUT over image density) and lag-1 correlation (separable [a, b, a]).
- * One pixel (the row's last 1-15 pixels of grain_gaussian16, below). */
-inline void grain_gaussian_px(__global const float *restrict src, __global float *restrict dst,
-                              const int x, const int y, const int width, const int height,
-                              __global const float *params, __global const float *sigma_lut,
-                              const float lut_scale, const float a, const float b, const float amount,
-                              const uint seed, const uint frame) {
-    const size_t n = (size_t)width * (size_t)height;
-    const size_t i = (size_t)y * (size_t)width + (size_t)x;
-    for (uint c = 0; c < 3; ++c) {
-        const float dmin = params[c], dmax = params[3 + c];
-        const float d_img = fmax(src[c * n + i] - dmin, 0.0f);
-        const float u = fmin(d_img * lut_scale, (float)(GRAIN_LUT_SIZE - 1));
-        const int k = min((int)u, GRAIN_LUT_SIZE - 2);
-        const float sigma = mix(sigma_lut[k], sigma_lut[k + 1], u - (float)k);
-#if GRAIN_TAPS == 1
-        const uint h0 = rnd_hash4(seed, frame, (uint)(x + 1), ((uint)(y + 1) << 2) | c);
-        const float g = rnd_normal(h0, rnd_mix(h0 ^ 0x68e31da4u));
-#else
-        /* counters are pixel coordinates (+1 so the border neighbours are >= 0); separable, in
-         * the order grain_gaussian16 sums: rows filtered [a, b, a], then the three rows */
-        float hr[3];
-        for (int j = 0; j < 3; ++j) {
-            float nq[3];
-            for (int q = 0; q < 3; ++q) {
-                const uint hh = rnd_hash4(seed, frame, (uint)(x + q), ((uint)(y + j) << 2) | c);
-                nq[q] = rnd_normal(hh, rnd_mix(hh ^ 0x68e31da4u));
-            }
-            hr[j] = a * nq[0] + b * nq[1] + a * nq[2];
-        }
-        const float g = a * hr[0] + b * hr[1] + a * hr[2];
-#endif
-        dst[c * n + i] = grain_to_density(clp_exp2(-3.32192809f * d_img) + amount * sigma * g, dmin, dmax);  /* 10^-d */
+/* draft/preview, and final with unresolved grains: Gaussian clear fraction T + amount sigma_T G
+ * with the model's pixel standard deviation in closed form, sigma_T = T sqrt((t + 1) P(t)), P the
+ * GRAIN_POLY_DEG polynomial in t = min(d, span) inv_half_span - 1 (inv_half_span = 2/span) of
+ * clpost/stages/grain.py sigma_polynomial (poly[0..GRAIN_POLY_DEG], constant term first), and G
+ * the unit normals filtered by the separable [a, b, a] (a = 0, b = 1: white).
+ *
+ * Normals: counter (X, Y) of layer c is pixel (X - 1, Y - 1)'s; the Box-Muller draw of hash
+ * (seed, frame, X >> 1, Y << 2 | c) gives X even its cosine and X odd its sine branch
+ * (rnd_normal_pair). The same numbers in both forms below, summed in the same order. */
+inline float grain_pixel(const float d, const float dmin, const float dmax, const float g,
+                         __global const float *poly, const float inv_half_span, const float amount) {
+    const float d_img = fmax(d - dmin, 0.0f);
+    const float t = fmin(d_img * inv_half_span, 2.0f) - 1.0f;
+    float p = poly[GRAIN_POLY_DEG];
+    for (int k = GRAIN_POLY_DEG - 1; k >= 0; --k)
+        p = fma(p, t, poly[k]);
+    const float mean = clp_exp2(-3.32192809f * d_img);   /* 10^-d */
+    const float sigma = mean * sqrt(fmax((t + 1.0f) * p, 0.0f));
+    return grain_to_density(mean + amount * sigma * g, dmin, dmax);
+}
+
+/* The lane form of grain_pixel. */
+inline float16 grain_pixel16(const float16 d, const float dmin, const float dmax, const float16 g,
+                             __global const float *poly, const float inv_half_span, const float amount) {
+    const float16 d_img = fmax(d - dmin, 0.0f);
+    const float16 t = fmin(d_img * inv_half_span, 2.0f) - 1.0f;
+    float16 p = (float16)(poly[GRAIN_POLY_DEG]);
+    for (int k = GRAIN_POLY_DEG - 1; k >= 0; --k)
+        p = fma(p, t, poly[k]);
+    const float16 mean = clp_exp2_w16(-3.32192809f * d_img);
+    const float16 sigma = mean * sqrt(fmax((t + 1.0f) * p, 0.0f));
+    return clamp(dmin - 0.30102999566f * clp_log2_w16(fmax(mean + amount * sigma * g, 1e-30f)), dmin, dmax);
+}
+
+/* The four normals of counters 2 (X >> 1) .. 2 (X >> 1) + 3 in row Y: two Box-Muller draws. */
+inline void grain_normals4(const uint seed, const uint frame, const int X, const int Y, const uint c,
+                           float n[4]) {
+    for (int q = 0; q < 2; ++q) {
+        const uint hh = rnd_hash4(seed, frame, (uint)(X >> 1) + (uint)q, ((uint)Y << 2) | c);
+        n[2 * q] = rnd_normal_pair(hh, rnd_mix(hh ^ 0x68e31da4u), &n[2 * q + 1]);
     }
 }
 
-/* The normal of counter (X, Y) = pixel (X - 1, Y - 1) of layer c; 16 lanes from X = x0. */
-inline float16 grain_normal16(const uint seed, const uint frame, const int x0, const int yc, const uint c) {
-    const uint16 hh = rnd_hash4_w16(seed, frame, (uint16)((uint)x0) + CLP_ULANES16, (uint16)(((uint)yc << 2) | c));
-    return rnd_normal_w16(hh, rnd_mix_w16(hh ^ 0x68e31da4u));
+/* One pixel (a GPU's form, GRAIN_LANES 1, and the last 1-15 pixels of a row in the lane form). */
+inline void grain_gaussian_px(__global const float *restrict src, __global float *restrict dst,
+                              const int x, const int y, const int width, const int height,
+                              __global const float *params, __global const float *poly,
+                              const float inv_half_span, const float a, const float b,
+                              const float amount, const uint seed, const uint frame) {
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t i = (size_t)y * (size_t)width + (size_t)x;
+    const int o = x & 1;   /* counter x is lane o of its pair */
+    for (uint c = 0; c < 3; ++c) {
+        float hr[3];
+        for (int j = 0; j < 3; ++j) {
+            float nq[4];
+            grain_normals4(seed, frame, x, y + j, c, nq);
+            hr[j] = a * nq[o] + b * nq[o + 1] + a * nq[o + 2];
+        }
+        const float g = a * hr[0] + b * hr[1] + a * hr[2];
+        dst[c * n + i] = grain_pixel(src[c * n + i], params[c], params[3 + c], g, poly, inv_half_span, amount);
+    }
 }
 
-/* The 2 x (GRAIN_ROWS + 2) normals right of 16 lanes from x0: lane 2r + k is counter
- * (x0 + 16 + k, y0 + r). */
-inline float16 grain_normal16x(const uint seed, const uint frame, const int x0, const int y0, const uint c) {
-    const uint16 xs = (uint16)((uint)x0 + 16u) + (CLP_ULANES16 & 1u);
-    const uint16 ys = (uint16)((uint)y0) + (CLP_ULANES16 >> 1);
-    const uint16 hh = rnd_hash4_w16(seed, frame, xs, (ys << 2) | c);
-    return rnd_normal_w16(hh, rnd_mix_w16(hh ^ 0x68e31da4u));
-}
-
-/* [a, b, a] along the row of counters from x0: 16 normals and the next two (e0, e1) per row
- * instead of 16 x 3 */
-inline float16 grain_hrow16(const uint seed, const uint frame, const int x0, const int yc, const uint c,
-                            const float a, const float b, const float e0, const float e1) {
-    const float16 n0 = grain_normal16(seed, frame, x0, yc, c);
-    const float16 n1 = (float16)(n0.s1234, n0.s5678, n0.s9abc, n0.sdef, e0);
-    const float16 n2 = (float16)(n0.s2345, n0.s6789, n0.sabcd, n0.sef, e0, e1);
-    return a * n0 + b * n1 + a * n2;
+/* [a, b, a] along two rows of counters from x0 (even): the Box-Muller draws of pairs x0/2 + 0..7
+ * of rows Y (lanes 0-7) and Y + 1 (lanes 8-15) interleaved into each row's 16 normals, and the
+ * row's next two normals e0, e1 (counters x0 + 16, x0 + 17). */
+inline void grain_hrows16(const uint seed, const uint frame, const int x0, const int Y, const uint c,
+                          const float a, const float b, const float *ce, const float *se,
+                          float16 *h0, float16 *h1) {
+    const uint16 lane = CLP_ULANES16;
+    const uint16 hh = rnd_hash4_w16(seed, frame, (uint16)((uint)x0 >> 1) + (lane & 7u),
+                                    (((uint16)((uint)Y) + (lane >> 3)) << 2) | c);
+    float16 s;
+    const float16 k = rnd_normal_pair_w16(hh, rnd_mix_w16(hh ^ 0x68e31da4u), &s);
+    for (int r = 0; r < 2; ++r) {
+        const float8 kc = r ? k.hi : k.lo, sc = r ? s.hi : s.lo;
+        const float16 n0 = (float16)(kc.s0, sc.s0, kc.s1, sc.s1, kc.s2, sc.s2, kc.s3, sc.s3,
+                                     kc.s4, sc.s4, kc.s5, sc.s5, kc.s6, sc.s6, kc.s7, sc.s7);
+        const float e0 = ce[r], e1 = se[r];
+        const float16 n1 = (float16)(n0.s1234, n0.s5678, n0.s9abc, n0.sdef, e0);
+        const float16 n2 = (float16)(n0.s2345, n0.s6789, n0.sabcd, n0.sef, e0, e1);
+        const float16 h = a * n0 + b * n1 + a * n2;
+        if (r) *h1 = h; else *h0 = h;
+    }
 }
 
 /* 16 pixels of GRAIN_ROWS rows per work-item (x0 = 16 gid0, y0 = GRAIN_ROWS gid1): the separable
- * filter reuses each filtered row for three output rows, so a pixel costs (1 + 2/GRAIN_ROWS) x 18/16
- * normals per layer instead of 9, all in float16 lanes (kernels/random.cl at width 16): the two
- * normals past each row's 16 (counters x0 + 16, x0 + 17 of the GRAIN_ROWS + 2 rows) are one more
- * float16 per layer (GRAIN_ROWS = 6: 2 x 8 = 16 lanes). */
+ * filter reuses each filtered row for three output rows and each Box-Muller draw gives two
+ * normals, so a pixel and layer costs (GRAIN_ROWS + 2) x 9 / (16 GRAIN_ROWS) draws (0.64 at 14
+ * rows; 9 normals each of its own draw before), all in float16 lanes (kernels/random.cl at width
+ * 16): the draws of pair x0/2 + 8 (the two normals past each row's 16) of the GRAIN_ROWS + 2 rows
+ * are one more float16 per layer. */
 inline void grain_gaussian16(__global const float *restrict src, __global float *restrict dst,
                              const int width, const int height, __global const float *params,
-                             __global const float *sigma_lut, const float lut_scale,
+                             __global const float *poly, const float inv_half_span,
                              const float a, const float b, const float amount, const uint seed,
                              const uint frame) {
     const int x0 = get_global_id(0) * 16;
@@ -91,40 +117,38 @@ inline void grain_gaussian16(__global const float *restrict src, __global float 
         const int y1 = min(y0 + GRAIN_ROWS, height);
         for (int y = y0; y < y1; ++y)
             for (int x = x0; x < width; ++x)
-                grain_gaussian_px(src, dst, x, y, width, height, params, sigma_lut, lut_scale, a, b,
+                grain_gaussian_px(src, dst, x, y, width, height, params, poly, inv_half_span, a, b,
                                   amount, seed, frame);
         return;
     }
     const size_t n = (size_t)width * (size_t)height;
     for (uint c = 0; c < 3; ++c) {
         const float dmin = params[c], dmax = params[3 + c];
-#if GRAIN_TAPS != 1
-        float ex[16];   /* lane 2r + k: counter (x0 + 16 + k, y0 + r) */
-        vstore16(grain_normal16x(seed, frame, x0, y0, c), 0, ex);
-        float16 h0 = grain_hrow16(seed, frame, x0, y0, c, a, b, ex[0], ex[1]);
-        float16 h1 = grain_hrow16(seed, frame, x0, y0 + 1, c, a, b, ex[2], ex[3]);
-#endif
-        for (int r = 0; r < GRAIN_ROWS; ++r) {
+        /* lane r: the draw of pair x0/2 + 8 in row y0 + r: counters x0 + 16 (cosine), x0 + 17 (sine) */
+        float ce[16], se[16];
+        {
+            const uint16 hh = rnd_hash4_w16(seed, frame, (uint16)(((uint)x0 >> 1) + 8u),
+                                            (((uint16)((uint)y0) + CLP_ULANES16) << 2) | c);
+            float16 s;
+            vstore16(rnd_normal_pair_w16(hh, rnd_mix_w16(hh ^ 0x68e31da4u), &s), 0, ce);
+            vstore16(s, 0, se);
+        }
+        float16 h0, h1, h2, h3;
+        grain_hrows16(seed, frame, x0, y0, c, a, b, ce, se, &h0, &h1);
+        for (int r = 0; r < GRAIN_ROWS; r += 2) {
+            grain_hrows16(seed, frame, x0, y0 + r + 2, c, a, b, ce + r + 2, se + r + 2, &h2, &h3);
+            const float16 g0 = a * h0 + b * h1 + a * h2;
+            const float16 g1 = a * h1 + b * h2 + a * h3;
+            h0 = h2;
+            h1 = h3;
             const int y = y0 + r;
-#if GRAIN_TAPS == 1
-            const float16 g = grain_normal16(seed, frame, x0 + 1, y + 1, c);
-#else
-            const float16 h2 = grain_hrow16(seed, frame, x0, y + 2, c, a, b, ex[2 * r + 4], ex[2 * r + 5]);
-            const float16 g = a * h0 + b * h1 + a * h2;
-            h0 = h1;
-            h1 = h2;
-#endif
             if (y >= height) break;
             const size_t i = (size_t)y * (size_t)width + (size_t)x0;
-            const float16 d_img = fmax(vload16(0, src + c * n + i) - dmin, 0.0f);
-            const float16 u = fmin(d_img * lut_scale, (float)(GRAIN_LUT_SIZE - 1));
-            const int16 k = min(convert_int16(u), GRAIN_LUT_SIZE - 2);
-            const float16 sigma = mix(CLP_GATHER16(sigma_lut, k), CLP_GATHER16(sigma_lut, k + 1),
-                                      u - convert_float16(k));
-            const float16 t = clp_exp2_w16(-3.32192809f * d_img) + amount * sigma * g;  /* 10^-d */
-            /* grain_to_density in lanes */
-            vstore16(clamp(dmin - 0.30102999566f * clp_log2_w16(fmax(t, 1e-30f)), dmin, dmax), 0,
-                     dst + c * n + i);
+            vstore16(grain_pixel16(vload16(0, src + c * n + i), dmin, dmax, g0, poly, inv_half_span, amount),
+                     0, dst + c * n + i);
+            if (y + 1 >= height) break;
+            vstore16(grain_pixel16(vload16(0, src + c * n + i + width), dmin, dmax, g1, poly, inv_half_span,
+                                   amount), 0, dst + c * n + i + width);
         }
     }
 }
@@ -179,16 +203,23 @@ inline void grain_boolean(__global const float *restrict src, __global float *re
     }
 }
 
-/* The stage's one entry point; GRAIN_BOOLEAN (a #define, part of the program key) picks the model. */
+/* The stage's one entry point; GRAIN_BOOLEAN (a #define, part of the program key) picks the model,
+ * GRAIN_LANES the Gaussian path's form: 16 pixels x GRAIN_ROWS rows per work-item (a CPU's SIMD
+ * lanes) or one pixel (a GPU's: a warp's loads and stores coalesce). */
 __kernel void grain(__global const float *restrict src, __global float *restrict dst,
                     const int width, const int height, __global const float *params,
-                    __global const float *sigma_lut, const float lut_scale, const float a,
+                    __global const float *poly, const float inv_half_span, const float a,
                     const float b, const float r, const float amount, const uint seed, const uint frame) {
 #if GRAIN_BOOLEAN
-    (void)sigma_lut; (void)lut_scale; (void)a; (void)b;
+    (void)poly; (void)inv_half_span; (void)a; (void)b;
     grain_boolean(src, dst, width, height, params, r, amount, seed, frame);
+#elif GRAIN_LANES == 1
+    (void)r;
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x < width && y < height)
+        grain_gaussian_px(src, dst, x, y, width, height, params, poly, inv_half_span, a, b, amount, seed, frame);
 #else
     (void)r;
-    grain_gaussian16(src, dst, width, height, params, sigma_lut, lut_scale, a, b, amount, seed, frame);
+    grain_gaussian16(src, dst, width, height, params, poly, inv_half_span, a, b, amount, seed, frame);
 #endif
 }

@@ -15,12 +15,18 @@ inline CLP_U CLP_FN(rnd_mix)(CLP_U x) {
     return x;
 }
 
+/* rnd_mix of one uint: the (seed, frame) words are the same in every lane, hashed once. */
+inline uint CLP_FN(rnd_mix1)(uint x) {
+    x ^= x >> 16; x *= 0x7feb352du;
+    x ^= x >> 15; x *= 0x846ca68bu;
+    x ^= x >> 16;
+    return x;
+}
+
 /* Hash of the counter (seed, frame, a, b): a, b are e.g. pixel index and sample number. */
 inline CLP_U CLP_FN(rnd_hash4)(const uint seed, const uint frame, const CLP_U a, const CLP_U b) {
-    CLP_U h = CLP_FN(rnd_mix)((CLP_U)(seed ^ 0x9e3779b9u));
-    h = CLP_FN(rnd_mix)(h ^ frame);
-    h = CLP_FN(rnd_mix)(h ^ a);
-    return CLP_FN(rnd_mix)(h ^ b);
+    const uint h = CLP_FN(rnd_mix1)(CLP_FN(rnd_mix1)(seed ^ 0x9e3779b9u) ^ frame);
+    return CLP_FN(rnd_mix)(CLP_FN(rnd_mix)((CLP_U)h ^ a) ^ b);
 }
 
 /* Uniform in (0, 1): 24 high bits, centred in their bin, never 0 or 1 (log() safe). */
@@ -35,6 +41,16 @@ inline CLP_F CLP_FN(rnd_normal)(const CLP_U h1, const CLP_U h2) {
     const CLP_F u1 = CLP_FN(rnd_uniform)(h1);
     const CLP_F u2 = CLP_FN(rnd_uniform)(h2);
     return sqrt(-1.38629436f * CLP_FN(clp_log2)(u1)) * CLP_FN(clp_cos2pi)(u2);
+}
+
+/* Both normals of one Box-Muller draw: returns the cosine branch (= rnd_normal(h1, h2)) and
+ * stores the sine branch, sin 2 pi u2 = cos 2 pi (u2 - 1/4), in *other; the two are independent
+ * standard normals for one log, one square root and two hashes. clpost/random.py normal_pair. */
+inline CLP_F CLP_FN(rnd_normal_pair)(const CLP_U h1, const CLP_U h2, CLP_F *other) {
+    const CLP_F rad = sqrt(-1.38629436f * CLP_FN(clp_log2)(CLP_FN(rnd_uniform)(h1)));
+    const CLP_F u2 = CLP_FN(rnd_uniform)(h2);
+    *other = rad * CLP_FN(clp_cos2pi)(u2 - 0.25f);
+    return rad * CLP_FN(clp_cos2pi)(u2);
 }
 
 /* Poisson(mean) by inversion with uniform u: the smallest n with u <= F(n; mean), by the

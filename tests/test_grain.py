@@ -197,3 +197,51 @@ def test_grain_amount_kernel_matches_reference(rng):
         ref = pipe.reference(frame)
         err = np.abs(out - ref)
         assert np.quantile(err, 0.999) < 2e-3 and err.mean() < 2e-4, (quality, err.max())
+
+
+# -- the Gaussian path's closed-form σ_T, Box–Muller pairs and its one-pixel (GPU) form --------
+
+@pytest.mark.parametrize("r_px, samples", [(0.005, None), (0.05, None), (0.13, 8), (0.7, 8), (4.0, 8)])
+def test_sigma_polynomial_matches_the_model_variance(r_px, samples):
+    from clpost.stages.grain import gaussian_tables, sigma_t
+
+    span = float((load_stock(STOCK).d_max() - load_stock(STOCK).d_min()).max())
+    poly, _ = gaussian_tables(r_px, span, samples)
+    d = np.concatenate([np.geomspace(1e-6, 1e-2, 20), np.linspace(1e-2, span, 301)])
+    exact = np.sqrt(pixel_covariance(d, r_px, samples_side=samples))
+    assert np.abs(sigma_t(poly, span, d) / exact - 1).max() < 1e-5
+    assert sigma_t(poly, span, 0.0) == 0.0
+    # above the span σ_T/T is held
+    assert sigma_t(poly, span, span + 1.0) == pytest.approx(sigma_t(poly, span, span) / 10.0, rel=1e-12)
+
+
+def test_box_muller_pairs_are_independent_unit_normals():
+    from clpost import random as rnd
+    from clpost.stages.grain import correlated_normal
+
+    g = correlated_normal(256, 256, 0.0, 1.0, 7, 3)  # white: the normal of counter (x+1, y+1)
+    assert abs(g.mean()) < 0.01 and g.var() == pytest.approx(1.0, rel=0.02)
+    even, odd = g[:, 1::2], g[:, 0::2]  # pixels x odd use the cosine branch (counter x+1 even)
+    assert abs(np.corrcoef(even.ravel(), odd.ravel())[0, 1]) < 0.01  # the two branches of one draw
+    h = rnd.hash4(1, 2, np.arange(1 << 16), 5)
+    c, s = rnd.normal_pair(h, rnd.mix(h ^ np.uint32(0x68E31DA4)))
+    np.testing.assert_array_equal(c, rnd.normal(h, rnd.mix(h ^ np.uint32(0x68E31DA4))))
+    assert abs(np.corrcoef(c, s)[0, 1]) < 0.02 and s.var() == pytest.approx(1.0, rel=0.03)
+
+
+@pytest.mark.parametrize("r_px", [0.3, 0.02])  # correlated, white
+@pytest.mark.parametrize("w, h", [(37, 23), (48, 29)])  # partial and whole 16-pixel runs
+def test_one_pixel_form_matches_the_sixteen_lane_form(rng, monkeypatch, r_px, w, h):
+    """The Gaussian path's one-pixel form (a GPU's, Runtime.wide False) draws the same normals and
+    sums them in the same order as the 16-lane form: the same image, and the reference."""
+    from clpost.runtime import Runtime
+
+    d = load_stock(STOCK).d_min() + rng.uniform(-0.2, 2.5, (h, w, 3))
+    frame = Frame(d.astype(np.float32), metadata={"frame_index": 3})
+    cam = cam_for_radius(r_px, w)
+    _, want = run_grain(cam, frame, "draft")
+    monkeypatch.setattr(Runtime, "wide", property(lambda self: False))
+    pipe, got = run_grain(cam, frame, "draft")
+    np.testing.assert_allclose(got, want, rtol=0, atol=2e-6)
+    err = np.abs(got - pipe.reference(frame))
+    assert np.median(err) < 1e-5 and (err > 1e-3).mean() < 2e-3

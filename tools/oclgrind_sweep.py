@@ -122,6 +122,13 @@ def cases():
             add(f"{st} narrow final {w}x{h}", lambda st=st, cam=cam, w=w, h=h: _run(cam, [st], "final", w, h, narrow=True))
     add("astigmatism-strong20um narrow final 61x35",
         lambda: _run(replace(aberr, sensor_mm=(61 * 0.02, 35 * 0.02)), ["astigmatism"], "final", 61, 35, narrow=True))
+    # grain's Gaussian path one pixel per work-item (correlated and white noise), with the fused
+    # film and print around it
+    for w, h in ((1, 1), (37, 23)):
+        for label, g in (("-white", {}), ("-correlated", dict(sensor_mm=(0.013, 0.008)))):  # r ≈ 0.3 px at 37 wide
+            add(f"film+grain{label}+print narrow draft {w}x{h}",
+                lambda g=g, w=w, h=h: _run(replace(base, film="kodak-ektar-100", **g), ["exposure", "film", "grain", "print"],
+                                           "draft", w, h, narrow=True))
 
     mb = replace(base, frame_rate_fps=24.0, shutter_s=1 / 48, readout_time_s=0.01)
     for q in qualities:

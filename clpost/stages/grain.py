@@ -20,7 +20,7 @@ Two implementations, matched in mean, variance and lag-1 autocorrelation (tested
 - otherwise (``draft``/``preview``, or grains smaller than 1/8 px where the samples could not
   resolve them and the central limit theorem makes the pixel average Gaussian): a Gaussian clear
   fraction, :math:`T' = T + σ_T(D_{img})\,G`, with σ_T from the model's exact pixel-box variance
-  (a LUT; where final renders the Boolean model, the variance of its 64-sample estimator, so
+  (in closed form, :func:`gaussian_tables`; where final renders the Boolean model, the variance of its 64-sample estimator, so
   draft matches final) and G a unit-variance field correlated by the separable kernel [a, b, a] so its lag-1
   correlation equals the model's.
 
@@ -73,9 +73,8 @@ GRAIN_NS = 8
 """Samples per pixel side of the final Boolean model (64 samples)."""
 RESOLVED_MIN_PX = 1.0 / 8.0
 """Grain radius (px) from which final renders the Boolean model (cells ≥ r, ≤ 8 per pixel side)."""
-GRAIN_LUT_SIZE = 64
 RHO_WHITE = 0.02
-"""Lag-1 correlation below which the Gaussian path draws white noise (one normal, not nine)."""
+"""Lag-1 correlation below which the Gaussian path's noise is white (filter [0, 1, 0])."""
 T_FLOOR_MARGIN = 0.0
 
 
@@ -89,12 +88,32 @@ def use_boolean(quality: str, r_px: float) -> bool:
     return quality == "final" and r_px >= RESOLVED_MIN_PX
 
 
+SIGMA_POLY_DEG = 10
+"""Degree of the polynomial σ_T is evaluated with (:func:`gaussian_tables`)."""
+
+
 @lru_cache(maxsize=64)
 def gaussian_tables(r_px: float, d_span: float, samples_side: int | None):
-    """(σ_T LUT over D_img ∈ [0, d_span], kernel weights (a, b)) for the Gaussian path."""
-    d = np.linspace(0.0, d_span, GRAIN_LUT_SIZE)
-    var = pixel_covariance(d, r_px, samples_side=samples_side)
-    sigma = np.sqrt(np.maximum(var, 0.0))
+    r"""(σ_T polynomial, kernel weights (a, b)) for the Gaussian path.
+
+    σ_T in closed form: the model's pixel variance is :math:`T^2 F(D)` with
+    :math:`F(D) = \sum_i w_i\,\mathrm{expm1}(D\ln 10\,g_i)` (:mod:`clpost.grain_model`: the
+    covariance integrated against the pixel box), an entire function with F(0) = 0, so
+
+    .. math:: σ_T(D) = T\sqrt{(t + 1)\,P(t)},\qquad t = 2\min(D, D_{span})/D_{span} - 1,
+
+    P the degree-:data:`SIGMA_POLY_DEG` Chebyshev interpolant of :math:`F(D)/(t + 1)` at 65
+    Chebyshev–Lobatto nodes over [0, D_span], returned in the power basis of t (constant term
+    first; the kernel's Horner loop). Above D_span (input beyond D_max) σ_T/T is held. Error
+    against the exact variance: |σ_fit/σ − 1| < 1e-5 for r from 0.005 to 4 px
+    (tests/test_grain.py; the 64-entry linear-interpolated table it replaces was off by up to
+    0.08 in σ_T near D = 0, where σ_T grows like √D)."""
+    nodes = 0.5 * d_span * (1.0 - np.cos(np.linspace(0.0, math.pi, 65)))
+    nodes[0] = 1e-9 * d_span  # F(D)/D at D → 0 (F(0) = 0 itself)
+    var = pixel_covariance(nodes, r_px, samples_side=samples_side)
+    t = 2.0 * nodes / d_span - 1.0
+    q = var * 10.0 ** (2.0 * nodes) / (t + 1.0)
+    poly = np.polynomial.chebyshev.cheb2poly(np.polynomial.chebyshev.chebfit(t, q, SIGMA_POLY_DEG))
     # lag-1 correlation at a mid density (the model's ρ₁ varies little with D): solve
     # 2ab/(2a²+b²) = ρ for the kernel [a, b, a], then normalise 2a² + b² = 1.
     dm = np.array([min(1.0, d_span / 2)])
@@ -102,10 +121,18 @@ def gaussian_tables(r_px: float, d_span: float, samples_side: int | None):
                 / pixel_covariance(dm, r_px, samples_side=samples_side)[0])
     rho = min(max(rho, 0.0), 0.7)
     # a/b = t: 2t/(2t²+1) = ρ → ρ·2t² − 2t + ρ = 0 → t = (1 − sqrt(1 − 2ρ²)) / (2ρ)
-    # ρ below 0.02 is invisible (and the 3×3 taps cost 9× the normals): treat it as white.
-    t = 0.0 if rho < RHO_WHITE else (1 - math.sqrt(1 - 2 * rho * rho)) / (2 * rho)
-    b = 1.0 / math.sqrt(2 * t * t + 1)
-    return sigma, (t * b, b)
+    # ρ below 0.02 is invisible: treat it as white (a = 0, b = 1: the filter passes one normal).
+    tt = 0.0 if rho < RHO_WHITE else (1 - math.sqrt(1 - 2 * rho * rho)) / (2 * rho)
+    b = 1.0 / math.sqrt(2 * tt * tt + 1)
+    return poly, (tt * b, b)
+
+
+def sigma_t(poly: np.ndarray, d_span: float, d_img) -> np.ndarray:
+    """σ_T of image density ``d_img`` from :func:`gaussian_tables`' polynomial, float64 (the
+    kernel's ``grain_pixel`` formula)."""
+    d = np.asarray(d_img, np.float64)
+    t = np.minimum(d * (2.0 / d_span), 2.0) - 1.0
+    return 10.0 ** -d * np.sqrt(np.maximum((t + 1.0) * np.polynomial.polynomial.polyval(t, poly), 0.0))
 
 
 def _stats_samples(r_px: float) -> int | None:
@@ -152,9 +179,9 @@ class Grain(GatherStage):
 
     def taps_per_pixel(self, camera, frame) -> int | None:
         """Filter taps per pixel, all three layers, on the Gaussian path (1 or 3×3 normals per
-        layer, for ``clpost bench`` taps/s — the kernel draws ≈ 1.5 per pixel and layer and filters
-        them separably, :data:`GAUSSIAN_ROWS`); None on the Boolean path, whose work varies with
-        density."""
+        layer, for ``clpost bench`` taps/s — the kernel draws 9/14 Box–Muller pairs per pixel and
+        layer and filters them separably, :data:`GAUSSIAN_ROWS`); None on the Boolean path, whose
+        work varies with density."""
         _, _, _, span, r, boolean = self._setup(camera, fld.image_width_px(frame))
         if boolean:
             return None
@@ -171,20 +198,25 @@ class Grain(GatherStage):
         seed, fr = np.uint32(camera.noise_seed), np.uint32(frame_index(frame))
         if boolean:
             k = int(min(8, max(1, math.floor(1.0 / r))))
-            sigma, (a, b) = np.zeros(GRAIN_LUT_SIZE), (0.0, 1.0)
+            poly, (a, b) = np.zeros(SIGMA_POLY_DEG + 1), (0.0, 1.0)
         else:
             k = 1
-            sigma, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
+            poly, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
+        lanes = 16 if rt.wide else 1
         defines = {"GRAIN_BOOLEAN": int(boolean), "GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k,
-                   "GRAIN_LUT_SIZE": GRAIN_LUT_SIZE, "GRAIN_TAPS": 1 if a == 0.0 else 3,
-                   "GRAIN_ROWS": GAUSSIAN_ROWS}
+                   "GRAIN_POLY_DEG": SIGMA_POLY_DEG, "GRAIN_ROWS": GAUSSIAN_ROWS, "GRAIN_LANES": lanes}
         knl = rt.kernel(_program_source(), "grain", defines)
-        # the Gaussian path: 16 pixels × GAUSSIAN_ROWS rows per work-item, 8×1 work-groups
-        # (kernels/grain.cl); the Boolean path one pixel per work-item
-        size, local = (((w, h), None) if boolean else
-                       ((-(-w // 16), -(-h // GAUSSIAN_ROWS)), (8, 1)))
+        # the Gaussian path: 16 pixels × GAUSSIAN_ROWS rows per work-item, 8×1 work-groups, where
+        # the device is wide (a CPU), else one pixel per work-item in 16×8 groups (kernels/grain.cl);
+        # the Boolean path one pixel per work-item
+        if boolean:
+            size, local = (w, h), None
+        elif lanes == 16:
+            size, local = (-(-w // 16), -(-h // GAUSSIAN_ROWS)), (8, 1)
+        else:
+            size, local = (w, h), (16, 8)
         return [rt.launch(knl, size, local, src, dst, np.int32(w), np.int32(h), rt.constant(params),
-                          rt.constant(sigma.astype(np.float32)), np.float32((GRAIN_LUT_SIZE - 1) / span),
+                          rt.constant(poly.astype(np.float32)), np.float32(2.0 / span),
                           np.float32(a), np.float32(b), np.float32(r), np.float32(camera.grain_amount), seed, fr)]
 
     # -- float64 reference --------------------------------------------------------------------
@@ -197,18 +229,18 @@ class Grain(GatherStage):
             t_mean = 10.0 ** -d_img
             t = t_mean + camera.grain_amount * (boolean_clear_fraction(d_img, r, seed, fr) - t_mean)
         else:
-            sigma, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
-            t = 10.0 ** -d_img + camera.grain_amount * np.stack(
-                [np.interp(d_img[..., c], np.linspace(0, span, GRAIN_LUT_SIZE), sigma) for c in range(3)], -1
-            ) * correlated_normal(color.shape[0], color.shape[1], a, b, seed, fr)
+            poly, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
+            t = 10.0 ** -d_img + camera.grain_amount * sigma_t(poly, span, d_img) * correlated_normal(
+                color.shape[0], color.shape[1], a, b, seed, fr)
         t_floor = 10.0 ** -(d_max - d_min)
         return d_min + -np.log10(np.clip(t, t_floor, 1.0))
 
 
-GAUSSIAN_ROWS = 6
-"""Rows per work-item of the Gaussian path: each [a, b, a]-filtered row of normals serves three
-output rows, so 6 rows cost 8 filtered rows (9 normals per pixel and layer before, 1.5 now); 6 makes
-the normals right of the 16 lanes (2 per filtered row) one float16 per layer (kernels/grain.cl)."""
+GAUSSIAN_ROWS = 14
+"""Rows per work-item of the Gaussian path's lane form: each [a, b, a]-filtered row of normals
+serves three output rows, so 14 rows cost 16 filtered rows, drawn two rows per float16 of
+Box–Muller pairs; the pairs right of the 16 lanes (one per filtered row) are one more float16 per
+layer (kernels/grain.cl; ≤ 14 and even)."""
 
 
 def _program_source() -> str:
@@ -220,13 +252,16 @@ def _program_source() -> str:
 
 
 def correlated_normal(h, w, a, b, seed, fr):
-    """(h, w, 3) unit-variance field: [a, b, a]⊗[a, b, a] over hashed normals at pixel (x+1, y+1)."""
-    ys, xs = np.mgrid[-1:h + 1, -1:w + 1]
+    """(h, w, 3) unit-variance field: [a, b, a]⊗[a, b, a] over the normals of counters (x+1, y+1):
+    counter (X, Y) of layer c is the cosine (X even) or sine (X odd) branch of the Box–Muller
+    draw of hash (seed, frame, X >> 1, Y << 2 | c)."""
+    ys, ps = np.mgrid[0:h + 2, 0:(w + 2) // 2 + 1]
     out = np.zeros((h, w, 3))
     wts = (a, b, a)
     for c in range(3):
-        hh = rnd.hash4(seed, fr, (xs + 1).astype(np.uint32), ((ys + 1) << 2 | c).astype(np.uint32))
-        n = rnd.normal(hh, rnd.mix(hh ^ np.uint32(0x68E31DA4)))
+        hh = rnd.hash4(seed, fr, ps.astype(np.uint32), (ys << 2 | c).astype(np.uint32))
+        cos_, sin_ = rnd.normal_pair(hh, rnd.mix(hh ^ np.uint32(0x68E31DA4)))
+        n = np.stack([cos_, sin_], -1).reshape(h + 2, -1)  # column X = 2P + branch
         for j in range(3):
             for i in range(3):
                 out[..., c] += wts[j] * wts[i] * n[j:j + h, i:i + w]
