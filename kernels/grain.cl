@@ -3,8 +3,8 @@
  * clpost/stages/grain.py and clpost/grain_model.py. Coordinates: pixel x covers [x, x+1).
  */
 #define GRAIN_LN10 2.302585093f
-#if !GRAIN_BOOLEAN && (GRAIN_ROWS % 2 != 0 || GRAIN_ROWS > 14)
-#error "grain_gaussian16 draws its rows in pairs and the edge normals of GRAIN_ROWS + 2 rows in one float16"
+#if !GRAIN_BOOLEAN && GRAIN_ROWS > 14
+#error "grain_gaussian32 draws the edge normals of GRAIN_ROWS + 2 rows in one float16 each: GRAIN_ROWS <= 14"
 #endif
 
 inline float grain_to_density(const float t, const float dmin, const float dmax) {
@@ -15,12 +15,15 @@ inline float grain_to_density(const float t, const float dmin, const float dmax)
 /* draft/preview, and final with unresolved grains: Gaussian clear fraction T + amount sigma_T G
  * with the model's pixel standard deviation in closed form, sigma_T = T sqrt((t + 1) P(t)), P the
  * GRAIN_POLY_DEG polynomial in t = min(d, span) inv_half_span - 1 (inv_half_span = 2/span) of
- * clpost/stages/grain.py sigma_polynomial (poly[0..GRAIN_POLY_DEG], constant term first), and G
- * the unit normals filtered by the separable [a, b, a] (a = 0, b = 1: white).
+ * clpost/stages/grain.py gaussian_tables (poly[0..GRAIN_POLY_DEG], constant term first), and G
+ * the unit normals of counters (x + i, y + j), i, j in {-1, 0, 1}, filtered by the separable
+ * [a, b, a] (GRAIN_TAPS 1: white, G = the normal of counter (x, y)).
  *
- * Normals: counter (X, Y) of layer c is pixel (X - 1, Y - 1)'s; the Box-Muller draw of hash
- * (seed, frame, X >> 1, Y << 2 | c) gives X even its cosine and X odd its sine branch
- * (rnd_normal_pair). The same numbers in both forms below, summed in the same order. */
+ * Normals: counters come in blocks of 32 per row; in block X >> 5 of row Y, layer c, the 16
+ * Box-Muller draws (rnd_normal_pair) of hashes (seed, frame, 16 (X >> 5) + k, Y << 2 | c),
+ * k = 0..15, give counter 32 (X >> 5) + k its cosine and 32 (X >> 5) + 16 + k its sine branch —
+ * so a float16 of draws is 32 consecutive normals with no shuffling. The same numbers in both
+ * forms below, summed in the same order. */
 inline float grain_pixel(const float d, const float dmin, const float dmax, const float g,
                          __global const float *poly, const float inv_half_span, const float amount) {
     const float d_img = fmax(d - dmin, 0.0f);
@@ -28,9 +31,9 @@ inline float grain_pixel(const float d, const float dmin, const float dmax, cons
     float p = poly[GRAIN_POLY_DEG];
     for (int k = GRAIN_POLY_DEG - 1; k >= 0; --k)
         p = fma(p, t, poly[k]);
-    const float mean = clp_exp2(-3.32192809f * d_img);   /* 10^-d */
-    const float sigma = mean * sqrt(fmax((t + 1.0f) * p, 0.0f));
-    return grain_to_density(mean + amount * sigma * g, dmin, dmax);
+    const float s = sqrt(fmax((t + 1.0f) * p, 0.0f));   /* sigma_T / T */
+    /* dmin - log10(T + amount sigma_T g) with T = 10^-d_img factored out: no exp2 (<= 0 -> D_max) */
+    return clamp(dmin + d_img - 0.30102999566f * clp_log2(fmax(fma(amount * s, g, 1.0f), 1e-30f)), dmin, dmax);
 }
 
 /* The lane form of grain_pixel. */
@@ -41,21 +44,28 @@ inline float16 grain_pixel16(const float16 d, const float dmin, const float dmax
     float16 p = (float16)(poly[GRAIN_POLY_DEG]);
     for (int k = GRAIN_POLY_DEG - 1; k >= 0; --k)
         p = fma(p, t, poly[k]);
-    const float16 mean = clp_exp2_w16(-3.32192809f * d_img);
-    const float16 sigma = mean * sqrt(fmax((t + 1.0f) * p, 0.0f));
-    return clamp(dmin - 0.30102999566f * clp_log2_w16(fmax(mean + amount * sigma * g, 1e-30f)), dmin, dmax);
+    const float16 s = sqrt(fmax((t + 1.0f) * p, 0.0f));
+    return clamp(dmin + d_img - 0.30102999566f * clp_log2_w16(fmax(fma(amount * s, g, 1.0f), 1e-30f)), dmin, dmax);
 }
 
-/* The four normals of counters 2 (X >> 1) .. 2 (X >> 1) + 3 in row Y: two Box-Muller draws. */
-inline void grain_normals4(const uint seed, const uint frame, const int X, const int Y, const uint c,
-                           float n[4]) {
-    for (int q = 0; q < 2; ++q) {
-        const uint hh = rnd_hash4(seed, frame, (uint)(X >> 1) + (uint)q, ((uint)Y << 2) | c);
-        n[2 * q] = rnd_normal_pair(hh, rnd_mix(hh ^ 0x68e31da4u), &n[2 * q + 1]);
-    }
+/* The normal of counter (X, Y) of layer c (counters of the pixels left of and above the image
+ * wrap around as uint: any fixed mapping keeps the noise a function of the counters). */
+inline float grain_normal(const uint seed, const uint frame, const int X, const int Y, const uint c) {
+    const uint ux = (uint)X, block = (uint)((X + 32) >> 5) - 1u;   /* floor(X / 32), X >= -1 */
+    const uint hh = rnd_hash4(seed, frame, (block << 4) | (ux & 15u), ((uint)Y << 2) | c);
+    const float rad = sqrt(-1.38629436f * clp_log2(rnd_uniform(hh)));
+    const float u2 = rnd_uniform(rnd_mix(hh ^ 0x68e31da4u));
+    return rad * clp_cos2pi((ux & 16u) ? u2 - 0.25f : u2);
 }
 
-/* One pixel (a GPU's form, GRAIN_LANES 1, and the last 1-15 pixels of a row in the lane form). */
+/* The 32 normals of block B of row Y: counters 32 B .. 32 B + 15 (returned), + 16 .. + 31 (*hi). */
+inline float16 grain_block16(const uint seed, const uint frame, const uint B, const int Y, const uint c,
+                             float16 *hi) {
+    const uint16 hh = rnd_hash4_w16(seed, frame, (uint16)(B << 4) + CLP_ULANES16, (uint16)(((uint)Y << 2) | c));
+    return rnd_normal_pair_w16(hh, rnd_mix_w16(hh ^ 0x68e31da4u), hi);
+}
+
+/* One pixel (a GPU's form, GRAIN_LANES 1, and the last 1-31 pixels of a row in the lane form). */
 inline void grain_gaussian_px(__global const float *restrict src, __global float *restrict dst,
                               const int x, const int y, const int width, const int height,
                               __global const float *params, __global const float *poly,
@@ -63,57 +73,48 @@ inline void grain_gaussian_px(__global const float *restrict src, __global float
                               const float amount, const uint seed, const uint frame) {
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
-    const int o = x & 1;   /* counter x is lane o of its pair */
     for (uint c = 0; c < 3; ++c) {
+#if GRAIN_TAPS == 1
+        const float g = grain_normal(seed, frame, x, y, c);
+#else
         float hr[3];
-        for (int j = 0; j < 3; ++j) {
-            float nq[4];
-            grain_normals4(seed, frame, x, y + j, c, nq);
-            hr[j] = a * nq[o] + b * nq[o + 1] + a * nq[o + 2];
-        }
+        for (int j = 0; j < 3; ++j)
+            hr[j] = a * grain_normal(seed, frame, x - 1, y + j - 1, c) + b * grain_normal(seed, frame, x, y + j - 1, c)
+                  + a * grain_normal(seed, frame, x + 1, y + j - 1, c);
         const float g = a * hr[0] + b * hr[1] + a * hr[2];
+#endif
         dst[c * n + i] = grain_pixel(src[c * n + i], params[c], params[3 + c], g, poly, inv_half_span, amount);
     }
 }
 
-/* [a, b, a] along two rows of counters from x0 (even): the Box-Muller draws of pairs x0/2 + 0..7
- * of rows Y (lanes 0-7) and Y + 1 (lanes 8-15) interleaved into each row's 16 normals, and the
- * row's next two normals e0, e1 (counters x0 + 16, x0 + 17). */
-inline void grain_hrows16(const uint seed, const uint frame, const int x0, const int Y, const uint c,
-                          const float a, const float b, const float *ce, const float *se,
-                          float16 *h0, float16 *h1) {
-    const uint16 lane = CLP_ULANES16;
-    const uint16 hh = rnd_hash4_w16(seed, frame, (uint16)((uint)x0 >> 1) + (lane & 7u),
-                                    (((uint16)((uint)Y) + (lane >> 3)) << 2) | c);
+#if GRAIN_TAPS != 1
+/* Row Y's normals of pixels x0 .. x0 + 31 filtered [a, b, a] along the row: block x0/32 and the
+ * normals left (counter x0 - 1) and right (x0 + 32) of it. */
+inline void grain_hrow32(const uint seed, const uint frame, const int x0, const int Y, const uint c,
+                         const float a, const float b, const float left, const float right,
+                         float16 *h0, float16 *h1) {
     float16 s;
-    const float16 k = rnd_normal_pair_w16(hh, rnd_mix_w16(hh ^ 0x68e31da4u), &s);
-    for (int r = 0; r < 2; ++r) {
-        const float8 kc = r ? k.hi : k.lo, sc = r ? s.hi : s.lo;
-        const float16 n0 = (float16)(kc.s0, sc.s0, kc.s1, sc.s1, kc.s2, sc.s2, kc.s3, sc.s3,
-                                     kc.s4, sc.s4, kc.s5, sc.s5, kc.s6, sc.s6, kc.s7, sc.s7);
-        const float e0 = ce[r], e1 = se[r];
-        const float16 n1 = (float16)(n0.s1234, n0.s5678, n0.s9abc, n0.sdef, e0);
-        const float16 n2 = (float16)(n0.s2345, n0.s6789, n0.sabcd, n0.sef, e0, e1);
-        const float16 h = a * n0 + b * n1 + a * n2;
-        if (r) *h1 = h; else *h0 = h;
-    }
+    const float16 k = grain_block16(seed, frame, (uint)x0 >> 5, Y, c, &s);
+    *h0 = a * (float16)(left, k.s0123, k.s456789ab, k.scde) + b * k + a * (float16)(k.s123, k.s456789ab, k.scdef, s.s0);
+    *h1 = a * (float16)(k.sf, s.s0123, s.s456789ab, s.scde) + b * s + a * (float16)(s.s123, s.s456789ab, s.scdef, right);
 }
+#endif
 
-/* 16 pixels of GRAIN_ROWS rows per work-item (x0 = 16 gid0, y0 = GRAIN_ROWS gid1): the separable
- * filter reuses each filtered row for three output rows and each Box-Muller draw gives two
- * normals, so a pixel and layer costs (GRAIN_ROWS + 2) x 9 / (16 GRAIN_ROWS) draws (0.64 at 14
- * rows; 9 normals each of its own draw before), all in float16 lanes (kernels/random.cl at width
- * 16): the draws of pair x0/2 + 8 (the two normals past each row's 16) of the GRAIN_ROWS + 2 rows
- * are one more float16 per layer. */
-inline void grain_gaussian16(__global const float *restrict src, __global float *restrict dst,
+/* 32 pixels of GRAIN_ROWS rows per work-item (x0 = 32 gid0, y0 = GRAIN_ROWS gid1), in float16
+ * lanes (kernels/random.cl at width 16): one float16 of draws is a row's 32 normals; white noise
+ * costs 1/2 draw per pixel and layer; the [a, b, a] filter reuses each filtered row for three
+ * output rows and takes the normals left and right of the block (counters x0 - 1, x0 + 32) of the
+ * GRAIN_ROWS + 2 rows from two float16 of draws, (GRAIN_ROWS + 4) x 16 / (32 GRAIN_ROWS) draws
+ * per pixel and layer (5/6 at 6 rows). */
+inline void grain_gaussian32(__global const float *restrict src, __global float *restrict dst,
                              const int width, const int height, __global const float *params,
                              __global const float *poly, const float inv_half_span,
                              const float a, const float b, const float amount, const uint seed,
                              const uint frame) {
-    const int x0 = get_global_id(0) * 16;
+    const int x0 = get_global_id(0) * 32;
     const int y0 = get_global_id(1) * GRAIN_ROWS;
     if (x0 >= width || y0 >= height) return;
-    if (x0 + 16 > width) {   /* the row's last 1-15 pixels, one by one */
+    if (x0 + 32 > width) {   /* the row's last 1-31 pixels, one by one */
         const int y1 = min(y0 + GRAIN_ROWS, height);
         for (int y = y0; y < y1; ++y)
             for (int x = x0; x < width; ++x)
@@ -124,31 +125,42 @@ inline void grain_gaussian16(__global const float *restrict src, __global float 
     const size_t n = (size_t)width * (size_t)height;
     for (uint c = 0; c < 3; ++c) {
         const float dmin = params[c], dmax = params[3 + c];
-        /* lane r: the draw of pair x0/2 + 8 in row y0 + r: counters x0 + 16 (cosine), x0 + 17 (sine) */
-        float ce[16], se[16];
+#if GRAIN_TAPS != 1
+        /* lane r: row y0 - 1 + r; left: the sine of draw 15 of block x0/32 - 1, right: the
+         * cosine of draw 0 of block x0/32 + 1 */
+        float le[16], ri[16];
         {
-            const uint16 hh = rnd_hash4_w16(seed, frame, (uint16)(((uint)x0 >> 1) + 8u),
-                                            (((uint16)((uint)y0) + CLP_ULANES16) << 2) | c);
-            float16 s;
-            vstore16(rnd_normal_pair_w16(hh, rnd_mix_w16(hh ^ 0x68e31da4u), &s), 0, ce);
-            vstore16(s, 0, se);
+            const uint16 rows = ((uint16)((uint)(y0 - 1)) + CLP_ULANES16) << 2 | c;
+            const uint16 hl = rnd_hash4_w16(seed, frame, (uint16)(((((uint)x0 >> 5) - 1u) << 4) | 15u), rows);
+            const uint16 hr = rnd_hash4_w16(seed, frame, (uint16)((((uint)x0 >> 5) + 1u) << 4), rows);
+            float16 s, unused;
+            (void)rnd_normal_pair_w16(hl, rnd_mix_w16(hl ^ 0x68e31da4u), &s);
+            vstore16(s, 0, le);
+            vstore16(rnd_normal_pair_w16(hr, rnd_mix_w16(hr ^ 0x68e31da4u), &unused), 0, ri);
         }
-        float16 h0, h1, h2, h3;
-        grain_hrows16(seed, frame, x0, y0, c, a, b, ce, se, &h0, &h1);
-        for (int r = 0; r < GRAIN_ROWS; r += 2) {
-            grain_hrows16(seed, frame, x0, y0 + r + 2, c, a, b, ce + r + 2, se + r + 2, &h2, &h3);
-            const float16 g0 = a * h0 + b * h1 + a * h2;
-            const float16 g1 = a * h1 + b * h2 + a * h3;
-            h0 = h2;
-            h1 = h3;
+        float16 a0, a1, b0, b1;   /* filtered rows y - 1 and y, each as two 16-pixel halves */
+        grain_hrow32(seed, frame, x0, y0 - 1, c, a, b, le[0], ri[0], &a0, &a1);
+        grain_hrow32(seed, frame, x0, y0, c, a, b, le[1], ri[1], &b0, &b1);
+#endif
+        for (int r = 0; r < GRAIN_ROWS; ++r) {
             const int y = y0 + r;
+#if GRAIN_TAPS == 1
+            float16 g1;
+            const float16 g0 = grain_block16(seed, frame, (uint)x0 >> 5, y, c, &g1);
+#else
+            float16 c0, c1;
+            grain_hrow32(seed, frame, x0, y + 1, c, a, b, le[r + 2], ri[r + 2], &c0, &c1);
+            const float16 g0 = a * a0 + b * b0 + a * c0;
+            const float16 g1 = a * a1 + b * b1 + a * c1;
+            a0 = b0; a1 = b1;
+            b0 = c0; b1 = c1;
+#endif
             if (y >= height) break;
             const size_t i = (size_t)y * (size_t)width + (size_t)x0;
             vstore16(grain_pixel16(vload16(0, src + c * n + i), dmin, dmax, g0, poly, inv_half_span, amount),
                      0, dst + c * n + i);
-            if (y + 1 >= height) break;
-            vstore16(grain_pixel16(vload16(0, src + c * n + i + width), dmin, dmax, g1, poly, inv_half_span,
-                                   amount), 0, dst + c * n + i + width);
+            vstore16(grain_pixel16(vload16(0, src + c * n + i + 16), dmin, dmax, g1, poly, inv_half_span, amount),
+                     0, dst + c * n + i + 16);
         }
     }
 }
@@ -204,8 +216,8 @@ inline void grain_boolean(__global const float *restrict src, __global float *re
 }
 
 /* The stage's one entry point; GRAIN_BOOLEAN (a #define, part of the program key) picks the model,
- * GRAIN_LANES the Gaussian path's form: 16 pixels x GRAIN_ROWS rows per work-item (a CPU's SIMD
- * lanes) or one pixel (a GPU's: a warp's loads and stores coalesce). */
+ * GRAIN_LANES the Gaussian path's form: 32 pixels x GRAIN_ROWS rows per work-item in float16 (a
+ * CPU's SIMD lanes) or one pixel (a GPU's: a warp's loads and stores coalesce). */
 __kernel void grain(__global const float *restrict src, __global float *restrict dst,
                     const int width, const int height, __global const float *params,
                     __global const float *poly, const float inv_half_span, const float a,
@@ -220,6 +232,6 @@ __kernel void grain(__global const float *restrict src, __global float *restrict
         grain_gaussian_px(src, dst, x, y, width, height, params, poly, inv_half_span, a, b, amount, seed, frame);
 #else
     (void)r;
-    grain_gaussian16(src, dst, width, height, params, poly, inv_half_span, a, b, amount, seed, frame);
+    grain_gaussian32(src, dst, width, height, params, poly, inv_half_span, a, b, amount, seed, frame);
 #endif
 }

@@ -179,8 +179,8 @@ class Grain(GatherStage):
 
     def taps_per_pixel(self, camera, frame) -> int | None:
         """Filter taps per pixel, all three layers, on the Gaussian path (1 or 3×3 normals per
-        layer, for ``clpost bench`` taps/s — the kernel draws 9/14 Box–Muller pairs per pixel and
-        layer and filters them separably, :data:`GAUSSIAN_ROWS`); None on the Boolean path, whose
+        layer, for ``clpost bench`` taps/s — the kernel draws 1/2 (white) or 5/6 Box–Muller pairs per
+        pixel and layer and filters them separably, :data:`GAUSSIAN_ROWS`); None on the Boolean path, whose
         work varies with density."""
         _, _, _, span, r, boolean = self._setup(camera, fld.image_width_px(frame))
         if boolean:
@@ -202,17 +202,18 @@ class Grain(GatherStage):
         else:
             k = 1
             poly, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
-        lanes = 16 if rt.wide else 1
+        lanes = 32 if rt.wide else 1
         defines = {"GRAIN_BOOLEAN": int(boolean), "GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k,
-                   "GRAIN_POLY_DEG": SIGMA_POLY_DEG, "GRAIN_ROWS": GAUSSIAN_ROWS, "GRAIN_LANES": lanes}
+                   "GRAIN_POLY_DEG": SIGMA_POLY_DEG, "GRAIN_ROWS": GAUSSIAN_ROWS, "GRAIN_LANES": lanes,
+                   "GRAIN_TAPS": 1 if a == 0.0 else 3}
         knl = rt.kernel(_program_source(), "grain", defines)
-        # the Gaussian path: 16 pixels × GAUSSIAN_ROWS rows per work-item, 8×1 work-groups, where
+        # the Gaussian path: 32 pixels × GAUSSIAN_ROWS rows per work-item, 8×1 work-groups, where
         # the device is wide (a CPU), else one pixel per work-item in 16×8 groups (kernels/grain.cl);
         # the Boolean path one pixel per work-item
         if boolean:
             size, local = (w, h), None
         elif lanes == 16:
-            size, local = (-(-w // 16), -(-h // GAUSSIAN_ROWS)), (8, 1)
+            size, local = (-(-w // 32), -(-h // GAUSSIAN_ROWS)), (8, 1)
         else:
             size, local = (w, h), (16, 8)
         return [rt.launch(knl, size, local, src, dst, np.int32(w), np.int32(h), rt.constant(params),
@@ -236,11 +237,11 @@ class Grain(GatherStage):
         return d_min + -np.log10(np.clip(t, t_floor, 1.0))
 
 
-GAUSSIAN_ROWS = 14
-"""Rows per work-item of the Gaussian path's lane form: each [a, b, a]-filtered row of normals
-serves three output rows, so 14 rows cost 16 filtered rows, drawn two rows per float16 of
-Box–Muller pairs; the pairs right of the 16 lanes (one per filtered row) are one more float16 per
-layer (kernels/grain.cl; ≤ 14 and even)."""
+GAUSSIAN_ROWS = 6
+"""Rows per work-item (each 32 pixels wide) of the Gaussian path's lane form: each
+[a, b, a]-filtered row of normals serves three output rows, so 6 rows cost 8 filtered rows, one
+float16 of Box–Muller draws each, and two float16 of draws for the normals left and right of the
+block (kernels/grain.cl; ≤ 14)."""
 
 
 def _program_source() -> str:
@@ -251,17 +252,27 @@ def _program_source() -> str:
     return library() + library_lanes16() + kernel_source("grain")
 
 
+def grain_normals(h, w, seed, fr, c):
+    """(h + 2, w + 2) normals of counters (X, Y), X in -1 … w, Y in -1 … h, of layer ``c``: in
+    block ⌊X/32⌋ of row Y the Box–Muller draws of hashes (seed, frame, 16⌊X/32⌋ + k, Y << 2 | c)
+    give counter 32⌊X/32⌋ + k its cosine and 32⌊X/32⌋ + 16 + k its sine (kernels/grain.cl)."""
+    ys, xs = np.mgrid[-1:h + 1, -1:w + 1]
+    p = (np.floor_divide(xs, 32) << 4 | (xs & 15)).astype(np.int64).astype(np.uint32)
+    hh = rnd.hash4(seed, fr, p, (ys.astype(np.int64) << 2 | c).astype(np.uint32))
+    cos_, sin_ = rnd.normal_pair(hh, rnd.mix(hh ^ np.uint32(0x68E31DA4)))
+    return np.where(xs & 16, sin_, cos_)
+
+
 def correlated_normal(h, w, a, b, seed, fr):
-    """(h, w, 3) unit-variance field: [a, b, a]⊗[a, b, a] over the normals of counters (x+1, y+1):
-    counter (X, Y) of layer c is the cosine (X even) or sine (X odd) branch of the Box–Muller
-    draw of hash (seed, frame, X >> 1, Y << 2 | c)."""
-    ys, ps = np.mgrid[0:h + 2, 0:(w + 2) // 2 + 1]
+    """(h, w, 3) unit-variance field: [a, b, a]⊗[a, b, a] over the normals of counters
+    (x + i, y + j), i, j ∈ {−1, 0, 1} (:func:`grain_normals`); a = 0: white, counter (x, y)."""
     out = np.zeros((h, w, 3))
     wts = (a, b, a)
     for c in range(3):
-        hh = rnd.hash4(seed, fr, ps.astype(np.uint32), (ys << 2 | c).astype(np.uint32))
-        cos_, sin_ = rnd.normal_pair(hh, rnd.mix(hh ^ np.uint32(0x68E31DA4)))
-        n = np.stack([cos_, sin_], -1).reshape(h + 2, -1)  # column X = 2P + branch
+        n = grain_normals(h, w, seed, fr, c)
+        if a == 0.0:
+            out[..., c] = n[1:h + 1, 1:w + 1]
+            continue
         for j in range(3):
             for i in range(3):
                 out[..., c] += wts[j] * wts[i] * n[j:j + h, i:i + w]
