@@ -56,6 +56,7 @@ WIDTH_MACROS: dict[int, dict[str, str]] = {
         "CLP_PLANE(buf, p)": "((buf)[(p).i])",
         "CLP_PLANE2(buf, p, k)": "((buf)[2 * (p).i + (k)])",
         "CLP_GATHER(table, idx)": "((table)[idx])",
+        "CLP_GATHERU(table, idx)": "((table)[idx])",
     },
     VECTOR_PIXELS: {
         "CLP_W": "16", "CLP_F": "float16", "CLP_I": "int16", "CLP_U": "uint16", "CLP_CTX": "PixelCtx16",
@@ -69,6 +70,7 @@ WIDTH_MACROS: dict[int, dict[str, str]] = {
         "CLP_PLANE2(buf, p, k)": "((k) ? (float16)(vload16(0, (buf) + 2 * (p).i0).odd, vload16(1, (buf) + 2 * (p).i0).odd) "
                                  ": (float16)(vload16(0, (buf) + 2 * (p).i0).even, vload16(1, (buf) + 2 * (p).i0).even))",
         "CLP_GATHER(table, idx)": "CLP_GATHER16(table, idx)",
+        "CLP_GATHERU(table, idx)": "CLP_GATHER16U(table, idx)",
     },
 }
 """Per width: the types (``CLP_F`` float, ``CLP_I`` int — also what a comparison gives —,
@@ -76,7 +78,7 @@ WIDTH_MACROS: dict[int, dict[str, str]] = {
 bits), ``CLP_ANY`` (any lane true), and what a pixel reads: ``CLP_X``/``CLP_Y`` its coordinates,
 ``CLP_INDEX`` its index (a counter for random.cl), ``CLP_PLANE`` one float per pixel of a W×H
 plane, ``CLP_PLANE2`` component k of an interleaved pair (velocity), ``CLP_GATHER`` a table entry
-per lane (data-dependent: one load per lane)."""
+per lane (data-dependent: one load per lane; ``CLP_GATHERU`` of a uint table)."""
 
 LIBRARIES = ("fastmath", "random")
 """Width-generic kernels/*.cl every fused kernel instantiates, in this order, before its stages."""

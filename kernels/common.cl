@@ -37,6 +37,13 @@ typedef struct {
     (table)[(idx).s8], (table)[(idx).s9], (table)[(idx).sa], (table)[(idx).sb], \
     (table)[(idx).sc], (table)[(idx).sd], (table)[(idx).se], (table)[(idx).sf]))
 
+/* the same for a uint table */
+#define CLP_GATHER16U(table, idx) ((uint16)( \
+    (table)[(idx).s0], (table)[(idx).s1], (table)[(idx).s2], (table)[(idx).s3], \
+    (table)[(idx).s4], (table)[(idx).s5], (table)[(idx).s6], (table)[(idx).s7], \
+    (table)[(idx).s8], (table)[(idx).s9], (table)[(idx).sa], (table)[(idx).sb], \
+    (table)[(idx).sc], (table)[(idx).sd], (table)[(idx).se], (table)[(idx).sf]))
+
 /* The tile of a tiled gather (astigmatism, coma; clpost/stages/_field.py "Tiles"): work-group g
  * takes tile `tile_id` (from its list); a work-item does `lanes` consecutive pixels of a tile row
  * from (x, y). The padded planes hold whole tiles plus `pad` on every side: row pitch pw, plane

@@ -150,3 +150,17 @@ def test_packaged_stock_files_parse_and_are_in_package_data():
     assert len(files) >= 3, f"film stocks missing from {film_data_dir()}"  # also in the installed wheel (CI)
     for f in files:
         assert tomllib.loads(f.read_text())["name"] == f.stem
+
+
+def test_packed_table_decodes_to_the_table_within_1e_5():
+    from clpost.stages.film import FILM_LUT_SIZE, pack_lut, packed_lut, stock_lut, unpack_lut
+
+    for name in stock_names():
+        lut = stock_lut(name)[0]
+        v, step = unpack_lut(*packed_lut(name))
+        assert np.abs(v - lut).max() < 1e-5, name
+        # value + step reaches the next entry, so the interpolation is continuous within 1e-5
+        assert np.abs(v[:, :-1] + step[:, :-1] - lut[:, 1:]).max() < 1e-5, name
+        assert packed_lut(name)[0].shape == (3, FILM_LUT_SIZE) and packed_lut(name)[0].dtype == np.uint32
+    flat = np.zeros((3, 8))  # a constant layer (range 0) decodes to itself
+    np.testing.assert_allclose(unpack_lut(*pack_lut(flat))[0], flat, atol=1e-12)

@@ -129,6 +129,10 @@ def cases():
             add(f"film+grain{label}+print narrow draft {w}x{h}",
                 lambda g=g, w=w, h=h: _run(replace(base, film="kodak-ektar-100", **g), ["exposure", "film", "grain", "print"],
                                            "draft", w, h, narrow=True))
+    # and its 32-pixel lane form with correlated noise (two blocks and a remainder; r ≈ 0.3 px)
+    add("film+grain-correlated+print draft 70x23",
+        lambda: _run(replace(base, film="kodak-ektar-100", sensor_mm=(0.025, 0.008)), ["exposure", "film", "grain", "print"],
+                     "draft", 70, 23))
 
     mb = replace(base, frame_rate_fps=24.0, shutter_s=1 / 48, readout_time_s=0.01)
     for q in qualities:
