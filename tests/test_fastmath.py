@@ -1,4 +1,4 @@
-"""The branch-free elementary functions of kernels/common.cl (clp_log2, clp_exp2, clp_cos2pi)
+"""The branch-free elementary functions of kernels/common.cl (clp_log2, clp_exp2, clp_exp2_bounded, clp_cos2pi)
 against float64 numpy over the whole float32 range, including the IEEE special values."""
 import numpy as np
 import pytest
@@ -15,6 +15,7 @@ __kernel void fm(__global const float *x, __global float *out, const int n) {
     out[i] = clp_log2(x[i]);
     out[n + i] = clp_exp2(x[i]);
     out[2 * n + i] = clp_cos2pi(x[i]);
+    out[3 * n + i] = clp_exp2_bounded(clamp(x[i], -126.0f, 126.0f));
 }
 """
 
@@ -23,12 +24,12 @@ def _run(x):
     rt = get_runtime()
     x = np.ascontiguousarray(x, np.float32)
     prog = rt.program(_SRC, "fm")
-    out = np.empty(3 * x.size, np.float32)
+    out = np.empty(4 * x.size, np.float32)
     xb = cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=x)
     ob = cl.Buffer(rt.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
     cl.Kernel(prog, "fm")(rt.queue, (x.size,), None, xb, ob, np.int32(x.size))
     cl.enqueue_copy(rt.queue, out, ob)
-    return out.reshape(3, -1)
+    return out.reshape(4, -1)
 
 
 def _ulp_err(got, want):
@@ -82,3 +83,13 @@ def test_cos2pi():
     err = np.abs(got - want)
     k = int(np.argmax(err))
     assert err.max() < 2.5e-7, f"worst at u={u[k]!r}: {got[k]!r} vs {want[k]!r}"
+
+
+def test_exp2_bounded_within_4_ulp_on_its_domain():
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.uniform(-126, 126, 200000), rng.uniform(-1, 1, 20000),
+                        np.arange(-126, 127, dtype=np.float64), [-126.0, 126.0, 0.5, -0.5]]).astype(np.float32)
+    got = _run(x)[3]
+    err = _ulp_err(got, np.exp2(x.astype(np.float64)))
+    k = int(np.argmax(err))
+    assert err.max() <= 4.0, f"worst {err[k]:.2f} ulp at x={x[k]!r}"
