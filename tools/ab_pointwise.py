@@ -1,0 +1,72 @@
+"""The pointwise kernels (vignetting+exposure+film, grain, print): an old revision vs this tree in
+one process — per kernel the min and median device ms of each, new/old of the mins, and % of the
+copy kernel's bandwidth (median; the copy kernel runs right after every plan run).
+
+    PYTHONPATH=. POCL_MAX_PTHREAD_COUNT=1 .venv/bin/python tools/ab_pointwise.py --old main --size 640x360 --repeats 61
+
+Scene: the bench's full camera without motion blur and distortion (vignetting, exposure, film
+Ektar 100, grain, print) on the bench's synthetic frame; the two plans run alternately, the order
+swapped every repeat. On a loaded machine medians and % of copy swing by ±30 % between runs; the
+min over many short single-threaded runs (a cache-resident 640×360 frame: the kernels' compute) is
+what repeats. Bytes as `clpost bench` counts them (RGB float read + write, + the RI plane for the
+vignetting group).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import statistics
+import warnings
+
+KERNELS = ("vignetting__exposure__film", "grain", "print")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--old", default="main")
+    ap.add_argument("--quality", default="draft")
+    ap.add_argument("--size", default="1920x1080")
+    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--warmup", type=int, default=2)
+    args = ap.parse_args(argv)
+    warnings.simplefilter("ignore")
+    import clpost
+    from clpost import bench as nb, bench_ab as ab
+    from clpost.runtime import get_runtime
+
+    old = ab.load_revision(args.old)
+    ob = importlib.import_module(f"{old.__name__}.bench")
+    for m in (nb, ob):
+        m.SCENES["pointwise"] = m.Scene(
+            "pointwise", "pointwise film chain", wants=("vignetting", "exposure", "film", "grain", "print"),
+            camera_fields=dict(luminance_scale=1.0, f_number=4.0, vignetting="natural", film="kodak-ektar-100"))
+    w, h = (int(v) for v in args.size.split("x"))
+    frame = nb.synthetic_frame(w, h)
+    runs = [(args.old, *ab._pipeline(old, ob, "pointwise", w, h, args.quality, None, frame)),
+            ("this tree", *ab._pipeline(clpost, nb, "pointwise", w, h, args.quality, None, frame))]
+    copier = nb.CopyKernel(get_runtime(None), w * h * 12)
+    nbytes = {"vignetting__exposure__film": w * h * 28, "grain": w * h * 24, "print": w * h * 24}
+    ms: dict = {}
+    pct: dict = {}
+    for i in range(args.warmup + args.repeats):
+        for tag, pipe, f in (runs if i % 2 else runs[::-1]):
+            pipe.run(f)
+            times = dict(pipe.last_timings)
+            gbps = copier.gbps()
+            if i >= args.warmup:
+                for k in KERNELS:
+                    ms.setdefault((k, tag), []).append(times[k])
+                    pct.setdefault((k, tag), []).append(100.0 * nbytes[k] / (times[k] * 1e6) / gbps)
+    old_tag, new_tag = runs[0][0], runs[1][0]
+    print(f"{w}x{h} {args.quality}, {args.repeats} repeats: device ms min / median, new/old of the mins, "
+          "% of copy (median)")
+    for k in KERNELS:
+        o, n = ms[(k, old_tag)], ms[(k, new_tag)]
+        print(f"  {k:<28} {old_tag} {min(o):7.2f} / {statistics.median(o):7.2f}   {new_tag} {min(n):7.2f} / "
+              f"{statistics.median(n):7.2f}   new/old {min(n) / min(o):.2f}   % of copy "
+              f"{statistics.median(pct[(k, old_tag)]):.0f} → {statistics.median(pct[(k, new_tag)]):.0f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
