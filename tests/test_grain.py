@@ -236,10 +236,31 @@ def test_one_pixel_form_matches_the_sixteen_lane_form(rng, monkeypatch, r_px, w,
     sums them in the same order as the 16-lane form: the same image, and the reference."""
     from clpost.runtime import Runtime
 
+    from clpost.stages.grain import GAUSSIAN_ROWS
+
     d = load_stock(STOCK).d_min() + rng.uniform(-0.2, 2.5, (h, w, 3))
     frame = Frame(d.astype(np.float32), metadata={"frame_index": 3})
     cam = cam_for_radius(r_px, w)
-    _, want = run_grain(cam, frame, "draft")
+    pipe, want = run_grain(cam, frame, "draft")
+    stage = pipe.plan_for(frame, pipe.camera_for(frame)).stages[0]
+
+    class Launches:  # what the stage asks a runtime for: 32 pixels x GAUSSIAN_ROWS rows per work-item, or one
+        def __init__(self, wide):
+            self.wide, self.sizes = wide, []
+
+        def kernel(self, src, name, defines):
+            return defines["GRAIN_LANES"]
+
+        def constant(self, host):
+            return host
+
+        def launch(self, lanes, size, local, *args):
+            self.sizes.append((lanes, tuple(size)))
+
+    for wide, want_size in ((True, (32, (-(-w // 32), -(-h // GAUSSIAN_ROWS)))), (False, (1, (w, h)))):
+        rt = Launches(wide)
+        stage.enqueue(rt, pipe.camera_for(frame), frame, None, None, {})
+        assert rt.sizes == [want_size]
     monkeypatch.setattr(Runtime, "wide", property(lambda self: False))
     pipe, got = run_grain(cam, frame, "draft")
     np.testing.assert_allclose(got, want, rtol=0, atol=2e-6)

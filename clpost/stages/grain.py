@@ -20,9 +20,9 @@ Two implementations, matched in mean, variance and lag-1 autocorrelation (tested
 - otherwise (``draft``/``preview``, or grains smaller than 1/8 px where the samples could not
   resolve them and the central limit theorem makes the pixel average Gaussian): a Gaussian clear
   fraction, :math:`T' = T + σ_T(D_{img})\,G`, with σ_T from the model's exact pixel-box variance
-  (in closed form, :func:`gaussian_tables`; where final renders the Boolean model, the variance of its 64-sample estimator, so
-  draft matches final) and G a unit-variance field correlated by the separable kernel [a, b, a] so its lag-1
-  correlation equals the model's.
+  (in closed form, :func:`gaussian_tables`; where final renders the Boolean model, the variance
+  of its 64-sample estimator, so draft matches final) and G a unit-variance field correlated by
+  the separable kernel [a, b, a] so its lag-1 correlation equals the model's.
 
 Strength: ``Camera.grain_amount`` a scales the clear fraction's deviation from its mean,
 :math:`T'' = T + a\,(T' - T)`, :math:`T = 10^{-D_{img}}` — σ_T grows a-fold, the mean, the grain
@@ -179,9 +179,9 @@ class Grain(GatherStage):
 
     def taps_per_pixel(self, camera, frame) -> int | None:
         """Filter taps per pixel, all three layers, on the Gaussian path (1 or 3×3 normals per
-        layer, for ``clpost bench`` taps/s — the kernel draws 1/2 (white) or 5/6 Box–Muller pairs per
-        pixel and layer and filters them separably, :data:`GAUSSIAN_ROWS`); None on the Boolean path, whose
-        work varies with density."""
+        layer, for ``clpost bench`` taps/s — the kernel draws 1/2 (white) or 5/6 Box–Muller pairs
+        per pixel and layer and filters them separably, :data:`GAUSSIAN_ROWS`); None on the Boolean
+        path, whose work varies with density."""
         _, _, _, span, r, boolean = self._setup(camera, fld.image_width_px(frame))
         if boolean:
             return None
@@ -212,7 +212,7 @@ class Grain(GatherStage):
         # the Boolean path one pixel per work-item
         if boolean:
             size, local = (w, h), None
-        elif lanes == 16:
+        elif lanes == 32:
             size, local = (-(-w // 32), -(-h // GAUSSIAN_ROWS)), (8, 1)
         else:
             size, local = (w, h), (16, 8)
