@@ -15,6 +15,18 @@
 #pragma OPENCL FP_CONTRACT OFF
 /* FP_CONTRACT OFF: no a*b+c fusion, so tap positions round exactly as in the numpy reference. */
 
+/* MOTION_BLUR_LANES: pixels per work-item of the prep and the gather, 16 (explicit float16 rows, for
+ * CPUs: PoCL vectorises neither one-pixel form) or 1 (one pixel per work-item, for GPUs, where a
+ * 16-wide work-item makes uncoalesced loads and few work-items); the stage sets it from
+ * Runtime.wide. The one-pixel functions below are the spec either way (the 16-wide ones do the
+ * same operations lane for lane). */
+#ifndef MOTION_BLUR_LANES
+#define MOTION_BLUR_LANES 16
+#endif
+#if MOTION_BLUR_LANES != 16 && MOTION_BLUR_LANES != 1
+#error "MOTION_BLUR_LANES must be 16 or 1"
+#endif
+
 #define MOTION_BLUR_SOFT_Z 0.05f   /* relative depth difference over which fore/background blend */
 #define MOTION_BLUR_AGREE0 0.8f    /* cos(v_N, h_X) below which the tap sets split (AGREE0/1 in the .py) */
 #define MOTION_BLUR_AGREE1 0.95f
@@ -80,6 +92,7 @@ inline void motion_blur_prep_px(__global const float *restrict velocity,
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
 }
 
+#if MOTION_BLUR_LANES == 16
 /* motion_blur_prep_px on 16 pixels of a row (x0 - 1 >= 0 and x0 + 16 < width: no column clamp),
  * lane for lane the same operations; neighbours are row loads at offsets -1, 0, +1 (velocity
  * interleaved: even/odd lanes of 32 floats). */
@@ -128,13 +141,16 @@ inline void motion_blur_prep_16(__global const float *restrict velocity,
     vstore16(isinf(z) ? 0.0f : 1.0f / z, 0, iz + i0);
 }
 
-/* h, |h| key and 1/depth per pixel: 16 pixels of a row per work-item (x0 = 16 gid0); groups that
- * touch the left or right edge one pixel at a time (their neighbours clamp) */
+#endif /* MOTION_BLUR_LANES == 16 */
+
+/* h, |h| key and 1/depth per pixel: 16 pixels of a row per work-item (x0 = 16 gid0; groups that
+ * touch the left or right edge one pixel at a time: their neighbours clamp), or one (LANES 1) */
 __kernel void motion_blur_prep(__global const float *restrict velocity,
                                __global const float *restrict depth,
                                __global float *restrict hv, __global float *restrict iz,
                                const int width, const int height, const float k)
 {
+#if MOTION_BLUR_LANES == 16
     const int x0 = get_global_id(0) * 16, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     if (x0 >= 1 && x0 + 16 < width) {
@@ -143,6 +159,11 @@ __kernel void motion_blur_prep(__global const float *restrict velocity,
         for (int x = x0; x < min(x0 + 16, width); ++x)
             motion_blur_prep_px(velocity, depth, hv, iz, x, y, width, height, k);
     }
+#else
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    motion_blur_prep_px(velocity, depth, hv, iz, x, y, width, height, k);
+#endif
 }
 
 /* largest half-vector (by length; first in scan order on ties) of each K x K tile */
@@ -212,7 +233,7 @@ inline int motion_blur_taps(const float ln) {
     return min(MOTION_BLUR_SAMPLES, 2 * (int)ceil(MOTION_BLUR_DENSITY * ln) + 1);
 }
 
-/* One pixel (the row's last 1-15 pixels of the kernel below); motion_blur_16 is the same
+/* One pixel (every pixel with MOTION_BLUR_LANES 1, else the row's last 1-15 of the kernel below); motion_blur_16 is the same
  * arithmetic in 16 lanes. */
 inline void motion_blur_px(__global const float *restrict src, __global float *restrict dst,
                            __global const float *restrict hv, __global const float *restrict iz,
@@ -297,6 +318,7 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
 }
 
 
+#if MOTION_BLUR_LANES == 16
 /* The gather on 16 consecutive pixels of a row (x0 .. x0 + 15), every lane the arithmetic of
  * motion_blur_px operation for operation (FP_CONTRACT OFF; the same roundings, so the same tap
  * positions): PoCL does not vectorise the one-pixel form (float3, sqrt, smoothstep, data-dependent
@@ -477,13 +499,16 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     vstore16(still ? cxb : cfc * frb + (1.0f - cfc) * oub, 0, dst + 2 * n + i0);
 }
 
-/* 16 pixels of a row per work-item (x0 = 16 gid0); the row's last 1-15 one by one */
+#endif /* MOTION_BLUR_LANES == 16 */
+
+/* 16 pixels of a row per work-item (x0 = 16 gid0; the row's last 1-15 one by one), or one (LANES 1) */
 __kernel void motion_blur(__global const float *restrict src, __global float *restrict dst,
                           __global const float *restrict hv, __global const float *restrict iz,
                           __global const float *restrict nmax,
                           const int width, const int height, const int tw, const int th,
                           const uint seed, const uint frame)
 {
+#if MOTION_BLUR_LANES == 16
     const int x0 = get_global_id(0) * 16, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     if (x0 + 16 <= width) {
@@ -492,6 +517,11 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
         for (int x = x0; x < width; ++x)
             motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame);
     }
+#else
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame);
+#endif
 }
 
 /* rolling shutter: row y is exposed tau_y = r (y/(H-1) - 1/2) frames after the frame time, so it

@@ -70,6 +70,36 @@ def test_kernel_matches_reference_where_tiles_take_different_tap_counts(rng, qua
     _compare(CAM, frame, quality)
 
 
+@pytest.mark.parametrize("quality", list(SAMPLES))
+@pytest.mark.parametrize("w,h", [(5 * TILE + 7, 2 * TILE + 3), (1, 1), (37, 23)])
+def test_one_pixel_per_work_item_form_matches_the_sixteen_wide_one(rng, monkeypatch, quality, w, h):
+    """The prep's and the gather's one-pixel form (a GPU's, Runtime.wide False) gives the 16-wide
+    form's image (the same operations per pixel; tap counts differing within a row and tile
+    edges) and the float64 reference."""
+    from clpost.runtime import Runtime
+
+    color = (rng.random((h, w, 3)) * 10).astype(np.float32)
+    vel = np.zeros((h, w, 2), np.float32)
+    for i, speed in enumerate([0.0, 1.5, 5.0, 0.0, 12.0, 40.0]):
+        x0, x1 = min(i * TILE, w), min((i + 1) * TILE, w)
+        vel[:, x0:x1, 0] = speed * (1 + 0.2 * rng.random((h, x1 - x0)))
+    vel[..., 1] = rng.normal(size=(h, w)) * 0.7
+    vel[h // 2:, ::5] = rng.normal(size=vel[h // 2:, ::5].shape) * 20.0
+    depth = rng.uniform(1.0, 30.0, (h, w)).astype(np.float32)
+    depth[:2] = np.inf
+    frame = Frame(color, depth=depth, velocity=vel, metadata={"frame_index": 5})
+    pipe = Pipeline(CAM, quality=quality, stages=["motion_blur"])
+    assert MotionBlur.lanes(pipe.runtime) == 16
+    want = pipe.run(frame).color
+    monkeypatch.setattr(Runtime, "wide", property(lambda self: False))
+    pipe = Pipeline(CAM, quality=quality, stages=["motion_blur"])
+    assert MotionBlur.lanes(pipe.runtime) == 1
+    # every fifth column of the lower half has random 20 px/frame vectors: float32 weights at cylinder
+    # edges round apart from the float64 reference's by up to ~1e-4 (in either form, they are equal)
+    got, ref = _compare(CAM, frame, quality, tol=2e-4)
+    np.testing.assert_allclose(got, want, rtol=2e-6, atol=2e-6)
+
+
 def test_adversarial_velocities_and_depths(rng):
     f = _frame(rng, 41, 29)
     vel = f.velocity.copy()

@@ -230,12 +230,25 @@ class MotionBlur(GatherStage):
         return 3 * (self.samples + 1)
 
     # -- OpenCL -----------------------------------------------------------------------------
+    @staticmethod
+    def lanes(rt) -> int:
+        """Pixels per work-item of the prep and the gather: 16 on a CPU (explicit float16 rows),
+        1 on a GPU (:attr:`clpost.runtime.Runtime.wide`; kernels/motion_blur.cl MOTION_BLUR_LANES)."""
+        return 16 if rt.wide else 1
+
     def _kernel(self, rt, camera, name):
         from ..codegen import library, library_lanes16
         from ..runtime import kernel_source
 
         src = library() + library_lanes16() + "\n" + kernel_source("motion_blur")
-        return rt.kernel(src, name, self.defines(camera), "motion_blur")
+        return rt.kernel(src, name, {**self.defines(camera), "MOTION_BLUR_LANES": self.lanes(rt)}, "motion_blur")
+
+    def _row_launch(self, rt, w, h):
+        """(global, local) of the per-pixel kernels: 16 pixels of a row per work-item in 8×1 groups
+        (CPU), or one pixel per work-item in 32×4 groups (GPU: a warp reads a row's 32 pixels)."""
+        if self.lanes(rt) == 16:
+            return (-(-w // 16), h), (8, 1)
+        return (w, h), (32, 4)
 
     def _buffers(self, rt, w, h):
         tw, th = -(-w // TILE), -(-h // TILE)
@@ -259,7 +272,7 @@ class MotionBlur(GatherStage):
             k = self._kernel(rt, camera, "motion_blur_prep")
             k.set_args(aux["velocity"], aux["depth"], b["hv"], b["iz"], np.int32(w), np.int32(h),
                        np.float32(shutter_fraction(camera) / 2.0))
-            events.append(rt.launch(k, (-(-w // 16), h), (8, 1)))
+            events.append(rt.launch(k, *self._row_launch(rt, w, h)))
             k = self._kernel(rt, camera, "motion_blur_tilemax")
             k.set_args(b["hv"], b["tile"], np.int32(w), np.int32(h), np.int32(tw), np.int32(th))
             events.append(rt.launch(k, (tw, th)))
@@ -269,8 +282,7 @@ class MotionBlur(GatherStage):
             k = self._kernel(rt, camera, "motion_blur")
             k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], np.int32(w), np.int32(h),
                        np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(frame.index))
-            # 16 pixels of a row per work-item, 8×1 work-groups (kernels/motion_blur.cl)
-            events.append(rt.launch(k, (-(-w // 16), h), (8, 1)))
+            events.append(rt.launch(k, *self._row_launch(rt, w, h)))
         if rolling:
             k = self._kernel(rt, camera, "motion_blur_rolling")
             k.set_args(blur_dst if blur else src, dst, aux["velocity"], np.int32(w), np.int32(h),
