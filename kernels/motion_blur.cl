@@ -28,6 +28,7 @@
 #endif
 
 #define MOTION_BLUR_SOFT_Z 0.05f   /* relative depth difference over which fore/background blend */
+#define MOTION_BLUR_FOOT 0.5f      /* half a pixel: a swept pixel's footprint reaches this beyond |h| (FOOT in the .py) */
 #define MOTION_BLUR_AGREE0 0.8f    /* cos(v_N, h_X) below which the tap sets split (AGREE0/1 in the .py) */
 #define MOTION_BLUR_AGREE1 0.95f
 
@@ -214,8 +215,11 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
     nmax[tn + t] = best.y;
 }
 
+/* 1 within a streak of half-length len, ramping to 0 over len -/+ r, r = max(half a pixel, 5 % of len):
+ * a surface pixel swept over +-len overlaps X's pixel partly up to half a pixel beyond */
 inline float motion_blur_cylinder(float dist, float len) {
-    return 1.0f - smoothstep(0.95f * len, 1.05f * len, dist);
+    const float r = fmax(MOTION_BLUR_FOOT, 0.05f * len);
+    return 1.0f - smoothstep(len - r, len + r, dist);
 }
 
 /* weight that a surface of inverse depth wa is in front of one of inverse depth wb:
@@ -266,9 +270,12 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     /* taps of this pixel (motion_blur_taps), strata <= 1 / MOTION_BLUR_DENSITY px apart */
     const int ns = motion_blur_taps(ln);
     const float inv_s = 1.0f / (float)ns;
+    /* the tap paths reach half a pixel beyond |v| (the swept pixel's footprint, see the cylinder) */
+    const float pn = ln + MOTION_BLUR_FOOT, pv = lv + MOTION_BLUR_FOOT;
+    const float2 dn = vn * (pn / fmax(ln, 1e-30f)), dv = vx * (pv / fmax(lv, 1e-30f));
     /* three layers: surfaces in front of X (coverage cf), X's own surface smeared along its path
      * (coverage co, X itself weighted wc), the background behind X (revealed as X moves away) */
-    const float hdn = ln * inv_s, hdv = lv * inv_s;   /* half the path length per tap, per set */
+    const float hdn = pn * inv_s, hdv = pv * inv_s;   /* half the path length per tap, per set */
     /* X's own point covers X for (its footprint: the centre stratum's path, at least the pixel)
      * over its streak 2 |h_X|: a static pixel (|h_X| <= 0.5) is its own surface all the time */
     const float wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
@@ -276,7 +283,7 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     float3 sf = (float3)(0.0f), so = cx * wc, sb = cx * wb;
     for (int s = 0; s < ns; ++s) {
         if (s == ns / 2) continue;   /* the centre stratum is X itself */
-        const float2 dir = (s & 1) ? vx : vn;
+        const float2 dir = (s & 1) ? dv : dn;
         const float u = ((float)s + 0.5f + j) * inv_s;   /* S strata covering the whole path */
         const float tt = 2.0f * u - 1.0f;
         const float ox = dir.x * tt;
@@ -295,13 +302,15 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const float b = clamp(1.0f + r, 0.0f, 1.0f);
         /* Y's surface passes over X for (path length per tap) / (Y's streak 2 |h_Y|) of the shutter;
          * where the tap sets split, odd taps carry X's own surface and even taps what is in front.
-         * Background estimate (ab): surfaces behind X, or level with it whose streak misses X. */
+         * Background estimate (ab): surfaces behind X, or level with it whose streak misses X,
+         * weighted by 1 / max(d, 1)^2 (what is hidden behind X looks most like what is next to it) */
+        const float dd = fmax(dist, 1.0f);
         const float cly = motion_blur_cylinder(dist, ly);
         const float a = cly * ((s & 1) ? hdv : hdn) / ly;
         const float own = b * motion_blur_cylinder(dist, lx);   /* level with X and on X's path */
         const float af = f * (1.0f - own) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
         const float ao = f * own * a * (agree + (1.0f - agree) * ((s & 1) ? 2.0f : 0.0f));
-        const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx);
+        const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx) / (dd * dd);
         const float3 cy = load_planar(src, k, n);
         cf += af;
         sf += af * cy;
@@ -325,13 +334,14 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
  * loads), explicit float16 compiles to 16-lane vector code. Taps are per-lane gathers. */
 #define MB_GATHER(buf, k) CLP_GATHER16(buf, k)
 inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
-    return 1.0f - smoothstep(0.95f * len, 1.05f * len, dist);
+    const float16 r = fmax(MOTION_BLUR_FOOT, 0.05f * len);
+    return 1.0f - smoothstep(len - r, len + r, dist);
 }
 
 /* one tap s of motion_blur_16 on all lanes where TAP (int16) is true; uses and updates its locals */
 #define MB_TAP16(s, TAP) do { \
         const int odd = (s) & 1; \
-        const float16 dx = odd ? vxx : vnx, dy = odd ? vxy : vny; \
+        const float16 dx = odd ? dvx : dnx, dy = odd ? dvy : dny; \
         const float16 u = ((float)(s) + 0.5f + j) * inv_s; \
         const float16 tt = 2.0f * u - 1.0f; \
         const float16 ox = dx * tt; \
@@ -352,7 +362,8 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         const float16 own = b * clx; \
         const float16 af0 = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f)); \
         const float16 ao0 = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f)); \
-        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx; \
+        const float16 dd = fmax(dist, 1.0f); \
+        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx / (dd * dd); \
         const int16 tap = (TAP);   /* lanes past their own S or at their centre: nothing */ \
         const float16 af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f; \
         const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k); \
@@ -416,7 +427,10 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     const int4 n4 = min(n8.lo, n8.hi);
     const int2 n2 = min(n4.lo, n4.hi);
     const int smin = min(n2.x, n2.y);
-    const float16 hdn = ln * inv_s, hdv = lv * inv_s;
+    const float16 pn = ln + MOTION_BLUR_FOOT, pv = lv + MOTION_BLUR_FOOT;   /* paths reach half a pixel beyond |v| */
+    const float16 sn = pn / fmax(ln, 1e-30f), sv = pv / fmax(lv, 1e-30f);
+    const float16 dnx = vnx * sn, dny = vny * sn, dvx = vxx * sv, dvy = vxy * sv;
+    const float16 hdn = pn * inv_s, hdv = pv * inv_s;
     const float16 wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
     const float16 xf = convert_float16(xs), yf = (float16)((float)y);
     float16 cf = 0.0f, co = wc, wb = 1e-3f;

@@ -144,6 +144,9 @@ DENSITY = 1.5
 """Taps per px of |v_N|: a pixel takes S = min(S_q, 2⌈DENSITY |v_N|⌉ + 1) taps (module docstring)."""
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
 SOFT_Z = 0.05
+FOOT = 0.5
+"""Half a pixel: a surface pixel swept over ±|h| overlaps a pixel partly up to FOOT beyond |h|, so
+the tap paths reach |v| + FOOT and the cylinders ramp over ±max(FOOT, 0.05 |h|) (module docstring)."""
 FRINGE = 0.1
 AGREE0, AGREE1 = 0.8, 0.95
 """cos(angle) between v_N and X's own half-vector below which the two tap sets split the work."""
@@ -373,10 +376,11 @@ def _len32(v32: np.ndarray) -> np.ndarray:
 
 
 def _cylinder32(dist: np.ndarray, length: np.ndarray) -> np.ndarray:
-    """1 − smoothstep(0.95 l, 1.05 l, d) in float32, as the kernel rounds it (a tap just at the
-    edge can carry a huge colour: its weight must round the same way)."""
+    """cyl(d, l) = 1 − smoothstep(l − r, l + r, d), r = max(FOOT, 0.05 l), in float32 as the kernel
+    rounds it (a tap just at the edge can carry a huge colour: its weight must round the same way)."""
     d, l = np.asarray(dist, np.float32), np.asarray(length, np.float32)
-    e0, e1 = np.float32(0.95) * l, np.float32(1.05) * l
+    r = np.maximum(np.float32(FOOT), np.float32(0.05) * l)
+    e0, e1 = l - r, l + r
     t = np.clip((d - e0) / (e1 - e0), np.float32(0), np.float32(1))
     return (np.float32(1) - t * t * (np.float32(3) - np.float32(2) * t)).astype(np.float64)
 
@@ -427,22 +431,28 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     lx32 = np.maximum(lhx, np.float32(0.5))
     lx = lx32.astype(np.float64)
     vx32 = np.where((lhx > 0.5)[..., None], h32, vn32)   # odd taps: X's own motion
-    ln = _len32(vn32).astype(np.float64)
-    lv = _len32(vx32).astype(np.float64)
+    ln32, lv32 = _len32(vn32), _len32(vx32)
+    ln, lv = ln32.astype(np.float64), lv32.astype(np.float64)
     cosang = (vn32[..., 0] * vx32[..., 0] + vn32[..., 1] * vx32[..., 1]) / np.maximum(ln * lv, 1e-30)
     agree = np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0)
     j = jitter(seed, frame_index, xs, ys)
     ns = taps(_len32(vn32), samples)                          # S per pixel
     inv = np.float32(1) / ns.astype(np.float32)
     inv64 = inv.astype(np.float64)
-    wc = np.maximum((ln + lv) * inv64, 1.0) / (2.0 * lx)    # at least the pixel's own footprint
+    # tap paths reach FOOT beyond |v|: directions scaled to |v| + FOOT, in float32 as the kernel
+    pn32, pv32 = ln32 + np.float32(FOOT), lv32 + np.float32(FOOT)
+    tiny = np.float32(1e-30)
+    dn32 = vn32 * (pn32 / np.maximum(ln32, tiny))[..., None]
+    dv32 = vx32 * (pv32 / np.maximum(lv32, tiny))[..., None]
+    pn, pv = pn32.astype(np.float64), pv32.astype(np.float64)
+    wc = np.maximum((pn32 * inv).astype(np.float64) + (pv32 * inv), 1.0) / (2.0 * lx)   # at least the pixel
     cf, sf = np.zeros((hh, ww)), np.zeros_like(color)          # surfaces in front of X
     co, so = wc.copy(), color * wc[..., None]                  # X's own surface along its path
     wb = np.full((hh, ww), 1e-3)
     sb = color * wb[..., None]                                  # the background behind X
     for s in range(samples):
         tap = (s < ns) & (s != ns // 2)          # the centre stratum is X itself
-        d32 = vx32 if s % 2 else vn32
+        d32 = dv32 if s % 2 else dn32
         u = (np.float32(s) + np.float32(0.5) + j) * inv
         t = np.float32(2.0) * u - np.float32(1.0)
         ox, oy = d32[..., 0] * t, d32[..., 1] * t
@@ -455,11 +465,12 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         wy = iz[sy, sx]
         f, b = _front(wy, iz), _front(iz, wy)
         cly = _cylinder32(dist, ly32)
-        a = tap * cly * (lv if s % 2 else ln) * inv64 / ly
+        a = tap * cly * (pv if s % 2 else pn) * inv64 / ly
         own = b * _cylinder32(dist, lx32)        # level with X and on X's own path
         af = f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
         ao = f * own * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
-        ab = tap * b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
+        ab = (tap * b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
+              / np.maximum(dist, 1.0) ** 2)                                           # nearest look most like it
         cy = color[sy, sx]
         cf, sf = cf + af, sf + af[..., None] * cy
         co, so = co + ao, so + ao[..., None] * cy
