@@ -215,11 +215,12 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
     nmax[tn + t] = best.y;
 }
 
-/* 1 within a streak of half-length len, ramping to 0 over len -/+ r, r = max(half a pixel, 5 % of len):
- * a surface pixel swept over +-len overlaps X's pixel partly up to half a pixel beyond */
+/* 1 within a streak of half-length len, ramping to 0 over len -/+ half a pixel (a surface pixel
+ * swept over +-len overlaps X's pixel partly up to half a pixel beyond): 1 - smoothstep(len - 1/2,
+ * len + 1/2, dist), its unit width written out (no division) */
 inline float motion_blur_cylinder(float dist, float len) {
-    const float r = fmax(MOTION_BLUR_FOOT, 0.05f * len);
-    return 1.0f - smoothstep(len - r, len + r, dist);
+    const float t = clamp(dist - len + MOTION_BLUR_FOOT, 0.0f, 1.0f);
+    return 1.0f - t * t * (3.0f - 2.0f * t);
 }
 
 /* weight that a surface of inverse depth wa is in front of one of inverse depth wb:
@@ -292,7 +293,8 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const int sy = clamp((int)floor((float)y + oy + 0.5f), 0, height - 1);
         const size_t k = (size_t)sy * (size_t)width + (size_t)sx;
         const float ddx = (float)(sx - x), ddy = (float)(sy - y);
-        const float dist = sqrt(ddx * ddx + ddy * ddy);
+        const float d2 = ddx * ddx + ddy * ddy;
+        const float dist = sqrt(d2);
         const float2 hy = (float2)(hv[k], hv[n + k]);
         const float ly = fmax(sqrt(motion_blur_len2(hy)), 0.5f);
         const float wy = iz[k];
@@ -304,13 +306,12 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
          * where the tap sets split, odd taps carry X's own surface and even taps what is in front.
          * Background estimate (ab): surfaces behind X, or level with it whose streak misses X,
          * weighted by 1 / max(d, 1)^2 (what is hidden behind X looks most like what is next to it) */
-        const float dd = fmax(dist, 1.0f);
         const float cly = motion_blur_cylinder(dist, ly);
         const float a = cly * ((s & 1) ? hdv : hdn) / ly;
         const float own = b * motion_blur_cylinder(dist, lx);   /* level with X and on X's path */
         const float af = f * (1.0f - own) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
         const float ao = f * own * a * (agree + (1.0f - agree) * ((s & 1) ? 2.0f : 0.0f));
-        const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx) / (dd * dd);
+        const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx) / fmax(d2, 1.0f);
         const float3 cy = load_planar(src, k, n);
         cf += af;
         sf += af * cy;
@@ -334,8 +335,8 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
  * loads), explicit float16 compiles to 16-lane vector code. Taps are per-lane gathers. */
 #define MB_GATHER(buf, k) CLP_GATHER16(buf, k)
 inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
-    const float16 r = fmax(MOTION_BLUR_FOOT, 0.05f * len);
-    return 1.0f - smoothstep(len - r, len + r, dist);
+    const float16 t = clamp(dist - len + MOTION_BLUR_FOOT, 0.0f, 1.0f);
+    return 1.0f - t * t * (3.0f - 2.0f * t);
 }
 
 /* one tap s of motion_blur_16 on all lanes where TAP (int16) is true; uses and updates its locals */
@@ -350,7 +351,8 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         const int16 sy = clamp(convert_int16(floor(yf + oy + 0.5f)), 0, height - 1); \
         const int16 k = sy * width + sx; \
         const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y); \
-        const float16 dist = sqrt(ddx * ddx + ddy * ddy); \
+        const float16 d2 = ddx * ddx + ddy * ddy; \
+        const float16 dist = sqrt(d2); \
         const float16 ly = MB_GATHER(hv + 3 * n, k);   /* max(|h_Y|, 0.5) */ \
         const float16 wy = MB_GATHER(iz, k); \
         const float16 r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f)); \
@@ -362,8 +364,7 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         const float16 own = b * clx; \
         const float16 af0 = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f)); \
         const float16 ao0 = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f)); \
-        const float16 dd = fmax(dist, 1.0f); \
-        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx / (dd * dd); \
+        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx / fmax(d2, 1.0f); \
         const int16 tap = (TAP);   /* lanes past their own S or at their centre: nothing */ \
         const float16 af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f; \
         const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k); \

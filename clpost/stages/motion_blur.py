@@ -27,7 +27,10 @@ of its 3×3 neighbours (edge-clamped, first in scan order on ties) takes that ne
 and depth: its colour is (partly) that surface's, and spreads with it.
 
 *Taps.* S taps along two directions: even i along :math:`v_N`, odd i along X's own half-vector
-:math:`h_X` (:math:`v_N` where :math:`|h_X| \le 0.5`), stratified over the whole path,
+:math:`h_X` (:math:`v_N` where :math:`|h_X| \le 0.5`), stratified over the whole path, which reaches
+FOOT = ½ px beyond the vector — :math:`d_i = \hat v\,(|v| + \tfrac12)` for v = :math:`v_N` or
+:math:`h_X` (a surface pixel swept over ±|h| overlaps its neighbours partly up to half a pixel
+further: its footprint),
 
 .. math::
 
@@ -42,8 +45,8 @@ frame's cost follows its motion; the choice of D: ``docs/motion_blur.md``).
 
 *Coverage.* A surface Y moving with half-vector :math:`h_Y` passes over X, |X − Y| = d, for the
 fraction :math:`\delta_i / (2|h_Y|)` of the shutter per tap (:math:`\delta_i = 2|d_i|/S` the path
-length a tap stands for; cylinder cyl(d, l) = 1 − smoothstep(0.95 l, 1.05 l, d) limits it to Y's
-streak). With f = "Y in front of X", b = "X in front of Y" by a soft depth test on inverse depth
+length a tap stands for; cylinder cyl(d, l) = 1 − smoothstep(l − ½, l + ½, d) limits it to Y's
+streak, ramping over the swept pixel's footprint; its integral over d stays 2l). With f = "Y in front of X", b = "X in front of Y" by a soft depth test on inverse depth
 (ramp over 5 % relative depth, the sky's inverse depth 0) and :math:`a_i = \mathrm{cyl}(d,
 |h_Y|)\,\delta_i / (2|h_Y|)`, :math:`o_i = b\,\mathrm{cyl}(d, |h_X|)` ("level with X and on X's
 own path"), three layers are gathered:
@@ -55,8 +58,10 @@ own path"), three layers are gathered:
   the pixel; a static pixel is its own surface all the time), colour O = weighted mean (a box for
   uniform motion);
 - behind X (revealed as X's surface moves away): weights :math:`b\,\big((1-f) + f\,(1 -
-  \mathrm{cyl}(d, |h_Y|))\big)\,\mathrm{cyl}(d, |h_X|)` (surfaces behind X, or level with it whose
-  streak misses X), colour B (X itself at weight 10⁻³ when there is none);
+  \mathrm{cyl}(d, |h_Y|))\big)\,\mathrm{cyl}(d, |h_X|) / \max(d, 1)^2` (surfaces behind X, or level
+  with it whose streak misses X; inverse-square in the distance: what X hides looks most like the
+  background right next to it, not like the mean of its whole path), colour B (X itself at weight
+  10⁻³ when there is none);
 
 .. math::
 
@@ -146,7 +151,7 @@ SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
 SOFT_Z = 0.05
 FOOT = 0.5
 """Half a pixel: a surface pixel swept over ±|h| overlaps a pixel partly up to FOOT beyond |h|, so
-the tap paths reach |v| + FOOT and the cylinders ramp over ±max(FOOT, 0.05 |h|) (module docstring)."""
+the tap paths reach |v| + FOOT and the cylinders ramp over |h| ± FOOT (module docstring)."""
 FRINGE = 0.1
 AGREE0, AGREE1 = 0.8, 0.95
 """cos(angle) between v_N and X's own half-vector below which the two tap sets split the work."""
@@ -376,12 +381,10 @@ def _len32(v32: np.ndarray) -> np.ndarray:
 
 
 def _cylinder32(dist: np.ndarray, length: np.ndarray) -> np.ndarray:
-    """cyl(d, l) = 1 − smoothstep(l − r, l + r, d), r = max(FOOT, 0.05 l), in float32 as the kernel
-    rounds it (a tap just at the edge can carry a huge colour: its weight must round the same way)."""
+    """cyl(d, l) = 1 − smoothstep(l − FOOT, l + FOOT, d) in float32 as the kernel rounds it,
+    t = d − l + FOOT (a tap just at the edge can carry a huge colour: its weight must round the same way)."""
     d, l = np.asarray(dist, np.float32), np.asarray(length, np.float32)
-    r = np.maximum(np.float32(FOOT), np.float32(0.05) * l)
-    e0, e1 = l - r, l + r
-    t = np.clip((d - e0) / (e1 - e0), np.float32(0), np.float32(1))
+    t = np.clip((d - l) + np.float32(FOOT), np.float32(0), np.float32(1))
     return (np.float32(1) - t * t * (np.float32(3) - np.float32(2) * t)).astype(np.float64)
 
 
@@ -470,7 +473,7 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         af = f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
         ao = f * own * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
         ab = (tap * b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
-              / np.maximum(dist, 1.0) ** 2)                                           # nearest look most like it
+              / np.maximum(dx32 * dx32 + dy32 * dy32, np.float32(1)))                 # nearest look most like it
         cy = color[sy, sx]
         cf, sf = cf + af, sf + af[..., None] * cy
         co, so = co + ao, so + ao[..., None] * cy
