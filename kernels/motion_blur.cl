@@ -15,7 +15,20 @@
 #pragma OPENCL FP_CONTRACT OFF
 /* FP_CONTRACT OFF: no a*b+c fusion, so tap positions round exactly as in the numpy reference. */
 
+/* MOTION_BLUR_LANES: pixels per work-item of the prep and the gather, 16 (explicit float16 rows, for
+ * CPUs: PoCL vectorises neither one-pixel form) or 1 (one pixel per work-item, for GPUs, where a
+ * 16-wide work-item makes uncoalesced loads and few work-items); the stage sets it from
+ * Runtime.wide. The one-pixel functions below are the spec either way (the 16-wide ones do the
+ * same operations lane for lane). */
+#ifndef MOTION_BLUR_LANES
+#define MOTION_BLUR_LANES 16
+#endif
+#if MOTION_BLUR_LANES != 16 && MOTION_BLUR_LANES != 1
+#error "MOTION_BLUR_LANES must be 16 or 1"
+#endif
+
 #define MOTION_BLUR_SOFT_Z 0.05f   /* relative depth difference over which fore/background blend */
+#define MOTION_BLUR_FOOT 0.5f      /* half a pixel: a swept pixel's footprint reaches this beyond |h| (FOOT in the .py) */
 #define MOTION_BLUR_AGREE0 0.8f    /* cos(v_N, h_X) below which the tap sets split (AGREE0/1 in the .py) */
 #define MOTION_BLUR_AGREE1 0.95f
 
@@ -80,6 +93,7 @@ inline void motion_blur_prep_px(__global const float *restrict velocity,
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
 }
 
+#if MOTION_BLUR_LANES == 16
 /* motion_blur_prep_px on 16 pixels of a row (x0 - 1 >= 0 and x0 + 16 < width: no column clamp),
  * lane for lane the same operations; neighbours are row loads at offsets -1, 0, +1 (velocity
  * interleaved: even/odd lanes of 32 floats). */
@@ -128,13 +142,16 @@ inline void motion_blur_prep_16(__global const float *restrict velocity,
     vstore16(isinf(z) ? 0.0f : 1.0f / z, 0, iz + i0);
 }
 
-/* h, |h| key and 1/depth per pixel: 16 pixels of a row per work-item (x0 = 16 gid0); groups that
- * touch the left or right edge one pixel at a time (their neighbours clamp) */
+#endif /* MOTION_BLUR_LANES == 16 */
+
+/* h, |h| key and 1/depth per pixel: 16 pixels of a row per work-item (x0 = 16 gid0; groups that
+ * touch the left or right edge one pixel at a time: their neighbours clamp), or one (LANES 1) */
 __kernel void motion_blur_prep(__global const float *restrict velocity,
                                __global const float *restrict depth,
                                __global float *restrict hv, __global float *restrict iz,
                                const int width, const int height, const float k)
 {
+#if MOTION_BLUR_LANES == 16
     const int x0 = get_global_id(0) * 16, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     if (x0 >= 1 && x0 + 16 < width) {
@@ -143,6 +160,11 @@ __kernel void motion_blur_prep(__global const float *restrict velocity,
         for (int x = x0; x < min(x0 + 16, width); ++x)
             motion_blur_prep_px(velocity, depth, hv, iz, x, y, width, height, k);
     }
+#else
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    motion_blur_prep_px(velocity, depth, hv, iz, x, y, width, height, k);
+#endif
 }
 
 /* largest half-vector (by length; first in scan order on ties) of each K x K tile */
@@ -193,8 +215,12 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
     nmax[tn + t] = best.y;
 }
 
+/* 1 within a streak of half-length len, ramping to 0 over len -/+ half a pixel (a surface pixel
+ * swept over +-len overlaps X's pixel partly up to half a pixel beyond): 1 - smoothstep(len - 1/2,
+ * len + 1/2, dist), its unit width written out (no division) */
 inline float motion_blur_cylinder(float dist, float len) {
-    return 1.0f - smoothstep(0.95f * len, 1.05f * len, dist);
+    const float t = clamp(dist - len + MOTION_BLUR_FOOT, 0.0f, 1.0f);
+    return 1.0f - t * t * (3.0f - 2.0f * t);
 }
 
 /* weight that a surface of inverse depth wa is in front of one of inverse depth wb:
@@ -212,7 +238,7 @@ inline int motion_blur_taps(const float ln) {
     return min(MOTION_BLUR_SAMPLES, 2 * (int)ceil(MOTION_BLUR_DENSITY * ln) + 1);
 }
 
-/* One pixel (the row's last 1-15 pixels of the kernel below); motion_blur_16 is the same
+/* One pixel (every pixel with MOTION_BLUR_LANES 1, else the row's last 1-15 of the kernel below); motion_blur_16 is the same
  * arithmetic in 16 lanes. */
 inline void motion_blur_px(__global const float *restrict src, __global float *restrict dst,
                            __global const float *restrict hv, __global const float *restrict iz,
@@ -245,9 +271,12 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     /* taps of this pixel (motion_blur_taps), strata <= 1 / MOTION_BLUR_DENSITY px apart */
     const int ns = motion_blur_taps(ln);
     const float inv_s = 1.0f / (float)ns;
+    /* the tap paths reach half a pixel beyond |v| (the swept pixel's footprint, see the cylinder) */
+    const float pn = ln + MOTION_BLUR_FOOT, pv = lv + MOTION_BLUR_FOOT;
+    const float2 dn = vn * (pn / fmax(ln, 1e-30f)), dv = vx * (pv / fmax(lv, 1e-30f));
     /* three layers: surfaces in front of X (coverage cf), X's own surface smeared along its path
      * (coverage co, X itself weighted wc), the background behind X (revealed as X moves away) */
-    const float hdn = ln * inv_s, hdv = lv * inv_s;   /* half the path length per tap, per set */
+    const float hdn = pn * inv_s, hdv = pv * inv_s;   /* half the path length per tap, per set */
     /* X's own point covers X for (its footprint: the centre stratum's path, at least the pixel)
      * over its streak 2 |h_X|: a static pixel (|h_X| <= 0.5) is its own surface all the time */
     const float wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
@@ -255,7 +284,7 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     float3 sf = (float3)(0.0f), so = cx * wc, sb = cx * wb;
     for (int s = 0; s < ns; ++s) {
         if (s == ns / 2) continue;   /* the centre stratum is X itself */
-        const float2 dir = (s & 1) ? vx : vn;
+        const float2 dir = (s & 1) ? dv : dn;
         const float u = ((float)s + 0.5f + j) * inv_s;   /* S strata covering the whole path */
         const float tt = 2.0f * u - 1.0f;
         const float ox = dir.x * tt;
@@ -264,7 +293,8 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const int sy = clamp((int)floor((float)y + oy + 0.5f), 0, height - 1);
         const size_t k = (size_t)sy * (size_t)width + (size_t)sx;
         const float ddx = (float)(sx - x), ddy = (float)(sy - y);
-        const float dist = sqrt(ddx * ddx + ddy * ddy);
+        const float d2 = ddx * ddx + ddy * ddy;
+        const float dist = sqrt(d2);
         const float2 hy = (float2)(hv[k], hv[n + k]);
         const float ly = fmax(sqrt(motion_blur_len2(hy)), 0.5f);
         const float wy = iz[k];
@@ -274,13 +304,14 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const float b = clamp(1.0f + r, 0.0f, 1.0f);
         /* Y's surface passes over X for (path length per tap) / (Y's streak 2 |h_Y|) of the shutter;
          * where the tap sets split, odd taps carry X's own surface and even taps what is in front.
-         * Background estimate (ab): surfaces behind X, or level with it whose streak misses X. */
+         * Background estimate (ab): surfaces behind X, or level with it whose streak misses X,
+         * weighted by 1 / max(d, 1)^2 (what is hidden behind X looks most like what is next to it) */
         const float cly = motion_blur_cylinder(dist, ly);
         const float a = cly * ((s & 1) ? hdv : hdn) / ly;
         const float own = b * motion_blur_cylinder(dist, lx);   /* level with X and on X's path */
         const float af = f * (1.0f - own) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
         const float ao = f * own * a * (agree + (1.0f - agree) * ((s & 1) ? 2.0f : 0.0f));
-        const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx);
+        const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx) / fmax(d2, 1.0f);
         const float3 cy = load_planar(src, k, n);
         cf += af;
         sf += af * cy;
@@ -297,19 +328,21 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
 }
 
 
+#if MOTION_BLUR_LANES == 16
 /* The gather on 16 consecutive pixels of a row (x0 .. x0 + 15), every lane the arithmetic of
  * motion_blur_px operation for operation (FP_CONTRACT OFF; the same roundings, so the same tap
  * positions): PoCL does not vectorise the one-pixel form (float3, sqrt, smoothstep, data-dependent
  * loads), explicit float16 compiles to 16-lane vector code. Taps are per-lane gathers. */
 #define MB_GATHER(buf, k) CLP_GATHER16(buf, k)
 inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
-    return 1.0f - smoothstep(0.95f * len, 1.05f * len, dist);
+    const float16 t = clamp(dist - len + MOTION_BLUR_FOOT, 0.0f, 1.0f);
+    return 1.0f - t * t * (3.0f - 2.0f * t);
 }
 
 /* one tap s of motion_blur_16 on all lanes where TAP (int16) is true; uses and updates its locals */
 #define MB_TAP16(s, TAP) do { \
         const int odd = (s) & 1; \
-        const float16 dx = odd ? vxx : vnx, dy = odd ? vxy : vny; \
+        const float16 dx = odd ? dvx : dnx, dy = odd ? dvy : dny; \
         const float16 u = ((float)(s) + 0.5f + j) * inv_s; \
         const float16 tt = 2.0f * u - 1.0f; \
         const float16 ox = dx * tt; \
@@ -318,7 +351,8 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         const int16 sy = clamp(convert_int16(floor(yf + oy + 0.5f)), 0, height - 1); \
         const int16 k = sy * width + sx; \
         const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y); \
-        const float16 dist = sqrt(ddx * ddx + ddy * ddy); \
+        const float16 d2 = ddx * ddx + ddy * ddy; \
+        const float16 dist = sqrt(d2); \
         const float16 ly = MB_GATHER(hv + 3 * n, k);   /* max(|h_Y|, 0.5) */ \
         const float16 wy = MB_GATHER(iz, k); \
         const float16 r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f)); \
@@ -330,7 +364,7 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         const float16 own = b * clx; \
         const float16 af0 = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f)); \
         const float16 ao0 = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f)); \
-        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx; \
+        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx / fmax(d2, 1.0f); \
         const int16 tap = (TAP);   /* lanes past their own S or at their centre: nothing */ \
         const float16 af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f; \
         const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k); \
@@ -394,7 +428,10 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     const int4 n4 = min(n8.lo, n8.hi);
     const int2 n2 = min(n4.lo, n4.hi);
     const int smin = min(n2.x, n2.y);
-    const float16 hdn = ln * inv_s, hdv = lv * inv_s;
+    const float16 pn = ln + MOTION_BLUR_FOOT, pv = lv + MOTION_BLUR_FOOT;   /* paths reach half a pixel beyond |v| */
+    const float16 sn = pn / fmax(ln, 1e-30f), sv = pv / fmax(lv, 1e-30f);
+    const float16 dnx = vnx * sn, dny = vny * sn, dvx = vxx * sv, dvy = vxy * sv;
+    const float16 hdn = pn * inv_s, hdv = pv * inv_s;
     const float16 wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
     const float16 xf = convert_float16(xs), yf = (float16)((float)y);
     float16 cf = 0.0f, co = wc, wb = 1e-3f;
@@ -477,13 +514,16 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     vstore16(still ? cxb : cfc * frb + (1.0f - cfc) * oub, 0, dst + 2 * n + i0);
 }
 
-/* 16 pixels of a row per work-item (x0 = 16 gid0); the row's last 1-15 one by one */
+#endif /* MOTION_BLUR_LANES == 16 */
+
+/* 16 pixels of a row per work-item (x0 = 16 gid0; the row's last 1-15 one by one), or one (LANES 1) */
 __kernel void motion_blur(__global const float *restrict src, __global float *restrict dst,
                           __global const float *restrict hv, __global const float *restrict iz,
                           __global const float *restrict nmax,
                           const int width, const int height, const int tw, const int th,
                           const uint seed, const uint frame)
 {
+#if MOTION_BLUR_LANES == 16
     const int x0 = get_global_id(0) * 16, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     if (x0 + 16 <= width) {
@@ -492,6 +532,11 @@ __kernel void motion_blur(__global const float *restrict src, __global float *re
         for (int x = x0; x < width; ++x)
             motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame);
     }
+#else
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame);
+#endif
 }
 
 /* rolling shutter: row y is exposed tau_y = r (y/(H-1) - 1/2) frames after the frame time, so it

@@ -16,9 +16,10 @@ from clpost.pipeline import Pipeline
 DATA = Path(__file__).parent / "data" / "cycles"
 MANIFEST = json.loads((DATA / "manifest.json").read_text())
 VECTOR_BLUR = (32.91, 0.0248)
-# quality -> (PSNR dB, FLIP) in the motion box, measured; main before issue 16 item 3:
-# 30.40 / 30.57 / 30.82 dB and FLIP 0.0384 / 0.0388 / 0.0389
-MEASURED = {"draft": (32.39, 0.0290), "preview": (33.53, 0.0242), "final": (33.79, 0.0220)}
+# quality -> (PSNR dB, FLIP) in the motion box, measured with the swept-pixel footprint and the
+# nearest-weighted background (docs/motion_blur.md); before them 32.39 / 33.53 / 33.79 dB and FLIP
+# 0.0290 / 0.0242 / 0.0220; main before issue 16 item 3: 30.40 / 30.57 / 30.82 dB, 0.0384 / 0.0388 / 0.0389
+MEASURED = {"draft": (32.68, 0.0273), "preview": (34.01, 0.0224), "final": (34.23, 0.0202)}
 pytestmark = pytest.mark.skipif("motion" not in MANIFEST["scenes"], reason="no motion scene stored")
 
 
@@ -43,9 +44,9 @@ def test_motion_box_floor_vs_cycles(quality):
     psnr = fd.psnr_srgb(truth[y0:y1, x0:x1], out[y0:y1, x0:x1])
     assert psnr >= MEASURED[quality][0] - 0.3, f"{quality}: {psnr:.2f} dB"
     if quality == "final":
-        assert psnr > VECTOR_BLUR[0] + 0.5, psnr   # issue 16's target is +1 dB: not met (docs)
+        assert psnr > VECTOR_BLUR[0] + 1.0, psnr   # issue 16's target: >= 1 dB above Vector Blur
     flip = fd.flip_ldr(truth[y0:y1, x0:x1], out[y0:y1, x0:x1])
     if flip is not None:                             # flip-evaluator installed ('.[bench]')
         assert flip <= MEASURED[quality][1] + 0.002, f"{quality}: FLIP {flip:.4f}"
-        if quality == "final":
-            assert flip < VECTOR_BLUR[1], flip
+        if quality == "final":   # issue 16's target is 20 % lower: 18.5 % measured (docs)
+            assert flip < 0.85 * VECTOR_BLUR[1], flip

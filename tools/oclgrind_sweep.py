@@ -139,6 +139,11 @@ def cases():
         for w, h in small:
             add(f"motion_blur {q} {w}x{h}",
                 lambda q=q, w=w, h=h: _run(mb, ["motion_blur"], q, w, h, velocity=6.0))
+    # motion_blur's one-pixel prep and gather (a GPU's form); 45x23: partial 32x4 groups and tiles
+    for q in ("draft", "final"):
+        for w, h in ((1, 1), (45, 23)):
+            add(f"motion_blur narrow {q} {w}x{h}",
+                lambda q=q, w=w, h=h: _run(mb, ["motion_blur"], q, w, h, velocity=6.0, narrow=True))
 
     # distortion: barrel (bench scenes), strong pincushion + tangential (fold-over, pixels
     # without data), at both filters; sizes include a partial tile in x and in y

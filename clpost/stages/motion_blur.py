@@ -27,7 +27,10 @@ of its 3×3 neighbours (edge-clamped, first in scan order on ties) takes that ne
 and depth: its colour is (partly) that surface's, and spreads with it.
 
 *Taps.* S taps along two directions: even i along :math:`v_N`, odd i along X's own half-vector
-:math:`h_X` (:math:`v_N` where :math:`|h_X| \le 0.5`), stratified over the whole path,
+:math:`h_X` (:math:`v_N` where :math:`|h_X| \le 0.5`), stratified over the whole path, which reaches
+FOOT = ½ px beyond the vector — :math:`d_i = \hat v\,(|v| + \tfrac12)` for v = :math:`v_N` or
+:math:`h_X` (a surface pixel swept over ±|h| overlaps its neighbours partly up to half a pixel
+further: its footprint),
 
 .. math::
 
@@ -42,8 +45,8 @@ frame's cost follows its motion; the choice of D: ``docs/motion_blur.md``).
 
 *Coverage.* A surface Y moving with half-vector :math:`h_Y` passes over X, |X − Y| = d, for the
 fraction :math:`\delta_i / (2|h_Y|)` of the shutter per tap (:math:`\delta_i = 2|d_i|/S` the path
-length a tap stands for; cylinder cyl(d, l) = 1 − smoothstep(0.95 l, 1.05 l, d) limits it to Y's
-streak). With f = "Y in front of X", b = "X in front of Y" by a soft depth test on inverse depth
+length a tap stands for; cylinder cyl(d, l) = 1 − smoothstep(l − ½, l + ½, d) limits it to Y's
+streak, ramping over the swept pixel's footprint; its integral over d stays 2l). With f = "Y in front of X", b = "X in front of Y" by a soft depth test on inverse depth
 (ramp over 5 % relative depth, the sky's inverse depth 0) and :math:`a_i = \mathrm{cyl}(d,
 |h_Y|)\,\delta_i / (2|h_Y|)`, :math:`o_i = b\,\mathrm{cyl}(d, |h_X|)` ("level with X and on X's
 own path"), three layers are gathered:
@@ -55,8 +58,10 @@ own path"), three layers are gathered:
   the pixel; a static pixel is its own surface all the time), colour O = weighted mean (a box for
   uniform motion);
 - behind X (revealed as X's surface moves away): weights :math:`b\,\big((1-f) + f\,(1 -
-  \mathrm{cyl}(d, |h_Y|))\big)\,\mathrm{cyl}(d, |h_X|)` (surfaces behind X, or level with it whose
-  streak misses X), colour B (X itself at weight 10⁻³ when there is none);
+  \mathrm{cyl}(d, |h_Y|))\big)\,\mathrm{cyl}(d, |h_X|) / \max(d, 1)^2` (surfaces behind X, or level
+  with it whose streak misses X; inverse-square in the distance: what X hides looks most like the
+  background right next to it, not like the mean of its whole path), colour B (X itself at weight
+  10⁻³ when there is none);
 
 .. math::
 
@@ -144,6 +149,9 @@ DENSITY = 1.5
 """Taps per px of |v_N|: a pixel takes S = min(S_q, 2⌈DENSITY |v_N|⌉ + 1) taps (module docstring)."""
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
 SOFT_Z = 0.05
+FOOT = 0.5
+"""Half a pixel: a surface pixel swept over ±|h| overlaps a pixel partly up to FOOT beyond |h|, so
+the tap paths reach |v| + FOOT and the cylinders ramp over |h| ± FOOT (module docstring)."""
 FRINGE = 0.1
 AGREE0, AGREE1 = 0.8, 0.95
 """cos(angle) between v_N and X's own half-vector below which the two tap sets split the work."""
@@ -230,12 +238,25 @@ class MotionBlur(GatherStage):
         return 3 * (self.samples + 1)
 
     # -- OpenCL -----------------------------------------------------------------------------
+    @staticmethod
+    def lanes(rt) -> int:
+        """Pixels per work-item of the prep and the gather: 16 on a CPU (explicit float16 rows),
+        1 on a GPU (:attr:`clpost.runtime.Runtime.wide`; kernels/motion_blur.cl MOTION_BLUR_LANES)."""
+        return 16 if rt.wide else 1
+
     def _kernel(self, rt, camera, name):
         from ..codegen import library, library_lanes16
         from ..runtime import kernel_source
 
         src = library() + library_lanes16() + "\n" + kernel_source("motion_blur")
-        return rt.kernel(src, name, self.defines(camera), "motion_blur")
+        return rt.kernel(src, name, {**self.defines(camera), "MOTION_BLUR_LANES": self.lanes(rt)}, "motion_blur")
+
+    def _row_launch(self, rt, w, h):
+        """(global, local) of the per-pixel kernels: 16 pixels of a row per work-item in 8×1 groups
+        (CPU), or one pixel per work-item in 32×4 groups (GPU: a warp reads a row's 32 pixels)."""
+        if self.lanes(rt) == 16:
+            return (-(-w // 16), h), (8, 1)
+        return (w, h), (32, 4)
 
     def _buffers(self, rt, w, h):
         tw, th = -(-w // TILE), -(-h // TILE)
@@ -259,7 +280,7 @@ class MotionBlur(GatherStage):
             k = self._kernel(rt, camera, "motion_blur_prep")
             k.set_args(aux["velocity"], aux["depth"], b["hv"], b["iz"], np.int32(w), np.int32(h),
                        np.float32(shutter_fraction(camera) / 2.0))
-            events.append(rt.launch(k, (-(-w // 16), h), (8, 1)))
+            events.append(rt.launch(k, *self._row_launch(rt, w, h)))
             k = self._kernel(rt, camera, "motion_blur_tilemax")
             k.set_args(b["hv"], b["tile"], np.int32(w), np.int32(h), np.int32(tw), np.int32(th))
             events.append(rt.launch(k, (tw, th)))
@@ -269,8 +290,7 @@ class MotionBlur(GatherStage):
             k = self._kernel(rt, camera, "motion_blur")
             k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], np.int32(w), np.int32(h),
                        np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(frame.index))
-            # 16 pixels of a row per work-item, 8×1 work-groups (kernels/motion_blur.cl)
-            events.append(rt.launch(k, (-(-w // 16), h), (8, 1)))
+            events.append(rt.launch(k, *self._row_launch(rt, w, h)))
         if rolling:
             k = self._kernel(rt, camera, "motion_blur_rolling")
             k.set_args(blur_dst if blur else src, dst, aux["velocity"], np.int32(w), np.int32(h),
@@ -361,11 +381,10 @@ def _len32(v32: np.ndarray) -> np.ndarray:
 
 
 def _cylinder32(dist: np.ndarray, length: np.ndarray) -> np.ndarray:
-    """1 − smoothstep(0.95 l, 1.05 l, d) in float32, as the kernel rounds it (a tap just at the
-    edge can carry a huge colour: its weight must round the same way)."""
+    """cyl(d, l) = 1 − smoothstep(l − FOOT, l + FOOT, d) in float32 as the kernel rounds it,
+    t = d − l + FOOT (a tap just at the edge can carry a huge colour: its weight must round the same way)."""
     d, l = np.asarray(dist, np.float32), np.asarray(length, np.float32)
-    e0, e1 = np.float32(0.95) * l, np.float32(1.05) * l
-    t = np.clip((d - e0) / (e1 - e0), np.float32(0), np.float32(1))
+    t = np.clip((d - l) + np.float32(FOOT), np.float32(0), np.float32(1))
     return (np.float32(1) - t * t * (np.float32(3) - np.float32(2) * t)).astype(np.float64)
 
 
@@ -415,22 +434,28 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     lx32 = np.maximum(lhx, np.float32(0.5))
     lx = lx32.astype(np.float64)
     vx32 = np.where((lhx > 0.5)[..., None], h32, vn32)   # odd taps: X's own motion
-    ln = _len32(vn32).astype(np.float64)
-    lv = _len32(vx32).astype(np.float64)
+    ln32, lv32 = _len32(vn32), _len32(vx32)
+    ln, lv = ln32.astype(np.float64), lv32.astype(np.float64)
     cosang = (vn32[..., 0] * vx32[..., 0] + vn32[..., 1] * vx32[..., 1]) / np.maximum(ln * lv, 1e-30)
     agree = np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0)
     j = jitter(seed, frame_index, xs, ys)
     ns = taps(_len32(vn32), samples)                          # S per pixel
     inv = np.float32(1) / ns.astype(np.float32)
     inv64 = inv.astype(np.float64)
-    wc = np.maximum((ln + lv) * inv64, 1.0) / (2.0 * lx)    # at least the pixel's own footprint
+    # tap paths reach FOOT beyond |v|: directions scaled to |v| + FOOT, in float32 as the kernel
+    pn32, pv32 = ln32 + np.float32(FOOT), lv32 + np.float32(FOOT)
+    tiny = np.float32(1e-30)
+    dn32 = vn32 * (pn32 / np.maximum(ln32, tiny))[..., None]
+    dv32 = vx32 * (pv32 / np.maximum(lv32, tiny))[..., None]
+    pn, pv = pn32.astype(np.float64), pv32.astype(np.float64)
+    wc = np.maximum((pn32 * inv).astype(np.float64) + (pv32 * inv), 1.0) / (2.0 * lx)   # at least the pixel
     cf, sf = np.zeros((hh, ww)), np.zeros_like(color)          # surfaces in front of X
     co, so = wc.copy(), color * wc[..., None]                  # X's own surface along its path
     wb = np.full((hh, ww), 1e-3)
     sb = color * wb[..., None]                                  # the background behind X
     for s in range(samples):
         tap = (s < ns) & (s != ns // 2)          # the centre stratum is X itself
-        d32 = vx32 if s % 2 else vn32
+        d32 = dv32 if s % 2 else dn32
         u = (np.float32(s) + np.float32(0.5) + j) * inv
         t = np.float32(2.0) * u - np.float32(1.0)
         ox, oy = d32[..., 0] * t, d32[..., 1] * t
@@ -443,11 +468,12 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         wy = iz[sy, sx]
         f, b = _front(wy, iz), _front(iz, wy)
         cly = _cylinder32(dist, ly32)
-        a = tap * cly * (lv if s % 2 else ln) * inv64 / ly
+        a = tap * cly * (pv if s % 2 else pn) * inv64 / ly
         own = b * _cylinder32(dist, lx32)        # level with X and on X's own path
         af = f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
         ao = f * own * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
-        ab = tap * b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
+        ab = (tap * b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
+              / np.maximum(dx32 * dx32 + dy32 * dy32, np.float32(1)))                 # nearest look most like it
         cy = color[sy, sx]
         cf, sf = cf + af, sf + af[..., None] * cy
         co, so = co + ao, so + ao[..., None] * cy
