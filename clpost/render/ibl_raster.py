@@ -190,10 +190,11 @@ class FloatRasterizer:
             if max(nx, ny) > MAX_TEXELS:
                 texel *= max(nx, ny) / MAX_TEXELS
                 self.coarsened.append(obj.name)
+            # whole texels over exactly the region (texel shrunk to fit): the polygon must end at
+            # the plane's edge, not up to a texel beyond it
             nx = max(2, int(math.ceil((region[1] - region[0]) / texel)))
             ny = max(2, int(math.ceil((region[3] - region[2]) / texel)))
-            # the texture covers whole texels from the region's corner
-            region = np.array([region[0], region[0] + nx * texel, region[2], region[2] + ny * texel])
+            tx, ty = (region[1] - region[0]) / nx, (region[3] - region[2]) / ny
             # every pose: shadows and emitter light depend on the other objects too
             key = (b"".join(p.tobytes() for p in poses), region.round(9).tobytes(), round(texel, 12))
             actor.VisibilityOn()
@@ -202,12 +203,12 @@ class FloatRasterizer:
             self.textures[k].SetMipmap(bool(spread > MIPMAP_SPREAD))
             if self._baked.get(k) == key:
                 continue
-            xs = region[0] + (np.arange(nx) + 0.5) * texel
-            ys = region[2] + (np.arange(ny) + 0.5) * texel
+            xs = region[0] + (np.arange(nx) + 0.5) * tx
+            ys = region[2] + (np.arange(ny) + 0.5) * ty
             gx, gy = np.meshgrid(xs, ys)
             local = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], -1)
             width = np.zeros_like(local)
-            width[:, :2] = texel  # the texel's box filter (the numpy path's: one pixel's footprint)
+            width[:, 0], width[:, 1] = tx, ty  # the texel's box filter
             rad = surface_radiance(scene, k, local, width, poses).astype(np.float32)
             img = self.vtk.vtkImageData()
             img.SetDimensions(nx, ny, 1)
