@@ -141,11 +141,12 @@ def open_rasterizer(scene, log=None):
 def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1, camera_motion: bool = False,
                                  scene=None, *, pupil_n: int = 3, threshold_deg: float = THRESHOLD_DEG,
                                  max_depth: int = 4, device: str | None = None, log=None,
-                                 pupil_pattern: str = "grid") -> list:
+                                 pupil_pattern: str = "grid", rasterizer: bool = False) -> list:
     """Frames 0 … n_frames−1 through the image-based model of ``camera``'s lens: colour from
     :func:`render_image_based`, depth and velocity from the pinhole at the entrance pupil
     (the centre of the chief rays; what the post-process path renders). Metadata records the
-    projections per frame and the timings."""
+    projections per frame and the timings. ``rasterizer``: the projections through the
+    rasterizer path where it can render the scene (else the numpy path, with the reason logged)."""
     from .demo_scene import DemoScene
     from .pyvista_renderer import PyVistaRenderer
 
@@ -154,16 +155,19 @@ def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1
     model = model_for_camera(camera, pupil_n=pupil_n, threshold_deg=threshold_deg, max_depth=max_depth,
                              pupil_pattern=pupil_pattern)
     renderer = PyVistaRenderer(scene if scene is not None else DemoScene.default(camera_motion=camera_motion))
+    raster = open_rasterizer(renderer.scene, log) if rasterizer else None
     try:
         frames = []
         for i in range(int(n_frames)):
             t0 = time.perf_counter()
-            color, stats = render_image_based(model, size, pyvista_render_fn(renderer, i), device=device)
+            fn = pyvista_render_fn(renderer, i) if raster is None else rasterizer_render_fn(raster, i)
+            color, stats = render_image_based(model, size, fn, device=device)
             stats["frame_s"] = time.perf_counter() - t0
             pin = renderer.render(camera, size, i)
             meta = dict(pin.metadata)
             meta["image_based_lens"] = dict(stats, max_angle_deg=model.max_angle_deg,
-                                            pupil_samples=len(model.pupil_samples_mm))
+                                            pupil_samples=len(model.pupil_samples_mm),
+                                            projection_path="numpy" if raster is None else "raster")
             frames.append(pin.replace(color=color, metadata=meta))
             if log is not None:
                 log(f"image-based lens frame {i}: {stats['projections']} projections, "
@@ -172,3 +176,5 @@ def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1
         return frames
     finally:
         renderer.close()
+        if raster is not None:
+            raster.close()
