@@ -418,3 +418,30 @@ def test_rasterizer_refuses_scenes_it_cannot_bake_and_open_rasterizer_falls_back
     said = []
     assert open_rasterizer(scene, log=said.append) is None
     assert "using the numpy path" in said[0]
+
+
+def test_bake_region_is_the_frustum_on_the_plane_and_nothing_behind_the_pinhole():
+    """A fronto-parallel plane at depth 3 m seen by one 101×51 px projection (f = 100 px): the
+    baked region is the frustum's footprint (±50.5 px × 3 m / 100, ±25.5 px × …) clipped to the
+    plane, the footprint 3 m / 100 px; the same plane behind the pinhole is not baked."""
+    from clpost.render.demo_scene import RigidMotion, rotation
+    from clpost.render.ibl_raster import bake_region
+    from clpost.render.ibl_warp import WarpCell
+
+    cam_pose = RigidMotion.camera((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)).matrix(0)
+    face = rotation((1.0, 0.0, 0.0), np.pi / 2)
+    cell = WarpCell(0, (0, 101, 0, 51), np.zeros((2, 2, 4)), (0.0, 0.0), (100.0, 50.0), (101, 51), 100.0,
+                    (50.0, 25.0), np.zeros(3))
+    for y, expect in ((3.0, True), (-3.0, False)):
+        pose = np.eye(4)
+        pose[:3, :3] = face
+        pose[:3, 3] = (0.0, y, 1.0)
+        got = bake_region([cell], cam_pose, pose, 10.0)
+        if not expect:
+            assert got is None
+            continue
+        region, footprint, spread = got
+        np.testing.assert_allclose(np.abs(region), [1.515, 1.515, 0.765, 0.765], rtol=1e-9)
+        assert footprint == pytest.approx(0.03) and spread == pytest.approx(1.0)
+        small = bake_region([cell], cam_pose, pose, 0.5)[0]  # a plane smaller than the view: all of it
+        np.testing.assert_allclose(np.abs(small), [0.5, 0.5, 0.5, 0.5])

@@ -64,11 +64,15 @@ def bake_region(cells: list[WarpCell], cam_pose: np.ndarray, obj_pose: np.ndarra
     the plane's nearest point), ratio infinite."""
     rot_c, cen_c = cam_pose[:3, :3], cam_pose[:3, 3]
     rot, t = obj_pose[:3, :3], obj_pose[:3, 3]
+    h = half_size_m
+    corners = np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]]) @ rot.T + t
     lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
     texel, far = math.inf, 0.0
     seen = False
     for cell in cells:
         origin = rot_c @ np.asarray(cell.cop_camera_m) + cen_c
+        if np.all((corners - origin) @ rot_c[:, 2] <= 0.0):
+            continue  # the whole plane behind this projection's pinhole
         dirs = _frustum_rays(cell) @ rot_c.T
         o = (origin - t) @ rot
         d = dirs @ rot
@@ -153,7 +157,7 @@ class FloatRasterizer:
         self.cam_pose: np.ndarray | None = None
         self.bake_s = 0.0
         self.baked_texels = 0
-        self.coarsened: list[str] = []
+        self.coarsened: set[str] = set()
 
     def prepare(self, cells: list[WarpCell], frame_index: int) -> None:
         """Bake every plane the frame's projections see (reusing an unchanged bake)."""
@@ -189,7 +193,7 @@ class FloatRasterizer:
             ny = int(math.ceil((region[3] - region[2]) / texel))
             if max(nx, ny) > MAX_TEXELS:
                 texel *= max(nx, ny) / MAX_TEXELS
-                self.coarsened.append(obj.name)
+                self.coarsened.add(obj.name)
             # whole texels over exactly the region (texel shrunk to fit): the polygon must end at
             # the plane's edge, not up to a texel beyond it
             nx = max(2, int(math.ceil((region[1] - region[0]) / texel)))
