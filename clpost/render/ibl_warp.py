@@ -202,7 +202,7 @@ class Warper:
         cl.enqueue_fill_buffer(self.rt.queue, self.acc, np.float32(0), 0, 3 * w * h * 4)
         self.events = []
         self._meta = None
-        self._stage = self._src_buf = None
+        self._src_buf = None
 
     def add(self, src: np.ndarray, cell: WarpCell) -> None:
         cl = self.cl
@@ -261,22 +261,30 @@ class Warper:
     def add_cells(self, srcs: list[np.ndarray], cells: list[WarpCell]) -> None:
         """All of a frame's projections in one launch (``ibl_warp_cells``): the same sum as
         :meth:`add` per cell, in the same order, with one upload of the renders (interleaved
-        RGB, staged in one host buffer) instead of a launch and two buffers per cell."""
+        RGB, written into one mapped host-allocated buffer) instead of a launch and two buffers per cell."""
         cl = self.cl
         if len(srcs) != len(cells):
             raise ValueError(f"{len(srcs)} renders for {len(cells)} cells")
         if not cells:
             return
         _, (node_buf, ci_buf, cf_buf), offsets, total = self._cells_meta(cells)
-        if self._stage is None or self._stage.size < total:
-            self._stage = np.empty(total, np.float32)
-            self._src_buf = cl.Buffer(self.rt.context, cl.mem_flags.READ_ONLY, size=4 * total)
-        for src, cell, off in zip(srcs, cells, offsets):
+        for src, cell in zip(srcs, cells):
             sw, sh = cell.render_size
             if np.shape(src) != (sh, sw, 3):
                 raise InputError(f"image-based lens: a render of shape {np.shape(src)} for a {sw}x{sh} projection")
-            self._stage[off:off + 3 * sw * sh].reshape(sh, sw, 3)[...] = src
-        cl.enqueue_copy(self.rt.queue, self._src_buf, self._stage[:total])
+        if self._src_buf is None or self._src_buf.size < 4 * total:
+            # host-allocated (pinned on a GPU): the renders are written into the mapped buffer,
+            # no staging copy and no separate upload on a CPU device
+            self._src_buf = cl.Buffer(self.rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.ALLOC_HOST_PTR,
+                                      size=4 * total)
+        stage, _ = cl.enqueue_map_buffer(self.rt.queue, self._src_buf, cl.map_flags.WRITE_INVALIDATE_REGION, 0,
+                                         (total,), np.float32)
+        try:
+            for src, cell, off in zip(srcs, cells, offsets):
+                sw, sh = cell.render_size
+                stage[off:off + 3 * sw * sh].reshape(sh, sw, 3)[...] = src
+        finally:
+            stage.base.release(self.rt.queue)
         w, h = self.size
         self.events.append(self.kernel_cells(self.rt.queue, (w, h), None, self._src_buf, node_buf, ci_buf, cf_buf,
                                              np.int32(len(cells)), self.acc, np.int32(w), np.int32(h)))
