@@ -1,10 +1,10 @@
 /* ibl_warp: projections of the image-based lens model (Heidrich, Slusallek & Seidel 1997,
  * sec. 3.5) mapped onto the film and accumulated.
  *
- * A projection's render `src` (src_w x src_h; ibl_warp: planar R, G, B; ibl_warp_cells: interleaved RGB) is texture-mapped onto a regular
- * grid of film nodes (gx_n x gy_n, float4 per node: u, v = render pixel coordinates of the ray's
- * image-plane intersection, w = the weight W(x') = cos t' cos t'' / |x'' - x'|^2, 0 where the
- * ray is vignetted). Each output pixel of the cell's box interpolates its node values
+ * A projection's render `src` (src_w x src_h; ibl_warp: planar R, G, B; ibl_warp_cells: interleaved
+ * RGB) is texture-mapped onto a regular grid of film nodes (gx_n x gy_n, float4 per node: u, v =
+ * render pixel coordinates of the ray's image-plane intersection, w = the weight
+ * W(x') = cos t' cos t'' / |x'' - x'|^2, 0 where the ray is vignetted). Each output pixel of the cell's box interpolates its node values
  * bilinearly, samples the render bilinearly at (u, v) and adds w * colour to the planar
  * accumulator `acc`. Node i of the grid is at output pixel x = node_x0 + i / inv_sx (likewise y).
  *
@@ -16,7 +16,8 @@
  * projection: the launches, not the arithmetic, were the warp's cost).
  */
 static float3 warp_sample(__global const float *src, const int src_w, const int src_h,
-                          const int px_stride, const int ch_stride, __global const float4 *nodes, const int gx_n, const int gy_n,
+                          const int px_stride, const int ch_stride,
+                          __global const float4 *nodes, const int gx_n, const int gy_n,
                           const float node_x0, const float node_y0, const float inv_sx, const float inv_sy,
                           const int x, const int y)
 {
@@ -55,7 +56,8 @@ __kernel void ibl_warp(__global const float *src, const int src_w, const int src
 {
     const int x = px0 + (int)get_global_id(0);
     const int y = py0 + (int)get_global_id(1);
-    const float3 v = warp_sample(src, src_w, src_h, 1, src_w * src_h, nodes, gx_n, gy_n, node_x0, node_y0, inv_sx, inv_sy, x, y);
+    const float3 v = warp_sample(src, src_w, src_h, 1, src_w * src_h, nodes, gx_n, gy_n,
+                                 node_x0, node_y0, inv_sx, inv_sy, x, y);
     const int out_plane = out_w * out_h;
     const int o = y * out_w + x;
     acc[o] += v.x;

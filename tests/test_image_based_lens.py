@@ -400,7 +400,8 @@ def test_rasterizer_framebuffer_is_float_not_clipped_or_quantised():
     # 0.25 m at 3 m with f = 200 px: the planes' centres at x = 40 ∓ 16.7 px, 13 px wide
     lamp, grey = img[20, 40 - 17], img[20, 40 + 17]
     np.testing.assert_allclose(lamp, (37.25, 0.5, 2.0), rtol=1e-6)
-    np.testing.assert_allclose(grey, np.array([0.123457, 0.5, 0.75]) * 2.0 * 0.5, rtol=1e-5)  # ambient·½(1 + n_z), n_z = 0
+    # ambient · ½(1 + n_z) with n_z = 0
+    np.testing.assert_allclose(grey, np.array([0.123457, 0.5, 0.75]) * 2.0 * 0.5, rtol=1e-5)
     sky_dir = np.array([[(0 - c[0]) / f, 0.0, 1.0]])  # pixel (0, 20): camera axes = world (x, z, −y)…
     assert img[20, 0].min() > 0 and np.all(np.isfinite(img))
     cam = scene.camera_pose(0)

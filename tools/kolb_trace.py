@@ -76,7 +76,8 @@ def main(argv=None):
         noise = half * math.sqrt((1 / len(refs)) / (1 / n_a + 1 / n_b))
     rows = [("Kolb et al. distribution ray tracing", f"{len(refs)} × {args.rays} rays/px", t_ref, None)]
     rows += [(f"image-based lens (Heidrich et al.), {path} projections",
-              f"{st['projections']} projections, {st['pupil_samples']} pupil samples", st["frame_s"], errors(img, ref, border))
+              f"{st['projections']} projections, {st['pupil_samples']} pupil samples", st["frame_s"],
+              errors(img, ref, border))
              for path, (img, st) in ibls.items()]
     rows += [("post-process: dof + vignetting + distortion", "pinhole render ×3 supersampled + 3 stages", t_post,
               errors(post, ref, border)),

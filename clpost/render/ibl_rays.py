@@ -61,8 +61,9 @@ def _concentric(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def pupil_samples(pres, table, zf, z_exit_mm: float, n: int, pattern: str = "grid",
                   count: int | None = None) -> np.ndarray:
-    r"""n² (spiral: ``count``, if given) stratified points on the exit-pupil plane z = ``z_exit_mm``, inside the radius R
-    through which the axial film point's rays pass the stopped-down iris (bisection).
+    r"""n² (spiral: ``count``, if given) stratified points on the exit-pupil plane z = ``z_exit_mm``,
+    inside the radius R through which the axial film point's rays pass the stopped-down iris
+    (bisection).
 
     ``pattern``: ``"grid"`` — the n×n cell centres mapped by the concentric map (rows and
     columns: a defocused highlight shows as an n×n array of copies); ``"spiral"`` — the Vogel

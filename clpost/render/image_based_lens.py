@@ -14,6 +14,7 @@ One module per job, every public name importable from here:
 """
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -37,8 +38,9 @@ _WARPERS: dict = {}
 
 def _warper(size: tuple[int, int], device: str | None) -> Warper:
     """A zeroed :class:`Warper` for ``size``, kept between frames (its buffers and the cells'
-    metadata are re-used; the last few sizes are kept)."""
-    key = (tuple(int(v) for v in size), device)
+    metadata are re-used; the last few sizes are kept), one per thread: a Warper holds a frame's
+    accumulator."""
+    key = (tuple(int(v) for v in size), device, threading.get_ident())
     warper = _WARPERS.pop(key, None)
     if warper is None:
         warper = Warper(size, device)
@@ -54,8 +56,9 @@ def render_image_based(model: ImageBasedLens, size: tuple[int, int], render_fn, 
                        supersample: float = 1.0, device: str | None = None) -> tuple[np.ndarray, dict]:
     r"""The image of ``model`` at ``size`` (sec. 3.5): every projection rendered by
     ``render_fn(cop_camera_m, f_px, c, (w, h)) -> h×w×3 radiance`` (a pinhole at the COP with an
-    off-axis frustum; a ``render_fn.prepare(cells)``, if there is one, is called first with all the
-    frame's :class:`WarpCell` s — the rasterizer path bakes its textures there), warped onto its film cell by the ``ibl_warp`` kernel with weight W and
+    off-axis frustum; ``render_fn.prepare(cells)``, if there is one, is called first with all the
+    frame's :class:`WarpCell` s — the rasterizer path bakes its textures there), warped onto its
+    film cell with weight W by the ``ibl_warp_cells`` kernel (all projections in one launch) and
     summed over pupil samples, then normalised by the axial point's weight,
 
     .. math:: I(x') = \frac{\sum_i W_i(x')\,L_i(x')}{\sum_i W_i(0)},
