@@ -446,3 +446,30 @@ def test_bake_region_is_the_frustum_on_the_plane_and_nothing_behind_the_pinhole(
         assert footprint == pytest.approx(0.03) and spread == pytest.approx(1.0)
         small = bake_region([cell], cam_pose, pose, 0.5)[0]  # a plane smaller than the view: all of it
         np.testing.assert_allclose(np.abs(small), [0.5, 0.5, 0.5, 0.5])
+
+
+def test_sequences_take_the_rasterizer_path_where_they_can_and_say_why_not():
+    """render_image_based_sequence(rasterizer=True): the planes scene through the rasterizer path
+    (recorded in the metadata, within the numpy path's tolerance), the demo scene through the
+    numpy path with the reason logged."""
+    from clpost.camera import Camera
+    from clpost.render.demo_scene import DemoScene
+    from clpost.render.image_based_lens import render_image_based_sequence
+    from clpost.render.kolb_trace import planes_scene
+
+    warnings.simplefilter("ignore")
+    _rasterizer(planes_scene()).close()  # skips where VTK has no float framebuffers
+    cam = Camera(lens="thorlabs-lb1471", f_number=8.0, focus_distance_m=3.0, sensor_mm=(6.0, 4.0))
+    kw = dict(pupil_n=1, max_depth=2)
+    said = []
+    numpy_frames = render_image_based_sequence(cam, (60, 40), 2, scene=planes_scene(), **kw)
+    raster_frames = render_image_based_sequence(cam, (60, 40), 2, scene=planes_scene(), rasterizer=True,
+                                                log=said.append, **kw)
+    assert [f.metadata["image_based_lens"]["projection_path"] for f in numpy_frames + raster_frames] == \
+        ["numpy"] * 2 + ["raster"] * 2
+    d = np.abs(raster_frames[1].color - numpy_frames[1].color).mean(-1) / numpy_frames[1].color.mean()
+    assert d.mean() < 0.03, d.mean()
+    demo = render_image_based_sequence(cam, (24, 16), 1, scene=DemoScene.default(), rasterizer=True,
+                                       log=said.append, pupil_n=1, max_depth=0)
+    assert demo[0].metadata["image_based_lens"]["projection_path"] == "numpy"
+    assert any("rasterizer path unavailable" in m and "are not planes" in m for m in said), said

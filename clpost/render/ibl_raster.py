@@ -109,8 +109,10 @@ class FloatRasterizer:
     def __init__(self, scene: DemoScene) -> None:
         others = [o.name for o in scene.objects if not isinstance(o.shape, Plane)]
         if others:
-            raise RasterUnavailable(f"the rasterizer path bakes planes only; objects {others} are not planes "
-                                    "(render with the numpy path: rasterizer=False)")
+            names = ", ".join(others[:4]) + (", …" if len(others) > 4 else "")
+            raise RasterUnavailable(f"the rasterizer path bakes planes only; {len(others)} of the scene's "
+                                    f"{len(scene.objects)} objects are not planes ({names}); the numpy path "
+                                    "renders any scene")
         try:
             import vtk
             from vtkmodules.vtkRenderingOpenGL2 import vtkFramebufferPass, vtkRenderStepsPass, vtkTextureObject
