@@ -123,6 +123,7 @@ class FloatRasterizer:
         self.vtk = vtk
         self.scene = scene
         self.window = _offscreen_window()
+        self.window.SwapBuffersOff()  # the image is read from the pass's texture, never shown
         self.renderer = vtk.vtkRenderer()
         self.renderer.SetBackground(0.0, 0.0, 0.0)
         self.renderer.SetBackgroundAlpha(0.0)
