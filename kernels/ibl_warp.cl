@@ -1,8 +1,8 @@
 /* ibl_warp: projections of the image-based lens model (Heidrich, Slusallek & Seidel 1997,
  * sec. 3.5) mapped onto the film and accumulated.
  *
- * A projection's render `src` (src_w x src_h; ibl_warp: planar R, G, B; ibl_warp_cells: interleaved
- * RGB) is texture-mapped onto a regular grid of film nodes (gx_n x gy_n, float4 per node: u, v =
+ * A projection's render `src` (src_w x src_h; ibl_warp: planar R, G, B; ibl_warp_cells: RGBA pixels,
+ * rows bottom-up as OpenGL reads them back) is texture-mapped onto a regular grid of film nodes (gx_n x gy_n, float4 per node: u, v =
  * render pixel coordinates of the ray's image-plane intersection, w = the weight
  * W(x') = cos t' cos t'' / |x'' - x'|^2, 0 where the ray is vignetted). Each output pixel of the cell's box interpolates its node values
  * bilinearly, samples the render bilinearly at (u, v) and adds w * colour to the planar
@@ -16,7 +16,7 @@
  * projection: the launches, not the arithmetic, were the warp's cost).
  */
 static float3 warp_sample(__global const float *src, const int src_w, const int src_h,
-                          const int px_stride, const int ch_stride,
+                          const int px_stride, const int row_stride, const int ch_stride,
                           __global const float4 *nodes, const int gx_n, const int gy_n,
                           const float node_x0, const float node_y0, const float inv_sx, const float inv_sy,
                           const int x, const int y)
@@ -39,11 +39,10 @@ static float3 warp_sample(__global const float *src, const int src_w, const int 
     const int iv = min((int)v, src_h - 2);
     const float fu = u - (float)iu;
     const float fv = v - (float)iv;
-    const int row = src_w * px_stride;
     float val[3];
     for (int c = 0; c < 3; ++c) {
-        __global const float *s = src + c * ch_stride + (iv * src_w + iu) * px_stride;
-        val[c] = n.z * mix(mix(s[0], s[px_stride], fu), mix(s[row], s[row + px_stride], fu), fv);
+        __global const float *s = src + c * ch_stride + iv * row_stride + iu * px_stride;
+        val[c] = n.z * mix(mix(s[0], s[px_stride], fu), mix(s[row_stride], s[row_stride + px_stride], fu), fv);
     }
     return (float3)(val[0], val[1], val[2]);
 }
@@ -56,7 +55,7 @@ __kernel void ibl_warp(__global const float *src, const int src_w, const int src
 {
     const int x = px0 + (int)get_global_id(0);
     const int y = py0 + (int)get_global_id(1);
-    const float3 v = warp_sample(src, src_w, src_h, 1, src_w * src_h, nodes, gx_n, gy_n,
+    const float3 v = warp_sample(src, src_w, src_h, 1, src_w, src_w * src_h, nodes, gx_n, gy_n,
                                  node_x0, node_y0, inv_sx, inv_sy, x, y);
     const int out_plane = out_w * out_h;
     const int o = y * out_w + x;
@@ -81,7 +80,10 @@ __kernel void ibl_warp_cells(__global const float *src, __global const float4 *n
         if (x < ci[0] || x >= ci[1] || y < ci[2] || y >= ci[3])
             continue;
         const float4 cf = cell_f[c];
-        sum += warp_sample(src + ci[4], ci[5], ci[6], 3, 1, nodes + ci[7], ci[8], ci[9], cf.x, cf.y, cf.z, cf.w, x, y);
+        /* RGBA rows bottom-up (OpenGL's order, as read back): row 0 of the image is the last */
+        __global const float *top = src + ci[4] + 4 * (ci[6] - 1) * ci[5];
+        sum += warp_sample(top, ci[5], ci[6], 4, -4 * ci[5], 1, nodes + ci[7], ci[8], ci[9], cf.x, cf.y, cf.z, cf.w,
+                           x, y);
     }
     const int out_plane = out_w * out_h;
     const int o = y * out_w + x;

@@ -233,12 +233,21 @@ class FloatRasterizer:
     def render(self, cop_m, f_px: float, c, size) -> np.ndarray:
         """Radiance (h×w×3 float32) of the projection: a pinhole at camera-space ``cop_m`` of the
         prepared frame's camera, focal length ``f_px``, principal point ``c``, ``size`` = (w, h)."""
+        out = np.empty((int(size[1]), int(size[0]), 4), np.float32)
+        self.render_into(out, cop_m, f_px, c, size)
+        return np.ascontiguousarray(out[::-1, :, :3])
+
+    def render_into(self, out: np.ndarray, cop_m, f_px: float, c, size) -> None:
+        """:meth:`render` into ``out`` (h×w×4 float32, C-contiguous): RGBA with the rows bottom-up,
+        as OpenGL reads them back (the warp's buffer layout); alpha 0 marks sky pixels."""
         from .pyvista_renderer import _sky, set_vtk_camera
 
         vtk = self.vtk
         if self.cam_pose is None:
             raise RuntimeError("FloatRasterizer.render before prepare()")
         w, h = int(size[0]), int(size[1])
+        if out.shape != (h, w, 4) or out.dtype != np.float32 or not out.flags.c_contiguous:
+            raise ValueError(f"render_into needs a C-contiguous {h}x{w}x4 float32 array, got {out.shape} {out.dtype}")
         if self.size != (w, h):
             self.window.SetSize(w, h)
             self.size = (w, h)
@@ -250,18 +259,14 @@ class FloatRasterizer:
         if tex.GetVTKDataType() != vtk.VTK_FLOAT or (tex.GetWidth(), tex.GetHeight()) != (w, h):
             raise RasterUnavailable(f"VTK's framebuffer pass gave a {tex.GetWidth()}x{tex.GetHeight()} texture of "
                                     f"VTK type {tex.GetVTKDataType()}, not {w}x{h} float32")
-        out = np.empty((h, w, 4), np.float32)
         if not tex.Download().Download2D(vtk.VTK_FLOAT, out, [w, h], 4, [0, 0]):
             raise RasterUnavailable("VTK could not read back the float framebuffer")
-        out = out[::-1]  # OpenGL rows run bottom-up
-        rgb = out[..., :3]  # a view: the warp's batch copies it once
         sky = out[..., 3] <= 0.0
         if sky.any():
-            rgb = rgb.copy()
-            jj, ii = np.nonzero(sky)
+            jb, ii = np.nonzero(sky)
+            jj = h - 1 - jb  # rows bottom-up
             rays = np.stack([(ii - c[0]) / f_px, (jj - c[1]) / f_px, np.ones(ii.size)], -1)
-            rgb[jj, ii] = _sky(rays @ pose[:3, :3].T, self.scene)
-        return rgb
+            out[jb, ii, :3] = _sky(rays @ pose[:3, :3].T, self.scene)
 
     def close(self) -> None:
         self.window.Finalize()

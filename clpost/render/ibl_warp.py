@@ -203,6 +203,7 @@ class Warper:
         self.events = []
         self._meta = None
         self._src_buf = None
+        self._mapped = None
 
     def add(self, src: np.ndarray, cell: WarpCell) -> None:
         cl = self.cl
@@ -247,10 +248,10 @@ class Warper:
             if sw < 2 or sh < 2:
                 raise InputError(f"image-based lens: a projection's render of {sw}x{sh} px is too small to sample")
             gy, gx = cell.nodes.shape[:2]
-            cell_i[k] = (*cell.box, s_off, sw, sh, n_off, gx, gy)
+            cell_i[k] = (*cell.box, s_off, sw, sh, n_off, gx, gy)  # s_off: RGBA floats
             cell_f[k] = (cell.node_origin[0], cell.node_origin[1], 1.0 / cell.node_step[0], 1.0 / cell.node_step[1])
             nodes.append(np.asarray(cell.nodes, np.float32).reshape(-1, 4))
-            s_off += 3 * sw * sh
+            s_off += 4 * sw * sh
             n_off += gx * gy
         mf = cl.mem_flags
         bufs = [cl.Buffer(self.rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
@@ -258,36 +259,53 @@ class Warper:
         self._meta = (cells, bufs, cell_i[:, 4].copy(), s_off)
         return self._meta
 
-    def add_cells(self, srcs: list[np.ndarray], cells: list[WarpCell]) -> None:
-        """All of a frame's projections in one launch (``ibl_warp_cells``): the same sum as
-        :meth:`add` per cell, in the same order, with one upload of the renders (interleaved
-        RGB, written into one mapped host-allocated buffer) instead of a launch and two buffers per cell."""
+    def map_cells(self, cells: list[WarpCell]) -> list[np.ndarray]:
+        """Writable (h, w, 4) float32 views, one per cell, into one mapped host-allocated buffer
+        (pinned on a GPU; on a CPU device the kernel reads it in place, no upload): RGBA pixels
+        with the rows bottom-up, as OpenGL reads a framebuffer back, so a rasterizer can download
+        straight into them (alpha is not read). Fill them, then :meth:`launch_cells`."""
         cl = self.cl
+        if self._mapped is not None:
+            raise RuntimeError("Warper.map_cells twice without launch_cells")
+        _, _, offsets, total = self._cells_meta(cells)
+        if self._src_buf is None or self._src_buf.size < 4 * total:
+            self._src_buf = cl.Buffer(self.rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.ALLOC_HOST_PTR,
+                                      size=4 * max(total, 1))
+        stage, _ = cl.enqueue_map_buffer(self.rt.queue, self._src_buf, cl.map_flags.WRITE_INVALIDATE_REGION, 0,
+                                         (max(total, 1),), np.float32)
+        self._mapped = (cells, stage)
+        return [stage[off:off + 4 * c.render_size[0] * c.render_size[1]].reshape(c.render_size[1], c.render_size[0], 4)
+                for c, off in zip(cells, offsets)]
+
+    def launch_cells(self, run: bool = True) -> None:
+        """Unmap the buffer of :meth:`map_cells` and (``run``) add all its cells in one launch of
+        ``ibl_warp_cells``: the same sum as :meth:`add` per cell, in the same order."""
+        cells, stage = self._mapped
+        self._mapped = None
+        stage.base.release(self.rt.queue)
+        if not run or not cells:
+            return
+        _, (node_buf, ci_buf, cf_buf), _, _ = self._cells_meta(cells)
+        w, h = self.size
+        self.events.append(self.kernel_cells(self.rt.queue, (w, h), None, self._src_buf, node_buf, ci_buf, cf_buf,
+                                             np.int32(len(cells)), self.acc, np.int32(w), np.int32(h)))
+
+    def add_cells(self, srcs: list[np.ndarray], cells: list[WarpCell]) -> None:
+        """:meth:`map_cells`, each render (h×w×3, rows top-down) copied in, :meth:`launch_cells`."""
         if len(srcs) != len(cells):
             raise ValueError(f"{len(srcs)} renders for {len(cells)} cells")
-        if not cells:
-            return
-        _, (node_buf, ci_buf, cf_buf), offsets, total = self._cells_meta(cells)
         for src, cell in zip(srcs, cells):
             sw, sh = cell.render_size
             if np.shape(src) != (sh, sw, 3):
                 raise InputError(f"image-based lens: a render of shape {np.shape(src)} for a {sw}x{sh} projection")
-        if self._src_buf is None or self._src_buf.size < 4 * total:
-            # host-allocated (pinned on a GPU): the renders are written into the mapped buffer,
-            # no staging copy and no separate upload on a CPU device
-            self._src_buf = cl.Buffer(self.rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.ALLOC_HOST_PTR,
-                                      size=4 * total)
-        stage, _ = cl.enqueue_map_buffer(self.rt.queue, self._src_buf, cl.map_flags.WRITE_INVALIDATE_REGION, 0,
-                                         (total,), np.float32)
+        views = self.map_cells(cells)
         try:
-            for src, cell, off in zip(srcs, cells, offsets):
-                sw, sh = cell.render_size
-                stage[off:off + 3 * sw * sh].reshape(sh, sw, 3)[...] = src
-        finally:
-            stage.base.release(self.rt.queue)
-        w, h = self.size
-        self.events.append(self.kernel_cells(self.rt.queue, (w, h), None, self._src_buf, node_buf, ci_buf, cf_buf,
-                                             np.int32(len(cells)), self.acc, np.int32(w), np.int32(h)))
+            for src, view in zip(srcs, views):
+                view[::-1, :, :3] = src
+        except BaseException:
+            self.launch_cells(run=False)
+            raise
+        self.launch_cells()
 
     def result(self) -> np.ndarray:
         w, h = self.size

@@ -57,7 +57,9 @@ def render_image_based(model: ImageBasedLens, size: tuple[int, int], render_fn, 
     r"""The image of ``model`` at ``size`` (sec. 3.5): every projection rendered by
     ``render_fn(cop_camera_m, f_px, c, (w, h)) -> h×w×3 radiance`` (a pinhole at the COP with an
     off-axis frustum; ``render_fn.prepare(cells)``, if there is one, is called first with all the
-    frame's :class:`WarpCell` s — the rasterizer path bakes its textures there), warped onto its
+    frame's :class:`WarpCell` s — the rasterizer path bakes its textures there; a
+    ``render_fn.render_into(view, cop, f, c, size)`` writes straight into the warp's RGBA buffer
+    with rows bottom-up instead of returning), warped onto its
     film cell with weight W by the ``ibl_warp_cells`` kernel (all projections in one launch) and
     summed over pupil samples, then normalised by the axial point's weight,
 
@@ -76,15 +78,23 @@ def render_image_based(model: ImageBasedLens, size: tuple[int, int], render_fn, 
     if prepare is not None:
         prepare(cells)
     t_prepare = time.perf_counter() - t0
-    srcs = []
-    for cell in cells:
-        src = np.asarray(render_fn(cell.cop_camera_m, cell.render_f_px, cell.render_c, cell.render_size))
-        if src.shape != (cell.render_size[1], cell.render_size[0], 3):
-            raise InputError(f"image-based lens: render_fn returned shape {src.shape}, expected "
-                             f"{(cell.render_size[1], cell.render_size[0], 3)} (h, w, 3)")
-        srcs.append(src)
+    into = getattr(render_fn, "render_into", None)
+    views = warper.map_cells(cells)
+    try:
+        for cell, view in zip(cells, views):
+            if into is not None:  # straight into the warp's buffer (RGBA, rows bottom-up)
+                into(view, cell.cop_camera_m, cell.render_f_px, cell.render_c, cell.render_size)
+                continue
+            src = np.asarray(render_fn(cell.cop_camera_m, cell.render_f_px, cell.render_c, cell.render_size))
+            if src.shape != (cell.render_size[1], cell.render_size[0], 3):
+                raise InputError(f"image-based lens: render_fn returned shape {src.shape}, expected "
+                                 f"{(cell.render_size[1], cell.render_size[0], 3)} (h, w, 3)")
+            view[::-1, :, :3] = src
+    except BaseException:
+        warper.launch_cells(run=False)
+        raise
     t_render = time.perf_counter() - t0
-    warper.add_cells(srcs, cells)
+    warper.launch_cells()
     out = warper.result() / np.float32(axial)
     return out.astype(np.float32), {"projections": len(cells), "render_s": t_render, "prepare_s": t_prepare,
                                      "warp_device_ms": warper.device_ms()}
@@ -113,6 +123,9 @@ class _RasterRenderFn:
 
     def __call__(self, cop_m, f_px, c, size):
         return self.raster.render(cop_m, f_px, c, size)
+
+    def render_into(self, view, cop_m, f_px, c, size) -> None:
+        self.raster.render_into(view, cop_m, f_px, c, size)
 
 
 def rasterizer_render_fn(raster, frame_index: int = 0):
