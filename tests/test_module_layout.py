@@ -121,7 +121,7 @@ def test_the_curves_cache_is_bounded(monkeypatch):
 
 LAYERS = {
     # each job module imports only the layers before it
-    "clpost.render": ["ibl_rays", "ibl_build", "ibl_warp", "image_based_lens"],
+    "clpost.render": ["ibl_rays", "ibl_build", "ibl_warp", "ibl_raster", "image_based_lens"],
     "clpost.calibration": ["model", "frustum", "traced", "formats"],
 }
 

@@ -7,15 +7,20 @@ and the RMS difference from the first configuration given as ``--reference`` (a 
 writes the images and 2× crops of a defocused region to ``--out``.
 
 ``fps``: the paper's table — projections per frame, frames per second (median wall time of
-render + warp over ``--repeats`` frames after one warm-up; the warp's device time from OpenCL
-profiling events) and the maximum ray-angle error, for the achromatic doublet on a 4×4 mm film at
-f/8 (one projection per pupil sample) and the bi-convex singlet on 12×8 mm (subdivided), the
-checker-plane scene of :mod:`clpost.render.kolb_trace`.
+render + warp over ``--repeats`` frames after one warm-up, and the median process CPU time per
+frame, which a loaded shared machine disturbs less; the warp's device time from OpenCL
+profiling events) and the maximum ray-angle error, for the checker-plane scene of
+:mod:`clpost.render.kolb_trace`, through the numpy-shading path and the rasterizer path
+(``--path``). ``--cases legacy``: the achromatic doublet on a 4×4 mm film at f/8 and the
+bi-convex singlet on 12×8 mm with ``--pupil-n``² grid samples; ``--cases paper``: the paper's
+rows, 10 spiral pupil samples of one projection each (doublet, 3×3 mm) and 40 projections
+(singlet, 5.5×5.5 mm).
 
 Usage::
 
     PYTHONPATH=. python tools/ibl_bench.py pupil --size 480 320 --reference spiral:12:1 grid:3:2 spiral:3:2 spiral:6:1
     PYTHONPATH=. python tools/ibl_bench.py fps --size 480 480 --repeats 5
+    PYTHONPATH=. python tools/ibl_bench.py fps --cases paper --size 256 256 --repeats 9
 """
 from __future__ import annotations
 
@@ -93,38 +98,72 @@ def pupil(args) -> None:
     print(f"wrote {out}/pupil_*.png (crops left to right in the order of the table)")
 
 
+FPS_CASES = {
+    # the table before the rasterizer path: 2×2 grid pupil samples (--pupil-n)
+    "legacy": (("thorlabs-ac254-050-a", (4.0, 4.0), None), ("thorlabs-lb1471", (12.0, 8.0), None)),
+    # the paper's two rows: 10 pupil samples of one projection each (the achromat over a 3×3 mm
+    # film fits a pinhole per sample to 0.05°), and 40 projections (the singlet over 5.5×5.5 mm:
+    # 10 samples of 1–7 cells)
+    "paper": (("thorlabs-ac254-050-a", (3.0, 3.0), 10), ("thorlabs-lb1471", (5.5, 5.5), 10)),
+}
+
+
 def fps(args) -> None:
+    import os
+
+    from clpost.render.image_based_lens import open_rasterizer, rasterizer_render_fn
+    from clpost.render.kolb_trace import planes_scene
     from clpost.render.pyvista_renderer import PyVistaRenderer
 
-    from clpost.render.kolb_trace import planes_scene
-
-    cases = (("thorlabs-ac254-050-a", (4.0, 4.0)), ("thorlabs-lb1471", (12.0, 8.0)))
-    print(f"f/{args.f_number:g}, focus 3 m, {args.pupil_n}² pupil samples, threshold 0.05°, median of "
-          f"{args.repeats} frames after one warm-up")
-    print("| lens | film | output | projections per frame (per pupil sample) | max ray-angle error | preprocessing (s) "
-          "| render + warp, median (s) | fps | of which rendering (s) | warp device, median (ms) |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    r = PyVistaRenderer(planes_scene())
+    load = os.getloadavg()
+    print(f"f/{args.f_number:g}, focus 3 m, threshold 0.05°, median of {args.repeats} frames after one warm-up; "
+          f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} CPUs; "
+          f"LP_NUM_THREADS={os.environ.get('LP_NUM_THREADS', 'unset')}")
+    print("| lens | film | output | pupil samples | projections per frame (per pupil sample) | max ray-angle error "
+          "| preprocessing (s) | path | frame wall, median (ms) | fps | frame CPU, median (ms) | fps by CPU time "
+          "| of which rendering, wall (ms) | warp device, median (ms) | bake, first frame (s) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    scene = planes_scene()
+    r = PyVistaRenderer(scene)
+    raster = open_rasterizer(scene, log=print) if "raster" in args.path else None
     try:
-        for lens, film in cases:
+        for lens, film, count in FPS_CASES[args.cases]:
             build.cache_clear()
-            model = build(lens, 3.0, args.f_number, film, pupil_n=args.pupil_n)
+            if count is None:
+                model = build(lens, 3.0, args.f_number, film, pupil_n=args.pupil_n)
+                samples = f"{args.pupil_n}² grid"
+            else:
+                model = build(lens, 3.0, args.f_number, film, pupil_pattern="spiral", pupil_count=count)
+                samples = f"{count} spiral"
             size = (args.size[0], int(round(args.size[0] * film[1] / film[0])))
-            walls, dev, rend = [], [], []
-            for k in range(args.repeats + 1):
-                t0 = time.perf_counter()
-                _, st = render_image_based(model, size, pyvista_render_fn(r, 0))
-                if k:
-                    walls.append(time.perf_counter() - t0)
-                    dev.append(st["warp_device_ms"])
-                    rend.append(st["render_s"])
             per = sorted(set(model.projections_per_sample().tolist()))
-            wall = statistics.median(walls)
-            print(f"| {lens} | {film[0]:g}×{film[1]:g} mm | {size[0]}×{size[1]} | {len(model.projections)} ({per}) "
-                  f"| {model.max_angle_deg:.3f}° | {model.preprocess_s:.2f} | {wall:.3f} | {1 / wall:.2f} "
-                  f"| {statistics.median(rend):.3f} | {statistics.median(dev):.2f} |")
+            for path in args.path:
+                if path == "raster" and raster is None:
+                    continue
+                fn = rasterizer_render_fn(raster, 0) if path == "raster" else pyvista_render_fn(r, 0)
+                walls, cpus, dev, rend = [], [], [], []
+                bake = 0.0
+                for k in range(args.repeats + 1):
+                    t0, c0 = time.perf_counter(), time.process_time()
+                    _, st = render_image_based(model, size, fn)
+                    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+                    if k == 0 and path == "raster":
+                        bake = raster.bake_s
+                    if k:
+                        walls.append(wall)
+                        cpus.append(cpu)
+                        dev.append(st["warp_device_ms"])
+                        rend.append(st["render_s"])
+                wall, cpu = statistics.median(walls), statistics.median(cpus)
+                print(f"| {lens} | {film[0]:g}×{film[1]:g} mm | {size[0]}×{size[1]} | {samples} "
+                      f"| {len(model.projections)} ({per}) | {model.max_angle_deg:.3f}° | {model.preprocess_s:.2f} "
+                      f"| {path} | {1e3 * wall:.1f} | {1 / wall:.1f} | {1e3 * cpu:.1f} | {1 / cpu:.1f} "
+                      f"| {1e3 * statistics.median(rend):.1f} | {statistics.median(dev):.2f} "
+                      + (f"| {bake:.2f} |" if path == "raster" else "| — |"))
     finally:
         r.close()
+        if raster is not None:
+            raster.close()
 
 
 def main(argv=None) -> None:
@@ -142,6 +181,10 @@ def main(argv=None) -> None:
     f.add_argument("--f-number", type=float, default=8.0)
     f.add_argument("--pupil-n", type=int, default=2)
     f.add_argument("--repeats", type=int, default=5)
+    f.add_argument("--cases", choices=sorted(FPS_CASES), default="legacy",
+                   help="legacy: the 2×2-sample table; paper: 10 samples × 1 projection and 40 projections")
+    f.add_argument("--path", nargs="+", choices=("numpy", "raster"), default=["numpy", "raster"],
+                   help="numpy: per-projection numpy shading; raster: baked textures rasterised by VTK")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     (pupil if args.cmd == "pupil" else fps)(args)

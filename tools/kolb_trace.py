@@ -36,6 +36,8 @@ def main(argv=None):
                          "image differs from it at every sharp edge by aliasing alone")
     ap.add_argument("--pupil-n", type=int, default=3)
     ap.add_argument("--pupil-pattern", choices=("grid", "spiral"), default="grid")
+    ap.add_argument("--ibl-path", nargs="+", choices=("numpy", "raster"), default=["numpy"],
+                    help="the image-based model's projections: numpy shading and/or the rasterizer path")
     ap.add_argument("--out", default="/tmp/kolb")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
@@ -57,8 +59,11 @@ def main(argv=None):
         img = np.asarray(img, np.float64)[..., :3]
         return img.reshape(size[1], k, size[0], k, 3).mean((1, 3))
 
-    ibl, st = ibl_image(*big, pupil_n=args.pupil_n, pupil_pattern=args.pupil_pattern)
-    ibl = down(ibl)
+    ibls = {}
+    for path in args.ibl_path:
+        img, st = ibl_image(*big, pupil_n=args.pupil_n, pupil_pattern=args.pupil_pattern, rasterizer=path == "raster")
+        ibls[path] = (down(img), st)
+    ibl = next(iter(ibls.values()))[0]
     post, plan, t_post, pin = post_image(*big)
     post = down(post)
     pin_c = down(pin.color)
@@ -69,12 +74,14 @@ def main(argv=None):
         n_a, n_b = len(refs[0::2]), len(refs[1::2])
         half = errors(np.mean(refs[0::2], 0), np.mean(refs[1::2], 0), border)["rms"]
         noise = half * math.sqrt((1 / len(refs)) / (1 / n_a + 1 / n_b))
-    rows = [("Kolb et al. distribution ray tracing", f"{len(refs)} × {args.rays} rays/px", t_ref, None),
-            ("image-based lens (Heidrich et al.)", f"{st['projections']} projections, {st['pupil_samples']} pupil samples",
-             st["frame_s"], errors(ibl, ref, border)),
-            ("post-process: dof + vignetting + distortion", "pinhole render ×3 supersampled + 3 stages", t_post,
-             errors(post, ref, border)),
-            ("pinhole only (no lens)", "pinhole render", 0.0, errors(pin_c, ref, border))]
+    rows = [("Kolb et al. distribution ray tracing", f"{len(refs)} × {args.rays} rays/px", t_ref, None)]
+    rows += [(f"image-based lens (Heidrich et al.), {path} projections",
+              f"{st['projections']} projections, {st['pupil_samples']} pupil samples", st["frame_s"],
+              errors(img, ref, border))
+             for path, (img, st) in ibls.items()]
+    rows += [("post-process: dof + vignetting + distortion", "pinhole render ×3 supersampled + 3 stages", t_post,
+              errors(post, ref, border)),
+             ("pinhole only (no lens)", "pinhole render", 0.0, errors(pin_c, ref, border))]
     print(f"lens {args.lens} f/{args.f_number:g}, focus {args.focus:g} m, film {args.sensor[0]:g}×{args.sensor[1]:g} mm, "
           f"{size[0]}×{size[1]} px (others rendered at {k}× and box-averaged); IBL max ray-angle error {st['max_angle_deg']:.3f}°, preprocessing "
           f"{st['preprocess_s']:.2f} s, warp {st['warp_device_ms']:.1f} ms device")
@@ -90,6 +97,8 @@ def main(argv=None):
             print(f"| {name} | {work} | {t:.2f} | {e['rms']:.4f} | {clean} | {e['p99']:.4f} | {e['max']:.3f} {e['max_at']} |")
     print("plan:", "; ".join(str(p) for p in plan))
     stem = f"{args.lens}"
+    if "raster" in ibls:
+        write_png(out / f"{stem}_ibl_raster.png", ibls["raster"][0].astype(np.float32))
     for name, img in (("kolb", ref), ("ibl", ibl), ("post", post), ("pinhole", pin_c)):
         write_png(out / f"{stem}_{name}.png", img.astype(np.float32))
     for name, img in (("ibl", ibl), ("post", post)):

@@ -233,7 +233,9 @@ def cases():
         rng = np.random.default_rng(5)
         warper = Warper((w, h), device="oclgrind")
         g, (sw, sh) = (4, 3), (9, 7)
-        for box in ((0, w // 2, 0, h), (w // 2, w, 0, h)):
+        cells, srcs = [], []
+        # two pupil samples: a left/right split and the whole frame (overlapping cells)
+        for box in ((0, w // 2, 0, h), (w // 2, w, 0, h), (0, w, 0, h)):
             i0, i1, j0, j1 = box
             nodes = np.zeros((g[1], g[0], 4))
             # texture coordinates overshooting the render (the kernel clamps), some zero weights
@@ -242,8 +244,13 @@ def cases():
             nodes[..., 2] = np.where(rng.random((g[1], g[0])) < 0.25, 0.0, rng.uniform(0, 5, (g[1], g[0])))
             step = (max(i1 - i0, 1) / (g[0] - 1) * 1.03, (j1 - j0) / (g[1] - 1) * 1.03)
             cell = WarpCell(0, box, nodes, (i0 - 0.4, j0 - 0.3), step, (sw, sh), 1.0, (0.0, 0.0), np.zeros(3))
-            warper.add(rng.uniform(0, 10, (sh, sw, 3)).astype(np.float32), cell)
+            cells.append(cell)
+            srcs.append(rng.uniform(0, 10, (sh, sw, 3)).astype(np.float32))
+            warper.add(srcs[-1], cell)
         warper.result()
+        batched = Warper((w, h), device="oclgrind")  # ibl_warp_cells: all cells in one launch
+        batched.add_cells(srcs, cells)
+        batched.result()
 
     add("ibl_warp 17x5", lambda: ibl_case(17, 5))
 

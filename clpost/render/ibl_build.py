@@ -88,6 +88,8 @@ class ImageBasedLens:
     threshold_deg: float = THRESHOLD_DEG
     preprocess_s: float = 0.0
     dropped_cells: int = 0
+    # warp data per output size (clpost.render.ibl_warp.warp_cells): the model is fixed once built
+    warp_cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def max_angle_deg(self) -> float:
@@ -161,10 +163,12 @@ def _projection(pres, table, zf, p, index, cell, grid, e, depth, z_plane_mm):
 @lru_cache(maxsize=16)
 def build(lens: str, focus_distance_m: float = math.inf, f_number: float | None = None,
           sensor_mm: tuple[float, float] = (36.0, 24.0), grid: int = 10, pupil_n: int = 3,
-          threshold_deg: float = THRESHOLD_DEG, max_depth: int = 4, pupil_pattern: str = "grid") -> ImageBasedLens:
+          threshold_deg: float = THRESHOLD_DEG, max_depth: int = 4, pupil_pattern: str = "grid",
+          pupil_count: int | None = None) -> ImageBasedLens:
     """The image-based model of ``lens`` (a ``lens_data`` name) focused at ``focus_distance_m``
     (lens-scale: from the film, :meth:`clpost.optics.Lens.focus`; a Camera's is its
-    ``focus_from_film_m``) at ``f_number``; cached per arguments (module docstring)."""
+    ``focus_from_film_m``) at ``f_number``; cached per arguments (module docstring).
+    ``pupil_count``: that many spiral pupil samples instead of ``pupil_n``² (e.g. the paper's 10)."""
     if lens not in available_lenses():
         raise InputError(f"lens {lens!r} is not in lens_data/; choose one of {', '.join(available_lenses())}")
     if int(grid) != grid or grid < 2:
@@ -173,6 +177,9 @@ def build(lens: str, focus_distance_m: float = math.inf, f_number: float | None 
         raise InputError(f"pupil_n={pupil_n!r} must be an integer >= 1 (pupil samples per side)")
     if pupil_pattern not in ("grid", "spiral"):
         raise InputError(f"pupil_pattern={pupil_pattern!r} must be 'grid' or 'spiral' (pupil_samples)")
+    if pupil_count is not None and (pupil_pattern != "spiral" or int(pupil_count) != pupil_count or pupil_count < 1):
+        raise InputError(f"pupil_count={pupil_count!r} needs pupil_pattern='spiral' and an integer >= 1 "
+                         "(the grid pattern has pupil_n² samples)")
     if not (math.isfinite(threshold_deg) and threshold_deg > 0):
         raise InputError(f"threshold_deg={threshold_deg!r} must be > 0 degrees (the paper uses 0.05)")
     if len(sensor_mm) != 2 or not all(math.isfinite(s) and s > 0 for s in sensor_mm):
@@ -183,7 +190,8 @@ def build(lens: str, focus_distance_m: float = math.inf, f_number: float | None 
     dist_mm = focus_distance_m * 1000.0 if math.isfinite(focus_distance_m) else math.inf
     pres = L.focused(dist_mm, n_num)
     table, zf = mirrored_table(pres, L.stop_radius_mm(n_num))
-    samples = pupil_samples(pres, table, zf, L.paraxial.z_exit_pupil_mm, int(pupil_n), pupil_pattern)
+    samples = pupil_samples(pres, table, zf, L.paraxial.z_exit_pupil_mm, int(pupil_n), pupil_pattern,
+                            pupil_count)
     e_root = np.array([0.0, 0.0, L.paraxial.z_entrance_pupil_mm])
     model = ImageBasedLens(lens, float(focus_distance_m), float(n_num), tuple(sensor_mm), samples,
                            threshold_deg=float(threshold_deg))

@@ -59,13 +59,16 @@ def _concentric(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return r * np.cos(phi), r * np.sin(phi)
 
 
-def pupil_samples(pres, table, zf, z_exit_mm: float, n: int, pattern: str = "grid") -> np.ndarray:
-    r"""n² stratified points on the exit-pupil plane z = ``z_exit_mm``, inside the radius R
-    through which the axial film point's rays pass the stopped-down iris (bisection).
+def pupil_samples(pres, table, zf, z_exit_mm: float, n: int, pattern: str = "grid",
+                  count: int | None = None) -> np.ndarray:
+    r"""n² (spiral: ``count``, if given) stratified points on the exit-pupil plane z = ``z_exit_mm``,
+    inside the radius R through which the axial film point's rays pass the stopped-down iris
+    (bisection).
 
     ``pattern``: ``"grid"`` — the n×n cell centres mapped by the concentric map (rows and
     columns: a defocused highlight shows as an n×n array of copies); ``"spiral"`` — the Vogel
-    (golden-angle) spiral :math:`r_k = R\sqrt{(k + ½)/n^2},\ \varphi_k = k \cdot 137.5°`,
+    (golden-angle) spiral :math:`r_k = R\sqrt{(k + ½)/K},\ \varphi_k = k \cdot 137.5°` for K = n² or ``count``
+    samples (any number, e.g. the paper's 10),
     equally stratified in area but with no rows, so the copies of a defocused point fill its
     blur disc evenly instead of lining up (the same count, the same cost)."""
     lo, hi = 0.0, 4.0 * float(pres.surfaces[-1].semi_diameter_mm)
@@ -76,8 +79,9 @@ def pupil_samples(pres, table, zf, z_exit_mm: float, n: int, pattern: str = "gri
         else:
             hi = mid
     if pattern == "spiral":
-        k = np.arange(n * n)
-        rad, phi = np.sqrt((k + 0.5) / (n * n)), k * math.pi * (3.0 - math.sqrt(5.0))
+        total = n * n if count is None else int(count)
+        k = np.arange(total)
+        rad, phi = np.sqrt((k + 0.5) / total), k * math.pi * (3.0 - math.sqrt(5.0))
         x, y = rad * np.cos(phi), rad * np.sin(phi)
         return np.stack([lo * 0.999 * x, lo * 0.999 * y, np.full(x.shape, z_exit_mm)], -1)
     g = (np.arange(n) + 0.5) / n * 2 - 1

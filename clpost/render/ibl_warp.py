@@ -75,7 +75,11 @@ def warp_cells(model: ImageBasedLens, size: tuple[int, int], node_spacing_px: fl
     approximation q − e, W as in :mod:`clpost.render.ibl_build`. Vignetted nodes get W = 0 and the
     affine extrapolation of the passing nodes' (u, v), so interpolation across the border stays
     smooth. Render: focal length ``supersample`` × the film's (v / p), the frustum = the
-    bounding box of the passing nodes' texture coordinates plus ``margin_px``."""
+    bounding box of the passing nodes' texture coordinates plus ``margin_px``. Cached on the model
+    per arguments (the warp data of a model and size never change; a frame re-uses them)."""
+    key = (tuple(size), float(node_spacing_px), float(supersample), int(margin_px))
+    if key in model.warp_cache:
+        return model.warp_cache[key]
     w, h = (int(v) for v in size)
     if w < 2 or h < 2 or (w, h) != tuple(size):
         raise InputError(f"image-based lens: size={size!r} must be (width, height) in whole pixels >= 2")
@@ -144,6 +148,7 @@ def warp_cells(model: ImageBasedLens, size: tuple[int, int], node_spacing_px: fl
         dz = p[2] - zf
         d2 = p[0] ** 2 + p[1] ** 2 + dz * dz
         axial += dz * dz / d2 / d2
+    model.warp_cache[key] = (cells, axial)
     return cells, axial
 
 
@@ -192,9 +197,13 @@ class Warper:
         self.size = (int(size[0]), int(size[1]))
         w, h = self.size
         self.kernel = self.rt.kernel(kernel_source("ibl_warp"), "ibl_warp")
+        self.kernel_cells = self.rt.kernel(kernel_source("ibl_warp"), "ibl_warp_cells")
         self.acc = cl.Buffer(self.rt.context, cl.mem_flags.READ_WRITE, size=3 * w * h * 4)
         cl.enqueue_fill_buffer(self.rt.queue, self.acc, np.float32(0), 0, 3 * w * h * 4)
         self.events = []
+        self._meta = None
+        self._src_buf = None
+        self._mapped = None
 
     def add(self, src: np.ndarray, cell: WarpCell) -> None:
         cl = self.cl
@@ -217,6 +226,86 @@ class Warper:
                          np.float32(1.0 / cell.node_step[1]), self.acc, np.int32(w), np.int32(h),
                          np.int32(i0), np.int32(j0))
         self.events.append(ev)
+
+    def reset(self) -> None:
+        """Zero the accumulator for the next frame (the buffers are kept)."""
+        w, h = self.size
+        self.cl.enqueue_fill_buffer(self.rt.queue, self.acc, np.float32(0), 0, 3 * w * h * 4)
+        self.events = []
+
+    def _cells_meta(self, cells: list[WarpCell]):
+        """Per-cell metadata and nodes on the device, kept for the last cell list (a model's warp
+        data is cached, so every frame of a sequence passes the same list)."""
+        if self._meta is not None and self._meta[0] is cells:
+            return self._meta
+        cl = self.cl
+        cell_i = np.zeros((len(cells), 10), np.int32)
+        cell_f = np.zeros((len(cells), 4), np.float32)
+        nodes = []
+        s_off = n_off = 0
+        for k, cell in enumerate(cells):
+            sw, sh = cell.render_size
+            if sw < 2 or sh < 2:
+                raise InputError(f"image-based lens: a projection's render of {sw}x{sh} px is too small to sample")
+            gy, gx = cell.nodes.shape[:2]
+            cell_i[k] = (*cell.box, s_off, sw, sh, n_off, gx, gy)  # s_off: RGBA floats
+            cell_f[k] = (cell.node_origin[0], cell.node_origin[1], 1.0 / cell.node_step[0], 1.0 / cell.node_step[1])
+            nodes.append(np.asarray(cell.nodes, np.float32).reshape(-1, 4))
+            s_off += 4 * sw * sh
+            n_off += gx * gy
+        mf = cl.mem_flags
+        bufs = [cl.Buffer(self.rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
+                for a in (np.concatenate(nodes), cell_i, cell_f)]
+        self._meta = (cells, bufs, cell_i[:, 4].copy(), s_off)
+        return self._meta
+
+    def map_cells(self, cells: list[WarpCell]) -> list[np.ndarray]:
+        """Writable (h, w, 4) float32 views, one per cell, into one mapped host-allocated buffer
+        (pinned on a GPU; on a CPU device the kernel reads it in place, no upload): RGBA pixels
+        with the rows bottom-up, as OpenGL reads a framebuffer back, so a rasterizer can download
+        straight into them (alpha is not read). Fill them, then :meth:`launch_cells`."""
+        cl = self.cl
+        if self._mapped is not None:
+            raise RuntimeError("Warper.map_cells twice without launch_cells")
+        _, _, offsets, total = self._cells_meta(cells)
+        if self._src_buf is None or self._src_buf.size < 4 * total:
+            self._src_buf = cl.Buffer(self.rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.ALLOC_HOST_PTR,
+                                      size=4 * max(total, 1))
+        stage, _ = cl.enqueue_map_buffer(self.rt.queue, self._src_buf, cl.map_flags.WRITE_INVALIDATE_REGION, 0,
+                                         (max(total, 1),), np.float32)
+        self._mapped = (cells, stage)
+        return [stage[off:off + 4 * c.render_size[0] * c.render_size[1]].reshape(c.render_size[1], c.render_size[0], 4)
+                for c, off in zip(cells, offsets)]
+
+    def launch_cells(self, run: bool = True) -> None:
+        """Unmap the buffer of :meth:`map_cells` and (``run``) add all its cells in one launch of
+        ``ibl_warp_cells``: the same sum as :meth:`add` per cell, in the same order."""
+        cells, stage = self._mapped
+        self._mapped = None
+        stage.base.release(self.rt.queue)
+        if not run or not cells:
+            return
+        _, (node_buf, ci_buf, cf_buf), _, _ = self._cells_meta(cells)
+        w, h = self.size
+        self.events.append(self.kernel_cells(self.rt.queue, (w, h), None, self._src_buf, node_buf, ci_buf, cf_buf,
+                                             np.int32(len(cells)), self.acc, np.int32(w), np.int32(h)))
+
+    def add_cells(self, srcs: list[np.ndarray], cells: list[WarpCell]) -> None:
+        """:meth:`map_cells`, each render (h×w×3, rows top-down) copied in, :meth:`launch_cells`."""
+        if len(srcs) != len(cells):
+            raise ValueError(f"{len(srcs)} renders for {len(cells)} cells")
+        for src, cell in zip(srcs, cells):
+            sw, sh = cell.render_size
+            if np.shape(src) != (sh, sw, 3):
+                raise InputError(f"image-based lens: a render of shape {np.shape(src)} for a {sw}x{sh} projection")
+        views = self.map_cells(cells)
+        try:
+            for src, view in zip(srcs, views):
+                view[::-1, :, :3] = src
+        except BaseException:
+            self.launch_cells(run=False)
+            raise
+        self.launch_cells()
 
     def result(self) -> np.ndarray:
         w, h = self.size

@@ -14,6 +14,7 @@ One module per job, every public name importable from here:
 """
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -27,15 +28,39 @@ from .ibl_warp import (Warper, WarpCell, lens_to_camera_m, model_grid, pixel_to_
 
 __all__ = ["THRESHOLD_DEG", "ImageBasedLens", "Projection", "WarpCell", "Warper", "angle_errors_deg", "build",
            "fit_cop", "focus_plane_z_mm", "image_plane_tex", "lens_to_camera_m", "mirrored_table", "model_for_camera",
-           "model_grid", "pixel_to_film", "pupil_samples", "pyvista_render_fn", "render_image_based",
-           "render_image_based_sequence", "trace_back", "warp_cells", "warp_reference"]
+           "model_grid", "open_rasterizer", "pixel_to_film", "pupil_samples", "pyvista_render_fn",
+           "rasterizer_render_fn", "render_image_based", "render_image_based_sequence", "trace_back", "warp_cells",
+           "warp_reference"]
+
+
+_WARPERS: dict = {}
+
+
+def _warper(size: tuple[int, int], device: str | None) -> Warper:
+    """A zeroed :class:`Warper` for ``size``, kept between frames (its buffers and the cells'
+    metadata are re-used; the last few sizes are kept), one per thread: a Warper holds a frame's
+    accumulator."""
+    key = (tuple(int(v) for v in size), device, threading.get_ident())
+    warper = _WARPERS.pop(key, None)
+    if warper is None:
+        warper = Warper(size, device)
+    else:
+        warper.reset()
+    _WARPERS[key] = warper
+    while len(_WARPERS) > 4:
+        _WARPERS.pop(next(iter(_WARPERS)))
+    return warper
 
 
 def render_image_based(model: ImageBasedLens, size: tuple[int, int], render_fn, *, node_spacing_px: float = 16.0,
                        supersample: float = 1.0, device: str | None = None) -> tuple[np.ndarray, dict]:
     r"""The image of ``model`` at ``size`` (sec. 3.5): every projection rendered by
     ``render_fn(cop_camera_m, f_px, c, (w, h)) -> h×w×3 radiance`` (a pinhole at the COP with an
-    off-axis frustum), warped onto its film cell by the ``ibl_warp`` kernel with weight W and
+    off-axis frustum; ``render_fn.prepare(cells)``, if there is one, is called first with all the
+    frame's :class:`WarpCell` s — the rasterizer path bakes its textures there; a
+    ``render_fn.render_into(view, cop, f, c, size)`` writes straight into the warp's RGBA buffer
+    with rows bottom-up instead of returning), warped onto its
+    film cell with weight W by the ``ibl_warp_cells`` kernel (all projections in one launch) and
     summed over pupil samples, then normalised by the axial point's weight,
 
     .. math:: I(x') = \frac{\sum_i W_i(x')\,L_i(x')}{\sum_i W_i(0)},
@@ -44,20 +69,34 @@ def render_image_based(model: ImageBasedLens, size: tuple[int, int], render_fn, 
     the axis. Photometry: this is scene radiance times RI — what the exposure stage expects as
     input, with the lens's fall-off (natural and optical vignetting) already applied; the
     ``vignetting`` stage must then not run (nor ``dof`` and ``distortion``, which the model
-    also contains). Returns (H×W×3 float32, stats: projections, render_s, warp_device_ms)."""
+    also contains). Returns (H×W×3 float32, stats: projections, render_s (prepare + renders),
+    prepare_s, warp_device_ms)."""
     cells, axial = warp_cells(model, size, node_spacing_px, supersample)
-    warper = Warper(size, device)
-    t_render = 0.0
-    for cell in cells:
-        t0 = time.perf_counter()
-        src = np.asarray(render_fn(cell.cop_camera_m, cell.render_f_px, cell.render_c, cell.render_size))
-        t_render += time.perf_counter() - t0
-        if src.shape != (cell.render_size[1], cell.render_size[0], 3):
-            raise InputError(f"image-based lens: render_fn returned shape {src.shape}, expected "
-                             f"{(cell.render_size[1], cell.render_size[0], 3)} (h, w, 3)")
-        warper.add(src, cell)
+    warper = _warper(size, device)
+    t0 = time.perf_counter()
+    prepare = getattr(render_fn, "prepare", None)
+    if prepare is not None:
+        prepare(cells)
+    t_prepare = time.perf_counter() - t0
+    into = getattr(render_fn, "render_into", None)
+    views = warper.map_cells(cells)
+    try:
+        for cell, view in zip(cells, views):
+            if into is not None:  # straight into the warp's buffer (RGBA, rows bottom-up)
+                into(view, cell.cop_camera_m, cell.render_f_px, cell.render_c, cell.render_size)
+                continue
+            src = np.asarray(render_fn(cell.cop_camera_m, cell.render_f_px, cell.render_c, cell.render_size))
+            if src.shape != (cell.render_size[1], cell.render_size[0], 3):
+                raise InputError(f"image-based lens: render_fn returned shape {src.shape}, expected "
+                                 f"{(cell.render_size[1], cell.render_size[0], 3)} (h, w, 3)")
+            view[::-1, :, :3] = src
+    except BaseException:
+        warper.launch_cells(run=False)
+        raise
+    t_render = time.perf_counter() - t0
+    warper.launch_cells()
     out = warper.result() / np.float32(axial)
-    return out.astype(np.float32), {"projections": len(cells), "render_s": t_render,
+    return out.astype(np.float32), {"projections": len(cells), "render_s": t_render, "prepare_s": t_prepare,
                                      "warp_device_ms": warper.device_ms()}
 
 
@@ -73,14 +112,57 @@ def pyvista_render_fn(renderer, frame_index: int = 0):
     return fn
 
 
+class _RasterRenderFn:
+    """``render_fn`` of the rasterizer path (:func:`rasterizer_render_fn`)."""
+
+    def __init__(self, raster, frame_index: int) -> None:
+        self.raster, self.frame_index = raster, frame_index
+
+    def prepare(self, cells) -> None:
+        self.raster.prepare(cells, self.frame_index)
+
+    def __call__(self, cop_m, f_px, c, size):
+        return self.raster.render(cop_m, f_px, c, size)
+
+    def render_into(self, view, cop_m, f_px, c, size) -> None:
+        self.raster.render_into(view, cop_m, f_px, c, size)
+
+
+def rasterizer_render_fn(raster, frame_index: int = 0):
+    """``render_fn`` for :func:`render_image_based` from a
+    :class:`~clpost.render.ibl_raster.FloatRasterizer`: per frame the scene's radiance baked into
+    float textures, then every projection a VTK rasterisation into a float framebuffer
+    (docs/image_based_lens.md, "Rasterizer path")."""
+    return _RasterRenderFn(raster, frame_index)
+
+
+def open_rasterizer(scene, log=None):
+    """A :class:`~clpost.render.ibl_raster.FloatRasterizer` for ``scene``, or None with the reason
+    passed to ``log`` (default: a warning) when the rasterizer path cannot render it here."""
+    import warnings
+
+    from .ibl_raster import FloatRasterizer, RasterUnavailable
+
+    try:
+        return FloatRasterizer(scene)
+    except RasterUnavailable as e:
+        msg = f"image-based lens: rasterizer path unavailable, using the numpy path: {e}"
+        if log is not None:
+            log(msg)
+        else:
+            warnings.warn(msg, stacklevel=2)
+        return None
+
+
 def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1, camera_motion: bool = False,
                                  scene=None, *, pupil_n: int = 3, threshold_deg: float = THRESHOLD_DEG,
                                  max_depth: int = 4, device: str | None = None, log=None,
-                                 pupil_pattern: str = "grid") -> list:
+                                 pupil_pattern: str = "grid", rasterizer: bool = False) -> list:
     """Frames 0 … n_frames−1 through the image-based model of ``camera``'s lens: colour from
     :func:`render_image_based`, depth and velocity from the pinhole at the entrance pupil
     (the centre of the chief rays; what the post-process path renders). Metadata records the
-    projections per frame and the timings."""
+    projections per frame and the timings. ``rasterizer``: the projections through the
+    rasterizer path where it can render the scene (else the numpy path, with the reason logged)."""
     from .demo_scene import DemoScene
     from .pyvista_renderer import PyVistaRenderer
 
@@ -89,16 +171,19 @@ def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1
     model = model_for_camera(camera, pupil_n=pupil_n, threshold_deg=threshold_deg, max_depth=max_depth,
                              pupil_pattern=pupil_pattern)
     renderer = PyVistaRenderer(scene if scene is not None else DemoScene.default(camera_motion=camera_motion))
+    raster = open_rasterizer(renderer.scene, log) if rasterizer else None
     try:
         frames = []
         for i in range(int(n_frames)):
             t0 = time.perf_counter()
-            color, stats = render_image_based(model, size, pyvista_render_fn(renderer, i), device=device)
+            fn = pyvista_render_fn(renderer, i) if raster is None else rasterizer_render_fn(raster, i)
+            color, stats = render_image_based(model, size, fn, device=device)
             stats["frame_s"] = time.perf_counter() - t0
             pin = renderer.render(camera, size, i)
             meta = dict(pin.metadata)
             meta["image_based_lens"] = dict(stats, max_angle_deg=model.max_angle_deg,
-                                            pupil_samples=len(model.pupil_samples_mm))
+                                            pupil_samples=len(model.pupil_samples_mm),
+                                            projection_path="numpy" if raster is None else "raster")
             frames.append(pin.replace(color=color, metadata=meta))
             if log is not None:
                 log(f"image-based lens frame {i}: {stats['projections']} projections, "
@@ -107,3 +192,5 @@ def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1
         return frames
     finally:
         renderer.close()
+        if raster is not None:
+            raster.close()

@@ -308,16 +308,25 @@ def post_image(lens_name, f_number, focus_m, sensor_mm, size, scene, device=None
 
 
 def ibl_image(lens_name, f_number, focus_m, sensor_mm, size, scene, pupil_n=3, threshold_deg=0.05, max_depth=4,
-              device=None, supersample=2.0, pupil_pattern="grid"):
-    from clpost.render.image_based_lens import build, pyvista_render_fn, render_image_based
+              device=None, supersample=2.0, pupil_pattern="grid", rasterizer=False):
+    """The image-based model's image; ``rasterizer``: its projections through the rasterizer path
+    (baked textures, VTK float framebuffer) instead of per-projection numpy shading."""
+    from clpost.render.image_based_lens import build, pyvista_render_fn, rasterizer_render_fn, render_image_based
     from clpost.render.pyvista_renderer import PyVistaRenderer
 
     model = build(lens_name, focus_m, f_number, tuple(sensor_mm), pupil_n=pupil_n, threshold_deg=threshold_deg,
                   max_depth=max_depth, pupil_pattern=pupil_pattern)
-    r = PyVistaRenderer(scene)
+    if rasterizer:
+        from clpost.render.ibl_raster import FloatRasterizer
+
+        r = FloatRasterizer(scene)
+        fn = rasterizer_render_fn(r, 0)
+    else:
+        r = PyVistaRenderer(scene)
+        fn = pyvista_render_fn(r, 0)
     try:
         t0 = time.perf_counter()
-        img, stats = render_image_based(model, size, pyvista_render_fn(r, 0), supersample=supersample, device=device)
+        img, stats = render_image_based(model, size, fn, supersample=supersample, device=device)
         stats["frame_s"] = time.perf_counter() - t0
     finally:
         r.close()

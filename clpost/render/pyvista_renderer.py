@@ -96,6 +96,21 @@ def _vtk_matrix(m: np.ndarray):
     return out
 
 
+def set_vtk_camera(cam, pose: np.ndarray, f_px: float, height_px: int,
+                   principal: tuple[float, float, int] | None = None) -> None:
+    """Set the VTK camera ``cam`` (see :meth:`_IdDepthPass.set_camera`)."""
+    c = pose[:3, 3]
+    cam.SetPosition(*c)
+    cam.SetFocalPoint(*(c + pose[:3, 2]))
+    cam.SetViewUp(*(-pose[:3, 1]))
+    cam.SetViewAngle(math.degrees(2.0 * math.atan(0.5 * height_px / f_px)))
+    cam.SetWindowCenter(0.0, 0.0)
+    if principal is not None:
+        cx, cy, w = principal
+        cam.SetWindowCenter(1.0 - 2.0 * (cx + 0.5) / w, 2.0 * (cy + 0.5) / height_px - 1.0)
+    cam.SetClippingRange(_NEAR_M, _FAR_M)
+
+
 @dataclass
 class GBuffer:
     """What the rasterizer measured at pixel centres: object index (−1 = background) and planar
@@ -138,17 +153,7 @@ class _IdDepthPass:
         frustum). VTK shifts the projection by minus its window centre, so the window centre is
         minus the optical axis's NDC position :math:`(2(c_x + ½)/W - 1, 1 - 2(c_y + ½)/H)`
         (checked in tests/test_distortion.py against a crop of a wider centred render)."""
-        cam = self.renderer.GetActiveCamera()
-        c = pose[:3, 3]
-        cam.SetPosition(*c)
-        cam.SetFocalPoint(*(c + pose[:3, 2]))
-        cam.SetViewUp(*(-pose[:3, 1]))
-        cam.SetViewAngle(math.degrees(2.0 * math.atan(0.5 * height_px / f_px)))
-        cam.SetWindowCenter(0.0, 0.0)
-        if principal is not None:
-            cx, cy, w = principal
-            cam.SetWindowCenter(1.0 - 2.0 * (cx + 0.5) / w, 2.0 * (cy + 0.5) / height_px - 1.0)
-        cam.SetClippingRange(_NEAR_M, _FAR_M)
+        set_vtk_camera(self.renderer.GetActiveCamera(), pose, f_px, height_px, principal)
 
     def render(self, size: tuple[int, int], object_poses: list[np.ndarray]) -> GBuffer:
         import vtk
@@ -373,6 +378,44 @@ def _sun_visibility(points: np.ndarray, normals: np.ndarray, owner: np.ndarray, 
     return vis
 
 
+def _lit_radiance(scene: DemoScene, p: np.ndarray, n: np.ndarray, owner: np.ndarray, local: np.ndarray,
+                  width: np.ndarray, poses: list[np.ndarray]) -> np.ndarray:
+    """Radiance (N×3) of non-emitting surface points: world positions ``p`` and normals ``n``
+    (N×3) on objects ``owner`` (N), local coordinates ``local`` and texture footprint ``width``
+    (N×3): albedo × (sun with shadows + hemispherical ambient + emitters); see :class:`DemoScene`."""
+    s = scene.sun_unit
+    cos_s = np.clip(n @ s, 0.0, None)
+    sunlit = np.flatnonzero(cos_s > 0)
+    vis = np.zeros(len(p))
+    vis[sunlit] = _sun_visibility(p[sunlit], n[sunlit], owner[sunlit], scene, poses)
+    irradiance = scene.sun_irradiance * cos_s * vis + scene.ambient * 0.5 * (1.0 + n[:, 2])
+    irr_rgb = np.repeat(irradiance[:, None], 3, axis=1)
+    if scene.emitter_lighting:
+        # |c − p|² and n·(c − p) expanded so each emitter costs two matrix–vector products
+        p_p = np.einsum("ij,ij->i", p, p)
+        n_p = np.einsum("ij,ij->i", n, p)
+        for k, obj in enumerate(scene.objects):
+            if not obj.material.is_emitter:
+                continue
+            centre = poses[k][:3, 3]
+            r = obj.shape.bounding_radius_m
+            dist2 = np.maximum(centre @ centre - 2.0 * (p @ centre) + p_p, r * r)
+            cos_e = np.clip(n @ centre - n_p, 0.0, None) / np.sqrt(dist2)
+            power = math.pi * r * r * np.asarray(obj.material.emission)
+            irr_rgb += (cos_e / dist2)[:, None] * power
+
+    albedo = np.zeros((len(p), 3))
+    order = np.argsort(owner, kind="stable")
+    bounds = np.flatnonzero(np.r_[True, owner[order][1:] != owner[order][:-1], True])
+    if len(p) == 0:  # only sky or emitters in view (a small sub-frustum): no albedo to look up
+        bounds = bounds[:1]
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        sel = order[a:b]
+        k = int(owner[sel[0]])
+        albedo[sel] = _albedo(scene.objects[k].material, local[sel], width[sel])
+    return albedo * irr_rgb
+
+
 def shade(scene: DemoScene, gbuf: GBuffer, f_px: float, c: tuple[float, float],
           cam_pose: np.ndarray, poses: list[np.ndarray], rays: np.ndarray | None = None) -> np.ndarray:
     """Linear HDR radiance (H×W×3, float64) of the G-buffer; see :class:`DemoScene` for the model.
@@ -402,46 +445,26 @@ def shade(scene: DemoScene, gbuf: GBuffer, f_px: float, c: tuple[float, float],
     lit = np.flatnonzero(ids >= 0)
     emissive = np.array([o.material.is_emitter for o in scene.objects] + [False])
     lit = lit[~emissive[ids[lit]]]
-    p, n = flat_pts[lit], normals[lit]
-
-    s = scene.sun_unit
-    cos_s = np.clip(n @ s, 0.0, None)
-    sunlit = np.flatnonzero(cos_s > 0)
-    vis = np.zeros(lit.size)
-    vis[sunlit] = _sun_visibility(p[sunlit], n[sunlit], ids[lit][sunlit], scene, poses)
-    irradiance = scene.sun_irradiance * cos_s * vis + scene.ambient * 0.5 * (1.0 + n[:, 2])
-    irr_rgb = np.repeat(irradiance[:, None], 3, axis=1)
-    if scene.emitter_lighting:
-        # |c − p|² and n·(c − p) expanded so each emitter costs two matrix–vector products
-        p_p = np.einsum("ij,ij->i", p, p)
-        n_p = np.einsum("ij,ij->i", n, p)
-        for k, obj in enumerate(scene.objects):
-            if not obj.material.is_emitter:
-                continue
-            centre = poses[k][:3, 3]
-            r = obj.shape.bounding_radius_m
-            dist2 = np.maximum(centre @ centre - 2.0 * (p @ centre) + p_p, r * r)
-            cos_e = np.clip(n @ centre - n_p, 0.0, None) / np.sqrt(dist2)
-            power = math.pi * r * r * np.asarray(obj.material.emission)
-            irr_rgb += (cos_e / dist2)[:, None] * power
-
-    albedo = np.zeros((lit.size, 3))
-    owner = ids[lit]
-    order = np.argsort(owner, kind="stable")
-    bounds = np.flatnonzero(np.r_[True, owner[order][1:] != owner[order][:-1], True])
-    if lit.size == 0:  # only sky or emitters in view (a small sub-frustum): no albedo to look up
-        bounds = bounds[:1]
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        sel = order[a:b]
-        k = int(owner[sel[0]])
-        albedo[sel] = _albedo(scene.objects[k].material, local[lit[sel]], width[lit[sel]])
-
     out = color.reshape(-1, 3)
-    out[lit] = albedo * irr_rgb
+    out[lit] = _lit_radiance(scene, flat_pts[lit], normals[lit], ids[lit], local[lit], width[lit], poses)
     for k, pix in _segments(gbuf.ids):
         if scene.objects[k].material.is_emitter:
             out[pix] = scene.objects[k].material.emission
     return out.reshape(h, w, 3)
+
+
+def surface_radiance(scene: DemoScene, k: int, local: np.ndarray, width: np.ndarray,
+                     poses: list[np.ndarray]) -> np.ndarray:
+    """Radiance (N×3) of object ``k`` at local points ``local`` (N×3, on its surface) with texture
+    footprint ``width`` (N×3, m): what :func:`shade` gives a pixel that sees that point, for
+    view-independent (baked) shading — the scene is Lambertian, so only the footprint depends
+    on the view."""
+    obj = scene.objects[k]
+    if obj.material.is_emitter:
+        return np.broadcast_to(np.asarray(obj.material.emission, np.float64), local.shape).copy()
+    rot, t = poses[k][:3, :3], poses[k][:3, 3]
+    return _lit_radiance(scene, local @ rot.T + t, obj.shape.normal(local) @ rot.T, np.full(len(local), k), local,
+                         width, poses)
 
 
 # ---------------------------------------------------------------------------------------------
