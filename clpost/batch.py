@@ -243,8 +243,7 @@ def first_size(jobs: list[FrameJob]) -> tuple[int, int] | None:
     its frame against it, so a mismatched frame fails by itself instead of stopping the run."""
     for job in jobs:
         if job.src.is_file():
-            info = exr.info(job.src)
-            return tuple(info["size"])  # type: ignore[return-value]
+            return exr.display_size(job.src)
     return None
 
 
