@@ -121,6 +121,16 @@ def main(argv=None) -> int:
         for _ in range(args.rounds):
             for n in names:
                 times[n].append(run(n))
+        # the floor must write what clpost writes: the same channels, pixel types and compression
+        def kind(path):
+            with OpenEXR.File(str(path), header_only=True) as f:
+                return exr.read_header(path)[0].channels, f.header()["compression"]
+
+        tags = {"plain": "plain", "clpost I/O": "io", **{n: n for n in cams}}
+        floor = kind(out / "plain.0000.exr")
+        for n in names:
+            if not n.endswith(" serial") and kind(out / f"{tags[n]}.0000.exr") != floor:
+                print(f"warning: {n} wrote {kind(out / f'{tags[n]}.0000.exr')}, plain {floor}: not the same work")
         med = {n: statistics.median(t for t, _ in v) for n, v in times.items()}
         cpu = {n: statistics.median(c for _, c in v) for n, v in times.items()}
         # each round's own ratio (its rows ran back to back), then the median: robust to load drifting

@@ -746,7 +746,7 @@ def read_frame(path: str | os.PathLike, layout: "str | ReadSpec | None" = None, 
 def _encode(path: Path, name: str, a: np.ndarray, half: bool) -> np.ndarray:
     if not half:
         return np.ascontiguousarray(a, dtype=np.float32)
-    big = float(np.max(np.abs(a))) if a.size else 0.0
+    big = float(np.maximum(a.max(), -a.min())) if a.size else 0.0  # max |a| without an |a| copy
     if big > _HALF_MAX:
         raise InputError(f"{path}: {name} reaches {big:g}, beyond float16's {_HALF_MAX:g}; "
                          "write with half=False (float32) or scale the data")
