@@ -9,6 +9,15 @@ beside its destination ``<name>`` and registered while it exists:
   run unwinds (locks released) — :func:`signal_cleanup`;
 - SIGKILL cannot be caught: the next run on the same outputs removes the stale ones of that
   naming pattern (:func:`remove_stale_temps`, called under the output lock), never other files.
+
+No ``fsync``: like OpenImageIO's and Nuke's writers, a file is written and renamed without forcing
+it to the disk first. The guarantee above holds without it — however a run is interrupted, an
+output's name only ever points at a complete file, because the rename is the last step and is
+atomic — and a sequence does not wait on the disk per frame. What it leaves to the operating
+system is durability across a power loss or kernel crash: a file renamed just before one may come
+back short on a filesystem that reorders the rename before the data (ext4 flushes a file that
+replaces another by rename, ``auto_da_alloc``, but a new name is not covered). Rerun such a run
+with ``--overwrite``: resuming skips outputs that exist.
 """
 from __future__ import annotations
 

@@ -9,8 +9,11 @@ Overlap (:func:`process_sequence`): frame k+1 is read by a reader thread and fra
 a writer thread while frame k runs on the device, so a sequence costs about the slowest of read,
 process and write per frame instead of their sum (OpenEXR's decoding and encoding, numpy copies
 and OpenCL waits release the GIL; OpenEXR also gets one thread per CPU, :func:`exr_threads`). At
-most one read ahead and one write behind: three frames in memory. Errors keep the serial loop's order: frame k's error is raised only after every earlier
-frame's output is complete.
+most one read ahead and one write behind: three frames in memory. An output image whose file is
+written becomes the array a later frame's image is downloaded into (:meth:`Pipeline.run`'s
+``out``), so a sequence does not allocate — and page-fault — a fresh image per frame. Errors keep
+the serial loop's order: frame k's error is raised only after every earlier frame's output is
+complete.
 """
 from __future__ import annotations
 
@@ -137,11 +140,11 @@ def load_job(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
 
 
 def run_job(pipeline: Pipeline, job: FrameJob, cam, frame: Frame, display="srgb",
-            aovs: tuple[str, ...] = ()) -> tuple[Frame, tuple]:
+            aovs: tuple[str, ...] = (), out: np.ndarray | None = None) -> tuple[Frame, tuple]:
     """Device step of :func:`process_one` (the pipeline's thread): the processed frame and what
     :func:`store_job` needs (working space, input chromaticities, AOV channels, the camera used
-    and the effective camera)."""
-    out = pipeline.run(frame, cam)
+    and the effective camera). ``out``: an array to put the image in (:meth:`Pipeline.run`)."""
+    out = pipeline.run(frame, cam, out)
     ws = (cam or pipeline.camera).working_space
     chroma = input_chromaticities(display, job.src, frame.metadata)
     extra = None
@@ -243,8 +246,7 @@ def first_size(jobs: list[FrameJob]) -> tuple[int, int] | None:
     its frame against it, so a mismatched frame fails by itself instead of stopping the run."""
     for job in jobs:
         if job.src.is_file():
-            info = exr.info(job.src)
-            return tuple(info["size"])  # type: ignore[return-value]
+            return exr.display_size(job.src)
     return None
 
 
@@ -275,10 +277,12 @@ def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | 
         return report
     exr_threads()
     t_last = time.perf_counter()
+    spare: list[np.ndarray] = []  # images whose output is written: the next frames download into them
 
-    def finished(job: FrameJob, write) -> None:
+    def finished(job: FrameJob, write, image: np.ndarray) -> None:
         nonlocal t_last
         write.result()  # a failed write raises here, before any later frame's error
+        spare.append(image)
         now = time.perf_counter()
         report.done.append(job.frame)
         report.seconds.append(now - t_last)
@@ -289,18 +293,18 @@ def process_sequence(pipeline: Pipeline, jobs: list[FrameJob], *, layout: str | 
     with ThreadPoolExecutor(1, thread_name_prefix="clpost-read") as reader, \
             ThreadPoolExecutor(1, thread_name_prefix="clpost-write") as writer:
         ahead = reader.submit(load_job, pipeline, todo[0], layout, size, sources)
-        behind = None  # (job, future) of the write in flight
+        behind = None  # (job, future, image) of the write in flight
         try:
             for k, job in enumerate(todo):
                 cam, frame = ahead.result()
                 if k + 1 < len(todo):
                     ahead = reader.submit(load_job, pipeline, todo[k + 1], layout, size, sources)
-                out, store = run_job(pipeline, job, cam, frame, display, aovs)
+                out, store = run_job(pipeline, job, cam, frame, display, aovs, spare.pop() if spare else None)
                 if behind is not None:
                     done, behind = behind, None
                     finished(*done)
                 behind = (job, writer.submit(store_job, job, out, store, half, compression, display,
-                                                    preview_dir, camera_files))
+                                                    preview_dir, camera_files), out.color)
             done, behind = behind, None
             finished(*done)
         except Exception:

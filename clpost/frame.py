@@ -267,7 +267,9 @@ class Frame:
         cached = self.__dict__.get("_velocity_max")
         if cached is not None and cached[0] is self.velocity:
             return cached[1]
-        v = float(np.max(np.abs(self.velocity))) if self.velocity.size else 0.0
+        vel = self.velocity
+        # max |v| as max(max v, −min v): two reductions, no |v| copy of the buffer (NaN propagates)
+        v = float(np.maximum(vel.max(), -vel.min())) if vel.size else 0.0
         object.__setattr__(self, "_velocity_max", (self.velocity, v))
         return v
 

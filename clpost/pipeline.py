@@ -196,12 +196,14 @@ class Pipeline:
         return [n.name for n in group_nodes(self._planned(frame, cam))]
 
     # -- running ------------------------------------------------------------------------------
-    def run(self, frame: Frame, camera: Camera | None = None) -> Frame:
+    def run(self, frame: Frame, camera: Camera | None = None, out: np.ndarray | None = None) -> Frame:
         """Process one frame; returns a new Frame whose color is the camera's output
         (normalised sensor signal; later stages: the film/sensor's recorded values).
         ``camera``: this frame's camera (an animated camera; default the pipeline's): its scalar
         parameters change per frame through the same plan; its metadata ``resolved_camera`` is
-        the camera used (metered)."""
+        the camera used (metered). ``out``: an array to download the image into
+        (:meth:`Plan.run`'s, e.g. an earlier output that is done with: a sequence then allocates
+        no fresh frame), used when it fits this frame's plan, else a new one."""
         if camera is not None and not isinstance(camera, Camera):
             raise InputError(f"Pipeline.run: camera must be a clpost.Camera, not {type(camera).__name__}")
         frame = self.plate(frame, camera)
@@ -212,7 +214,10 @@ class Pipeline:
             self._exposure_checked = True
             metering.check_exposure(cam, frame)
         self.last_plan = plan
-        out = plan.run(frame, cam)
+        w, h = plan.output_size
+        fits = (out is not None and out.shape == (h, w, 3) and out.dtype == np.float32
+                and out.flags.c_contiguous and out.flags.writeable)
+        out = plan.run(frame, cam, out if fits else None)
         meta = dict(out.metadata, resolved_camera=cam)
         if "distortion" in plan.stage_names:
             # the distorted image is the calibration's: data = display = the output, at (0, 0)

@@ -13,8 +13,10 @@ motion) as EXRs with ``--compression`` into a temporary folder, then per round, 
   writes behind), and ``… serial``: the same frames one at a time (``process_one``), as the loop
   ran before the overlap.
 
-Reported: ms per frame (wall time of the whole sequence / frames; medians over rounds) and each
-row's throughput as a multiple of ``plain`` (≥ 0.8 is the target). Kernels are built in a warm-up
+Reported: ms per frame (wall time of the whole sequence / frames; medians over rounds), each
+row's throughput as a multiple of ``plain`` (≥ 0.8 is the target; the median over rounds of each
+round's own ratio, so load drifting between rounds cancels) and the process's CPU time per frame
+(all threads: what the row costs a loaded machine). ``--rows`` picks rows. Kernels are built in a warm-up
 pass first. ``--threads N`` sets OpenEXR's global thread count for every row alike (default: one
 per CPU, what ``clpost process`` sets, :func:`clpost.batch.exr_threads`; OpenEXR's own default is 0).
 """
@@ -38,6 +40,9 @@ def _plain_io(src: Path, dst: Path, compression) -> None:
     OpenEXR.File({"compression": compression, "type": OpenEXR.scanlineimage}, ch).write(str(dst))
 
 
+ROWS = ("plain", "clpost I/O", "exposure", "exposure serial", "cinematic", "cinematic serial")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--size", default="1920x1080")
@@ -48,6 +53,8 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=os.cpu_count() or 1,
                     help="OpenEXR global thread count for every row (default: one per CPU)")
     ap.add_argument("--device", default=None)
+    ap.add_argument("--rows", default=",".join(ROWS),
+                    help="comma-separated rows to run (default all; 'plain' always runs)")
     args = ap.parse_args(argv)
 
     import warnings
@@ -87,7 +94,7 @@ def main(argv=None) -> int:
             return [FrameJob(k, s, out / f"{tag}.{k:04d}.exr") for k, s in enumerate(srcs)]
 
         def run(name):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             if name == "plain":
                 for j in jobs("plain"):
                     _plain_io(j.src, j.dst, comp)
@@ -100,22 +107,41 @@ def main(argv=None) -> int:
                     process_one(pipes[base], j, compression=args.compression)
             else:
                 process_sequence(pipes[name], jobs(name), overwrite=True, compression=args.compression)
-            return (time.perf_counter() - t0) * 1e3 / args.frames
+            return ((time.perf_counter() - t0) * 1e3 / args.frames, (time.process_time() - c0) * 1e3 / args.frames)
 
-        names = ["plain", "clpost I/O", "exposure", "exposure serial", "cinematic", "cinematic serial"]
-        for name in cams:  # build kernels and plans
+        wanted = {r.strip() for r in args.rows.split(",")}
+        unknown = wanted - set(ROWS)
+        if unknown:
+            ap.error(f"--rows: unknown {', '.join(sorted(unknown))}; pick from {', '.join(ROWS)}")
+        names = [n for n in ROWS if n == "plain" or n in wanted]
+        load0 = os.getloadavg()
+        for name in {n.split()[0] for n in names} & set(cams):  # build kernels and plans
             process_one(pipes[name], FrameJob(0, srcs[0], out / "warm.exr"), compression=args.compression)
         times = {n: [] for n in names}
         for _ in range(args.rounds):
             for n in names:
                 times[n].append(run(n))
-        med = {n: statistics.median(v) for n, v in times.items()}
+        # the floor must write what clpost writes: the same channels, pixel types and compression
+        def kind(path):
+            with OpenEXR.File(str(path), header_only=True) as f:
+                return exr.read_header(path)[0].channels, f.header()["compression"]
+
+        tags = {"plain": "plain", "clpost I/O": "io", **{n: n for n in cams}}
+        floor = kind(out / "plain.0000.exr")
+        for n in names:
+            if not n.endswith(" serial") and kind(out / f"{tags[n]}.0000.exr") != floor:
+                print(f"warning: {n} wrote {kind(out / f'{tags[n]}.0000.exr')}, plain {floor}: not the same work")
+        med = {n: statistics.median(t for t, _ in v) for n, v in times.items()}
+        cpu = {n: statistics.median(c for _, c in v) for n, v in times.items()}
+        # each round's own ratio (its rows ran back to back), then the median: robust to load drifting
+        ratio = {n: statistics.median(p[0] / t[0] for p, t in zip(times["plain"], v)) for n, v in times.items()}
         print(f"{args.frames} frames {w}x{h}, {args.compression}, quality {args.quality}, OpenEXR threads "
               f"{OpenEXR.global_thread_count() if hasattr(OpenEXR, 'global_thread_count') else '?'}, "
-              f"{args.rounds} round(s), device {pipes['exposure'].runtime.name}")
-        print(f"| row | ms/frame | throughput / plain read+write |\n|---|---:|---:|")
+              f"{args.rounds} round(s), device {pipes['exposure'].runtime.name}, {os.cpu_count()} CPUs, load average "
+              f"{load0[0]:.1f} before, {os.getloadavg()[0]:.1f} after")
+        print("| row | ms/frame | throughput / plain read+write | CPU ms/frame (all threads) |\n|---|---:|---:|---:|")
         for n in names:
-            print(f"| {n} | {med[n]:.0f} | {med['plain'] / med[n]:.2f} |")
+            print(f"| {n} | {med[n]:.0f} | {ratio[n]:.2f} | {cpu[n]:.0f} |")
     return 0
 
 

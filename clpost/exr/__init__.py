@@ -130,7 +130,7 @@ Blender manual, "Render Passes" (Depth, Vector); Foundry Nuke reference guide, S
 ZDefocus, VectorBlur; Autodesk Arnold user guide, "AOVs" and the ``motion_vector`` shader.
 """
 from .io import (CAMERA_ATTRIBUTES, COMPRESSIONS, MAX_CHANNELS, MAX_SIDE, PartHeader, ReadSpec, check_header,
-                 format_info, info, quiet_openexr, read_attributes, read_frame, read_header, window_str, write_frame)
+                 display_size, format_info, info, quiet_openexr, read_attributes, read_frame, read_header, window_str, write_frame)
 from .layouts import (BLENDER_VIEW_LAYER, DEPTH_KINDS, LAYOUTS, REGISTRY, SKY_DEPTH_M,
                       ArnoldLayout, BlenderLayout, ClpostLayout, DepthConventionWarning, Layout,
                       NukeLayout, detect_layout, get_layout, planar_to_radial, radial_to_planar)
@@ -138,6 +138,6 @@ from .layouts import (BLENDER_VIEW_LAYER, DEPTH_KINDS, LAYOUTS, REGISTRY, SKY_DE
 __all__ = [
     "CAMERA_ATTRIBUTES", "read_attributes", "ArnoldLayout", "BLENDER_VIEW_LAYER", "BlenderLayout", "COMPRESSIONS", "ClpostLayout", "DEPTH_KINDS",
     "DepthConventionWarning", "LAYOUTS", "Layout", "MAX_CHANNELS", "MAX_SIDE", "NukeLayout", "PartHeader",
-    "REGISTRY", "ReadSpec", "window_str", "SKY_DEPTH_M", "check_header", "detect_layout", "format_info", "get_layout", "info",
+    "REGISTRY", "ReadSpec", "window_str", "SKY_DEPTH_M", "check_header", "detect_layout", "display_size", "format_info", "get_layout", "info",
     "planar_to_radial", "quiet_openexr", "radial_to_planar", "read_frame", "read_header", "write_frame",
 ]

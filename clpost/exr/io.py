@@ -73,6 +73,8 @@ class PartHeader:
 
     channels: dict[str, int] = field(default_factory=dict)
     """channel name → pixel type (0 uint, 1 half, 2 float)."""
+    sampling: dict[str, tuple[int, int]] = field(default_factory=dict)
+    """channel name → (x, y) sampling."""
     data_window: Window | None = None
     display_window: Window | None = None
     type: str = ""
@@ -122,7 +124,7 @@ def _box(r: _Reader, size: int) -> Window:
     return (x0, y0), (x1, y1)
 
 
-def _chlist(r: _Reader, size: int, limit: int) -> dict[str, int]:
+def _chlist(r: _Reader, size: int, limit: int, sampling: dict[str, tuple[int, int]]) -> dict[str, int]:
     end = r.i + size
     out: dict[str, int] = {}
     while True:
@@ -136,6 +138,7 @@ def _chlist(r: _Reader, size: int, limit: int) -> dict[str, int]:
             raise InputError(f"{r.path}: a part declares more than {MAX_CHANNELS} channels; the file is "
                              "corrupt or not a rendered frame — re-render or re-copy it")
         out[name] = ptype
+        sampling[name] = (xs, ys)
     if r.i != end:
         raise r.corrupt("a channel list of the wrong size")
     return out
@@ -180,7 +183,7 @@ def _parse_headers(r: _Reader) -> list[PartHeader]:
             if typ == "box2i" and name in ("dataWindow", "displayWindow"):
                 setattr(ph, "data_window" if name == "dataWindow" else "display_window", _box(r, size))
             elif typ == "chlist" and name == "channels":
-                ph.channels = _chlist(r, size, limit)
+                ph.channels = _chlist(r, size, limit, ph.sampling)
             elif typ == "string":
                 text = r.take(size).decode("utf-8", "replace")
                 if name == "type":
@@ -223,6 +226,20 @@ def read_attributes(path: str | os.PathLike) -> tuple[dict[str, float], dict[str
     except OSError as e:
         raise InputError(f"{p}: cannot read ({e.strerror}); check the file's permissions") from None
     return dict(first.attributes), dict(first.strings)
+
+
+def display_size(path: str | os.PathLike) -> tuple[int, int]:
+    """(width, height) of the display window of ``path``'s first part, from the checked header
+    alone (no pixels are read): the size :func:`read_frame`'s frame will have."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such file; check the path")
+    try:
+        headers = read_header(p)
+    except OSError as e:
+        raise InputError(f"{p}: cannot read ({e.strerror}); check the file's permissions") from None
+    check_header(p, headers)
+    return _side(headers[0].display_window)  # type: ignore[arg-type]
 
 
 def _camera_attrs(header: dict) -> dict[str, float]:
@@ -382,7 +399,7 @@ def _load(path: str | os.PathLike) -> list[_Part]:
     check_header(p, headers)
     try:
         with quiet_openexr():
-            f = OpenEXR.File(str(p), separate_channels=True)
+            f = OpenEXR.File(str(p), separate_channels=not _can_interleave(headers))
             raw_parts = list(f.parts)
     except MemoryError:
         raise InputError(f"{p}: out of memory reading it; the file is corrupt, or free memory first") from None
@@ -398,6 +415,34 @@ def _load(path: str | os.PathLike) -> list[_Part]:
         raise InputError(f"{p}: {len(headers) - len(raw_parts)} of its {len(headers)} parts cannot be read; the "
                          "file is corrupt or truncated — re-render or re-copy it")
     return [_part(p, i, rp) for i, rp in enumerate(raw_parts)]
+
+
+def _rgba_groups(ph: PartHeader) -> dict[str, list[str]]:
+    """The channels OpenEXR's bindings read interleaved when asked (``separate_channels=False``):
+    per key (``RGB``/``RGBA``, or the layer of ``layer.R`` …), the names of the layer's R, G, B
+    (and A) — every layer that has all of R, G and B."""
+    out = {}
+    for n in ph.channels:
+        pre = n[:-1]
+        if n[-1] == "R" and (not pre or pre.endswith(".")) and all(pre + c in ph.channels for c in "GB"):
+            members = [pre + c for c in "RGBA" if pre + c in ph.channels]
+            out[pre[:-1] if pre else "RGBA"[:len(members)]] = members
+    return out
+
+
+def _can_interleave(headers: Sequence[PartHeader]) -> bool:
+    """Whether OpenEXR can read every part's colour layers straight into interleaved (H, W, 3|4)
+    arrays — what a Frame's colour is, so the reader need not stack planes: flat parts whose
+    layers' channels share one pixel type and full resolution, with no channel named like a
+    layer's key. Otherwise planes are read one by one."""
+    for ph in headers:
+        if ph.type.startswith("deep"):
+            return False
+        for key, members in _rgba_groups(ph).items():
+            if (key in ph.channels or len({ph.channels[m] for m in members}) != 1
+                    or any(ph.sampling.get(m) != (1, 1) for m in members)):
+                return False
+    return True
 
 
 _CHROMA = ("RY", "BY")
@@ -425,9 +470,14 @@ def _part(path: Path, index: int, rp: Any) -> _Part:
                              "write full-resolution channels")
         px = np.asarray(ch.pixels)
         want = (-(-shape[0] // ys), -(-shape[1] // xs))
-        if px.shape != want:
+        if px.shape[:2] != want or px.ndim not in ((2,) if is_deep else (2, 3)):
             raise InputError(f"{path}: channel {cname!r} in {label} has {px.shape} pixels, data window "
                              f"{window_str(dw)} needs {want}; the file is corrupt or truncated — re-render it")
+        if px.ndim == 3:  # an interleaved layer (_can_interleave): its channels are views of it
+            pre = "" if cname in ("RGB", "RGBA") else cname + "."
+            for i, c in enumerate("RGBA"[:px.shape[2]]):
+                planes[pre + c], types[pre + c] = px[..., i], ch.type().name.lower()
+            continue
         planes[cname] = px
         types[cname] = ch.type().name.lower()
     return _Part(index, name, header, planes, types, dw, disp, is_deep)
@@ -584,26 +634,30 @@ def _frame_from_parts(path: Path, parts: Sequence[_Part], layout: "str | ReadSpe
     def place(plane, fill):
         return _place(plane, window_of[id(plane)], extent, fill)
 
-    color = np.stack([place(c, 0.0) for c in m.color], axis=-1)
+    rgb = _interleaved(m.color)  # read interleaved (_can_interleave): no copy
+    if rgb is not None and window_of[id(m.color[0])] == extent:
+        color = rgb
+    else:
+        color = np.stack([place(c, 0.0) for c in m.color], axis=-1)
     alpha = None
     if m.alpha is not None:
-        # Filters with negative lobes overshoot coverage a hair; only that much is clipped.
-        a = np.asarray(m.alpha)
-        a = np.where((a > 1) & (a <= 1 + 1e-3), 1, np.where((a < 0) & (a >= -1e-3), 0, a)).astype(a.dtype)
-        alpha = _place(a, window_of[id(m.alpha)], extent, 0.0)
+        alpha = _place(_clip_coverage(np.asarray(m.alpha)), window_of[id(m.alpha)], extent, 0.0)
     elif window_of[id(m.color[0])] != extent:
         alpha = _place(np.ones(m.color[0].shape, np.float32), window_of[id(m.color[0])], extent, 0.0)
     depth_m, kind_out = None, "planar"
     if m.depth is not None:
-        # placed with a neutral 1 (radial depth converts by pixel position), no data → +inf after
-        depth_m, kind_out = depth_to_planar(path, place(m.depth, 1.0), kind, focal_px)
-        covered = _place(np.ones(m.depth.shape, bool), window_of[id(m.depth)], extent, False)
-        depth_m = np.where(covered, depth_m, np.float32(np.inf)).astype(np.float32)
+        # placed with a neutral 1 (radial depth converts by pixel position), no data → +inf after;
+        # the plane is this read's own, converted in place
+        depth_m, kind_out = depth_to_planar(path, place(m.depth, 1.0), kind, focal_px, in_place=True)
+        if window_of[id(m.depth)] != extent:
+            covered = _place(np.ones(m.depth.shape, bool), window_of[id(m.depth)], extent, False)
+            depth_m = np.where(covered, depth_m, np.float32(np.inf)).astype(np.float32)
     vel = None
     if m.velocity is not None:
         win = window_of[id(m.velocity[0])]
         vel = lay.velocity(m, velocity_y_up)
-        vel = np.stack([_place(vel[..., i], win, extent, 0.0) for i in range(2)], axis=-1)
+        if win != extent:
+            vel = np.stack([_place(vel[..., i], win, extent, 0.0) for i in range(2)], axis=-1)
     label_planes = {name: place(planes[name], 0) for name in _label_channels(path, planes, m, labels)}
     header = parts[0].header
     metadata = {"path": str(path), "layout": layout, "header": _str_attrs(header),
@@ -618,6 +672,28 @@ def _frame_from_parts(path: Path, parts: Sequence[_Part], layout: "str | ReadSpe
                      copy=False)
     except InputError as e:
         raise InputError(f"{path} (layout {layout}): {e}") from None
+
+
+def _interleaved(planes: Sequence[np.ndarray]) -> np.ndarray | None:
+    """The C-contiguous (H, W, len(planes)) array whose channels ``planes`` are, in order (views
+    of an interleaved read, or the first channels of one: RGB of RGBA is a strided view), else None."""
+    base = planes[0].base
+    if not isinstance(base, np.ndarray) or base.ndim != 3 or not base.flags.c_contiguous:
+        return None
+    start = base.__array_interface__["data"][0]
+    for i, p in enumerate(planes):
+        if p.base is not base or p.__array_interface__["data"][0] != start + i * base.itemsize or p.shape != base.shape[:2]:
+            return None
+    return base if base.shape[2] == len(planes) else base[..., :len(planes)]
+
+
+def _clip_coverage(a: np.ndarray) -> np.ndarray:
+    """Alpha with the hair that filters with negative lobes overshoot coverage by (1e-3) clipped
+    to [0, 1]; values further out are left for the Frame to refuse. Two reductions when nothing
+    overshoots (the usual case)."""
+    if not a.size or (a.min() >= 0 and a.max() <= 1):  # NaN takes the long way, keeping it for the Frame to name
+        return a
+    return np.where((a > 1) & (a <= 1 + 1e-3), 1, np.where((a < 0) & (a >= -1e-3), 0, a)).astype(a.dtype)
 
 
 def _label_channels(path: Path, planes: dict[str, np.ndarray], m, spec: str) -> list[str]:
@@ -670,7 +746,7 @@ def read_frame(path: str | os.PathLike, layout: "str | ReadSpec | None" = None, 
 def _encode(path: Path, name: str, a: np.ndarray, half: bool) -> np.ndarray:
     if not half:
         return np.ascontiguousarray(a, dtype=np.float32)
-    big = float(np.max(np.abs(a))) if a.size else 0.0
+    big = float(np.maximum(a.max(), -a.min())) if a.size else 0.0  # max |a| without an |a| copy
     if big > _HALF_MAX:
         raise InputError(f"{path}: {name} reaches {big:g}, beyond float16's {_HALF_MAX:g}; "
                          "write with half=False (float32) or scale the data")
@@ -679,16 +755,38 @@ def _encode(path: Path, name: str, a: np.ndarray, half: bool) -> np.ndarray:
 
 def _layout_parts(path: Path, frame: Frame, layout: str, half: bool,
                   focal_px: float | tuple[float, float] | None) -> list[tuple[str, dict[str, np.ndarray]]]:
-    """(part name, channels) for each part to write, with our conventions inverted."""
-    c = frame.color
-    rgb = {k: _encode(path, "color", c[..., i], half) for i, k in enumerate("RGB")}
+    """(part name, channels) for each part to write, with our conventions inverted; colour and
+    velocity as views of the (encoded) interleaved arrays (:func:`_writable` makes them writable)."""
+    c = _encode(path, "color", frame.color, half)
+    rgb = {k: c[..., i] for i, k in enumerate("RGB")}
     alpha = None if frame.alpha is None else _encode(path, "alpha", frame.alpha, half)
     vel = None
     if frame.velocity is not None:
-        vel = (_encode(path, "velocity", frame.velocity[..., 0], half),
-               _encode(path, "velocity", frame.velocity[..., 1], half))
+        v = _encode(path, "velocity", frame.velocity, half)
+        vel = (v[..., 0], v[..., 1])
     # Depth stays float32 even for half files (precision and range, see clpost.exr).
     return get_layout(path, layout).parts(rgb, alpha, frame.depth, vel, focal_px)
+
+
+def _writable(channels: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Channels as OpenEXR's bindings write them correctly: each layer's R, G, B that are the
+    channels of one interleaved array, in order, as that array under the layer's key (``RGB``,
+    or the layer's name: the bindings write an (H, W, 3) array's channels with their strides,
+    on OpenEXR's threads, no copy); every other plane C-contiguous — the bindings ignore a
+    plane's strides and would write a strided view's memory as it lies."""
+    out = dict(channels)
+    for name in channels:
+        pre = name[:-1]
+        if name[-1:] != "R" or (pre and not pre.endswith(".")) or not all(pre + c in out for c in "GB"):
+            continue
+        rgb = _interleaved([out[pre + c] for c in "RGB"])
+        key = pre[:-1] if pre else "RGB"
+        if rgb is None or not rgb.flags.c_contiguous or key in out:
+            continue
+        for c in "RGB":
+            del out[pre + c]
+        out[key] = rgb
+    return {k: v if v.ndim == 3 else np.ascontiguousarray(v) for k, v in out.items()}
 
 
 def _user_header(path: Path, header: dict[str, str | float] | None) -> dict[str, str | float]:
@@ -762,6 +860,7 @@ def _build_file(parts: list[tuple[str, dict[str, np.ndarray]]], attrs: dict[str,
     base = {"compression": getattr(OpenEXR, COMPRESSIONS[compression][0]), "type": OpenEXR.scanlineimage}
     if windows is not None:
         base.update(dataWindow=_box2i(windows.data), displayWindow=_box2i(windows.display))
+    parts = [(name, _writable(ch)) for name, ch in parts]
     if len(parts) == 1 and not parts[0][0]:
         return OpenEXR.File({**base, **attrs}, parts[0][1])
     # Blender tags its multilayer files so other tools recognise the layer.pass.channel naming.

@@ -134,15 +134,18 @@ def planar_to_radial(depth: np.ndarray, focal_px: float | tuple[float, float]) -
 
 
 def depth_to_planar(path: Path, raw: np.ndarray, kind: str,
-                    focal_px: float | tuple[float, float] | None) -> tuple[np.ndarray, str]:
+                    focal_px: float | tuple[float, float] | None, *, in_place: bool = False) -> tuple[np.ndarray, str]:
     """A file's depth plane of ``kind`` (:data:`DEPTH_KINDS`) as planar metres, ``+inf`` sky;
-    radial depth without ``focal_px`` stays radial (returned kind says which)."""
+    radial depth without ``focal_px`` stays radial (returned kind says which). ``in_place``: a
+    float32 ``raw`` is the caller's to overwrite (a reader's own plane: no copy)."""
     # Arithmetic on half planes would lose precision: one explicit conversion here.
     d = np.asarray(raw, dtype=np.float32)
     if kind == "inverse":
         with np.errstate(divide="ignore"):
             d = np.where(d == 0, np.float32(np.inf), np.float32(1) / d).astype(np.float32)
-    d = np.where(d >= SKY_DEPTH_M, np.float32(np.inf), d).astype(np.float32)
+    elif (d is raw and not in_place) or not d.flags.writeable:
+        d = d.copy()
+    np.copyto(d, np.float32(np.inf), where=d >= SKY_DEPTH_M)
     if kind == "radial":
         if focal_px is None:
             warnings.warn(
@@ -156,13 +159,23 @@ def depth_to_planar(path: Path, raw: np.ndarray, kind: str,
     return d, "planar"
 
 
+def _interleave(x: np.ndarray, y: np.ndarray, sx: float, sy: float) -> np.ndarray:
+    """(H, W, 2) float32 of ``sx·x`` and ``sy·y`` (signs ±1), written once (half planes convert
+    on the way)."""
+    out = np.empty(np.shape(x) + (2,), np.float32)
+    for i, (a, s) in enumerate(((x, sx), (y, sy))):
+        if s < 0:
+            np.negative(a, out=out[..., i], casting="unsafe")
+        else:
+            np.copyto(out[..., i], a, casting="unsafe")
+    return out
+
+
 def _pair_velocity(m: Mapped, y_up: bool) -> np.ndarray:
-    u = np.asarray(m.velocity[0], dtype=np.float32)
-    v = np.asarray(m.velocity[1], dtype=np.float32)
     # A "backward" pair (Nuke backward.u/v) points against the motion; negate it, assuming
     # constant velocity.
     sign = -1.0 if (m.velocity_note == "backward") else 1.0
-    return np.stack([sign * u, sign * (-v if y_up else v)], axis=-1).astype(np.float32)
+    return _interleave(m.velocity[0], m.velocity[1], sign, -sign if y_up else sign)
 
 
 # -- the layouts --------------------------------------------------------------------------------
@@ -258,9 +271,7 @@ class BlenderLayout(Layout):
     def velocity(self, m, y_up):
         # ZW = current − next and XY = previous − current, both y up: forward y-down is (−a, +b)
         # (verified with Blender 5.2 / Cycles; XY assumes constant velocity).
-        a = np.asarray(m.velocity[0], dtype=np.float32)
-        b = np.asarray(m.velocity[1], dtype=np.float32)
-        return np.stack([-a, b], axis=-1).astype(np.float32)
+        return _interleave(m.velocity[0], m.velocity[1], -1.0, 1.0)
 
     def parts(self, rgb, alpha, depth, vel, focal_px):
         pre = BLENDER_VIEW_LAYER
