@@ -115,7 +115,7 @@ __kernel void distortion_rest(__global const float *restrict src, __global float
  * along columns it is latency-bound (30+ ms at 1080p). The FIR gives every work-item 16
  * neighbouring pixels and loads at offsets uniform across lanes, on buffers padded so no tap is
  * clamped. */
-#define DISTORTION_PAD 12
+#define DISTORTION_PAD 20
 #define DISTORTION_FIR_K 12
 /* h_0 ... h_K in float64 printed to float precision (tests/test_distortion.py checks them against
  * fir_taps and the impulse response of scipy.ndimage.spline_filter1d) */
@@ -130,7 +130,7 @@ __constant float distortion_fir[DISTORTION_FIR_K + 1] = {
  * column of padded column p: p - PAD. The window x0 ... x0 + 47 (16 + 2K = 40 used) is three
  * vload16 and the 2K + 1 shifted copies are shuffle2 with constant masks (one permute each),
  * not 25 unaligned vload16, which split cache lines (same output;
- * docs/measurements.md#kernel-forms-on-pocl). Work-items whose window leaves the row (5 of 122
+ * docs/measurements.md#kernel-forms-on-pocl). Work-items whose window leaves the row (5 of 123
  * per row at 1080p) copy it with clamped indices to a private array first. tmp: 3 planes of th =
  * coefficient rows + 2K rows of pitch. The taps are written out for K = 12. */
 #if DISTORTION_FIR_K != 12
@@ -221,7 +221,11 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
     const int n = width * height, sn = src_w * src_h;
     const int i = y * width + x;
     const int b0 = base[i];
-    const int b = b0 < 0 ? 0 : b0;
+    if (b0 < 0) {  /* no preimage: colour 0 (whole tiles of them are listed here) */
+        for (int c = 0; c < 3; ++c) dst[c * n + i] = 0.0f;
+        return;
+    }
+    const int b = b0;
     float wx[4], wy[4];
     for (int k = 0; k < 4; ++k) {
         wx[k] = wts[k * n + i];
@@ -250,7 +254,7 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
         const float lo = min(min(a, e), min(d, f)), hi = max(max(a, e), max(d, f));
         const float lin = mix(mix(a, e, tx), mix(d, f, tx), ty);
         const float v = mix(clamp(acc, lo, hi), lin, th);
-        dst[c * n + i] = b0 < 0 ? 0.0f : v;
+        dst[c * n + i] = v;
     }
 }
 
