@@ -38,14 +38,16 @@ def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0
     return Frame(color, depth=d, velocity=v, metadata=meta, labels=lab)
 
 
-def _run(camera, stages, quality, w, h, *, narrow=False, **frame_kw):
-    """``narrow``: the forms a GPU runs (one pixel per work-item, :attr:`Runtime.wide` False)."""
+def _run(camera, stages, quality, w, h, *, narrow=False, wide=False, **frame_kw):
+    """``narrow``: the forms a GPU runs (one pixel per work-item, :attr:`Runtime.wide` False);
+    ``wide``: the CPUs' forms (Oclgrind's device reports every device type, GPU included, so
+    without either it runs the GPU forms)."""
     from clpost import Pipeline
     from clpost.runtime import Runtime
 
-    if narrow:
+    if narrow or wide:
         saved = Runtime.wide
-        Runtime.wide = property(lambda self: False)
+        Runtime.wide = property(lambda self: wide)
         try:
             return _run(camera, stages, quality, w, h, **frame_kw)
         finally:
@@ -138,6 +140,10 @@ def cases():
             for w, h in ((3, 2), (17, 5), (37, 23), (61, 35)):
                 add(f"distortion-{label} {q} {w}x{h}",
                     lambda k=k, q=q, w=w, h=h: _run(_distortion_model(base, w, h, **k), ["distortion"], q, w, h))
+        # the CPUs' prefilter row pass (distortion_iir_rows; Runtime.wide)
+        for w, h in ((3, 2), (37, 23)):
+            add(f"distortion-{label} wide final {w}x{h}",
+                lambda k=k, w=w, h=h: _run(_distortion_model(base, w, h, **k), ["distortion"], "final", w, h, wide=True))
 
     # label planes (distortion_labels): fold-over leaves pixels without a preimage (index -1)
     for w, h in ((3, 2), (37, 23)):
