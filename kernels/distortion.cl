@@ -10,8 +10,8 @@
  * Draft/preview: bilinear (4 taps), kernels `distortion_tiles` and `distortion_rest` (`distortion`:
  * the same per pixel over the whole map).
  * Final: cubic B-spline interpolation: the B-spline coefficients of the
- * source (`distortion_fir_rows` then `_cols`: the prefilter of Unser 1999 as a separable FIR,
- * |k| <= DISTORTION_FIR_K) and 16 taps with B-spline weights (`distortion_bspline_tiles` on the
+ * source (`distortion_fir_rows` (GPUs) or `distortion_iir_rows` (CPUs) then `distortion_fir_cols`:
+ * the prefilter of Unser 1999 as its recursion or a separable FIR, |k| <= DISTORTION_FIR_K) and 16 taps with B-spline weights (`distortion_bspline_tiles` on the
  * tiles whose taps fit a tile-uniform window, `distortion_table` elsewhere), made HDR-safe by
  * clamping to the least and largest of the position's 2x2 samples and handing over to bilinear
  * where the local contrast is high (`distortion_dering` writes the hand-over weight; formula and

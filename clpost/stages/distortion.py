@@ -439,9 +439,9 @@ def prefilter_rows_kernel(rt) -> str:
 
 def coef_pitch(src_w: int) -> int:
     """Row pitch of the coefficient planes: the render plus 2 :data:`PAD`, rounded up to 64 (the
-    prefilter kernels write 16 pixels per work-item; with the pitch a multiple of 16 only — 123
-    work-items a row at 1080p — PoCL's own work-group sizes made ``distortion_fir_cols`` and
-    ``distortion_dering`` 2–3× slower than at 124, in one process)."""
+    prefilter kernels write 16 pixels per work-item; with an odd count of them a row — 123 at
+    1080p — PoCL's automatic work-group sizes walk down column strips instead of along rows, and
+    ``distortion_fir_cols`` and ``distortion_dering`` ran 2–3× slower: docs/benchmarks.md, issue 20)."""
     return -(-(src_w + 2 * PAD) // 64) * 64
 
 
@@ -698,8 +698,8 @@ class Distortion(GatherStage):
         tiles, rest = bspline_tiles(model, frame.size, kkey)
         rows, cols = kernel(prefilter_rows_kernel(rt)), kernel("distortion_fir_cols")
         dering = kernel("distortion_dering")
-        # a row per work-item (groups of 4: th is a multiple of 4; left to itself PoCL put a plane's
-        # rows in one group), or 16 pixels of one
+        # a row per work-item (groups of 4: th is a multiple of 4; left to itself PoCL puts all 3·th
+        # rows in one or two groups, i.e. threads), or 16 pixels of one
         row_size, row_group = ((th, 3), (4, 1)) if rt.wide else ((pw // 16, th, 3), None)
         events = [rt.launch(rows, row_size, row_group, src, tmp, np.int32(sw), np.int32(sh), np.int32(pw),
                             np.int32(th)),
