@@ -367,14 +367,15 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
             const AVEC q2 = us2 * AVLOAD(an + 2 * pn) + ut2 * AVLOAD(an + 3 * pn);
             w *= ASAT((1.5625f - q2) * (1.0f / 0.5625f));
         }
-        const AVEC w00 = w * ((1.0f - fx) * (1.0f - fy)), w01 = w * (fx * (1.0f - fy));
-        const AVEC w10 = w * ((1.0f - fx) * fy), w11 = w * (fx * fy);
+        /* the bilinear weights are the tap's (scalars, the same for every lane): interpolate, then
+         * weigh by the lane's w (no per-lane products of the four corner weights) */
+        const float b00 = (1.0f - fx) * (1.0f - fy), b01 = fx * (1.0f - fy), b10 = (1.0f - fx) * fy, b11 = fx * fy;
         __global const float *p = col + iy * stride + ix;
-        ar += w00 * AVLOAD(p) + w01 * AVLOAD(p + 1) + w10 * AVLOAD(p + stride) + w11 * AVLOAD(p + stride + 1);
+        ar = mad(w, b00 * AVLOAD(p) + b01 * AVLOAD(p + 1) + b10 * AVLOAD(p + stride) + b11 * AVLOAD(p + stride + 1), ar);
         p += plane;
-        ag += w00 * AVLOAD(p) + w01 * AVLOAD(p + 1) + w10 * AVLOAD(p + stride) + w11 * AVLOAD(p + stride + 1);
+        ag = mad(w, b00 * AVLOAD(p) + b01 * AVLOAD(p + 1) + b10 * AVLOAD(p + stride) + b11 * AVLOAD(p + stride + 1), ag);
         p += plane;
-        ab += w00 * AVLOAD(p) + w01 * AVLOAD(p + 1) + w10 * AVLOAD(p + stride) + w11 * AVLOAD(p + stride + 1);
+        ab = mad(w, b00 * AVLOAD(p) + b01 * AVLOAD(p + 1) + b10 * AVLOAD(p + stride) + b11 * AVLOAD(p + stride + 1), ab);
         wsum += w;
     }
     /* copy where both semi-axes are below 1e-3 px or no tap has weight */

@@ -124,6 +124,12 @@ def cases():
             add(f"{st} narrow final {w}x{h}", lambda st=st, cam=cam, w=w, h=h: _run(cam, [st], "final", w, h, narrow=True))
     add("astigmatism-strong20um narrow final 61x35",
         lambda: _run(replace(aberr, sensor_mm=(61 * 0.02, 35 * 0.02)), ["astigmatism"], "final", 61, 35, narrow=True))
+    # and the 16-lane forms a CPU runs (Oclgrind reports a GPU type too, so the cases above without
+    # narrow/wide run the one-pixel forms as well)
+    for w, h in ((1, 1), (37, 23)):
+        add(f"astigmatism wide final {w}x{h}", lambda w=w, h=h: _run(aberr, ["astigmatism"], "final", w, h, wide=True))
+    add("astigmatism-strong20um wide final 61x35",
+        lambda: _run(replace(aberr, sensor_mm=(61 * 0.02, 35 * 0.02)), ["astigmatism"], "final", 61, 35, wide=True))
 
     mb = replace(base, frame_rate_fps=24.0, shutter_s=1 / 48, readout_time_s=0.01)
     for q in qualities:
