@@ -10,8 +10,8 @@
  * Draft/preview: bilinear (4 taps), kernels `distortion_tiles` and `distortion_rest` (`distortion`:
  * the same per pixel over the whole map).
  * Final: cubic B-spline interpolation: the B-spline coefficients of the
- * source (`distortion_fir_rows` (GPUs) or `distortion_iir_rows` (CPUs) then `distortion_fir_cols`:
- * the prefilter of Unser 1999 as its recursion or a separable FIR, |k| <= DISTORTION_FIR_K) and 16 taps with B-spline weights (`distortion_bspline_tiles` on the
+ * source (`distortion_fir_rows` then `_cols`: the prefilter of Unser 1999 as a separable FIR,
+ * |k| <= DISTORTION_FIR_K) and 16 taps with B-spline weights (`distortion_bspline_tiles` on the
  * tiles whose taps fit a tile-uniform window, `distortion_table` elsewhere), made HDR-safe by
  * clamping to the least and largest of the position's 2x2 samples and handing over to bilinear
  * where the local contrast is high (`distortion_dering` writes the hand-over weight; formula and
@@ -174,70 +174,6 @@ __kernel void distortion_fir_rows(__global const float *restrict src, __global f
     acc = mad(distortion_fir[1], DISTORTION_SHIFT(a, b, 11) + DISTORTION_SHIFT(a, b, 13), acc);
     acc = mad(distortion_fir[0], DISTORTION_SHIFT(a, b, 12), acc);
     vstore16(acc, 0, tmp + ((size_t)ch * th + r) * pitch + 16 * g);
-}
-
-/* Row pass on CPUs (Runtime.wide; GPUs take distortion_fir_rows, 16 pixels per work-item over the
- * whole row): the same row of tmp as distortion_fir_rows, by the recursion the FIR truncates
- * (Unser 1999, eq. 7-8; the impulse response is fir_taps in clpost/stages/distortion.py), exact up
- * to float rounding:
- *     c+[k] = f[k] + z c+[k-1],   c-[k] = z (c-[k+1] - c+[k]),   row = 6 c-
- * on the padded row f[p] = source[clamp(p - PAD)] (p = 0 ... pitch - 1) continued by its end values
- * beyond, so the sums over the infinite edge-extended row start from the closed forms
- *     c+[-1] = f_0 / (1 - z),
- *     c-[N-1] = -z (f_R / (1 - z)^2 + (c+[N-1] - f_R / (1 - z)) / (1 - z^2))   (f_R = f[N-1])
- * (geometric series of the constant ends). One work-item: one row of one channel, 16 columns per
- * step: inside a step the first-order recursion is 4 doubling steps over the lanes
- * (y += z^s shift(y, s), s = 1, 2, 4, 8; constant shuffles) plus z^(l+1) times the previous step's
- * last value — a third of the FIR's shuffles and multiplies; the row's 16-column steps are
- * sequential, the rows parallel. */
-#define DISTORTION_Z (-0.2679491924311228f)
-#define DISTORTION_UP(y, s) shuffle2((float16)(0.0f), (y), (uint16)(16 - (s)) + \
-    (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
-#define DISTORTION_DOWN(y, s) DISTORTION_SHIFT((y), (float16)(0.0f), (s))
-__kernel void distortion_iir_rows(__global const float *restrict src, __global float *restrict tmp,
-                                  const int src_w, const int src_h, const int pitch, const int th)
-{
-    const float z = DISTORTION_Z, z2 = z * z, z4 = z2 * z2, z8 = z4 * z4;
-    const int r = get_global_id(0), ch = get_global_id(1);
-    const int sy = clamp(r - DISTORTION_PAD - DISTORTION_FIR_K, 0, src_h - 1);
-    __global const float *s = src + ((size_t)ch * src_h + sy) * src_w;
-    __global float *t = tmp + ((size_t)ch * th + r) * pitch;
-    const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    const float16 z_up = pown((float16)(z), lane + 1), z_down = pown((float16)(z), 16 - lane);
-    const int steps = pitch / 16;
-    float carry = s[0] / (1.0f - z);  /* c+[-1] */
-    for (int j = 0; j < steps; ++j) {
-        const int x0 = 16 * j - DISTORTION_PAD;
-        float16 y;
-        if (x0 >= 0 && x0 + 15 <= src_w - 1) {
-            y = vload16(0, s + x0);
-        } else {  /* the row's ends repeated: a private copy (as distortion_fir_rows) */
-            float win[16];
-            for (int k = 0; k < 16; ++k) win[k] = s[clamp(x0 + k, 0, src_w - 1)];
-            y = vload16(0, win);
-        }
-        y = mad(z, DISTORTION_UP(y, 1), y);
-        y = mad(z2, DISTORTION_UP(y, 2), y);
-        y = mad(z4, DISTORTION_UP(y, 4), y);
-        y = mad(z8, DISTORTION_UP(y, 8), y);
-        y = mad(z_up, (float16)(carry), y);
-        vstore16(y, 0, t + 16 * j);
-        carry = y.sf;
-    }
-    /* anticausal, right to left: v = -z c+ + z v[k+1], started so that v[N-1] = c-[N-1] */
-    const float f_r = s[src_w - 1], c_end = f_r / (1.0f - z);
-    const float last = -z * (f_r / ((1.0f - z) * (1.0f - z)) + (carry - c_end) / (1.0f - z2));
-    carry = (last + z * carry) / z;  /* v[N], from which the recursion gives v[N-1] = last */
-    for (int j = steps - 1; j >= 0; --j) {
-        float16 v = -z * vload16(0, t + 16 * j);
-        v = mad(z, DISTORTION_DOWN(v, 1), v);
-        v = mad(z2, DISTORTION_DOWN(v, 2), v);
-        v = mad(z4, DISTORTION_DOWN(v, 4), v);
-        v = mad(z8, DISTORTION_DOWN(v, 8), v);
-        v = mad(z_down, (float16)(carry), v);
-        vstore16(6.0f * v, 0, t + 16 * j);
-        carry = v.s0;
-    }
 }
 
 /* Column pass. Work-item (g, q0, ch): coefficient rows q = DISTORTION_FIR_ROWS q0 + o (source

@@ -75,29 +75,6 @@ def test_kernel_matches_reference_on_odd_sizes(rng, quality):
         assert np.all(np.isfinite(out.color)) and out.color.min() >= 0  # bicubic is clamped at 0: no negative ringing
 
 
-def test_final_filter_gpu_row_pass_matches_the_cpu_one_and_the_reference(rng, monkeypatch):
-    """The prefilter's row pass differs by device (distortion.prefilter_rows_kernel): the GPUs' FIR
-    (Runtime.wide off) and the CPUs' recursion give the same image up to the prefilter's error
-    bound (test_prefilter_kernels_equal_scipys_bspline_coefficients_of_the_padded_source), both
-    within the reference's tolerance of test_kernel_matches_reference_on_odd_sizes."""
-    from clpost.runtime import Runtime
-    from clpost.stages.distortion import prefilter_rows_kernel
-
-    m = OpenCVModel(37, 23, 30, 31, 17.2, 11.4, k1=-0.3, k2=0.1, p1=0.01, s1=0.002)
-    frame = odd_frame(rng, scale=1e3)
-    cpu = Pipeline(Camera(distortion=m), quality="final", stages=["distortion"])
-    assert prefilter_rows_kernel(cpu.runtime) == ("distortion_iir_rows" if cpu.runtime.wide else "distortion_fir_rows")
-    want = cpu.run(frame).color
-    monkeypatch.setattr(Runtime, "wide", property(lambda self: False))
-    gpu = Pipeline(Camera(distortion=m), quality="final", stages=["distortion"])
-    assert prefilter_rows_kernel(gpu.runtime) == "distortion_fir_rows"
-    got = gpu.run(frame).color
-    # each within the prefilter's bound 2.6e-6 · max|f| of scipy's coefficients (max|f| = 1e3 here)
-    np.testing.assert_allclose(got, want, rtol=0, atol=2 * 2.6e-6 * 1e3)
-    ref = gpu.reference(frame)
-    assert (np.abs(got - ref) - 1e-5 * np.abs(ref)).max() < 1e-3
-
-
 def test_tap_table_samples_the_padded_bspline_coefficients_as_scipy_does(rng):
     """The final filter's tap table applied in float64 to scipy's B-spline coefficients of the
     padded source equals scipy's map_coordinates, on a map that runs past every edge (barrel,
@@ -408,10 +385,9 @@ def test_tile_lists_cover_the_image_and_both_kernels_match_the_reference(rng, qu
     assert np.all(np.isfinite(out)) and out.min() >= 0
 
 
-def _device_coefficients(planes: np.ndarray, rows_kernel: str = "distortion_fir_rows") -> np.ndarray:
-    """The final filter's prefilter kernels (``rows_kernel``: distortion_fir_rows, the GPUs', or
-    distortion_iir_rows, the CPUs'; then distortion_fir_cols) on float32 planes (3, h, w): the
-    B-spline coefficient planes (3, h + 2 PAD, w + 2 PAD) cut out of the padded buffers."""
+def _device_coefficients(planes: np.ndarray) -> np.ndarray:
+    """The final filter's prefilter kernels (distortion_fir_rows, _cols) on float32 planes (3, h, w):
+    the B-spline coefficient planes (3, h + 2 PAD, w + 2 PAD) cut out of the padded buffers."""
     import pyopencl as cl
 
     from clpost.runtime import get_runtime, kernel_source
@@ -424,10 +400,10 @@ def _device_coefficients(planes: np.ndarray, rows_kernel: str = "distortion_fir_
     prog = rt.program(kernel_source("common") + kernel_source("distortion"), "distortion", {})
     src, tmp, coef = rt.empty(planes.shape), rt.empty((3, th, pw)), rt.empty((3, ph, pw))
     cl.enqueue_copy(rt.queue, src, np.ascontiguousarray(planes, np.float32))
-    rows, cols = cl.Kernel(prog, rows_kernel), cl.Kernel(prog, "distortion_fir_cols")
+    rows, cols = cl.Kernel(prog, "distortion_fir_rows"), cl.Kernel(prog, "distortion_fir_cols")
     rows.set_args(src, tmp, np.int32(w), np.int32(h), np.int32(pw), np.int32(th))
     cols.set_args(tmp, coef, np.int32(pw), np.int32(th), np.int32(ph))
-    cl.enqueue_nd_range_kernel(rt.queue, rows, (th, 3) if "iir" in rows_kernel else (pw // 16, th, 3), None)
+    cl.enqueue_nd_range_kernel(rt.queue, rows, (pw // 16, th, 3), None)
     cl.enqueue_nd_range_kernel(rt.queue, cols, (pw // 16, ph // FIR_ROWS, 3), None)
     out = np.empty((3, ph, pw), np.float32)
     cl.enqueue_copy(rt.queue, out, coef)
@@ -463,11 +439,9 @@ def test_prefilter_fir_taps_are_the_impulse_response_of_scipys_recursive_prefilt
     np.testing.assert_array_equal(np.float32(lits), fir_taps().astype(np.float32))
 
 
-@pytest.mark.parametrize("rows_kernel", ["distortion_fir_rows", "distortion_iir_rows"])
 @pytest.mark.parametrize("size", [(37, 23), (1, 5), (3, 2), (61, 40)])
-def test_prefilter_kernels_equal_scipys_bspline_coefficients_of_the_padded_source(rng, size, rows_kernel):
-    """distortion_fir_rows (or _iir_rows: the recursion, exact up to rounding, so within the same
-    bound)/_cols against scipy's spline_filter on the source padded by PAD edge
+def test_prefilter_kernels_equal_scipys_bspline_coefficients_of_the_padded_source(rng, size):
+    """distortion_fir_rows/_cols against scipy's spline_filter on the source padded by PAD edge
     pixels (what map_coordinates(order=3, mode="nearest") computes) on odd and tiny sizes, with
     1e8 spikes among values in [0, 1e3] and a negative ramp: within the truncation bound
     6·1.74e-7·max|f| plus 3 half-ulps of the largest coefficient (≤ 9·max|f|), fir_taps."""
@@ -480,7 +454,7 @@ def test_prefilter_kernels_equal_scipys_bspline_coefficients_of_the_padded_sourc
     planes[0][rng.random((h, w)) < 0.05] = 1e8
     planes[1] = np.linspace(-50, 50, w)[None, :] * np.linspace(1, 3, h)[:, None]
     planes = planes.astype(np.float32)
-    got = _device_coefficients(planes, rows_kernel)
+    got = _device_coefficients(planes)
     for c in range(3):
         ref = spline_filter(np.pad(planes[c].astype(np.float64), PAD, mode="edge"), order=3, mode="mirror")
         scale = np.abs(planes[c]).max()
@@ -491,15 +465,14 @@ def test_prefilter_kernels_equal_scipys_bspline_coefficients_of_the_padded_sourc
                                    f"(x={j[1]}, y={j[0]}) of {w}x{h}")
 
 
-@pytest.mark.parametrize("rows_kernel", ["distortion_fir_rows", "distortion_iir_rows"])
-def test_prefilter_keeps_a_flat_field_flat_and_is_deterministic(rows_kernel):
+def test_prefilter_keeps_a_flat_field_flat_and_is_deterministic():
     """Σh = 1: a constant image has constant coefficients (to float32 rounding), whatever the
     luminance (1e-6 ... 1e8), and two runs are bit-identical."""
     for v in (1e-6, 1.0, 1e8):
         planes = np.full((3, 23, 37), v, np.float32)
-        got = _device_coefficients(planes, rows_kernel)
+        got = _device_coefficients(planes)
         assert np.abs(got / v - 1).max() < 5e-7, v
-        np.testing.assert_array_equal(got, _device_coefficients(planes, rows_kernel))
+        np.testing.assert_array_equal(got, _device_coefficients(planes))
 
 
 def test_a_one_pixel_frame_runs_through_a_traced_lens():

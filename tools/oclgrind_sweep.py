@@ -146,10 +146,6 @@ def cases():
             for w, h in ((3, 2), (17, 5), (37, 23), (61, 35)):
                 add(f"distortion-{label} {q} {w}x{h}",
                     lambda k=k, q=q, w=w, h=h: _run(_distortion_model(base, w, h, **k), ["distortion"], q, w, h))
-        # the CPUs' prefilter row pass (distortion_iir_rows; Runtime.wide)
-        for w, h in ((3, 2), (37, 23)):
-            add(f"distortion-{label} wide final {w}x{h}",
-                lambda k=k, w=w, h=h: _run(_distortion_model(base, w, h, **k), ["distortion"], "final", w, h, wide=True))
 
     # label planes (distortion_labels): fold-over leaves pixels without a preimage (index -1)
     for w, h in ((3, 2), (37, 23)):

@@ -37,8 +37,7 @@ field of view narrows by s, as scaling a plate up to hide the border does).
 
 Quality: ``draft``/``preview`` bilinear (4 taps); ``final`` cubic B-spline *interpolation*
 (Unser, "Splines: a perfect fit for signal and image processing", IEEE SPM 1999): the render's
-B-spline coefficients (the prefilter along rows — its recursion on CPUs, the FIR of :func:`fir_taps`
-on GPUs, :func:`prefilter_rows_kernel` — then as that FIR along columns,
+B-spline coefficients (the prefilter as a separable FIR along rows, then columns, :func:`fir_taps`,
 stored with :data:`PAD` edge pixels around the render) sampled by 16 taps with B-spline weights —
 computed per lane on the tiles whose taps fit a tile-uniform 5 × 5 window (:func:`bspline_tiles`,
 vector loads), from a per-pixel table built with the map elsewhere (:func:`tap_table`) — made
@@ -428,15 +427,6 @@ def fir_taps(k_max: int = FIR_K) -> np.ndarray:
     return -6.0 * z / (1.0 - z * z) * z ** np.arange(k_max + 1, dtype=np.float64)
 
 
-def prefilter_rows_kernel(rt) -> str:
-    """The row pass of the prefilter: on CPUs (``Runtime.wide``) ``distortion_iir_rows``, the
-    recursion whose impulse response :func:`fir_taps` truncates (exact up to rounding; a third of
-    the FIR's vector work, its rows' 16-pixel steps sequential), on GPUs ``distortion_fir_rows``
-    (16 independent pixels per work-item over the whole row: the parallelism a GPU needs); both
-    write the same layout, which ``distortion_fir_cols`` filters along columns."""
-    return "distortion_iir_rows" if rt.wide else "distortion_fir_rows"
-
-
 def coef_pitch(src_w: int) -> int:
     """Row pitch of the coefficient planes: the render plus 2 :data:`PAD`, rounded up to 64 (the
     prefilter kernels write 16 pixels per work-item; with an odd count of them a row — 123 at
@@ -696,12 +686,9 @@ class Distortion(GatherStage):
             return events
         base, wts, fmap, tiles_b, rest_b, coef, tmp, hdr = bufs
         tiles, rest = bspline_tiles(model, frame.size, kkey)
-        rows, cols = kernel(prefilter_rows_kernel(rt)), kernel("distortion_fir_cols")
+        rows, cols = kernel("distortion_fir_rows"), kernel("distortion_fir_cols")
         dering = kernel("distortion_dering")
-        # a row per work-item (groups of 4: th is a multiple of 4; left to itself PoCL puts all 3·th
-        # rows in one or two groups, i.e. threads), or 16 pixels of one
-        row_size, row_group = ((th, 3), (4, 1)) if rt.wide else ((pw // 16, th, 3), None)
-        events = [rt.launch(rows, row_size, row_group, src, tmp, np.int32(sw), np.int32(sh), np.int32(pw),
+        events = [rt.launch(rows, (pw // 16, th, 3), None, src, tmp, np.int32(sw), np.int32(sh), np.int32(pw),
                             np.int32(th)),
                   rt.launch(cols, (pw // 16, ph // FIR_ROWS, 3), None, tmp, coef, np.int32(pw), np.int32(th),
                             np.int32(ph)),
