@@ -115,7 +115,7 @@ __kernel void distortion_rest(__global const float *restrict src, __global float
  * along columns it is latency-bound (30+ ms at 1080p). The FIR gives every work-item 16
  * neighbouring pixels and loads at offsets uniform across lanes, on buffers padded so no tap is
  * clamped. */
-#define DISTORTION_PAD 12
+#define DISTORTION_PAD 20
 #define DISTORTION_FIR_K 12
 /* h_0 ... h_K in float64 printed to float precision (tests/test_distortion.py checks them against
  * fir_taps and the impulse response of scipy.ndimage.spline_filter1d) */
@@ -130,7 +130,7 @@ __constant float distortion_fir[DISTORTION_FIR_K + 1] = {
  * column of padded column p: p - PAD. The window x0 ... x0 + 47 (16 + 2K = 40 used) is three
  * vload16 and the 2K + 1 shifted copies are shuffle2 with constant masks (one permute each),
  * not 25 unaligned vload16, which split cache lines (same output;
- * docs/measurements.md#kernel-forms-on-pocl). Work-items whose window leaves the row (5 of 122
+ * docs/measurements.md#kernel-forms-on-pocl). Work-items whose window leaves the row (5 of 123
  * per row at 1080p) copy it with clamped indices to a private array first. tmp: 3 planes of th =
  * coefficient rows + 2K rows of pitch. The taps are written out for K = 12. */
 #if DISTORTION_FIR_K != 12
@@ -221,7 +221,11 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
     const int n = width * height, sn = src_w * src_h;
     const int i = y * width + x;
     const int b0 = base[i];
-    const int b = b0 < 0 ? 0 : b0;
+    if (b0 < 0) {  /* no preimage: colour 0 (whole tiles of them are listed here) */
+        for (int c = 0; c < 3; ++c) dst[c * n + i] = 0.0f;
+        return;
+    }
+    const int b = b0;
     float wx[4], wy[4];
     for (int k = 0; k < 4; ++k) {
         wx[k] = wts[k * n + i];
@@ -250,29 +254,33 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
         const float lo = min(min(a, e), min(d, f)), hi = max(max(a, e), max(d, f));
         const float lin = mix(mix(a, e, tx), mix(d, f, tx), ty);
         const float v = mix(clamp(acc, lo, hi), lin, th);
-        dst[c * n + i] = b0 < 0 ? 0.0f : v;
+        dst[c * n + i] = v;
     }
 }
 
-/* The centred cubic B-spline beta3(d) = (4 - 6d^2 + 3|d|^3)/6 for |d| < 1, (2 - |d|)^3/6 for
- * 1 <= |d| < 2, 0 beyond: the weight of a coefficient at distance d (the same polynomials as the
- * host's bspline3, which the tap table uses). */
-inline float16 distortion_beta3(const float16 d)
+/* The cubic B-spline weights of the taps at floor - 1 ... floor + 2 for the fraction t in [0, 1)
+ * (the host's bspline3, which the tap table uses; the third as 1 minus the others, the weights
+ * summing to 1 by construction). */
+inline void distortion_bspline4(const float16 t, float16 *w)
 {
-    const float16 a = fabs(d), s = fmax(2.0f - a, 0.0f);
-    const float16 inner = (4.0f + a * a * (3.0f * a - 6.0f)) * (1.0f / 6.0f);
-    return select(s * s * s * (1.0f / 6.0f), inner, a < 1.0f);
+    const float16 s = 1.0f - t, t2 = t * t, t3 = t2 * t;
+    w[0] = s * s * s * (1.0f / 6.0f);
+    w[1] = mad(0.5f, t3, (float16)(2.0f / 3.0f) - t2);
+    w[3] = t3 * (1.0f / 6.0f);
+    w[2] = 1.0f - w[0] - w[1] - w[3];
 }
 
 /* The final filter on the tiles of DISTORTION_TILE x DISTORTION_TILE output pixels whose integer
  * displacement floor(s) - x takes at most two neighbouring values where there is a preimage (the
  * others get colour 0; host: bspline_tiles), as the
  * bilinear distortion_tiles: the 4x4 windows of a tile row lie in the 5x5 window of coefficients
- * at (x + ox - 1, y + oy - 1), read by vload16 at addresses affine in the lane, with weights
- * beta3(f + 1 - m) for window column m and the lane's fraction f = s - (x + ox) in [0, 2) (one of
- * the five is 0). Weights are computed here in float32 from the float32 map (the table's are
- * float64-derived float32; both within a few ulps). One work-item: one row of one tile; tiles:
- * (x0, y0, ox, oy); coef planes of pitch x ch_rows with DISTORTION_PAD pixels around the render. */
+ * at (x + ox - 1, y + oy - 1), read by vload16 at addresses affine in the lane; a lane whose
+ * fraction f = s - (x + ox) in [0, 2) is >= 1 takes window columns 1-4, the others 0-3 (one select
+ * per column), with the 4 B-spline weights of its fraction f - floor(f) (computed here in float32
+ * from the float32 map; the table's are float64-derived float32; both within a few ulps). Rows
+ * likewise: the 5 row sums weighted by the 4 weights placed on rows 0-3 or 1-4. One work-item:
+ * one row of one tile; tiles: (x0, y0, ox, oy); coef planes of pitch x ch_rows with
+ * DISTORTION_PAD pixels around the render. */
 __kernel void distortion_bspline_tiles(__global const float *restrict coef, __global float *restrict dst,
                                        __global const float *restrict map, __global const int *restrict tiles,
                                        __global const float *restrict hdr,
@@ -288,17 +296,20 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
     const int16 ok = sx > -1.0e29f;  /* no preimage (-1e30): colour 0 */
     const float16 fx = select((float16)(0.0f), sx - ((float)(t.x + t.z) + CLP_LANES16), ok);
     const float16 fy = select((float16)(0.0f), vload16(0, map + n + i) - (float)(y + t.w), ok);
-    float16 wx[5], wy[5];
-#pragma unroll
-    for (int m = 0; m < 5; ++m) {
-        wx[m] = distortion_beta3(fx + (float)(1 - m));
-        wy[m] = distortion_beta3(fy + (float)(1 - m));
-    }
-    /* bilinear weights of the 3x3 samples at (x + ox, y + oy): the lane's 2x2 cell is columns
-     * 0-1 (f < 1) or 1-2, one of the three weights is 0 (as distortion_tiles) */
+    const int16 right = fx >= 1.0f, down = fy >= 1.0f;
+    const float16 tx = select(fx, fx - 1.0f, right), ty = select(fy, fy - 1.0f, down);
+    float16 wx[4], v4[4], wy[5];
+    distortion_bspline4(tx, wx);
+    distortion_bspline4(ty, v4);
+    wy[0] = select(v4[0], (float16)(0.0f), down);
+    wy[1] = select(v4[1], v4[0], down);
+    wy[2] = select(v4[2], v4[1], down);
+    wy[3] = select(v4[3], v4[2], down);
+    wy[4] = select((float16)(0.0f), v4[3], down);
+    /* the hand-over weight, bilinear over the lane's 2x2 cell at (x + ox, y + oy) + (right, down):
+     * tent weights on the 3x3 samples there, one of the three 0 (as distortion_tiles) */
     const float16 bx0 = max(1.0f - fx, 0.0f), bx2 = max(fx - 1.0f, 0.0f), bx1 = 1.0f - bx0 - bx2;
     const float16 by0 = max(1.0f - fy, 0.0f), by2 = max(fy - 1.0f, 0.0f), by1 = 1.0f - by0 - by2;
-    const int16 right = fx >= 1.0f, down = fy >= 1.0f;
     const size_t base = (size_t)(y + t.w - 1 + DISTORTION_PAD) * pitch + (size_t)(t.x + t.z - 1 + DISTORTION_PAD);
     const size_t cell = base + pitch + 1;
     float16 th = (float16)(0.0f);
@@ -311,38 +322,34 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
     for (int c = 0; c < 3; ++c) {
         __global const float *p = coef + c * sn + base;
         float16 acc = (float16)(0.0f);
-        /* the samples at window columns 1-3 of every row, 6 f = c[m-1] + 4 c[m] + c[m+1] (the
-         * B-spline at the knots), so the cell's samples cost no loads */
-        float16 h1[5], h2[5], h3[5];
+        /* per row: the lane's 4 columns d0-d3, its row sum and 6x the samples at the cell's
+         * columns, 6 f = d0 + 4 d1 + d2 (left), d1 + 4 d2 + d3 (right): the B-spline at the knots,
+         * so the cell's samples cost no loads */
+        float16 hl[5], hr[5];
 #pragma unroll
         for (int r = 0; r < 5; ++r) {
             __global const float *q = p + (size_t)r * pitch;
-            const float16 c0 = vload16(0, q), c1 = vload16(0, q + 1), c2 = vload16(0, q + 2);
-            const float16 c3 = vload16(0, q + 3), c4 = vload16(0, q + 4);
-            float16 rowv = wx[0] * c0;
-            rowv = mad(wx[1], c1, rowv);
-            rowv = mad(wx[2], c2, rowv);
-            rowv = mad(wx[3], c3, rowv);
-            rowv = mad(wx[4], c4, rowv);
+            const float16 c1 = vload16(0, q + 1), c2 = vload16(0, q + 2), c3 = vload16(0, q + 3);
+            const float16 d0 = select(vload16(0, q), c1, right), d1 = select(c1, c2, right);
+            const float16 d2 = select(c2, c3, right), d3 = select(c3, vload16(0, q + 4), right);
+            float16 rowv = wx[0] * d0;
+            rowv = mad(wx[1], d1, rowv);
+            rowv = mad(wx[2], d2, rowv);
+            rowv = mad(wx[3], d3, rowv);
             acc = mad(wy[r], rowv, acc);
-            h1[r] = mad(4.0f, c1, c0 + c2);
-            h2[r] = mad(4.0f, c2, c1 + c3);
-            h3[r] = mad(4.0f, c3, c2 + c4);
+            hl[r] = mad(4.0f, d1, d0 + d2);
+            hr[r] = mad(4.0f, d2, d1 + d3);
         }
-        /* the cell's samples: least, largest and bilinear */
-        float16 lo[3], hi[3], lin = (float16)(0.0f);
-#pragma unroll
-        for (int r = 0; r < 3; ++r) {
-            const float16 v0 = mad(4.0f, h1[r + 1], h1[r] + h1[r + 2]) * (1.0f / 36.0f);
-            const float16 v1 = mad(4.0f, h2[r + 1], h2[r] + h2[r + 2]) * (1.0f / 36.0f);
-            const float16 v2 = mad(4.0f, h3[r + 1], h3[r] + h3[r + 2]) * (1.0f / 36.0f);
-            const float16 side = select(v0, v2, right);
-            lo[r] = min(v1, side);
-            hi[r] = max(v1, side);
-            lin = mad(r == 0 ? by0 : (r == 1 ? by1 : by2), bx0 * v0 + bx1 * v1 + bx2 * v2, lin);
-        }
-        const float16 cl = min(lo[1], select(lo[0], lo[2], down)), ch = max(hi[1], select(hi[0], hi[2], down));
-        const float16 v = mix(clamp(acc, cl, ch), lin, th);
+        /* the cell's rows: window rows 0-3 (fy < 1) or 1-4; its samples a b (top) d e (bottom) */
+        const float16 l0 = select(hl[0], hl[1], down), l1 = select(hl[1], hl[2], down);
+        const float16 l2 = select(hl[2], hl[3], down), l3 = select(hl[3], hl[4], down);
+        const float16 r0 = select(hr[0], hr[1], down), r1 = select(hr[1], hr[2], down);
+        const float16 r2 = select(hr[2], hr[3], down), r3 = select(hr[3], hr[4], down);
+        const float16 a = mad(4.0f, l1, l0 + l2) * (1.0f / 36.0f), b = mad(4.0f, r1, r0 + r2) * (1.0f / 36.0f);
+        const float16 d = mad(4.0f, l2, l1 + l3) * (1.0f / 36.0f), e = mad(4.0f, r2, r1 + r3) * (1.0f / 36.0f);
+        const float16 lo = min(min(a, b), min(d, e)), hi = max(max(a, b), max(d, e));
+        const float16 lin = mix(mix(a, b, tx), mix(d, e, tx), ty);
+        const float16 v = mix(clamp(acc, lo, hi), lin, th);
         vstore16(select((float16)(0.0f), v, ok), 0, dst + c * n + i);
     }
 }

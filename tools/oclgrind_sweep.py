@@ -38,14 +38,16 @@ def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0
     return Frame(color, depth=d, velocity=v, metadata=meta, labels=lab)
 
 
-def _run(camera, stages, quality, w, h, *, narrow=False, **frame_kw):
-    """``narrow``: the forms a GPU runs (one pixel per work-item, :attr:`Runtime.wide` False)."""
+def _run(camera, stages, quality, w, h, *, narrow=False, wide=False, **frame_kw):
+    """``narrow``: the forms a GPU runs (one pixel per work-item, :attr:`Runtime.wide` False);
+    ``wide``: the CPUs' forms (Oclgrind's device reports every device type, GPU included, so
+    without either it runs the GPU forms)."""
     from clpost import Pipeline
     from clpost.runtime import Runtime
 
-    if narrow:
+    if narrow or wide:
         saved = Runtime.wide
-        Runtime.wide = property(lambda self: False)
+        Runtime.wide = property(lambda self: wide)
         try:
             return _run(camera, stages, quality, w, h, **frame_kw)
         finally:
@@ -130,9 +132,23 @@ def cases():
                 lambda g=g, w=w, h=h: _run(replace(base, film="kodak-ektar-100", **g), ["exposure", "film", "grain", "print"],
                                            "draft", w, h, narrow=True))
     # and its 32-pixel lane form with correlated noise (two blocks and a remainder; r ≈ 0.3 px)
-    add("film+grain-correlated+print draft 70x23",
-        lambda: _run(replace(base, film="kodak-ektar-100", sensor_mm=(0.025, 0.008)), ["exposure", "film", "grain", "print"],
-                     "draft", 70, 23))
+    for w, h in ((1, 1), (70, 23)):
+        add(f"film+grain-correlated+print wide draft {w}x{h}",
+            lambda w=w, h=h: _run(replace(base, film="kodak-ektar-100", sensor_mm=(0.025 * w / 70, 0.008 * h / 23)),
+                                  ["exposure", "film", "grain", "print"], "draft", w, h, wide=True))
+    add("film+grain-white+print wide draft 37x23",
+        lambda: _run(replace(base, film="kodak-ektar-100"), ["exposure", "film", "grain", "print"], "draft", 37, 23,
+                     wide=True))
+
+    # and the 16-lane forms a CPU runs (Oclgrind reports a GPU type too, so the cases above without
+    # narrow/wide run the one-pixel forms as well)
+    for w, h in ((1, 1), (37, 23)):
+        add(f"astigmatism wide final {w}x{h}", lambda w=w, h=h: _run(aberr, ["astigmatism"], "final", w, h, wide=True))
+    add("astigmatism-strong20um wide final 61x35",
+        lambda: _run(replace(aberr, sensor_mm=(61 * 0.02, 35 * 0.02)), ["astigmatism"], "final", 61, 35, wide=True))
+    for w, h in ((1, 1), (37, 23)):
+        add(f"vignetting wide final {w}x{h}",
+            lambda w=w, h=h: _run(replace(base, vignetting="natural"), ["vignetting"], "final", w, h, wide=True))
 
     mb = replace(base, frame_rate_fps=24.0, shutter_s=1 / 48, readout_time_s=0.01)
     for q in qualities:
@@ -144,6 +160,11 @@ def cases():
         for w, h in ((1, 1), (45, 23)):
             add(f"motion_blur narrow {q} {w}x{h}",
                 lambda q=q, w=w, h=h: _run(mb, ["motion_blur"], q, w, h, velocity=6.0, narrow=True))
+    # and its 16-lane form (a CPU's): a partial 16-pixel run at the right edge
+    for q in ("draft", "final"):
+        for w, h in ((1, 1), (37, 23)):
+            add(f"motion_blur wide {q} {w}x{h}",
+                lambda q=q, w=w, h=h: _run(mb, ["motion_blur"], q, w, h, velocity=6.0, wide=True))
 
     # distortion: barrel (bench scenes), strong pincushion + tangential (fold-over, pixels
     # without data), at both filters; sizes include a partial tile in x and in y

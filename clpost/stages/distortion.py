@@ -381,10 +381,12 @@ def bspline_tiles(model: OpenCVModel, src_size: tuple[int, int],
     return _split_tiles(x0, y0, ox, oy, fast)
 
 
-PAD = 12
-"""Edge pixels around the B-spline coefficients (kernels/distortion.cl DISTORTION_PAD; scipy's
-``map_coordinates`` pads ``mode="nearest"`` by the same 12 before its mirror-boundary prefilter).
-The 4×4 window of a valid position (in [−½, size − ½]) needs 2 of them."""
+PAD = 20
+"""Edge pixels around the B-spline coefficients (kernels/distortion.cl DISTORTION_PAD). The 4×4
+window of a valid position (in [−½, size − ½]) needs 2 of them; the rest lets the vector gather
+take the border tiles too, whose lanes without a preimage load windows up to the render's
+missing overscan beyond its edge (19 px at the bench's barrel distortion; with 12, 67 of its
+8160 tiles at 1080p fell to ``distortion_table``, 14× slower per tile)."""
 
 FIR_K = 12
 """Half-length of the prefilter FIR (kernels/distortion.cl DISTORTION_FIR_K), see :func:`fir_taps`."""
@@ -426,9 +428,11 @@ def fir_taps(k_max: int = FIR_K) -> np.ndarray:
 
 
 def coef_pitch(src_w: int) -> int:
-    """Row pitch of the coefficient planes: the render plus 2 :data:`PAD`, rounded up to 16 (the
-    prefilter kernels write 16 pixels per work-item)."""
-    return -(-(src_w + 2 * PAD) // 16) * 16
+    """Row pitch of the coefficient planes: the render plus 2 :data:`PAD`, rounded up to 64 (the
+    prefilter kernels write 16 pixels per work-item; with an odd count of them a row — 123 at
+    1080p — PoCL's automatic work-group sizes walk down column strips instead of along rows, and
+    ``distortion_fir_cols`` and ``distortion_dering`` ran 2–3× slower: docs/benchmarks.md, issue 20)."""
+    return -(-(src_w + 2 * PAD) // 64) * 64
 
 
 def bspline3(t: np.ndarray) -> list[np.ndarray]:
