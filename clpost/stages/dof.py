@@ -293,29 +293,82 @@ def _neighbourhood(a: np.ndarray):
 SPECKLE_MAX_SAME = 3
 """A pixel with at most this many of its 8 neighbours at its own depth (within 0.8×) is a speckle
 candidate (:func:`despeckle_depth`)."""
+SAME_SOURCE = 1.5
+"""Two pixels within this luminance ratio of each other, both far above their surround, are one
+source (CONVENTIONS.md's 1.5× of a light; :func:`despeckle_depth`)."""
+FRINGE_STEP = 0.95
+"""The fringe rule's near surface must be brighter (darker) than every other pixel of p's own
+surface by more than 1 − this (5 %): a near pixel no brighter or darker than p's own surface
+explains nothing (:func:`effective_depth`)."""
+
+
+def _same_depth(dq, d):
+    return (dq >= MIXED_SAME_DEPTH * d) & (d >= MIXED_SAME_DEPTH * dq)
+
+
+_RING = (0, 1, 2, 4, 7, 6, 5, 3)
+"""The 8 neighbours of :func:`_neighbourhood` (after the centre) in ring order, clockwise from the
+top left."""
+
+
+def speckle_candidates(depth: np.ndarray, lines: bool = True) -> np.ndarray:
+    """Pixels with at most :data:`SPECKLE_MAX_SAME` of their 8 neighbours at their own depth class,
+    except those with exactly that many forming one arc of the ring: an object's convex corner (an
+    L of 3), whose depth is right, not a speckle's (:func:`despeckle_depth`). ``lines=False`` also
+    leaves out pixels with two opposite same-depth neighbours (on a one-pixel line: a wire, a pole)."""
+    d = np.asarray(depth, dtype=np.float64)
+    s = [_same_depth(q, d) for q in _neighbourhood(d)[1:]]
+    same = sum(x.astype(int) for x in s)
+    ring = [s[k] for k in _RING]
+    arcs = sum((ring[i] != ring[(i + 1) % 8]).astype(int) for i in range(8))
+    out = (same <= SPECKLE_MAX_SAME) & ~((same == SPECKLE_MAX_SAME) & (arcs == 2))
+    if not lines:
+        for i in range(4):
+            out &= ~(ring[i] & ring[i + 4])
+    return out
 
 
 def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | None = None) -> np.ndarray:
     r"""Depth with stochastic-transparency speckle removed: a renderer's depth pass under a
     semi-transparent surface flips per pixel between the surface and what is behind it while the
-    colour stays smooth. p takes the median depth of its 3×3 when its depth class (neighbours
-    within 0.8× of :math:`d_p` either way) has at most :data:`SPECKLE_MAX_SAME` of its 8
-    neighbours *and* its luminance lies within the range of its other-depth neighbours' (its colour
-    is explained without its own surface). A wire, a lamp or a silhouette pixel brighter or darker
-    than everything around it keeps its depth. Applied before the fringe rule
-    (:func:`effective_depth`)."""
+    colour stays smooth. A *candidate* is a pixel whose depth class (neighbours within 0.8× of
+    :math:`d_p` either way) has at most :data:`SPECKLE_MAX_SAME` of its 8 neighbours, not in one
+    arc (:func:`speckle_candidates`: an object's corner is not a speckle).
+
+    * A candidate whose luminance lies within the range of its other-depth neighbours' (its colour
+      is explained without its own surface) takes the median depth of its 3×3.
+    * A light seen through such a surface: a candidate brighter than every other-depth neighbour,
+      but by less than :data:`SAME_SOURCE`× the brightest of them (that neighbour is the same
+      source), whose depth class is also seen on a candidate of its 5×5 dimmer than
+      :math:`Y_p`/:data:`SAME_SOURCE` and not on a one-pixel line (a speckle of it: the stochastic
+      depth of a surface in front — a pane's — not the source's own), takes that brightest
+      neighbour's depth. A lamp's own pixels keep theirs: their depth class is seen only on the
+      lamp, or on a fixture at its depth (a pole, a wall: not a speckle).
+
+    A wire, a lamp or a silhouette pixel brighter or darker than everything around it keeps its
+    depth. Applied before the fringe rule (:func:`effective_depth`); docs/fidelity.md,
+    "Transparent: stochastic depth"."""
     d = np.asarray(depth, dtype=np.float64)
     lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
     dn, ln = _neighbourhood(d), _neighbourhood(lum)
-    same = np.zeros(d.shape, int)
-    lo, hi = np.full_like(d, np.inf), np.full_like(d, -np.inf)
+    lo, hi, hi_d = np.full_like(d, np.inf), np.full_like(d, -np.inf), d.copy()
     for dq, lq in zip(dn[1:], ln[1:]):
-        s = (dq >= MIXED_SAME_DEPTH * d) & (d >= MIXED_SAME_DEPTH * dq)
-        same += s
+        s = _same_depth(dq, d)
         lo = np.where(s, lo, np.minimum(lo, lq))
-        hi = np.where(s, hi, np.maximum(hi, lq))
-    speckle = (same <= SPECKLE_MAX_SAME) & (lum >= lo) & (lum <= hi)
-    return np.where(speckle, np.median(np.stack(dn), axis=0), d)
+        up = ~s & (lq > hi)
+        hi_d, hi = np.where(up, dq, hi_d), np.where(up, lq, hi)
+    cand = speckle_candidates(d)
+    speckle = cand & (lum >= lo) & (lum <= hi)
+    source = cand & (lum > hi) & (lum <= SAME_SOURCE * hi)
+    h, w = d.shape
+    pd, pl, pc = (np.pad(a, 2, mode="edge") for a in (d, lum, speckle_candidates(d, lines=False)))
+    dim = np.zeros(d.shape, bool)
+    for b in range(5):
+        for a in range(5):
+            dim |= _same_depth(pd[b:b + h, a:a + w], d) & (SAME_SOURCE * pl[b:b + h, a:a + w] < lum) \
+                & pc[b:b + h, a:a + w]
+    out = np.where(speckle, np.median(np.stack(dn), axis=0), d)
+    return np.where(source & dim, hi_d, out)
 
 
 def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | None = None) -> np.ndarray:
@@ -334,27 +387,32 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     * dark near (a pole over the sky): :math:`Y_n` the darkest near pixel, :math:`Y_f` the
       brightest of p's surface; it explains p when :math:`\alpha \ge \tfrac12`.
 
-    When either holds p takes the nearest depth of its 3×3. The depth is first despeckled
-    (:func:`despeckle_depth`). With
-    :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are written without a division. A depth
-    only ever moves nearer; a pixel with no near neighbour keeps its own."""
+    Either needs a near surface that differs from p's own: brighter (darker) than every *other*
+    pixel of p's surface by more than 1 − :data:`FRINGE_STEP` — a pane's depth speckle next to sky
+    of the same colour, or a lamp's pixel next to the pane speckle in front of it (α > 1), is not a
+    mix. When either holds p takes the nearest depth of its 3×3. The depth is first despeckled
+    (:func:`despeckle_depth`). With :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are
+    written without a division. A depth only ever moves nearer; a pixel with no near neighbour
+    keeps its own."""
     d = despeckle_depth(color, depth, luma)
     lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
     dn, ln = _neighbourhood(d), _neighbourhood(lum)
     nearest = np.minimum.reduce(dn)
     bright_n, dark_n = np.full_like(d, -np.inf), np.full_like(d, np.inf)  # near pixels' extremes
-    own_min, own_max = lum.copy(), lum.copy()                            # p's own surface, p included
+    other_min, other_max = np.full_like(d, np.inf), np.full_like(d, -np.inf)  # p's own surface, p excluded
     for dq, lq in zip(dn[1:], ln[1:]):
         near = dq < MIXED_SAME_DEPTH * d
         bright_n = np.where(near, np.maximum(bright_n, lq), bright_n)
         dark_n = np.where(near, np.minimum(dark_n, lq), dark_n)
-        own_min = np.where(near, own_min, np.minimum(own_min, lq))
-        own_max = np.where(near, own_max, np.maximum(own_max, lq))
+        other_min = np.where(near, other_min, np.minimum(other_min, lq))
+        other_max = np.where(near, other_max, np.maximum(other_max, lq))
+    own_min, own_max = np.minimum(other_min, lum), np.maximum(other_max, lum)
     with np.errstate(invalid="ignore"):
         span, part = bright_n - own_min, lum - own_min
-        bright = (span > 0) & ((2 * part >= span) | (2 * part * bright_n >= lum * span))
+        bright = (span > 0) & ((2 * part >= span) | (2 * part * bright_n >= lum * span)) \
+            & (FRINGE_STEP * bright_n > other_max)
         span, part = own_max - dark_n, own_max - lum
-        dark = (span > 0) & (2 * part >= span)
+        dark = (span > 0) & (2 * part >= span) & (dark_n < FRINGE_STEP * other_min)
     return np.where(bright | dark, nearest, d)
 
 
@@ -831,7 +889,8 @@ class Dof(GatherStage):
                 "DOF_PROFILE": int(traced), "DOF_REACH": f"{reach!r}f", **prof,
                 "DOF_HALF_SHRINK": f"{4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2)!r}f",
                 "DOF_HALF_BLEND": f"{1.0 / (4.0 * HALF_PATH_VAR_PX2)!r}f",
-                "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
+                "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
+                "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
 
