@@ -243,8 +243,8 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     }
 }
 
-/* Half-resolution levels: keep in-focus pixels at full resolution, take the upsampled blur where
- * the full-resolution CoC (DOF_HALF_B) or the front layer's coverage says so. Upsampling is bilinear
+/* Half-resolution levels: small CoCs take the full-resolution 3x3 blur (dof_local_px), mixed with
+ * the upsampled blur where the full-resolution CoC (DOF_HALF_B) or the front layer's coverage says so. Upsampling is bilinear
  * weighted by CoC similarity g = 1/(DOF_UP_TOL + (r - m_i)^2) (UPSAMPLE_COC_TOL_PX2), r the full-resolution CoC and m_i the min of
  * the full-resolution CoC over corner i's DOF_SCALE^2 block: the original CoC, not the
  * variance-matched one the working pixels were gathered with, which is 0 for every |r| < 2.31 px
@@ -257,6 +257,28 @@ inline float dof_block_min(__global const float *coc, const int xs, const int ys
         for (int a = 0; a < DOF_SCALE; ++a)
             m = fmin(m, coc[(size_t)min(DOF_SCALE * ys + b, height - 1) * width + min(DOF_SCALE * xs + a, width - 1)]);
     return m;
+}
+
+/* The full-resolution 3x3 blur of small CoCs (local_blur in clpost/stages/dof.py): neighbour q
+ * weighs w(ox) w(oy), w(0) = 1 - 2a, w(+-1) = a, a = DOF_LOCAL_A of q's CoC when q is nearer than p
+ * by more than DOF_FRONT_MARGIN (px here), else of the smaller of the two; normalised. Edges clamped. */
+inline float3 dof_local_px(__global const float *src, __global const float *coc, const int x, const int y,
+                           const int width, const int height)
+{
+    const size_t n = (size_t)width * height;
+    const float r = coc[(size_t)y * width + x], ap = DOF_LOCAL_A(r);
+    float3 acc = (float3)(0.0f);
+    float wsum = 0.0f;
+    for (int b = -1; b <= 1; ++b)
+        for (int a = -1; a <= 1; ++a) {
+            const size_t j = (size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1);
+            const float rq = coc[j];
+            const float aq = rq < r - DOF_FRONT_MARGIN ? DOF_LOCAL_A(rq) : fmin(DOF_LOCAL_A(rq), ap);
+            const float wq = (b ? aq : 1.0f - 2.0f * aq) * (a ? aq : 1.0f - 2.0f * aq);
+            acc += wq * (float3)(src[j], src[n + j], src[2 * n + j]);
+            wsum += wq;
+        }
+    return acc / wsum;
 }
 
 inline float3 dof_upsample_px(__global const float *src, __global const float *coc, __global const float *blur,
@@ -284,8 +306,10 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
 #undef DOF_CORNER
     acc /= wsum;
     const float b = fmax(DOF_HALF_B(r), acc.w);
-    const float3 c = (float3)(src[i], src[n + i], src[2 * n + i]);
-    return c * (1.0f - b) + acc.xyz * b;  /* exact at b = 1 even for 1e8 highlights */
+    if (b >= 1.0f)
+        return acc.xyz;  /* exact at b = 1 even for 1e8 highlights */
+    const float3 c = dof_local_px(src, coc, x, y, width, height);
+    return c + (acc.xyz - c) * b;
 }
 
 #if DOF_SCALE == 2
@@ -351,10 +375,35 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
 #undef DOF_ROW
         const float16 inv = 1.0f / wsum;
         const float16 b = fmax(DOF_HALF_B(r), aa * inv);
-        const float16 ob = 1.0f - b;
-        vstore16(vload16(0, src + i) * ob + ar * inv * b, 0, dst + i);
-        vstore16(vload16(0, src + n + i) * ob + ag * inv * b, 0, dst + n + i);
-        vstore16(vload16(0, src + 2 * n + i) * ob + ab * inv * b, 0, dst + 2 * n + i);
+        ar *= inv; ag *= inv; ab *= inv;
+        if (all(b >= 1.0f)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
+            vstore16(ar, 0, dst + i); vstore16(ag, 0, dst + n + i); vstore16(ab, 0, dst + 2 * n + i);
+            return;
+        }
+        /* the full-resolution 3x3 blur (dof_local_px), lane-wise; columns x - 1 .. x + 16 lie in
+         * the image (x >= 2, x + 30 <= width) */
+        const float16 ap = DOF_LOCAL_A(r);
+        float16 cr = (float16)(0.0f), cg = cr, cb = cr, cw = cr;
+#pragma unroll
+        for (int bb = -1; bb <= 1; ++bb) {
+            const size_t row = (size_t)clamp(y + bb, 0, height - 1) * width + x;
+#pragma unroll
+            for (int a = -1; a <= 1; ++a) {
+                const float16 rq = vload16(0, coc + row + a);
+                const float16 aq = select(fmin(DOF_LOCAL_A(rq), ap), DOF_LOCAL_A(rq), rq < r - DOF_FRONT_MARGIN);
+                const float16 wq = (bb ? aq : 1.0f - 2.0f * aq) * (a ? aq : 1.0f - 2.0f * aq);
+                cr += wq * vload16(0, src + row + a);
+                cg += wq * vload16(0, src + n + row + a);
+                cb += wq * vload16(0, src + 2 * n + row + a);
+                cw += wq;
+            }
+        }
+        const float16 ic = 1.0f / cw;
+        const int16 whole = b >= 1.0f;
+        cr *= ic; cg *= ic; cb *= ic;
+        vstore16(select(cr + (ar - cr) * b, ar, whole), 0, dst + i);
+        vstore16(select(cg + (ag - cg) * b, ag, whole), 0, dst + n + i);
+        vstore16(select(cb + (ab - cb) * b, ab, whole), 0, dst + 2 * n + i);
         return;
     }
 #endif

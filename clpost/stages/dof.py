@@ -772,11 +772,50 @@ def half_radius(coc: np.ndarray) -> np.ndarray:
     return np.sign(c) * np.sqrt(np.maximum(c * c - 4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2), 0.0))
 
 
+LOCAL_VAR_PX2 = 0.5
+r"""Largest variance (px², per axis) of the half-resolution path's full-resolution 3×3 blur
+(:func:`local_blur`): the binomial [¼, ½, ¼]."""
+
+
 def half_blend(coc: np.ndarray) -> np.ndarray:
-    r"""Weight of the half-resolution blur against the sharp pixel, :math:`\min(1, r^2/(4V_{path}))`
-    (module docstring)."""
+    r"""Weight of the half-resolution blur against the full-resolution 3×3 blur
+    (:func:`local_blur`): 0 while the disc's variance :math:`v = r^2/4` fits the 3×3
+    (:math:`v \le V_3` = :data:`LOCAL_VAR_PX2`), then the mix of the two whose variance is v,
+    :math:`(v - V_3)/(V_{path} - V_3)`, 1 from :math:`v = V_{path}` (r = 2 px) on (module docstring)."""
     c = np.asarray(coc, dtype=np.float64)
-    return np.minimum(c * c / (4.0 * HALF_PATH_VAR_PX2), 1.0)
+    v = c * c / 4.0
+    return np.clip((v - LOCAL_VAR_PX2) / (HALF_PATH_VAR_PX2 - LOCAL_VAR_PX2), 0.0, 1.0)
+
+
+def local_weight(coc: np.ndarray) -> np.ndarray:
+    r"""Side weight a of the 3×3 separable blur [a, 1 − 2a, a] per axis (variance 2a) for a CoC r:
+    :math:`a = \min(r^2/4, V_3)/2` — the disc's variance, capped at the binomial's."""
+    c = np.asarray(coc, dtype=np.float64)
+    return np.minimum(c * c / 4.0, LOCAL_VAR_PX2) / 2.0
+
+
+def local_blur(color: np.ndarray, coc: np.ndarray) -> np.ndarray:
+    r"""Full-resolution 3×3 scatter-as-gather for the small CoCs the half-resolution path cannot
+    make (its box and upsampling alone are 1 px² per axis; a disc of r < 2 px has less): each
+    neighbour q spreads with the separable weight :math:`w_q = w(o_x)\,w(o_y)`, w(0) = 1 − 2a,
+    w(±1) = a, a = :func:`local_weight` of q's own CoC when q is nearer than p by more than
+    :data:`FRONT_MARGIN_PX`, else of min(|r_q|, |r_p|) (the gather's background clamp: a blurred
+    background never bleeds onto a sharper pixel), normalised by the summed weight. Edges clamped."""
+    c = np.asarray(coc, dtype=np.float64)
+    h, w = c.shape
+    a_p = local_weight(c)
+    pc = np.pad(np.asarray(color, dtype=np.float64), ((1, 1), (1, 1), (0, 0)), mode="edge")
+    pr = np.pad(c, 1, mode="edge")
+    acc = np.zeros((h, w, 3)); wsum = np.zeros((h, w))
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            rq = pr[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+            aq = local_weight(rq)
+            aq = np.where(rq < c - FRONT_MARGIN_PX, aq, np.minimum(aq, a_p))
+            wq = (aq if dy else 1.0 - 2.0 * aq) * (aq if dx else 1.0 - 2.0 * aq)
+            acc += wq[..., None] * pc[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+            wsum += wq
+    return acc / wsum[..., None]
 
 
 def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
@@ -793,7 +832,8 @@ def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
     _, rw_orig = _working(color, coc, scale)
     up, up_alpha = _upsample(out, alpha, rw_orig, coc, scale)
     b = np.maximum(half_blend(coc), up_alpha)
-    return color + (up - color) * b[..., None], rw
+    near = local_blur(color, coc)
+    return np.where(b[..., None] < 1.0, near + (up - near) * b[..., None], up), rw
 
 
 def mixed_mask(rw: np.ndarray, coc: np.ndarray, quality: str, reach: float = 1.0) -> np.ndarray:
@@ -888,7 +928,8 @@ class Dof(GatherStage):
                 "DOF_TEXTURE": int(camera.spherical_aberration != 0 and not traced),
                 "DOF_PROFILE": int(traced), "DOF_REACH": f"{reach!r}f", **prof,
                 "DOF_HALF_SHRINK": f"{4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2)!r}f",
-                "DOF_HALF_BLEND": f"{1.0 / (4.0 * HALF_PATH_VAR_PX2)!r}f",
+                "DOF_HALF_BLEND": f"{1.0 / (HALF_PATH_VAR_PX2 - LOCAL_VAR_PX2)!r}f",
+                "DOF_LOCAL_VAR": f"{LOCAL_VAR_PX2!r}f",
                 "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
                 "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
