@@ -265,8 +265,14 @@ inline float dof_block_min(__global const float *coc, const int xs, const int ys
 inline float3 dof_local_px(__global const float *src, __global const float *coc, const int x, const int y,
                            const int width, const int height)
 {
-    const size_t n = (size_t)width * height;
-    const float r = coc[(size_t)y * width + x], ap = DOF_LOCAL_A(r);
+    const size_t n = (size_t)width * height, i = (size_t)y * width + x;
+    const float r = coc[i], ap = DOF_LOCAL_A(r);
+    float rmax = 0.0f;
+    for (int b = -1; b <= 1; ++b)
+        for (int a = -1; a <= 1; ++a)
+            rmax = fmax(rmax, fabs(coc[(size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1)]));
+    if (rmax < DOF_LOCAL_MIN)
+        return (float3)(src[i], src[n + i], src[2 * n + i]);
     float3 acc = (float3)(0.0f);
     float wsum = 0.0f;
     for (int b = -1; b <= 1; ++b)
@@ -376,13 +382,30 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         const float16 inv = 1.0f / wsum;
         const float16 b = fmax(DOF_HALF_B(r), aa * inv);
         ar *= inv; ag *= inv; ab *= inv;
-        if (all(b >= 1.0f)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
+        const int16 whole_ = b >= 1.0f;
+        if (all(whole_)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
             vstore16(ar, 0, dst + i); vstore16(ag, 0, dst + n + i); vstore16(ab, 0, dst + 2 * n + i);
             return;
         }
         /* the full-resolution 3x3 blur (dof_local_px), lane-wise; columns x - 1 .. x + 16 lie in
          * the image (x >= 2, x + 30 <= width) */
         const float16 ap = DOF_LOCAL_A(r);
+        float16 rmax = (float16)(0.0f);
+#pragma unroll
+        for (int bb = -1; bb <= 1; ++bb) {
+            const size_t row = (size_t)clamp(y + bb, 0, height - 1) * width + x;
+#pragma unroll
+            for (int a = -1; a <= 1; ++a)
+                rmax = fmax(rmax, fabs(vload16(0, coc + row + a)));
+        }
+        const int16 sharp = rmax < DOF_LOCAL_MIN;
+        if (all(sharp | whole_)) {  /* no pixel needs the 3x3's taps: its colour is the source's */
+            const float16 sr = vload16(0, src + i), sg = vload16(0, src + n + i), sb = vload16(0, src + 2 * n + i);
+            vstore16(select(sr + (ar - sr) * b, ar, whole_), 0, dst + i);
+            vstore16(select(sg + (ag - sg) * b, ag, whole_), 0, dst + n + i);
+            vstore16(select(sb + (ab - sb) * b, ab, whole_), 0, dst + 2 * n + i);
+            return;
+        }
         float16 cr = (float16)(0.0f), cg = cr, cb = cr, cw = cr;
 #pragma unroll
         for (int bb = -1; bb <= 1; ++bb) {
@@ -399,8 +422,10 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
             }
         }
         const float16 ic = 1.0f / cw;
-        const int16 whole = b >= 1.0f;
-        cr *= ic; cg *= ic; cb *= ic;
+        const int16 whole = whole_;
+        cr = select(cr * ic, vload16(0, src + i), sharp);
+        cg = select(cg * ic, vload16(0, src + n + i), sharp);
+        cb = select(cb * ic, vload16(0, src + 2 * n + i), sharp);
         vstore16(select(cr + (ar - cr) * b, ar, whole), 0, dst + i);
         vstore16(select(cg + (ag - cg) * b, ag, whole), 0, dst + n + i);
         vstore16(select(cb + (ab - cb) * b, ab, whole), 0, dst + 2 * n + i);

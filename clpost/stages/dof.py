@@ -117,13 +117,16 @@ draft      half (2×2 box)     32 px (16 work)   3    45 (dense up to 3 work px,
 preview    half               64 px (32 work)   5    109 (dense up to 5 work px, then stride 2, 4, 8)
 final      mixed (below)      64 px             8    249 (dense up to 8 px, stride 2 up to 17 px; beyond: half res)
 =========  =================  ================  ===  =====================================================
-Half-resolution levels composite with the full-resolution image by
-:math:`\mathrm{lerp}(c_{full}, \mathrm{up}(c_{blur}), \max(\min(1, r^2/4), \mathrm{up}(\alpha)))`
+Half-resolution levels composite with a full-resolution 3×3 blur of the image by
+:math:`\mathrm{lerp}(c_{3\times3}, \mathrm{up}(c_{blur}), \max(b(r), \mathrm{up}(\alpha)))`
 (depth-aware bilinear upsampling, :func:`_upsample`), so in-focus pixels stay at full resolution.
 The path itself blurs: the 2×2 box and the bilinear upsampling add 1 px² of variance per axis and
 the working-resolution coverage ramp 1/3 px², so it gathers with the variance-matched radius
-:math:`r' = \sqrt{r^2 - 16/3}` (:func:`half_radius`) and, below r = 2 px, where even r' = 0 is too
-wide, blends the sharp pixel with the path's narrowest blur by variance, :math:`b = r^2/4`
+:math:`r' = \sqrt{r^2 - 16/3}` (:func:`half_radius`). Below r = 2 px, where even r' = 0 is too
+wide, the disc's variance :math:`v = r^2/4` is made at full resolution: a separable
+[a, 1 − 2a, a] scatter-as-gather, a = min(v, ½)/2 per source with the gather's near/far rule
+(:func:`local_blur`), alone up to v = ½ (r = √2 px) and mixed by variance with the path's
+narrowest blur up to v = 1 (r = 2 px), :math:`b = \mathrm{clamp}(2v - 1, 0, 1)`
 (:func:`half_blend`); effect on the Cycles truths: docs/fidelity.md, "The half-resolution path".
 
 Mixed resolution (final, :data:`MIXED`): a working tile (16×16 at half resolution = 32×32 px) is
@@ -339,7 +342,7 @@ def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
       is explained without its own surface) takes the median depth of its 3×3.
     * A light seen through such a surface: a candidate brighter than every other-depth neighbour,
       but by less than :data:`SAME_SOURCE`× the brightest of them (that neighbour is the same
-      source), whose depth class is also seen on a candidate of its 5×5 dimmer than
+      source), and by more than that the dimmest (a source above its surround), whose depth class is also seen on a candidate of its 5×5 dimmer than
       :math:`Y_p`/:data:`SAME_SOURCE` and not on a one-pixel line (a speckle of it: the stochastic
       depth of a surface in front — a pane's — not the source's own), takes that brightest
       neighbour's depth. A lamp's own pixels keep theirs: their depth class is seen only on the
@@ -359,7 +362,7 @@ def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
         hi_d, hi = np.where(up, dq, hi_d), np.where(up, lq, hi)
     cand = speckle_candidates(d)
     speckle = cand & (lum >= lo) & (lum <= hi)
-    source = cand & (lum > hi) & (lum <= SAME_SOURCE * hi)
+    source = cand & (lum > hi) & (lum <= SAME_SOURCE * hi) & (lum > SAME_SOURCE * lo)
     h, w = d.shape
     pd, pl, pc = (np.pad(a, 2, mode="edge") for a in (d, lum, speckle_candidates(d, lines=False)))
     dim = np.zeros(d.shape, bool)
@@ -775,6 +778,9 @@ def half_radius(coc: np.ndarray) -> np.ndarray:
 LOCAL_VAR_PX2 = 0.5
 r"""Largest variance (px², per axis) of the half-resolution path's full-resolution 3×3 blur
 (:func:`local_blur`): the binomial [¼, ½, ¼]."""
+LOCAL_MIN_PX = 0.5
+"""Below this |CoC| over a whole 3×3 the full-resolution blur leaves the pixel as it is (side weight
+a = r²/8 < 1/32)."""
 
 
 def half_blend(coc: np.ndarray) -> np.ndarray:
@@ -800,7 +806,9 @@ def local_blur(color: np.ndarray, coc: np.ndarray) -> np.ndarray:
     neighbour q spreads with the separable weight :math:`w_q = w(o_x)\,w(o_y)`, w(0) = 1 − 2a,
     w(±1) = a, a = :func:`local_weight` of q's own CoC when q is nearer than p by more than
     :data:`FRONT_MARGIN_PX`, else of min(|r_q|, |r_p|) (the gather's background clamp: a blurred
-    background never bleeds onto a sharper pixel), normalised by the summed weight. Edges clamped."""
+    background never bleeds onto a sharper pixel), normalised by the summed weight. Edges clamped.
+    A pixel whose 3×3 has every |r| < :data:`LOCAL_MIN_PX` keeps its colour (weights ≤ 1/32: the
+    kernel skips the taps there)."""
     c = np.asarray(coc, dtype=np.float64)
     h, w = c.shape
     a_p = local_weight(c)
@@ -815,7 +823,8 @@ def local_blur(color: np.ndarray, coc: np.ndarray) -> np.ndarray:
             wq = (aq if dy else 1.0 - 2.0 * aq) * (aq if dx else 1.0 - 2.0 * aq)
             acc += wq[..., None] * pc[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
             wsum += wq
-    return acc / wsum[..., None]
+    sharp = np.max(np.abs(np.stack(_neighbourhood(c))), axis=0) < LOCAL_MIN_PX
+    return np.where(sharp[..., None], np.asarray(color, dtype=np.float64), acc / wsum[..., None])
 
 
 def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
@@ -929,7 +938,7 @@ class Dof(GatherStage):
                 "DOF_PROFILE": int(traced), "DOF_REACH": f"{reach!r}f", **prof,
                 "DOF_HALF_SHRINK": f"{4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2)!r}f",
                 "DOF_HALF_BLEND": f"{1.0 / (HALF_PATH_VAR_PX2 - LOCAL_VAR_PX2)!r}f",
-                "DOF_LOCAL_VAR": f"{LOCAL_VAR_PX2!r}f",
+                "DOF_LOCAL_VAR": f"{LOCAL_VAR_PX2!r}f", "DOF_LOCAL_MIN": f"{LOCAL_MIN_PX!r}f",
                 "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
                 "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
