@@ -42,8 +42,8 @@ inline float16 dof_luma16(__global const float *p, const size_t n) {
  * DOF_SPECKLE_MAX_SAME of its 8 neighbours share its depth (within 0.8x either way) and they are not one
  * arc of the ring (an object's corner: DOF_CANDIDATE below). A candidate whose
  * luminance lies within its other-depth neighbours' range takes the median depth of its 3x3; one
- * brighter than all of them but within DOF_SAME_SOURCE x the brightest (the same source) and above
- * DOF_SAME_SOURCE x the dimmest (a source above its surround), whose depth
+ * not on a one-pixel line, brighter than all of them but within DOF_SAME_SOURCE x the brightest (the
+ * same source) and above DOF_SAME_SOURCE x the dimmest (a source above its surround), whose depth
  * class is seen on a speckle (dof_speckle_px) of its 5x5 dimmer than lum / DOF_SAME_SOURCE, takes that
  * brightest neighbour's depth (a light seen through a pane). Neighbours clamped to the image; the median by
  * the 19-exchange network for 9 values (Paeth, Graphics Gems 1990). */
@@ -104,7 +104,7 @@ inline float dof_despeckle_px(__global const float *src, __global const float *d
     if (!DOF_CANDIDATE(same, ring) || lum < lo)
         return d;
     if (lum > hi) {
-        if (lum > DOF_SAME_SOURCE * hi || lum <= DOF_SAME_SOURCE * lo)
+        if (lum > DOF_SAME_SOURCE * hi || lum <= DOF_SAME_SOURCE * lo || (ring & (ring >> 4) & 15))
             return d;
         for (int b = -2; b <= 2; ++b)
             for (int a = -2; a <= 2; ++a) {
@@ -178,7 +178,8 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
         DOF_SORT2(4, 2)
         /* a light seen through a pane (lum above hi but within DOF_SAME_SOURCE x it) is rare:
          * the group goes per pixel (the 5x5 test) */
-        if (!any(cand & (lum > hi) & (lum <= DOF_SAME_SOURCE * hi) & (lum > DOF_SAME_SOURCE * lo))) {
+        if (!any(cand & (lum > hi) & (lum <= DOF_SAME_SOURCE * hi) & (lum > DOF_SAME_SOURCE * lo)
+                 & ((ring & (ring >> 4) & 15) == 0))) {
             vstore16(select(d, v[4], cand & (lum >= lo) & (lum <= hi)), 0, out + i);
             return;
         }

@@ -340,7 +340,8 @@ def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
 
     * A candidate whose luminance lies within the range of its other-depth neighbours' (its colour
       is explained without its own surface) takes the median depth of its 3×3.
-    * A light seen through such a surface: a candidate brighter than every other-depth neighbour,
+    * A light seen through such a surface: a candidate not on a one-pixel line (a wire's pixels
+      keep their depth) brighter than every other-depth neighbour,
       but by less than :data:`SAME_SOURCE`× the brightest of them (that neighbour is the same
       source), and by more than that the dimmest (a source above its surround), whose depth class is also seen on a candidate of its 5×5 dimmer than
       :math:`Y_p`/:data:`SAME_SOURCE` and not on a one-pixel line (a speckle of it: the stochastic
@@ -362,9 +363,10 @@ def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
         hi_d, hi = np.where(up, dq, hi_d), np.where(up, lq, hi)
     cand = speckle_candidates(d)
     speckle = cand & (lum >= lo) & (lum <= hi)
-    source = cand & (lum > hi) & (lum <= SAME_SOURCE * hi) & (lum > SAME_SOURCE * lo)
+    speck = speckle_candidates(d, lines=False)
+    source = speck & (lum > hi) & (lum <= SAME_SOURCE * hi) & (lum > SAME_SOURCE * lo)
     h, w = d.shape
-    pd, pl, pc = (np.pad(a, 2, mode="edge") for a in (d, lum, speckle_candidates(d, lines=False)))
+    pd, pl, pc = (np.pad(a, 2, mode="edge") for a in (d, lum, speck))
     dim = np.zeros(d.shape, bool)
     for b in range(5):
         for a in range(5):
