@@ -41,7 +41,8 @@ inline float16 dof_luma16(__global const float *p, const size_t n) {
 /* Stochastic-depth speckle (despeckle_depth in clpost/stages/dof.py): p is a candidate when at most
  * DOF_SPECKLE_MAX_SAME of its 8 neighbours share its depth (within 0.8x either way) and they are not one
  * arc of the ring (an object's corner: DOF_CANDIDATE below). A candidate whose
- * luminance lies within its other-depth neighbours' range takes the median depth of its 3x3; one
+ * luminance lies within its other-depth neighbours' range (DOF_FRINGE_STEP's 5 % outside it allowed)
+ * takes the median depth of its 3x3; one
  * not on a one-pixel line, brighter than all of them but within DOF_SAME_SOURCE x the brightest (the
  * same source) and above DOF_SAME_SOURCE x the dimmest (a source above its surround), whose depth
  * class is seen on a speckle (dof_speckle_px) of its 5x5 dimmer than lum / DOF_SAME_SOURCE, takes that
@@ -101,11 +102,9 @@ inline float dof_despeckle_px(__global const float *src, __global const float *d
                 if (lq > hi) { hi = lq; hi_d = dq; }
             }
         }
-    if (!DOF_CANDIDATE(same, ring) || lum < lo)
+    if (!DOF_CANDIDATE(same, ring) || lum < DOF_FRINGE_STEP * lo)
         return d;
-    if (lum > hi) {
-        if (lum > DOF_SAME_SOURCE * hi || lum <= DOF_SAME_SOURCE * lo || (ring & (ring >> 4) & 15))
-            return d;
+    if (lum > hi && lum <= DOF_SAME_SOURCE * hi && lum > DOF_SAME_SOURCE * lo && !(ring & (ring >> 4) & 15)) {
         for (int b = -2; b <= 2; ++b)
             for (int a = -2; a <= 2; ++a) {
                 const int xq = clamp(x + a, 0, width - 1), yq = clamp(y + b, 0, height - 1);
@@ -114,8 +113,9 @@ inline float dof_despeckle_px(__global const float *src, __global const float *d
                     && dof_speckle_px(depth, xq, yq, width, height))
                     return hi_d;
             }
-        return d;
     }
+    if (DOF_FRINGE_STEP * lum > hi)
+        return d;
     DOF_SORT2(1, 2) DOF_SORT2(4, 5) DOF_SORT2(7, 8) DOF_SORT2(0, 1) DOF_SORT2(3, 4) DOF_SORT2(6, 7)
     DOF_SORT2(1, 2) DOF_SORT2(4, 5) DOF_SORT2(7, 8) DOF_SORT2(0, 3) DOF_SORT2(5, 8) DOF_SORT2(4, 7)
     DOF_SORT2(3, 6) DOF_SORT2(1, 4) DOF_SORT2(2, 5) DOF_SORT2(4, 7) DOF_SORT2(4, 2) DOF_SORT2(6, 4)
@@ -180,7 +180,7 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
          * the group goes per pixel (the 5x5 test) */
         if (!any(cand & (lum > hi) & (lum <= DOF_SAME_SOURCE * hi) & (lum > DOF_SAME_SOURCE * lo)
                  & ((ring & (ring >> 4) & 15) == 0))) {
-            vstore16(select(d, v[4], cand & (lum >= lo) & (lum <= hi)), 0, out + i);
+            vstore16(select(d, v[4], cand & (lum >= DOF_FRINGE_STEP * lo) & (DOF_FRINGE_STEP * lum <= hi)), 0, out + i);
             return;
         }
     }

@@ -300,9 +300,10 @@ SAME_SOURCE = 1.5
 """Two pixels within this luminance ratio of each other, both far above their surround, are one
 source (CONVENTIONS.md's 1.5× of a light; :func:`despeckle_depth`)."""
 FRINGE_STEP = 0.95
-"""The fringe rule's near surface must be brighter (darker) than every other pixel of p's own
-surface by more than 1 − this (5 %): a near pixel no brighter or darker than p's own surface
-explains nothing (:func:`effective_depth`)."""
+"""Luminance steps under 1 − this (5 %) are no evidence (render noise, the pixel filter's spread):
+the fringe rule's near surface must be brighter (darker) than every other pixel of p's own surface
+by more (:func:`effective_depth`), and a speckle's luminance may lie that far outside its
+other-depth neighbours' range (:func:`despeckle_depth`)."""
 
 
 def _same_depth(dq, d):
@@ -339,7 +340,8 @@ def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     arc (:func:`speckle_candidates`: an object's corner is not a speckle).
 
     * A candidate whose luminance lies within the range of its other-depth neighbours' (its colour
-      is explained without its own surface) takes the median depth of its 3×3.
+      is explained without its own surface; up to :data:`FRINGE_STEP`'s 5 % outside it) takes the
+      median depth of its 3×3.
     * A light seen through such a surface: a candidate not on a one-pixel line (a wire's pixels
       keep their depth) brighter than every other-depth neighbour,
       but by less than :data:`SAME_SOURCE`× the brightest of them (that neighbour is the same
@@ -362,7 +364,7 @@ def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
         up = ~s & (lq > hi)
         hi_d, hi = np.where(up, dq, hi_d), np.where(up, lq, hi)
     cand = speckle_candidates(d)
-    speckle = cand & (lum >= lo) & (lum <= hi)
+    speckle = cand & (lum >= FRINGE_STEP * lo) & (FRINGE_STEP * lum <= hi)
     speck = speckle_candidates(d, lines=False)
     source = speck & (lum > hi) & (lum <= SAME_SOURCE * hi) & (lum > SAME_SOURCE * lo)
     h, w = d.shape
