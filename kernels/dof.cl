@@ -297,19 +297,22 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
     const int x1 = min(x0 + 1, ww - 1), y1 = min(y0 + 1, hw - 1);
     const size_t n = (size_t)width * height, i = (size_t)y * width + x, nw = (size_t)ww * hw;
     const float r = coc[i];
-#define DOF_CORNER(XS, YS, BW) { \
-        const size_t j = (size_t)(YS) * ww + (XS); \
-        const float dr = r - dof_block_min(coc, (XS), (YS), width, height); \
-        const float g = (BW) / (DOF_UP_TOL + dr * dr); \
-        acc += g * (float4)(blur[j], blur[nw + j], blur[2 * nw + j], alpha[j]); \
-        wsum += g; }
+    const int xs[4] = {x0, x1, x0, x1}, ys[4] = {y0, y0, y1, y1};
+    const float bw[4] = {(1.0f - fx) * (1.0f - fy), fx * (1.0f - fy), (1.0f - fx) * fy, fx * fy};
+    float dr[4];
+    int same = 0;
+    for (int c = 0; c < 4; ++c) {
+        dr[c] = fabs(r - dof_block_min(coc, xs[c], ys[c], width, height));
+        same |= bw[c] > 0.0f && dr[c] <= DOF_UP_SAME;
+    }
     float4 acc = (float4)(0.0f);
     float wsum = 0.0f;
-    DOF_CORNER(x0, y0, (1.0f - fx) * (1.0f - fy))
-    DOF_CORNER(x1, y0, fx * (1.0f - fy))
-    DOF_CORNER(x0, y1, (1.0f - fx) * fy)
-    DOF_CORNER(x1, y1, fx * fy)
-#undef DOF_CORNER
+    for (int c = 0; c < 4; ++c) {
+        const size_t j = (size_t)ys[c] * ww + xs[c];
+        const float g = same && dr[c] > DOF_UP_SAME ? 0.0f : bw[c] / (DOF_UP_TOL + dr[c] * dr[c]);
+        acc += g * (float4)(blur[j], blur[nw + j], blur[2 * nw + j], alpha[j]);
+        wsum += g;
+    }
     acc /= wsum;
     const float b = fmax(DOF_HALF_B(r), acc.w);
     if (b >= 1.0f)
@@ -326,6 +329,19 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
                                (v).s4, (v).s5, (v).s5, (v).s6, (v).s6, (v).s7, (v).s7, (v).s8))
 #define DOF_RIGHT(v) ((float16)((v).s1, (v).s2, (v).s2, (v).s3, (v).s3, (v).s4, (v).s4, (v).s5, \
                                 (v).s5, (v).s6, (v).s6, (v).s7, (v).s7, (v).s8, (v).s8, (v).s9))
+#endif
+
+#if DOF_SCALE == 2
+/* The min CoC of the 2x2 blocks of working pixels m-1 .. m+14 (m = x / 2) in working row ys. */
+inline float16 dof_block_min16(__global const float *coc, const int x, const int ys, const int width, const int height)
+{
+    const size_t k0 = (size_t)(2 * ys) * width + x - 2;
+    const size_t k1 = (size_t)min(2 * ys + 1, height - 1) * width + x - 2;
+    const float16 a0 = vload16(0, coc + k0), a1 = vload16(1, coc + k0);
+    const float16 b0 = vload16(0, coc + k1), b1 = vload16(1, coc + k1);
+    return (float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)),
+                     fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd)));
+}
 #endif
 
 /* 16 output pixels of a row per work-item, float16 (PoCL does not vectorise the per-pixel form;
@@ -359,25 +375,26 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
                                       0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f);
         const float16 r = vload16(0, coc + i);
         float16 ar = (float16)(0.0f), ag = ar, ab = ar, aa = ar, wsum = ar;
-        /* vc: the min CoC of the 2x2 blocks of working pixels m-1 .. m+14 in row YS */
-#define DOF_ROW(YS, WL, WR) { \
+        const float16 vc0 = dof_block_min16(coc, x, y0, width, height);
+        const float16 vc1 = dof_block_min16(coc, x, y1, width, height);
+        const float16 dl0 = fabs(r - DOF_LEFT(vc0)), dr0 = fabs(r - DOF_RIGHT(vc0));
+        const float16 dl1 = fabs(r - DOF_LEFT(vc1)), dr1 = fabs(r - DOF_RIGHT(vc1));
+        const float16 wl0 = (1.0f - fx) * (1.0f - fy), wr0 = fx * (1.0f - fy), wl1 = (1.0f - fx) * fy, wr1 = fx * fy;
+        /* p's own surface among the corners: the others are left out (UPSAMPLE_SAME_PX) */
+        const int16 same = ((wl0 > 0.0f) & (dl0 <= DOF_UP_SAME)) | ((wr0 > 0.0f) & (dr0 <= DOF_UP_SAME))
+                           | ((wl1 > 0.0f) & (dl1 <= DOF_UP_SAME)) | ((wr1 > 0.0f) & (dr1 <= DOF_UP_SAME));
+#define DOF_ROW(YS, DL, DR, WL, WR) { \
             const size_t j = (size_t)(YS) * ww + m - 1; \
             const float16 vr = vload16(0, blur + j), vg = vload16(0, blur + nw + j); \
             const float16 vb = vload16(0, blur + 2 * nw + j), va = vload16(0, alpha + j); \
-            const size_t k0 = (size_t)(2 * (YS)) * width + x - 2; \
-            const size_t k1 = (size_t)min(2 * (YS) + 1, height - 1) * width + x - 2; \
-            const float16 a0 = vload16(0, coc + k0), a1 = vload16(1, coc + k0); \
-            const float16 b0 = vload16(0, coc + k1), b1 = vload16(1, coc + k1); \
-            const float16 vc = (float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)), \
-                                         fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd))); \
-            const float16 dl = r - DOF_LEFT(vc), dr = r - DOF_RIGHT(vc); \
-            const float16 gl = (WL) / (DOF_UP_TOL + dl * dl), gr = (WR) / (DOF_UP_TOL + dr * dr); \
+            const float16 gl = select((WL) / (DOF_UP_TOL + (DL) * (DL)), (float16)(0.0f), same & ((DL) > DOF_UP_SAME)); \
+            const float16 gr = select((WR) / (DOF_UP_TOL + (DR) * (DR)), (float16)(0.0f), same & ((DR) > DOF_UP_SAME)); \
             ar += gl * DOF_LEFT(vr); ag += gl * DOF_LEFT(vg); ab += gl * DOF_LEFT(vb); aa += gl * DOF_LEFT(va); \
             wsum += gl; \
             ar += gr * DOF_RIGHT(vr); ag += gr * DOF_RIGHT(vg); ab += gr * DOF_RIGHT(vb); aa += gr * DOF_RIGHT(va); \
             wsum += gr; }
-        DOF_ROW(y0, (1.0f - fx) * (1.0f - fy), fx * (1.0f - fy))
-        DOF_ROW(y1, (1.0f - fx) * fy, fx * fy)
+        DOF_ROW(y0, dl0, dr0, wl0, wr0)
+        DOF_ROW(y1, dl1, dr1, wl1, wr1)
 #undef DOF_ROW
         const float16 inv = 1.0f / wsum;
         const float16 b = fmax(DOF_HALF_B(r), aa * inv);

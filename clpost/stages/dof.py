@@ -742,21 +742,34 @@ motion 42.46 → 42.70, thin 37.59 → 37.45; 1/16 gave highlights 40.81 and mot
 37.34 with FLIP 0.0272 — docs/fidelity.md)."""
 
 
+UPSAMPLE_SAME_PX = 1.0
+"""A working corner whose CoC differs from the pixel's by more than this (px) is another surface:
+when one corner with a bilinear weight is within it, the others get weight 0 (:func:`_upsample`)."""
+
+
 def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.ndarray, scale: int):
     r"""Depth-aware bilinear upsampling of the working-resolution blur and α: bilinear weights
     times :math:`g_i = 1/(\tau + (r - s\,r_i)^2)` (τ = :data:`UPSAMPLE_COC_TOL_PX2`, r the full-resolution CoC, :math:`r_i` the
     working CoC of corner i: the min of r over its block, in working px), so a blurred background
     next to a sharp edge is not mixed with the working pixels that straddle the edge (which carry
-    the nearer CoC). Edges are clamped.
+    the nearer CoC); when a corner with a bilinear weight lies within :data:`UPSAMPLE_SAME_PX` of
+    r (p's own surface is there), the corners farther than that get none — a sharp HDR lamp's
+    working corner 2 px of CoC away still weighed 1/32 of the surface's own and put a ring of its
+    light on it. Edges are clamped.
 
     ``coc_w`` is the block min of the *original* CoC, not of the variance-matched one the gather
     used (:func:`half_radius` maps every |r| < 2.31 px to 0, so an in-focus lamp and a wall at
     r = 2.2 px looked alike, and the wall's pixels took the lamp's blurred light on top of the lamp
     keeping its own: +12 % of an in-focus lamp's energy at draft; docs/fidelity.md)."""
     h, w = coc.shape
+    corners = [(ys, xs, b, np.abs(coc - scale * coc_w[ys][:, xs]))
+               for ys, xs, b in fld.upsample_corners(h, w, *coc_w.shape, scale)]
+    same = np.zeros((h, w), bool)
+    for _, _, b, dr in corners:
+        same |= (b > 0) & (dr <= UPSAMPLE_SAME_PX)
     acc = np.zeros((h, w, 3)); acc_a = np.zeros((h, w)); wsum = np.zeros((h, w))
-    for ys, xs, b in fld.upsample_corners(h, w, *coc_w.shape, scale):
-        g = b / (UPSAMPLE_COC_TOL_PX2 + (coc - scale * coc_w[ys][:, xs]) ** 2)
+    for ys, xs, b, dr in corners:
+        g = np.where(same & (dr > UPSAMPLE_SAME_PX), 0.0, b / (UPSAMPLE_COC_TOL_PX2 + dr ** 2))
         acc += g[..., None] * img[ys][:, xs]
         acc_a += g * alpha[ys][:, xs]
         wsum += g
@@ -944,6 +957,7 @@ class Dof(GatherStage):
                 "DOF_HALF_BLEND": f"{1.0 / (HALF_PATH_VAR_PX2 - LOCAL_VAR_PX2)!r}f",
                 "DOF_LOCAL_VAR": f"{LOCAL_VAR_PX2!r}f", "DOF_LOCAL_MIN": f"{LOCAL_MIN_PX!r}f",
                 "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
+                "DOF_UP_SAME": f"{UPSAMPLE_SAME_PX!r}f",
                 "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
