@@ -343,13 +343,13 @@ def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
       is explained without its own surface; up to :data:`FRINGE_STEP`'s 5 % outside it) takes the
       median depth of its 3×3.
     * A light seen through such a surface: a candidate not on a one-pixel line (a wire's pixels
-      keep their depth) brighter than every other-depth neighbour,
-      but by less than :data:`SAME_SOURCE`× the brightest of them (that neighbour is the same
-      source), and by more than that the dimmest (a source above its surround), whose depth class is also seen on a candidate of its 5×5 dimmer than
-      :math:`Y_p`/:data:`SAME_SOURCE` and not on a one-pixel line (a speckle of it: the stochastic
-      depth of a surface in front — a pane's — not the source's own), takes that brightest
-      neighbour's depth. A lamp's own pixels keep theirs: their depth class is seen only on the
-      lamp, or on a fixture at its depth (a pole, a wall: not a speckle).
+      keep their depth) brighter than every other-depth neighbour, but by less than
+      :data:`SAME_SOURCE`× the brightest of them (that neighbour is the same source) and by more
+      than that the dimmest (a source above its surround), whose depth class is also seen on a
+      candidate of its 5×5 dimmer than :math:`Y_p`/:data:`SAME_SOURCE` and not on a one-pixel line
+      (a speckle of it: the stochastic depth of a surface in front — a pane's — not the source's
+      own), takes that brightest neighbour's depth. A lamp's own pixels keep theirs: their depth
+      class is seen only on the lamp, or on a fixture at its depth (a pole, a wall: not a speckle).
 
     A wire, a lamp or a silhouette pixel brighter or darker than everything around it keeps its
     depth. Applied before the fringe rule (:func:`effective_depth`); docs/fidelity.md,
