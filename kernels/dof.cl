@@ -243,8 +243,8 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     }
 }
 
-/* Half-resolution levels: keep in-focus pixels at full resolution, take the upsampled blur where
- * the full-resolution CoC (DOF_HALF_B) or the front layer's coverage says so. Upsampling is bilinear
+/* Half-resolution levels: small CoCs take the full-resolution 3x3 blur (dof_local_px), mixed with
+ * the upsampled blur where the full-resolution CoC (DOF_HALF_B) or the front layer's coverage says so. Upsampling is bilinear
  * weighted by CoC similarity g = 1/(DOF_UP_TOL + (r - m_i)^2) (UPSAMPLE_COC_TOL_PX2), r the full-resolution CoC and m_i the min of
  * the full-resolution CoC over corner i's DOF_SCALE^2 block: the original CoC, not the
  * variance-matched one the working pixels were gathered with, which is 0 for every |r| < 2.31 px
@@ -259,6 +259,34 @@ inline float dof_block_min(__global const float *coc, const int xs, const int ys
     return m;
 }
 
+/* The full-resolution 3x3 blur of small CoCs (local_blur in clpost/stages/dof.py): neighbour q
+ * weighs w(ox) w(oy), w(0) = 1 - 2a, w(+-1) = a, a = DOF_LOCAL_A of q's CoC when q is nearer than p
+ * by more than DOF_FRONT_MARGIN (px here), else of the smaller of the two; normalised. Edges clamped. */
+inline float3 dof_local_px(__global const float *src, __global const float *coc, const int x, const int y,
+                           const int width, const int height)
+{
+    const size_t n = (size_t)width * height, i = (size_t)y * width + x;
+    const float r = coc[i], ap = DOF_LOCAL_A(r);
+    float rmax = 0.0f;
+    for (int b = -1; b <= 1; ++b)
+        for (int a = -1; a <= 1; ++a)
+            rmax = fmax(rmax, fabs(coc[(size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1)]));
+    if (rmax < DOF_LOCAL_MIN)
+        return (float3)(src[i], src[n + i], src[2 * n + i]);
+    float3 acc = (float3)(0.0f);
+    float wsum = 0.0f;
+    for (int b = -1; b <= 1; ++b)
+        for (int a = -1; a <= 1; ++a) {
+            const size_t j = (size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1);
+            const float rq = coc[j];
+            const float aq = rq < r - DOF_FRONT_MARGIN ? DOF_LOCAL_A(rq) : fmin(DOF_LOCAL_A(rq), ap);
+            const float wq = (b ? aq : 1.0f - 2.0f * aq) * (a ? aq : 1.0f - 2.0f * aq);
+            acc += wq * (float3)(src[j], src[n + j], src[2 * n + j]);
+            wsum += wq;
+        }
+    return acc / wsum;
+}
+
 inline float3 dof_upsample_px(__global const float *src, __global const float *coc, __global const float *blur,
                               __global const float *alpha, const int x, const int y,
                               const int width, const int height, const int ww, const int hw)
@@ -269,23 +297,28 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
     const int x1 = min(x0 + 1, ww - 1), y1 = min(y0 + 1, hw - 1);
     const size_t n = (size_t)width * height, i = (size_t)y * width + x, nw = (size_t)ww * hw;
     const float r = coc[i];
-#define DOF_CORNER(XS, YS, BW) { \
-        const size_t j = (size_t)(YS) * ww + (XS); \
-        const float dr = r - dof_block_min(coc, (XS), (YS), width, height); \
-        const float g = (BW) / (DOF_UP_TOL + dr * dr); \
-        acc += g * (float4)(blur[j], blur[nw + j], blur[2 * nw + j], alpha[j]); \
-        wsum += g; }
+    const int xs[4] = {x0, x1, x0, x1}, ys[4] = {y0, y0, y1, y1};
+    const float bw[4] = {(1.0f - fx) * (1.0f - fy), fx * (1.0f - fy), (1.0f - fx) * fy, fx * fy};
+    float dr[4];
+    int same = 0;
+    for (int c = 0; c < 4; ++c) {
+        dr[c] = fabs(r - dof_block_min(coc, xs[c], ys[c], width, height));
+        same |= bw[c] > 0.0f && dr[c] <= DOF_UP_SAME;
+    }
     float4 acc = (float4)(0.0f);
     float wsum = 0.0f;
-    DOF_CORNER(x0, y0, (1.0f - fx) * (1.0f - fy))
-    DOF_CORNER(x1, y0, fx * (1.0f - fy))
-    DOF_CORNER(x0, y1, (1.0f - fx) * fy)
-    DOF_CORNER(x1, y1, fx * fy)
-#undef DOF_CORNER
+    for (int c = 0; c < 4; ++c) {
+        const size_t j = (size_t)ys[c] * ww + xs[c];
+        const float g = same && dr[c] > DOF_UP_SAME ? 0.0f : bw[c] / (DOF_UP_TOL + dr[c] * dr[c]);
+        acc += g * (float4)(blur[j], blur[nw + j], blur[2 * nw + j], alpha[j]);
+        wsum += g;
+    }
     acc /= wsum;
     const float b = fmax(DOF_HALF_B(r), acc.w);
-    const float3 c = (float3)(src[i], src[n + i], src[2 * n + i]);
-    return c * (1.0f - b) + acc.xyz * b;  /* exact at b = 1 even for 1e8 highlights */
+    if (b >= 1.0f)
+        return acc.xyz;  /* exact at b = 1 even for 1e8 highlights */
+    const float3 c = dof_local_px(src, coc, x, y, width, height);
+    return c + (acc.xyz - c) * b;
 }
 
 #if DOF_SCALE == 2
@@ -296,6 +329,19 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
                                (v).s4, (v).s5, (v).s5, (v).s6, (v).s6, (v).s7, (v).s7, (v).s8))
 #define DOF_RIGHT(v) ((float16)((v).s1, (v).s2, (v).s2, (v).s3, (v).s3, (v).s4, (v).s4, (v).s5, \
                                 (v).s5, (v).s6, (v).s6, (v).s7, (v).s7, (v).s8, (v).s8, (v).s9))
+#endif
+
+#if DOF_SCALE == 2
+/* The min CoC of the 2x2 blocks of working pixels m-1 .. m+14 (m = x / 2) in working row ys. */
+inline float16 dof_block_min16(__global const float *coc, const int x, const int ys, const int width, const int height)
+{
+    const size_t k0 = (size_t)(2 * ys) * width + x - 2;
+    const size_t k1 = (size_t)min(2 * ys + 1, height - 1) * width + x - 2;
+    const float16 a0 = vload16(0, coc + k0), a1 = vload16(1, coc + k0);
+    const float16 b0 = vload16(0, coc + k1), b1 = vload16(1, coc + k1);
+    return (float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)),
+                     fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd)));
+}
 #endif
 
 /* 16 output pixels of a row per work-item, float16 (PoCL does not vectorise the per-pixel form;
@@ -329,32 +375,77 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
                                       0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f);
         const float16 r = vload16(0, coc + i);
         float16 ar = (float16)(0.0f), ag = ar, ab = ar, aa = ar, wsum = ar;
-        /* vc: the min CoC of the 2x2 blocks of working pixels m-1 .. m+14 in row YS */
-#define DOF_ROW(YS, WL, WR) { \
+        const float16 vc0 = dof_block_min16(coc, x, y0, width, height);
+        const float16 vc1 = dof_block_min16(coc, x, y1, width, height);
+        const float16 dl0 = fabs(r - DOF_LEFT(vc0)), dr0 = fabs(r - DOF_RIGHT(vc0));
+        const float16 dl1 = fabs(r - DOF_LEFT(vc1)), dr1 = fabs(r - DOF_RIGHT(vc1));
+        const float16 wl0 = (1.0f - fx) * (1.0f - fy), wr0 = fx * (1.0f - fy), wl1 = (1.0f - fx) * fy, wr1 = fx * fy;
+        /* p's own surface among the corners: the others are left out (UPSAMPLE_SAME_PX) */
+        const int16 same = ((wl0 > 0.0f) & (dl0 <= DOF_UP_SAME)) | ((wr0 > 0.0f) & (dr0 <= DOF_UP_SAME))
+                           | ((wl1 > 0.0f) & (dl1 <= DOF_UP_SAME)) | ((wr1 > 0.0f) & (dr1 <= DOF_UP_SAME));
+#define DOF_ROW(YS, DL, DR, WL, WR) { \
             const size_t j = (size_t)(YS) * ww + m - 1; \
             const float16 vr = vload16(0, blur + j), vg = vload16(0, blur + nw + j); \
             const float16 vb = vload16(0, blur + 2 * nw + j), va = vload16(0, alpha + j); \
-            const size_t k0 = (size_t)(2 * (YS)) * width + x - 2; \
-            const size_t k1 = (size_t)min(2 * (YS) + 1, height - 1) * width + x - 2; \
-            const float16 a0 = vload16(0, coc + k0), a1 = vload16(1, coc + k0); \
-            const float16 b0 = vload16(0, coc + k1), b1 = vload16(1, coc + k1); \
-            const float16 vc = (float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)), \
-                                         fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd))); \
-            const float16 dl = r - DOF_LEFT(vc), dr = r - DOF_RIGHT(vc); \
-            const float16 gl = (WL) / (DOF_UP_TOL + dl * dl), gr = (WR) / (DOF_UP_TOL + dr * dr); \
+            const float16 gl = select((WL) / (DOF_UP_TOL + (DL) * (DL)), (float16)(0.0f), same & ((DL) > DOF_UP_SAME)); \
+            const float16 gr = select((WR) / (DOF_UP_TOL + (DR) * (DR)), (float16)(0.0f), same & ((DR) > DOF_UP_SAME)); \
             ar += gl * DOF_LEFT(vr); ag += gl * DOF_LEFT(vg); ab += gl * DOF_LEFT(vb); aa += gl * DOF_LEFT(va); \
             wsum += gl; \
             ar += gr * DOF_RIGHT(vr); ag += gr * DOF_RIGHT(vg); ab += gr * DOF_RIGHT(vb); aa += gr * DOF_RIGHT(va); \
             wsum += gr; }
-        DOF_ROW(y0, (1.0f - fx) * (1.0f - fy), fx * (1.0f - fy))
-        DOF_ROW(y1, (1.0f - fx) * fy, fx * fy)
+        DOF_ROW(y0, dl0, dr0, wl0, wr0)
+        DOF_ROW(y1, dl1, dr1, wl1, wr1)
 #undef DOF_ROW
         const float16 inv = 1.0f / wsum;
         const float16 b = fmax(DOF_HALF_B(r), aa * inv);
-        const float16 ob = 1.0f - b;
-        vstore16(vload16(0, src + i) * ob + ar * inv * b, 0, dst + i);
-        vstore16(vload16(0, src + n + i) * ob + ag * inv * b, 0, dst + n + i);
-        vstore16(vload16(0, src + 2 * n + i) * ob + ab * inv * b, 0, dst + 2 * n + i);
+        ar *= inv; ag *= inv; ab *= inv;
+        const int16 whole_ = b >= 1.0f;
+        if (all(whole_)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
+            vstore16(ar, 0, dst + i); vstore16(ag, 0, dst + n + i); vstore16(ab, 0, dst + 2 * n + i);
+            return;
+        }
+        /* the full-resolution 3x3 blur (dof_local_px), lane-wise; columns x - 1 .. x + 16 lie in
+         * the image (x >= 2, x + 30 <= width) */
+        const float16 ap = DOF_LOCAL_A(r);
+        float16 rmax = (float16)(0.0f);
+#pragma unroll
+        for (int bb = -1; bb <= 1; ++bb) {
+            const size_t row = (size_t)clamp(y + bb, 0, height - 1) * width + x;
+#pragma unroll
+            for (int a = -1; a <= 1; ++a)
+                rmax = fmax(rmax, fabs(vload16(0, coc + row + a)));
+        }
+        const int16 sharp = rmax < DOF_LOCAL_MIN;
+        if (all(sharp | whole_)) {  /* no pixel needs the 3x3's taps: its colour is the source's */
+            const float16 sr = vload16(0, src + i), sg = vload16(0, src + n + i), sb = vload16(0, src + 2 * n + i);
+            vstore16(select(sr + (ar - sr) * b, ar, whole_), 0, dst + i);
+            vstore16(select(sg + (ag - sg) * b, ag, whole_), 0, dst + n + i);
+            vstore16(select(sb + (ab - sb) * b, ab, whole_), 0, dst + 2 * n + i);
+            return;
+        }
+        float16 cr = (float16)(0.0f), cg = cr, cb = cr, cw = cr;
+#pragma unroll
+        for (int bb = -1; bb <= 1; ++bb) {
+            const size_t row = (size_t)clamp(y + bb, 0, height - 1) * width + x;
+#pragma unroll
+            for (int a = -1; a <= 1; ++a) {
+                const float16 rq = vload16(0, coc + row + a);
+                const float16 aq = select(fmin(DOF_LOCAL_A(rq), ap), DOF_LOCAL_A(rq), rq < r - DOF_FRONT_MARGIN);
+                const float16 wq = (bb ? aq : 1.0f - 2.0f * aq) * (a ? aq : 1.0f - 2.0f * aq);
+                cr += wq * vload16(0, src + row + a);
+                cg += wq * vload16(0, src + n + row + a);
+                cb += wq * vload16(0, src + 2 * n + row + a);
+                cw += wq;
+            }
+        }
+        const float16 ic = 1.0f / cw;
+        const int16 whole = whole_;
+        cr = select(cr * ic, vload16(0, src + i), sharp);
+        cg = select(cg * ic, vload16(0, src + n + i), sharp);
+        cb = select(cb * ic, vload16(0, src + 2 * n + i), sharp);
+        vstore16(select(cr + (ar - cr) * b, ar, whole), 0, dst + i);
+        vstore16(select(cg + (ag - cg) * b, ag, whole), 0, dst + n + i);
+        vstore16(select(cb + (ab - cb) * b, ab, whole), 0, dst + 2 * n + i);
         return;
     }
 #endif

@@ -1,7 +1,8 @@
 /* dof: signed circle of confusion and the padded working-resolution buffers of the gather.
  * Formula, constants and the edge rule are documented in clpost/stages/dof.py:
  *   r_px = k (1/u - 1/S), clamped to +-limit; +inf depth -> 1/S = 0 (finite far limit).
- * Structural: DOF_SCALE (working-resolution divisor).
+ * Structural: DOF_SCALE (working-resolution divisor). Constants of the colour/depth rules from the stage:
+ * DOF_FRINGE_STEP (FRINGE_STEP), DOF_SAME_SOURCE (SAME_SOURCE).
  */
 
 #define DOF_MIXED_SAME_DEPTH 0.8f
@@ -13,15 +14,19 @@ inline float dof_luma(__global const float *src, const size_t i, const size_t n)
 /* The fringe rule (effective_depth in clpost/stages/dof.py): p, a mix of a near and a far surface
  * Y_p = a Y_n + (1 - a) Y_f, takes the nearest depth of its 3x3 when the near surface (brightest near
  * neighbour) covers half of p or brings half its light (Y_f: the darkest of p's own surface), or when
- * the near surface (darkest near neighbour) covers half of p (Y_f: the brightest of p's own surface).
+ * the near surface (darkest near neighbour) covers half of p (Y_f: the brightest of p's own surface);
+ * either only when that near surface is brighter (darker) than every other pixel of p's own surface
+ * by more than 1 - DOF_FRINGE_STEP (other_min/other_max: p's own surface without p).
  * Both tests without a division; `span > 0` also rejects "no near neighbour" (+-inf). */
 inline float dof_fringe_depth(const float d, const float lum, const float nearest, const float bright_n,
-                              const float dark_n, const float own_min, const float own_max)
+                              const float dark_n, const float other_min, const float other_max)
 {
+    const float own_min = fmin(other_min, lum), own_max = fmax(other_max, lum);
     const float sb = bright_n - own_min, pb = lum - own_min;
     const float sd = own_max - dark_n, pd = own_max - lum;
-    const int take = (sb > 0.0f && (2.0f * pb >= sb || 2.0f * pb * bright_n >= lum * sb))
-                     || (sd > 0.0f && 2.0f * pd >= sd);
+    const int take = (sb > 0.0f && (2.0f * pb >= sb || 2.0f * pb * bright_n >= lum * sb)
+                      && DOF_FRINGE_STEP * bright_n > other_max)
+                     || (sd > 0.0f && 2.0f * pd >= sd && dark_n < DOF_FRINGE_STEP * other_min);
     return take ? nearest : d;
 }
 
@@ -33,33 +38,83 @@ inline float16 dof_luma16(__global const float *p, const size_t n) {
 /* one exchange of the median network, on v[] of floats or float16s (generic fmin/fmax) */
 #define DOF_SORT2(a, b) { const __typeof__(v[0]) t_ = fmin(v[a], v[b]); v[b] = fmax(v[a], v[b]); v[a] = t_; }
 
-/* Stochastic-depth speckle (despeckle_depth in clpost/stages/dof.py): p takes the median depth of
- * its 3x3 when at most DOF_SPECKLE_MAX_SAME of its 8 neighbours share its depth (within 0.8x either
- * way) and its luminance lies within its other-depth neighbours' range. Neighbours clamped to the
- * image; the median by the 19-exchange network for 9 values (Paeth, Graphics Gems 1990). */
+/* Stochastic-depth speckle (despeckle_depth in clpost/stages/dof.py): p is a candidate when at most
+ * DOF_SPECKLE_MAX_SAME of its 8 neighbours share its depth (within 0.8x either way) and they are not one
+ * arc of the ring (an object's corner: DOF_CANDIDATE below). A candidate whose
+ * luminance lies within its other-depth neighbours' range (DOF_FRINGE_STEP's 5 % outside it allowed)
+ * takes the median depth of its 3x3; one
+ * not on a one-pixel line, brighter than all of them but within DOF_SAME_SOURCE x the brightest (the
+ * same source) and above DOF_SAME_SOURCE x the dimmest (a source above its surround), whose depth
+ * class is seen on a speckle (dof_speckle_px) of its 5x5 dimmer than lum / DOF_SAME_SOURCE, takes that
+ * brightest neighbour's depth (a light seen through a pane). Neighbours clamped to the image; the median by
+ * the 19-exchange network for 9 values (Paeth, Graphics Gems 1990). */
+inline int dof_same_depth(const float dq, const float d) {
+    return dq >= DOF_MIXED_SAME_DEPTH * d && d >= DOF_MIXED_SAME_DEPTH * dq;
+}
+
+/* Position of neighbour (a, b) on the ring of 8 around p, clockwise from the top left. */
+inline int dof_ring_pos(const int a, const int b) {
+    return b < 0 ? a + 1 : b > 0 ? 5 - a : (a > 0 ? 3 : 7);
+}
+
+/* A speckle candidate: at most DOF_SPECKLE_MAX_SAME same-depth neighbours, unless exactly that many
+ * form one arc of the ring (an object's corner). `ring`: bit dof_ring_pos set per same-depth
+ * neighbour; works lane-wise on int16 as on int. */
+#define DOF_CANDIDATE(same, ring) (((same) <= DOF_SPECKLE_MAX_SAME) & \
+    !(((same) == DOF_SPECKLE_MAX_SAME) & (popcount((ring) ^ ((((ring) >> 1) | ((ring) << 7)) & 255)) == 2)))
+
+/* A candidate not on a one-pixel line (no two opposite same-depth neighbours: a wire, a pole): a
+ * speckle, for the light-behind-a-pane test (speckle_candidates(lines=False)). */
+inline int dof_speckle_px(__global const float *depth, const int x, const int y, const int width, const int height)
+{
+    const float d = depth[(size_t)y * width + x];
+    int same = 0, ring = 0;
+    for (int b = -1; b <= 1; ++b)
+        for (int a = -1; a <= 1; ++a)
+            if ((a != 0 || b != 0)
+                && dof_same_depth(depth[(size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1)], d)) {
+                ++same;
+                ring |= 1 << dof_ring_pos(a, b);
+            }
+    return DOF_CANDIDATE(same, ring) && !(ring & (ring >> 4) & 15);
+}
+
 inline float dof_despeckle_px(__global const float *src, __global const float *depth, const int x, const int y,
                               const int width, const int height)
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float d = depth[i], lum = dof_luma(src, i, n);
     float v[9];
-    float lo = INFINITY, hi = -INFINITY;
-    int same = 0, k = 0;
+    float lo = INFINITY, hi = -INFINITY, hi_d = d;
+    int same = 0, ring = 0, k = 0;
     for (int b = -1; b <= 1; ++b)
         for (int a = -1; a <= 1; ++a) {
             const size_t j = (size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1);
             const float dq = depth[j];
             v[k++] = dq;
             if (a == 0 && b == 0) continue;
-            if (dq >= DOF_MIXED_SAME_DEPTH * d && d >= DOF_MIXED_SAME_DEPTH * dq) {
+            if (dof_same_depth(dq, d)) {
                 ++same;
+                ring |= 1 << dof_ring_pos(a, b);
             } else {
                 const float lq = dof_luma(src, j, n);
                 lo = fmin(lo, lq);
-                hi = fmax(hi, lq);
+                if (lq > hi) { hi = lq; hi_d = dq; }
             }
         }
-    if (same > DOF_SPECKLE_MAX_SAME || lum < lo || lum > hi)
+    if (!DOF_CANDIDATE(same, ring) || lum < DOF_FRINGE_STEP * lo)
+        return d;
+    if (lum > hi && lum <= DOF_SAME_SOURCE * hi && lum > DOF_SAME_SOURCE * lo && !(ring & (ring >> 4) & 15)) {
+        for (int b = -2; b <= 2; ++b)
+            for (int a = -2; a <= 2; ++a) {
+                const int xq = clamp(x + a, 0, width - 1), yq = clamp(y + b, 0, height - 1);
+                const size_t j = (size_t)yq * width + xq;
+                if (dof_same_depth(depth[j], d) && DOF_SAME_SOURCE * dof_luma(src, j, n) < lum
+                    && dof_speckle_px(depth, xq, yq, width, height))
+                    return hi_d;
+            }
+    }
+    if (DOF_FRINGE_STEP * lum > hi)
         return d;
     DOF_SORT2(1, 2) DOF_SORT2(4, 5) DOF_SORT2(7, 8) DOF_SORT2(0, 1) DOF_SORT2(3, 4) DOF_SORT2(6, 7)
     DOF_SORT2(1, 2) DOF_SORT2(4, 5) DOF_SORT2(7, 8) DOF_SORT2(0, 3) DOF_SORT2(5, 8) DOF_SORT2(4, 7)
@@ -83,16 +138,19 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
         const float16 d = vload16(0, depth + i);
         const float16 lim = DOF_MIXED_SAME_DEPTH * d;
         const size_t rows[3] = {(size_t)max(y - 1, 0) * width + x, i, (size_t)min(y + 1, height - 1) * width + x};
-        int16 same = (int16)(0);
+        int16 same = (int16)(0), ring = (int16)(0);
 #pragma unroll
         for (int b = 0; b < 3; ++b)
 #pragma unroll
             for (int a = -1; a <= 1; ++a) {
                 if (a == 0 && b == 1) continue;
                 const float16 dq = vload16(0, depth + rows[b] + a);
-                same -= (dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq);  /* true lanes are -1 */
+                const int16 sm = (dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq);  /* true lanes are -1 */
+                same -= sm;
+                ring |= (sm & 1) << dof_ring_pos(a, b - 1);
             }
-        if (!any(same <= DOF_SPECKLE_MAX_SAME)) {
+        const int16 cand = DOF_CANDIDATE(same, ring);
+        if (!any(cand)) {
             vstore16(d, 0, out + i);
             return;
         }
@@ -118,9 +176,13 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
         DOF_SORT2(1, 2) DOF_SORT2(4, 5) DOF_SORT2(7, 8) DOF_SORT2(0, 3) DOF_SORT2(5, 8) DOF_SORT2(4, 7)
         DOF_SORT2(3, 6) DOF_SORT2(1, 4) DOF_SORT2(2, 5) DOF_SORT2(4, 7) DOF_SORT2(4, 2) DOF_SORT2(6, 4)
         DOF_SORT2(4, 2)
-        const int16 speckle = (same <= DOF_SPECKLE_MAX_SAME) & (lum >= lo) & (lum <= hi);
-        vstore16(select(d, v[4], speckle), 0, out + i);
-        return;
+        /* a light seen through a pane (lum above hi but within DOF_SAME_SOURCE x it) is rare:
+         * the group goes per pixel (the 5x5 test) */
+        if (!any(cand & (lum > hi) & (lum <= DOF_SAME_SOURCE * hi) & (lum > DOF_SAME_SOURCE * lo)
+                 & ((ring & (ring >> 4) & 15) == 0))) {
+            vstore16(select(d, v[4], cand & (lum >= DOF_FRINGE_STEP * lo) & (DOF_FRINGE_STEP * lum <= hi)), 0, out + i);
+            return;
+        }
     }
     for (int xi = x; xi < min(x + 16, width); ++xi)
         out[(size_t)y * width + xi] = dof_despeckle_px(src, depth, xi, y, width, height);
@@ -135,7 +197,7 @@ inline float dof_coc_px(__global const float *src, __global const float *depth, 
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float d = depth[i];
     const float lum = dof_luma(src, i, n);
-    float nearest = d, bright_n = -INFINITY, dark_n = INFINITY, own_min = lum, own_max = lum;
+    float nearest = d, bright_n = -INFINITY, dark_n = INFINITY, other_min = INFINITY, other_max = -INFINITY;
     for (int b = -1; b <= 1; ++b)
         for (int a = -1; a <= 1; ++a) {
             if (a == 0 && b == 0) continue;
@@ -146,11 +208,11 @@ inline float dof_coc_px(__global const float *src, __global const float *depth, 
                 bright_n = fmax(bright_n, lq);
                 dark_n = fmin(dark_n, lq);
             } else {
-                own_min = fmin(own_min, lq);
-                own_max = fmax(own_max, lq);
+                other_min = fmin(other_min, lq);
+                other_max = fmax(other_max, lq);
             }
         }
-    const float s = dof_fringe_depth(d, lum, nearest, bright_n, dark_n, own_min, own_max);
+    const float s = dof_fringe_depth(d, lum, nearest, bright_n, dark_n, other_min, other_max);
     const float inv_s = isinf(s) ? 0.0f : 1.0f / s;
     return clamp(k * (inv_u - inv_s), -limit, limit);
 }
@@ -180,7 +242,7 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
         if (any(nearest < near_lim)) {
             const float16 lum = dof_luma16(src + i, n);
             float16 bright_n = (float16)(-INFINITY), dark_n = (float16)(INFINITY);
-            float16 own_min = lum, own_max = lum;
+            float16 other_min = (float16)(INFINITY), other_max = (float16)(-INFINITY);
     #pragma unroll
             for (int b = 0; b < 3; ++b)
     #pragma unroll
@@ -191,13 +253,15 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
                     const int16 near = dq < near_lim;
                     bright_n = fmax(bright_n, select((float16)(-INFINITY), lq, near));
                     dark_n = fmin(dark_n, select((float16)(INFINITY), lq, near));
-                    own_min = fmin(own_min, select(lq, (float16)(INFINITY), near));
-                    own_max = fmax(own_max, select(lq, (float16)(-INFINITY), near));
+                    other_min = fmin(other_min, select(lq, (float16)(INFINITY), near));
+                    other_max = fmax(other_max, select(lq, (float16)(-INFINITY), near));
                 }
+            const float16 own_min = fmin(other_min, lum), own_max = fmax(other_max, lum);
             const float16 sb = bright_n - own_min, pb = lum - own_min;
             const float16 sd = own_max - dark_n, pd = own_max - lum;
-            const int16 take = ((sb > 0.0f) & ((2.0f * pb >= sb) | (2.0f * pb * bright_n >= lum * sb)))
-                               | ((sd > 0.0f) & (2.0f * pd >= sd));
+            const int16 take = ((sb > 0.0f) & ((2.0f * pb >= sb) | (2.0f * pb * bright_n >= lum * sb))
+                                & (DOF_FRINGE_STEP * bright_n > other_max))
+                               | ((sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min));
             s = select(d, nearest, take);
         }
         const float16 inv_s = select(1.0f / s, (float16)(0.0f), isinf(s));

@@ -11,6 +11,8 @@
 
 /* The half-resolution path's variance-matched radius and composite weight (half_radius and
  * half_blend in clpost/stages/dof.py): r' = sgn(r) sqrt(max(r^2 - DOF_HALF_SHRINK, 0)) and
- * b = min(1, r^2 DOF_HALF_BLEND); scalar or vector r (generic built-ins only). */
+ * b = clamp((r^2/4 - DOF_LOCAL_VAR) DOF_HALF_BLEND, 0, 1); the 3x3 blur's side weight
+ * a = min(r^2/4, DOF_LOCAL_VAR)/2 (local_weight); scalar or vector r (generic built-ins only). */
 #define DOF_HALF_R(r) copysign(sqrt(fmax((r) * (r) - DOF_HALF_SHRINK, 0.0f)), (r))
-#define DOF_HALF_B(r) fmin((r) * (r) * DOF_HALF_BLEND, 1.0f)
+#define DOF_HALF_B(r) clamp(((r) * (r) * 0.25f - DOF_LOCAL_VAR) * DOF_HALF_BLEND, 0.0f, 1.0f)
+#define DOF_LOCAL_A(r) (0.5f * fmin((r) * (r) * 0.25f, DOF_LOCAL_VAR))

@@ -31,22 +31,22 @@ MARGIN_DB = 0.5
 # (occluder) and 1.42 dB (transparent: under a 0.3-opacity pane Cycles' depth pass is a per-pixel speckle
 # of the pane's and the wall's depth, and the rule moves checker-edge pixels to the pane) — docs/fidelity.md.
 MEASURED_PSNR = {
-    ("emitters", "dof", "draft"): 35.10,        # 33.50; 34.62 before the upsampling compared the original CoC
+    ("emitters", "dof", "draft"): 35.16,        # 33.50; 34.62 before the upsampling compared the original CoC
     ("emitters", "dof", "final"): 37.34,
-    ("highlights", "dof", "draft"): 40.27,      # 38.32
-    ("highlights", "dof", "final"): 42.64,
-    ("occluder", "dof", "final"): 40.90,
-    ("thin", "dof", "draft"): 37.60,            # 36.25
-    ("thin", "dof", "final"): 41.18,            # 40.55 before the 0.25 px front margin
-    ("motion", "dof", "draft"): 42.70,          # 39.85
+    ("highlights", "dof", "draft"): 41.04,      # 38.32; 40.27 before the stricter fringe rule; 40.32 before UPSAMPLE_SAME_PX
+    ("highlights", "dof", "final"): 42.72,      # 42.64
+    ("occluder", "dof", "final"): 41.12,        # 40.90 before the stricter fringe rule
+    ("thin", "dof", "draft"): 39.16,            # 36.25; 37.45 before the 3x3 below r = 2 px; measured 39.06 now
+    ("thin", "dof", "final"): 41.18,            # 40.55 before the 0.25 px front margin; measured 41.16 now
+    ("motion", "dof", "draft"): 48.78,          # 39.85; 42.70 before the 3x3 below r = 2 px
     ("motion", "dof", "final"): 48.55,          # 48.36
     ("motion", "motion", "draft"): 36.09,       # 34.10 before the coverage gather (issue 16 item 3)
     ("motion", "motion", "final"): 37.50,       # 34.52
     ("motion", "dofmotion", "final"): 37.45,    # 34.62; 37.42 before the 0.25 px front margin
-    ("transparent", "dof", "draft"): 39.96,     # 38.01; 38.73 before the despeckle; 39.61
-    ("transparent", "dof", "final"): 41.10,     # 39.82 before the despeckle
+    ("transparent", "dof", "draft"): 43.40,     # 38.01; 38.73 before the despeckle; 39.96 before the lamp-behind-a-pane rule
+    ("transparent", "dof", "final"): 44.13,     # 39.82 before the despeckle; 41.10 before the lamp-behind-a-pane rule
     ("macro", "dof", "draft"): 28.98,           # 28.67
-    ("macro", "dof", "final"): 34.44,           # 33.94 (its large-reach tiles take the half-resolution path)
+    ("macro", "dof", "final"): 34.45,           # 33.94 (its large-reach tiles take the half-resolution path)
 }
 
 
@@ -154,6 +154,26 @@ def test_emitter_regressions_on_the_emitters_scene():
     # pass missed it (docs/fidelity.md, "Emitter energy")
     defocused = {x["name"]: round(x["energy_ratio"], 3) for x in m if not x["in_focus"] and x["energy_ratio"]}
     assert len(defocused) >= 6 and all(abs(e - 1) <= 0.03 for e in defocused.values()), defocused
+
+
+def test_the_lamp_behind_the_pane_keeps_its_own_depth():
+    """The transparent scene's lamp01 (2 px at 9 m) seen through the 0.3-opacity pane, whose depth
+    pass is a speckle of the pane's depth: its brightest pixel's sample hit the pane, and it spread
+    as a near-field blob of 2.7x (final) / 3.7x (draft) Cycles' saturated disc area before the
+    despeckle's light-behind-a-pane rule (docs/fidelity.md, "Transparent: stochastic depth");
+    1.12 / 1.46 measured after."""
+    entry, frame = _scene("transparent")
+    t = entry["truths"]["dof"]
+    truth, truth_lamps = _channels(DATA / t["file"], ""), _channels(DATA / t["file"], "emit.")
+    emit = _channels(DATA / entry["pinhole"]["file"], "Emission.")
+    dark = Frame(color=np.maximum(frame.color[..., :3] - emit, 0).astype(np.float32), depth=frame.depth,
+                 velocity=frame.velocity)
+    lamp = next(x for x in entry["lamps"] if x["name"] == "lamp01")
+    for quality, measured in (("final", 1.12), ("draft", 1.46)):
+        out = _run(entry, frame, "dof", quality)
+        m = fd.emitter_metrics(out, truth, out - _run(entry, dark, "dof", quality), truth_lamps, lamp,
+                               entry["shot"], 0.6)
+        assert m["area_ratio"] <= measured + 0.1, (quality, m["area_ratio"])
 
 
 MEASURED_EMITTERS = {"area_ratio_max": 2.13, "halo_px_sum": 129 + 108 + 146 + 35, "energy_min": 0.857}

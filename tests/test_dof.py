@@ -378,6 +378,32 @@ def test_in_focus_light_over_a_slightly_blurred_wall_is_not_counted_twice_at_hal
         assert added == pytest.approx(4 * 99.75, rel=tol), q
 
 
+@pytest.mark.parametrize("quality", ["draft", "preview"])
+def test_in_focus_light_leaves_no_ring_on_a_slightly_blurred_wall_at_half_resolution(quality):
+    """The same in-focus 2×2 light (100× the wall) over the wall at r = 2.2 px: its working corner,
+    2.2 px of CoC from the wall's pixels, weighed 1/40 of the wall's own corners in the depth-aware
+    upsampling and ringed the light with its blurred light (the 12 wall pixels around it gained up
+    to 2.3× the wall's level; the transparent scene's in-focus lamp: a 23 px draft halo where Cycles
+    has none). With a corner of the wall's own within UPSAMPLE_SAME_PX the light's corner gets no
+    weight: no wall pixel gains more than 5 % of the wall's level."""
+    cam = Camera(**CAM)
+    w = h = 61
+    k, inv_u = D.coc_coefficients(cam, w)
+    wall_m = 1.0 / (inv_u - 2.2 / k)
+    color = np.full((h, w, 3), 0.25, np.float32)
+    depth = np.full((h, w), wall_m, np.float32)
+    depth[30:32, 30:32] = cam.focus_distance_m
+    dark = Frame(color.copy(), depth=depth)
+    color[30:32, 30:32] = 100.0
+    lit = Frame(color, depth=depth)
+    out, pipe = run(cam, lit, quality)
+    assert_matches_reference(pipe, lit, out, rtol=1e-3)
+    added = (out - pipe.run(dark).color)[..., 1]
+    yy, xx = np.mgrid[:h, :w]
+    wall = np.maximum(np.abs(yy - 30.5), np.abs(xx - 30.5)) > 1.0
+    assert added[wall].max() < 0.05 * 0.25
+
+
 def test_half_covered_pixel_of_a_dark_pole_takes_the_poles_depth():
     h, w = 21, 21
     color = np.full((h, w, 3), 1.0, np.float32)
@@ -411,6 +437,77 @@ def test_despeckle_takes_the_median_where_depth_flips_but_colour_does_not():
     d_wire[:, 6] = 1.0
     assert D.despeckle_depth(lamp, d_lamp)[4, 2] == 9.0
     assert np.all(D.despeckle_depth(wire, d_wire)[:, 6] == 1.0)
+
+
+def _pane_speckle(rng, h=24, w=40):
+    """Sky (+inf) seen through a 0.3-opacity pane at 1.5 m: the depth pass is the pane's on about
+    3 pixels in 10, the colour smooth (the Cycles transparent scene's left pane)."""
+    col = np.full((h, w, 3), 0.5, np.float32)
+    depth = np.where(rng.random((h, w)) < 0.3, 1.5, np.inf).astype(np.float32)
+    return col, depth
+
+
+def test_a_light_behind_a_speckled_pane_takes_its_own_depth_not_the_panes(rng):
+    """A 2-px lamp at 9 m behind the pane: its brightest pixel's depth sample hit the pane, the
+    other's the lamp. Within 1.5× of each other they are one source, and the pane's depth is a
+    speckle around it, so the bright pixel takes the lamp's 9 m (it spread as a 3.5 px near-field
+    blob before: docs/fidelity.md, "Transparent: stochastic depth"). The fringe rule does not pull
+    it back to the pane (the pane's speckle is no brighter than the sky: no mix to explain)."""
+    col, depth = _pane_speckle(rng)
+    y, x = 12, 20
+    depth[y - 2:y + 3, x - 2:x + 3] = np.inf
+    depth[y, x - 2], depth[y + 2, x + 1] = 1.5, 1.5   # pane speckle next to the lamp
+    depth[y, x], depth[y, x + 1] = 1.5, 9.0
+    col[y, x], col[y, x + 1] = 220.0, 180.0
+    col[y - 1:y + 2, x - 1:x + 3] += 40.0 * (col[y - 1:y + 2, x - 1:x + 3] < 1)   # fringe at the sky's depth
+    assert D.despeckle_depth(col, depth)[y, x] == 9.0
+    eff = D.effective_depth(col, depth)
+    assert eff[y, x] == 9.0 and eff[y, x + 1] == 9.0
+    assert np.all(eff[y - 1:y + 2, x - 1:x + 3] >= 9.0)    # its fringe goes with the lamp, not the pane
+
+
+def test_a_lamps_own_pixels_keep_its_depth_next_to_a_bright_fringe():
+    """The other way round (the Cycles motion scene's lamp): a lamp's depth-hit pixels next to a
+    fringe pixel as bright as they are but at the wall's depth keep the lamp's depth — the lamp's
+    class is seen only on the lamp; and a lamp on a solid fixture at its own depth (a pole: not a
+    speckle) keeps it too."""
+    h, w = 12, 12
+    col = np.full((h, w, 3), 0.3, np.float32)
+    depth = np.full((h, w), 8.9, np.float32)
+    depth[5:7, 5] = 6.0
+    col[5:7, 5] = 150.0
+    col[5:7, 6] = 120.0          # fringe at the wall's depth, within 1.5x
+    assert np.all(D.despeckle_depth(col, depth)[5:7, 5] == 6.0)
+    assert np.all(D.effective_depth(col, depth)[5:7, 5:7] == 6.0)
+    pole = depth.copy()
+    pole[7:, 5] = 6.0            # the fixture under the lamp, dim, at the lamp's depth
+    assert np.all(D.despeckle_depth(col, pole)[5:7, 5] == 6.0)
+
+
+def test_an_objects_corner_is_not_a_speckle(rng):
+    """A textured block's convex corner has 3 same-depth neighbours in one arc: it keeps its
+    depth even though its luminance lies within its background neighbours' range."""
+    col = (rng.random((12, 12, 3)) * 0.5).astype(np.float32)
+    depth = np.full((12, 12), 9.0, np.float32)
+    depth[4:, 4:] = 1.0
+    cand = D.speckle_candidates(depth)
+    assert not cand[4, 4] and not cand[4, 11] and not cand[11, 4]
+    assert np.all(D.despeckle_depth(col, depth) == depth)
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_speckle_and_light_rules_kernel_matches_its_reference(rng, quality):
+    """The speckled pane with lamps behind it (pane-depth and lamp-depth pixels of one source), at an
+    odd size with 16-pixel groups and edge pixels: dof_despeckle's per-pixel fall-back for groups
+    with a source candidate, and the fringe rule's own-surface steps, against the numpy rules."""
+    col, depth = _pane_speckle(rng, 29, 53)
+    for y, x in ((6, 9), (14, 30), (22, 44), (10, 50)):
+        depth[y, x], depth[y, x + 1] = 1.5, 9.0
+        col[y, x], col[y, x + 1] = 220.0, 180.0
+    cam = Camera(**{**CAM, "focus_distance_m": 4.0})
+    frame = Frame(col, depth=depth)
+    out, pipe = run(cam, frame, quality)
+    assert_matches_reference(pipe, frame, out, rtol=1e-3)
 
 
 @pytest.mark.parametrize("quality", ["draft", "final"])
@@ -543,6 +640,8 @@ def test_final_mixed_resolution_when_only_the_full_resolution_plan_is_coarse(rng
     color = (rng.random((h, w, 3)) * 10).astype(np.float32)
     depth = np.full((h, w), 2.0, np.float32)
     depth[:, 96::2] = np.inf
+    color[:, 96::2] *= 0.05   # a dark far field behind bright stripes: with colours of one range the
+                              # one-pixel stripes read as depth speckle (despeckle_depth) and swap depths
     frame = Frame(color, depth=depth)
     cam = Camera(**{**CAM, "f_number": 0.7}, blades=6)
     out, pipe = run(cam, frame, "final")

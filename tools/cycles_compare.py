@@ -177,8 +177,8 @@ def tables(results: dict, manifest: dict) -> str:
             floor = manifest["scenes"][scene]["truths"][kind]["noise_floor_psnr_srgb_db"]
             for name, r in rows.items():
                 lines.append(f"| {scene} | {kind} | {floor:.1f} | {name} | {fmt(r.get('ms'), '.1f')} | "
-                             f"{fmt(r.get('wall_ms'), '.0f')} | {r['psnr']:.2f} | {fmt(r['flip'], '.4f')} | "
-                             f"{fmt(r.get('psnr_moving'), '.2f')} | {fmt(r.get('flip_moving'), '.4f')} |")
+                             f"{fmt(r.get('wall_ms'), '.0f')} | {r['psnr']:.2f} | {fmt(r['flip'], '.5f')} | "
+                             f"{fmt(r.get('psnr_moving'), '.2f')} | {fmt(r.get('flip_moving'), '.5f')} |")
     lines += ["", "Emitters (DoF truths; target: area ratio within 0.9–1.1, in-focus halo ≤ 2× Cycles', "
               "energy ratio within 0.97–1.03):", "",
               "| scene | image | disc area ratio (min…max) | in-focus halo px, image vs Cycles | energy ratio (min…max) |",

@@ -117,13 +117,16 @@ draft      half (2×2 box)     32 px (16 work)   3    45 (dense up to 3 work px,
 preview    half               64 px (32 work)   5    109 (dense up to 5 work px, then stride 2, 4, 8)
 final      mixed (below)      64 px             8    249 (dense up to 8 px, stride 2 up to 17 px; beyond: half res)
 =========  =================  ================  ===  =====================================================
-Half-resolution levels composite with the full-resolution image by
-:math:`\mathrm{lerp}(c_{full}, \mathrm{up}(c_{blur}), \max(\min(1, r^2/4), \mathrm{up}(\alpha)))`
+Half-resolution levels composite with a full-resolution 3×3 blur of the image by
+:math:`\mathrm{lerp}(c_{3\times3}, \mathrm{up}(c_{blur}), \max(b(r), \mathrm{up}(\alpha)))`
 (depth-aware bilinear upsampling, :func:`_upsample`), so in-focus pixels stay at full resolution.
 The path itself blurs: the 2×2 box and the bilinear upsampling add 1 px² of variance per axis and
 the working-resolution coverage ramp 1/3 px², so it gathers with the variance-matched radius
-:math:`r' = \sqrt{r^2 - 16/3}` (:func:`half_radius`) and, below r = 2 px, where even r' = 0 is too
-wide, blends the sharp pixel with the path's narrowest blur by variance, :math:`b = r^2/4`
+:math:`r' = \sqrt{r^2 - 16/3}` (:func:`half_radius`). Below r = 2 px, where even r' = 0 is too
+wide, the disc's variance :math:`v = r^2/4` is made at full resolution: a separable
+[a, 1 − 2a, a] scatter-as-gather, a = min(v, ½)/2 per source with the gather's near/far rule
+(:func:`local_blur`), alone up to v = ½ (r = √2 px) and mixed by variance with the path's
+narrowest blur up to v = 1 (r = 2 px), :math:`b = \mathrm{clamp}(2v - 1, 0, 1)`
 (:func:`half_blend`); effect on the Cycles truths: docs/fidelity.md, "The half-resolution path".
 
 Mixed resolution (final, :data:`MIXED`): a working tile (16×16 at half resolution = 32×32 px) is
@@ -293,29 +296,86 @@ def _neighbourhood(a: np.ndarray):
 SPECKLE_MAX_SAME = 3
 """A pixel with at most this many of its 8 neighbours at its own depth (within 0.8×) is a speckle
 candidate (:func:`despeckle_depth`)."""
+SAME_SOURCE = 1.5
+"""Two pixels within this luminance ratio of each other, both far above their surround, are one
+source (CONVENTIONS.md's 1.5× of a light; :func:`despeckle_depth`)."""
+FRINGE_STEP = 0.95
+"""Luminance steps under 1 − this (5 %) are no evidence (render noise, the pixel filter's spread):
+the fringe rule's near surface must be brighter (darker) than every other pixel of p's own surface
+by more (:func:`effective_depth`), and a speckle's luminance may lie that far outside its
+other-depth neighbours' range (:func:`despeckle_depth`)."""
+
+
+def _same_depth(dq, d):
+    return (dq >= MIXED_SAME_DEPTH * d) & (d >= MIXED_SAME_DEPTH * dq)
+
+
+_RING = (0, 1, 2, 4, 7, 6, 5, 3)
+"""The 8 neighbours of :func:`_neighbourhood` (after the centre) in ring order, clockwise from the
+top left."""
+
+
+def speckle_candidates(depth: np.ndarray, lines: bool = True) -> np.ndarray:
+    """Pixels with at most :data:`SPECKLE_MAX_SAME` of their 8 neighbours at their own depth class,
+    except those with exactly that many forming one arc of the ring: an object's convex corner (an
+    L of 3), whose depth is right, not a speckle's (:func:`despeckle_depth`). ``lines=False`` also
+    leaves out pixels with two opposite same-depth neighbours (on a one-pixel line: a wire, a pole)."""
+    d = np.asarray(depth, dtype=np.float64)
+    s = [_same_depth(q, d) for q in _neighbourhood(d)[1:]]
+    same = sum(x.astype(int) for x in s)
+    ring = [s[k] for k in _RING]
+    arcs = sum((ring[i] != ring[(i + 1) % 8]).astype(int) for i in range(8))
+    out = (same <= SPECKLE_MAX_SAME) & ~((same == SPECKLE_MAX_SAME) & (arcs == 2))
+    if not lines:
+        for i in range(4):
+            out &= ~(ring[i] & ring[i + 4])
+    return out
 
 
 def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | None = None) -> np.ndarray:
     r"""Depth with stochastic-transparency speckle removed: a renderer's depth pass under a
     semi-transparent surface flips per pixel between the surface and what is behind it while the
-    colour stays smooth. p takes the median depth of its 3×3 when its depth class (neighbours
-    within 0.8× of :math:`d_p` either way) has at most :data:`SPECKLE_MAX_SAME` of its 8
-    neighbours *and* its luminance lies within the range of its other-depth neighbours' (its colour
-    is explained without its own surface). A wire, a lamp or a silhouette pixel brighter or darker
-    than everything around it keeps its depth. Applied before the fringe rule
-    (:func:`effective_depth`)."""
+    colour stays smooth. A *candidate* is a pixel whose depth class (neighbours within 0.8× of
+    :math:`d_p` either way) has at most :data:`SPECKLE_MAX_SAME` of its 8 neighbours, not in one
+    arc (:func:`speckle_candidates`: an object's corner is not a speckle).
+
+    * A candidate whose luminance lies within the range of its other-depth neighbours' (its colour
+      is explained without its own surface; up to :data:`FRINGE_STEP`'s 5 % outside it) takes the
+      median depth of its 3×3.
+    * A light seen through such a surface: a candidate not on a one-pixel line (a wire's pixels
+      keep their depth) brighter than every other-depth neighbour, but by less than
+      :data:`SAME_SOURCE`× the brightest of them (that neighbour is the same source) and by more
+      than that the dimmest (a source above its surround), whose depth class is also seen on a
+      candidate of its 5×5 dimmer than :math:`Y_p`/:data:`SAME_SOURCE` and not on a one-pixel line
+      (a speckle of it: the stochastic depth of a surface in front — a pane's — not the source's
+      own), takes that brightest neighbour's depth. A lamp's own pixels keep theirs: their depth
+      class is seen only on the lamp, or on a fixture at its depth (a pole, a wall: not a speckle).
+
+    A wire, a lamp or a silhouette pixel brighter or darker than everything around it keeps its
+    depth. Applied before the fringe rule (:func:`effective_depth`); docs/fidelity.md,
+    "Transparent: stochastic depth"."""
     d = np.asarray(depth, dtype=np.float64)
     lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
     dn, ln = _neighbourhood(d), _neighbourhood(lum)
-    same = np.zeros(d.shape, int)
-    lo, hi = np.full_like(d, np.inf), np.full_like(d, -np.inf)
+    lo, hi, hi_d = np.full_like(d, np.inf), np.full_like(d, -np.inf), d.copy()
     for dq, lq in zip(dn[1:], ln[1:]):
-        s = (dq >= MIXED_SAME_DEPTH * d) & (d >= MIXED_SAME_DEPTH * dq)
-        same += s
+        s = _same_depth(dq, d)
         lo = np.where(s, lo, np.minimum(lo, lq))
-        hi = np.where(s, hi, np.maximum(hi, lq))
-    speckle = (same <= SPECKLE_MAX_SAME) & (lum >= lo) & (lum <= hi)
-    return np.where(speckle, np.median(np.stack(dn), axis=0), d)
+        up = ~s & (lq > hi)
+        hi_d, hi = np.where(up, dq, hi_d), np.where(up, lq, hi)
+    cand = speckle_candidates(d)
+    speckle = cand & (lum >= FRINGE_STEP * lo) & (FRINGE_STEP * lum <= hi)
+    speck = speckle_candidates(d, lines=False)
+    source = speck & (lum > hi) & (lum <= SAME_SOURCE * hi) & (lum > SAME_SOURCE * lo)
+    h, w = d.shape
+    pd, pl, pc = (np.pad(a, 2, mode="edge") for a in (d, lum, speck))
+    dim = np.zeros(d.shape, bool)
+    for b in range(5):
+        for a in range(5):
+            dim |= _same_depth(pd[b:b + h, a:a + w], d) & (SAME_SOURCE * pl[b:b + h, a:a + w] < lum) \
+                & pc[b:b + h, a:a + w]
+    out = np.where(speckle, np.median(np.stack(dn), axis=0), d)
+    return np.where(source & dim, hi_d, out)
 
 
 def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | None = None) -> np.ndarray:
@@ -334,27 +394,32 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     * dark near (a pole over the sky): :math:`Y_n` the darkest near pixel, :math:`Y_f` the
       brightest of p's surface; it explains p when :math:`\alpha \ge \tfrac12`.
 
-    When either holds p takes the nearest depth of its 3×3. The depth is first despeckled
-    (:func:`despeckle_depth`). With
-    :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are written without a division. A depth
-    only ever moves nearer; a pixel with no near neighbour keeps its own."""
+    Either needs a near surface that differs from p's own: brighter (darker) than every *other*
+    pixel of p's surface by more than 1 − :data:`FRINGE_STEP` — a pane's depth speckle next to sky
+    of the same colour, or a lamp's pixel next to the pane speckle in front of it (α > 1), is not a
+    mix. When either holds p takes the nearest depth of its 3×3. The depth is first despeckled
+    (:func:`despeckle_depth`). With :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are
+    written without a division. A depth only ever moves nearer; a pixel with no near neighbour
+    keeps its own."""
     d = despeckle_depth(color, depth, luma)
     lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
     dn, ln = _neighbourhood(d), _neighbourhood(lum)
     nearest = np.minimum.reduce(dn)
     bright_n, dark_n = np.full_like(d, -np.inf), np.full_like(d, np.inf)  # near pixels' extremes
-    own_min, own_max = lum.copy(), lum.copy()                            # p's own surface, p included
+    other_min, other_max = np.full_like(d, np.inf), np.full_like(d, -np.inf)  # p's own surface, p excluded
     for dq, lq in zip(dn[1:], ln[1:]):
         near = dq < MIXED_SAME_DEPTH * d
         bright_n = np.where(near, np.maximum(bright_n, lq), bright_n)
         dark_n = np.where(near, np.minimum(dark_n, lq), dark_n)
-        own_min = np.where(near, own_min, np.minimum(own_min, lq))
-        own_max = np.where(near, own_max, np.maximum(own_max, lq))
+        other_min = np.where(near, other_min, np.minimum(other_min, lq))
+        other_max = np.where(near, other_max, np.maximum(other_max, lq))
+    own_min, own_max = np.minimum(other_min, lum), np.maximum(other_max, lum)
     with np.errstate(invalid="ignore"):
         span, part = bright_n - own_min, lum - own_min
-        bright = (span > 0) & ((2 * part >= span) | (2 * part * bright_n >= lum * span))
+        bright = (span > 0) & ((2 * part >= span) | (2 * part * bright_n >= lum * span)) \
+            & (FRINGE_STEP * bright_n > other_max)
         span, part = own_max - dark_n, own_max - lum
-        dark = (span > 0) & (2 * part >= span)
+        dark = (span > 0) & (2 * part >= span) & (dark_n < FRINGE_STEP * other_min)
     return np.where(bright | dark, nearest, d)
 
 
@@ -677,21 +742,34 @@ motion 42.46 → 42.70, thin 37.59 → 37.45; 1/16 gave highlights 40.81 and mot
 37.34 with FLIP 0.0272 — docs/fidelity.md)."""
 
 
+UPSAMPLE_SAME_PX = 1.0
+"""A working corner whose CoC differs from the pixel's by more than this (px) is another surface:
+when one corner with a bilinear weight is within it, the others get weight 0 (:func:`_upsample`)."""
+
+
 def _upsample(img: np.ndarray, alpha: np.ndarray, coc_w: np.ndarray, coc: np.ndarray, scale: int):
     r"""Depth-aware bilinear upsampling of the working-resolution blur and α: bilinear weights
     times :math:`g_i = 1/(\tau + (r - s\,r_i)^2)` (τ = :data:`UPSAMPLE_COC_TOL_PX2`, r the full-resolution CoC, :math:`r_i` the
     working CoC of corner i: the min of r over its block, in working px), so a blurred background
     next to a sharp edge is not mixed with the working pixels that straddle the edge (which carry
-    the nearer CoC). Edges are clamped.
+    the nearer CoC); when a corner with a bilinear weight lies within :data:`UPSAMPLE_SAME_PX` of
+    r (p's own surface is there), the corners farther than that get none — a sharp HDR lamp's
+    working corner 2 px of CoC away still weighed 1/32 of the surface's own and put a ring of its
+    light on it. Edges are clamped.
 
     ``coc_w`` is the block min of the *original* CoC, not of the variance-matched one the gather
     used (:func:`half_radius` maps every |r| < 2.31 px to 0, so an in-focus lamp and a wall at
     r = 2.2 px looked alike, and the wall's pixels took the lamp's blurred light on top of the lamp
     keeping its own: +12 % of an in-focus lamp's energy at draft; docs/fidelity.md)."""
     h, w = coc.shape
+    corners = [(ys, xs, b, np.abs(coc - scale * coc_w[ys][:, xs]))
+               for ys, xs, b in fld.upsample_corners(h, w, *coc_w.shape, scale)]
+    same = np.zeros((h, w), bool)
+    for _, _, b, dr in corners:
+        same |= (b > 0) & (dr <= UPSAMPLE_SAME_PX)
     acc = np.zeros((h, w, 3)); acc_a = np.zeros((h, w)); wsum = np.zeros((h, w))
-    for ys, xs, b in fld.upsample_corners(h, w, *coc_w.shape, scale):
-        g = b / (UPSAMPLE_COC_TOL_PX2 + (coc - scale * coc_w[ys][:, xs]) ** 2)
+    for ys, xs, b, dr in corners:
+        g = np.where(same & (dr > UPSAMPLE_SAME_PX), 0.0, b / (UPSAMPLE_COC_TOL_PX2 + dr ** 2))
         acc += g[..., None] * img[ys][:, xs]
         acc_a += g * alpha[ys][:, xs]
         wsum += g
@@ -714,11 +792,56 @@ def half_radius(coc: np.ndarray) -> np.ndarray:
     return np.sign(c) * np.sqrt(np.maximum(c * c - 4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2), 0.0))
 
 
+LOCAL_VAR_PX2 = 0.5
+r"""Largest variance (px², per axis) of the half-resolution path's full-resolution 3×3 blur
+(:func:`local_blur`): the binomial [¼, ½, ¼]."""
+LOCAL_MIN_PX = 0.5
+"""Below this |CoC| over a whole 3×3 the full-resolution blur leaves the pixel as it is (side weight
+a = r²/8 < 1/32)."""
+
+
 def half_blend(coc: np.ndarray) -> np.ndarray:
-    r"""Weight of the half-resolution blur against the sharp pixel, :math:`\min(1, r^2/(4V_{path}))`
-    (module docstring)."""
+    r"""Weight of the half-resolution blur against the full-resolution 3×3 blur
+    (:func:`local_blur`): 0 while the disc's variance :math:`v = r^2/4` fits the 3×3
+    (:math:`v \le V_3` = :data:`LOCAL_VAR_PX2`), then the mix of the two whose variance is v,
+    :math:`(v - V_3)/(V_{path} - V_3)`, 1 from :math:`v = V_{path}` (r = 2 px) on (module docstring)."""
     c = np.asarray(coc, dtype=np.float64)
-    return np.minimum(c * c / (4.0 * HALF_PATH_VAR_PX2), 1.0)
+    v = c * c / 4.0
+    return np.clip((v - LOCAL_VAR_PX2) / (HALF_PATH_VAR_PX2 - LOCAL_VAR_PX2), 0.0, 1.0)
+
+
+def local_weight(coc: np.ndarray) -> np.ndarray:
+    r"""Side weight a of the 3×3 separable blur [a, 1 − 2a, a] per axis (variance 2a) for a CoC r:
+    :math:`a = \min(r^2/4, V_3)/2` — the disc's variance, capped at the binomial's."""
+    c = np.asarray(coc, dtype=np.float64)
+    return np.minimum(c * c / 4.0, LOCAL_VAR_PX2) / 2.0
+
+
+def local_blur(color: np.ndarray, coc: np.ndarray) -> np.ndarray:
+    r"""Full-resolution 3×3 scatter-as-gather for the small CoCs the half-resolution path cannot
+    make (its box and upsampling alone are 1 px² per axis; a disc of r < 2 px has less): each
+    neighbour q spreads with the separable weight :math:`w_q = w(o_x)\,w(o_y)`, w(0) = 1 − 2a,
+    w(±1) = a, a = :func:`local_weight` of q's own CoC when q is nearer than p by more than
+    :data:`FRONT_MARGIN_PX`, else of min(|r_q|, |r_p|) (the gather's background clamp: a blurred
+    background never bleeds onto a sharper pixel), normalised by the summed weight. Edges clamped.
+    A pixel whose 3×3 has every |r| < :data:`LOCAL_MIN_PX` keeps its colour (weights ≤ 1/32: the
+    kernel skips the taps there)."""
+    c = np.asarray(coc, dtype=np.float64)
+    h, w = c.shape
+    a_p = local_weight(c)
+    pc = np.pad(np.asarray(color, dtype=np.float64), ((1, 1), (1, 1), (0, 0)), mode="edge")
+    pr = np.pad(c, 1, mode="edge")
+    acc = np.zeros((h, w, 3)); wsum = np.zeros((h, w))
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            rq = pr[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+            aq = local_weight(rq)
+            aq = np.where(rq < c - FRONT_MARGIN_PX, aq, np.minimum(aq, a_p))
+            wq = (aq if dy else 1.0 - 2.0 * aq) * (aq if dx else 1.0 - 2.0 * aq)
+            acc += wq[..., None] * pc[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+            wsum += wq
+    sharp = np.max(np.abs(np.stack(_neighbourhood(c))), axis=0) < LOCAL_MIN_PX
+    return np.where(sharp[..., None], np.asarray(color, dtype=np.float64), acc / wsum[..., None])
 
 
 def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
@@ -735,7 +858,8 @@ def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
     _, rw_orig = _working(color, coc, scale)
     up, up_alpha = _upsample(out, alpha, rw_orig, coc, scale)
     b = np.maximum(half_blend(coc), up_alpha)
-    return color + (up - color) * b[..., None], rw
+    near = local_blur(color, coc)
+    return np.where(b[..., None] < 1.0, near + (up - near) * b[..., None], up), rw
 
 
 def mixed_mask(rw: np.ndarray, coc: np.ndarray, quality: str, reach: float = 1.0) -> np.ndarray:
@@ -830,8 +954,11 @@ class Dof(GatherStage):
                 "DOF_TEXTURE": int(camera.spherical_aberration != 0 and not traced),
                 "DOF_PROFILE": int(traced), "DOF_REACH": f"{reach!r}f", **prof,
                 "DOF_HALF_SHRINK": f"{4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2)!r}f",
-                "DOF_HALF_BLEND": f"{1.0 / (4.0 * HALF_PATH_VAR_PX2)!r}f",
-                "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
+                "DOF_HALF_BLEND": f"{1.0 / (HALF_PATH_VAR_PX2 - LOCAL_VAR_PX2)!r}f",
+                "DOF_LOCAL_VAR": f"{LOCAL_VAR_PX2!r}f", "DOF_LOCAL_MIN": f"{LOCAL_MIN_PX!r}f",
+                "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
+                "DOF_UP_SAME": f"{UPSAMPLE_SAME_PX!r}f",
+                "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
 
