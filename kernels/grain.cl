@@ -27,11 +27,12 @@ inline float grain_to_density(const float t, const float dmin, const float dmax)
 inline float grain_pixel(const float d, const float dmin, const float dmax, const float g,
                          __global const float *poly, const float inv_half_span, const float amount) {
     const float d_img = fmax(d - dmin, 0.0f);
-    const float t = fmin(d_img * inv_half_span, 2.0f) - 1.0f;
+    const float t1 = fmin(d_img * inv_half_span, 2.0f);   /* t + 1, exact near D = 0 */
+    const float t = t1 - 1.0f;
     float p = poly[GRAIN_POLY_DEG];
     for (int k = GRAIN_POLY_DEG - 1; k >= 0; --k)
         p = fma(p, t, poly[k]);
-    const float s = sqrt(fmax((t + 1.0f) * p, 0.0f));   /* sigma_T / T */
+    const float s = sqrt(fmax(t1 * p, 0.0f));   /* sigma_T / T */
     /* dmin - log10(T + amount sigma_T g) with T = 10^-d_img factored out: no exp2 (<= 0 -> D_max) */
     return clamp(dmin + d_img - 0.30102999566f * clp_log2(fmax(fma(amount * s, g, 1.0f), 1e-30f)), dmin, dmax);
 }
@@ -40,11 +41,12 @@ inline float grain_pixel(const float d, const float dmin, const float dmax, cons
 inline float16 grain_pixel16(const float16 d, const float dmin, const float dmax, const float16 g,
                              __global const float *poly, const float inv_half_span, const float amount) {
     const float16 d_img = fmax(d - dmin, 0.0f);
-    const float16 t = fmin(d_img * inv_half_span, 2.0f) - 1.0f;
+    const float16 t1 = fmin(d_img * inv_half_span, 2.0f);
+    const float16 t = t1 - 1.0f;
     float16 p = (float16)(poly[GRAIN_POLY_DEG]);
     for (int k = GRAIN_POLY_DEG - 1; k >= 0; --k)
         p = fma(p, t, poly[k]);
-    const float16 s = sqrt(fmax((t + 1.0f) * p, 0.0f));
+    const float16 s = sqrt(fmax(t1 * p, 0.0f));
     return clamp(dmin + d_img - 0.30102999566f * clp_log2_w16(fmax(fma(amount * s, g, 1.0f), 1e-30f)), dmin, dmax);
 }
 

@@ -219,10 +219,12 @@ def test_box_muller_pairs_are_independent_unit_normals():
     from clpost import random as rnd
     from clpost.stages.grain import correlated_normal
 
-    g = correlated_normal(256, 256, 0.0, 1.0, 7, 3)  # white: the normal of counter (x+1, y+1)
+    g = correlated_normal(256, 256, 0.0, 1.0, 7, 3)  # white: the normal of counter (x, y)
     assert abs(g.mean()) < 0.01 and g.var() == pytest.approx(1.0, rel=0.02)
-    even, odd = g[:, 1::2], g[:, 0::2]  # pixels x odd use the cosine branch (counter x+1 even)
-    assert abs(np.corrcoef(even.ravel(), odd.ravel())[0, 1]) < 0.01  # the two branches of one draw
+    blocks = g.reshape(256, 8, 2, 16, 3)  # per 32-pixel block: counters 0…15 the cosines, 16…31 the sines
+    cos_, sin_ = blocks[:, :, 0].ravel(), blocks[:, :, 1].ravel()  # the two branches of the same draws
+    assert abs(np.corrcoef(cos_, sin_)[0, 1]) < 0.015  # 98304 pairs: sigma 0.0032
+    assert abs(np.corrcoef(cos_ ** 2, sin_ ** 2)[0, 1]) < 0.02  # independent, not only uncorrelated
     h = rnd.hash4(1, 2, np.arange(1 << 16), 5)
     c, s = rnd.normal_pair(h, rnd.mix(h ^ np.uint32(0x68E31DA4)))
     np.testing.assert_array_equal(c, rnd.normal(h, rnd.mix(h ^ np.uint32(0x68E31DA4))))
@@ -230,8 +232,8 @@ def test_box_muller_pairs_are_independent_unit_normals():
 
 
 @pytest.mark.parametrize("r_px", [0.3, 0.02])  # correlated, white
-@pytest.mark.parametrize("w, h", [(37, 23), (48, 29)])  # partial and whole 16-pixel runs
-def test_one_pixel_form_matches_the_sixteen_lane_form(rng, monkeypatch, r_px, w, h):
+@pytest.mark.parametrize("w, h", [(37, 23), (100, 13)])  # one block + tail; three blocks (left neighbours from the previous block) + tail
+def test_one_pixel_form_matches_the_32_pixel_lane_form(rng, monkeypatch, r_px, w, h):
     """The Gaussian path's one-pixel form (a GPU's, Runtime.wide False) draws the same normals and
     sums them in the same order as the 16-lane form: the same image, and the reference."""
     from clpost.runtime import Runtime
@@ -263,6 +265,6 @@ def test_one_pixel_form_matches_the_sixteen_lane_form(rng, monkeypatch, r_px, w,
         assert rt.sizes == [want_size]
     monkeypatch.setattr(Runtime, "wide", property(lambda self: False))
     pipe, got = run_grain(cam, frame, "draft")
-    np.testing.assert_allclose(got, want, rtol=0, atol=2e-6)
+    np.testing.assert_allclose(got, want, rtol=0, atol=2e-6)  # bit-identical on PoCL 5; the bound allows other compilers
     err = np.abs(got - pipe.reference(frame))
     assert np.median(err) < 1e-5 and (err > 1e-3).mean() < 2e-3

@@ -473,3 +473,29 @@ def test_sequences_take_the_rasterizer_path_where_they_can_and_say_why_not():
                                        log=said.append, pupil_n=1, max_depth=0)
     assert demo[0].metadata["image_based_lens"]["projection_path"] == "numpy"
     assert any("rasterizer path unavailable" in m and "are not planes" in m for m in said), said
+
+
+def test_a_rasterizer_that_fails_at_its_first_render_falls_back_to_the_numpy_path(monkeypatch):
+    """The float framebuffer is only checked when the first projection renders (a VTK without
+    float framebuffers): the sequence then takes the numpy path for that frame on, with the reason
+    logged, instead of raising."""
+    from clpost.camera import Camera
+    from clpost.render import ibl_raster
+    from clpost.render.image_based_lens import render_image_based_sequence
+    from clpost.render.kolb_trace import planes_scene
+
+    warnings.simplefilter("ignore")
+    _rasterizer(planes_scene()).close()  # skips where the rasterizer cannot even open
+
+    def no_float(self, *args, **kw):
+        raise ibl_raster.RasterUnavailable("VTK's framebuffer pass gave an 8-bit texture (simulated)")
+
+    monkeypatch.setattr(ibl_raster.FloatRasterizer, "render_into", no_float)
+    monkeypatch.setattr(ibl_raster.FloatRasterizer, "render", no_float)
+    cam = Camera(lens="thorlabs-lb1471", f_number=8.0, focus_distance_m=3.0, sensor_mm=(6.0, 4.0))
+    said = []
+    frames = render_image_based_sequence(cam, (30, 20), 2, scene=planes_scene(), rasterizer=True,
+                                         log=said.append, pupil_n=1, max_depth=1)
+    assert [f.metadata["image_based_lens"]["projection_path"] for f in frames] == ["numpy", "numpy"]
+    assert np.all(np.isfinite(frames[0].color)) and frames[0].color.mean() > 0
+    assert sum("8-bit texture (simulated)" in m for m in said) == 1, said

@@ -79,6 +79,8 @@ def bake_region(cells: list[WarpCell], cam_pose: np.ndarray, obj_pose: np.ndarra
         with np.errstate(divide="ignore", invalid="ignore"):
             s = -o[2] / d[:, 2]  # ray parameter = planar depth in the projection's camera (unit-Z rays)
         hit = np.isfinite(s) & (s > 0)
+        if not hit.any():
+            continue  # no corner ray meets the plane: neither does any ray of the frustum (their cone)
         if hit.all():
             pts = o[:2] + s[:, None] * d[:, :2]
             lo, hi = np.minimum(lo, pts.min(0)), np.maximum(hi, pts.max(0))
@@ -88,7 +90,7 @@ def bake_region(cells: list[WarpCell], cam_pose: np.ndarray, obj_pose: np.ndarra
             seen = True
         else:
             lo, hi = np.full(2, -half_size_m), np.full(2, half_size_m)
-            near = float(s[hit].min()) if hit.any() else abs(float(o[2]))
+            near = float(s[hit].min())
             texel = min(texel, max(near, 1e-3) / cell.render_f_px)
             far = math.inf
             seen = True

@@ -139,19 +139,23 @@ def rasterizer_render_fn(raster, frame_index: int = 0):
 def open_rasterizer(scene, log=None):
     """A :class:`~clpost.render.ibl_raster.FloatRasterizer` for ``scene``, or None with the reason
     passed to ``log`` (default: a warning) when the rasterizer path cannot render it here."""
-    import warnings
-
     from .ibl_raster import FloatRasterizer, RasterUnavailable
 
     try:
         return FloatRasterizer(scene)
     except RasterUnavailable as e:
-        msg = f"image-based lens: rasterizer path unavailable, using the numpy path: {e}"
-        if log is not None:
-            log(msg)
-        else:
-            warnings.warn(msg, stacklevel=2)
+        _fallback_note(f"image-based lens: rasterizer path unavailable, using the numpy path: {e}", log)
         return None
+
+
+def _fallback_note(msg: str, log=None) -> None:
+    """``msg`` to ``log``, or a warning without one."""
+    import warnings
+
+    if log is not None:
+        log(msg)
+    else:
+        warnings.warn(msg, stacklevel=3)
 
 
 def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1, camera_motion: bool = False,
@@ -164,6 +168,7 @@ def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1
     projections per frame and the timings. ``rasterizer``: the projections through the
     rasterizer path where it can render the scene (else the numpy path, with the reason logged)."""
     from .demo_scene import DemoScene
+    from .ibl_raster import RasterUnavailable
     from .pyvista_renderer import PyVistaRenderer
 
     if int(n_frames) != n_frames or n_frames < 1:
@@ -176,8 +181,17 @@ def render_image_based_sequence(camera, size: tuple[int, int], n_frames: int = 1
         frames = []
         for i in range(int(n_frames)):
             t0 = time.perf_counter()
-            fn = pyvista_render_fn(renderer, i) if raster is None else rasterizer_render_fn(raster, i)
-            color, stats = render_image_based(model, size, fn, device=device)
+            if raster is not None:
+                try:
+                    color, stats = render_image_based(model, size, rasterizer_render_fn(raster, i), device=device)
+                except RasterUnavailable as e:  # found at the first render (e.g. no float framebuffer)
+                    _fallback_note(f"image-based lens: rasterizer path unavailable, using the numpy path: {e}", log)
+                    raster.close()
+                    raster = None
+            if raster is None:
+                color, stats = render_image_based(model, size, pyvista_render_fn(renderer, i), device=device)
+            elif raster.coarsened:  # a plane whose bake hit the texture cap: blurrier than its footprint
+                stats["coarsened"] = sorted(raster.coarsened)
             stats["frame_s"] = time.perf_counter() - t0
             pin = renderer.render(camera, size, i)
             meta = dict(pin.metadata)
