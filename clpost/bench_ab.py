@@ -95,18 +95,24 @@ def _compare_runs(old, old_bench, new_bench, scene, w, h, quality, device, repea
     times: dict[str, tuple[list, list]] = {}
     outs = []
     for i in range(warmup + repeats):
-        pair = []
-        for pipe, f in ((p_old, f_old), (p_new, f_new)):
+        pair = [None, None]
+        # which revision runs first alternates per repeat: on a loaded box the second of two
+        # back-to-back runs is systematically faster or slower (caches, frequency, the scheduler),
+        # which biased identical kernels to new/old 0.67–1.17 when old always ran first
+        order = (0, 1) if i % 2 == 0 else (1, 0)
+        for k in order:
+            pipe, f = ((p_old, f_old), (p_new, f_new))[k]
             out = pipe.run(f)
             if i == 0:
-                outs.append(out.color)
-            pair.append(dict(pipe.last_timings))
+                outs.append((k, out.color))
+            pair[k] = dict(pipe.last_timings)
         if i < warmup:
             continue
         for k, t in enumerate(pair):
             for name, ms in t.items():
                 times.setdefault(name, ([], []))[k].append(ms)
-    diff = float(np.max(np.abs(outs[0].astype(np.float64) - outs[1]))) if outs[0].shape == outs[1].shape else None
+    a_out, b_out = (c for _, c in sorted(outs, key=lambda kc: kc[0]))
+    diff = float(np.max(np.abs(a_out.astype(np.float64) - b_out))) if a_out.shape == b_out.shape else None
     rows = []
     for name, (a, b) in times.items():
         if name in ("upload", "download"):

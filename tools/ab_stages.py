@@ -76,11 +76,13 @@ def old_frame(old, frame):
 
 
 def interleaved(pipes, frames, stage: str, repeats: int):
-    """Run the (old, new) pipelines alternately; per-version stage ms and last outputs."""
+    """Run the (old, new) pipelines alternately, which one first alternating per repeat (as
+    :mod:`clpost.bench_ab`); per-version stage ms and last outputs."""
     times = [[], []]
     outs = [None, None]
     for i in range(repeats + 1):
-        for j, (pipe, frame) in enumerate(zip(pipes, frames)):
+        for j in ((0, 1) if i % 2 == 0 else (1, 0)):
+            pipe, frame = pipes[j], frames[j]
             outs[j] = pipe.run(frame).color
             if i:
                 times[j].append(pipe.last_timings[stage])
