@@ -231,15 +231,7 @@ def read_attributes(path: str | os.PathLike) -> tuple[dict[str, float], dict[str
 def display_size(path: str | os.PathLike) -> tuple[int, int]:
     """(width, height) of the display window of ``path``'s first part, from the checked header
     alone (no pixels are read): the size :func:`read_frame`'s frame will have."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{p}: no such file; check the path")
-    try:
-        headers = read_header(p)
-    except OSError as e:
-        raise InputError(f"{p}: cannot read ({e.strerror}); check the file's permissions") from None
-    check_header(p, headers)
-    return _side(headers[0].display_window)  # type: ignore[arg-type]
+    return _side(_checked_headers(Path(path))[0].display_window)  # type: ignore[arg-type]
 
 
 def _camera_attrs(header: dict) -> dict[str, float]:
@@ -382,9 +374,9 @@ def window_str(w: Window) -> str:
     return f"({x0},{y0})-({x1},{y1})"
 
 
-def _load(path: str | os.PathLike) -> list[_Part]:
-    """All parts of ``path`` with their pixel planes; InputError for anything unreadable."""
-    p = Path(path)
+def _checked_headers(p: Path) -> list:
+    """``p``'s part headers, checked (:func:`check_header`); InputError naming the fix for a path
+    that is missing, a directory or unreadable."""
     if not p.exists():
         raise InputError(f"{p}: no such file; check the path (and the frame number of a sequence)")
     if p.is_dir():
@@ -397,6 +389,13 @@ def _load(path: str | os.PathLike) -> list[_Part]:
     except OSError as e:
         raise InputError(f"{p}: cannot read ({e.strerror}); check the file's permissions") from None
     check_header(p, headers)
+    return headers
+
+
+def _load(path: str | os.PathLike) -> list[_Part]:
+    """All parts of ``path`` with their pixel planes; InputError for anything unreadable."""
+    p = Path(path)
+    headers = _checked_headers(p)
     try:
         with quiet_openexr():
             f = OpenEXR.File(str(p), separate_channels=not _can_interleave(headers))
