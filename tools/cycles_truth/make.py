@@ -125,7 +125,8 @@ def main(argv=None) -> int:
             imgs, emits, times = [], [], []
             for seed in (1, 2):
                 raw = os.path.join(a.raw, f"{scene}_{kind}_s{seed}.exr")
-                times.append(render(scene, kind, raw, a.spp, seed, a.threads, a.threshold, a.reuse, a.size)["render_s"])
+                info_k = render(scene, kind, raw, a.spp, seed, a.threads, a.threshold, a.reuse, a.size)
+                times.append(info_k["render_s"])
                 imgs.append(read_pass(raw))
                 emits.append(read_pass(raw, "Emission"))
             floor = psnr_srgb(imgs[0], imgs[1])
@@ -135,9 +136,11 @@ def main(argv=None) -> int:
                                      "noise_floor_psnr_srgb_db": round(floor, 2)}
             print(f"{scene} {kind}: floor {floor:.2f} dB, {times} s", flush=True)
         entry["wall_s"] = round(time.time() - t0, 1)
+        rel_out = os.path.relpath(out, os.path.join(HERE, "..", ".."))
         entry["command"] = (f"/work/bpyvenv/bin/python tools/cycles_truth/make.py --scenes {scene} --spp {a.spp} "
                             f"--pinhole-spp {a.pinhole_spp} --threshold {a.threshold:g}"
-                            + ("" if a.size == "480x270" else f" --size {a.size} --out {os.path.relpath(out, os.path.join(HERE, '..', '..'))}"))
+                            + ("" if a.size == "480x270" else f" --size {a.size}")
+                            + ("" if rel_out == os.path.join("tests", "data", "cycles") else f" --out {rel_out}"))
         if os.path.exists(man_path):  # another make.py may have added scenes meanwhile
             manifest = json.load(open(man_path))
         manifest["scenes"][scene] = entry

@@ -496,8 +496,8 @@ def scene_h_spin(width):
                      checker("wheel_mat", (0.9, 0.9, 0.85), (0.1, 0.3, 0.6), 12.0), vertices=48)
     bpy.ops.object.shade_flat()
     wheel.rotation_mode = "XYZ"
-    keyframes(wheel, "rotation_euler", [(math.radians(90), math.radians(-20), 0), (math.radians(90), math.radians(20), 0)],
-              [0, 2])
+    keyframes(wheel, "rotation_euler",
+              [(math.radians(90), math.radians(-20), 0), (math.radians(90), math.radians(20), 0)], [0, 2])
     f = f_px_of(shot, width)
     # 15 px/frame at 2 m: 15·2/f metres per frame
     v = 15 * 2.0 / f
