@@ -66,14 +66,15 @@ def write_truth(path, rgb, emit):
     os.replace(tmp, path)
 
 
-def render(scene, kind, path, spp, seed, threads, threshold, reuse=False):
+def render(scene, kind, path, spp, seed, threads, threshold, reuse=False, size="480x270"):
     if reuse and os.path.exists(path + ".json"):
         with open(path + ".json") as fh:
             info = json.load(fh)
-        if (info["spp"], info["seed"], info["adaptive_threshold"]) == (spp, seed, threshold):
+        if (info["spp"], info["seed"], info["adaptive_threshold"], "x".join(map(str, info["size"]))) == \
+                (spp, seed, threshold, size):
             return info
     cmd = [sys.executable, os.path.join(HERE, "render.py"), scene, kind, path, "--spp", str(spp),
-           "--seed", str(seed), "--threads", str(threads), "--threshold", str(threshold)]
+           "--seed", str(seed), "--threads", str(threads), "--threshold", str(threshold), "--size", size]
     print(" ".join(cmd), flush=True)
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     with open(path + ".json") as fh:
@@ -97,6 +98,7 @@ def main(argv=None) -> int:
     p.add_argument("--pinhole-spp", type=int, default=256)
     p.add_argument("--threshold", type=float, default=0.0, help="adaptive sampling threshold (0: off)")
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--size", default="480x270", help="WxH (the held-out scenes: 320x180)")
     p.add_argument("--raw", default="/tmp/cycles/raw")
     p.add_argument("--reuse", action="store_true", help="keep raw renders already in --raw with the same settings")
     p.add_argument("--out", default=os.path.join(HERE, "..", "..", "tests", "data", "cycles"))
@@ -111,7 +113,7 @@ def main(argv=None) -> int:
         d = os.path.join(out, scene)
         os.makedirs(d, exist_ok=True)
         pin_raw = os.path.join(a.raw, f"{scene}_pinhole.exr")
-        info = render(scene, "pinhole", pin_raw, a.pinhole_spp, 0, a.threads, a.threshold, a.reuse)
+        info = render(scene, "pinhole", pin_raw, a.pinhole_spp, 0, a.threads, a.threshold, a.reuse, a.size)
         shutil.copyfile(pin_raw, os.path.join(d, "pinhole.exr"))
         shot = info["shot"]
         w, h = info["size"]
@@ -123,7 +125,8 @@ def main(argv=None) -> int:
             imgs, emits, times = [], [], []
             for seed in (1, 2):
                 raw = os.path.join(a.raw, f"{scene}_{kind}_s{seed}.exr")
-                times.append(render(scene, kind, raw, a.spp, seed, a.threads, a.threshold, a.reuse)["render_s"])
+                info_k = render(scene, kind, raw, a.spp, seed, a.threads, a.threshold, a.reuse, a.size)
+                times.append(info_k["render_s"])
                 imgs.append(read_pass(raw))
                 emits.append(read_pass(raw, "Emission"))
             floor = psnr_srgb(imgs[0], imgs[1])
@@ -133,8 +136,11 @@ def main(argv=None) -> int:
                                      "noise_floor_psnr_srgb_db": round(floor, 2)}
             print(f"{scene} {kind}: floor {floor:.2f} dB, {times} s", flush=True)
         entry["wall_s"] = round(time.time() - t0, 1)
+        rel_out = os.path.relpath(out, os.path.join(HERE, "..", ".."))
         entry["command"] = (f"/work/bpyvenv/bin/python tools/cycles_truth/make.py --scenes {scene} --spp {a.spp} "
-                            f"--pinhole-spp {a.pinhole_spp} --threshold {a.threshold:g}")
+                            f"--pinhole-spp {a.pinhole_spp} --threshold {a.threshold:g}"
+                            + ("" if a.size == "480x270" else f" --size {a.size}")
+                            + ("" if rel_out == os.path.join("tests", "data", "cycles") else f" --out {rel_out}"))
         if os.path.exists(man_path):  # another make.py may have added scenes meanwhile
             manifest = json.load(open(man_path))
         manifest["scenes"][scene] = entry

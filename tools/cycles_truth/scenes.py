@@ -125,6 +125,29 @@ def see_through(name, rgb, opacity, pattern_scale=None):
     return m
 
 
+def bricks(name, rgb1, rgb2, mortar, scale):
+    """Diffuse brick texture in object coordinates on a wall facing the camera (courses along x,
+    stacked along z; a texture other than the suite's checkers)."""
+    m, nt, out = _mat(name)
+    tc = nt.nodes.new("ShaderNodeTexCoord")
+    sep = nt.nodes.new("ShaderNodeSeparateXYZ")
+    comb = nt.nodes.new("ShaderNodeCombineXYZ")
+    nt.links.new(tc.outputs["Object"], sep.inputs[0])
+    nt.links.new(sep.outputs["X"], comb.inputs["X"])
+    nt.links.new(sep.outputs["Z"], comb.inputs["Y"])
+    nt.links.new(sep.outputs["Y"], comb.inputs["Z"])
+    br = nt.nodes.new("ShaderNodeTexBrick")
+    br.inputs["Color1"].default_value = (*rgb1, 1)
+    br.inputs["Color2"].default_value = (*rgb2, 1)
+    br.inputs["Mortar"].default_value = (*mortar, 1)
+    br.inputs["Scale"].default_value = scale
+    d = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    nt.links.new(comb.outputs[0], br.inputs["Vector"])
+    nt.links.new(br.outputs["Color"], d.inputs["Color"])
+    nt.links.new(d.outputs[0], out.inputs["Surface"])
+    return m
+
+
 def foliage(name, rgb, scale):
     """Alpha-cut leaves: a Voronoi cell pattern thresholded to a binary mask (the alpha-textured
     foliage card of game and film assets)."""
@@ -198,10 +221,10 @@ def cylinder(name, p0, p1, radius, mat, vertices=16):
     return ob
 
 
-def lamp(shot, name, center, px, times_white, f_px):
-    """An emitter ``px`` pixels across at its depth (y), radiance ``times_white`` × WHITE."""
+def lamp(shot, name, center, px, times_white, f_px, rgb=(1.0, 1.0, 1.0)):
+    """An emitter ``px`` pixels across at its depth (y), radiance ``times_white`` × WHITE (× ``rgb``)."""
     radius = px * center[1] / (2 * f_px)
-    ob = sphere(name, center, radius, emission(name + "_mat", times_white * WHITE), segments=16)
+    ob = sphere(name, center, radius, emission(name + "_mat", times_white * WHITE, rgb), segments=16)
     for attr in ("visible_diffuse", "visible_glossy", "visible_transmission", "visible_volume_scatter",
                  "visible_shadow"):
         setattr(ob, attr, False)
@@ -382,6 +405,114 @@ SCENES = {
     "macro": scene_macro,
     "motion": scene_motion,
 }
+
+
+# ----------------------------------------------------------------------------------------------
+# held-out scenes (tests/data/cycles_heldout/): the same failure classes as the suite's, with other
+# geometry, colours, depths, textures and cameras; never used to tune clpost (docs/fidelity.md,
+# "Held-out scenes")
+# ----------------------------------------------------------------------------------------------
+
+def at_px(shot, width, u, v, y):
+    """World (x, y, z) of the point at depth y seen at pixel (u·width, v·height), height = width·9/16."""
+    f = f_px_of(shot, width)
+    return ((u - 0.5) * width * y / f, y, CAM_Z - (v - 0.5) * width * 9 / 16 * y / f)
+
+
+def scene_h_lamps(width):
+    """Held-out emitters: an 85 mm lens at f/2, 8 blades, focus 3 m. Coloured lamps of 1–5 px,
+    50–2000× white at 5–25 m against the sky and at 4.5 m in front of a brick wall (6 m) on the
+    right; in-focus lamps at 3 m, one against the sky, one against the wall."""
+    shot = Shot(focal_mm=85.0, f_number=2.0, focus_m=3.0, blades=8)
+    f = f_px_of(shot, width)
+    ground(checker("ground_mat", (0.35, 0.4, 0.3), (0.22, 0.26, 0.2), 1.5))
+    box("wall", (1.3, 6.0, 0.925), (1.6, 0.2, 1.85),
+        bricks("wall_mat", (0.6, 0.3, 0.2), (0.45, 0.22, 0.15), (0.8, 0.78, 0.75), 3.0))
+    warm, cool, green, white = (1.0, 0.6, 0.25), (0.5, 0.8, 1.0), (0.5, 1.0, 0.5), (1.0, 1.0, 1.0)
+    specs = [  # (u, v, depth, px, × white, rgb): pixel position as fractions of the frame
+        (0.30, 0.15, 3.0, 2, 500, warm),     # in focus, against the sky
+        (0.85, 0.55, 3.0, 1, 2000, white),   # in focus, against the wall (6 m)
+        (0.10, 0.20, 5.0, 3, 400, cool), (0.45, 0.10, 8.0, 2, 800, white), (0.20, 0.40, 12.0, 4, 150, warm),
+        (0.60, 0.25, 15.0, 1, 2000, green), (0.05, 0.08, 25.0, 5, 50, white), (0.35, 0.30, 8.0, 2, 1000, warm),
+        (0.80, 0.40, 4.5, 2, 600, cool), (0.90, 0.75, 4.5, 3, 250, warm), (0.95, 0.35, 4.5, 1, 1500, white),
+    ]
+    for i, (u, v, y, px, k, rgb) in enumerate(specs):
+        lamp(shot, f"lamp{i:02d}", at_px(shot, width, u, v, y), px, k, f, rgb)
+    box("bollard", (-0.05, 3.0, 0.75), (0.05, 0.05, 1.5), diffuse("bollard_mat", (0.55, 0.5, 0.2)))
+    return shot
+
+
+def scene_h_panes(width):
+    """Held-out semi-transparent surfaces: focus *on* the panes (1.2 m, f/1.8, 5 blades), so what
+    is seen through them is defocused. Panes of opacity 0.2 (blue), 0.5 (amber), 0.85 (grey) side by
+    side, straddling the top edge of a brick wall at 4 m; lamps behind each pane against the sky
+    (6 m) and against the wall (3 m); an orange sheet of opacity 0.5 at 0.7 m in front of focus."""
+    shot = Shot(focal_mm=50.0, f_number=1.8, focus_m=1.2, blades=5)
+    f = f_px_of(shot, width)
+    ground()
+    box("wall", (0.0, 4.0, 0.75), (4.0, 0.1, 1.5),
+        bricks("wall_mat", (0.75, 0.7, 0.6), (0.3, 0.32, 0.35), (0.15, 0.15, 0.15), 4.0))
+    panes = [(-0.25, (0.3, 0.45, 0.9), 0.2), (0.0, (0.9, 0.6, 0.2), 0.5), (0.25, (0.8, 0.8, 0.8), 0.85)]
+    for i, (x, rgb, op) in enumerate(panes):
+        plane(f"pane{i}", (x, 1.2, 1.5), (0.2, 0.3), see_through(f"pane{i}_mat", rgb, op))
+        # a lamp behind the pane's upper half against the sky, one behind its lower half before the wall
+        lamp(shot, f"lamp{2 * i:02d}", (x * 6.0 / 1.2 + 0.1, 6.0, 1.5 + 0.07 * 6.0 / 1.2), 2, 600, f)
+        lamp(shot, f"lamp{2 * i + 1:02d}", (x * 3.0 / 1.2 - 0.05, 3.0, 1.5 - 0.08 * 3.0 / 1.2), 3, 250, f)
+    lamp(shot, "lamp06", (0.8 * 6.0 / 1.2 * 0.5, 6.0, 1.5 + 0.18 * 5.0), 2, 600, f)  # no pane: the control
+    plane("sheet", (-0.12, 0.7, 1.42), (0.14, 0.12), see_through("sheet_mat", (0.95, 0.45, 0.1), 0.5))
+    return shot
+
+
+def scene_h_fence(width):
+    """Held-out thin geometry and partial occlusion: a 35 mm lens at f/1.4, 7 blades, focus 5 m on a
+    brick wall with a cable (3 mm) and a pipe in front of it; a wire fence (4 mm wires, 10 cm
+    apart) at 0.8 m and a post (6 cm) at 0.6 m blurred over it; hills 30 m away, wires at 10 m."""
+    shot = Shot(focal_mm=35.0, f_number=1.4, focus_m=5.0, blades=7)
+    ground(checker("ground_mat", (0.4, 0.38, 0.3), (0.28, 0.3, 0.22), 1.0))
+    box("wall", (0.4, 5.0, 1.1), (3.0, 0.2, 2.2),
+        bricks("wall_mat", (0.8, 0.75, 0.65), (0.5, 0.25, 0.2), (0.1, 0.1, 0.1), 5.0))
+    box("hills", (0, 30.0, 4.0), (60, 0.5, 8), checker("hills_mat", (0.3, 0.45, 0.3), (0.2, 0.3, 0.22), 0.7))
+    dark = diffuse("cable_mat", (0.05, 0.04, 0.03))
+    cylinder("cable", (-3, 4.8, 1.9), (3, 4.8, 1.6), 0.0015, dark, vertices=8)
+    cylinder("pipe", (1.2, 4.85, 0.0), (1.2, 4.85, 2.2), 0.025, diffuse("pipe_mat", (0.2, 0.5, 0.7)))
+    for i, (z, r) in enumerate([(3.2, 0.004), (3.6, 0.003)]):
+        cylinder(f"wire{i}", (-12, 10.0, z), (12, 10.0, z + 0.4), r, dark, vertices=8)
+    steel = diffuse("fence_mat", (0.7, 0.7, 0.72))
+    for i in range(9):  # vertical wires of a fence at 0.8 m, 10 cm apart, slightly tilted
+        x = -0.4 + 0.1 * i
+        cylinder(f"fw{i}", (x, 0.8, 1.0), (x + 0.03, 0.8, 2.1), 0.002, steel, vertices=8)
+    cylinder("fence_top", (-0.6, 0.8, 1.62), (0.6, 0.8, 1.66), 0.002, steel, vertices=8)
+    cylinder("post", (0.25, 0.6, 0.0), (0.25, 0.6, 3.0), 0.03, diffuse("post_mat", (0.15, 0.3, 0.15)))
+    return shot
+
+
+def scene_h_spin(width):
+    """Held-out motion: a checkered wheel spinning 20°/frame at 3 m and a ball falling 15 px/frame
+    at 2 m in front of a brick wall (5 m); 24 fps, 180°; focus 3 m, f/2.4 for the DoF+motion truth."""
+    shot = Shot(f_number=2.4, focus_m=3.0, motion=True, frame=1, blades=6)
+    ground()
+    box("back", (0, 5.0, 1.5), (6, 0.2, 3), bricks("back_mat", (0.7, 0.6, 0.5), (0.4, 0.35, 0.3), (0.9, 0.9, 0.9), 3.0))
+    wheel = cylinder("wheel", (-0.25, 3.0, 1.5), (-0.25, 2.97, 1.5), 0.22,
+                     checker("wheel_mat", (0.9, 0.9, 0.85), (0.1, 0.3, 0.6), 12.0), vertices=48)
+    bpy.ops.object.shade_flat()
+    wheel.rotation_mode = "XYZ"
+    keyframes(wheel, "rotation_euler",
+              [(math.radians(90), math.radians(-20), 0), (math.radians(90), math.radians(20), 0)], [0, 2])
+    f = f_px_of(shot, width)
+    # 15 px/frame at 2 m: 15·2/f metres per frame
+    v = 15 * 2.0 / f
+    ball = sphere("ball", (0.3, 2.0, 1.5), 0.08, checker("ball_mat", (0.95, 0.8, 0.1), (0.6, 0.1, 0.5), 30.0))
+    keyframes(ball, "location", [(0.3, 2.0, 1.5 + v), (0.3, 2.0, 1.5 - v)], [0, 2])
+    return shot
+
+
+HELDOUT = {
+    "h_lamps": scene_h_lamps,
+    "h_panes": scene_h_panes,
+    "h_fence": scene_h_fence,
+    "h_spin": scene_h_spin,
+}
+SCENES.update(HELDOUT)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -1,0 +1,106 @@
+"""clpost on HELD-OUT Cycles scenes (tests/data/cycles_heldout, docs/fidelity.md "Held-out scenes"):
+the suite's failure classes with other geometry, colours, textures, depths and lenses, never used to
+tune clpost. The data checks are quick; the scores are slow-marked regression floors (today's
+measured levels minus a margin, tools/cycles_compare.py --data tests/data/cycles_heldout), NOT
+the issue's targets — several of which these scenes show unmet (docs/fidelity.md)."""
+import json
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+import pytest
+
+from clpost import fidelity as fd
+from clpost.exr import read_frame
+from clpost.frame import Frame
+from clpost.pipeline import Pipeline
+
+DATA = Path(__file__).parent / "data" / "cycles_heldout"
+MANIFEST = json.loads((DATA / "manifest.json").read_text())
+STAGES = {"dof": ["dof"], "motion": ["motion_blur"], "dofmotion": ["dof", "motion_blur"]}
+MARGIN_DB = 0.5
+
+# (scene, truth, quality) -> PSNR sRGB dB vs Cycles, measured (docs/fidelity.md, "Held-out scenes")
+MEASURED_PSNR = {
+    ("h_lamps", "dof", "draft"): 29.96,
+    ("h_lamps", "dof", "preview"): 32.82,
+    ("h_lamps", "dof", "final"): 35.86,
+    ("h_panes", "dof", "draft"): 31.38,
+    ("h_panes", "dof", "preview"): 32.10,
+    ("h_panes", "dof", "final"): 32.73,
+    ("h_fence", "dof", "draft"): 36.45,
+    ("h_fence", "dof", "final"): 38.67,
+    ("h_spin", "dof", "draft"): 49.96,
+    ("h_spin", "dof", "final"): 44.89,       # final over-blurs the 1.85 px CoC of the wall (docs/fidelity.md)
+    ("h_spin", "motion", "draft"): 43.71,
+    ("h_spin", "motion", "final"): 46.67,
+    ("h_spin", "dofmotion", "final"): 43.04,
+}
+
+
+def _channels(path: Path, prefix: str) -> np.ndarray:
+    for part in OpenEXR.File(str(path), separate_channels=True).parts:
+        ch = part.channels
+        for pre in [prefix] + [n[:-1] for n in ch if prefix and n.endswith("." + prefix + "R")]:
+            if all(pre + c in ch for c in "RGB"):
+                return np.stack([ch[pre + c].pixels for c in "RGB"], -1).astype(np.float32)
+    raise AssertionError(f"{path}: no {prefix}R/G/B")
+
+
+def _run(entry, frame, kind, quality):
+    w, h = entry["size"]
+    cam = fd.cycles_camera(entry["shot"], w, h, dof=kind != "motion", motion=kind != "dof")
+    return Pipeline(cam, quality=quality, stages=STAGES[kind]).run(frame).color[..., :3]
+
+
+def test_heldout_truths_are_sound():
+    """Guards the data: Blender's layout, floors ≥ 36 dB, each truth far from its pinhole, and the
+    held-out scenes really differ from the suite's cameras."""
+    suite = json.loads((DATA.parent / "cycles" / "manifest.json").read_text())["scenes"]
+    cams = {(e["shot"]["focal_mm"], e["shot"]["f_number"], e["shot"]["focus_m"], e["shot"]["blades"])
+            for e in suite.values()}
+    assert len(MANIFEST["scenes"]) >= 3
+    for name, entry in MANIFEST["scenes"].items():
+        frame = read_frame(DATA / entry["pinhole"]["file"])
+        w, h = entry["size"]
+        assert frame.metadata["layout"] == "blender" and frame.color.shape[:2] == (h, w), name
+        s = entry["shot"]
+        assert (s["focal_mm"], s["f_number"], s["focus_m"], s["blades"]) not in cams, name
+        for kind, t in entry["truths"].items():
+            truth = _channels(DATA / t["file"], "")
+            assert t["noise_floor_psnr_srgb_db"] >= 36.0, (name, kind)
+            assert fd.psnr_srgb(truth, frame.color) < t["noise_floor_psnr_srgb_db"] - 3.0, (name, kind)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene,kind,quality", sorted(k for k in MEASURED_PSNR if k[0] in MANIFEST["scenes"]))
+def test_heldout_psnr_floor_vs_cycles(scene, kind, quality):
+    entry = MANIFEST["scenes"][scene]
+    frame = read_frame(DATA / entry["pinhole"]["file"])
+    truth = _channels(DATA / entry["truths"][kind]["file"], "")
+    psnr = fd.psnr_srgb(truth, _run(entry, frame, kind, quality))
+    assert psnr >= MEASURED_PSNR[scene, kind, quality] - MARGIN_DB, f"{scene} {kind} {quality}: {psnr:.2f} dB"
+
+
+@pytest.mark.slow
+def test_heldout_emitters_do_not_get_worse():
+    """h_lamps at final: today the two 1-px defocused lamps' discs are 1.55× / 1.61× Cycles' area and
+    the in-focus 1-px lamp on the wall gets a 65-pixel halo (Cycles: 0) — the despeckle takes a 1-px
+    lamp's only depth sample for a speckle when the lamp straddles two pixels (docs/fidelity.md,
+    "Held-out scenes"). Floors, not targets (1 ± 0.1, ≤ 2× Cycles' halo)."""
+    entry = MANIFEST["scenes"]["h_lamps"]
+    frame = read_frame(DATA / entry["pinhole"]["file"])
+    t = entry["truths"]["dof"]
+    truth, truth_lamps = _channels(DATA / t["file"], ""), _channels(DATA / t["file"], "emit.")
+    emit = _channels(DATA / entry["pinhole"]["file"], "Emission.")
+    dark = Frame(color=np.maximum(frame.color[..., :3] - emit, 0).astype(np.float32), depth=frame.depth,
+                 velocity=frame.velocity)
+    out = _run(entry, frame, "dof", "final")
+    lamps_out = out - _run(entry, dark, "dof", "final")
+    m = [fd.emitter_metrics(out, truth, lamps_out, truth_lamps, lamp, entry["shot"], 0.6) for lamp in entry["lamps"]]
+    areas = [x["area_ratio"] for x in m if x.get("area_ratio") is not None]
+    energy = [x["energy_ratio"] for x in m if x["energy_ratio"] is not None]
+    halo = sum(x["halo_test"] for x in m if x["in_focus"])
+    assert len(areas) == 9 and max(areas) <= 1.61 + 0.1, areas
+    assert halo <= 65 * 1.2, halo
+    assert min(energy) >= 0.939 - 0.03, energy
