@@ -31,12 +31,20 @@
 #define MOTION_BLUR_FOOT 0.5f      /* half a pixel: a swept pixel's footprint reaches this beyond |h| (FOOT in the .py) */
 #define MOTION_BLUR_AGREE0 0.8f    /* cos(v_N, h_X) below which the tap sets split (AGREE0/1 in the .py) */
 #define MOTION_BLUR_AGREE1 0.95f
+#define MOTION_BLUR_LINE 2.0f      /* a front surface reaches X within this of its motion line, +- 1/2 px (LINE in the .py) */
 
+#define MOTION_BLUR_R2X 0.7548776662f   /* the R2 lattice's steps per pixel in x and y (JITTER_R2 in the .py) */
+#define MOTION_BLUR_R2Y 0.5698402910f
 inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
-    /* j in [-0.5, 0.5): the counter hash of (seed, frame, x, y) of kernels/random.cl, per
-     * CONVENTIONS "Randomness"; 24 high bits, exact in float. */
-    const uint h = rnd_hash4(seed, frame, (uint)x, (uint)y);
-    return (float)(h >> 8) * (1.0f / 16777216.0f) - 0.5f;
+    /* j in [-0.5, 0.5): a per-frame offset from the counter hash of (seed, frame) of kernels/random.cl
+     * (CONVENTIONS "Randomness"; 24 high bits, exact in float) plus the R2 lattice
+     * frac(x a1 + y a2): neighbouring pixels take well-spread strata (blue-noise-like), so the few
+     * taps' noise is fine-grained; each fraction taken before the sum keeps float32 exact enough */
+    const float j0 = (float)(rnd_hash4(seed, frame, 0u, 0u) >> 8) * (1.0f / 16777216.0f);
+    const float a = (float)x * MOTION_BLUR_R2X;
+    const float b = (float)y * MOTION_BLUR_R2Y;
+    const float v = (a - floor(a)) + (b - floor(b)) + j0;
+    return v - floor(v) - 0.5f;
 }
 
 inline float motion_blur_len2(float2 v) {
@@ -309,7 +317,10 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const float cly = motion_blur_cylinder(dist, ly);
         const float a = cly * ((s & 1) ? hdv : hdn) / ly;
         const float own = b * motion_blur_cylinder(dist, lx);   /* level with X and on X's path */
-        const float af = f * (1.0f - own) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
+        /* a surface in front reaches X only along its own motion line, give or take its footprint
+         * and a spinning object's spread of directions: |d x h_Y| / |h_Y| within LINE +- 1/2 px */
+        const float line = clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * hy.y - ddy * hy.x) / ly, 0.0f, 1.0f);
+        const float af = line * f * (1.0f - own) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
         const float ao = f * own * a * (agree + (1.0f - agree) * ((s & 1) ? 2.0f : 0.0f));
         const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx) / fmax(d2, 1.0f);
         const float3 cy = load_planar(src, k, n);
@@ -339,6 +350,8 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
     return 1.0f - t * t * (3.0f - 2.0f * t);
 }
 
+/* motion_blur_px's line weight: Y's direction from the hv planes (two more loads per tap) */
+#define MB_LINE16 clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * MB_GATHER(hv + n, k) - ddy * MB_GATHER(hv, k)) / ly, 0.0f, 1.0f) *
 /* one tap s of motion_blur_16 on all lanes where TAP (int16) is true; uses and updates its locals */
 #define MB_TAP16(s, TAP) do { \
         const int odd = (s) & 1; \
@@ -362,7 +375,7 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         const float16 a = cly * (odd ? hdv : hdn) / ly; \
         const float16 clx = motion_blur_cyl16(dist, lx); \
         const float16 own = b * clx; \
-        const float16 af0 = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f)); \
+        const float16 af0 = MB_LINE16 f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f)); \
         const float16 ao0 = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f)); \
         const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx / fmax(d2, 1.0f); \
         const int16 tap = (TAP);   /* lanes past their own S or at their centre: nothing */ \
@@ -413,8 +426,12 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     const float16 cosang = (vnx * vxx + vny * vxy) / fmax(ln * lv, 1e-30f);
     const float16 agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
     const float16 wx = vload16(0, iz + i0);
-    const uint16 hj = rnd_hash4_w16(seed, frame, convert_uint16(xs), (uint16)((uint)y));
-    const float16 j = convert_float16(hj >> 8) * (1.0f / 16777216.0f) - 0.5f;   /* motion_blur_jitter */
+    /* motion_blur_jitter */
+    const float j0 = (float)(rnd_hash4(seed, frame, 0u, 0u) >> 8) * (1.0f / 16777216.0f);
+    const float16 ja = convert_float16(xs) * MOTION_BLUR_R2X;
+    const float jb = (float)y * MOTION_BLUR_R2Y;
+    const float16 jv = (ja - floor(ja)) + (jb - floor(jb)) + j0;
+    const float16 j = jv - floor(jv) - 0.5f;
     /* motion_blur_taps per lane; the loop runs to the largest (a 16-pixel row spans at most two
      * tiles), lanes past their own S or at their own centre stratum add nothing */
     const int16 ns = min((int16)MOTION_BLUR_SAMPLES, 2 * convert_int16(ceil(MOTION_BLUR_DENSITY * ln)) + 1);

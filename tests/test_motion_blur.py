@@ -213,6 +213,40 @@ def test_deterministic_and_jitter_depends_on_frame_index(rng):
     assert j.dtype == np.float32 and -0.5 <= j.min() and j.max() < 0.5 and abs(j.mean()) < 0.02
 
 
+def test_jitter_spreads_neighbouring_pixels_over_the_strata():
+    # the R2 lattice: any 8 consecutive pixels of a row, and any 3x3 block, leave no gap in [-1/2, 1/2)
+    # (circular) wider than 0.25 / 0.2 — independent uniform draws leave gaps of 0.7 and more here
+    ys, xs = np.mgrid[0:64, 0:64]
+    for frame in (0, 5):
+        j = jitter(1, frame, xs, ys)
+
+        def gap(v):
+            v = np.sort(v)
+            return np.diff(np.concatenate([v, v[:1] + 1.0])).max()
+
+        assert max(gap(j[y, x:x + 8]) for y in range(64) for x in range(56)) < 0.25
+        assert max(gap(j[y:y + 3, x:x + 3].ravel()) for y in range(62) for x in range(62)) < 0.2
+
+
+def test_front_surface_reaches_only_pixels_on_its_own_motion_line(rng):
+    # a bar sliding right (|h| 5 px) above a static wall, and a faster diagonal mover in the same tile
+    # neighbourhood, so v_N is diagonal: taps of a wall pixel 3 rows below the bar run diagonally into
+    # the bar within its half-length (4.2 px). The bar never passes over that pixel (3 px off the
+    # bar's motion line, beyond LINE + 1/2): no smear (without the line test: up to 1.1 here).
+    h, w = 60, 60
+    color = np.full((h, w, 3), 0.2, np.float32)
+    vel = np.zeros((h, w, 2), np.float32)
+    depth = np.full((h, w), 10.0, np.float32)
+    color[20:24, 20:30] = 5.0
+    vel[20:24, 20:30] = (20.0, 0.0)        # 180°: |h| = 5 px
+    depth[20:24, 20:30] = 2.0
+    vel[40:44, 40:44] = (30.0, 30.0)       # the neighbourhood's fastest: v_N diagonal
+    depth[40:44, 40:44] = 2.0
+    frame = Frame(color, depth=depth, velocity=vel, metadata={"frame_index": 2})
+    out, ref = _compare(CAM, frame, "final")
+    assert np.abs(out[26, 18:32, 0] - 0.2).max() < 1e-3, out[26, 18:32, 0]
+
+
 def test_clamp_keeps_direction_and_caps_length():
     v = np.array([[[3e38, -3e38], [0.0, 0.0], [3.0, 4.0]]], np.float32)
     hv = half_vectors(v, 0.25)

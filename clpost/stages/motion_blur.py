@@ -37,8 +37,12 @@ further: its footprint),
     Y_i = \Big\lfloor X + d_i\,t_i + \tfrac12 \Big\rfloor, \quad t_i = -1 + 2\,\frac{i + \tfrac12 + j}{S},
     \quad i \ne \tfrac{S-1}{2}, \qquad S = \min\big(S_q,\ 2\lceil D\,|v_N| \rceil + 1\big)
 
-with :math:`j \in [-\tfrac12, \tfrac12)` a per-pixel jitter from a counter-based hash of (seed,
-frame index, x, y) (CONVENTIONS "Randomness"); the centre stratum is X itself. :math:`S_q` is the
+with the per-pixel jitter :math:`j = \mathrm{frac}(j_0 + \mathrm{frac}(a_1 x) + \mathrm{frac}(a_2 y)) - \tfrac12`:
+:math:`j_0 \in [0, 1)` from a counter-based hash of (seed, frame index) (CONVENTIONS "Randomness"),
+:math:`(a_1, a_2)` the R2 lattice (Roberts 2018, "The unreasonable effectiveness of quasirandom
+sequences": :math:`1/\varphi_2, 1/\varphi_2^2`, :math:`\varphi_2` the plastic number), so neighbouring pixels
+take well-spread strata and the few taps' noise is fine-grained (a per-pixel hash gave clumps of
+equal strata); the centre stratum is X itself. :math:`S_q` is the
 quality's tap count; a slower neighbourhood takes fewer: the S strata of the path :math:`2|v_N|` are
 then at most 1/D px apart (D = DENSITY = 1.5), so more taps would only resample the same pixels (a
 frame's cost follows its motion; the choice of D: ``docs/motion_blur.md``).
@@ -52,7 +56,11 @@ streak, ramping over the swept pixel's footprint; its integral over d stays 2l).
 own path"), three layers are gathered:
 
 - in front of X (or level but off X's path, e.g. a light sliding over a wall at its depth):
-  :math:`c_F = \sum f(1-o_i)\,a_i\,g_i^F`, colour F = their weighted mean;
+  :math:`c_F = \sum f(1-o_i)\,\ell_i\,a_i\,g_i^F`, colour F = their weighted mean; a surface in front
+  reaches X only along its own motion line, give or take its footprint and a spinning object's
+  spread of directions: :math:`\ell_i = \mathrm{clamp}(L + \tfrac12 - |d \times h_Y| / |h_Y|, 0, 1)`,
+  L = LINE = 2 px (the cylinder alone is isotropic: a fast neighbour's streak would reach X from any
+  side, e.g. a sliding cube's smear onto the static wall below it);
 - X's own surface along its path: :math:`c_O = w_c + \sum f\,o_i\,a_i\,g_i^O` with X itself at
   :math:`w_c = \max(\bar\delta, 1) / (2|h_X|)` (its footprint: the centre stratum's path, at least
   the pixel; a static pixel is its own surface all the time), colour O = weighted mean (a box for
@@ -153,6 +161,10 @@ FOOT = 0.5
 """Half a pixel: a surface pixel swept over ±|h| overlaps a pixel partly up to FOOT beyond |h|, so
 the tap paths reach |v| + FOOT and the cylinders ramp over |h| ± FOOT (module docstring)."""
 FRINGE = 0.1
+LINE = 2.0
+"""A surface in front of X reaches X only within LINE ± ½ px of its own motion line (module docstring)."""
+JITTER_R2 = (0.7548776662, 0.5698402910)
+"""The R2 lattice's steps per pixel in x and y (Roberts 2018, the plastic number's 1/φ₂, 1/φ₂²)."""
 AGREE0, AGREE1 = 0.8, 0.95
 """cos(angle) between v_N and X's own half-vector below which the two tap sets split the work."""
 """A pixel faster than FRINGE × its fastest 3×3 neighbour takes that neighbour's motion (fringe rule)."""
@@ -318,9 +330,14 @@ class MotionBlur(GatherStage):
 # -- numpy reference ---------------------------------------------------------------------------
 
 def jitter(seed: int, frame: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Per-pixel jitter j ∈ [−½, ½) — the kernel's ``motion_blur_jitter`` (float32)."""
-    h = rnd.hash4(seed, frame, np.asarray(x).astype(np.uint32), np.asarray(y).astype(np.uint32))
-    return ((h >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0) - np.float32(0.5))
+    """Per-pixel jitter j ∈ [−½, ½) — the kernel's ``motion_blur_jitter`` (float32, operation for
+    operation): the per-frame hash offset plus the R2 lattice (module docstring, "Taps")."""
+    h = rnd.hash4(seed, frame, np.uint32(0), np.uint32(0))
+    j0 = (np.uint32(h) >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0)
+    a = np.asarray(x).astype(np.float32) * np.float32(JITTER_R2[0])
+    b = np.asarray(y).astype(np.float32) * np.float32(JITTER_R2[1])
+    v = ((a - np.floor(a)) + (b - np.floor(b))) + j0
+    return ((v - np.floor(v)) - np.float32(0.5)).astype(np.float32)
 
 
 def half_vectors(velocity: np.ndarray, k: float, with_length: bool = False) -> np.ndarray:
@@ -470,7 +487,9 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         cly = _cylinder32(dist, ly32)
         a = tap * cly * (pv if s % 2 else pn) * inv64 / ly
         own = b * _cylinder32(dist, lx32)        # level with X and on X's own path
-        af = f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
+        hy = h[sy, sx]
+        line = np.clip(LINE + 0.5 - np.abs(dx32 * hy[..., 1] - dy32 * hy[..., 0]) / ly, 0.0, 1.0)
+        af = line * f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
         ao = f * own * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
         ab = (tap * b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
               / np.maximum(dx32 * dx32 + dy32 * dy32, np.float32(1)))                 # nearest look most like it
