@@ -4,7 +4,7 @@
  *
  * Buffers: colour planar (c*n + i); velocity interleaved (2i, 2i+1) px per frame, forward,
  * +x right, +y down; depth planar metres (+inf sky). Scratch: hv = clamped half-vectors and
- * their unclamped length and max(|h|, 0.5) (4 planes: x, y, key, length), iz = 1/depth (0 for sky), tile and
+ * their unclamped length and h again as two halves in one word (4 planes: x, y, key, packed), iz = 1/depth (0 for sky), tile and
  * neighbour-max (3 planes each). Maxima are ranked by the unclamped length: clamped vectors all
  * have length K, and ranking them by a rounding-level difference would not be reproducible.
  *
@@ -31,6 +31,7 @@
 #define MOTION_BLUR_FOOT 0.5f      /* half a pixel: a swept pixel's footprint reaches this beyond |h| (FOOT in the .py) */
 #define MOTION_BLUR_AGREE0 0.8f    /* cos(v_N, h_X) below which the tap sets split (AGREE0/1 in the .py) */
 #define MOTION_BLUR_AGREE1 0.95f
+#define MOTION_BLUR_HALF_MIN 0x1p-14f   /* the smallest normal half */
 #define MOTION_BLUR_LINE 2.0f      /* a front surface reaches X within this of its motion line, +- 1/2 px (LINE in the .py) */
 
 #define MOTION_BLUR_R2X 0.7548776662f   /* the R2 lattice's steps per pixel in x and y (JITTER_R2 in the .py) */
@@ -45,6 +46,17 @@ inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
     const float b = (float)y * MOTION_BLUR_R2Y;
     const float v = (a - floor(a)) + (b - floor(b)) + j0;
     return v - floor(v) - 0.5f;
+}
+
+/* a half's bits (normal or zero: the prep flushes the rest) as a float, exactly */
+inline float motion_blur_half(uint b) {
+    const uint e = b & 0x7fffu;
+    return as_float(((b & 0x8000u) << 16) | (e != 0u ? (e + 0x1c000u) << 13 : 0u));
+}
+
+/* the prep's packed half-vector (x in the low half, y in the high) */
+inline float2 motion_blur_unpack(uint w) {
+    return (float2)(motion_blur_half(w & 0xffffu), motion_blur_half(w >> 16));
 }
 
 inline float motion_blur_len2(float2 v) {
@@ -97,7 +109,11 @@ inline void motion_blur_prep_px(__global const float *restrict velocity,
     hv[i] = h.x;
     hv[n + i] = h.y;
     hv[2 * n + i] = len;
-    hv[3 * n + i] = fmax(sqrt(motion_blur_len2(h)), 0.5f);   /* the gather's |h| (>= 0.5), one load per tap */
+    /* h as two halves in one 32-bit word (x low, y high): a tap loads Y's direction and length at once;
+     * components below the smallest normal half flushed to 0 (motion_blur_unpack reads normals only) */
+    __global half *restrict hp = (__global half *)(hv + 3 * n);
+    vstore_half_rte(fabs(h.x) < MOTION_BLUR_HALF_MIN ? 0.0f : h.x, 2 * i, hp);
+    vstore_half_rte(fabs(h.y) < MOTION_BLUR_HALF_MIN ? 0.0f : h.y, 2 * i + 1, hp);
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
 }
 
@@ -146,7 +162,10 @@ inline void motion_blur_prep_16(__global const float *restrict velocity,
     vstore16(hx0, 0, hv + i0);
     vstore16(hy0, 0, hv + n + i0);
     vstore16(moving ? len : 0.0f, 0, hv + 2 * n + i0);
-    vstore16(fmax(sqrt(hx0 * hx0 + hy0 * hy0), 0.5f), 0, hv + 3 * n + i0);
+    const float16 px = fabs(hx0) < MOTION_BLUR_HALF_MIN ? 0.0f : hx0, py = fabs(hy0) < MOTION_BLUR_HALF_MIN ? 0.0f : hy0;
+    __global half *restrict hp = (__global half *)(hv + 3 * n);   /* motion_blur_prep_px's packed h */
+    vstore_half16_rte(shuffle2(px, py, (uint16)(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23)), 0, hp + 2 * i0);
+    vstore_half16_rte(shuffle2(px, py, (uint16)(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31)), 1, hp + 2 * i0);
     vstore16(isinf(z) ? 0.0f : 1.0f / z, 0, iz + i0);
 }
 
@@ -303,7 +322,7 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const float ddx = (float)(sx - x), ddy = (float)(sy - y);
         const float d2 = ddx * ddx + ddy * ddy;
         const float dist = sqrt(d2);
-        const float2 hy = (float2)(hv[k], hv[n + k]);
+        const float2 hy = motion_blur_unpack(((__global const uint *)(hv + 3 * n))[k]);   /* h_Y, halves */
         const float ly = fmax(sqrt(motion_blur_len2(hy)), 0.5f);
         const float wy = iz[k];
         /* soft depth test: f = Y in front of X, b = X in front of Y (motion_blur_front, one division) */
@@ -350,8 +369,12 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
     return 1.0f - t * t * (3.0f - 2.0f * t);
 }
 
-/* motion_blur_px's line weight: Y's direction from the hv planes (two more loads per tap) */
-#define MB_LINE16 clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * MB_GATHER(hv + n, k) - ddy * MB_GATHER(hv, k)) / ly, 0.0f, 1.0f) *
+/* motion_blur_px's line weight: |d x h_Y| / |h_Y| from the packed h_Y */
+inline float16 motion_blur_half16(uint16 b) {   /* motion_blur_half, 16 lanes */
+    const uint16 e = b & 0x7fffu;
+    return as_float16(((b & 0x8000u) << 16) | (e != 0u ? (e + 0x1c000u) << 13 : (uint16)0u));
+}
+#define MB_LINE16 clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * hyy - ddy * hyx) / ly, 0.0f, 1.0f) *
 /* one tap s of motion_blur_16 on all lanes where TAP (int16) is true; uses and updates its locals */
 #define MB_TAP16(s, TAP) do { \
         const int odd = (s) & 1; \
@@ -366,7 +389,9 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y); \
         const float16 d2 = ddx * ddx + ddy * ddy; \
         const float16 dist = sqrt(d2); \
-        const float16 ly = MB_GATHER(hv + 3 * n, k);   /* max(|h_Y|, 0.5) */ \
+        const uint16 pk = CLP_GATHER16U((__global const uint *)(hv + 3 * n), k);   /* h_Y, halves */ \
+        const float16 hyx = motion_blur_half16(pk & 0xffffu), hyy = motion_blur_half16(pk >> 16); \
+        const float16 ly = fmax(sqrt(hyx * hyx + hyy * hyy), 0.5f); \
         const float16 wy = MB_GATHER(iz, k); \
         const float16 r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f)); \
         const float16 f = clamp(1.0f - r, 0.0f, 1.0f); \
@@ -418,8 +443,9 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
         return;
     }
     const float16 hx = vload16(0, hv + i0), hy = vload16(0, hv + n + i0);
-    const float16 lx = vload16(0, hv + 3 * n + i0);   /* max(|h_X|, 0.5) */
-    const int16 own_dir = lx > 0.5f;                   /* |h_X| > 0.5 */
+    const float16 lhx = sqrt(hx * hx + hy * hy);
+    const float16 lx = fmax(lhx, 0.5f);
+    const int16 own_dir = lhx > 0.5f;
     const float16 vxx = own_dir ? hx : vnx, vxy = own_dir ? hy : vny;   /* odd taps follow X's own motion */
     const float16 ln = sqrt(l2n);
     const float16 lv = sqrt(vxx * vxx + vxy * vxy);

@@ -366,6 +366,13 @@ def half_vectors32(velocity: np.ndarray, k: float) -> np.ndarray:
     return np.where(m > 0, np.concatenate([h, length], axis=-1), np.float32(0)).astype(np.float32)
 
 
+def packed_half_vectors(h32: np.ndarray) -> np.ndarray:
+    """h as a tap reads it (``motion_blur_prep`` packs both components as IEEE halves in one word,
+    rounded to nearest even, those below the smallest normal half flushed to 0), back in float32."""
+    h = np.where(np.abs(h32) < np.float32(2.0 ** -14), np.float32(0), h32)
+    return h.astype(np.float16).astype(np.float32)
+
+
 def _argmax_len(vecs: np.ndarray) -> np.ndarray:
     """vecs (..., N, 3) → the one of the N with the largest key (component 2; first on ties)."""
     idx = np.argmax(vecs[..., 2], axis=-1)
@@ -442,6 +449,7 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     hk = half_vectors32(velocity, np.float32(fraction / 2.0))
     h32 = hk[..., :2]
     h = h32.astype(np.float64)
+    hp = packed_half_vectors(h32)                            # what a tap reads of Y
     _, nmax = tile_max(hk.astype(np.float64))
     ys, xs = np.mgrid[0:hh, 0:ww]
     vn = nmax[ys // TILE, xs // TILE, :2]
@@ -480,14 +488,14 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         sy = np.clip(np.floor(ys.astype(np.float32) + oy + np.float32(0.5)).astype(np.int64), 0, hh - 1)
         dx32, dy32 = (sx - xs).astype(np.float32), (sy - ys).astype(np.float32)
         dist = np.sqrt(dx32 * dx32 + dy32 * dy32)
-        ly32 = np.maximum(_len32(h32[sy, sx]), np.float32(0.5))
+        ly32 = np.maximum(_len32(hp[sy, sx]), np.float32(0.5))
         ly = ly32.astype(np.float64)
         wy = iz[sy, sx]
         f, b = _front(wy, iz), _front(iz, wy)
         cly = _cylinder32(dist, ly32)
         a = tap * cly * (pv if s % 2 else pn) * inv64 / ly
         own = b * _cylinder32(dist, lx32)        # level with X and on X's own path
-        hy = h[sy, sx]
+        hy = hp[sy, sx].astype(np.float64)
         line = np.clip(LINE + 0.5 - np.abs(dx32 * hy[..., 1] - dy32 * hy[..., 0]) / ly, 0.0, 1.0)
         af = line * f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
         ao = f * own * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
