@@ -48,10 +48,10 @@ inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
     return v - floor(v) - 0.5f;
 }
 
-/* a half's bits (normal or zero: the prep flushes the rest) as a float, exactly */
+/* a half's bits (normal or zero: the prep flushes the rest) as a float, exactly: exponent and
+ * mantissa moved into a float's fields (a float 2^112 times too small, still normal), then scaled */
 inline float motion_blur_half(uint b) {
-    const uint e = b & 0x7fffu;
-    return as_float(((b & 0x8000u) << 16) | (e != 0u ? (e + 0x1c000u) << 13 : 0u));
+    return as_float(((b & 0x8000u) << 16) | ((b & 0x7fffu) << 13)) * 0x1p112f;
 }
 
 /* the prep's packed half-vector (x in the low half, y in the high) */
@@ -326,7 +326,12 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const float ly = fmax(sqrt(motion_blur_len2(hy)), 0.5f);
         const float wy = iz[k];
         /* soft depth test: f = Y in front of X, b = X in front of Y (motion_blur_front, one division) */
-        const float r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f));
+        /* one division for the three per-tap quotients (depth test, 1/|h_Y|, 1/max(d, 1)^2) */
+        const float zden = MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f);
+        const float md2 = fmax(d2, 1.0f);
+        const float lm = ly * md2;
+        const float q = 1.0f / (zden * lm);
+        const float r = (wx - wy) * (lm * q);
         const float f = clamp(1.0f - r, 0.0f, 1.0f);
         const float b = clamp(1.0f + r, 0.0f, 1.0f);
         /* Y's surface passes over X for (path length per tap) / (Y's streak 2 |h_Y|) of the shutter;
@@ -334,14 +339,15 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
          * Background estimate (ab): surfaces behind X, or level with it whose streak misses X,
          * weighted by 1 / max(d, 1)^2 (what is hidden behind X looks most like what is next to it) */
         const float cly = motion_blur_cylinder(dist, ly);
-        const float a = cly * ((s & 1) ? hdv : hdn) / ly;
+        const float rly = (zden * md2) * q;
+        const float a = cly * ((s & 1) ? hdv : hdn) * rly;
         const float own = b * motion_blur_cylinder(dist, lx);   /* level with X and on X's path */
         /* a surface in front reaches X only along its own motion line, give or take its footprint
          * and a spinning object's spread of directions: |d x h_Y| / |h_Y| within LINE +- 1/2 px */
-        const float line = clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * hy.y - ddy * hy.x) / ly, 0.0f, 1.0f);
+        const float line = clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * hy.y - ddy * hy.x) * rly, 0.0f, 1.0f);
         const float af = line * f * (1.0f - own) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
         const float ao = f * own * a * (agree + (1.0f - agree) * ((s & 1) ? 2.0f : 0.0f));
-        const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx) / fmax(d2, 1.0f);
+        const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx) * ((zden * ly) * q);
         const float3 cy = load_planar(src, k, n);
         cf += af;
         sf += af * cy;
@@ -371,10 +377,9 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
 
 /* motion_blur_px's line weight: |d x h_Y| / |h_Y| from the packed h_Y */
 inline float16 motion_blur_half16(uint16 b) {   /* motion_blur_half, 16 lanes */
-    const uint16 e = b & 0x7fffu;
-    return as_float16(((b & 0x8000u) << 16) | (e != 0u ? (e + 0x1c000u) << 13 : (uint16)0u));
+    return as_float16(((b & 0x8000u) << 16) | ((b & 0x7fffu) << 13)) * 0x1p112f;
 }
-#define MB_LINE16 clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * hyy - ddy * hyx) / ly, 0.0f, 1.0f) *
+#define MB_LINE16 clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * hyy - ddy * hyx) * rly, 0.0f, 1.0f) *
 /* one tap s of motion_blur_16 on all lanes where TAP (int16) is true; uses and updates its locals */
 #define MB_TAP16(s, TAP) do { \
         const int odd = (s) & 1; \
@@ -393,16 +398,21 @@ inline float16 motion_blur_half16(uint16 b) {   /* motion_blur_half, 16 lanes */
         const float16 hyx = motion_blur_half16(pk & 0xffffu), hyy = motion_blur_half16(pk >> 16); \
         const float16 ly = fmax(sqrt(hyx * hyx + hyy * hyy), 0.5f); \
         const float16 wy = MB_GATHER(iz, k); \
-        const float16 r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f)); \
+        const float16 zden = MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f); \
+        const float16 md2 = fmax(d2, 1.0f); \
+        const float16 lm = ly * md2; \
+        const float16 q = 1.0f / (zden * lm); \
+        const float16 r = (wx - wy) * (lm * q); \
         const float16 f = clamp(1.0f - r, 0.0f, 1.0f); \
         const float16 b = clamp(1.0f + r, 0.0f, 1.0f); \
         const float16 cly = motion_blur_cyl16(dist, ly); \
-        const float16 a = cly * (odd ? hdv : hdn) / ly; \
+        const float16 rly = (zden * md2) * q; \
+        const float16 a = cly * (odd ? hdv : hdn) * rly; \
         const float16 clx = motion_blur_cyl16(dist, lx); \
         const float16 own = b * clx; \
         const float16 af0 = MB_LINE16 f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f)); \
         const float16 ao0 = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f)); \
-        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx / fmax(d2, 1.0f); \
+        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx * ((zden * ly) * q); \
         const int16 tap = (TAP);   /* lanes past their own S or at their centre: nothing */ \
         const float16 af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f; \
         const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k); \
