@@ -9,7 +9,8 @@
  * have length K, and ranking them by a rounding-level difference would not be reproducible.
  *
  * Defines: MOTION_BLUR_TILE (tile size K = the largest blur half-length in px),
- * MOTION_BLUR_SAMPLES (S_q, odd: the most taps; the centre tap is the pixel itself),
+ * MOTION_BLUR_SAMPLES (S_q, odd; the centre tap is the pixel itself), MOTION_BLUR_SAMPLES_MAX (odd:
+ * the most taps a frame whose motion covers few tiles may take, motion_blur_budget),
  * MOTION_BLUR_DENSITY (taps per px of half-path: S = min(S_q, 2 ceil(DENSITY |v_N|) + 1)).
  */
 #pragma OPENCL FP_CONTRACT OFF
@@ -261,15 +262,32 @@ inline float motion_blur_front(float wa, float wb) {
  * S strata of the path 2|v_N| are 2|v_N|/S px apart, so more than 2 ceil(DENSITY |v_N|) + 1 of them
  * only resample the same pixels. Odd, at most MOTION_BLUR_SAMPLES (the quality's S_q); the same
  * integer in the float16 form. */
-inline int motion_blur_taps(const float ln) {
-    return min(MOTION_BLUR_SAMPLES, 2 * (int)ceil(MOTION_BLUR_DENSITY * ln) + 1);
+inline int motion_blur_taps(const float ln, const int cap) {
+    return min(cap, 2 * (int)ceil(MOTION_BLUR_DENSITY * ln) + 1);
+}
+
+/* The frame's tap cap (one work-item): the quality's S_q times the share of tiles that run the
+ * gather at all (|v_N| > 0.5 px), rounded down to odd, within [S_q, MOTION_BLUR_SAMPLES_MAX]: a frame
+ * whose motion covers few tiles spends the taps its still tiles leave on its moving ones, bounded
+ * by what a frame moving everywhere costs at S_q. */
+__kernel void motion_blur_budget(__global const float *restrict nmax, __global int *restrict cap,
+                                 const int tw, const int th)
+{
+    if (get_global_id(0) != 0) return;
+    const int tn = tw * th;
+    int moving = 0;
+    for (int t = 0; t < tn; ++t)
+        moving += motion_blur_len2((float2)(nmax[t], nmax[tn + t])) > 0.25f ? 1 : 0;
+    int c = moving > 0 ? (MOTION_BLUR_SAMPLES * tn) / moving : MOTION_BLUR_SAMPLES;
+    c = clamp(c, MOTION_BLUR_SAMPLES, MOTION_BLUR_SAMPLES_MAX);
+    cap[0] = c - (1 - (c & 1));   /* odd (S_q and the maximum are odd) */
 }
 
 /* One pixel (every pixel with MOTION_BLUR_LANES 1, else the row's last 1-15 of the kernel below); motion_blur_16 is the same
  * arithmetic in 16 lanes. */
 inline void motion_blur_px(__global const float *restrict src, __global float *restrict dst,
                            __global const float *restrict hv, __global const float *restrict iz,
-                           __global const float *restrict nmax, const int x, const int y,
+                           __global const float *restrict nmax, const int cap, const int x, const int y,
                            const int width, const int height, const int tw, const int th,
                            const uint seed, const uint frame)
 {
@@ -296,7 +314,7 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     const float wx = iz[i];
     const float j = motion_blur_jitter(seed, frame, x, y);
     /* taps of this pixel (motion_blur_taps), strata <= 1 / MOTION_BLUR_DENSITY px apart */
-    const int ns = motion_blur_taps(ln);
+    const int ns = motion_blur_taps(ln, cap);
     const float inv_s = 1.0f / (float)ns;
     /* the tap paths reach half a pixel beyond |v| (the swept pixel's footprint, see the cylinder) */
     const float pn = ln + MOTION_BLUR_FOOT, pv = lv + MOTION_BLUR_FOOT;
@@ -435,7 +453,7 @@ inline float16 motion_blur_half16(uint16 b) {   /* motion_blur_half, 16 lanes */
 
 inline void motion_blur_16(__global const float *restrict src, __global float *restrict dst,
                            __global const float *restrict hv, __global const float *restrict iz,
-                           __global const float *restrict nmax, const int x0, const int y,
+                           __global const float *restrict nmax, const int cap, const int x0, const int y,
                            const int width, const int height, const int tw, const int th,
                            const uint seed, const uint frame)
 {
@@ -470,7 +488,7 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     const float16 j = jv - floor(jv) - 0.5f;
     /* motion_blur_taps per lane; the loop runs to the largest (a 16-pixel row spans at most two
      * tiles), lanes past their own S or at their own centre stratum add nothing */
-    const int16 ns = min((int16)MOTION_BLUR_SAMPLES, 2 * convert_int16(ceil(MOTION_BLUR_DENSITY * ln)) + 1);
+    const int16 ns = min((int16)cap, 2 * convert_int16(ceil(MOTION_BLUR_DENSITY * ln)) + 1);
     const int16 nc = ns / 2;
     const float16 inv_s = 1.0f / convert_float16(ns);
     const int8 m8 = max(ns.lo, ns.hi);
@@ -494,64 +512,64 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     /* loops of a constant length (unrolled, odd/even and the centre resolved at compile time): the
      * group's largest S; unmasked when every lane takes that S */
     switch (smax) {
-#if MOTION_BLUR_SAMPLES >= 3
+#if MOTION_BLUR_SAMPLES_MAX >= 3
     case 3: MB_LOOP16(3); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 5
+#if MOTION_BLUR_SAMPLES_MAX >= 5
     case 5: MB_LOOP16(5); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 7
+#if MOTION_BLUR_SAMPLES_MAX >= 7
     case 7: MB_LOOP16(7); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 9
+#if MOTION_BLUR_SAMPLES_MAX >= 9
     case 9: MB_LOOP16(9); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 11
+#if MOTION_BLUR_SAMPLES_MAX >= 11
     case 11: MB_LOOP16(11); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 13
+#if MOTION_BLUR_SAMPLES_MAX >= 13
     case 13: MB_LOOP16(13); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 15
+#if MOTION_BLUR_SAMPLES_MAX >= 15
     case 15: MB_LOOP16(15); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 17
+#if MOTION_BLUR_SAMPLES_MAX >= 17
     case 17: MB_LOOP16(17); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 19
+#if MOTION_BLUR_SAMPLES_MAX >= 19
     case 19: MB_LOOP16(19); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 21
+#if MOTION_BLUR_SAMPLES_MAX >= 21
     case 21: MB_LOOP16(21); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 23
+#if MOTION_BLUR_SAMPLES_MAX >= 23
     case 23: MB_LOOP16(23); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 25
+#if MOTION_BLUR_SAMPLES_MAX >= 25
     case 25: MB_LOOP16(25); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 27
+#if MOTION_BLUR_SAMPLES_MAX >= 27
     case 27: MB_LOOP16(27); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 29
+#if MOTION_BLUR_SAMPLES_MAX >= 29
     case 29: MB_LOOP16(29); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 31
+#if MOTION_BLUR_SAMPLES_MAX >= 31
     case 31: MB_LOOP16(31); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 33
+#if MOTION_BLUR_SAMPLES_MAX >= 33
     case 33: MB_LOOP16(33); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 35
+#if MOTION_BLUR_SAMPLES_MAX >= 35
     case 35: MB_LOOP16(35); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 37
+#if MOTION_BLUR_SAMPLES_MAX >= 37
     case 37: MB_LOOP16(37); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 39
+#if MOTION_BLUR_SAMPLES_MAX >= 39
     case 39: MB_LOOP16(39); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 41
+#if MOTION_BLUR_SAMPLES_MAX >= 41
     case 41: MB_LOOP16(41); break;
 #endif
     default: break;   /* S = 1: the centre only (|v_N| = 0, a still pixel) */
@@ -572,23 +590,24 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
 /* 16 pixels of a row per work-item (x0 = 16 gid0; the row's last 1-15 one by one), or one (LANES 1) */
 __kernel void motion_blur(__global const float *restrict src, __global float *restrict dst,
                           __global const float *restrict hv, __global const float *restrict iz,
-                          __global const float *restrict nmax,
+                          __global const float *restrict nmax, __global const int *restrict caps,
                           const int width, const int height, const int tw, const int th,
                           const uint seed, const uint frame)
 {
+    const int cap = caps[0];   /* motion_blur_budget */
 #if MOTION_BLUR_LANES == 16
     const int x0 = get_global_id(0) * 16, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     if (x0 + 16 <= width) {
-        motion_blur_16(src, dst, hv, iz, nmax, x0, y, width, height, tw, th, seed, frame);
+        motion_blur_16(src, dst, hv, iz, nmax, cap, x0, y, width, height, tw, th, seed, frame);
     } else {
         for (int x = x0; x < width; ++x)
-            motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame);
+            motion_blur_px(src, dst, hv, iz, nmax, cap, x, y, width, height, tw, th, seed, frame);
     }
 #else
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
-    motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame);
+    motion_blur_px(src, dst, hv, iz, nmax, cap, x, y, width, height, tw, th, seed, frame);
 #endif
 }
 

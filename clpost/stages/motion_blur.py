@@ -153,6 +153,8 @@ TILE = 20
 SAMPLES = {"draft": 5, "preview": 11, "final": 23}
 """S per quality level (odd: the centre stratum is the pixel itself); fewer than the 7/15/31 taps
 of the filter it replaced, to keep its cost (what each level costs: docs/motion_blur.md)."""
+SAMPLES_MAX = {"draft": 11, "preview": 23, "final": 23}
+"""The most taps per pixel (odd) when the frame's moving tiles leave budget (module docstring, "Taps")."""
 DENSITY = 1.5
 """Taps per px of |v_N|: a pixel takes S = min(S_q, 2⌈DENSITY |v_N|⌉ + 1) taps (module docstring)."""
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
@@ -241,6 +243,7 @@ class MotionBlur(GatherStage):
 
     def defines(self, camera):
         return {"MOTION_BLUR_TILE": TILE, "MOTION_BLUR_SAMPLES": self.samples,
+                "MOTION_BLUR_SAMPLES_MAX": SAMPLES_MAX[self.quality],
                 "MOTION_BLUR_DENSITY": f"{DENSITY!r}f"}
 
     def taps_per_pixel(self, camera, frame) -> int:
@@ -274,6 +277,7 @@ class MotionBlur(GatherStage):
         tw, th = -(-w // TILE), -(-h // TILE)
         return dict(hv=rt.scratch(self, "hv", (4, h, w)), iz=rt.scratch(self, "iz", (h, w)),
                     tile=rt.scratch(self, "tile", (3, th, tw)), nmax=rt.scratch(self, "nmax", (2, th, tw)),
+                    cap=rt.scratch(self, "cap", (1,), np.int32),
                     tmp=rt.scratch(self, "tmp", (3, h, w)), tw=tw, th=th)
 
     def replay_key(self, camera, frame):
@@ -299,8 +303,11 @@ class MotionBlur(GatherStage):
             k = self._kernel(rt, camera, "motion_blur_neighbormax")
             k.set_args(b["tile"], b["nmax"], np.int32(tw), np.int32(th))
             events.append(rt.launch(k, (tw, th)))
+            k = self._kernel(rt, camera, "motion_blur_budget")
+            k.set_args(b["nmax"], b["cap"], np.int32(tw), np.int32(th))
+            events.append(rt.launch(k, (1,)))
             k = self._kernel(rt, camera, "motion_blur")
-            k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], np.int32(w), np.int32(h),
+            k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], b["cap"], np.int32(w), np.int32(h),
                        np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(frame.index))
             events.append(rt.launch(k, *self._row_launch(rt, w, h)))
         if rolling:
@@ -321,7 +328,7 @@ class MotionBlur(GatherStage):
             raise InputError("motion_blur needs the frame's velocity buffer")
         if _blur_needed(camera, frame):
             out = reference_blur(out, frame.velocity, frame.depth, shutter_fraction(camera),
-                                 self.samples, frame.index)
+                                 self.samples, frame.index, samples_max=SAMPLES_MAX[self.quality])
         if _rolling_needed(camera, frame):
             out = reference_rolling(out, frame.velocity, camera.readout_time_s * camera.frame_rate_fps)
         return out
@@ -395,8 +402,19 @@ def tile_max(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def taps(ln32: np.ndarray, samples: int) -> np.ndarray:
-    """S per pixel (module docstring, "Taps"): min(samples, 2⌈DENSITY |v_N|⌉ + 1) from |v_N| in float32."""
+    """S per pixel (module docstring, "Taps"): min(samples, 2⌈DENSITY |v_N|⌉ + 1) from |v_N| in float32
+    (``samples``: the frame's cap, :func:`tap_cap`)."""
     return np.minimum(samples, 2 * np.ceil(np.float32(DENSITY) * ln32).astype(np.int64) + 1)
+
+
+def tap_cap(nmax: np.ndarray, samples: int, samples_max: int) -> int:
+    """The frame's cap C (module docstring, "Taps"; the kernel's ``motion_blur_budget``): S_q × tiles /
+    moving tiles (|v_N| > 0.5 px, tested in float32), rounded down to odd, within [S_q, S_max]."""
+    v = np.asarray(nmax[..., :2], np.float32)
+    moving = int(np.count_nonzero(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1] > np.float32(0.25)))
+    c = samples * v[..., 0].size // moving if moving else samples
+    c = min(max(c, samples), samples_max)
+    return c - (1 - (c & 1))
 
 
 def _len32(v32: np.ndarray) -> np.ndarray:
@@ -441,7 +459,7 @@ def effective_velocity(velocity: np.ndarray, depth: np.ndarray) -> tuple[np.ndar
 
 
 def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | None, fraction: float,
-                   samples: int, frame_index: int = 0, seed: int = SEED) -> np.ndarray:
+                   samples: int, frame_index: int = 0, seed: int = SEED, samples_max: int | None = None) -> np.ndarray:
     """The reconstruction filter of the module docstring in float64 (H×W×3 in and out)."""
     hh, ww = color.shape[:2]
     z = np.full((hh, ww), np.inf) if depth is None else np.asarray(depth, dtype=np.float64)
@@ -464,6 +482,7 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     cosang = (vn32[..., 0] * vx32[..., 0] + vn32[..., 1] * vx32[..., 1]) / np.maximum(ln * lv, 1e-30)
     agree = np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0)
     j = jitter(seed, frame_index, xs, ys)
+    samples = tap_cap(nmax, samples, samples if samples_max is None else samples_max)   # the frame's cap
     ns = taps(_len32(vn32), samples)                          # S per pixel
     inv = np.float32(1) / ns.astype(np.float32)
     inv64 = inv.astype(np.float64)
