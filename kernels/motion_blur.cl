@@ -49,6 +49,16 @@ inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
     return v - floor(v) - 0.5f;
 }
 
+/* IEEE half bits of f (|f| < 65504), rounded to nearest even; |f| below the smallest normal half
+ * gives 0 (flushed: motion_blur_half reads normals and zero only). Integer operations: the same bits
+ * on every device (numpy's float16 conversion in the reference). */
+inline uint motion_blur_half_bits(float f) {
+    const uint u = as_uint(f);
+    const uint m = u & 0x7fffffffu;
+    const uint r = (m + 0xfffu + ((m >> 13) & 1u) - 0x38000000u) >> 13;   /* rebias 127 -> 15, round */
+    return fabs(f) < MOTION_BLUR_HALF_MIN ? 0u : ((u >> 16) & 0x8000u) | r;
+}
+
 /* a half's bits (normal or zero: the prep flushes the rest) as a float, exactly: exponent and
  * mantissa moved into a float's fields (a float 2^112 times too small, still normal), then scaled */
 inline float motion_blur_half(uint b) {
@@ -112,13 +122,18 @@ inline void motion_blur_prep_px(__global const float *restrict velocity,
     hv[2 * n + i] = len;
     /* h as two halves in one 32-bit word (x low, y high): a tap loads Y's direction and length at once;
      * components below the smallest normal half flushed to 0 (motion_blur_unpack reads normals only) */
-    __global half *restrict hp = (__global half *)(hv + 3 * n);
-    vstore_half_rte(fabs(h.x) < MOTION_BLUR_HALF_MIN ? 0.0f : h.x, 2 * i, hp);
-    vstore_half_rte(fabs(h.y) < MOTION_BLUR_HALF_MIN ? 0.0f : h.y, 2 * i + 1, hp);
+    ((__global uint *)(hv + 3 * n))[i] = motion_blur_half_bits(h.x) | (motion_blur_half_bits(h.y) << 16);
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
 }
 
 #if MOTION_BLUR_LANES == 16
+inline uint16 motion_blur_half_bits16(const float16 f) {   /* motion_blur_half_bits, 16 lanes */
+    const uint16 u = as_uint16(f);
+    const uint16 m = u & 0x7fffffffu;
+    const uint16 r = (m + 0xfffu + ((m >> 13) & 1u) - 0x38000000u) >> 13;
+    return fabs(f) < MOTION_BLUR_HALF_MIN ? (uint16)0u : ((u >> 16) & 0x8000u) | r;
+}
+
 /* motion_blur_prep_px on 16 pixels of a row (x0 - 1 >= 0 and x0 + 16 < width: no column clamp),
  * lane for lane the same operations; neighbours are row loads at offsets -1, 0, +1 (velocity
  * interleaved: even/odd lanes of 32 floats). */
@@ -163,10 +178,8 @@ inline void motion_blur_prep_16(__global const float *restrict velocity,
     vstore16(hx0, 0, hv + i0);
     vstore16(hy0, 0, hv + n + i0);
     vstore16(moving ? len : 0.0f, 0, hv + 2 * n + i0);
-    const float16 px = fabs(hx0) < MOTION_BLUR_HALF_MIN ? 0.0f : hx0, py = fabs(hy0) < MOTION_BLUR_HALF_MIN ? 0.0f : hy0;
-    __global half *restrict hp = (__global half *)(hv + 3 * n);   /* motion_blur_prep_px's packed h */
-    vstore_half16_rte(shuffle2(px, py, (uint16)(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23)), 0, hp + 2 * i0);
-    vstore_half16_rte(shuffle2(px, py, (uint16)(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31)), 1, hp + 2 * i0);
+    vstore16(motion_blur_half_bits16(hx0) | (motion_blur_half_bits16(hy0) << 16), 0,
+             (__global uint *)(hv + 3 * n) + i0);   /* motion_blur_prep_px's packed h */
     vstore16(isinf(z) ? 0.0f : 1.0f / z, 0, iz + i0);
 }
 

@@ -35,15 +35,18 @@ further: its footprint),
 .. math::
 
     Y_i = \Big\lfloor X + d_i\,t_i + \tfrac12 \Big\rfloor, \quad t_i = -1 + 2\,\frac{i + \tfrac12 + j}{S},
-    \quad i \ne \tfrac{S-1}{2}, \qquad S = \min\big(S_q,\ 2\lceil D\,|v_N| \rceil + 1\big)
+    \quad i \ne \tfrac{S-1}{2}, \qquad S = \min\big(C,\ 2\lceil D\,|v_N| \rceil + 1\big)
 
 with the per-pixel jitter :math:`j = \mathrm{frac}(j_0 + \mathrm{frac}(a_1 x) + \mathrm{frac}(a_2 y)) - \tfrac12`:
 :math:`j_0 \in [0, 1)` from a counter-based hash of (seed, frame index) (CONVENTIONS "Randomness"),
 :math:`(a_1, a_2)` the R2 lattice (Roberts 2018, "The unreasonable effectiveness of quasirandom
 sequences": :math:`1/\varphi_2, 1/\varphi_2^2`, :math:`\varphi_2` the plastic number), so neighbouring pixels
 take well-spread strata and the few taps' noise is fine-grained (a per-pixel hash gave clumps of
-equal strata); the centre stratum is X itself. :math:`S_q` is the
-quality's tap count; a slower neighbourhood takes fewer: the S strata of the path :math:`2|v_N|` are
+equal strata); the centre stratum is X itself. C is the frame's cap: the quality's tap count
+:math:`S_q` times the share of tiles that run the gather at all (:math:`|v_N| > ½` px), rounded down
+to odd, within :math:`[S_q, S_{max}]` — a frame whose motion covers few tiles spends the taps its
+still tiles leave on its moving ones, never costing more than a frame moving everywhere at
+:math:`S_q` (where every tile moves, C = :math:`S_q`); a slower neighbourhood takes fewer: the S strata of the path :math:`2|v_N|` are
 then at most 1/D px apart (D = DENSITY = 1.5), so more taps would only resample the same pixels (a
 frame's cost follows its motion; the choice of D: ``docs/motion_blur.md``).
 
@@ -83,7 +86,8 @@ clamp((cos∠ − 0.8)/0.15, 0, 1)) the tap sets split the work: odd taps carry 
 hence the stage is *not planned* when no pixel's half-vector reaches 0.5 px (skipped ⇔ identity).
 
 **Quality** sets :math:`S_q` (the most taps per pixel; measured error and cost in
-``docs/motion_blur.md``): draft 5, preview 11, final 23. K = 20 px for all levels.
+``docs/motion_blur.md``): draft 5, preview 11, final 23, and :math:`S_{max}` (the frame cap's bound)
+draft 11, preview 23, final 23. K = 20 px for all levels.
 
 **Clamping.** :math:`|h|` is limited to K = 20 px (a streak of at most 40 px, i.e. 2K) keeping
 its direction: faster motion blurs as if it moved 2K px during the exposure, so its streak is
