@@ -4,7 +4,7 @@
  *
  * Buffers: colour planar (c*n + i); velocity interleaved (2i, 2i+1) px per frame, forward,
  * +x right, +y down; depth planar metres (+inf sky). Scratch: hv = clamped half-vectors and
- * their unclamped length and h again as two halves in one word (4 planes: x, y, key, packed), iz = 1/depth (0 for sky), tile and
+ * their unclamped length and h again packed in one word (4 planes: x, y, key, packed), iz = 1/depth (0 for sky), tile and
  * neighbour-max (3 planes each). Maxima are ranked by the unclamped length: clamped vectors all
  * have length K, and ranking them by a rounding-level difference would not be reproducible.
  *
@@ -32,7 +32,7 @@
 #define MOTION_BLUR_FOOT 0.5f      /* half a pixel: a swept pixel's footprint reaches this beyond |h| (FOOT in the .py) */
 #define MOTION_BLUR_AGREE0 0.8f    /* cos(v_N, h_X) below which the tap sets split (AGREE0/1 in the .py) */
 #define MOTION_BLUR_AGREE1 0.95f
-#define MOTION_BLUR_HALF_MIN 0x1p-14f   /* the smallest normal half */
+#define MOTION_BLUR_FIX 1024.0f   /* the packed half-vector's steps per px (FIX in the .py) */
 #define MOTION_BLUR_LINE 2.0f      /* a front surface reaches X within this of its motion line, +- 1/2 px (LINE in the .py) */
 
 #define MOTION_BLUR_R2X 0.7548776662f   /* the R2 lattice's steps per pixel in x and y (JITTER_R2 in the .py) */
@@ -49,25 +49,16 @@ inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
     return v - floor(v) - 0.5f;
 }
 
-/* IEEE half bits of f (|f| < 65504), rounded to nearest even; |f| below the smallest normal half
- * gives 0 (flushed: motion_blur_half reads normals and zero only). Integer operations: the same bits
- * on every device (numpy's float16 conversion in the reference). */
-inline uint motion_blur_half_bits(float f) {
-    const uint u = as_uint(f);
-    const uint m = u & 0x7fffffffu;
-    const uint r = (m + 0xfffu + ((m >> 13) & 1u) - 0x38000000u) >> 13;   /* rebias 127 -> 15, round */
-    return fabs(f) < MOTION_BLUR_HALF_MIN ? 0u : ((u >> 16) & 0x8000u) | r;
+/* h packed in one word for the taps: each component as a signed 16-bit count of 1/1024 px (|h| <= K
+ * = 20 px fits; rounded to nearest even by convert_int_rte, as numpy's rint in the reference), x in
+ * the low half, y in the high; the scale is a power of two, so packing and unpacking round once */
+inline uint motion_blur_pack(float2 h) {
+    const int qx = convert_int_rte(h.x * MOTION_BLUR_FIX), qy = convert_int_rte(h.y * MOTION_BLUR_FIX);
+    return ((uint)qx & 0xffffu) | ((uint)qy << 16);
 }
 
-/* a half's bits (normal or zero: the prep flushes the rest) as a float, exactly: exponent and
- * mantissa moved into a float's fields (a float 2^112 times too small, still normal), then scaled */
-inline float motion_blur_half(uint b) {
-    return as_float(((b & 0x8000u) << 16) | ((b & 0x7fffu) << 13)) * 0x1p112f;
-}
-
-/* the prep's packed half-vector (x in the low half, y in the high) */
 inline float2 motion_blur_unpack(uint w) {
-    return (float2)(motion_blur_half(w & 0xffffu), motion_blur_half(w >> 16));
+    return (float2)((float)(as_int(w << 16) >> 16), (float)(as_int(w) >> 16)) * (1.0f / MOTION_BLUR_FIX);
 }
 
 inline float motion_blur_len2(float2 v) {
@@ -120,19 +111,12 @@ inline void motion_blur_prep_px(__global const float *restrict velocity,
     hv[i] = h.x;
     hv[n + i] = h.y;
     hv[2 * n + i] = len;
-    /* h as two halves in one 32-bit word (x low, y high): a tap loads Y's direction and length at once;
-     * components below the smallest normal half flushed to 0 (motion_blur_unpack reads normals only) */
-    ((__global uint *)(hv + 3 * n))[i] = motion_blur_half_bits(h.x) | (motion_blur_half_bits(h.y) << 16);
+    /* h packed in one word: a tap loads Y's direction and length at once */
+    ((__global uint *)(hv + 3 * n))[i] = motion_blur_pack(h);
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
 }
 
 #if MOTION_BLUR_LANES == 16
-inline uint16 motion_blur_half_bits16(const float16 f) {   /* motion_blur_half_bits, 16 lanes */
-    const uint16 u = as_uint16(f);
-    const uint16 m = u & 0x7fffffffu;
-    const uint16 r = (m + 0xfffu + ((m >> 13) & 1u) - 0x38000000u) >> 13;
-    return fabs(f) < MOTION_BLUR_HALF_MIN ? (uint16)0u : ((u >> 16) & 0x8000u) | r;
-}
 
 /* motion_blur_prep_px on 16 pixels of a row (x0 - 1 >= 0 and x0 + 16 < width: no column clamp),
  * lane for lane the same operations; neighbours are row loads at offsets -1, 0, +1 (velocity
@@ -178,8 +162,8 @@ inline void motion_blur_prep_16(__global const float *restrict velocity,
     vstore16(hx0, 0, hv + i0);
     vstore16(hy0, 0, hv + n + i0);
     vstore16(moving ? len : 0.0f, 0, hv + 2 * n + i0);
-    vstore16(motion_blur_half_bits16(hx0) | (motion_blur_half_bits16(hy0) << 16), 0,
-             (__global uint *)(hv + 3 * n) + i0);   /* motion_blur_prep_px's packed h */
+    const int16 qx = convert_int16_rte(hx0 * MOTION_BLUR_FIX), qy = convert_int16_rte(hy0 * MOTION_BLUR_FIX);
+    vstore16((as_uint16(qx) & 0xffffu) | (as_uint16(qy) << 16), 0, (__global uint *)(hv + 3 * n) + i0);   /* motion_blur_pack */
     vstore16(isinf(z) ? 0.0f : 1.0f / z, 0, iz + i0);
 }
 
@@ -353,7 +337,7 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const float ddx = (float)(sx - x), ddy = (float)(sy - y);
         const float d2 = ddx * ddx + ddy * ddy;
         const float dist = sqrt(d2);
-        const float2 hy = motion_blur_unpack(((__global const uint *)(hv + 3 * n))[k]);   /* h_Y, halves */
+        const float2 hy = motion_blur_unpack(((__global const uint *)(hv + 3 * n))[k]);   /* h_Y, packed */
         const float ly = fmax(sqrt(motion_blur_len2(hy)), 0.5f);
         const float wy = iz[k];
         /* soft depth test: f = Y in front of X, b = X in front of Y (motion_blur_front, one division) */
@@ -407,9 +391,6 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
 }
 
 /* motion_blur_px's line weight: |d x h_Y| / |h_Y| from the packed h_Y */
-inline float16 motion_blur_half16(uint16 b) {   /* motion_blur_half, 16 lanes */
-    return as_float16(((b & 0x8000u) << 16) | ((b & 0x7fffu) << 13)) * 0x1p112f;
-}
 #define MB_LINE16 clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * hyy - ddy * hyx) * rly, 0.0f, 1.0f) *
 /* one tap s of motion_blur_16 on all lanes where TAP (int16) is true; uses and updates its locals */
 #define MB_TAP16(s, TAP) do { \
@@ -425,8 +406,9 @@ inline float16 motion_blur_half16(uint16 b) {   /* motion_blur_half, 16 lanes */
         const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y); \
         const float16 d2 = ddx * ddx + ddy * ddy; \
         const float16 dist = sqrt(d2); \
-        const uint16 pk = CLP_GATHER16U((__global const uint *)(hv + 3 * n), k);   /* h_Y, halves */ \
-        const float16 hyx = motion_blur_half16(pk & 0xffffu), hyy = motion_blur_half16(pk >> 16); \
+        const uint16 pk = CLP_GATHER16U((__global const uint *)(hv + 3 * n), k);   /* h_Y, packed */ \
+        const float16 hyx = convert_float16(as_int16(pk << 16) >> 16) * (1.0f / MOTION_BLUR_FIX); \
+        const float16 hyy = convert_float16(as_int16(pk) >> 16) * (1.0f / MOTION_BLUR_FIX);   /* motion_blur_unpack */ \
         const float16 ly = fmax(sqrt(hyx * hyx + hyy * hyy), 0.5f); \
         const float16 wy = MB_GATHER(iz, k); \
         const float16 zden = MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f); \

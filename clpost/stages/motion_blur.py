@@ -168,6 +168,8 @@ FOOT = 0.5
 the tap paths reach |v| + FOOT and the cylinders ramp over |h| ± FOOT (module docstring)."""
 FRINGE = 0.1
 LINE = 2.0
+FIX = 1024.0
+"""Steps per px of the packed half-vector a tap reads (|h| ≤ TILE = 20 px fits a signed 16-bit count)."""
 """A surface in front of X reaches X only within LINE ± ½ px of its own motion line (module docstring)."""
 JITTER_R2 = (0.7548776662, 0.5698402910)
 """The R2 lattice's steps per pixel in x and y (Roberts 2018, the plastic number's 1/φ₂, 1/φ₂²)."""
@@ -378,10 +380,9 @@ def half_vectors32(velocity: np.ndarray, k: float) -> np.ndarray:
 
 
 def packed_half_vectors(h32: np.ndarray) -> np.ndarray:
-    """h as a tap reads it (``motion_blur_prep`` packs both components as IEEE halves in one word,
-    rounded to nearest even, those below the smallest normal half flushed to 0), back in float32."""
-    h = np.where(np.abs(h32) < np.float32(2.0 ** -14), np.float32(0), h32)
-    return h.astype(np.float16).astype(np.float32)
+    """h as a tap reads it: ``motion_blur_prep`` packs each component as a signed 16-bit count of
+    1/FIX px (rounded to nearest even) in one word; back in float32."""
+    return (np.rint(h32 * np.float32(FIX)).astype(np.int16).astype(np.float32) * np.float32(1.0 / FIX))
 
 
 def _argmax_len(vecs: np.ndarray) -> np.ndarray:
