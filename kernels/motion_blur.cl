@@ -11,7 +11,7 @@
  * Defines: MOTION_BLUR_TILE (tile size K = the largest blur half-length in px),
  * MOTION_BLUR_SAMPLES (S_q, odd; the centre tap is the pixel itself), MOTION_BLUR_SAMPLES_MAX (odd:
  * the most taps a frame whose motion covers few tiles may take, motion_blur_budget),
- * MOTION_BLUR_DENSITY (taps per px of half-path: S = min(S_q, 2 ceil(DENSITY |v_N|) + 1)).
+ * MOTION_BLUR_DENSITY (taps per px of half-path: S = min(C, 2 ceil(DENSITY |v_N|) + 1), C the frame's cap).
  */
 #pragma OPENCL FP_CONTRACT OFF
 /* FP_CONTRACT OFF: no a*b+c fusion, so tap positions round exactly as in the numpy reference. */
