@@ -4,13 +4,14 @@
  *
  * Buffers: colour planar (c*n + i); velocity interleaved (2i, 2i+1) px per frame, forward,
  * +x right, +y down; depth planar metres (+inf sky). Scratch: hv = clamped half-vectors and
- * their unclamped length and max(|h|, 0.5) (4 planes: x, y, key, length), iz = 1/depth (0 for sky), tile and
+ * their unclamped length and h again packed in one word (4 planes: x, y, key, packed), iz = 1/depth (0 for sky), tile and
  * neighbour-max (3 planes each). Maxima are ranked by the unclamped length: clamped vectors all
  * have length K, and ranking them by a rounding-level difference would not be reproducible.
  *
  * Defines: MOTION_BLUR_TILE (tile size K = the largest blur half-length in px),
- * MOTION_BLUR_SAMPLES (S_q, odd: the most taps; the centre tap is the pixel itself),
- * MOTION_BLUR_DENSITY (taps per px of half-path: S = min(S_q, 2 ceil(DENSITY |v_N|) + 1)).
+ * MOTION_BLUR_SAMPLES (S_q, odd; the centre tap is the pixel itself), MOTION_BLUR_SAMPLES_MAX (odd:
+ * the most taps a frame whose motion covers few tiles may take, motion_blur_budget),
+ * MOTION_BLUR_DENSITY (taps per px of half-path: S = min(C, 2 ceil(DENSITY |v_N|) + 1), C the frame's cap).
  */
 #pragma OPENCL FP_CONTRACT OFF
 /* FP_CONTRACT OFF: no a*b+c fusion, so tap positions round exactly as in the numpy reference. */
@@ -31,12 +32,33 @@
 #define MOTION_BLUR_FOOT 0.5f      /* half a pixel: a swept pixel's footprint reaches this beyond |h| (FOOT in the .py) */
 #define MOTION_BLUR_AGREE0 0.8f    /* cos(v_N, h_X) below which the tap sets split (AGREE0/1 in the .py) */
 #define MOTION_BLUR_AGREE1 0.95f
+#define MOTION_BLUR_FIX 1024.0f   /* the packed half-vector's steps per px (FIX in the .py) */
+#define MOTION_BLUR_LINE 2.0f      /* a front surface reaches X within this of its motion line, +- 1/2 px (LINE in the .py) */
 
+#define MOTION_BLUR_R2X 0.7548776662f   /* the R2 lattice's steps per pixel in x and y (JITTER_R2 in the .py) */
+#define MOTION_BLUR_R2Y 0.5698402910f
 inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
-    /* j in [-0.5, 0.5): the counter hash of (seed, frame, x, y) of kernels/random.cl, per
-     * CONVENTIONS "Randomness"; 24 high bits, exact in float. */
-    const uint h = rnd_hash4(seed, frame, (uint)x, (uint)y);
-    return (float)(h >> 8) * (1.0f / 16777216.0f) - 0.5f;
+    /* j in [-0.5, 0.5): a per-frame offset from the counter hash of (seed, frame) of kernels/random.cl
+     * (CONVENTIONS "Randomness"; 24 high bits, exact in float) plus the R2 lattice
+     * frac(x a1 + y a2): neighbouring pixels take well-spread strata (blue-noise-like), so the few
+     * taps' noise is fine-grained; each fraction taken before the sum keeps float32 exact enough */
+    const float j0 = (float)(rnd_hash4(seed, frame, 0u, 0u) >> 8) * (1.0f / 16777216.0f);
+    const float a = (float)x * MOTION_BLUR_R2X;
+    const float b = (float)y * MOTION_BLUR_R2Y;
+    const float v = (a - floor(a)) + (b - floor(b)) + j0;
+    return v - floor(v) - 0.5f;
+}
+
+/* h packed in one word for the taps: each component as a signed 16-bit count of 1/1024 px (|h| <= K
+ * = 20 px fits; rounded to nearest even by convert_int_rte, as numpy's rint in the reference), x in
+ * the low half, y in the high; the scale is a power of two, so packing and unpacking round once */
+inline uint motion_blur_pack(float2 h) {
+    const int qx = convert_int_rte(h.x * MOTION_BLUR_FIX), qy = convert_int_rte(h.y * MOTION_BLUR_FIX);
+    return ((uint)qx & 0xffffu) | ((uint)qy << 16);
+}
+
+inline float2 motion_blur_unpack(uint w) {
+    return (float2)((float)(as_int(w << 16) >> 16), (float)(as_int(w) >> 16)) * (1.0f / MOTION_BLUR_FIX);
 }
 
 inline float motion_blur_len2(float2 v) {
@@ -89,11 +111,13 @@ inline void motion_blur_prep_px(__global const float *restrict velocity,
     hv[i] = h.x;
     hv[n + i] = h.y;
     hv[2 * n + i] = len;
-    hv[3 * n + i] = fmax(sqrt(motion_blur_len2(h)), 0.5f);   /* the gather's |h| (>= 0.5), one load per tap */
+    /* h packed in one word: a tap loads Y's direction and length at once */
+    ((__global uint *)(hv + 3 * n))[i] = motion_blur_pack(h);
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
 }
 
 #if MOTION_BLUR_LANES == 16
+
 /* motion_blur_prep_px on 16 pixels of a row (x0 - 1 >= 0 and x0 + 16 < width: no column clamp),
  * lane for lane the same operations; neighbours are row loads at offsets -1, 0, +1 (velocity
  * interleaved: even/odd lanes of 32 floats). */
@@ -138,7 +162,8 @@ inline void motion_blur_prep_16(__global const float *restrict velocity,
     vstore16(hx0, 0, hv + i0);
     vstore16(hy0, 0, hv + n + i0);
     vstore16(moving ? len : 0.0f, 0, hv + 2 * n + i0);
-    vstore16(fmax(sqrt(hx0 * hx0 + hy0 * hy0), 0.5f), 0, hv + 3 * n + i0);
+    const int16 qx = convert_int16_rte(hx0 * MOTION_BLUR_FIX), qy = convert_int16_rte(hy0 * MOTION_BLUR_FIX);
+    vstore16((as_uint16(qx) & 0xffffu) | (as_uint16(qy) << 16), 0, (__global uint *)(hv + 3 * n) + i0);   /* motion_blur_pack */
     vstore16(isinf(z) ? 0.0f : 1.0f / z, 0, iz + i0);
 }
 
@@ -234,15 +259,32 @@ inline float motion_blur_front(float wa, float wb) {
  * S strata of the path 2|v_N| are 2|v_N|/S px apart, so more than 2 ceil(DENSITY |v_N|) + 1 of them
  * only resample the same pixels. Odd, at most MOTION_BLUR_SAMPLES (the quality's S_q); the same
  * integer in the float16 form. */
-inline int motion_blur_taps(const float ln) {
-    return min(MOTION_BLUR_SAMPLES, 2 * (int)ceil(MOTION_BLUR_DENSITY * ln) + 1);
+inline int motion_blur_taps(const float ln, const int cap) {
+    return min(cap, 2 * (int)ceil(MOTION_BLUR_DENSITY * ln) + 1);
+}
+
+/* The frame's tap cap (one work-item): the quality's S_q times the share of tiles that run the
+ * gather at all (|v_N| > 0.5 px), rounded down to odd, within [S_q, MOTION_BLUR_SAMPLES_MAX]: a frame
+ * whose motion covers few tiles spends the taps its still tiles leave on its moving ones, bounded
+ * by what a frame moving everywhere costs at S_q. */
+__kernel void motion_blur_budget(__global const float *restrict nmax, __global int *restrict cap,
+                                 const int tw, const int th)
+{
+    if (get_global_id(0) != 0) return;
+    const int tn = tw * th;
+    int moving = 0;
+    for (int t = 0; t < tn; ++t)
+        moving += motion_blur_len2((float2)(nmax[t], nmax[tn + t])) > 0.25f ? 1 : 0;
+    int c = moving > 0 ? (MOTION_BLUR_SAMPLES * tn) / moving : MOTION_BLUR_SAMPLES;
+    c = clamp(c, MOTION_BLUR_SAMPLES, MOTION_BLUR_SAMPLES_MAX);
+    cap[0] = c - (1 - (c & 1));   /* odd (S_q and the maximum are odd) */
 }
 
 /* One pixel (every pixel with MOTION_BLUR_LANES 1, else the row's last 1-15 of the kernel below); motion_blur_16 is the same
  * arithmetic in 16 lanes. */
 inline void motion_blur_px(__global const float *restrict src, __global float *restrict dst,
                            __global const float *restrict hv, __global const float *restrict iz,
-                           __global const float *restrict nmax, const int x, const int y,
+                           __global const float *restrict nmax, const int cap, const int x, const int y,
                            const int width, const int height, const int tw, const int th,
                            const uint seed, const uint frame)
 {
@@ -269,7 +311,7 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     const float wx = iz[i];
     const float j = motion_blur_jitter(seed, frame, x, y);
     /* taps of this pixel (motion_blur_taps), strata <= 1 / MOTION_BLUR_DENSITY px apart */
-    const int ns = motion_blur_taps(ln);
+    const int ns = motion_blur_taps(ln, cap);
     const float inv_s = 1.0f / (float)ns;
     /* the tap paths reach half a pixel beyond |v| (the swept pixel's footprint, see the cylinder) */
     const float pn = ln + MOTION_BLUR_FOOT, pv = lv + MOTION_BLUR_FOOT;
@@ -295,11 +337,16 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const float ddx = (float)(sx - x), ddy = (float)(sy - y);
         const float d2 = ddx * ddx + ddy * ddy;
         const float dist = sqrt(d2);
-        const float2 hy = (float2)(hv[k], hv[n + k]);
+        const float2 hy = motion_blur_unpack(((__global const uint *)(hv + 3 * n))[k]);   /* h_Y, packed */
         const float ly = fmax(sqrt(motion_blur_len2(hy)), 0.5f);
         const float wy = iz[k];
         /* soft depth test: f = Y in front of X, b = X in front of Y (motion_blur_front, one division) */
-        const float r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f));
+        /* one division for the three per-tap quotients (depth test, 1/|h_Y|, 1/max(d, 1)^2) */
+        const float zden = MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f);
+        const float md2 = fmax(d2, 1.0f);
+        const float lm = ly * md2;
+        const float q = 1.0f / (zden * lm);
+        const float r = (wx - wy) * (lm * q);
         const float f = clamp(1.0f - r, 0.0f, 1.0f);
         const float b = clamp(1.0f + r, 0.0f, 1.0f);
         /* Y's surface passes over X for (path length per tap) / (Y's streak 2 |h_Y|) of the shutter;
@@ -307,11 +354,15 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
          * Background estimate (ab): surfaces behind X, or level with it whose streak misses X,
          * weighted by 1 / max(d, 1)^2 (what is hidden behind X looks most like what is next to it) */
         const float cly = motion_blur_cylinder(dist, ly);
-        const float a = cly * ((s & 1) ? hdv : hdn) / ly;
+        const float rly = (zden * md2) * q;
+        const float a = cly * ((s & 1) ? hdv : hdn) * rly;
         const float own = b * motion_blur_cylinder(dist, lx);   /* level with X and on X's path */
-        const float af = f * (1.0f - own) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
+        /* a surface in front reaches X only along its own motion line, give or take its footprint
+         * and a spinning object's spread of directions: |d x h_Y| / |h_Y| within LINE +- 1/2 px */
+        const float line = clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * hy.y - ddy * hy.x) * rly, 0.0f, 1.0f);
+        const float af = line * f * (1.0f - own) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
         const float ao = f * own * a * (agree + (1.0f - agree) * ((s & 1) ? 2.0f : 0.0f));
-        const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx) / fmax(d2, 1.0f);
+        const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx) * ((zden * ly) * q);
         const float3 cy = load_planar(src, k, n);
         cf += af;
         sf += af * cy;
@@ -339,6 +390,8 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
     return 1.0f - t * t * (3.0f - 2.0f * t);
 }
 
+/* motion_blur_px's line weight: |d x h_Y| / |h_Y| from the packed h_Y */
+#define MB_LINE16 clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * hyy - ddy * hyx) * rly, 0.0f, 1.0f) *
 /* one tap s of motion_blur_16 on all lanes where TAP (int16) is true; uses and updates its locals */
 #define MB_TAP16(s, TAP) do { \
         const int odd = (s) & 1; \
@@ -353,18 +406,26 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y); \
         const float16 d2 = ddx * ddx + ddy * ddy; \
         const float16 dist = sqrt(d2); \
-        const float16 ly = MB_GATHER(hv + 3 * n, k);   /* max(|h_Y|, 0.5) */ \
+        const uint16 pk = CLP_GATHER16U((__global const uint *)(hv + 3 * n), k);   /* h_Y, packed */ \
+        const float16 hyx = convert_float16(as_int16(pk << 16) >> 16) * (1.0f / MOTION_BLUR_FIX); \
+        const float16 hyy = convert_float16(as_int16(pk) >> 16) * (1.0f / MOTION_BLUR_FIX);   /* motion_blur_unpack */ \
+        const float16 ly = fmax(sqrt(hyx * hyx + hyy * hyy), 0.5f); \
         const float16 wy = MB_GATHER(iz, k); \
-        const float16 r = (wx - wy) / (MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f)); \
+        const float16 zden = MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f); \
+        const float16 md2 = fmax(d2, 1.0f); \
+        const float16 lm = ly * md2; \
+        const float16 q = 1.0f / (zden * lm); \
+        const float16 r = (wx - wy) * (lm * q); \
         const float16 f = clamp(1.0f - r, 0.0f, 1.0f); \
         const float16 b = clamp(1.0f + r, 0.0f, 1.0f); \
         const float16 cly = motion_blur_cyl16(dist, ly); \
-        const float16 a = cly * (odd ? hdv : hdn) / ly; \
+        const float16 rly = (zden * md2) * q; \
+        const float16 a = cly * (odd ? hdv : hdn) * rly; \
         const float16 clx = motion_blur_cyl16(dist, lx); \
         const float16 own = b * clx; \
-        const float16 af0 = f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f)); \
+        const float16 af0 = MB_LINE16 f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f)); \
         const float16 ao0 = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f)); \
-        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx / fmax(d2, 1.0f); \
+        const float16 ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx * ((zden * ly) * q); \
         const int16 tap = (TAP);   /* lanes past their own S or at their centre: nothing */ \
         const float16 af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f; \
         const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k); \
@@ -387,7 +448,7 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
 
 inline void motion_blur_16(__global const float *restrict src, __global float *restrict dst,
                            __global const float *restrict hv, __global const float *restrict iz,
-                           __global const float *restrict nmax, const int x0, const int y,
+                           __global const float *restrict nmax, const int cap, const int x0, const int y,
                            const int width, const int height, const int tw, const int th,
                            const uint seed, const uint frame)
 {
@@ -405,19 +466,24 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
         return;
     }
     const float16 hx = vload16(0, hv + i0), hy = vload16(0, hv + n + i0);
-    const float16 lx = vload16(0, hv + 3 * n + i0);   /* max(|h_X|, 0.5) */
-    const int16 own_dir = lx > 0.5f;                   /* |h_X| > 0.5 */
+    const float16 lhx = sqrt(hx * hx + hy * hy);
+    const float16 lx = fmax(lhx, 0.5f);
+    const int16 own_dir = lhx > 0.5f;
     const float16 vxx = own_dir ? hx : vnx, vxy = own_dir ? hy : vny;   /* odd taps follow X's own motion */
     const float16 ln = sqrt(l2n);
     const float16 lv = sqrt(vxx * vxx + vxy * vxy);
     const float16 cosang = (vnx * vxx + vny * vxy) / fmax(ln * lv, 1e-30f);
     const float16 agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
     const float16 wx = vload16(0, iz + i0);
-    const uint16 hj = rnd_hash4_w16(seed, frame, convert_uint16(xs), (uint16)((uint)y));
-    const float16 j = convert_float16(hj >> 8) * (1.0f / 16777216.0f) - 0.5f;   /* motion_blur_jitter */
+    /* motion_blur_jitter */
+    const float j0 = (float)(rnd_hash4(seed, frame, 0u, 0u) >> 8) * (1.0f / 16777216.0f);
+    const float16 ja = convert_float16(xs) * MOTION_BLUR_R2X;
+    const float jb = (float)y * MOTION_BLUR_R2Y;
+    const float16 jv = (ja - floor(ja)) + (jb - floor(jb)) + j0;
+    const float16 j = jv - floor(jv) - 0.5f;
     /* motion_blur_taps per lane; the loop runs to the largest (a 16-pixel row spans at most two
      * tiles), lanes past their own S or at their own centre stratum add nothing */
-    const int16 ns = min((int16)MOTION_BLUR_SAMPLES, 2 * convert_int16(ceil(MOTION_BLUR_DENSITY * ln)) + 1);
+    const int16 ns = min((int16)cap, 2 * convert_int16(ceil(MOTION_BLUR_DENSITY * ln)) + 1);
     const int16 nc = ns / 2;
     const float16 inv_s = 1.0f / convert_float16(ns);
     const int8 m8 = max(ns.lo, ns.hi);
@@ -441,64 +507,64 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     /* loops of a constant length (unrolled, odd/even and the centre resolved at compile time): the
      * group's largest S; unmasked when every lane takes that S */
     switch (smax) {
-#if MOTION_BLUR_SAMPLES >= 3
+#if MOTION_BLUR_SAMPLES_MAX >= 3
     case 3: MB_LOOP16(3); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 5
+#if MOTION_BLUR_SAMPLES_MAX >= 5
     case 5: MB_LOOP16(5); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 7
+#if MOTION_BLUR_SAMPLES_MAX >= 7
     case 7: MB_LOOP16(7); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 9
+#if MOTION_BLUR_SAMPLES_MAX >= 9
     case 9: MB_LOOP16(9); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 11
+#if MOTION_BLUR_SAMPLES_MAX >= 11
     case 11: MB_LOOP16(11); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 13
+#if MOTION_BLUR_SAMPLES_MAX >= 13
     case 13: MB_LOOP16(13); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 15
+#if MOTION_BLUR_SAMPLES_MAX >= 15
     case 15: MB_LOOP16(15); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 17
+#if MOTION_BLUR_SAMPLES_MAX >= 17
     case 17: MB_LOOP16(17); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 19
+#if MOTION_BLUR_SAMPLES_MAX >= 19
     case 19: MB_LOOP16(19); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 21
+#if MOTION_BLUR_SAMPLES_MAX >= 21
     case 21: MB_LOOP16(21); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 23
+#if MOTION_BLUR_SAMPLES_MAX >= 23
     case 23: MB_LOOP16(23); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 25
+#if MOTION_BLUR_SAMPLES_MAX >= 25
     case 25: MB_LOOP16(25); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 27
+#if MOTION_BLUR_SAMPLES_MAX >= 27
     case 27: MB_LOOP16(27); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 29
+#if MOTION_BLUR_SAMPLES_MAX >= 29
     case 29: MB_LOOP16(29); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 31
+#if MOTION_BLUR_SAMPLES_MAX >= 31
     case 31: MB_LOOP16(31); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 33
+#if MOTION_BLUR_SAMPLES_MAX >= 33
     case 33: MB_LOOP16(33); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 35
+#if MOTION_BLUR_SAMPLES_MAX >= 35
     case 35: MB_LOOP16(35); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 37
+#if MOTION_BLUR_SAMPLES_MAX >= 37
     case 37: MB_LOOP16(37); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 39
+#if MOTION_BLUR_SAMPLES_MAX >= 39
     case 39: MB_LOOP16(39); break;
 #endif
-#if MOTION_BLUR_SAMPLES >= 41
+#if MOTION_BLUR_SAMPLES_MAX >= 41
     case 41: MB_LOOP16(41); break;
 #endif
     default: break;   /* S = 1: the centre only (|v_N| = 0, a still pixel) */
@@ -519,23 +585,24 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
 /* 16 pixels of a row per work-item (x0 = 16 gid0; the row's last 1-15 one by one), or one (LANES 1) */
 __kernel void motion_blur(__global const float *restrict src, __global float *restrict dst,
                           __global const float *restrict hv, __global const float *restrict iz,
-                          __global const float *restrict nmax,
+                          __global const float *restrict nmax, __global const int *restrict caps,
                           const int width, const int height, const int tw, const int th,
                           const uint seed, const uint frame)
 {
+    const int cap = caps[0];   /* motion_blur_budget */
 #if MOTION_BLUR_LANES == 16
     const int x0 = get_global_id(0) * 16, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     if (x0 + 16 <= width) {
-        motion_blur_16(src, dst, hv, iz, nmax, x0, y, width, height, tw, th, seed, frame);
+        motion_blur_16(src, dst, hv, iz, nmax, cap, x0, y, width, height, tw, th, seed, frame);
     } else {
         for (int x = x0; x < width; ++x)
-            motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame);
+            motion_blur_px(src, dst, hv, iz, nmax, cap, x, y, width, height, tw, th, seed, frame);
     }
 #else
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
-    motion_blur_px(src, dst, hv, iz, nmax, x, y, width, height, tw, th, seed, frame);
+    motion_blur_px(src, dst, hv, iz, nmax, cap, x, y, width, height, tw, th, seed, frame);
 #endif
 }
 

@@ -5,8 +5,8 @@ from hypothesis import given, strategies as st
 
 from clpost import Camera, Frame, Pipeline
 from clpost.errors import InputError
-from clpost.stages.motion_blur import (DENSITY, SAMPLES, TILE, MotionBlur, half_vectors, jitter,
-                                       shutter_fraction, shutter_from_angle, taps)
+from clpost.stages.motion_blur import (DENSITY, SAMPLES, SAMPLES_MAX, TILE, MotionBlur, half_vectors, jitter,
+                                       shutter_fraction, shutter_from_angle, tap_cap, taps, tile_max)
 
 from conftest import assert_planned
 
@@ -53,6 +53,45 @@ def test_tap_count_follows_the_neighbourhood_speed():
         assert (2 * ln[dense] / s[dense] <= 1.0 / DENSITY).all()
     assert DENSITY == 1.5   # the values below: 2 ceil(1.5 |v_N|) + 1
     np.testing.assert_array_equal(taps(ln, 23), [1, 3, 5, 5, 7, 13, 23])
+
+
+def test_tap_cap_spends_the_still_tiles_budget_within_bounds():
+    # C = S_q x tiles / moving tiles, rounded down to odd, in [S_q, S_max]
+    nmax = np.zeros((4, 6, 2))
+    assert tap_cap(nmax, 5, 11) == 5                      # nothing moves: S_q
+    nmax[0, 0] = (0.6, 0.0)                               # 1 of 24 tiles: 120 -> 11
+    assert tap_cap(nmax, 5, 11) == 11
+    nmax[:2, :] = (0.0, 0.6)                              # 12 of 24: 10 -> 9 (odd)
+    assert tap_cap(nmax, 5, 11) == 9
+    nmax[:2, :] = (0.0, 0.5)                              # |v_N| = 0.5 does not run the gather
+    assert tap_cap(nmax, 5, 11) == 5
+    nmax[:] = (3.0, 4.0)                                  # everything moves: S_q
+    assert tap_cap(nmax, 23, 23) == 23 and tap_cap(nmax, 5, 11) == 5
+    assert all(SAMPLES_MAX[q] >= SAMPLES[q] and SAMPLES_MAX[q] % 2 == 1 for q in SAMPLES)
+
+
+@pytest.mark.parametrize("quality", list(SAMPLES))
+def test_sparse_motion_takes_more_taps_in_both_forms(rng, monkeypatch, quality):
+    """A mover in 2 of 24 tiles: the frame's cap rises to S_max (draft 5 -> 11); the kernel matches
+    the reference and the one-pixel form the 16-wide one."""
+    from clpost.runtime import Runtime
+
+    h, w = 4 * TILE, 6 * TILE
+    color = (rng.random((h, w, 3)) * 10).astype(np.float32)
+    vel = np.zeros((h, w, 2), np.float32)
+    vel[5:15, 3:17] = (60.0, 10.0)                        # |h| 15 px: S_max taps where it reaches
+    depth = rng.uniform(1.0, 30.0, (h, w)).astype(np.float32)
+    frame = Frame(color, depth=depth, velocity=vel, metadata={"frame_index": 4})
+    _, nm = tile_max(half_vectors(vel, 0.25, True))
+    assert tap_cap(nm, SAMPLES[quality], SAMPLES_MAX[quality]) == SAMPLES_MAX[quality]
+    want, _ = _compare(CAM, frame, quality, tol=2e-4)
+    monkeypatch.setattr(Runtime, "wide", property(lambda self: False))
+    got, _ = _compare(CAM, frame, quality, tol=2e-4)
+    np.testing.assert_allclose(got, want, rtol=2e-6, atol=2e-6)
+    if SAMPLES_MAX[quality] > SAMPLES[quality]:         # and it differs from S_q taps
+        from clpost.stages.motion_blur import reference_blur
+        old = reference_blur(color.astype(np.float64), vel, depth, 0.5, SAMPLES[quality], 4)
+        assert np.abs(old - want).max() > 0.1
 
 
 @pytest.mark.parametrize("quality", list(SAMPLES))
@@ -211,6 +250,40 @@ def test_deterministic_and_jitter_depends_on_frame_index(rng):
     xs, ys = np.meshgrid(np.arange(64), np.arange(64))
     j = jitter(1, 2, xs, ys)
     assert j.dtype == np.float32 and -0.5 <= j.min() and j.max() < 0.5 and abs(j.mean()) < 0.02
+
+
+def test_jitter_spreads_neighbouring_pixels_over_the_strata():
+    # the R2 lattice: any 8 consecutive pixels of a row, and any 3x3 block, leave no gap in [-1/2, 1/2)
+    # (circular) wider than 0.25 / 0.2 — independent uniform draws leave gaps of 0.7 and more here
+    ys, xs = np.mgrid[0:64, 0:64]
+    for frame in (0, 5):
+        j = jitter(1, frame, xs, ys)
+
+        def gap(v):
+            v = np.sort(v)
+            return np.diff(np.concatenate([v, v[:1] + 1.0])).max()
+
+        assert max(gap(j[y, x:x + 8]) for y in range(64) for x in range(56)) < 0.25
+        assert max(gap(j[y:y + 3, x:x + 3].ravel()) for y in range(62) for x in range(62)) < 0.2
+
+
+def test_front_surface_reaches_only_pixels_on_its_own_motion_line(rng):
+    # a bar sliding right (|h| 5 px) above a static wall, and a faster diagonal mover in the same tile
+    # neighbourhood, so v_N is diagonal: taps of a wall pixel 3 rows below the bar run diagonally into
+    # the bar within its half-length (4.2 px). The bar never passes over that pixel (3 px off the
+    # bar's motion line, beyond LINE + 1/2): no smear (without the line test: up to 1.1 here).
+    h, w = 60, 60
+    color = np.full((h, w, 3), 0.2, np.float32)
+    vel = np.zeros((h, w, 2), np.float32)
+    depth = np.full((h, w), 10.0, np.float32)
+    color[20:24, 20:30] = 5.0
+    vel[20:24, 20:30] = (20.0, 0.0)        # 180°: |h| = 5 px
+    depth[20:24, 20:30] = 2.0
+    vel[40:44, 40:44] = (30.0, 30.0)       # the neighbourhood's fastest: v_N diagonal
+    depth[40:44, 40:44] = 2.0
+    frame = Frame(color, depth=depth, velocity=vel, metadata={"frame_index": 2})
+    out, ref = _compare(CAM, frame, "final")
+    assert np.abs(out[26, 18:32, 0] - 0.2).max() < 1e-3, out[26, 18:32, 0]
 
 
 def test_clamp_keeps_direction_and_caps_length():

@@ -35,11 +35,18 @@ further: its footprint),
 .. math::
 
     Y_i = \Big\lfloor X + d_i\,t_i + \tfrac12 \Big\rfloor, \quad t_i = -1 + 2\,\frac{i + \tfrac12 + j}{S},
-    \quad i \ne \tfrac{S-1}{2}, \qquad S = \min\big(S_q,\ 2\lceil D\,|v_N| \rceil + 1\big)
+    \quad i \ne \tfrac{S-1}{2}, \qquad S = \min\big(C,\ 2\lceil D\,|v_N| \rceil + 1\big)
 
-with :math:`j \in [-\tfrac12, \tfrac12)` a per-pixel jitter from a counter-based hash of (seed,
-frame index, x, y) (CONVENTIONS "Randomness"); the centre stratum is X itself. :math:`S_q` is the
-quality's tap count; a slower neighbourhood takes fewer: the S strata of the path :math:`2|v_N|` are
+with the per-pixel jitter :math:`j = \mathrm{frac}(j_0 + \mathrm{frac}(a_1 x) + \mathrm{frac}(a_2 y)) - \tfrac12`:
+:math:`j_0 \in [0, 1)` from a counter-based hash of (seed, frame index) (CONVENTIONS "Randomness"),
+:math:`(a_1, a_2)` the R2 lattice (Roberts 2018, "The unreasonable effectiveness of quasirandom
+sequences": :math:`1/\varphi_2, 1/\varphi_2^2`, :math:`\varphi_2` the plastic number), so neighbouring pixels
+take well-spread strata and the few taps' noise is fine-grained (a per-pixel hash gave clumps of
+equal strata); the centre stratum is X itself. C is the frame's cap: the quality's tap count
+:math:`S_q` times the share of tiles that run the gather at all (:math:`|v_N| > ½` px), rounded down
+to odd, within :math:`[S_q, S_{max}]` — a frame whose motion covers few tiles spends the taps its
+still tiles leave on its moving ones, never costing more than a frame moving everywhere at
+:math:`S_q` (where every tile moves, C = :math:`S_q`); a slower neighbourhood takes fewer: the S strata of the path :math:`2|v_N|` are
 then at most 1/D px apart (D = DENSITY = 1.5), so more taps would only resample the same pixels (a
 frame's cost follows its motion; the choice of D: ``docs/motion_blur.md``).
 
@@ -52,7 +59,11 @@ streak, ramping over the swept pixel's footprint; its integral over d stays 2l).
 own path"), three layers are gathered:
 
 - in front of X (or level but off X's path, e.g. a light sliding over a wall at its depth):
-  :math:`c_F = \sum f(1-o_i)\,a_i\,g_i^F`, colour F = their weighted mean;
+  :math:`c_F = \sum f(1-o_i)\,\ell_i\,a_i\,g_i^F`, colour F = their weighted mean; a surface in front
+  reaches X only along its own motion line, give or take its footprint and a spinning object's
+  spread of directions: :math:`\ell_i = \mathrm{clamp}(L + \tfrac12 - |d \times h_Y| / |h_Y|, 0, 1)`,
+  L = LINE = 2 px (the cylinder alone is isotropic: a fast neighbour's streak would reach X from any
+  side, e.g. a sliding cube's smear onto the static wall below it);
 - X's own surface along its path: :math:`c_O = w_c + \sum f\,o_i\,a_i\,g_i^O` with X itself at
   :math:`w_c = \max(\bar\delta, 1) / (2|h_X|)` (its footprint: the centre stratum's path, at least
   the pixel; a static pixel is its own surface all the time), colour O = weighted mean (a box for
@@ -75,7 +86,8 @@ clamp((cos∠ − 0.8)/0.15, 0, 1)) the tap sets split the work: odd taps carry 
 hence the stage is *not planned* when no pixel's half-vector reaches 0.5 px (skipped ⇔ identity).
 
 **Quality** sets :math:`S_q` (the most taps per pixel; measured error and cost in
-``docs/motion_blur.md``): draft 5, preview 11, final 23. K = 20 px for all levels.
+``docs/motion_blur.md``): draft 5, preview 11, final 23, and :math:`S_{max}` (the frame cap's bound)
+draft 11, preview 23, final 23. K = 20 px for all levels.
 
 **Clamping.** :math:`|h|` is limited to K = 20 px (a streak of at most 40 px, i.e. 2K) keeping
 its direction: faster motion blurs as if it moved 2K px during the exposure, so its streak is
@@ -145,6 +157,8 @@ TILE = 20
 SAMPLES = {"draft": 5, "preview": 11, "final": 23}
 """S per quality level (odd: the centre stratum is the pixel itself); fewer than the 7/15/31 taps
 of the filter it replaced, to keep its cost (what each level costs: docs/motion_blur.md)."""
+SAMPLES_MAX = {"draft": 11, "preview": 23, "final": 23}
+"""The most taps per pixel (odd) when the frame's moving tiles leave budget (module docstring, "Taps")."""
 DENSITY = 1.5
 """Taps per px of |v_N|: a pixel takes S = min(S_q, 2⌈DENSITY |v_N|⌉ + 1) taps (module docstring)."""
 SEED = 0x6D62  # "mb": the jitter's hash seed, fixed so output is reproducible
@@ -153,6 +167,12 @@ FOOT = 0.5
 """Half a pixel: a surface pixel swept over ±|h| overlaps a pixel partly up to FOOT beyond |h|, so
 the tap paths reach |v| + FOOT and the cylinders ramp over |h| ± FOOT (module docstring)."""
 FRINGE = 0.1
+LINE = 2.0
+FIX = 1024.0
+"""Steps per px of the packed half-vector a tap reads (|h| ≤ TILE = 20 px fits a signed 16-bit count)."""
+"""A surface in front of X reaches X only within LINE ± ½ px of its own motion line (module docstring)."""
+JITTER_R2 = (0.7548776662, 0.5698402910)
+"""The R2 lattice's steps per pixel in x and y (Roberts 2018, the plastic number's 1/φ₂, 1/φ₂²)."""
 AGREE0, AGREE1 = 0.8, 0.95
 """cos(angle) between v_N and X's own half-vector below which the two tap sets split the work."""
 """A pixel faster than FRINGE × its fastest 3×3 neighbour takes that neighbour's motion (fringe rule)."""
@@ -229,6 +249,7 @@ class MotionBlur(GatherStage):
 
     def defines(self, camera):
         return {"MOTION_BLUR_TILE": TILE, "MOTION_BLUR_SAMPLES": self.samples,
+                "MOTION_BLUR_SAMPLES_MAX": SAMPLES_MAX[self.quality],
                 "MOTION_BLUR_DENSITY": f"{DENSITY!r}f"}
 
     def taps_per_pixel(self, camera, frame) -> int:
@@ -262,6 +283,7 @@ class MotionBlur(GatherStage):
         tw, th = -(-w // TILE), -(-h // TILE)
         return dict(hv=rt.scratch(self, "hv", (4, h, w)), iz=rt.scratch(self, "iz", (h, w)),
                     tile=rt.scratch(self, "tile", (3, th, tw)), nmax=rt.scratch(self, "nmax", (2, th, tw)),
+                    cap=rt.scratch(self, "cap", (1,), np.int32),
                     tmp=rt.scratch(self, "tmp", (3, h, w)), tw=tw, th=th)
 
     def replay_key(self, camera, frame):
@@ -287,8 +309,11 @@ class MotionBlur(GatherStage):
             k = self._kernel(rt, camera, "motion_blur_neighbormax")
             k.set_args(b["tile"], b["nmax"], np.int32(tw), np.int32(th))
             events.append(rt.launch(k, (tw, th)))
+            k = self._kernel(rt, camera, "motion_blur_budget")
+            k.set_args(b["nmax"], b["cap"], np.int32(tw), np.int32(th))
+            events.append(rt.launch(k, (1,)))
             k = self._kernel(rt, camera, "motion_blur")
-            k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], np.int32(w), np.int32(h),
+            k.set_args(src, blur_dst, b["hv"], b["iz"], b["nmax"], b["cap"], np.int32(w), np.int32(h),
                        np.int32(tw), np.int32(th), np.uint32(SEED), np.uint32(frame.index))
             events.append(rt.launch(k, *self._row_launch(rt, w, h)))
         if rolling:
@@ -309,7 +334,7 @@ class MotionBlur(GatherStage):
             raise InputError("motion_blur needs the frame's velocity buffer")
         if _blur_needed(camera, frame):
             out = reference_blur(out, frame.velocity, frame.depth, shutter_fraction(camera),
-                                 self.samples, frame.index)
+                                 self.samples, frame.index, samples_max=SAMPLES_MAX[self.quality])
         if _rolling_needed(camera, frame):
             out = reference_rolling(out, frame.velocity, camera.readout_time_s * camera.frame_rate_fps)
         return out
@@ -318,9 +343,14 @@ class MotionBlur(GatherStage):
 # -- numpy reference ---------------------------------------------------------------------------
 
 def jitter(seed: int, frame: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Per-pixel jitter j ∈ [−½, ½) — the kernel's ``motion_blur_jitter`` (float32)."""
-    h = rnd.hash4(seed, frame, np.asarray(x).astype(np.uint32), np.asarray(y).astype(np.uint32))
-    return ((h >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0) - np.float32(0.5))
+    """Per-pixel jitter j ∈ [−½, ½) — the kernel's ``motion_blur_jitter`` (float32, operation for
+    operation): the per-frame hash offset plus the R2 lattice (module docstring, "Taps")."""
+    h = rnd.hash4(seed, frame, np.uint32(0), np.uint32(0))
+    j0 = (np.uint32(h) >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0)
+    a = np.asarray(x).astype(np.float32) * np.float32(JITTER_R2[0])
+    b = np.asarray(y).astype(np.float32) * np.float32(JITTER_R2[1])
+    v = ((a - np.floor(a)) + (b - np.floor(b))) + j0
+    return ((v - np.floor(v)) - np.float32(0.5)).astype(np.float32)
 
 
 def half_vectors(velocity: np.ndarray, k: float, with_length: bool = False) -> np.ndarray:
@@ -349,6 +379,12 @@ def half_vectors32(velocity: np.ndarray, k: float) -> np.ndarray:
     return np.where(m > 0, np.concatenate([h, length], axis=-1), np.float32(0)).astype(np.float32)
 
 
+def packed_half_vectors(h32: np.ndarray) -> np.ndarray:
+    """h as a tap reads it: ``motion_blur_prep`` packs each component as a signed 16-bit count of
+    1/FIX px (rounded to nearest even) in one word; back in float32."""
+    return (np.rint(h32 * np.float32(FIX)).astype(np.int16).astype(np.float32) * np.float32(1.0 / FIX))
+
+
 def _argmax_len(vecs: np.ndarray) -> np.ndarray:
     """vecs (..., N, 3) → the one of the N with the largest key (component 2; first on ties)."""
     idx = np.argmax(vecs[..., 2], axis=-1)
@@ -371,8 +407,19 @@ def tile_max(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def taps(ln32: np.ndarray, samples: int) -> np.ndarray:
-    """S per pixel (module docstring, "Taps"): min(samples, 2⌈DENSITY |v_N|⌉ + 1) from |v_N| in float32."""
+    """S per pixel (module docstring, "Taps"): min(samples, 2⌈DENSITY |v_N|⌉ + 1) from |v_N| in float32
+    (``samples``: the frame's cap, :func:`tap_cap`)."""
     return np.minimum(samples, 2 * np.ceil(np.float32(DENSITY) * ln32).astype(np.int64) + 1)
+
+
+def tap_cap(nmax: np.ndarray, samples: int, samples_max: int) -> int:
+    """The frame's cap C (module docstring, "Taps"; the kernel's ``motion_blur_budget``): S_q × tiles /
+    moving tiles (|v_N| > 0.5 px, tested in float32), rounded down to odd, within [S_q, S_max]."""
+    v = np.asarray(nmax[..., :2], np.float32)
+    moving = int(np.count_nonzero(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1] > np.float32(0.25)))
+    c = samples * v[..., 0].size // moving if moving else samples
+    c = min(max(c, samples), samples_max)
+    return c - (1 - (c & 1))
 
 
 def _len32(v32: np.ndarray) -> np.ndarray:
@@ -417,7 +464,7 @@ def effective_velocity(velocity: np.ndarray, depth: np.ndarray) -> tuple[np.ndar
 
 
 def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | None, fraction: float,
-                   samples: int, frame_index: int = 0, seed: int = SEED) -> np.ndarray:
+                   samples: int, frame_index: int = 0, seed: int = SEED, samples_max: int | None = None) -> np.ndarray:
     """The reconstruction filter of the module docstring in float64 (H×W×3 in and out)."""
     hh, ww = color.shape[:2]
     z = np.full((hh, ww), np.inf) if depth is None else np.asarray(depth, dtype=np.float64)
@@ -425,6 +472,7 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     hk = half_vectors32(velocity, np.float32(fraction / 2.0))
     h32 = hk[..., :2]
     h = h32.astype(np.float64)
+    hp = packed_half_vectors(h32)                            # what a tap reads of Y
     _, nmax = tile_max(hk.astype(np.float64))
     ys, xs = np.mgrid[0:hh, 0:ww]
     vn = nmax[ys // TILE, xs // TILE, :2]
@@ -439,6 +487,7 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     cosang = (vn32[..., 0] * vx32[..., 0] + vn32[..., 1] * vx32[..., 1]) / np.maximum(ln * lv, 1e-30)
     agree = np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0)
     j = jitter(seed, frame_index, xs, ys)
+    samples = tap_cap(nmax, samples, samples if samples_max is None else samples_max)   # the frame's cap
     ns = taps(_len32(vn32), samples)                          # S per pixel
     inv = np.float32(1) / ns.astype(np.float32)
     inv64 = inv.astype(np.float64)
@@ -463,14 +512,16 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         sy = np.clip(np.floor(ys.astype(np.float32) + oy + np.float32(0.5)).astype(np.int64), 0, hh - 1)
         dx32, dy32 = (sx - xs).astype(np.float32), (sy - ys).astype(np.float32)
         dist = np.sqrt(dx32 * dx32 + dy32 * dy32)
-        ly32 = np.maximum(_len32(h32[sy, sx]), np.float32(0.5))
+        ly32 = np.maximum(_len32(hp[sy, sx]), np.float32(0.5))
         ly = ly32.astype(np.float64)
         wy = iz[sy, sx]
         f, b = _front(wy, iz), _front(iz, wy)
         cly = _cylinder32(dist, ly32)
         a = tap * cly * (pv if s % 2 else pn) * inv64 / ly
         own = b * _cylinder32(dist, lx32)        # level with X and on X's own path
-        af = f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
+        hy = hp[sy, sx].astype(np.float64)
+        line = np.clip(LINE + 0.5 - np.abs(dx32 * hy[..., 1] - dy32 * hy[..., 0]) / ly, 0.0, 1.0)
+        af = line * f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
         ao = f * own * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
         ab = (tap * b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
               / np.maximum(dx32 * dx32 + dy32 * dy32, np.float32(1)))                 # nearest look most like it
