@@ -145,9 +145,21 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
             for (int a = -1; a <= 1; ++a) {
                 if (a == 0 && b == 1) continue;
                 const float16 dq = vload16(0, depth + rows[b] + a);
-                const int16 sm = (dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq);  /* true lanes are -1 */
-                same -= sm;
-                ring |= (sm & 1) << dof_ring_pos(a, b - 1);
+                same -= (dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq);  /* true lanes are -1 */
+            }
+        /* most groups: no lane has few enough same-depth neighbours (the count alone, as
+         * DOF_CANDIDATE needs `same` <= DOF_SPECKLE_MAX_SAME) */
+        if (!any(same <= DOF_SPECKLE_MAX_SAME)) {
+            vstore16(d, 0, out + i);
+            return;
+        }
+#pragma unroll
+        for (int b = 0; b < 3; ++b)
+#pragma unroll
+            for (int a = -1; a <= 1; ++a) {
+                if (a == 0 && b == 1) continue;
+                const float16 dq = vload16(0, depth + rows[b] + a);
+                ring |= (((dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq)) & 1) << dof_ring_pos(a, b - 1);
             }
         const int16 cand = DOF_CANDIDATE(same, ring);
         if (!any(cand)) {
