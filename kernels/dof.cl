@@ -267,11 +267,15 @@ inline float3 dof_local_px(__global const float *src, __global const float *coc,
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float r = coc[i], ap = DOF_LOCAL_A(r);
-    float rmax = 0.0f;
+    /* every side weight under DOF_LOCAL_A(DOF_LOCAL_MIN): p's own |r| and every nearer neighbour's
+     * under DOF_LOCAL_MIN (the others weigh at most p's) */
+    int need = fabs(r) >= DOF_LOCAL_MIN;
     for (int b = -1; b <= 1; ++b)
-        for (int a = -1; a <= 1; ++a)
-            rmax = fmax(rmax, fabs(coc[(size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1)]));
-    if (rmax < DOF_LOCAL_MIN)
+        for (int a = -1; a <= 1; ++a) {
+            const float rq = coc[(size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1)];
+            need |= rq < r - DOF_FRONT_MARGIN && fabs(rq) >= DOF_LOCAL_MIN;
+        }
+    if (!need)
         return (float3)(src[i], src[n + i], src[2 * n + i]);
     float3 acc = (float3)(0.0f);
     float wsum = 0.0f;
@@ -434,13 +438,15 @@ inline void dof_upsample16(__global const float *restrict src, __global const fl
     /* the full-resolution 3x3 blur (dof_local_px), lane-wise; rows clamped to the image */
     const size_t rows[3] = {(size_t)max(y - 1, 0) * width, row, (size_t)min(y + 1, height - 1) * width};
     const float16 ap = DOF_LOCAL_A(r);
-    float16 rmax = (float16)(0.0f);
+    int16 need = fabs(r) >= DOF_LOCAL_MIN;  /* dof_local_px's test */
 #pragma unroll
     for (int bb = 0; bb < 3; ++bb)
 #pragma unroll
-        for (int a = -1; a <= 1; ++a)
-            rmax = fmax(rmax, fabs(dof_row16(coc, rows[bb], x + a, width, edge)));
-    const int16 sharp = rmax < DOF_LOCAL_MIN;
+        for (int a = -1; a <= 1; ++a) {
+            const float16 rq = dof_row16(coc, rows[bb], x + a, width, edge);
+            need |= (rq < r - DOF_FRONT_MARGIN) & (fabs(rq) >= DOF_LOCAL_MIN);
+        }
+    const int16 sharp = !need;
     const float16 sr = dof_row16(src, row, x, width, edge), sg = dof_row16(src + n, row, x, width, edge);
     const float16 sb = dof_row16(src + 2 * n, row, x, width, edge);
     float16 cr = sr, cg = sg, cb = sb;
@@ -532,15 +538,17 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         /* the full-resolution 3x3 blur (dof_local_px), lane-wise; columns x - 1 .. x + 16 lie in
          * the image (x >= 2, x + 30 <= width) */
         const float16 ap = DOF_LOCAL_A(r);
-        float16 rmax = (float16)(0.0f);
+        int16 need = fabs(r) >= DOF_LOCAL_MIN;  /* dof_local_px's test */
 #pragma unroll
         for (int bb = -1; bb <= 1; ++bb) {
             const size_t row = (size_t)clamp(y + bb, 0, height - 1) * width + x;
 #pragma unroll
-            for (int a = -1; a <= 1; ++a)
-                rmax = fmax(rmax, fabs(vload16(0, coc + row + a)));
+            for (int a = -1; a <= 1; ++a) {
+                const float16 rq = vload16(0, coc + row + a);
+                need |= (rq < r - DOF_FRONT_MARGIN) & (fabs(rq) >= DOF_LOCAL_MIN);
+            }
         }
-        const int16 sharp = rmax < DOF_LOCAL_MIN;
+        const int16 sharp = !need;
         if (all(sharp | whole_)) {  /* no pixel needs the 3x3's taps: its colour is the source's */
             const float16 sr = vload16(0, src + i), sg = vload16(0, src + n + i), sb = vload16(0, src + 2 * n + i);
             vstore16(select(sr + (ar - sr) * b, ar, whole_), 0, dst + i);
