@@ -267,11 +267,15 @@ inline float3 dof_local_px(__global const float *src, __global const float *coc,
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float r = coc[i], ap = DOF_LOCAL_A(r);
-    float rmax = 0.0f;
+    /* every side weight under DOF_LOCAL_A(DOF_LOCAL_MIN): p's own |r| and every nearer neighbour's
+     * under DOF_LOCAL_MIN (the others weigh at most p's) */
+    int need = fabs(r) >= DOF_LOCAL_MIN;
     for (int b = -1; b <= 1; ++b)
-        for (int a = -1; a <= 1; ++a)
-            rmax = fmax(rmax, fabs(coc[(size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1)]));
-    if (rmax < DOF_LOCAL_MIN)
+        for (int a = -1; a <= 1; ++a) {
+            const float rq = coc[(size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1)];
+            need |= rq < r - DOF_FRONT_MARGIN && fabs(rq) >= DOF_LOCAL_MIN;
+        }
+    if (!need)
         return (float3)(src[i], src[n + i], src[2 * n + i]);
     float3 acc = (float3)(0.0f);
     float wsum = 0.0f;
@@ -332,15 +336,142 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
 #endif
 
 #if DOF_SCALE == 2
-/* The min CoC of the 2x2 blocks of working pixels m-1 .. m+14 (m = x / 2) in working row ys. */
-inline float16 dof_block_min16(__global const float *coc, const int x, const int ys, const int width, const int height)
+/* 16 floats of row `row` from column `col` on: one vload16 inside the row (edge 0), else per lane
+ * with the column clamped to [0, lim - 1] (edge 1: the groups at the image's left/right end, the
+ * per-pixel formulas' clamps) */
+inline float16 dof_row16(__global const float *p, const size_t row, const int col, const int lim, const int edge)
 {
-    const size_t k0 = (size_t)(2 * ys) * width + x - 2;
-    const size_t k1 = (size_t)min(2 * ys + 1, height - 1) * width + x - 2;
-    const float16 a0 = vload16(0, coc + k0), a1 = vload16(1, coc + k0);
-    const float16 b0 = vload16(0, coc + k1), b1 = vload16(1, coc + k1);
-    return (float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)),
-                     fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd)));
+    if (!edge)
+        return vload16(0, p + row + col);
+    float t[16];
+    for (int l = 0; l < 16; ++l)
+        t[l] = p[row + clamp(col + l, 0, lim - 1)];
+    return vload16(0, t);
+}
+
+/* The min CoC of the 2x2 blocks of working pixels m-1 .. m+14 (m = x / 2) in working row ys
+ * (dof_block_min: working columns clamped to [0, ww - 1], the block's second column and row to the
+ * image). */
+inline float16 dof_block_min16(__global const float *coc, const int x, const int ys, const int width, const int height,
+                               const int ww, const int edge)
+{
+    const size_t k0 = (size_t)(2 * ys) * width;
+    const size_t k1 = (size_t)min(2 * ys + 1, height - 1) * width;
+    if (!edge) {
+        const float16 a0 = vload16(0, coc + k0 + x - 2), a1 = vload16(1, coc + k0 + x - 2);
+        const float16 b0 = vload16(0, coc + k1 + x - 2), b1 = vload16(1, coc + k1 + x - 2);
+        return (float16)(fmin(fmin(a0.even, a0.odd), fmin(b0.even, b0.odd)),
+                         fmin(fmin(a1.even, a1.odd), fmin(b1.even, b1.odd)));
+    }
+    float t[16];
+    for (int l = 0; l < 16; ++l) {
+        const int c0 = 2 * clamp(x / 2 - 1 + l, 0, ww - 1), c1 = min(c0 + 1, width - 1);
+        t[l] = fmin(fmin(coc[k0 + c0], coc[k0 + c1]), fmin(coc[k1 + c0], coc[k1 + c1]));
+    }
+    return vload16(0, t);
+}
+
+/* 16 floats to dst + i: the lanes inside the image (the last group of a row may be partial) */
+inline void dof_store16(const float16 v, __global float *dst, const size_t i, const int nlanes)
+{
+    if (nlanes >= 16) {
+        vstore16(v, 0, dst + i);
+        return;
+    }
+    float t[16];
+    vstore16(v, 0, t);
+    for (int l = 0; l < nlanes; ++l)
+        dst[i + l] = t[l];
+}
+
+/* The vector form of dof_upsample_px (its formulas lane-wise) for output pixels x .. x + 15 of row
+ * y, with edge = 1: the groups at the image's left/right end, whose loads leave the rows
+ * (dof_row16, dof_block_min16 clamp per lane as the per-pixel form does). The interior groups run
+ * the same formulas inline in dof_upsample with whole-row loads: a shared function with edge = 0
+ * measured slower there (the per-lane branches stay in). The per-pixel form ran these groups
+ * before: 2 of 90 groups a row at 1440 px cost as much as ~20 % of the kernel with the 3x3. */
+inline void dof_upsample16(__global const float *restrict src, __global const float *restrict coc,
+                           __global const float *restrict blur, __global const float *restrict alpha,
+                           __global float *restrict dst, const int x, const int y,
+                           const int width, const int height, const int ww, const int hw, const int edge)
+{
+    const size_t n = (size_t)width * height, i = (size_t)y * width + x, nw = (size_t)ww * hw;
+    const int nlanes = min(16, width - x);
+    const int m = x / 2;
+    const float sy = ((float)y + 0.5f) / DOF_SCALE - 0.5f;
+    const int y0 = clamp((int)floor(sy), 0, hw - 1), y1 = min(y0 + 1, hw - 1);
+    const float fy = clamp(sy - (float)y0, 0.0f, 1.0f);
+    const float16 fx = (float16)(0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f,
+                                  0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f);
+    const size_t row = (size_t)y * width;
+    const float16 r = dof_row16(coc, row, x, width, edge);
+    float16 ar = (float16)(0.0f), ag = ar, ab = ar, aa = ar, wsum = ar;
+    const float16 vc0 = dof_block_min16(coc, x, y0, width, height, ww, edge);
+    const float16 vc1 = dof_block_min16(coc, x, y1, width, height, ww, edge);
+    const float16 dl0 = fabs(r - DOF_LEFT(vc0)), dr0 = fabs(r - DOF_RIGHT(vc0));
+    const float16 dl1 = fabs(r - DOF_LEFT(vc1)), dr1 = fabs(r - DOF_RIGHT(vc1));
+    const float16 wl0 = (1.0f - fx) * (1.0f - fy), wr0 = fx * (1.0f - fy), wl1 = (1.0f - fx) * fy, wr1 = fx * fy;
+    /* p's own surface among the corners: the others are left out (UPSAMPLE_SAME_PX) */
+    const int16 same = ((wl0 > 0.0f) & (dl0 <= DOF_UP_SAME)) | ((wr0 > 0.0f) & (dr0 <= DOF_UP_SAME))
+                       | ((wl1 > 0.0f) & (dl1 <= DOF_UP_SAME)) | ((wr1 > 0.0f) & (dr1 <= DOF_UP_SAME));
+#define DOF_ROW(YS, DL, DR, WL, WR) { \
+        const size_t j = (size_t)(YS) * ww; \
+        const float16 vr = dof_row16(blur, j, m - 1, ww, edge), vg = dof_row16(blur + nw, j, m - 1, ww, edge); \
+        const float16 vb = dof_row16(blur + 2 * nw, j, m - 1, ww, edge), va = dof_row16(alpha, j, m - 1, ww, edge); \
+        const float16 gl = select((WL) / (DOF_UP_TOL + (DL) * (DL)), (float16)(0.0f), same & ((DL) > DOF_UP_SAME)); \
+        const float16 gr = select((WR) / (DOF_UP_TOL + (DR) * (DR)), (float16)(0.0f), same & ((DR) > DOF_UP_SAME)); \
+        ar += gl * DOF_LEFT(vr); ag += gl * DOF_LEFT(vg); ab += gl * DOF_LEFT(vb); aa += gl * DOF_LEFT(va); \
+        wsum += gl; \
+        ar += gr * DOF_RIGHT(vr); ag += gr * DOF_RIGHT(vg); ab += gr * DOF_RIGHT(vb); aa += gr * DOF_RIGHT(va); \
+        wsum += gr; }
+    DOF_ROW(y0, dl0, dr0, wl0, wr0)
+    DOF_ROW(y1, dl1, dr1, wl1, wr1)
+#undef DOF_ROW
+    const float16 inv = 1.0f / wsum;
+    const float16 b = fmax(DOF_HALF_B(r), aa * inv);
+    ar *= inv; ag *= inv; ab *= inv;
+    const int16 whole = b >= 1.0f;
+    if (all(whole)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
+        dof_store16(ar, dst, i, nlanes); dof_store16(ag, dst + n, i, nlanes); dof_store16(ab, dst + 2 * n, i, nlanes);
+        return;
+    }
+    /* the full-resolution 3x3 blur (dof_local_px), lane-wise; rows clamped to the image */
+    const size_t rows[3] = {(size_t)max(y - 1, 0) * width, row, (size_t)min(y + 1, height - 1) * width};
+    const float16 ap = DOF_LOCAL_A(r);
+    int16 need = fabs(r) >= DOF_LOCAL_MIN;  /* dof_local_px's test */
+#pragma unroll
+    for (int bb = 0; bb < 3; ++bb)
+#pragma unroll
+        for (int a = -1; a <= 1; ++a) {
+            const float16 rq = dof_row16(coc, rows[bb], x + a, width, edge);
+            need |= (rq < r - DOF_FRONT_MARGIN) & (fabs(rq) >= DOF_LOCAL_MIN);
+        }
+    const int16 sharp = !need;
+    const float16 sr = dof_row16(src, row, x, width, edge), sg = dof_row16(src + n, row, x, width, edge);
+    const float16 sb = dof_row16(src + 2 * n, row, x, width, edge);
+    float16 cr = sr, cg = sg, cb = sb;
+    if (!all(sharp | whole)) {  /* some pixel needs the 3x3's taps */
+        float16 tr = (float16)(0.0f), tg = tr, tb = tr, cw = tr;
+#pragma unroll
+        for (int bb = 0; bb < 3; ++bb)
+#pragma unroll
+            for (int a = -1; a <= 1; ++a) {
+                const float16 rq = dof_row16(coc, rows[bb], x + a, width, edge);
+                const float16 aq = select(fmin(DOF_LOCAL_A(rq), ap), DOF_LOCAL_A(rq), rq < r - DOF_FRONT_MARGIN);
+                const float16 wq = (bb != 1 ? aq : 1.0f - 2.0f * aq) * (a ? aq : 1.0f - 2.0f * aq);
+                tr += wq * dof_row16(src, rows[bb], x + a, width, edge);
+                tg += wq * dof_row16(src + n, rows[bb], x + a, width, edge);
+                tb += wq * dof_row16(src + 2 * n, rows[bb], x + a, width, edge);
+                cw += wq;
+            }
+        const float16 ic = 1.0f / cw;
+        cr = select(tr * ic, sr, sharp);
+        cg = select(tg * ic, sg, sharp);
+        cb = select(tb * ic, sb, sharp);
+    }
+    dof_store16(select(cr + (ar - cr) * b, ar, whole), dst, i, nlanes);
+    dof_store16(select(cg + (ag - cg) * b, ag, whole), dst + n, i, nlanes);
+    dof_store16(select(cb + (ab - cb) * b, ab, whole), dst + 2 * n, i, nlanes);
 }
 #endif
 
@@ -375,8 +506,8 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
                                       0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f);
         const float16 r = vload16(0, coc + i);
         float16 ar = (float16)(0.0f), ag = ar, ab = ar, aa = ar, wsum = ar;
-        const float16 vc0 = dof_block_min16(coc, x, y0, width, height);
-        const float16 vc1 = dof_block_min16(coc, x, y1, width, height);
+        const float16 vc0 = dof_block_min16(coc, x, y0, width, height, ww, 0);
+        const float16 vc1 = dof_block_min16(coc, x, y1, width, height, ww, 0);
         const float16 dl0 = fabs(r - DOF_LEFT(vc0)), dr0 = fabs(r - DOF_RIGHT(vc0));
         const float16 dl1 = fabs(r - DOF_LEFT(vc1)), dr1 = fabs(r - DOF_RIGHT(vc1));
         const float16 wl0 = (1.0f - fx) * (1.0f - fy), wr0 = fx * (1.0f - fy), wl1 = (1.0f - fx) * fy, wr1 = fx * fy;
@@ -407,15 +538,17 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         /* the full-resolution 3x3 blur (dof_local_px), lane-wise; columns x - 1 .. x + 16 lie in
          * the image (x >= 2, x + 30 <= width) */
         const float16 ap = DOF_LOCAL_A(r);
-        float16 rmax = (float16)(0.0f);
+        int16 need = fabs(r) >= DOF_LOCAL_MIN;  /* dof_local_px's test */
 #pragma unroll
         for (int bb = -1; bb <= 1; ++bb) {
             const size_t row = (size_t)clamp(y + bb, 0, height - 1) * width + x;
 #pragma unroll
-            for (int a = -1; a <= 1; ++a)
-                rmax = fmax(rmax, fabs(vload16(0, coc + row + a)));
+            for (int a = -1; a <= 1; ++a) {
+                const float16 rq = vload16(0, coc + row + a);
+                need |= (rq < r - DOF_FRONT_MARGIN) & (fabs(rq) >= DOF_LOCAL_MIN);
+            }
         }
-        const int16 sharp = rmax < DOF_LOCAL_MIN;
+        const int16 sharp = !need;
         if (all(sharp | whole_)) {  /* no pixel needs the 3x3's taps: its colour is the source's */
             const float16 sr = vload16(0, src + i), sg = vload16(0, src + n + i), sb = vload16(0, src + 2 * n + i);
             vstore16(select(sr + (ar - sr) * b, ar, whole_), 0, dst + i);
@@ -448,10 +581,13 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         vstore16(select(cb + (ab - cb) * b, ab, whole), 0, dst + 2 * n + i);
         return;
     }
-#endif
+    /* the groups at the image's left/right end: the same formulas, loads clamped per lane */
+    dof_upsample16(src, coc, blur, alpha, dst, x, y, width, height, ww, hw, 1);
+#else
     for (int xi = x; xi < min(x + 16, width); ++xi) {
         const float3 o = dof_upsample_px(src, coc, blur, alpha, xi, y, width, height, ww, hw);
         const size_t ii = (size_t)y * width + xi;
         dst[ii] = o.x; dst[n + ii] = o.y; dst[2 * n + ii] = o.z;
     }
+#endif
 }

@@ -83,26 +83,32 @@ inline float dof_despeckle_px(__global const float *src, __global const float *d
                               const int width, const int height)
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
-    const float d = depth[i], lum = dof_luma(src, i, n);
+    const float d = depth[i];
     float v[9];
-    float lo = INFINITY, hi = -INFINITY, hi_d = d;
     int same = 0, ring = 0, k = 0;
+    for (int b = -1; b <= 1; ++b)
+        for (int a = -1; a <= 1; ++a) {
+            const float dq = depth[(size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1)];
+            v[k++] = dq;
+            if ((a != 0 || b != 0) && dof_same_depth(dq, d)) {
+                ++same;
+                ring |= 1 << dof_ring_pos(a, b);
+            }
+        }
+    if (!DOF_CANDIDATE(same, ring))  /* most pixels: depth alone decides, no luminance loads */
+        return d;
+    const float lum = dof_luma(src, i, n);
+    float lo = INFINITY, hi = -INFINITY, hi_d = d;
     for (int b = -1; b <= 1; ++b)
         for (int a = -1; a <= 1; ++a) {
             const size_t j = (size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1);
             const float dq = depth[j];
-            v[k++] = dq;
-            if (a == 0 && b == 0) continue;
-            if (dof_same_depth(dq, d)) {
-                ++same;
-                ring |= 1 << dof_ring_pos(a, b);
-            } else {
-                const float lq = dof_luma(src, j, n);
-                lo = fmin(lo, lq);
-                if (lq > hi) { hi = lq; hi_d = dq; }
-            }
+            if ((a == 0 && b == 0) || dof_same_depth(dq, d)) continue;
+            const float lq = dof_luma(src, j, n);
+            lo = fmin(lo, lq);
+            if (lq > hi) { hi = lq; hi_d = dq; }
         }
-    if (!DOF_CANDIDATE(same, ring) || lum < DOF_FRINGE_STEP * lo)
+    if (lum < DOF_FRINGE_STEP * lo)
         return d;
     if (lum > hi && lum <= DOF_SAME_SOURCE * hi && lum > DOF_SAME_SOURCE * lo && !(ring & (ring >> 4) & 15)) {
         for (int b = -2; b <= 2; ++b)
@@ -145,9 +151,21 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
             for (int a = -1; a <= 1; ++a) {
                 if (a == 0 && b == 1) continue;
                 const float16 dq = vload16(0, depth + rows[b] + a);
-                const int16 sm = (dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq);  /* true lanes are -1 */
-                same -= sm;
-                ring |= (sm & 1) << dof_ring_pos(a, b - 1);
+                same -= (dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq);  /* true lanes are -1 */
+            }
+        /* most groups: no lane has few enough same-depth neighbours (the count alone, as
+         * DOF_CANDIDATE needs `same` <= DOF_SPECKLE_MAX_SAME) */
+        if (!any(same <= DOF_SPECKLE_MAX_SAME)) {
+            vstore16(d, 0, out + i);
+            return;
+        }
+#pragma unroll
+        for (int b = 0; b < 3; ++b)
+#pragma unroll
+            for (int a = -1; a <= 1; ++a) {
+                if (a == 0 && b == 1) continue;
+                const float16 dq = vload16(0, depth + rows[b] + a);
+                ring |= (((dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq)) & 1) << dof_ring_pos(a, b - 1);
             }
         const int16 cand = DOF_CANDIDATE(same, ring);
         if (!any(cand)) {

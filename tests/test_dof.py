@@ -194,6 +194,21 @@ def test_half_resolution_path_blurs_an_edge_like_the_disc(quality, r_px):
     assert np.mean(spread) == pytest.approx(r_px * r_px / 4, rel=0.12)
 
 
+def test_local_blur_skips_only_pixels_whose_side_weights_are_all_negligible():
+    """local_blur leaves a pixel as it is exactly when its own |r| and every nearer neighbour's are
+    under LOCAL_MIN_PX (side weights < 1/32): an in-focus pixel beside a blurred background keeps
+    its colour, beside a blurred foreground it takes the foreground's spread."""
+    col = np.zeros((5, 6, 3))
+    col[:, 3:] = 1.0
+    coc = np.full((5, 6), 0.2)
+    coc[:, 3:] = 5.0  # background behind the in-focus left half
+    out = D.local_blur(col, coc)
+    assert np.array_equal(out[:, :3], col[:, :3])
+    coc[:, 3:] = -5.0  # the same neighbour in front
+    out = D.local_blur(col, coc)
+    assert out[2, 2, 0] > 0.1 and np.array_equal(out[:, :2], col[:, :2])
+
+
 @pytest.mark.parametrize("sa, near_rim_brighter", [(0.7, True), (-0.7, False)])
 def test_spherical_aberration_textures_near_and_far_oppositely(sa, near_rim_brighter):
     cam = Camera(**CAM, blades=0, spherical_aberration=sa)

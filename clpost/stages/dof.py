@@ -796,8 +796,9 @@ LOCAL_VAR_PX2 = 0.5
 r"""Largest variance (px², per axis) of the half-resolution path's full-resolution 3×3 blur
 (:func:`local_blur`): the binomial [¼, ½, ¼]."""
 LOCAL_MIN_PX = 0.5
-"""Below this |CoC| over a whole 3×3 the full-resolution blur leaves the pixel as it is (side weight
-a = r²/8 < 1/32)."""
+"""A pixel whose own |CoC| and every nearer neighbour's are below this keeps its colour in the
+full-resolution blur: every side weight it would use is then under a = r²/8 = 1/32 (a neighbour not
+nearer weighs at most p's own)."""
 
 
 def half_blend(coc: np.ndarray) -> np.ndarray:
@@ -824,24 +825,26 @@ def local_blur(color: np.ndarray, coc: np.ndarray) -> np.ndarray:
     w(±1) = a, a = :func:`local_weight` of q's own CoC when q is nearer than p by more than
     :data:`FRONT_MARGIN_PX`, else of min(|r_q|, |r_p|) (the gather's background clamp: a blurred
     background never bleeds onto a sharper pixel), normalised by the summed weight. Edges clamped.
-    A pixel whose 3×3 has every |r| < :data:`LOCAL_MIN_PX` keeps its colour (weights ≤ 1/32: the
-    kernel skips the taps there)."""
+    A pixel whose own |r| and every nearer neighbour's are < :data:`LOCAL_MIN_PX` keeps its colour
+    (side weights < 1/32: the kernel skips the taps there)."""
     c = np.asarray(coc, dtype=np.float64)
     h, w = c.shape
     a_p = local_weight(c)
     pc = np.pad(np.asarray(color, dtype=np.float64), ((1, 1), (1, 1), (0, 0)), mode="edge")
     pr = np.pad(c, 1, mode="edge")
     acc = np.zeros((h, w, 3)); wsum = np.zeros((h, w))
+    need = np.abs(c) >= LOCAL_MIN_PX
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
             rq = pr[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
             aq = local_weight(rq)
-            aq = np.where(rq < c - FRONT_MARGIN_PX, aq, np.minimum(aq, a_p))
+            front = rq < c - FRONT_MARGIN_PX
+            need |= front & (np.abs(rq) >= LOCAL_MIN_PX)
+            aq = np.where(front, aq, np.minimum(aq, a_p))
             wq = (aq if dy else 1.0 - 2.0 * aq) * (aq if dx else 1.0 - 2.0 * aq)
             acc += wq[..., None] * pc[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
             wsum += wq
-    sharp = np.max(np.abs(np.stack(_neighbourhood(c))), axis=0) < LOCAL_MIN_PX
-    return np.where(sharp[..., None], np.asarray(color, dtype=np.float64), acc / wsum[..., None])
+    return np.where(need[..., None], acc / wsum[..., None], np.asarray(color, dtype=np.float64))
 
 
 def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
