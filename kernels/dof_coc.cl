@@ -46,7 +46,8 @@ inline float16 dof_luma16(__global const float *p, const size_t n) {
  * it allowed) takes the median depth of its 3x3; one
  * not on a one-pixel line, brighter than all of them but within DOF_SAME_SOURCE x the brightest (the
  * same source) and above DOF_SAME_SOURCE x the dimmest (a source above its surround), whose depth
- * class is seen on a speckle (dof_speckle_px) of its 5x5 dimmer than lum / DOF_SAME_SOURCE, takes that
+ * class is seen on a speckle (dof_speckle_px) of its 5x5 dimmer than lum / DOF_SAME_SOURCE and than
+ * DOF_SAME_SOURCE x the dimmest (one showing the surround, not a lamp's own dimmer pixel), takes that
  * brightest neighbour's depth (a light seen through a pane). Neighbours clamped to the image; the median by
  * the 19-exchange network for 9 values (Paeth, Graphics Gems 1990). */
 inline int dof_same_depth(const float dq, const float d) {
@@ -112,7 +113,8 @@ inline float dof_despeckle_px(__global const float *src, __global const float *d
             for (int a = -2; a <= 2; ++a) {
                 const int xq = clamp(x + a, 0, width - 1), yq = clamp(y + b, 0, height - 1);
                 const size_t j = (size_t)yq * width + xq;
-                if (dof_same_depth(depth[j], d) && DOF_SAME_SOURCE * dof_luma(src, j, n) < lum
+                const float lq = dof_luma(src, j, n);
+                if (dof_same_depth(depth[j], d) && DOF_SAME_SOURCE * lq < lum && lq <= DOF_SAME_SOURCE * lo
                     && dof_speckle_px(depth, xq, yq, width, height))
                     return hi_d;
             }

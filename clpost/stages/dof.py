@@ -350,9 +350,11 @@ def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
       keep their depth) brighter than every other-depth neighbour, but by less than
       :data:`SAME_SOURCE`× the brightest of them (that neighbour is the same source) and by more
       than that the dimmest (a source above its surround), whose depth class is also seen on a
-      candidate of its 5×5 dimmer than :math:`Y_p`/:data:`SAME_SOURCE` and not on a one-pixel line
-      (a speckle of it: the stochastic depth of a surface in front — a pane's — not the source's
-      own), takes that brightest neighbour's depth. A lamp's own pixels keep theirs: their depth
+      candidate of its 5×5 dimmer than :math:`Y_p`/:data:`SAME_SOURCE`, no brighter than
+      :data:`SAME_SOURCE`× that dimmest neighbour and not on a one-pixel line (a speckle of it
+      showing the surround: the stochastic depth of a surface in front — a pane's — not the
+      source's own; a lamp's own dimmer pixel is far above its surround), takes that brightest
+      neighbour's depth. A lamp's own pixels keep theirs: their depth
       class is seen only on the lamp, or on a fixture at its depth (a pole, a wall: not a speckle).
 
     A wire, a lamp or a silhouette pixel brighter or darker than everything around it keeps its
@@ -379,7 +381,8 @@ def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     dim = np.zeros(d.shape, bool)
     for b in range(5):
         for a in range(5):
-            dim |= _same_depth(pd[b:b + h, a:a + w], d) & (SAME_SOURCE * pl[b:b + h, a:a + w] < lum) \
+            lq = pl[b:b + h, a:a + w]
+            dim |= _same_depth(pd[b:b + h, a:a + w], d) & (SAME_SOURCE * lq < lum) & (lq <= SAME_SOURCE * lo) \
                 & pc[b:b + h, a:a + w]
     out = np.where(speckle, np.median(np.stack(dn), axis=0), d)
     return np.where(source & dim, hi_d, out)
