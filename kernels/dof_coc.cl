@@ -187,7 +187,8 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
          * the group goes per pixel (the 5x5 test) */
         if (!any(cand & (lum > hi) & (lum <= DOF_SAME_SOURCE * hi) & (lum > DOF_SAME_SOURCE * lo)
                  & ((ring & (ring >> 4) & 15) == 0))) {
-            vstore16(select(d, v[4], cand & (lum >= DOF_FRINGE_STEP * lo2) & (DOF_FRINGE_STEP * lum <= hi2)), 0, out + i);
+            vstore16(select(d, v[4], cand & (lum >= DOF_FRINGE_STEP * lo2) & (DOF_FRINGE_STEP * lum <= hi2)),
+                     0, out + i);
             return;
         }
     }
