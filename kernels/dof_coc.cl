@@ -41,11 +41,13 @@ inline float16 dof_luma16(__global const float *p, const size_t n) {
 /* Stochastic-depth speckle (despeckle_depth in clpost/stages/dof.py): p is a candidate when at most
  * DOF_SPECKLE_MAX_SAME of its 8 neighbours share its depth (within 0.8x either way) and they are not one
  * arc of the ring (an object's corner: DOF_CANDIDATE below). A candidate whose
- * luminance lies within its other-depth neighbours' range (DOF_FRINGE_STEP's 5 % outside it allowed)
- * takes the median depth of its 3x3; one
+ * luminance lies within its other-depth neighbours' robust range (lo2 .. hi2: the second-darkest to the
+ * second-brightest, so one bright twin of a 1-px lamp cannot explain it; DOF_FRINGE_STEP's 5 % outside
+ * it allowed) takes the median depth of its 3x3; one
  * not on a one-pixel line, brighter than all of them but within DOF_SAME_SOURCE x the brightest (the
  * same source) and above DOF_SAME_SOURCE x the dimmest (a source above its surround), whose depth
- * class is seen on a speckle (dof_speckle_px) of its 5x5 dimmer than lum / DOF_SAME_SOURCE, takes that
+ * class is seen on a speckle (dof_speckle_px) of its 5x5 dimmer than lum / DOF_SAME_SOURCE and than
+ * DOF_SAME_SOURCE x the dimmest (one showing the surround, not a lamp's own dimmer pixel), takes that
  * brightest neighbour's depth (a light seen through a pane). Neighbours clamped to the image; the median by
  * the 19-exchange network for 9 values (Paeth, Graphics Gems 1990). */
 inline int dof_same_depth(const float dq, const float d) {
@@ -98,13 +100,15 @@ inline float dof_despeckle_px(__global const float *src, __global const float *d
     if (!DOF_CANDIDATE(same, ring))  /* most pixels: depth alone decides, no luminance loads */
         return d;
     const float lum = dof_luma(src, i, n);
-    float lo = INFINITY, hi = -INFINITY, hi_d = d;
+    float lo = INFINITY, hi = -INFINITY, hi_d = d, lo2 = INFINITY, hi2 = -INFINITY;
     for (int b = -1; b <= 1; ++b)
         for (int a = -1; a <= 1; ++a) {
             const size_t j = (size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1);
             const float dq = depth[j];
             if ((a == 0 && b == 0) || dof_same_depth(dq, d)) continue;
             const float lq = dof_luma(src, j, n);
+            lo2 = fmin(lo2, fmax(lo, lq));
+            hi2 = fmax(hi2, fmin(hi, lq));
             lo = fmin(lo, lq);
             if (lq > hi) { hi = lq; hi_d = dq; }
         }
@@ -115,12 +119,13 @@ inline float dof_despeckle_px(__global const float *src, __global const float *d
             for (int a = -2; a <= 2; ++a) {
                 const int xq = clamp(x + a, 0, width - 1), yq = clamp(y + b, 0, height - 1);
                 const size_t j = (size_t)yq * width + xq;
-                if (dof_same_depth(depth[j], d) && DOF_SAME_SOURCE * dof_luma(src, j, n) < lum
+                const float lq = dof_luma(src, j, n);
+                if (dof_same_depth(depth[j], d) && DOF_SAME_SOURCE * lq < lum && lq <= DOF_SAME_SOURCE * lo
                     && dof_speckle_px(depth, xq, yq, width, height))
                     return hi_d;
             }
     }
-    if (DOF_FRINGE_STEP * lum > hi)
+    if (DOF_FRINGE_STEP * lum > hi2 || lum < DOF_FRINGE_STEP * lo2)
         return d;
     DOF_SORT2(1, 2) DOF_SORT2(4, 5) DOF_SORT2(7, 8) DOF_SORT2(0, 1) DOF_SORT2(3, 4) DOF_SORT2(6, 7)
     DOF_SORT2(1, 2) DOF_SORT2(4, 5) DOF_SORT2(7, 8) DOF_SORT2(0, 3) DOF_SORT2(5, 8) DOF_SORT2(4, 7)
@@ -175,7 +180,7 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
         /* candidates: the luminance test and the 9-value median, lane-wise */
         const size_t n = (size_t)width * height;
         const float16 lum = dof_luma16(src + i, n);
-        float16 lo = (float16)(INFINITY), hi = (float16)(-INFINITY);
+        float16 lo = (float16)(INFINITY), hi = (float16)(-INFINITY), lo2 = lo, hi2 = hi;
         float16 v[9];
         int k = 0;
 #pragma unroll
@@ -187,6 +192,8 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
                 if (a == 0 && b == 1) continue;
                 const int16 sm = (dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq);
                 const float16 lq = dof_luma16(src + rows[b] + a, n);
+                lo2 = select(fmin(lo2, fmax(lo, lq)), lo2, sm);
+                hi2 = select(fmax(hi2, fmin(hi, lq)), hi2, sm);
                 lo = select(fmin(lo, lq), lo, sm);
                 hi = select(fmax(hi, lq), hi, sm);
             }
@@ -198,7 +205,8 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
          * the group goes per pixel (the 5x5 test) */
         if (!any(cand & (lum > hi) & (lum <= DOF_SAME_SOURCE * hi) & (lum > DOF_SAME_SOURCE * lo)
                  & ((ring & (ring >> 4) & 15) == 0))) {
-            vstore16(select(d, v[4], cand & (lum >= DOF_FRINGE_STEP * lo) & (DOF_FRINGE_STEP * lum <= hi)), 0, out + i);
+            vstore16(select(d, v[4], cand & (lum >= DOF_FRINGE_STEP * lo2) & (DOF_FRINGE_STEP * lum <= hi2)),
+                     0, out + i);
             return;
         }
     }

@@ -22,12 +22,12 @@ MARGIN_DB = 0.5
 
 # (scene, truth, quality) -> PSNR sRGB dB vs Cycles, measured (docs/fidelity.md, "Held-out scenes")
 MEASURED_PSNR = {
-    ("h_lamps", "dof", "draft"): 29.96,
-    ("h_lamps", "dof", "preview"): 32.82,
-    ("h_lamps", "dof", "final"): 35.86,
-    ("h_panes", "dof", "draft"): 31.38,
-    ("h_panes", "dof", "preview"): 32.10,
-    ("h_panes", "dof", "final"): 32.73,
+    ("h_lamps", "dof", "draft"): 31.60,
+    ("h_lamps", "dof", "preview"): 34.40,
+    ("h_lamps", "dof", "final"): 36.60,
+    ("h_panes", "dof", "draft"): 31.38,   # now 31.04: the lamp behind the in-focus pane keeps its 6 m
+    ("h_panes", "dof", "preview"): 32.40,
+    ("h_panes", "dof", "final"): 33.10,
     ("h_fence", "dof", "draft"): 36.45,
     ("h_fence", "dof", "final"): 38.67,
     ("h_spin", "dof", "draft"): 49.96,
@@ -84,10 +84,10 @@ def test_heldout_psnr_floor_vs_cycles(scene, kind, quality):
 
 @pytest.mark.slow
 def test_heldout_emitters_do_not_get_worse():
-    """h_lamps at final: today the two 1-px defocused lamps' discs are 1.55× / 1.61× Cycles' area and
-    the in-focus 1-px lamp on the wall gets a 65-pixel halo (Cycles: 0) — the despeckle takes a 1-px
-    lamp's only depth sample for a speckle when the lamp straddles two pixels (docs/fidelity.md,
-    "Held-out scenes"). Floors, not targets (1 ± 0.1, ≤ 2× Cycles' halo)."""
+    """h_lamps at final: the two 1-px defocused lamps' discs are 1.12× / 1.46× Cycles' area (1.55× /
+    1.61× while the despeckle took a 1-px lamp's only depth sample for a speckle) and the in-focus
+    1-px lamp on the wall gets a 65-pixel halo (Cycles: 0) — its fringe keeps the wall's depth
+    (docs/fidelity.md, "Held-out scenes"). Floors, not targets (1 ± 0.1, ≤ 2× Cycles' halo)."""
     entry = MANIFEST["scenes"]["h_lamps"]
     frame = read_frame(DATA / entry["pinhole"]["file"])
     t = entry["truths"]["dof"]
@@ -101,6 +101,6 @@ def test_heldout_emitters_do_not_get_worse():
     areas = [x["area_ratio"] for x in m if x.get("area_ratio") is not None]
     energy = [x["energy_ratio"] for x in m if x["energy_ratio"] is not None]
     halo = sum(x["halo_test"] for x in m if x["in_focus"])
-    assert len(areas) == 9 and max(areas) <= 1.61 + 0.1, areas
+    assert len(areas) == 9 and max(areas) <= 1.46 + 0.1, areas
     assert halo <= 65 * 1.2, halo
-    assert min(energy) >= 0.939 - 0.03, energy
+    assert min(energy) >= 0.973 - 0.03, energy

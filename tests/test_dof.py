@@ -685,3 +685,73 @@ def test_cli_camera_options_reach_the_camera():
     assert (cam.depth_of_field, cam.aperture_roundness, cam.spherical_aberration, cam.optical_vignetting) == \
         (True, 0.25, -0.5, 0.3)
     assert camera_from_args(build_parser().parse_args(["bench"])).depth_of_field is False
+
+
+def test_a_one_pixel_lamp_hit_by_the_depth_in_one_of_its_two_pixels_keeps_its_depth():
+    """Held-out h_lamps' lamp01 (docs/fidelity.md, "Held-out scenes"): a 1-px lamp at 3 m straddling
+    two pixels (375 and 361× the wall's luminance) before a wall at 5.9 m; the depth pass hit the
+    lamp in one. Its bright twin is the only other-depth neighbour as bright as it — outside the
+    robust range (2nd-darkest … 2nd-brightest), so not a speckle: it keeps 3 m. A pane's speckle
+    next to one bright glint of another depth still is one (its colour is its neighbours')."""
+    h, w = 9, 9
+    col = np.full((h, w, 3), 0.3, np.float32)
+    depth = np.full((h, w), 5.9, np.float32)
+    y, x = 4, 3
+    col[y, x], col[y, x + 1], col[y, x + 2] = 375.2, 361.2, 5.1
+    col[y - 1, x:x + 2], col[y + 1, x:x + 2] = [[51.7] * 3, [37.8] * 3], [[56.6] * 3, [42.6] * 3]
+    depth[y, x] = 3.0
+    assert D.despeckle_depth(col, depth)[y, x] == 3.0
+    pane = np.full((h, w, 3), 0.5, np.float32)
+    d_pane = np.full((h, w), 3.0, np.float32)
+    d_pane[4, 4] = 1.5                      # a speckle of the pane …
+    pane[3, 5] = 5.0                        # … next to one glint at the wall's depth
+    assert D.despeckle_depth(pane, d_pane)[4, 4] == 3.0
+
+
+def _lamp_behind_an_in_focus_pane():
+    """Held-out h_panes' lamp00: a 2-px lamp at 6 m seen through a 0.2 pane at 1.2 m over the sky;
+    its pixels 124, 201, 234 (depth 6 / 5.99) and 164 (the pane's depth sample), fringe at the
+    sky's, the pane's speckle around (luminances and depths as exported by Cycles)."""
+    lum = np.array([[0.44, 6.83, 11.94, 3.00, 0.44],
+                    [6.83, 124.4, 201.08, 33.67, 0.44],
+                    [5.55, 164.02, 234.3, 37.5, 0.44],
+                    [0.44, 18.33, 34.94, 1.72, 0.44],
+                    [0.44, 0.44, 1.72, 0.44, 0.44]])
+    d = np.array([[np.inf] * 5,
+                  [1.2, 6.0, 5.99, np.inf, np.inf],
+                  [np.inf, 1.2, 5.99, np.inf, np.inf],
+                  [np.inf] * 5,
+                  [np.inf, 1.2, np.inf, np.inf, np.inf]])
+    col = np.full((15, 21, 3), 0.44, np.float32)
+    depth = np.full((15, 21), np.inf, np.float32)
+    col[5:10, 8:13] = lum[..., None]
+    depth[5:10, 8:13] = d
+    depth[2, 3] = depth[12, 17] = depth[1, 14] = 1.2            # more of the pane's speckle
+    return col, depth
+
+
+def test_a_lamp_behind_an_in_focus_pane_keeps_its_depth():
+    """The light-behind-a-pane rule needs a dim speckle of p's depth class showing the surround
+    (≤ 1.5× p's dimmest other-depth neighbour): the lamp's own dimmer pixel (124, far above the sky)
+    is not one, so the two brightest lamp pixels keep 6 m (they went to the pane's 1.2 m: a disc
+    0.09× Cycles'), and the pane's sample over the lamp takes the lamp's depth."""
+    col, depth = _lamp_behind_an_in_focus_pane()
+    out = D.despeckle_depth(col, depth)
+    assert np.allclose(out[6:8, 9:11], 6.0, rtol=2e-3)
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_robust_range_and_surround_speckle_kernel_matches_its_reference(quality):
+    """dof_despeckle (its 16-lane and per-pixel paths) against the numpy rules on the two held-out
+    patterns above, tiled over an odd-sized frame so both paths see them."""
+    col, depth = _lamp_behind_an_in_focus_pane()
+    col = np.tile(col, (2, 3, 1))[:29, :53].copy()
+    depth = np.tile(depth, (2, 3))[:29, :53].copy()
+    for y, x in ((4, 30), (20, 47), (25, 1)):
+        col[y, x], col[y, x + 1], depth[y, x] = 375.0, 361.0, 1.0
+    d_np = D.despeckle_depth(col, depth)
+    assert (d_np != depth).any() and (d_np[[4, 20, 25], [30, 47, 1]] == 1.0).all()
+    cam = Camera(**{**CAM, "focus_distance_m": 4.0})
+    frame = Frame(col, depth=depth)
+    out, pipe = run(cam, frame, quality)
+    assert_matches_reference(pipe, frame, out, rtol=1e-3)

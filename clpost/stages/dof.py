@@ -339,16 +339,22 @@ def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     :math:`d_p` either way) has at most :data:`SPECKLE_MAX_SAME` of its 8 neighbours, not in one
     arc (:func:`speckle_candidates`: an object's corner is not a speckle).
 
-    * A candidate whose luminance lies within the range of its other-depth neighbours' (its colour
-      is explained without its own surface; up to :data:`FRINGE_STEP`'s 5 % outside it) takes the
-      median depth of its 3×3.
+    * A candidate whose luminance lies within the *robust* range of its other-depth neighbours'
+      (between the second-darkest and the second-brightest of them, up to :data:`FRINGE_STEP`'s
+      5 % outside it: its colour is explained without its own surface) takes the median depth of
+      its 3×3. A candidate has at least 5 other-depth neighbours. A speckle under a smooth
+      semi-transparent surface is inside that range; a 1-px lamp straddling two pixels, whose depth
+      sample hit the lamp in one, is not: its bright twin is the only other-depth neighbour as
+      bright as it, and one neighbour cannot explain it (docs/fidelity.md, "Held-out scenes").
     * A light seen through such a surface: a candidate not on a one-pixel line (a wire's pixels
       keep their depth) brighter than every other-depth neighbour, but by less than
       :data:`SAME_SOURCE`× the brightest of them (that neighbour is the same source) and by more
       than that the dimmest (a source above its surround), whose depth class is also seen on a
-      candidate of its 5×5 dimmer than :math:`Y_p`/:data:`SAME_SOURCE` and not on a one-pixel line
-      (a speckle of it: the stochastic depth of a surface in front — a pane's — not the source's
-      own), takes that brightest neighbour's depth. A lamp's own pixels keep theirs: their depth
+      candidate of its 5×5 dimmer than :math:`Y_p`/:data:`SAME_SOURCE`, no brighter than
+      :data:`SAME_SOURCE`× that dimmest neighbour and not on a one-pixel line (a speckle of it
+      showing the surround: the stochastic depth of a surface in front — a pane's — not the
+      source's own; a lamp's own dimmer pixel is far above its surround), takes that brightest
+      neighbour's depth. A lamp's own pixels keep theirs: their depth
       class is seen only on the lamp, or on a fixture at its depth (a pole, a wall: not a speckle).
 
     A wire, a lamp or a silhouette pixel brighter or darker than everything around it keeps its
@@ -358,13 +364,16 @@ def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
     dn, ln = _neighbourhood(d), _neighbourhood(lum)
     lo, hi, hi_d = np.full_like(d, np.inf), np.full_like(d, -np.inf), d.copy()
+    lo2, hi2 = lo.copy(), hi.copy()
     for dq, lq in zip(dn[1:], ln[1:]):
         s = _same_depth(dq, d)
+        lo2 = np.where(s, lo2, np.minimum(lo2, np.maximum(lo, lq)))
+        hi2 = np.where(s, hi2, np.maximum(hi2, np.minimum(hi, lq)))
         lo = np.where(s, lo, np.minimum(lo, lq))
         up = ~s & (lq > hi)
         hi_d, hi = np.where(up, dq, hi_d), np.where(up, lq, hi)
     cand = speckle_candidates(d)
-    speckle = cand & (lum >= FRINGE_STEP * lo) & (FRINGE_STEP * lum <= hi)
+    speckle = cand & (lum >= FRINGE_STEP * lo2) & (FRINGE_STEP * lum <= hi2)
     speck = speckle_candidates(d, lines=False)
     source = speck & (lum > hi) & (lum <= SAME_SOURCE * hi) & (lum > SAME_SOURCE * lo)
     h, w = d.shape
@@ -372,7 +381,8 @@ def despeckle_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     dim = np.zeros(d.shape, bool)
     for b in range(5):
         for a in range(5):
-            dim |= _same_depth(pd[b:b + h, a:a + w], d) & (SAME_SOURCE * pl[b:b + h, a:a + w] < lum) \
+            lq = pl[b:b + h, a:a + w]
+            dim |= _same_depth(pd[b:b + h, a:a + w], d) & (SAME_SOURCE * lq < lum) & (lq <= SAME_SOURCE * lo) \
                 & pc[b:b + h, a:a + w]
     out = np.where(speckle, np.median(np.stack(dn), axis=0), d)
     return np.where(source & dim, hi_d, out)
