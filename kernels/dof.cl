@@ -111,9 +111,12 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
 #if DOF_VIGNETTING
     {
         const DOF_F sir = select(-ir, ir, far);  /* 1 / (r sgn) */
-        const DOF_F ex = -(float)dx * sir - vig * hx, ey = -(float)dy * sir - vig * hy;
-        const DOF_F e = sqrt(ex * ex + ey * ey);
-        /* per-source pupil area (pv = 1/area fraction): the clipped bokeh keeps its energy */
+        /* front and rear barrel circles at ±vig h / 2 (h: the midpoint of p and q, pvq: the mean
+         * of their 1/area fraction), so w(p, q) = w(q, p): the clipped bokeh keeps its energy */
+        const DOF_F ax = -(float)dx * sir, ay = -(float)dy * sir;
+        const DOF_F bx = 0.5f * vig * hx, by = 0.5f * vig * hy;
+        const DOF_F e = sqrt(fmax((ax - bx) * (ax - bx) + (ay - by) * (ay - by),
+                                  (ax + bx) * (ax + bx) + (ay + by) * (ay + by)));
         w *= clamp((1.0f - e) * r + 0.5f, 0.0f, 1.0f) * pvq;
     }
 #endif
@@ -186,6 +189,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                    (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f)
 #endif
                    };
+    const DOF_F pvp = DOF_VIGNETTING ? DOF_LOAD(pv + c0) : (DOF_F)(1.0f);
     {
         /* centre tap: own colour, blended toward the level's as p's own bokeh outgrows the
          * lattice spacing (a point light's centre must not stay a one-pixel spike) */
@@ -196,7 +200,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                  DOF_LOAD(lv + 2 * pn + c0) * ob + DOF_LOAD(L + 2 * pn + c0) * beta,
                  rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0],
                  inv_s, cell, sa, hx0, (DOF_F)(hy0), 0, 0,
-                 DOF_VIGNETTING ? DOF_LOAD(pv + c0) : (DOF_F)(1.0f), vig, prof);
+                 pvp, vig, prof);
     }
     for (int k = 1; k < count; ++k) {
         const int dx = s * tap_dx[k], dy = s * tap_dy[k];
@@ -204,8 +208,9 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
         dof_tapv(&acc, DOF_LOAD(L + q), DOF_LOAD(L + pn + q), DOF_LOAD(L + 2 * pn + q),
                  DOF_LOAD(L + 3 * pn + q), DOF_LOAD(L + 4 * pn + q), rp, arp, iarp, fs * tap_dist[k],
                  rho_far[k], rho_near[k], inv_rho_far[k], inv_rho_near[k], inv_s, cell, sa,
-                 ((float)(x + dx) + lane - cx) * inv_half, (DOF_F)(((float)(y + dy) - cy) * inv_half),
-                 dx, dy, DOF_VIGNETTING ? DOF_LOAD(pv + q) : (DOF_F)(1.0f), vig, prof);
+                 ((float)x + 0.5f * (float)dx + lane - cx) * inv_half,
+                 (DOF_F)(((float)y + 0.5f * (float)dy - cy) * inv_half),
+                 dx, dy, DOF_VIGNETTING ? 0.5f * (pvp + DOF_LOAD(pv + q)) : (DOF_F)(1.0f), vig, prof);
     }
     /* per channel (one weight for all three without DOF_PROFILE); alpha_out: green's coverage.
      * No background weight (a strong SA texture zeroes the centre tap and every other tap is in

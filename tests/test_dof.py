@@ -755,3 +755,16 @@ def test_robust_range_and_surround_speckle_kernel_matches_its_reference(quality)
     frame = Frame(col, depth=depth)
     out, pipe = run(cam, frame, quality)
     assert_matches_reference(pipe, frame, out, rtol=1e-3)
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview", "final"])
+@pytest.mark.parametrize("eta", [0.0, 0.5, 1.0])
+def test_cats_eye_point_light_keeps_its_energy(quality, eta):
+    """The clipped bokeh keeps its energy (module docstring: the light the barrel removes belongs
+    to the vignetting stage), at the centre (an unclipped pupil) and toward a corner. Before the
+    front/rear barrel pair and the symmetric weights, the centre kept 1.145 at final, η = 1 (the
+    barrel's displaced centroid magnified the blur and the normalisation turned that into light)."""
+    cam = Camera(**CAM, blades=0, optical_vignetting=eta)
+    for at, tol in [((50, 80), 0.015 + 0.015 * eta), ((12, 18), 0.01)]:
+        out, _ = run(cam, point_frame(20.0, w=161, h=101, at=at), quality)
+        assert out.sum() / 3000.0 == pytest.approx(1.0, abs=tol), (at, quality, eta)
