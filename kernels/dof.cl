@@ -88,7 +88,7 @@ inline void dof_profile(__global const float4 *restrict prof, const DOF_F rq, co
 inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F cb, const DOF_F rq,
                      const DOF_F iq, const DOF_F rp, const DOF_F arp, const DOF_F iarp,
                      const float dist, const float rhof, const float rhon, const float irhof,
-                     const float irhon, const float inv_s, const float cell, const float sa,
+                     const float irhon, const float inv_ramp, const float cell, const float sa,
                      const DOF_F hx, const DOF_F hy, const int dx, const int dy, const DOF_F pvq,
                      const float vig, __global const float4 *restrict prof)
 {
@@ -99,7 +99,7 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
     const DOF_F r = select(fmax(fabs(rq), 0.5f), arp, behind);
     const DOF_F ir = select(iq, iarp, behind);
     const DOF_F rr = r * select((DOF_F)(rhon), (DOF_F)(rhof), far);
-    const DOF_F cov = clamp((rr * DOF_TMAX - dist) * inv_s + 0.5f, 0.0f, 1.0f);
+    const DOF_F cov = clamp((rr * DOF_TMAX - dist) * inv_ramp + 0.5f, 0.0f, 1.0f);
     DOF_F w = cov * (cell * ir * ir);
 #if DOF_TEXTURE
     {
@@ -174,6 +174,8 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     if (count == 0) return;
     const int s = 1 << lvl;
     const float fs = (float)s, inv_s = 1.0f / fs, cell = fs * fs * inv_area;
+    /* the disc-edge coverage ramp: max(s/2, 1) px wide (clpost/stages/dof.py) */
+    const float inv_ramp = 1.0f / fmax(0.5f * fs, 1.0f);
     const int pw = DOF_PW(ww, pad);
     const size_t pn = (size_t)pw * DOF_PW(hw, pad);
     const size_t c0 = (size_t)(y + pad) * pw + (x + pad);
@@ -199,7 +201,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                  DOF_LOAD(lv + pn + c0) * ob + DOF_LOAD(L + pn + c0) * beta,
                  DOF_LOAD(lv + 2 * pn + c0) * ob + DOF_LOAD(L + 2 * pn + c0) * beta,
                  rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0],
-                 inv_s, cell, sa, hx0, (DOF_F)(hy0), 0, 0,
+                 inv_ramp, cell, sa, hx0, (DOF_F)(hy0), 0, 0,
                  pvp, vig, prof);
     }
     for (int k = 1; k < count; ++k) {
@@ -207,7 +209,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
         const size_t q = (size_t)((long)c0 + (long)dy * pw + dx);
         dof_tapv(&acc, DOF_LOAD(L + q), DOF_LOAD(L + pn + q), DOF_LOAD(L + 2 * pn + q),
                  DOF_LOAD(L + 3 * pn + q), DOF_LOAD(L + 4 * pn + q), rp, arp, iarp, fs * tap_dist[k],
-                 rho_far[k], rho_near[k], inv_rho_far[k], inv_rho_near[k], inv_s, cell, sa,
+                 rho_far[k], rho_near[k], inv_rho_far[k], inv_rho_near[k], inv_ramp, cell, sa,
                  ((float)x + 0.5f * (float)dx + lane - cx) * inv_half,
                  (DOF_F)(((float)y + 0.5f * (float)dy - cy) * inv_half),
                  dx, dy, DOF_VIGNETTING ? 0.5f * (pvp + DOF_LOAD(pv + q)) : (DOF_F)(1.0f), vig, prof);

@@ -58,8 +58,9 @@ bokehs that cover it. Ideas used, by source:
   and a pixel whose own CoC is far below its tile's R is blurred at the lattice scale (its centre
   tap blends its own colour toward the level's by :math:`\beta = \min(1, |r_p|/s)`).
 * Shape and texture are evaluated per tap, weighted by each sample's own CoC (scatter-as-gather),
-  with the coverage ramp one lattice step wide: :math:`\mathrm{cov} = \mathrm{clamp}((r\rho - |o|)/s + \tfrac12, 0, 1)`
-  and the cell area :math:`s^2` in the weight.
+  with the coverage ramp half a lattice step wide (at least 1 px):
+  :math:`\mathrm{cov} = \mathrm{clamp}((r\rho - |o|)/\max(s/2, 1) + \tfrac12, 0, 1)` — sharper disc
+  edges than a ramp of s, at no cost (docs/fidelity.md) — and the cell area :math:`s^2` in the weight.
 * Near/far separation by depth order relative to p (Jimenez's scatter-as-gather classification):
   taps nearer than p by more than :data:`FRONT_MARGIN_PX` of CoC form the *front* layer F (their own radius, so a
   blurred foreground spreads over the in-focus background); taps behind p have their radius
@@ -668,7 +669,7 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
         far = rq >= 0
         rho = np.where(far, rf[k], rn[k])
         rr = r * rho
-        cov = np.clip((rr * reach - dist) / s + 0.5, 0.0, 1.0)
+        cov = np.clip((rr * reach - dist) / np.maximum(s / 2, 1.0) + 0.5, 0.0, 1.0)
         if profile is None:
             t = np.minimum(dist / rr, 1.0)
             a = np.where(far, -sa, sa)
