@@ -640,9 +640,11 @@ def test_final_mixed_resolution_matches_the_reference(rng, extra):
     assert 0.2 < mask.mean() < 0.8
     assert np.isfinite(out).all() and (out >= 0).all()
     assert_matches_reference(pipe, frame, out)
-    # outside the mixed tiles the output is the full-resolution gather, exactly as before
-    full, _ = D.gather_reference(color.astype(np.float64), coc, 64, 8, cam.blades, cam.blade_rotation_deg,
-                                 cam.aperture_roundness, cam.spherical_aberration, cam.optical_vignetting)
+    # outside the mixed tiles the output is the full-resolution gather with its small CoCs mixed
+    # with the 3x3 blur (D._full_small), exactly as before
+    full, alpha = D.gather_reference(color.astype(np.float64), coc, 64, 8, cam.blades, cam.blade_rotation_deg,
+                                     cam.aperture_roundness, cam.spherical_aberration, cam.optical_vignetting)
+    full = D._full_small(color.astype(np.float64), coc, full, alpha)
     np.testing.assert_allclose(out[~mask], full[~mask], rtol=2e-4, atol=1e-3)
 
 

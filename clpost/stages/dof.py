@@ -875,6 +875,20 @@ def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
     return np.where(b[..., None] < 1.0, near + (up - near) * b[..., None], up), rw
 
 
+def _full_small(color, coc, out, alpha):
+    r"""The full-resolution gather's small CoCs (final): the lattice disc with its 1-px coverage
+    ramp has too much variance below r ≈ 2 px (r = 0.9: 0.31 px² per axis for the disc's 0.20;
+    r ≤ 0.5: none at all), so, as the half-resolution path does, the disc's variance is made by the
+    3×3 blur (:func:`local_blur`) alone up to r = √2 px and mixed into the gather up to r = 2 px,
+    :math:`\mathrm{lerp}(c_{3\times3}, c_{gather}, \max(b(r), \alpha))` (:func:`half_blend`;
+    α: the gather's front coverage, so a blurred foreground still spreads over a sharp pixel).
+    From r = 2 px on (b = 1) and wherever α = 1 the gather is unchanged. Effect on the Cycles
+    truths: docs/fidelity.md, "Held-out scenes"."""
+    b = np.maximum(half_blend(coc), alpha)
+    near = local_blur(color, coc)
+    return np.where(b[..., None] < 1.0, near + (out - near) * b[..., None], out)
+
+
 def mixed_mask(rw: np.ndarray, coc: np.ndarray, quality: str, reach: float = 1.0) -> np.ndarray:
     r"""Full-resolution pixels that ``quality`` takes from the half-resolution path: those in a
     working tile whose half-resolution plan (:func:`tile_plan`) has level ≥ :data:`MIXED_LEVEL`,
@@ -908,9 +922,10 @@ def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "
     pm = traced_profile(camera, width_px or w, quality)
     if scale > 1:
         return _half_composite(camera, color, coc, scale, rmax, budget, pm)[0]
-    out, _ = gather_reference(color, coc, rmax, budget, camera.blades, camera.blade_rotation_deg,
-                              camera.aperture_roundness, camera.spherical_aberration,
-                              camera.optical_vignetting, None if pm is None else (pm, 1))
+    out, alpha = gather_reference(color, coc, rmax, budget, camera.blades, camera.blade_rotation_deg,
+                                  camera.aperture_roundness, camera.spherical_aberration,
+                                  camera.optical_vignetting, None if pm is None else (pm, 1))
+    out = _full_small(color, coc, out, alpha)
     if quality not in MIXED:
         return out
     half, rw = _half_composite(camera, color, coc, *MIXED[quality], pm)
