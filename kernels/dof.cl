@@ -229,9 +229,10 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
 #endif
 #if DOF_SCALE == 1
     /* small CoCs (final; _full_small in clpost/stages/dof.py): lerp(3x3 blur, gather, b),
-     * b = max(DOF_HALF_B(r), alpha); the 3x3 blur as dof_local_px, on level 0 of the padded
-     * buffers (their border replicates the edge, as its clamp does) */
-    const DOF_F bl = fmax(DOF_HALF_B(rp), alpha);
+     * b = clamp((|r| - DOF_SMALL_LO) DOF_SMALL_K, 0, 1), 1 where alpha > 0; the 3x3 blur as
+     * dof_local_px, on level 0 of the padded buffers (their border replicates the edge, as its
+     * clamp does) */
+    const DOF_F bl = select(clamp((fabs(rp) - DOF_SMALL_LO) * DOF_SMALL_K, 0.0f, 1.0f), (DOF_F)(1.0f), alpha > 0.0f);
     if (any(bl < 1.0f)) {
         const DOF_F ap = DOF_LOCAL_A(rp);
         DOF_I need = fabs(rp) >= DOF_LOCAL_MIN;
