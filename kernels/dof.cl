@@ -233,7 +233,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
      * dof_local_px, on level 0 of the padded buffers (their border replicates the edge, as its
      * clamp does) */
     const DOF_F bl = select(clamp((fabs(rp) - DOF_SMALL_LO) * DOF_SMALL_K, 0.0f, 1.0f), (DOF_F)(1.0f), alpha > 0.0f);
-    if (any(bl < 1.0f)) {
+    if (count > 1 && any(bl < 1.0f)) {  /* one-tap tiles: kept as gathered (_full_small's one_tap) */
         const DOF_F ap = DOF_LOCAL_A(rp);
         DOF_I need = fabs(rp) >= DOF_LOCAL_MIN;
         DOF_F lr = (DOF_F)(0.0f), lg = (DOF_F)(0.0f), lb = (DOF_F)(0.0f), lw = (DOF_F)(0.0f);

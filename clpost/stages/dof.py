@@ -880,15 +880,19 @@ SMALL_LO_PX, SMALL_HI_PX = 1.0, math.sqrt(2.0)
 which it is kept (a linear ramp between; :func:`_full_small`)."""
 
 
-def _full_small(color, coc, out, alpha):
+def _full_small(color, coc, out, alpha, one_tap=None):
     r"""Final's small CoCs: the full-resolution lattice disc with its 1-px coverage ramp has too
     much variance below r ≈ 1.4 px (r = 0.9: 0.31 px² per axis for the disc's 0.20; r ≤ 0.5:
     none), so there the disc's variance is made by the 3×3 blur (:func:`local_blur`, exact up to
     r = √2): :math:`\mathrm{lerp}(c_{3\times3}, c_{gather}, b)`, b = 0 for |r| ≤
     :data:`SMALL_LO_PX`, 1 from :data:`SMALL_HI_PX` on, and 1 wherever the gather has a front
     layer (α > 0: a blurred foreground over the pixel, or a sloped surface's nearer taps, keep
-    the gather). Measured per CoC band on the Cycles truths: docs/fidelity.md, "Held-out scenes"."""
+    the gather). ``one_tap``: pixels of one-tap tiles (every |r| in reach ≤ ½ px: the 3×3 blur
+    would change only exact ½ px CoCs; the kernel skips it there, for speed), kept as gathered.
+    Measured per CoC band on the Cycles truths: docs/fidelity.md, "Held-out scenes"."""
     b = np.where(alpha > 0.0, 1.0, np.clip((np.abs(coc) - SMALL_LO_PX) / (SMALL_HI_PX - SMALL_LO_PX), 0.0, 1.0))
+    if one_tap is not None:
+        b = np.where(one_tap, 1.0, b)
     near = local_blur(color, coc)
     return np.where(b[..., None] < 1.0, near + (out - near) * b[..., None], out)
 
@@ -929,7 +933,8 @@ def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "
     out, alpha = gather_reference(color, coc, rmax, budget, camera.blades, camera.blade_rotation_deg,
                                   camera.aperture_roundness, camera.spherical_aberration,
                                   camera.optical_vignetting, None if pm is None else (pm, 1))
-    out = _full_small(color, coc, out, alpha)
+    one_tap = tile_plan(coc, rmax, budget, 1.0 if pm is None else pencil.T_MAX)[1] == 1
+    out = _full_small(color, coc, out, alpha, one_tap)
     if quality not in MIXED:
         return out
     half, rw = _half_composite(camera, color, coc, *MIXED[quality], pm)
