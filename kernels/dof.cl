@@ -220,9 +220,9 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
 #if DOF_PROFILE
     /* per channel (the traced weights differ per colour); alpha_out: green's coverage */
     DOF_F alpha, a_r, a_b;
-    const DOF_F o_r = dof_out(acc.fr, acc.r, acc.wf, acc.wb, DOF_LOAD(lv + c0), &a_r);
-    const DOF_F o_g = dof_out(acc.fg, acc.g, acc.wfg, acc.wbg, DOF_LOAD(lv + pn + c0), &alpha);
-    const DOF_F o_b = dof_out(acc.fb, acc.b, acc.wfb, acc.wbb, DOF_LOAD(lv + 2 * pn + c0), &a_b);
+    DOF_F o_r = dof_out(acc.fr, acc.r, acc.wf, acc.wb, DOF_LOAD(lv + c0), &a_r);
+    DOF_F o_g = dof_out(acc.fg, acc.g, acc.wfg, acc.wbg, DOF_LOAD(lv + pn + c0), &alpha);
+    DOF_F o_b = dof_out(acc.fb, acc.b, acc.wfb, acc.wbb, DOF_LOAD(lv + 2 * pn + c0), &a_b);
 #else
     const DOF_F alpha = fmin(1.0f, acc.wf);
     const DOF_F inv_wf = select((DOF_F)(0.0f), 1.0f / acc.wf, acc.wf > 0.0f);
@@ -230,9 +230,39 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
      * front): the background is the pixel's own colour, never 0/0 */
     const DOF_F inv_wb = select((DOF_F)(0.0f), 1.0f / acc.wb, acc.wb > 0.0f);
     const DOF_F ob = 1.0f - alpha, af = alpha * inv_wf;
-    const DOF_F o_r = af * acc.fr + ob * select(DOF_LOAD(lv + c0), acc.r * inv_wb, acc.wb > 0.0f);
-    const DOF_F o_g = af * acc.fg + ob * select(DOF_LOAD(lv + pn + c0), acc.g * inv_wb, acc.wb > 0.0f);
-    const DOF_F o_b = af * acc.fb + ob * select(DOF_LOAD(lv + 2 * pn + c0), acc.b * inv_wb, acc.wb > 0.0f);
+    DOF_F o_r = af * acc.fr + ob * select(DOF_LOAD(lv + c0), acc.r * inv_wb, acc.wb > 0.0f);
+    DOF_F o_g = af * acc.fg + ob * select(DOF_LOAD(lv + pn + c0), acc.g * inv_wb, acc.wb > 0.0f);
+    DOF_F o_b = af * acc.fb + ob * select(DOF_LOAD(lv + 2 * pn + c0), acc.b * inv_wb, acc.wb > 0.0f);
+#endif
+#if DOF_SCALE == 1
+    /* small CoCs (final; _full_small in clpost/stages/dof.py): lerp(3x3 blur, gather, b),
+     * b = clamp((|r| - DOF_SMALL_LO) DOF_SMALL_K, 0, 1), 1 where alpha > 0; the 3x3 blur as
+     * dof_local_px, on level 0 of the padded buffers (their border replicates the edge, as its
+     * clamp does) */
+    const DOF_F bl = select(clamp((fabs(rp) - DOF_SMALL_LO) * DOF_SMALL_K, 0.0f, 1.0f), (DOF_F)(1.0f), alpha > 0.0f);
+    if (count > 1 && any(bl < 1.0f)) {  /* one-tap tiles: kept as gathered (_full_small's one_tap) */
+        const DOF_F ap = DOF_LOCAL_A(rp);
+        DOF_I need = fabs(rp) >= DOF_LOCAL_MIN;
+        DOF_F lr = (DOF_F)(0.0f), lg = (DOF_F)(0.0f), lb = (DOF_F)(0.0f), lw = (DOF_F)(0.0f);
+        for (int b = -1; b <= 1; ++b)
+            for (int a = -1; a <= 1; ++a) {
+                const size_t q = (size_t)((long)c0 + (long)b * pw + a);
+                const DOF_F rq = DOF_LOAD(lv + 3 * pn + q);
+                const DOF_I front = rq < rp - DOF_FRONT_MARGIN;
+                need |= front & (fabs(rq) >= DOF_LOCAL_MIN);
+                const DOF_F aq = select(fmin(DOF_LOCAL_A(rq), ap), DOF_LOCAL_A(rq), front);
+                const DOF_F wq = (b ? aq : 1.0f - 2.0f * aq) * (a ? aq : 1.0f - 2.0f * aq);
+                lr += wq * DOF_LOAD(lv + q); lg += wq * DOF_LOAD(lv + pn + q); lb += wq * DOF_LOAD(lv + 2 * pn + q);
+                lw += wq;
+            }
+        const DOF_F il = 1.0f / lw;
+        const DOF_F nr = select(DOF_LOAD(lv + c0), lr * il, need);
+        const DOF_F ng = select(DOF_LOAD(lv + pn + c0), lg * il, need);
+        const DOF_F nb = select(DOF_LOAD(lv + 2 * pn + c0), lb * il, need);
+        o_r = select(nr + (o_r - nr) * bl, o_r, bl >= 1.0f);
+        o_g = select(ng + (o_g - ng) * bl, o_g, bl >= 1.0f);
+        o_b = select(nb + (o_b - nb) * bl, o_b, bl >= 1.0f);
+    }
 #endif
     if (y >= hw || x >= ww) return;
     const size_t n = (size_t)ww * hw, i = (size_t)y * ww + x;

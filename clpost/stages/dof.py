@@ -891,6 +891,28 @@ def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
     return np.where(b[..., None] < 1.0, near + (up - near) * b[..., None], up), rw
 
 
+SMALL_LO_PX, SMALL_HI_PX = 1.0, math.sqrt(2.0)
+"""|CoC| (px) below which final's full-resolution gather is replaced by the 3×3 blur, and above
+which it is kept (a linear ramp between; :func:`_full_small`)."""
+
+
+def _full_small(color, coc, out, alpha, one_tap=None):
+    r"""Final's small CoCs: the full-resolution lattice disc with its 1-px coverage ramp has too
+    much variance below r ≈ 1.4 px (r = 0.9: 0.31 px² per axis for the disc's 0.20; r ≤ 0.5:
+    none), so there the disc's variance is made by the 3×3 blur (:func:`local_blur`, exact up to
+    r = √2): :math:`\mathrm{lerp}(c_{3\times3}, c_{gather}, b)`, b = 0 for |r| ≤
+    :data:`SMALL_LO_PX`, 1 from :data:`SMALL_HI_PX` on, and 1 wherever the gather has a front
+    layer (α > 0: a blurred foreground over the pixel, or a sloped surface's nearer taps, keep
+    the gather). ``one_tap``: pixels of one-tap tiles (every |r| in reach ≤ ½ px: the 3×3 blur
+    would change only exact ½ px CoCs; the kernel skips it there, for speed), kept as gathered.
+    Measured per CoC band on the Cycles truths: docs/fidelity.md, "Held-out scenes"."""
+    b = np.where(alpha > 0.0, 1.0, np.clip((np.abs(coc) - SMALL_LO_PX) / (SMALL_HI_PX - SMALL_LO_PX), 0.0, 1.0))
+    if one_tap is not None:
+        b = np.where(one_tap, 1.0, b)
+    near = local_blur(color, coc)
+    return np.where(b[..., None] < 1.0, near + (out - near) * b[..., None], out)
+
+
 def mixed_mask(rw: np.ndarray, coc: np.ndarray, quality: str, reach: float = 1.0) -> np.ndarray:
     r"""Full-resolution pixels that ``quality`` takes from the half-resolution path: those in a
     working tile whose half-resolution plan (:func:`tile_plan`) has level ≥ :data:`MIXED_LEVEL`,
@@ -924,9 +946,11 @@ def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "
     pm = traced_profile(camera, width_px or w, quality)
     if scale > 1:
         return _half_composite(camera, color, coc, scale, rmax, budget, pm)[0]
-    out, _ = gather_reference(color, coc, rmax, budget, camera.blades, camera.blade_rotation_deg,
-                              camera.aperture_roundness, camera.spherical_aberration,
-                              camera.optical_vignetting, None if pm is None else (pm, 1))
+    out, alpha = gather_reference(color, coc, rmax, budget, camera.blades, camera.blade_rotation_deg,
+                                  camera.aperture_roundness, camera.spherical_aberration,
+                                  camera.optical_vignetting, None if pm is None else (pm, 1))
+    one_tap = tile_plan(coc, rmax, budget, 1.0 if pm is None else pencil.T_MAX)[1] == 1
+    out = _full_small(color, coc, out, alpha, one_tap)
     if quality not in MIXED:
         return out
     half, rw = _half_composite(camera, color, coc, *MIXED[quality], pm)
@@ -985,6 +1009,7 @@ class Dof(GatherStage):
                 "DOF_HALF_SHRINK": f"{4.0 * (HALF_PATH_VAR_PX2 + HALF_RAMP_VAR_PX2)!r}f",
                 "DOF_HALF_BLEND": f"{1.0 / (HALF_PATH_VAR_PX2 - LOCAL_VAR_PX2)!r}f",
                 "DOF_LOCAL_VAR": f"{LOCAL_VAR_PX2!r}f", "DOF_LOCAL_MIN": f"{LOCAL_MIN_PX!r}f",
+                "DOF_SMALL_LO": f"{SMALL_LO_PX!r}f", "DOF_SMALL_K": f"{1.0 / (SMALL_HI_PX - SMALL_LO_PX)!r}f",
                 "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
                 "DOF_UP_SAME": f"{UPSAMPLE_SAME_PX!r}f",
                 "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
