@@ -424,9 +424,8 @@ inline void dof_store16(const float16 v, __global float *dst, const size_t i, co
 /* The vector form of dof_upsample_px (its formulas lane-wise) for output pixels x .. x + 15 of row
  * y, with edge = 1: the groups at the image's left/right end, whose loads leave the rows
  * (dof_row16, dof_block_min16 clamp per lane as the per-pixel form does). The interior groups run
- * the same formulas inline in dof_upsample with whole-row loads: a shared function with edge = 0
- * measured slower there (the per-lane branches stay in). The per-pixel form ran these groups
- * before: 2 of 90 groups a row at 1440 px cost as much as ~20 % of the kernel with the 3x3. */
+ * the same formulas inline in dof_upsample with whole-row loads, without the per-lane clamps
+ * (docs/fidelity.md has the measurements behind the split). */
 inline void dof_upsample16(__global const float *restrict src, __global const float *restrict coc,
                            __global const float *restrict blur, __global const float *restrict alpha,
                            __global float *restrict dst, const int x, const int y,

@@ -385,8 +385,9 @@ PAD = 20
 """Edge pixels around the B-spline coefficients (kernels/distortion.cl DISTORTION_PAD). The 4×4
 window of a valid position (in [−½, size − ½]) needs 2 of them; the rest lets the vector gather
 take the border tiles too, whose lanes without a preimage load windows up to the render's
-missing overscan beyond its edge (19 px at the bench's barrel distortion; with 12, 67 of its
-8160 tiles at 1080p fell to ``distortion_table``, 14× slower per tile)."""
+missing overscan beyond its edge (19 px at the bench's barrel distortion); tiles that reach
+further take the per-pixel ``distortion_table`` (docs/benchmarks.md, "Distortion's final filter
+and astigmatism")."""
 
 FIR_K = 12
 """Half-length of the prefilter FIR (kernels/distortion.cl DISTORTION_FIR_K), see :func:`fir_taps`."""
@@ -428,10 +429,10 @@ def fir_taps(k_max: int = FIR_K) -> np.ndarray:
 
 
 def coef_pitch(src_w: int) -> int:
-    """Row pitch of the coefficient planes: the render plus 2 :data:`PAD`, rounded up to 64 (the
-    prefilter kernels write 16 pixels per work-item; with an odd count of them a row — 123 at
-    1080p — PoCL's automatic work-group sizes walk down column strips instead of along rows, and
-    ``distortion_fir_cols`` and ``distortion_dering`` ran 2–3× slower: docs/benchmarks.md, issue 20)."""
+    """Row pitch of the coefficient planes: the render plus 2 :data:`PAD`, rounded up to 64, so a
+    row is an even count of the prefilter kernels' 16-pixel work-items (PoCL's automatic
+    work-group sizes for an odd count walk down column strips instead of along rows; measured in
+    docs/benchmarks.md, "Distortion's final filter and astigmatism")."""
     return -(-(src_w + 2 * PAD) // 64) * 64
 
 

@@ -248,10 +248,8 @@ r"""Taps whose signed CoC is below p's by more than this (working px) are p's fr
 by more than this its background; within it, p's own surface. The front layer adds unnormalised
 (each source's own bokeh weight, so its light is conserved); the own-surface pool is normalised by
 its summed weight, which loses a smaller-CoC source's light when it is pooled with a larger-CoC
-surround: a 2 px lamp at 12 m (CoC radius 4.96 px) over the sky (5.95 px) was inside the former
-1 px margin and kept 95 % of its light (docs/fidelity.md, "Emitter energy"). A sloped surface's
-taps that now leave the pool mix back as front/background layers; on the Cycles suite no scene
-and quality lost more than 0.04 dB."""
+surround, so the margin is narrow: a small source a pixel of CoC nearer than the sky is its own
+front layer (docs/fidelity.md, "Emitter energy", measures the choice)."""
 
 
 def lattice_stride(r_px: float, budget: int) -> int:
@@ -761,11 +759,10 @@ def profile_weight(profile, rq: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 UPSAMPLE_COC_TOL_PX2 = 0.125
-"""τ (px²) of the depth-aware upsampling's CoC similarity 1/(τ + Δr²) (:func:`_upsample`). 1/4
-before; 1/8 suppresses a working corner 2.2 px of CoC away 40× instead of 20×, which an HDR lamp
-next to a slightly blurred surface needs (draft on the Cycles suite: highlights 39.37 → 40.27 dB,
-motion 42.46 → 42.70, thin 37.59 → 37.45; 1/16 gave highlights 40.81 and motion 43.27 but thin
-37.34 with FLIP 0.0272 — docs/fidelity.md)."""
+"""τ (px²) of the depth-aware upsampling's CoC similarity 1/(τ + Δr²) (:func:`_upsample`): a
+working corner 2.2 px of CoC away weighs 1/40 of a same-CoC one, which an HDR lamp next to a
+slightly blurred surface needs (the choice of τ measured in docs/fidelity.md, "The upsampling's
+CoC comparison")."""
 
 
 UPSAMPLE_SAME_PX = 1.0
