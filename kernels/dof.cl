@@ -372,6 +372,23 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
                                 (v).s5, (v).s6, (v).s6, (v).s7, (v).s7, (v).s8, (v).s8, (v).s9))
 #endif
 
+/* The 16-lane upsampling's shared steps (dof_upsample16 at the row ends, dof_upsample inside):
+ * p's own surface among the 2x2 working corners (the others are left out, UPSAMPLE_SAME_PX), and
+ * one row of corners' weighted colour and alpha, read through DOF_UP_LOAD(plane, row offset),
+ * which each caller defines (clamped per lane at the ends, whole-row loads inside). */
+#define DOF_UP_OWN_SURFACE (((wl0 > 0.0f) & (dl0 <= DOF_UP_SAME)) | ((wr0 > 0.0f) & (dr0 <= DOF_UP_SAME)) \
+                            | ((wl1 > 0.0f) & (dl1 <= DOF_UP_SAME)) | ((wr1 > 0.0f) & (dr1 <= DOF_UP_SAME)))
+#define DOF_UP_ROW(YS, DL, DR, WL, WR) { \
+        const size_t j = (size_t)(YS) * ww; \
+        const float16 vr = DOF_UP_LOAD(blur, j), vg = DOF_UP_LOAD(blur + nw, j); \
+        const float16 vb = DOF_UP_LOAD(blur + 2 * nw, j), va = DOF_UP_LOAD(alpha, j); \
+        const float16 gl = select((WL) / (DOF_UP_TOL + (DL) * (DL)), (float16)(0.0f), same & ((DL) > DOF_UP_SAME)); \
+        const float16 gr = select((WR) / (DOF_UP_TOL + (DR) * (DR)), (float16)(0.0f), same & ((DR) > DOF_UP_SAME)); \
+        ar += gl * DOF_LEFT(vr); ag += gl * DOF_LEFT(vg); ab += gl * DOF_LEFT(vb); aa += gl * DOF_LEFT(va); \
+        wsum += gl; \
+        ar += gr * DOF_RIGHT(vr); ag += gr * DOF_RIGHT(vg); ab += gr * DOF_RIGHT(vb); aa += gr * DOF_RIGHT(va); \
+        wsum += gr; }
+
 #if DOF_SCALE == 2
 /* 16 floats of row `row` from column `col` on: one vload16 inside the row (edge 0), else per lane
  * with the column clamped to [0, lim - 1] (edge 1: the groups at the image's left/right end, the
@@ -447,22 +464,11 @@ inline void dof_upsample16(__global const float *restrict src, __global const fl
     const float16 dl0 = fabs(r - DOF_LEFT(vc0)), dr0 = fabs(r - DOF_RIGHT(vc0));
     const float16 dl1 = fabs(r - DOF_LEFT(vc1)), dr1 = fabs(r - DOF_RIGHT(vc1));
     const float16 wl0 = (1.0f - fx) * (1.0f - fy), wr0 = fx * (1.0f - fy), wl1 = (1.0f - fx) * fy, wr1 = fx * fy;
-    /* p's own surface among the corners: the others are left out (UPSAMPLE_SAME_PX) */
-    const int16 same = ((wl0 > 0.0f) & (dl0 <= DOF_UP_SAME)) | ((wr0 > 0.0f) & (dr0 <= DOF_UP_SAME))
-                       | ((wl1 > 0.0f) & (dl1 <= DOF_UP_SAME)) | ((wr1 > 0.0f) & (dr1 <= DOF_UP_SAME));
-#define DOF_ROW(YS, DL, DR, WL, WR) { \
-        const size_t j = (size_t)(YS) * ww; \
-        const float16 vr = dof_row16(blur, j, m - 1, ww, edge), vg = dof_row16(blur + nw, j, m - 1, ww, edge); \
-        const float16 vb = dof_row16(blur + 2 * nw, j, m - 1, ww, edge), va = dof_row16(alpha, j, m - 1, ww, edge); \
-        const float16 gl = select((WL) / (DOF_UP_TOL + (DL) * (DL)), (float16)(0.0f), same & ((DL) > DOF_UP_SAME)); \
-        const float16 gr = select((WR) / (DOF_UP_TOL + (DR) * (DR)), (float16)(0.0f), same & ((DR) > DOF_UP_SAME)); \
-        ar += gl * DOF_LEFT(vr); ag += gl * DOF_LEFT(vg); ab += gl * DOF_LEFT(vb); aa += gl * DOF_LEFT(va); \
-        wsum += gl; \
-        ar += gr * DOF_RIGHT(vr); ag += gr * DOF_RIGHT(vg); ab += gr * DOF_RIGHT(vb); aa += gr * DOF_RIGHT(va); \
-        wsum += gr; }
-    DOF_ROW(y0, dl0, dr0, wl0, wr0)
-    DOF_ROW(y1, dl1, dr1, wl1, wr1)
-#undef DOF_ROW
+    const int16 same = DOF_UP_OWN_SURFACE;
+#define DOF_UP_LOAD(P, J) dof_row16((P), (J), m - 1, ww, edge)
+    DOF_UP_ROW(y0, dl0, dr0, wl0, wr0)
+    DOF_UP_ROW(y1, dl1, dr1, wl1, wr1)
+#undef DOF_UP_LOAD
     const float16 inv = 1.0f / wsum;
     const float16 b = fmax(DOF_HALF_B(r), aa * inv);
     ar *= inv; ag *= inv; ab *= inv;
@@ -547,22 +553,11 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         const float16 dl0 = fabs(r - DOF_LEFT(vc0)), dr0 = fabs(r - DOF_RIGHT(vc0));
         const float16 dl1 = fabs(r - DOF_LEFT(vc1)), dr1 = fabs(r - DOF_RIGHT(vc1));
         const float16 wl0 = (1.0f - fx) * (1.0f - fy), wr0 = fx * (1.0f - fy), wl1 = (1.0f - fx) * fy, wr1 = fx * fy;
-        /* p's own surface among the corners: the others are left out (UPSAMPLE_SAME_PX) */
-        const int16 same = ((wl0 > 0.0f) & (dl0 <= DOF_UP_SAME)) | ((wr0 > 0.0f) & (dr0 <= DOF_UP_SAME))
-                           | ((wl1 > 0.0f) & (dl1 <= DOF_UP_SAME)) | ((wr1 > 0.0f) & (dr1 <= DOF_UP_SAME));
-#define DOF_ROW(YS, DL, DR, WL, WR) { \
-            const size_t j = (size_t)(YS) * ww + m - 1; \
-            const float16 vr = vload16(0, blur + j), vg = vload16(0, blur + nw + j); \
-            const float16 vb = vload16(0, blur + 2 * nw + j), va = vload16(0, alpha + j); \
-            const float16 gl = select((WL) / (DOF_UP_TOL + (DL) * (DL)), (float16)(0.0f), same & ((DL) > DOF_UP_SAME)); \
-            const float16 gr = select((WR) / (DOF_UP_TOL + (DR) * (DR)), (float16)(0.0f), same & ((DR) > DOF_UP_SAME)); \
-            ar += gl * DOF_LEFT(vr); ag += gl * DOF_LEFT(vg); ab += gl * DOF_LEFT(vb); aa += gl * DOF_LEFT(va); \
-            wsum += gl; \
-            ar += gr * DOF_RIGHT(vr); ag += gr * DOF_RIGHT(vg); ab += gr * DOF_RIGHT(vb); aa += gr * DOF_RIGHT(va); \
-            wsum += gr; }
-        DOF_ROW(y0, dl0, dr0, wl0, wr0)
-        DOF_ROW(y1, dl1, dr1, wl1, wr1)
-#undef DOF_ROW
+        const int16 same = DOF_UP_OWN_SURFACE;
+#define DOF_UP_LOAD(P, J) vload16(0, (P) + (J) + m - 1)
+        DOF_UP_ROW(y0, dl0, dr0, wl0, wr0)
+        DOF_UP_ROW(y1, dl1, dr1, wl1, wr1)
+#undef DOF_UP_LOAD
         const float16 inv = 1.0f / wsum;
         const float16 b = fmax(DOF_HALF_B(r), aa * inv);
         ar *= inv; ag *= inv; ab *= inv;
