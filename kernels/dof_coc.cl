@@ -54,6 +54,11 @@ inline int dof_same_depth(const float dq, const float d) {
     return dq >= DOF_MIXED_SAME_DEPTH * d && d >= DOF_MIXED_SAME_DEPTH * dq;
 }
 
+/* dof_same_depth lane-wise (true lanes are -1); lim = DOF_MIXED_SAME_DEPTH * d */
+inline int16 dof_same_depth16(const float16 dq, const float16 d, const float16 lim) {
+    return (dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq);
+}
+
 /* Position of neighbour (a, b) on the ring of 8 around p, clockwise from the top left. */
 inline int dof_ring_pos(const int a, const int b) {
     return b < 0 ? a + 1 : b > 0 ? 5 - a : (a > 0 ? 3 : 7);
@@ -156,7 +161,7 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
             for (int a = -1; a <= 1; ++a) {
                 if (a == 0 && b == 1) continue;
                 const float16 dq = vload16(0, depth + rows[b] + a);
-                same -= (dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq);  /* true lanes are -1 */
+                same -= dof_same_depth16(dq, d, lim);  /* true lanes are -1 */
             }
         /* most groups: no lane has few enough same-depth neighbours (the count alone, as
          * DOF_CANDIDATE needs `same` <= DOF_SPECKLE_MAX_SAME) */
@@ -170,7 +175,7 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
             for (int a = -1; a <= 1; ++a) {
                 if (a == 0 && b == 1) continue;
                 const float16 dq = vload16(0, depth + rows[b] + a);
-                ring |= (((dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq)) & 1) << dof_ring_pos(a, b - 1);
+                ring |= (dof_same_depth16(dq, d, lim) & 1) << dof_ring_pos(a, b - 1);
             }
         const int16 cand = DOF_CANDIDATE(same, ring);
         if (!any(cand)) {
@@ -190,7 +195,7 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
                 const float16 dq = vload16(0, depth + rows[b] + a);
                 v[k++] = dq;
                 if (a == 0 && b == 1) continue;
-                const int16 sm = (dq >= lim) & (d >= DOF_MIXED_SAME_DEPTH * dq);
+                const int16 sm = dof_same_depth16(dq, d, lim);
                 const float16 lq = dof_luma16(src + rows[b] + a, n);
                 lo2 = select(fmin(lo2, fmax(lo, lq)), lo2, sm);
                 hi2 = select(fmax(hi2, fmin(hi, lq)), hi2, sm);
