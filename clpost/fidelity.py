@@ -36,6 +36,21 @@ from .colorspace import cctf_encode
 REC709_Y = np.array([0.2126, 0.7152, 0.0722])
 
 
+def read_rgb(path, prefix: str = "") -> np.ndarray:
+    """R, G, B of an EXR (or ``prefix``R/G/B, or a Blender pass ``<layer>.<prefix>R``…) as float32
+    (H, W, 3): how the Cycles truths and passes are read."""
+    import OpenEXR
+
+    from .errors import InputError
+
+    for part in OpenEXR.File(str(path), separate_channels=True).parts:
+        ch = part.channels
+        for pre in (prefix, *(n[:-1] for n in ch if prefix and n.endswith("." + prefix + "R"))):
+            if all(pre + c in ch for c in "RGB"):
+                return np.stack([ch[pre + c].pixels for c in "RGB"], -1).astype(np.float32)
+    raise InputError(f"{path}: no {prefix or 'R, G, B'} channels; give an EXR with {prefix}R, {prefix}G, {prefix}B")
+
+
 def srgb_view(linear: np.ndarray, exposure: float = 1.0) -> np.ndarray:
     """sRGB code values in [0, 1]: ``linear × exposure`` clipped, then encoded (float64)."""
     x = np.clip(np.asarray(linear, np.float64)[..., :3] * exposure, 0.0, 1.0)

@@ -11,7 +11,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-import OpenEXR
 import pytest
 
 from clpost import fidelity as fd
@@ -50,13 +49,7 @@ MEASURED_PSNR = {
 }
 
 
-def _channels(path: Path, prefix: str) -> np.ndarray:
-    for part in OpenEXR.File(str(path), separate_channels=True).parts:
-        ch = part.channels
-        for pre in [prefix] + [n[:-1] for n in ch if prefix and n.endswith("." + prefix + "R")]:
-            if all(pre + c in ch for c in "RGB"):
-                return np.stack([ch[pre + c].pixels for c in "RGB"], -1).astype(np.float32)
-    raise AssertionError(f"{path}: no {prefix}R/G/B")
+_channels = fd.read_rgb
 
 
 def _scene(name):

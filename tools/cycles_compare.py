@@ -44,16 +44,7 @@ WHITE = 0.6  # tools/cycles_truth/scenes.py WHITE: sunlit diffuse white, the hal
 BEGIN, END = "<!-- cycles_compare: begin -->", "<!-- cycles_compare: end -->"
 
 
-def read_rgb(path: Path, prefix: str = "") -> np.ndarray:
-    """R, G, B (or ``prefix``R/G/B, or a Blender pass ``<layer>.<prefix>R``…) as float32."""
-    import OpenEXR
-
-    for part in OpenEXR.File(str(path), separate_channels=True).parts:
-        ch = part.channels
-        for pre in (prefix, *(n[:-1] for n in ch if prefix and n.endswith("." + prefix + "R"))):
-            if all(pre + c in ch for c in "RGB"):
-                return np.stack([ch[pre + c].pixels for c in "RGB"], -1).astype(np.float32)
-    raise SystemExit(f"{path}: no {prefix or 'R, G, B'} channels")
+read_rgb = fd.read_rgb
 
 
 def load_scene(name: str, data: Path = DATA):
