@@ -369,23 +369,30 @@ def test_light_slightly_nearer_than_the_sky_keeps_its_energy():
         assert added == pytest.approx(4 * 29.9, rel=tol), q
 
 
+def _in_focus_light_on_a_wall():
+    """(camera, wall depth, dark, lit): a 61×61 wall (0.25) at a CoC radius of 2.2 px and a 2×2 light
+    at the focus distance, absent (dark) or 100× the wall (lit)."""
+    cam = Camera(**CAM)
+    w = h = 61
+    k, inv_u = D.coc_coefficients(cam, w)
+    wall_m = 1.0 / (inv_u - 2.2 / k)
+    color = np.full((h, w, 3), 0.25, np.float32)
+    depth = np.full((h, w), wall_m, np.float32)
+    depth[30:32, 30:32] = cam.focus_distance_m
+    dark = Frame(color.copy(), depth=depth)
+    color[30:32, 30:32] = 100.0
+    return cam, wall_m, dark, Frame(color, depth=depth)
+
+
+
 def test_in_focus_light_over_a_slightly_blurred_wall_is_not_counted_twice_at_half_resolution():
     # issue 16 (energy within 3 %): the half-resolution path gathers with the variance-matched
     # radius, 0 for every |r| < 2.31 px, so its depth-aware upsampling saw the in-focus light and a
     # wall at r = 2.2 px as one surface: the wall's pixels took the light's blurred light while the
     # light kept its own (143.8 % of its energy at draft). The upsampling now compares the original
     # CoC.
-    cam = Camera(**CAM)
-    w = h = 61
-    k, inv_u = D.coc_coefficients(cam, w)
-    wall_m = 1.0 / (inv_u - 2.2 / k)
-    assert float(D.coc_px(cam, wall_m, w)) == pytest.approx(2.2)
-    color = np.full((h, w, 3), 0.25, np.float32)
-    depth = np.full((h, w), wall_m, np.float32)
-    depth[30:32, 30:32] = cam.focus_distance_m
-    dark = Frame(color.copy(), depth=depth)
-    color[30:32, 30:32] = 100.0
-    lit = Frame(color, depth=depth)
+    cam, wall_m, dark, lit = _in_focus_light_on_a_wall()
+    assert float(D.coc_px(cam, wall_m, 61)) == pytest.approx(2.2)
     for q, tol in (("draft", 0.03), ("preview", 0.03), ("final", 0.01)):
         out, pipe = run(cam, lit, q)
         assert_matches_reference(pipe, lit, out, rtol=1e-3)
@@ -401,20 +408,11 @@ def test_in_focus_light_leaves_no_ring_on_a_slightly_blurred_wall_at_half_resolu
     to 2.3× the wall's level; the transparent scene's in-focus lamp: a 23 px draft halo where Cycles
     has none). With a corner of the wall's own within UPSAMPLE_SAME_PX the light's corner gets no
     weight: no wall pixel gains more than 5 % of the wall's level."""
-    cam = Camera(**CAM)
-    w = h = 61
-    k, inv_u = D.coc_coefficients(cam, w)
-    wall_m = 1.0 / (inv_u - 2.2 / k)
-    color = np.full((h, w, 3), 0.25, np.float32)
-    depth = np.full((h, w), wall_m, np.float32)
-    depth[30:32, 30:32] = cam.focus_distance_m
-    dark = Frame(color.copy(), depth=depth)
-    color[30:32, 30:32] = 100.0
-    lit = Frame(color, depth=depth)
+    cam, wall_m, dark, lit = _in_focus_light_on_a_wall()
     out, pipe = run(cam, lit, quality)
     assert_matches_reference(pipe, lit, out, rtol=1e-3)
     added = (out - pipe.run(dark).color)[..., 1]
-    yy, xx = np.mgrid[:h, :w]
+    yy, xx = np.mgrid[:61, :61]
     wall = np.maximum(np.abs(yy - 30.5), np.abs(xx - 30.5)) > 1.0
     assert added[wall].max() < 0.05 * 0.25
 
