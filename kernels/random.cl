@@ -112,19 +112,14 @@ inline CLP_F CLP_FN(rnd_poisson_inversion)(const CLP_F mean, const CLP_F u) {
 
 /* Photon shot noise: Poisson(mean) exactly by inversion up to RND_POISSON_EXACT_MAX, with the
  * uniform of counter (a, b); above it the normal approximation round(mean + sqrt(mean) g) >= 0
- * with the Poisson variance, g the standard normal of counters (a, b + 1) and (a, b + 2). Per
- * lane; a branch no lane takes is not evaluated, hashes included (the search gets mean 0, no
- * step, in the lanes of the normal one). clpost/random.py poisson is the numpy twin. */
+ * with the Poisson variance (standard normal g). Per lane; the search (and its hash) runs only
+ * where a lane needs it, with mean 0 (no step) in the lanes of the normal approximation.
+ * clpost/random.py poisson is the numpy twin. */
 #define RND_POISSON_EXACT_MAX 32.0f
-inline CLP_F CLP_FN(rnd_poisson)(const CLP_F mean, const uint seed, const uint frame, const CLP_U a,
-                                 const uint b) {
+inline CLP_F CLP_FN(rnd_poisson)(const CLP_F mean, const CLP_F g, const uint seed, const uint frame,
+                                 const CLP_U a, const uint b) {
     const CLP_I normal = mean > RND_POISSON_EXACT_MAX;
-    CLP_F e = 0.0f;
-    if (CLP_ANY(normal)) {
-        const CLP_F g = CLP_FN(rnd_normal)(CLP_FN(rnd_hash4)(seed, frame, a, (CLP_U)(b + 1u)),
-                                           CLP_FN(rnd_hash4)(seed, frame, a, (CLP_U)(b + 2u)));
-        e = fmax(rint(mean + sqrt(mean) * g), 0.0f);
-    }
+    CLP_F e = fmax(rint(mean + sqrt(mean) * g), 0.0f);
     if (CLP_ANY(!normal)) {
         const CLP_F u = CLP_FN(rnd_uniform)(CLP_FN(rnd_hash4)(seed, frame, a, (CLP_U)(b)));
         e = normal ? e : CLP_FN(rnd_poisson_inversion)(normal ? (CLP_F)(0.0f) : mean, u);
