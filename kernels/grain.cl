@@ -55,9 +55,9 @@ inline float16 grain_pixel16(const float16 d, const float dmin, const float dmax
 inline float grain_normal(const uint seed, const uint frame, const int X, const int Y, const uint c) {
     const uint ux = (uint)X, block = (uint)((X + 32) >> 5) - 1u;   /* floor(X / 32), X >= -1 */
     const uint hh = rnd_hash4(seed, frame, (block << 4) | (ux & 15u), ((uint)Y << 2) | c);
-    const float rad = sqrt(-1.38629436f * clp_log2(rnd_uniform(hh)));
-    const float u2 = rnd_uniform(rnd_mix(hh ^ 0x68e31da4u));
-    return rad * clp_cos2pi((ux & 16u) ? u2 - 0.25f : u2);
+    float sine;
+    const float cosine = rnd_normal_pair(hh, rnd_mix(hh ^ 0x68e31da4u), &sine);
+    return (ux & 16u) ? sine : cosine;
 }
 
 /* The 32 normals of block B of row Y: counters 32 B .. 32 B + 15 (returned), + 16 .. + 31 (*hi). */

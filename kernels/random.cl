@@ -34,23 +34,25 @@ inline CLP_F CLP_FN(rnd_uniform)(const CLP_U h) {
     return (CLP_TO_F(h >> 8) + 0.5f) * (1.0f / 16777216.0f);
 }
 
-/* Standard normal from two hashes (Box-Muller, cosine branch). ln and cos through clp_log2 and
- * clp_cos2pi (kernels/fastmath.cl): PoCL's log and cospi do not vectorise. u1 >= 2^-25 is a normal
- * float, inside clp_log2's domain. */
+/* Standard normal from two hashes (Box-Muller, cosine branch). ln through clp_log2
+ * (kernels/fastmath.cl): PoCL's log does not vectorise. u1 >= 2^-25 is a normal float, inside
+ * clp_log2's domain. cos 2 pi u2 = -cos 2 pi v with v = u2 - 1/2 (exact, |v| < 1/2:
+ * clp_cossin2pi_half, no range reduction). */
 inline CLP_F CLP_FN(rnd_normal)(const CLP_U h1, const CLP_U h2) {
-    const CLP_F u1 = CLP_FN(rnd_uniform)(h1);
-    const CLP_F u2 = CLP_FN(rnd_uniform)(h2);
-    return sqrt(-1.38629436f * CLP_FN(clp_log2)(u1)) * CLP_FN(clp_cos2pi)(u2);
+    CLP_F unused;
+    const CLP_F c = CLP_FN(clp_cossin2pi_half)(CLP_FN(rnd_uniform)(h2) - 0.5f, &unused);
+    return -sqrt(-1.38629436f * CLP_FN(clp_log2)(CLP_FN(rnd_uniform)(h1))) * c;
 }
 
 /* Both normals of one Box-Muller draw: returns the cosine branch (= rnd_normal(h1, h2)) and
- * stores the sine branch, sin 2 pi u2 = cos 2 pi (u2 - 1/4), in *other; the two are independent
+ * stores the sine branch, sin 2 pi u2 = -sin 2 pi (u2 - 1/2), in *other; the two are independent
  * standard normals for one log, one square root and two hashes. clpost/random.py normal_pair. */
 inline CLP_F CLP_FN(rnd_normal_pair)(const CLP_U h1, const CLP_U h2, CLP_F *other) {
-    const CLP_F rad = sqrt(-1.38629436f * CLP_FN(clp_log2)(CLP_FN(rnd_uniform)(h1)));
-    const CLP_F u2 = CLP_FN(rnd_uniform)(h2);
-    *other = rad * CLP_FN(clp_cos2pi)(u2 - 0.25f);
-    return rad * CLP_FN(clp_cos2pi)(u2);
+    const CLP_F nrad = -sqrt(-1.38629436f * CLP_FN(clp_log2)(CLP_FN(rnd_uniform)(h1)));
+    CLP_F s;
+    const CLP_F c = CLP_FN(clp_cossin2pi_half)(CLP_FN(rnd_uniform)(h2) - 0.5f, &s);
+    *other = nrad * s;
+    return nrad * c;
 }
 
 /* Poisson(mean) by inversion with uniform u: the smallest n with u <= F(n; mean) — the number of
