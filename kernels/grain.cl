@@ -29,9 +29,16 @@ inline float grain_pixel(const float d, const float dmin, const float dmax, cons
     const float d_img = fmax(d - dmin, 0.0f);
     const float t1 = fmin(d_img * inv_half_span, 2.0f);   /* t + 1, exact near D = 0 */
     const float t = t1 - 1.0f;
+    /* P(t) as a polynomial in t^2 of the pairs poly[k] + poly[k + 1] t (half the dependent fma's
+     * of Horner's: 0.96x the kernel's time) */
+    const float t2 = t * t;
+#if GRAIN_POLY_DEG % 2
+    float p = fma(poly[GRAIN_POLY_DEG], t, poly[GRAIN_POLY_DEG - 1]);
+#else
     float p = poly[GRAIN_POLY_DEG];
-    for (int k = GRAIN_POLY_DEG - 1; k >= 0; --k)
-        p = fma(p, t, poly[k]);
+#endif
+    for (int k = GRAIN_POLY_DEG - 2 - GRAIN_POLY_DEG % 2; k >= 0; k -= 2)
+        p = fma(p, t2, fma(poly[k + 1], t, poly[k]));
     const float s = sqrt(fmax(t1 * p, 0.0f));   /* sigma_T / T */
     /* dmin - log10(T + amount sigma_T g) with T = 10^-d_img factored out: no exp2 (<= 0 -> D_max) */
     return clamp(dmin + d_img - 0.30102999566f * clp_log2(fmax(fma(amount * s, g, 1.0f), 1e-30f)), dmin, dmax);
@@ -43,9 +50,14 @@ inline float16 grain_pixel16(const float16 d, const float dmin, const float dmax
     const float16 d_img = fmax(d - dmin, 0.0f);
     const float16 t1 = fmin(d_img * inv_half_span, 2.0f);
     const float16 t = t1 - 1.0f;
+    const float16 t2 = t * t;
+#if GRAIN_POLY_DEG % 2
+    float16 p = fma(poly[GRAIN_POLY_DEG], t, poly[GRAIN_POLY_DEG - 1]);
+#else
     float16 p = (float16)(poly[GRAIN_POLY_DEG]);
-    for (int k = GRAIN_POLY_DEG - 1; k >= 0; --k)
-        p = fma(p, t, poly[k]);
+#endif
+    for (int k = GRAIN_POLY_DEG - 2 - GRAIN_POLY_DEG % 2; k >= 0; k -= 2)
+        p = fma(p, t2, fma(poly[k + 1], t, poly[k]));
     const float16 s = sqrt(fmax(t1 * p, 0.0f));
     return clamp(dmin + d_img - 0.30102999566f * clp_log2_w16(fmax(fma(amount * s, g, 1.0f), 1e-30f)), dmin, dmax);
 }

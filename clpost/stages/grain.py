@@ -104,8 +104,8 @@ def gaussian_tables(r_px: float, d_span: float, samples_side: int | None):
 
     P the degree-:data:`SIGMA_POLY_DEG` Chebyshev interpolant of :math:`F(D)/(t + 1)` at 65
     Chebyshev–Lobatto nodes over [0, D_span], returned in the power basis of t (constant term
-    first; the kernel's Horner loop). Above D_span (input beyond D_max) σ_T/T is held. Error
-    against the exact variance: |σ_fit/σ − 1| < 1e-5 for r from 0.005 to 4 px
+    first; the kernel evaluates it as a polynomial in t² of pairs of terms). Above D_span (input
+    beyond D_max) σ_T/T is held. Error against the exact variance: |σ_fit/σ − 1| < 1e-5 for r from 0.005 to 4 px
     (tests/test_grain.py; the 64-entry linear-interpolated table it replaces was off by up to
     0.08 in σ_T near D = 0, where σ_T grows like √D)."""
     nodes = 0.5 * d_span * (1.0 - np.cos(np.linspace(0.0, math.pi, 65)))
