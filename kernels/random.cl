@@ -56,18 +56,19 @@ inline CLP_F CLP_FN(rnd_normal_pair)(const CLP_U h1, const CLP_U h2, CLP_F *othe
 }
 
 /* Poisson(mean) by inversion with uniform u: the smallest n with u <= F(n; mean) — the number of
- * k >= 0 with F(k) < u, F non-decreasing — by the sequential search over the pmf, four terms per
+ * k >= 0 with F(k) < u, F non-decreasing — by the sequential search over the pmf, eight terms per
  * iteration, all from p_k: p_{k+j} = p_k mean^j c_j, c_j = 1/((k+1)...(k+j)) (scalar, from the
  * table of 1/k), F(k+j) = F(k) + (p_{k+1} + ... + p_{k+j}). The loop-carried work is one multiply
- * and one add per four steps, the lane test (any u > F(k)) once per four, and there is no vector
- * division (the one-term form's mean/k per step, one lane test per step: 1.6x slower on the
- * sensor's dark frames, docs/benchmarks.md). At most 128 steps; for small means — callers switch
- * to a normal approximation above theirs, and pass 0 for those lanes so they stop at once.
+ * and one add per eight steps, the lane test (any u > F(k)) once per eight, and there is no
+ * vector division (the one-term form's mean/k per step and lane test per step took 1.8x the time
+ * on the sensor's dark frames; four terms per iteration 1.1x, sixteen no better than eight:
+ * docs/benchmarks.md). At most 128 steps; for small means — callers switch to a normal
+ * approximation above theirs, and pass 0 for those lanes so they stop at once.
  * clpost/random.py poisson_inversion is the numpy twin (float64, one term per step: the same n
  * but where u lies within float32 rounding of an F(n); tests/test_poisson_sampler.py). */
 #ifndef RND_INV_DEFINED   /* this file is instantiated once per width */
 #define RND_INV_DEFINED
-__constant float rnd_inv[133] = {   /* 1/k, k = 0 (unused) .. 132 */
+__constant float rnd_inv[129] = {   /* 1/k, k = 0 (unused) .. 128 */
     0.0f, 1.000000000e+00f, 5.000000000e-01f, 3.333333333e-01f, 2.500000000e-01f, 2.000000000e-01f,
     1.666666667e-01f, 1.428571429e-01f, 1.250000000e-01f, 1.111111111e-01f, 1.000000000e-01f, 9.090909091e-02f,
     8.333333333e-02f, 7.692307692e-02f, 7.142857143e-02f, 6.666666667e-02f, 6.250000000e-02f, 5.882352941e-02f,
@@ -89,25 +90,29 @@ __constant float rnd_inv[133] = {   /* 1/k, k = 0 (unused) .. 132 */
     9.259259259e-03f, 9.174311927e-03f, 9.090909091e-03f, 9.009009009e-03f, 8.928571429e-03f, 8.849557522e-03f,
     8.771929825e-03f, 8.695652174e-03f, 8.620689655e-03f, 8.547008547e-03f, 8.474576271e-03f, 8.403361345e-03f,
     8.333333333e-03f, 8.264462810e-03f, 8.196721311e-03f, 8.130081301e-03f, 8.064516129e-03f, 8.000000000e-03f,
-    7.936507937e-03f, 7.874015748e-03f, 7.812500000e-03f, 7.751937984e-03f, 7.692307692e-03f, 7.633587786e-03f,
-    7.575757576e-03f
+    7.936507937e-03f, 7.874015748e-03f, 7.812500000e-03f
 };
 #endif
 inline CLP_F CLP_FN(rnd_poisson_inversion)(const CLP_F mean, const CLP_F u) {
-    const CLP_F mean2 = mean * mean, mean3 = mean2 * mean, mean4 = mean2 * mean2;
+    CLP_F mp[8];   /* mean^(j + 1) */
+    mp[0] = mean;
+    for (int j = 1; j < 8; ++j)
+        mp[j] = mp[j - 1] * mean;
     CLP_F prob = exp(-mean), cdf = prob, n = 0.0f;
-    for (int k = 0; k < 128; k += 4) {
+    for (int k = 0; k < 128; k += 8) {
         if (!CLP_ANY(u > cdf)) break;
-        const float c1 = rnd_inv[k + 1], c2 = c1 * rnd_inv[k + 2], c3 = c2 * rnd_inv[k + 3], c4 = c3 * rnd_inv[k + 4];
-        const CLP_F p1 = prob * (mean * c1), p2 = prob * (mean2 * c2), p3 = prob * (mean3 * c3);
-        prob *= mean4 * c4;
-        const CLP_F s2 = p1 + p2, s3 = s2 + p3;
-        const CLP_F cdf1 = cdf + p1, cdf2 = cdf + s2, cdf3 = cdf + s3;
+        float c = 1.0f;                 /* c_{j+1} */
+        CLP_F s = 0.0f, pj = 0.0f;      /* p_{k+1} + ... + p_{k+j+1}, p_{k+j+1} */
         n = u > cdf ? (CLP_F)((float)(k + 1)) : n;
-        n = u > cdf1 ? (CLP_F)((float)(k + 2)) : n;
-        n = u > cdf2 ? (CLP_F)((float)(k + 3)) : n;
-        n = u > cdf3 ? (CLP_F)((float)(k + 4)) : n;
-        cdf += s3 + prob;
+        for (int j = 0; j < 8; ++j) {
+            c *= rnd_inv[k + j + 1];
+            pj = prob * (mp[j] * c);
+            s += pj;
+            if (j < 7)
+                n = u > cdf + s ? (CLP_F)((float)(k + j + 2)) : n;
+        }
+        prob = pj;
+        cdf += s;
     }
     return n;
 }
