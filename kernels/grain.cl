@@ -13,7 +13,7 @@ inline float grain_to_density(const float t, const float dmin, const float dmax)
 }
 
 /* draft/preview, and final with unresolved grains: Gaussian clear fraction T + amount sigma_T G
- * with the model's pixel standard deviation in closed form, sigma_T = T sqrt((t + 1) P(t)), P the
+ * with the model's pixel standard deviation in closed form, sigma_T = T sqrt(t + 1) R(t), R the
  * GRAIN_POLY_DEG polynomial in t = min(d, span) inv_half_span - 1 (inv_half_span = 2/span) of
  * clpost/stages/grain.py gaussian_tables (poly[0..GRAIN_POLY_DEG], constant term first), and G
  * the unit normals of counters (x + i, y + j), i, j in {-1, 0, 1}, filtered by the separable
@@ -29,8 +29,8 @@ inline float grain_pixel(const float d, const float dmin, const float dmax, cons
     const float d_img = fmax(d - dmin, 0.0f);
     const float t1 = fmin(d_img * inv_half_span, 2.0f);   /* t + 1, exact near D = 0 */
     const float t = t1 - 1.0f;
-    /* P(t) as a polynomial in t^2 of the pairs poly[k] + poly[k + 1] t (half the dependent fma's
-     * of Horner's: 0.96x the kernel's time) */
+    /* R(t) as a polynomial in t^2 of the pairs poly[k] + poly[k + 1] t (half the dependent fma's
+     * of Horner's: 0.96x the kernel's time), sqrt(t + 1) beside it, not after it */
     const float t2 = t * t;
 #if GRAIN_POLY_DEG % 2
     float p = fma(poly[GRAIN_POLY_DEG], t, poly[GRAIN_POLY_DEG - 1]);
@@ -39,7 +39,7 @@ inline float grain_pixel(const float d, const float dmin, const float dmax, cons
 #endif
     for (int k = GRAIN_POLY_DEG - 2 - GRAIN_POLY_DEG % 2; k >= 0; k -= 2)
         p = fma(p, t2, fma(poly[k + 1], t, poly[k]));
-    const float s = sqrt(fmax(t1 * p, 0.0f));   /* sigma_T / T */
+    const float s = sqrt(t1) * p;   /* sigma_T / T */
     /* dmin - log10(T + amount sigma_T g) with T = 10^-d_img factored out: no exp2 (<= 0 -> D_max) */
     return clamp(dmin + d_img - 0.30102999566f * clp_log2(fmax(fma(amount * s, g, 1.0f), 1e-30f)), dmin, dmax);
 }
@@ -58,7 +58,7 @@ inline float16 grain_pixel16(const float16 d, const float dmin, const float dmax
 #endif
     for (int k = GRAIN_POLY_DEG - 2 - GRAIN_POLY_DEG % 2; k >= 0; k -= 2)
         p = fma(p, t2, fma(poly[k + 1], t, poly[k]));
-    const float16 s = sqrt(fmax(t1 * p, 0.0f));
+    const float16 s = sqrt(t1) * p;
     return clamp(dmin + d_img - 0.30102999566f * clp_log2_w16(fmax(fma(amount * s, g, 1.0f), 1e-30f)), dmin, dmax);
 }
 

@@ -209,7 +209,7 @@ def test_sigma_polynomial_matches_the_model_variance(r_px, samples):
     poly, _ = gaussian_tables(r_px, span, samples)
     d = np.concatenate([np.geomspace(1e-6, 1e-2, 20), np.linspace(1e-2, span, 301)])
     exact = np.sqrt(pixel_covariance(d, r_px, samples_side=samples))
-    assert np.abs(sigma_t(poly, span, d) / exact - 1).max() < 1e-5
+    assert np.abs(sigma_t(poly, span, d) / exact - 1).max() < 1e-6
     assert sigma_t(poly, span, 0.0) == 0.0
     # above the span σ_T/T is held
     assert sigma_t(poly, span, span + 1.0) == pytest.approx(sigma_t(poly, span, span) / 10.0, rel=1e-12)
