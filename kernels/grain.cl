@@ -119,7 +119,7 @@ inline void grain_hrow32(const uint seed, const uint frame, const int x0, const 
  * costs 1/2 draw per pixel and layer; the [a, b, a] filter reuses each filtered row for three
  * output rows and takes the normals left and right of the block (counters x0 - 1, x0 + 32) of the
  * GRAIN_ROWS + 2 rows from two float16 of draws, (GRAIN_ROWS + 4) x 16 / (32 GRAIN_ROWS) draws
- * per pixel and layer (5/6 at 6 rows). */
+ * per pixel and layer (9/14 at 14 rows, clpost/stages/grain.py GAUSSIAN_ROWS). */
 inline void grain_gaussian32(__global const float *restrict src, __global float *restrict dst,
                              const int width, const int height, __global const float *params,
                              __global const float *poly, const float inv_half_span,

@@ -183,7 +183,7 @@ class Grain(GatherStage):
 
     def taps_per_pixel(self, camera, frame) -> int | None:
         """Filter taps per pixel, all three layers, on the Gaussian path (1 or 3×3 normals per
-        layer, for ``clpost bench`` taps/s — the kernel draws 1/2 (white) or 5/6 Box–Muller pairs
+        layer, for ``clpost bench`` taps/s — the kernel draws 1/2 (white) or 9/14 Box–Muller pairs
         per pixel and layer and filters them separably, :data:`GAUSSIAN_ROWS`); None on the Boolean
         path, whose work varies with density."""
         _, _, _, span, r, boolean = self._setup(camera, fld.image_width_px(frame))
@@ -207,17 +207,19 @@ class Grain(GatherStage):
             k = 1
             poly, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
         lanes = 32 if rt.wide else 1
+        taps = 1 if a == 0.0 else 3
+        rows = GAUSSIAN_ROWS[taps]
         defines = {"GRAIN_BOOLEAN": int(boolean), "GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k,
-                   "GRAIN_POLY_DEG": SIGMA_POLY_DEG, "GRAIN_ROWS": GAUSSIAN_ROWS, "GRAIN_LANES": lanes,
-                   "GRAIN_TAPS": 1 if a == 0.0 else 3}
+                   "GRAIN_POLY_DEG": SIGMA_POLY_DEG, "GRAIN_ROWS": rows, "GRAIN_LANES": lanes,
+                   "GRAIN_TAPS": taps}
         knl = rt.kernel(_program_source(), "grain", defines)
-        # the Gaussian path: 32 pixels × GAUSSIAN_ROWS rows per work-item, 8×1 work-groups, where
+        # the Gaussian path: 32 pixels × GAUSSIAN_ROWS[taps] rows per work-item, 8×1 work-groups, where
         # the device is wide (a CPU), else one pixel per work-item in 16×8 groups (kernels/grain.cl);
         # the Boolean path one pixel per work-item
         if boolean:
             size, local = (w, h), None
         elif lanes == 32:
-            size, local = (-(-w // 32), -(-h // GAUSSIAN_ROWS)), (8, 1)
+            size, local = (-(-w // 32), -(-h // rows)), (8, 1)
         else:
             size, local = (w, h), (16, 8)
         return [rt.launch(knl, size, local, src, dst, np.int32(w), np.int32(h), rt.constant(params),
@@ -241,11 +243,13 @@ class Grain(GatherStage):
         return d_min + -np.log10(np.clip(t, t_floor, 1.0))
 
 
-GAUSSIAN_ROWS = 6
-"""Rows per work-item (each 32 pixels wide) of the Gaussian path's lane form: each
-[a, b, a]-filtered row of normals serves three output rows, so 6 rows cost 8 filtered rows, one
-float16 of Box–Muller draws each, and two float16 of draws for the normals left and right of the
-block (kernels/grain.cl; ≤ 14)."""
+GAUSSIAN_ROWS = {1: 6, 3: 14}
+"""Rows per work-item (each 32 pixels wide) of the Gaussian path's lane form, by filter taps
+(``GRAIN_TAPS``). White noise (1): one float16 of Box–Muller draws per row, 6 rows (14 measured
+×1.07 the time). The [a, b, a] filter (3): each filtered row of normals serves three output rows,
+so R rows cost R + 2 filtered rows, one float16 of draws each, and two float16 of draws for the
+normals left and right of the block — (R + 4)·16 / (32 R) draws per pixel and layer: 9/14 at 14,
+the most kernels/grain.cl takes (6 rows, 5/6 draws, measured ×1.11 the time; docs/benchmarks.md)."""
 
 
 def _program_source() -> str:
