@@ -29,7 +29,8 @@ inline CLP_U CLP_FN(rnd_hash4)(const uint seed, const uint frame, const CLP_U a,
     return CLP_FN(rnd_mix)(CLP_FN(rnd_mix)((CLP_U)h ^ a) ^ b);
 }
 
-/* Uniform in (0, 1): 24 high bits, centred in their bin, never 0 or 1 (log() safe). */
+/* Uniform in (0, 1]: 24 high bits, centred in their bin, never 0 (log() safe); the top bin's centre,
+ * 1 - 2^-25, rounds to 1.0f (rnd_poisson_inversion stops where its float32 sum does). */
 inline CLP_F CLP_FN(rnd_uniform)(const CLP_U h) {
     return (CLP_TO_F(h >> 8) + 0.5f) * (1.0f / 16777216.0f);
 }
@@ -93,7 +94,7 @@ __constant float rnd_inv[129] = {   /* 1/k, k = 0 (unused) .. 128 */
     7.936507937e-03f, 7.874015748e-03f, 7.812500000e-03f
 };
 #endif
-inline CLP_F CLP_FN(rnd_poisson_inversion)(const CLP_F mean, const CLP_F u) {
+inline CLP_F CLP_FN(rnd_poisson_inversion)(const CLP_F mean, CLP_F u) {
     CLP_F mp[8];   /* mean^(j + 1) */
     mp[0] = mean;
     for (int j = 1; j < 8; ++j)
@@ -112,6 +113,11 @@ inline CLP_F CLP_FN(rnd_poisson_inversion)(const CLP_F mean, const CLP_F u) {
                 n = u > cdf + s ? (CLP_F)((float)(k + j + 2)) : n;
         }
         prob = pj;
+        /* where the float32 sum has stopped moving (the tail's terms below its rounding) before
+         * reaching u — u rounds to 1.0f for the top 24-bit value, and cdf may end an ulp or two
+         * short of it — no later F(k) reaches u: the lane is done (n is then the quantile of
+         * 1 - ~2^-24 to within 8, not 128) */
+        u = cdf + s == cdf ? (CLP_F)(0.0f) : u;
         cdf += s;
     }
     return n;
