@@ -1,11 +1,13 @@
-"""The pointwise kernels (vignetting+exposure+film, grain, print; or exposure+sensor): an old revision vs this tree in
-one process — per kernel the min and median device ms of each, new/old of the mins, and % of the
-copy kernel's bandwidth (median; the copy kernel runs right after every plan run).
+"""The pointwise kernels (vignetting+exposure+film, grain, print; or exposure+sensor): an old
+revision vs this tree in one process — per kernel the min and median device ms of each, new/old of
+the mins, and % of the copy kernel's bandwidth (median; the copy kernel runs right after every plan
+run).
 
     PYTHONPATH=. POCL_MAX_PTHREAD_COUNT=1 .venv/bin/python tools/ab_pointwise.py --old main --size 640x360 --repeats 61
+    ... --scene sensor --sensor-gain 40   (or 10: a dark frame, nearly all exact Poisson)
 
-Scene: the bench's full camera without motion blur and distortion (vignetting, exposure, film
-Ektar 100, grain, print) on the bench's synthetic frame; the two plans run alternately, the order
+Scenes (SCENES): the bench's full camera without motion blur and distortion (vignetting, exposure,
+film Ektar 100, grain, print), or exposure+sensor, on the bench's synthetic frame; the two plans run alternately, the order
 swapped every repeat. On a loaded machine medians and % of copy swing by ±30 % between runs; the
 min over many short single-threaded runs (a cache-resident 640×360 frame: the kernels' compute) is
 what repeats. Bytes as `clpost bench` counts them (RGB float read + write, + the RI plane for the
@@ -64,7 +66,7 @@ def main(argv=None) -> int:
     runs = [(args.old, *ab._pipeline(old, ob, "pointwise", w, h, args.quality, None, frame)),
             ("this tree", *ab._pipeline(clpost, nb, "pointwise", w, h, args.quality, None, frame))]
     copier = nb.CopyKernel(get_runtime(None), w * h * 12)
-    KERNELS = sc["kernels"]
+    kernels = sc["kernels"]
     nbytes = {"vignetting__exposure__film": w * h * 28, "grain": w * h * 24, "print": w * h * 24,
               "exposure__sensor": w * h * 24}
     ms: dict = {}
@@ -75,13 +77,13 @@ def main(argv=None) -> int:
             times = dict(pipe.last_timings)
             gbps = copier.gbps()
             if i >= args.warmup:
-                for k in KERNELS:
+                for k in kernels:
                     ms.setdefault((k, tag), []).append(times[k])
                     pct.setdefault((k, tag), []).append(100.0 * nbytes[k] / (times[k] * 1e6) / gbps)
     old_tag, new_tag = runs[0][0], runs[1][0]
     print(f"{w}x{h} {args.quality}, {args.repeats} repeats: device ms min / median, new/old of the mins, "
           "% of copy (median)")
-    for k in KERNELS:
+    for k in kernels:
         o, n = ms[(k, old_tag)], ms[(k, new_tag)]
         print(f"  {k:<28} {old_tag} {min(o):7.2f} / {statistics.median(o):7.2f}   {new_tag} {min(n):7.2f} / "
               f"{statistics.median(n):7.2f}   new/old {min(n) / min(o):.2f}   % of copy "
