@@ -7,8 +7,8 @@ run).
     ... --scene sensor --sensor-gain 40   (or 10: a dark frame, nearly all exact Poisson)
 
 Scenes (SCENES): the bench's full camera without motion blur and distortion (vignetting, exposure,
-film Ektar 100, grain, print), or exposure+sensor, on the bench's synthetic frame; the two plans run alternately, the order
-swapped every repeat. On a loaded machine medians and % of copy swing by ±30 % between runs; the
+film Ektar 100, grain, print), or exposure+sensor, on the bench's synthetic frame; the two plans
+run alternately, the order swapped every repeat. On a loaded machine medians and % of copy swing by ±30 % between runs; the
 min over many short single-threaded runs (a cache-resident 640×360 frame: the kernels' compute) is
 what repeats. Bytes as `clpost bench` counts them (RGB float read + write, + the RI plane for the
 vignetting group).
