@@ -62,7 +62,7 @@ WIDTH_MACROS: dict[int, dict[str, str]] = {
         "CLP_W": "16", "CLP_F": "float16", "CLP_I": "int16", "CLP_U": "uint16", "CLP_CTX": "PixelCtx16",
         "CLP_TO_F(x)": "convert_float16(x)", "CLP_TO_I(x)": "convert_int16(x)", "CLP_TO_U(x)": "convert_uint16(x)",
         "CLP_AS_F(x)": "as_float16(x)", "CLP_AS_I(x)": "as_int16(x)", "CLP_AS_U(x)": "as_uint16(x)",
-        "CLP_ANY(c)": "any(c)",
+        "CLP_ANY(c)": "clp_any16(c)",
         "CLP_X(p)": "((float)(p).x0 + CLP_LANES16)", "CLP_Y(p)": "((float16)((float)(p).y))",
         "CLP_INDEX(p)": "((uint16)((uint)(p).i0) + CLP_ULANES16)",
         "CLP_PLANE(buf, p)": "vload16(0, (buf) + (p).i0)",

@@ -30,6 +30,16 @@ typedef struct {
 
 #define CLP_ULANES16 ((uint16)(0u, 1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u, 9u, 10u, 11u, 12u, 13u, 14u, 15u))
 
+/* any lane of a comparison's int16 true: an OR tree, which LLVM reduces in 4 vector steps —
+ * PoCL's any() tests the 16 lanes one by one with a branch each (≈ 40 instructions; the Poisson
+ * search's loop test, kernels/random.cl CLP_ANY). */
+inline int clp_any16(const int16 c) {
+    const int8 a = c.lo | c.hi;
+    const int4 b = a.lo | a.hi;
+    const int2 d = b.lo | b.hi;
+    return (d.x | d.y) < 0;
+}
+
 /* table[idx] per lane (a data-dependent gather has no vector builtin) */
 #define CLP_GATHER16(table, idx) ((float16)( \
     (table)[(idx).s0], (table)[(idx).s1], (table)[(idx).s2], (table)[(idx).s3], \

@@ -11,7 +11,8 @@
  *   clp_log2(x), x normal and finite (FLT_MIN <= x <= FLT_MAX): |error| <= max(2e-7, 2 ulp);
  *   clp_exp2(x), any non-NaN x: <= 2 ulp (exp2(-inf) = 0, exp2(x >= 128) = +inf);
  *   clp_exp2_bounded(x), |x| <= 126: <= 4 ulp;
- *   clp_cos2pi(u) = cos(2 pi u), finite u: |error| < 2.5e-7.
+ *   clp_cos2pi(u) = cos(2 pi u), finite u: |error| < 2.5e-7;
+ *   clp_cossin2pi_half(v) = cos(2 pi v), sin(2 pi v), |v| <= 1/2: |error| < 2.5e-7.
  * Selects are written `c ? a : b` (per lane for vectors) and integer flags never added: a vector
  * comparison is -1 where true, a scalar one 1.
  */
@@ -27,15 +28,13 @@ inline CLP_F CLP_FN(clp_log2)(const CLP_F x) {
     const CLP_I big = m > 1.41421356f;
     m = big ? 0.5f * m : m;
     e = big ? e + 1 : e;
-    const CLP_F u = m - 1.0f;
-    CLP_F p = fma(u, 1.224903415e-1f, -2.088673073e-1f);
-    p = fma(u, p, 2.178854908e-1f);
-    p = fma(u, p, -2.387827314e-1f);
-    p = fma(u, p, 2.876248107e-1f);
-    p = fma(u, p, -3.607062060e-1f);
-    p = fma(u, p, 4.809235176e-1f);
-    p = fma(u, p, -7.213473797e-1f);
-    p = fma(u, p, 1.442694855f);
+    const CLP_F u = m - 1.0f, u2 = u * u, u4 = u2 * u2;
+    /* Q by Estrin's scheme (pairs, then powers u^2, u^4): 5 dependent operations instead of
+     * Horner's 8, for grain's and film's long per-pixel chains (docs/benchmarks.md) */
+    const CLP_F q01 = fma(u, -7.213473797e-1f, 1.442694855f), q23 = fma(u, -3.607062060e-1f, 4.809235176e-1f);
+    const CLP_F q45 = fma(u, -2.387827314e-1f, 2.876248107e-1f), q67 = fma(u, -2.088673073e-1f, 2.178854908e-1f);
+    const CLP_F q03 = fma(u2, q23, q01), q47 = fma(u2, q67, q45);
+    const CLP_F p = fma(u4, fma(u4, 1.224903415e-1f, q47), q03);
     return fma(u, p, CLP_TO_F(e));
 }
 
@@ -72,11 +71,8 @@ inline CLP_F CLP_FN(clp_exp2_bounded)(const CLP_F x) {
     return p * CLP_AS_F(CLP_AS_U(CLP_TO_I(k) + 127) << 23);
 }
 
-/* cos(2 pi u): r = u - round(u), cos 2 pi r = sin(2 pi (1/4 - |r|)) with the argument in
- * [-pi/2, pi/2]; odd Taylor series to z^13 (truncation < 1e-9). */
-inline CLP_F CLP_FN(clp_cos2pi)(const CLP_F u) {
-    const CLP_F r = u - floor(u + 0.5f);
-    const CLP_F z = (0.25f - fabs(r)) * 6.28318531f;
+/* sin z for |z| <= pi/2: odd Taylor series to z^13 (truncation < 1e-9). */
+inline CLP_F CLP_FN(clp_sin_core)(const CLP_F z) {
     const CLP_F z2 = z * z;
     CLP_F p = fma(z2, -1.60590438e-10f, 2.50521084e-8f);   /* -1/13!, 1/11! */
     p = fma(z2, p, -2.75573192e-6f);
@@ -84,4 +80,20 @@ inline CLP_F CLP_FN(clp_cos2pi)(const CLP_F u) {
     p = fma(z2, p, -8.33333333e-3f);
     p = fma(z2, p, 0.16666667f);
     return fma(-z * z2, p, z);
+}
+
+/* cos(2 pi u): r = u - round(u), cos 2 pi r = sin(2 pi (1/4 - |r|)) with the argument in
+ * [-pi/2, pi/2]. */
+inline CLP_F CLP_FN(clp_cos2pi)(const CLP_F u) {
+    const CLP_F r = u - floor(u + 0.5f);
+    return CLP_FN(clp_sin_core)((0.25f - fabs(r)) * 6.28318531f);
+}
+
+/* cos(2 pi v), returned, and sin(2 pi v), in *s, for |v| <= 1/2 (the callers' domain: no range
+ * reduction, which costs clp_cos2pi's floor): cos 2 pi v = sin(2 pi (1/4 - |v|)),
+ * sin 2 pi v = sgn(v) sin(2 pi (1/4 - ||v| - 1/4|)), both arguments in [-pi/2, pi/2]. */
+inline CLP_F CLP_FN(clp_cossin2pi_half)(const CLP_F v, CLP_F *s) {
+    const CLP_F a = fabs(v), w = 0.25f - fabs(a - 0.25f);
+    *s = CLP_FN(clp_sin_core)((v < 0.0f ? -w : w) * 6.28318531f);
+    return CLP_FN(clp_sin_core)((0.25f - a) * 6.28318531f);
 }

@@ -40,8 +40,7 @@ inline void raw_apply(CLP_F *r, CLP_F *g, CLP_F *b, const CLP_CTX p, const float
     const CLP_F n_prnu = CLP_FN(raw_normal)(seed, RAW_FIXED_FRAME, i, 14u);
     CLP_F mean = fmax(fmax(s, 0.0f) * e_sat * (1.0f + prnu * n_prnu), 0.0f);
     mean = fmin(mean, 2.0f * full_well);
-    const CLP_F e = CLP_FN(rnd_poisson)(mean, CLP_FN(rnd_uniform)(CLP_FN(rnd_hash4)(seed, frame, i, (CLP_U)(0u))),
-                                        CLP_FN(raw_normal)(seed, frame, i, 1u));
+    const CLP_F e = CLP_FN(rnd_poisson)(mean, CLP_FN(raw_normal)(seed, frame, i, 1u), seed, frame, i, 0u);
     const CLP_U h3 = CLP_FN(rnd_hash4)(seed, frame, i, (CLP_U)(3u));
     const CLP_F dn = black + gain * fmin(e, full_well)
                      + dsnu * CLP_FN(raw_normal)(seed, RAW_FIXED_FRAME, i, 12u)

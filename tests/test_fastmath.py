@@ -1,4 +1,5 @@
-"""The branch-free elementary functions of kernels/common.cl (clp_log2, clp_exp2, clp_exp2_bounded, clp_cos2pi)
+"""The branch-free elementary functions of kernels/common.cl (clp_log2, clp_exp2, clp_exp2_bounded, clp_cos2pi,
+clp_cossin2pi_half)
 against float64 numpy over the whole float32 range, including the IEEE special values."""
 import numpy as np
 import pytest
@@ -16,6 +17,9 @@ __kernel void fm(__global const float *x, __global float *out, const int n) {
     out[n + i] = clp_exp2(x[i]);
     out[2 * n + i] = clp_cos2pi(x[i]);
     out[3 * n + i] = clp_exp2_bounded(clamp(x[i], -126.0f, 126.0f));
+    float s;
+    out[4 * n + i] = clp_cossin2pi_half(clamp(x[i], -0.5f, 0.5f), &s);
+    out[5 * n + i] = s;
 }
 """
 
@@ -24,12 +28,12 @@ def _run(x):
     rt = get_runtime()
     x = np.ascontiguousarray(x, np.float32)
     prog = rt.program(_SRC, "fm")
-    out = np.empty(4 * x.size, np.float32)
+    out = np.empty(6 * x.size, np.float32)
     xb = cl.Buffer(rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=x)
     ob = cl.Buffer(rt.context, cl.mem_flags.WRITE_ONLY, out.nbytes)
     cl.Kernel(prog, "fm")(rt.queue, (x.size,), None, xb, ob, np.int32(x.size))
     cl.enqueue_copy(rt.queue, out, ob)
-    return out.reshape(4, -1)
+    return out.reshape(6, -1)
 
 
 def _ulp_err(got, want):
@@ -83,6 +87,19 @@ def test_cos2pi():
     err = np.abs(got - want)
     k = int(np.argmax(err))
     assert err.max() < 2.5e-7, f"worst at u={u[k]!r}: {got[k]!r} vs {want[k]!r}"
+
+
+def test_cossin2pi_half_on_its_domain():
+    # |v| <= 1/2: Box-Muller's u2 - 1/2 (kernels/random.cl), every 24-bit uniform's value included
+    rng = np.random.default_rng(4)
+    v = np.concatenate([(np.arange(0, 1 << 24, 7) + 0.5) / 2.0 ** 24 - 0.5, rng.uniform(-0.5, 0.5, 100000),
+                        [-0.5, -0.25, 0.0, 0.25, 0.5, -1e-30, 1e-30]]).astype(np.float32)
+    out = _run(v)
+    for got, want in ((out[4], np.cos(2 * np.pi * v.astype(np.float64))),
+                      (out[5], np.sin(2 * np.pi * v.astype(np.float64)))):
+        err = np.abs(got.astype(np.float64) - want)
+        k = int(np.argmax(err))
+        assert err.max() < 2.5e-7, f"worst at v={v[k]!r}: {got[k]!r} vs {want[k]!r}"
 
 
 def test_exp2_bounded_within_4_ulp_on_its_domain():

@@ -1,12 +1,14 @@
-"""The pointwise kernels (vignetting+exposure+film, grain, print): an old revision vs this tree in
-one process — per kernel the min and median device ms of each, new/old of the mins, and % of the
-copy kernel's bandwidth (median; the copy kernel runs right after every plan run).
+"""The pointwise kernels (vignetting+exposure+film, grain, print; or exposure+sensor): an old
+revision vs this tree in one process — per kernel the min and median device ms of each, new/old of
+the mins, and % of the copy kernel's bandwidth (median; the copy kernel runs right after every plan
+run).
 
     PYTHONPATH=. POCL_MAX_PTHREAD_COUNT=1 .venv/bin/python tools/ab_pointwise.py --old main --size 640x360 --repeats 61
+    ... --scene sensor --sensor-gain 40   (or 10: a dark frame, nearly all exact Poisson)
 
-Scene: the bench's full camera without motion blur and distortion (vignetting, exposure, film
-Ektar 100, grain, print) on the bench's synthetic frame; the two plans run alternately, the order
-swapped every repeat. On a loaded machine medians and % of copy swing by ±30 % between runs; the
+Scenes (SCENES): the bench's full camera without motion blur and distortion (vignetting, exposure,
+film Ektar 100, grain, print), or exposure+sensor, on the bench's synthetic frame; the two plans
+run alternately, the order swapped every repeat. On a loaded machine medians and % of copy swing by ±30 % between runs; the
 min over many short single-threaded runs (a cache-resident 640×360 frame: the kernels' compute) is
 what repeats. Bytes as `clpost bench` counts them (RGB float read + write, + the RI plane for the
 vignetting group).
@@ -18,7 +20,20 @@ import importlib
 import statistics
 import warnings
 
-KERNELS = ("vignetting__exposure__film", "grain", "print")
+SCENES = {
+    # the bench's full camera without motion blur and distortion
+    "film": dict(wants=("vignetting", "exposure", "film", "grain", "print"),
+                 fields=dict(luminance_scale=1.0, f_number=4.0, vignetting="natural", film="kodak-ektar-100"),
+                 kernels=("vignetting__exposure__film", "grain", "print")),
+    # a digital camera at a high ISO: the smartphone preset at ISO 800 (375 e⁻ at saturation),
+    # the frame scaled by --sensor-gain (the exposure maps the synthetic frame to ≈ 1.7 e⁻ median:
+    # × 40 is a mid-grey exposure, median 66 e⁻ and 13 % of the means ≤ 32 e⁻, the exact-Poisson
+    # branch; × 10 a dark one, median 17 e⁻, 98 % of them)
+    "sensor": dict(wants=("exposure", "sensor"),
+                   fields=dict(luminance_scale=1.0, f_number=2.8, shutter_s=1 / 100, iso=800,
+                               sensor_preset="smartphone"),
+                   kernels=("exposure__sensor",)),
+}
 
 
 def main(argv=None) -> int:
@@ -28,6 +43,10 @@ def main(argv=None) -> int:
     ap.add_argument("--size", default="1920x1080")
     ap.add_argument("--repeats", type=int, default=15)
     ap.add_argument("--warmup", type=int, default=2)
+    ap.add_argument("--scene", choices=tuple(SCENES), default="film",
+                    help="film: vignetting+exposure+film, grain, print; sensor: exposure+sensor")
+    ap.add_argument("--sensor-gain", type=float, default=40.0,
+                    help="the sensor scene's frame × this (40: mid-grey, median 66 e⁻; 10: dark, median 17 e⁻)")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     import clpost
@@ -36,16 +55,20 @@ def main(argv=None) -> int:
 
     old = ab.load_revision(args.old)
     ob = importlib.import_module(f"{old.__name__}.bench")
+    sc = SCENES[args.scene]
     for m in (nb, ob):
-        m.SCENES["pointwise"] = m.Scene(
-            "pointwise", "pointwise film chain", wants=("vignetting", "exposure", "film", "grain", "print"),
-            camera_fields=dict(luminance_scale=1.0, f_number=4.0, vignetting="natural", film="kodak-ektar-100"))
+        m.SCENES["pointwise"] = m.Scene("pointwise", f"pointwise {args.scene} chain", wants=sc["wants"],
+                                        camera_fields=sc["fields"])
     w, h = (int(v) for v in args.size.split("x"))
     frame = nb.synthetic_frame(w, h)
+    if args.scene == "sensor":
+        frame.color[...] *= args.sensor_gain
     runs = [(args.old, *ab._pipeline(old, ob, "pointwise", w, h, args.quality, None, frame)),
             ("this tree", *ab._pipeline(clpost, nb, "pointwise", w, h, args.quality, None, frame))]
     copier = nb.CopyKernel(get_runtime(None), w * h * 12)
-    nbytes = {"vignetting__exposure__film": w * h * 28, "grain": w * h * 24, "print": w * h * 24}
+    kernels = sc["kernels"]
+    nbytes = {"vignetting__exposure__film": w * h * 28, "grain": w * h * 24, "print": w * h * 24,
+              "exposure__sensor": w * h * 24}
     ms: dict = {}
     pct: dict = {}
     for i in range(args.warmup + args.repeats):
@@ -54,13 +77,13 @@ def main(argv=None) -> int:
             times = dict(pipe.last_timings)
             gbps = copier.gbps()
             if i >= args.warmup:
-                for k in KERNELS:
+                for k in kernels:
                     ms.setdefault((k, tag), []).append(times[k])
                     pct.setdefault((k, tag), []).append(100.0 * nbytes[k] / (times[k] * 1e6) / gbps)
     old_tag, new_tag = runs[0][0], runs[1][0]
     print(f"{w}x{h} {args.quality}, {args.repeats} repeats: device ms min / median, new/old of the mins, "
           "% of copy (median)")
-    for k in KERNELS:
+    for k in kernels:
         o, n = ms[(k, old_tag)], ms[(k, new_tag)]
         print(f"  {k:<28} {old_tag} {min(o):7.2f} / {statistics.median(o):7.2f}   {new_tag} {min(n):7.2f} / "
               f"{statistics.median(n):7.2f}   new/old {min(n) / min(o):.2f}   % of copy "

@@ -211,6 +211,10 @@ def cases():
     raw = replace(base, raw_calibration="a7s2-like", iso=800.0, isp=True, cfa_pattern="GBRG")
     for w, h in ((3, 3), (4, 5), (37, 23)):
         add(f"raw+isp final {w}x{h}", lambda w=w, h=h: _run(raw, ["exposure", "raw", "isp"], "final", w, h))
+    # the CPUs' 16-lane forms of the shot noise (kernels/random.cl rnd_poisson: exact Poisson
+    # search and normal approximation lanes mixed in a float16; the frame's means 0 to ~60 e⁻)
+    add("sensor wide draft 37x23", lambda: _run(sensor, ["exposure", "sensor"], "draft", 37, 23, wide=True))
+    add("raw+isp wide final 37x23", lambda: _run(raw, ["exposure", "raw", "isp"], "final", 37, 23, wide=True))
     # halation (film base halo, its own gather before film) and ghosts (traced lens): both planned
     # only when the frame holds light far above saturation, so these frames are bright
     halo = replace(film, halation=True)

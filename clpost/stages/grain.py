@@ -88,7 +88,7 @@ def use_boolean(quality: str, r_px: float) -> bool:
     return quality == "final" and r_px >= RESOLVED_MIN_PX
 
 
-SIGMA_POLY_DEG = 10
+SIGMA_POLY_DEG = 8
 """Degree of the polynomial σ_T is evaluated with (:func:`gaussian_tables`)."""
 
 
@@ -98,21 +98,25 @@ def gaussian_tables(r_px: float, d_span: float, samples_side: int | None):
 
     σ_T in closed form: the model's pixel variance is :math:`T^2 F(D)` with
     :math:`F(D) = \sum_i w_i\,\mathrm{expm1}(D\ln 10\,g_i)` (:mod:`clpost.grain_model`: the
-    covariance integrated against the pixel box), an entire function with F(0) = 0, so
+    covariance integrated against the pixel box), an entire function with F(0) = 0 and F > 0
+    beyond, so
 
-    .. math:: σ_T(D) = T\sqrt{(t + 1)\,P(t)},\qquad t = 2\min(D, D_{span})/D_{span} - 1,
+    .. math:: σ_T(D) = T\sqrt{t + 1}\;R(t),\qquad t = 2\min(D, D_{span})/D_{span} - 1,
 
-    P the degree-:data:`SIGMA_POLY_DEG` Chebyshev interpolant of :math:`F(D)/(t + 1)` at 65
-    Chebyshev–Lobatto nodes over [0, D_span], returned in the power basis of t (constant term
-    first; the kernel's Horner loop). Above D_span (input beyond D_max) σ_T/T is held. Error
-    against the exact variance: |σ_fit/σ − 1| < 1e-5 for r from 0.005 to 4 px
-    (tests/test_grain.py; the 64-entry linear-interpolated table it replaces was off by up to
-    0.08 in σ_T near D = 0, where σ_T grows like √D)."""
+    R the degree-:data:`SIGMA_POLY_DEG` Chebyshev interpolant of :math:`\sqrt{F(D)/(t + 1)}` at
+    65 Chebyshev–Lobatto nodes over [0, D_span], returned in the power basis of t (constant term
+    first; the kernel evaluates it as a polynomial in t² of pairs of terms, and √(t + 1) beside
+    it). Above D_span (input beyond D_max) σ_T/T is held. Error against the exact variance:
+    |σ_fit/σ − 1| < 1e-7 for r from 0.005 to 4 px on every stock (tests/test_grain.py checks
+    1e-6; the square root of a degree-10 fit of F/(t + 1) itself, before, was within 5e-6, and
+    put the square root after the polynomial on the kernel's dependent chain; the 64-entry
+    linear-interpolated table before that was off by up to 0.08 in σ_T near D = 0, where σ_T
+    grows like √D)."""
     nodes = 0.5 * d_span * (1.0 - np.cos(np.linspace(0.0, math.pi, 65)))
     nodes[0] = 1e-9 * d_span  # F(D)/D at D → 0 (F(0) = 0 itself)
     var = pixel_covariance(nodes, r_px, samples_side=samples_side)
     t = 2.0 * nodes / d_span - 1.0
-    q = var * 10.0 ** (2.0 * nodes) / (t + 1.0)
+    q = np.sqrt(var * 10.0 ** (2.0 * nodes) / (t + 1.0))
     poly = np.polynomial.chebyshev.cheb2poly(np.polynomial.chebyshev.chebfit(t, q, SIGMA_POLY_DEG))
     # lag-1 correlation at a mid density (the model's ρ₁ varies little with D): solve
     # 2ab/(2a²+b²) = ρ for the kernel [a, b, a], then normalise 2a² + b² = 1.
@@ -132,7 +136,7 @@ def sigma_t(poly: np.ndarray, d_span: float, d_img) -> np.ndarray:
     kernel's ``grain_pixel`` formula)."""
     d = np.asarray(d_img, np.float64)
     t = np.minimum(d * (2.0 / d_span), 2.0) - 1.0
-    return 10.0 ** -d * np.sqrt(np.maximum((t + 1.0) * np.polynomial.polynomial.polyval(t, poly), 0.0))
+    return 10.0 ** -d * np.sqrt(t + 1.0) * np.polynomial.polynomial.polyval(t, poly)
 
 
 def _stats_samples(r_px: float) -> int | None:
@@ -179,7 +183,7 @@ class Grain(GatherStage):
 
     def taps_per_pixel(self, camera, frame) -> int | None:
         """Filter taps per pixel, all three layers, on the Gaussian path (1 or 3×3 normals per
-        layer, for ``clpost bench`` taps/s — the kernel draws 1/2 (white) or 5/6 Box–Muller pairs
+        layer, for ``clpost bench`` taps/s — the kernel draws 1/2 (white) or 9/14 Box–Muller pairs
         per pixel and layer and filters them separably, :data:`GAUSSIAN_ROWS`); None on the Boolean
         path, whose work varies with density."""
         _, _, _, span, r, boolean = self._setup(camera, fld.image_width_px(frame))
@@ -203,17 +207,19 @@ class Grain(GatherStage):
             k = 1
             poly, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
         lanes = 32 if rt.wide else 1
+        taps = 1 if a == 0.0 else 3
+        rows = GAUSSIAN_ROWS[taps]
         defines = {"GRAIN_BOOLEAN": int(boolean), "GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k,
-                   "GRAIN_POLY_DEG": SIGMA_POLY_DEG, "GRAIN_ROWS": GAUSSIAN_ROWS, "GRAIN_LANES": lanes,
-                   "GRAIN_TAPS": 1 if a == 0.0 else 3}
+                   "GRAIN_POLY_DEG": SIGMA_POLY_DEG, "GRAIN_ROWS": rows, "GRAIN_LANES": lanes,
+                   "GRAIN_TAPS": taps}
         knl = rt.kernel(_program_source(), "grain", defines)
-        # the Gaussian path: 32 pixels × GAUSSIAN_ROWS rows per work-item, 8×1 work-groups, where
+        # the Gaussian path: 32 pixels × GAUSSIAN_ROWS[taps] rows per work-item, 8×1 work-groups, where
         # the device is wide (a CPU), else one pixel per work-item in 16×8 groups (kernels/grain.cl);
         # the Boolean path one pixel per work-item
         if boolean:
             size, local = (w, h), None
         elif lanes == 32:
-            size, local = (-(-w // 32), -(-h // GAUSSIAN_ROWS)), (8, 1)
+            size, local = (-(-w // 32), -(-h // rows)), (8, 1)
         else:
             size, local = (w, h), (16, 8)
         return [rt.launch(knl, size, local, src, dst, np.int32(w), np.int32(h), rt.constant(params),
@@ -237,11 +243,13 @@ class Grain(GatherStage):
         return d_min + -np.log10(np.clip(t, t_floor, 1.0))
 
 
-GAUSSIAN_ROWS = 6
-"""Rows per work-item (each 32 pixels wide) of the Gaussian path's lane form: each
-[a, b, a]-filtered row of normals serves three output rows, so 6 rows cost 8 filtered rows, one
-float16 of Box–Muller draws each, and two float16 of draws for the normals left and right of the
-block (kernels/grain.cl; ≤ 14)."""
+GAUSSIAN_ROWS = {1: 6, 3: 14}
+"""Rows per work-item (each 32 pixels wide) of the Gaussian path's lane form, by filter taps
+(``GRAIN_TAPS``). White noise (1): one float16 of Box–Muller draws per row, 6 rows (14 measured
+×1.07 the time). The [a, b, a] filter (3): each filtered row of normals serves three output rows,
+so R rows cost R + 2 filtered rows, one float16 of draws each, and two float16 of draws for the
+normals left and right of the block — (R + 4)·16 / (32 R) draws per pixel and layer: 9/14 at 14,
+the most kernels/grain.cl takes (6 rows, 5/6 draws, measured ×1.11 the time; docs/benchmarks.md)."""
 
 
 def _program_source() -> str:

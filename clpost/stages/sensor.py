@@ -22,7 +22,9 @@ normal approximation with the Poisson variance (error of the normal approximatio
 mean 32 is < 1 % in σ). Means above 2·FW are clipped to the well with certainty and capped there.
 
 Randomness: counter-based hash of (``Camera.noise_seed``, ``metadata["frame_index"]``, pixel
-index, channel) — :mod:`clpost.random` reproduces it bit for bit.
+index, 4·channel + k) — :mod:`clpost.random` reproduces it bit for bit: k = 0 the exact Poisson
+search's uniform, k = 3 a Box–Muller draw whose cosine branch is the read noise and whose sine
+branch the normal approximation's (kernels/sensor.cl).
 
 Presets are *representative* of their sensor classes (orders of magnitude from published
 photon-transfer measurements, e.g. sensorgen.info and EMVA 1288 reports), not specific products.
@@ -127,9 +129,8 @@ class Sensor(PointwiseStage):
         seed, fr = camera.noise_seed, frame_index(frame)
         mean = np.minimum(np.maximum(np.asarray(color, np.float64), 0.0) * e_sat, 2.0 * p.full_well_e)
         u = rnd.uniform(rnd.hash4(seed, fr, i, ch * 4))
-        g_shot = rnd.normal(rnd.hash4(seed, fr, i, ch * 4 + 1), rnd.hash4(seed, fr, i, ch * 4 + 2))
         h3 = rnd.hash4(seed, fr, i, ch * 4 + 3)
-        g_read = rnd.normal(h3, rnd.mix(h3 ^ np.uint32(0x5BD1E995)))
+        g_read, g_shot = rnd.normal_pair(h3, rnd.mix(h3 ^ np.uint32(0x5BD1E995)))
         e = np.where(mean > POISSON_EXACT_MAX,
                      np.maximum(np.round(mean + np.sqrt(mean) * g_shot), 0.0),
                      rnd.poisson_inversion(np.minimum(mean, POISSON_EXACT_MAX), u))
