@@ -168,9 +168,9 @@ FOOT = 0.5
 the tap paths reach |v| + FOOT and the cylinders ramp over |h| ± FOOT (module docstring)."""
 FRINGE = 0.1
 LINE = 2.0
-FIX = 1024.0
-"""Steps per px of the packed half-vector a tap reads (|h| ≤ TILE = 20 px fits a signed 16-bit count)."""
 """A surface in front of X reaches X only within LINE ± ½ px of its own motion line (module docstring)."""
+DIR = 127.0
+"""Steps of the unit direction in the record a tap reads of Y (a signed byte per component: :func:`tap_records`)."""
 JITTER_R2 = (0.7548776662, 0.5698402910)
 """The R2 lattice's steps per pixel in x and y (Roberts 2018, the plastic number's 1/φ₂, 1/φ₂²)."""
 AGREE0, AGREE1 = 0.8, 0.95
@@ -375,14 +375,27 @@ def half_vectors32(velocity: np.ndarray, k: float) -> np.ndarray:
         u = v / np.where(m > 0, m, np.float32(1))
         l2 = (u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1])[..., None]
         length = np.sqrt(l2) * m * np.float32(k)
-        h = u * (np.minimum(length, np.float32(TILE)) / np.sqrt(l2))
+        h = (u * (np.float32(1) / np.sqrt(l2))) * np.minimum(length, np.float32(TILE))   # direction × |h|
     return np.where(m > 0, np.concatenate([h, length], axis=-1), np.float32(0)).astype(np.float32)
 
 
-def packed_half_vectors(h32: np.ndarray) -> np.ndarray:
-    """h as a tap reads it: ``motion_blur_prep`` packs each component as a signed 16-bit count of
-    1/FIX px (rounded to nearest even) in one word; back in float32."""
-    return (np.rint(h32 * np.float32(FIX)).astype(np.int16).astype(np.float32) * np.float32(1.0 / FIX))
+def tap_records(velocity: np.ndarray, k: float) -> tuple[np.ndarray, np.ndarray]:
+    """What a tap reads of Y, as ``motion_blur_prep`` packs it in one word: (l, e) with l = max(|h|,
+    ½) as a float with a 10-bit mantissa (the float32 bits from ½ up, rounded half up), e = h's unit
+    direction in signed counts of 1/DIR (rounded to nearest even; 0 where v = 0); float32, the same
+    operations as the kernel. |h| is the clamped length min(|v·k|, K) of :func:`half_vectors32`."""
+    v = np.asarray(velocity, dtype=np.float32)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        m = np.max(np.abs(v), axis=-1, keepdims=True)
+        u = v / np.where(m > 0, m, np.float32(1))
+        lu = np.sqrt(u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1])[..., None]
+        r = np.minimum(lu * m * np.float32(k), np.float32(TILE))
+        e = np.where(m > 0, u * (np.float32(1) / lu), np.float32(0)).astype(np.float32)
+    l32 = np.maximum(np.where(m > 0, r, np.float32(0)), np.float32(0.5)).astype(np.float32)[..., 0]
+    bits = ((l32.view(np.uint32) + np.uint32(0x1000) - np.uint32(0x3F000000)) >> np.uint32(13)) & np.uint32(0xFFFF)
+    lq = ((bits << np.uint32(13)) + np.uint32(0x3F000000)).astype(np.uint32).view(np.float32)
+    q = np.rint(e * np.float32(DIR)).astype(np.float32)
+    return lq, q
 
 
 def _argmax_len(vecs: np.ndarray) -> np.ndarray:
@@ -472,7 +485,7 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     hk = half_vectors32(velocity, np.float32(fraction / 2.0))
     h32 = hk[..., :2]
     h = h32.astype(np.float64)
-    hp = packed_half_vectors(h32)                            # what a tap reads of Y
+    lrec, erec = tap_records(velocity, np.float32(fraction / 2.0))   # what a tap reads of Y
     _, nmax = tile_max(hk.astype(np.float64))
     ys, xs = np.mgrid[0:hh, 0:ww]
     vn = nmax[ys // TILE, xs // TILE, :2]
@@ -484,6 +497,9 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     vx32 = np.where((lhx > 0.5)[..., None], h32, vn32)   # odd taps: X's own motion
     ln32, lv32 = _len32(vn32), _len32(vx32)
     ln, lv = ln32.astype(np.float64), lv32.astype(np.float64)
+    tiny = np.float32(1e-30)
+    rln32 = np.float32(1) / np.maximum(ln32, tiny)
+    rlv32 = np.float32(1) / np.maximum(lv32, tiny)
     cosang = (vn32[..., 0] * vx32[..., 0] + vn32[..., 1] * vx32[..., 1]) / np.maximum(ln * lv, 1e-30)
     agree = np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0)
     j = jitter(seed, frame_index, xs, ys)
@@ -493,9 +509,8 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     inv64 = inv.astype(np.float64)
     # tap paths reach FOOT beyond |v|: directions scaled to |v| + FOOT, in float32 as the kernel
     pn32, pv32 = ln32 + np.float32(FOOT), lv32 + np.float32(FOOT)
-    tiny = np.float32(1e-30)
-    dn32 = vn32 * (pn32 / np.maximum(ln32, tiny))[..., None]
-    dv32 = vx32 * (pv32 / np.maximum(lv32, tiny))[..., None]
+    dn32 = vn32 * (pn32 * rln32)[..., None]
+    dv32 = vx32 * (pv32 * rlv32)[..., None]
     pn, pv = pn32.astype(np.float64), pv32.astype(np.float64)
     wc = np.maximum((pn32 * inv).astype(np.float64) + (pv32 * inv), 1.0) / (2.0 * lx)   # at least the pixel
     cf, sf = np.zeros((hh, ww)), np.zeros_like(color)          # surfaces in front of X
@@ -512,15 +527,15 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         sy = np.clip(np.floor(ys.astype(np.float32) + oy + np.float32(0.5)).astype(np.int64), 0, hh - 1)
         dx32, dy32 = (sx - xs).astype(np.float32), (sy - ys).astype(np.float32)
         dist = np.sqrt(dx32 * dx32 + dy32 * dy32)
-        ly32 = np.maximum(_len32(hp[sy, sx]), np.float32(0.5))
+        ly32 = lrec[sy, sx]
         ly = ly32.astype(np.float64)
         wy = iz[sy, sx]
         f, b = _front(wy, iz), _front(iz, wy)
         cly = _cylinder32(dist, ly32)
         a = tap * cly * (pv if s % 2 else pn) * inv64 / ly
         own = b * _cylinder32(dist, lx32)        # level with X and on X's own path
-        hy = hp[sy, sx].astype(np.float64)
-        line = np.clip(LINE + 0.5 - np.abs(dx32 * hy[..., 1] - dy32 * hy[..., 0]) / ly, 0.0, 1.0)
+        ey = erec[sy, sx].astype(np.float64)
+        line = np.clip(LINE + 0.5 - np.abs(dx32 * ey[..., 1] - dy32 * ey[..., 0]) / DIR, 0.0, 1.0)
         af = line * f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
         ao = f * own * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
         ab = (tap * b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
