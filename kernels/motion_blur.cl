@@ -53,11 +53,14 @@ inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
 /* What a tap reads of Y, one word (tap_records in the .py): l = max(|h|, 0.5) in the low 16 bits as a
  * float with a 10-bit mantissa (its bits from 0.5 up, rounded half up: relative step 2^-10, l <= K
  * = 20 px fits), h's unit direction in the high two bytes, each a signed count of 1/127 (x, then y;
- * rounded to nearest even as numpy's rint). l decodes with two integer operations and no square
- * root; the direction only places X against Y's motion line, where 1/127 is < 0.2 px at 21 px. */
+ * rounded to nearest even as numpy's rint, by adding 1.5 * 2^23: PoCL's convert_int16_rte made the
+ * prep twice as slow). l decodes with two integer operations and no square root; the direction only
+ * places X against Y's motion line, where 1/127 is < 0.2 px at 21 px. */
+#define MOTION_BLUR_RINT_MAGIC 12582912.0f   /* 1.5 * 2^23: x + this rounds x (|x| < 2^22) to an integer */
 inline uint motion_blur_pack(float l, float2 e) {
     const uint lw = (as_uint(l) + 0x1000u - 0x3f000000u) >> 13;
-    const int qx = convert_int_rte(e.x * MOTION_BLUR_DIR), qy = convert_int_rte(e.y * MOTION_BLUR_DIR);
+    const int qx = as_int(e.x * MOTION_BLUR_DIR + MOTION_BLUR_RINT_MAGIC) - as_int(MOTION_BLUR_RINT_MAGIC);
+    const int qy = as_int(e.y * MOTION_BLUR_DIR + MOTION_BLUR_RINT_MAGIC) - as_int(MOTION_BLUR_RINT_MAGIC);
     return lw | (((uint)qx & 0xffu) << 16) | ((uint)qy << 24);
 }
 
@@ -172,8 +175,8 @@ inline void motion_blur_prep_16(__global const float *restrict velocity,
     vstore16(moving ? len : 0.0f, 0, hv + 2 * n + i0);
     const float16 l = fmax(moving ? r : 0.0f, 0.5f);
     const uint16 lw = (as_uint16(l) + 0x1000u - 0x3f000000u) >> 13;
-    const int16 qx = convert_int16_rte((moving ? ex : 0.0f) * MOTION_BLUR_DIR);
-    const int16 qy = convert_int16_rte((moving ? ey : 0.0f) * MOTION_BLUR_DIR);
+    const int16 qx = as_int16((moving ? ex : 0.0f) * MOTION_BLUR_DIR + MOTION_BLUR_RINT_MAGIC) - as_int(MOTION_BLUR_RINT_MAGIC);
+    const int16 qy = as_int16((moving ? ey : 0.0f) * MOTION_BLUR_DIR + MOTION_BLUR_RINT_MAGIC) - as_int(MOTION_BLUR_RINT_MAGIC);
     vstore16(lw | ((as_uint16(qx) & 0xffu) << 16) | (as_uint16(qy) << 24), 0,
              (__global uint *)(hv + 3 * n) + i0);   /* motion_blur_pack */
     vstore16(isinf(z) ? 0.0f : 1.0f / z, 0, iz + i0);
