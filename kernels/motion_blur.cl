@@ -325,6 +325,7 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     const float cosang = (vn.x * vx.x + vn.y * vx.y) * (rln * rlv);
     const float agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
     const float wx = iz[i];
+    const float wx0 = fmax(wx, 1e-30f);   /* fmax(fmax(wx, wy), 1e-30) = fmax(wx0, wy) */
     const float j = motion_blur_jitter(seed, frame, x, y);
     /* taps of this pixel (motion_blur_taps), strata <= 1 / MOTION_BLUR_DENSITY px apart */
     const int ns = motion_blur_taps(ln, cap);
@@ -358,7 +359,7 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const float wy = iz[k];
         /* soft depth test: f = Y in front of X, b = X in front of Y (motion_blur_front, one division) */
         /* one division for the three per-tap quotients (depth test, 1/|h_Y|, 1/max(d, 1)^2) */
-        const float zden = MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f);
+        const float zden = MOTION_BLUR_SOFT_Z * fmax(wx0, wy);
         const float md2 = fmax(d2, 1.0f);
         const float lm = ly * md2;
         const float q = 1.0f / (zden * lm);
@@ -381,12 +382,14 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const float ao = f * own * a * (agree + (1.0f - agree) * ((s & 1) ? 2.0f : 0.0f));
         const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx) * ((zden * ly) * q);
         const float3 cy = load_planar(src, k, n);
+        /* the layer sums by fused multiply-adds (FP_CONTRACT is off for the tap positions): one
+         * instruction each, and the same rounding in the 16-lane form */
         cf += af;
-        sf += af * cy;
+        sf = fma((float3)(af), cy, sf);
         co += ao;
-        so += ao * cy;
+        so = fma((float3)(ao), cy, so);
         wb += ab;
-        sb += ab * cy;
+        sb = fma((float3)(ab), cy, sb);
     }
     /* out = cf' F + (1 - cf') [co' O + (1 - co') B], coverages clamped to 1, layer colours normalised
      * (co' O = so min(1/co, 1); one reciprocal per layer) */
@@ -428,7 +431,7 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         const float16 ly = as_float16(((rec << 16) >> 3) + 0x3f000000u);   /* motion_blur_unpack_len */ \
         const float16 eyx = convert_float16(as_int16(rec << 8) >> 24), eyy = convert_float16(as_int16(rec) >> 24); \
         const float16 wy = MB_GATHER(iz, k); \
-        const float16 zden = MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f); \
+        const float16 zden = MOTION_BLUR_SOFT_Z * fmax(wx0, wy); \
         const float16 md2 = fmax(d2, 1.0f); \
         const float16 lm = ly * md2; \
         const float16 q = 1.0f / (zden * lm); \
@@ -446,9 +449,9 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         const int16 tap = (TAP);   /* lanes past their own S or at their centre: nothing */ \
         const float16 af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f; \
         const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k); \
-        cf += af; sfr += af * cr; sfg += af * cg; sfb += af * cb; \
-        co += ao; sor += ao * cr; sog += ao * cg; sob += ao * cb; \
-        wb += ab; sbr += ab * cr; sbg += ab * cg; sbb += ab * cb; \
+        cf += af; sfr = fma(af, cr, sfr); sfg = fma(af, cg, sfg); sfb = fma(af, cb, sfb); \
+        co += ao; sor = fma(ao, cr, sor); sog = fma(ao, cg, sog); sob = fma(ao, cb, sob); \
+        wb += ab; sbr = fma(ab, cr, sbr); sbg = fma(ab, cg, sbg); sbb = fma(ab, cb, sbb); \
     } while (0)
 
 /* motion_blur_16's taps 0 .. N - 1 (N its lanes' largest S): masks only where the lanes' S differ */
@@ -497,6 +500,7 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     const float16 cosang = (vnx * vxx + vny * vxy) * (rln * rlv);
     const float16 agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
     const float16 wx = vload16(0, iz + i0);
+    const float16 wx0 = fmax(wx, 1e-30f);   /* fmax(fmax(wx, wy), 1e-30) = fmax(wx0, wy) */
     /* motion_blur_jitter */
     const float j0 = (float)(rnd_hash4(seed, frame, 0u, 0u) >> 8) * (1.0f / 16777216.0f);
     const float16 ja = convert_float16(xs) * MOTION_BLUR_R2X;
