@@ -157,7 +157,7 @@ TILE = 20
 SAMPLES = {"draft": 5, "preview": 11, "final": 23}
 """S per quality level (odd: the centre stratum is the pixel itself); fewer than the 7/15/31 taps
 of the filter it replaced, to keep its cost (what each level costs: docs/motion_blur.md)."""
-SAMPLES_MAX = {"draft": 11, "preview": 23, "final": 23}
+SAMPLES_MAX = {"draft": 19, "preview": 23, "final": 23}
 """The most taps per pixel (odd) when the frame's moving tiles leave budget (module docstring, "Taps")."""
 DENSITY = 1.5
 """Taps per px of |v_N|: a pixel takes S = min(S_q, 2⌈DENSITY |v_N|⌉ + 1) taps (module docstring)."""
