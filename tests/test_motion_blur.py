@@ -72,7 +72,7 @@ def test_tap_cap_spends_the_still_tiles_budget_within_bounds():
 
 @pytest.mark.parametrize("quality", list(SAMPLES))
 def test_sparse_motion_takes_more_taps_in_both_forms(rng, monkeypatch, quality):
-    """A mover in 2 of 24 tiles: the frame's cap rises to S_max (draft 5 -> 11); the kernel matches
+    """A mover in 2 of 24 tiles: the frame's cap rises to S_max (draft 5 -> 19); the kernel matches
     the reference and the one-pixel form the 16-wide one."""
     from clpost.runtime import Runtime
 
