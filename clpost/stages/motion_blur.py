@@ -61,7 +61,7 @@ own path"), three layers are gathered:
 - in front of X (or level but off X's path, e.g. a light sliding over a wall at its depth):
   :math:`c_F = \sum f(1-o_i)\,\ell_i\,a_i\,g_i^F`, colour F = their weighted mean; a surface in front
   reaches X only along its own motion line, give or take its footprint and a spinning object's
-  spread of directions: :math:`\ell_i = \mathrm{clamp}(L + \tfrac12 - |d \times h_Y| / |h_Y|, 0, 1)`,
+  spread of directions: :math:`\ell_i = \mathrm{clamp}(L + \tfrac12 - |d \times \hat h_Y|, 0, 1)`,
   L = LINE = 2 px (the cylinder alone is isotropic: a fast neighbour's streak would reach X from any
   side, e.g. a sliding cube's smear onto the static wall below it);
 - X's own surface along its path: :math:`c_O = w_c + \sum f\,o_i\,a_i\,g_i^O` with X itself at
@@ -79,7 +79,9 @@ own path"), three layers are gathered:
     C'(X) = \bar c_F F + (1 - \bar c_F)\big(\bar c_O O + (1 - \bar c_O) B\big),
     \qquad \bar c = \min(c, 1)
 
-|h| clamped to ≥ 0.5 px. Where :math:`h_X` leaves :math:`v_N`'s direction (agreement g =
+|h| clamped to ≥ 0.5 px; a tap reads Y's as one word (:func:`tap_records`): :math:`\max(|h_Y|, ½)` as a float
+with a 10-bit mantissa (relative step 2⁻¹⁰) and the direction :math:`\hat h_Y` in steps of 1/127 (< 0.2 px
+across the 21 px a tap reaches). Where :math:`h_X` leaves :math:`v_N`'s direction (agreement g =
 clamp((cos∠ − 0.8)/0.15, 0, 1)) the tap sets split the work: odd taps carry X's own surface
 (:math:`g^O = g + 2(1-g)`, :math:`g^F = g`), even taps what is in front (:math:`g^F = g +
 2(1-g)`, :math:`g^O = g`). If :math:`|v_N| \le 0.5` px the pixel is left exactly as it is —
@@ -87,7 +89,7 @@ hence the stage is *not planned* when no pixel's half-vector reaches 0.5 px (ski
 
 **Quality** sets :math:`S_q` (the most taps per pixel; measured error and cost in
 ``docs/motion_blur.md``): draft 5, preview 11, final 23, and :math:`S_{max}` (the frame cap's bound)
-draft 11, preview 23, final 23. K = 20 px for all levels.
+draft 19, preview 23, final 23. K = 20 px for all levels.
 
 **Clamping.** :math:`|h|` is limited to K = 20 px (a streak of at most 40 px, i.e. 2K) keeping
 its direction: faster motion blurs as if it moved 2K px during the exposure, so its streak is
