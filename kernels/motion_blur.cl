@@ -4,7 +4,8 @@
  *
  * Buffers: colour planar (c*n + i); velocity interleaved (2i, 2i+1) px per frame, forward,
  * +x right, +y down; depth planar metres (+inf sky). Scratch: hv = clamped half-vectors and
- * their unclamped length and h again packed in one word (4 planes: x, y, key, packed), iz = 1/depth (0 for sky), tile and
+ * their unclamped length and what a tap reads of Y packed in one word (4 planes: x, y, key, record),
+ * iz = 1/depth (0 for sky), tile and
  * neighbour-max (3 planes each). Maxima are ranked by the unclamped length: clamped vectors all
  * have length K, and ranking them by a rounding-level difference would not be reproducible.
  *
@@ -32,7 +33,7 @@
 #define MOTION_BLUR_FOOT 0.5f      /* half a pixel: a swept pixel's footprint reaches this beyond |h| (FOOT in the .py) */
 #define MOTION_BLUR_AGREE0 0.8f    /* cos(v_N, h_X) below which the tap sets split (AGREE0/1 in the .py) */
 #define MOTION_BLUR_AGREE1 0.95f
-#define MOTION_BLUR_FIX 1024.0f   /* the packed half-vector's steps per px (FIX in the .py) */
+#define MOTION_BLUR_DIR 127.0f    /* steps of the tap record's unit direction (DIR in the .py) */
 #define MOTION_BLUR_LINE 2.0f      /* a front surface reaches X within this of its motion line, +- 1/2 px (LINE in the .py) */
 
 #define MOTION_BLUR_R2X 0.7548776662f   /* the R2 lattice's steps per pixel in x and y (JITTER_R2 in the .py) */
@@ -49,16 +50,22 @@ inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
     return v - floor(v) - 0.5f;
 }
 
-/* h packed in one word for the taps: each component as a signed 16-bit count of 1/1024 px (|h| <= K
- * = 20 px fits; rounded to nearest even by convert_int_rte, as numpy's rint in the reference), x in
- * the low half, y in the high; the scale is a power of two, so packing and unpacking round once */
-inline uint motion_blur_pack(float2 h) {
-    const int qx = convert_int_rte(h.x * MOTION_BLUR_FIX), qy = convert_int_rte(h.y * MOTION_BLUR_FIX);
-    return ((uint)qx & 0xffffu) | ((uint)qy << 16);
+/* What a tap reads of Y, one word (tap_records in the .py): l = max(|h|, 0.5) in the low 16 bits as a
+ * float with a 10-bit mantissa (its bits from 0.5 up, rounded half up: relative step 2^-10, l <= K
+ * = 20 px fits), h's unit direction in the high two bytes, each a signed count of 1/127 (x, then y;
+ * rounded to nearest even as numpy's rint, by adding 1.5 * 2^23: PoCL's convert_int16_rte made the
+ * prep twice as slow). l decodes with two integer operations and no square root; the direction only
+ * places X against Y's motion line, where 1/127 is < 0.2 px at 21 px. */
+#define MOTION_BLUR_RINT_MAGIC 12582912.0f   /* 1.5 * 2^23: x + this rounds x (|x| < 2^22) to an integer */
+inline uint motion_blur_pack(float l, float2 e) {
+    const uint lw = (as_uint(l) + 0x1000u - 0x3f000000u) >> 13;
+    const int qx = as_int(e.x * MOTION_BLUR_DIR + MOTION_BLUR_RINT_MAGIC) - as_int(MOTION_BLUR_RINT_MAGIC);
+    const int qy = as_int(e.y * MOTION_BLUR_DIR + MOTION_BLUR_RINT_MAGIC) - as_int(MOTION_BLUR_RINT_MAGIC);
+    return lw | (((uint)qx & 0xffu) << 16) | ((uint)qy << 24);
 }
 
-inline float2 motion_blur_unpack(uint w) {
-    return (float2)((float)(as_int(w << 16) >> 16), (float)(as_int(w) >> 16)) * (1.0f / MOTION_BLUR_FIX);
+inline float motion_blur_unpack_len(uint w) {
+    return as_float(((w << 16) >> 3) + 0x3f000000u);
 }
 
 inline float motion_blur_len2(float2 v) {
@@ -100,19 +107,21 @@ inline void motion_blur_prep_px(__global const float *restrict velocity,
     }
     /* scale by the inf-norm first: |v| up to FLT_MAX never overflows to inf */
     const float m = fmax(fabs(v.x), fabs(v.y));
-    float2 h = (float2)(0.0f, 0.0f);
-    float len = 0.0f;
+    float2 h = (float2)(0.0f, 0.0f), e = (float2)(0.0f, 0.0f);
+    float len = 0.0f, r = 0.0f;
     if (m > 0.0f) {
         const float2 u = v / m;                     /* inf-norm 1 */
-        len = sqrt(motion_blur_len2(u)) * m * k;    /* unclamped |h| (inf only beyond FLT_MAX) */
-        const float r = fmin(len, (float)MOTION_BLUR_TILE);
-        h = u * (r / sqrt(motion_blur_len2(u)));
+        const float lu = sqrt(motion_blur_len2(u));
+        len = lu * m * k;                           /* unclamped |h| (inf only beyond FLT_MAX) */
+        r = fmin(len, (float)MOTION_BLUR_TILE);
+        e = u * (1.0f / lu);                        /* h's direction */
+        h = e * r;
     }
     hv[i] = h.x;
     hv[n + i] = h.y;
     hv[2 * n + i] = len;
-    /* h packed in one word: a tap loads Y's direction and length at once */
-    ((__global uint *)(hv + 3 * n))[i] = motion_blur_pack(h);
+    /* a tap loads Y's length and direction at once */
+    ((__global uint *)(hv + 3 * n))[i] = motion_blur_pack(fmax(r, 0.5f), e);
     iz[i] = isinf(z) ? 0.0f : 1.0f / z;
 }
 
@@ -157,13 +166,19 @@ inline void motion_blur_prep_16(__global const float *restrict velocity,
     const float16 lu = sqrt(ux * ux + uy * uy);
     const float16 len = lu * m * k;
     const float16 r = fmin(len, (float)MOTION_BLUR_TILE);
-    const float16 hx = ux * (r / lu), hy = uy * (r / lu);
+    const float16 rlu = 1.0f / lu;
+    const float16 ex = ux * rlu, ey = uy * rlu;   /* h's direction */
+    const float16 hx = ex * r, hy = ey * r;
     const float16 hx0 = moving ? hx : 0.0f, hy0 = moving ? hy : 0.0f;
     vstore16(hx0, 0, hv + i0);
     vstore16(hy0, 0, hv + n + i0);
     vstore16(moving ? len : 0.0f, 0, hv + 2 * n + i0);
-    const int16 qx = convert_int16_rte(hx0 * MOTION_BLUR_FIX), qy = convert_int16_rte(hy0 * MOTION_BLUR_FIX);
-    vstore16((as_uint16(qx) & 0xffffu) | (as_uint16(qy) << 16), 0, (__global uint *)(hv + 3 * n) + i0);   /* motion_blur_pack */
+    const float16 l = fmax(moving ? r : 0.0f, 0.5f);
+    const uint16 lw = (as_uint16(l) + 0x1000u - 0x3f000000u) >> 13;
+    const int16 qx = as_int16((moving ? ex : 0.0f) * MOTION_BLUR_DIR + MOTION_BLUR_RINT_MAGIC) - as_int(MOTION_BLUR_RINT_MAGIC);
+    const int16 qy = as_int16((moving ? ey : 0.0f) * MOTION_BLUR_DIR + MOTION_BLUR_RINT_MAGIC) - as_int(MOTION_BLUR_RINT_MAGIC);
+    vstore16(lw | ((as_uint16(qx) & 0xffu) << 16) | (as_uint16(qy) << 24), 0,
+             (__global uint *)(hv + 3 * n) + i0);   /* motion_blur_pack */
     vstore16(isinf(z) ? 0.0f : 1.0f / z, 0, iz + i0);
 }
 
@@ -306,16 +321,18 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
     const float lv = sqrt(motion_blur_len2(vx));
     /* where X's own motion leaves v_N's direction, the tap sets split the work: odd taps (on X's
      * path) carry X's own surface, even taps (on v_N) the surfaces in front of X */
-    const float cosang = (vn.x * vx.x + vn.y * vx.y) / fmax(ln * lv, 1e-30f);
+    const float rln = 1.0f / fmax(ln, 1e-30f), rlv = 1.0f / fmax(lv, 1e-30f);
+    const float cosang = (vn.x * vx.x + vn.y * vx.y) * (rln * rlv);
     const float agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
     const float wx = iz[i];
+    const float wx0 = fmax(wx, 1e-30f);   /* fmax(fmax(wx, wy), 1e-30) = fmax(wx0, wy) */
     const float j = motion_blur_jitter(seed, frame, x, y);
     /* taps of this pixel (motion_blur_taps), strata <= 1 / MOTION_BLUR_DENSITY px apart */
     const int ns = motion_blur_taps(ln, cap);
     const float inv_s = 1.0f / (float)ns;
     /* the tap paths reach half a pixel beyond |v| (the swept pixel's footprint, see the cylinder) */
     const float pn = ln + MOTION_BLUR_FOOT, pv = lv + MOTION_BLUR_FOOT;
-    const float2 dn = vn * (pn / fmax(ln, 1e-30f)), dv = vx * (pv / fmax(lv, 1e-30f));
+    const float2 dn = vn * (pn * rln), dv = vx * (pv * rlv);
     /* three layers: surfaces in front of X (coverage cf), X's own surface smeared along its path
      * (coverage co, X itself weighted wc), the background behind X (revealed as X moves away) */
     const float hdn = pn * inv_s, hdv = pv * inv_s;   /* half the path length per tap, per set */
@@ -337,12 +354,12 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const float ddx = (float)(sx - x), ddy = (float)(sy - y);
         const float d2 = ddx * ddx + ddy * ddy;
         const float dist = sqrt(d2);
-        const float2 hy = motion_blur_unpack(((__global const uint *)(hv + 3 * n))[k]);   /* h_Y, packed */
-        const float ly = fmax(sqrt(motion_blur_len2(hy)), 0.5f);
+        const uint rec = ((__global const uint *)(hv + 3 * n))[k];   /* Y's record: motion_blur_pack */
+        const float ly = motion_blur_unpack_len(rec);   /* max(|h_Y|, 0.5) */
         const float wy = iz[k];
         /* soft depth test: f = Y in front of X, b = X in front of Y (motion_blur_front, one division) */
         /* one division for the three per-tap quotients (depth test, 1/|h_Y|, 1/max(d, 1)^2) */
-        const float zden = MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f);
+        const float zden = MOTION_BLUR_SOFT_Z * fmax(wx0, wy);
         const float md2 = fmax(d2, 1.0f);
         const float lm = ly * md2;
         const float q = 1.0f / (zden * lm);
@@ -358,23 +375,27 @@ inline void motion_blur_px(__global const float *restrict src, __global float *r
         const float a = cly * ((s & 1) ? hdv : hdn) * rly;
         const float own = b * motion_blur_cylinder(dist, lx);   /* level with X and on X's path */
         /* a surface in front reaches X only along its own motion line, give or take its footprint
-         * and a spinning object's spread of directions: |d x h_Y| / |h_Y| within LINE +- 1/2 px */
-        const float line = clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * hy.y - ddy * hy.x) * rly, 0.0f, 1.0f);
+         * and a spinning object's spread of directions: |d x e_Y| (e_Y = h_Y / |h_Y|) within LINE +- 1/2 px */
+        const float eyx = (float)(as_int(rec << 8) >> 24), eyy = (float)(as_int(rec) >> 24);
+        const float line = clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * eyy - ddy * eyx) * (1.0f / MOTION_BLUR_DIR), 0.0f, 1.0f);
         const float af = line * f * (1.0f - own) * a * (agree + (1.0f - agree) * ((s & 1) ? 0.0f : 2.0f));
         const float ao = f * own * a * (agree + (1.0f - agree) * ((s & 1) ? 2.0f : 0.0f));
         const float ab = b * ((1.0f - f) + f * (1.0f - cly)) * motion_blur_cylinder(dist, lx) * ((zden * ly) * q);
         const float3 cy = load_planar(src, k, n);
+        /* the layer sums by fused multiply-adds (FP_CONTRACT is off for the tap positions): one
+         * instruction each, and the same rounding in the 16-lane form */
         cf += af;
-        sf += af * cy;
+        sf = fma((float3)(af), cy, sf);
         co += ao;
-        so += ao * cy;
+        so = fma((float3)(ao), cy, so);
         wb += ab;
-        sb += ab * cy;
+        sb = fma((float3)(ab), cy, sb);
     }
-    /* out = cf' F + (1 - cf') [co' O + (1 - co') B], coverages clamped to 1, layer colours normalised */
-    const float cfc = fmin(cf, 1.0f), coc = fmin(co, 1.0f);
-    const float3 own = coc * (so / co) + (1.0f - coc) * (sb / wb);
-    const float3 fr = cf > 0.0f ? sf / cf : cx;
+    /* out = cf' F + (1 - cf') [co' O + (1 - co') B], coverages clamped to 1, layer colours normalised
+     * (co' O = so min(1/co, 1); one reciprocal per layer) */
+    const float cfc = fmin(cf, 1.0f), ico = 1.0f / co;
+    const float3 own = so * fmin(ico, 1.0f) + sb * ((1.0f - fmin(co, 1.0f)) * (1.0f / wb));
+    const float3 fr = cf > 0.0f ? sf * (1.0f / cf) : cx;
     store_planar(dst, i, n, cfc * fr + (1.0f - cfc) * own);
 }
 
@@ -390,8 +411,8 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
     return 1.0f - t * t * (3.0f - 2.0f * t);
 }
 
-/* motion_blur_px's line weight: |d x h_Y| / |h_Y| from the packed h_Y */
-#define MB_LINE16 clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * hyy - ddy * hyx) * rly, 0.0f, 1.0f) *
+/* motion_blur_px's line weight: |d x e_Y| from Y's record */
+#define MB_LINE16 clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * eyy - ddy * eyx) * (1.0f / MOTION_BLUR_DIR), 0.0f, 1.0f) *
 /* one tap s of motion_blur_16 on all lanes where TAP (int16) is true; uses and updates its locals */
 #define MB_TAP16(s, TAP) do { \
         const int odd = (s) & 1; \
@@ -406,12 +427,11 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         const float16 ddx = convert_float16(sx - xs), ddy = convert_float16(sy - y); \
         const float16 d2 = ddx * ddx + ddy * ddy; \
         const float16 dist = sqrt(d2); \
-        const uint16 pk = CLP_GATHER16U((__global const uint *)(hv + 3 * n), k);   /* h_Y, packed */ \
-        const float16 hyx = convert_float16(as_int16(pk << 16) >> 16) * (1.0f / MOTION_BLUR_FIX); \
-        const float16 hyy = convert_float16(as_int16(pk) >> 16) * (1.0f / MOTION_BLUR_FIX);   /* motion_blur_unpack */ \
-        const float16 ly = fmax(sqrt(hyx * hyx + hyy * hyy), 0.5f); \
+        const uint16 rec = CLP_GATHER16U((__global const uint *)(hv + 3 * n), k);   /* Y's record */ \
+        const float16 ly = as_float16(((rec << 16) >> 3) + 0x3f000000u);   /* motion_blur_unpack_len */ \
+        const float16 eyx = convert_float16(as_int16(rec << 8) >> 24), eyy = convert_float16(as_int16(rec) >> 24); \
         const float16 wy = MB_GATHER(iz, k); \
-        const float16 zden = MOTION_BLUR_SOFT_Z * fmax(fmax(wx, wy), 1e-30f); \
+        const float16 zden = MOTION_BLUR_SOFT_Z * fmax(wx0, wy); \
         const float16 md2 = fmax(d2, 1.0f); \
         const float16 lm = ly * md2; \
         const float16 q = 1.0f / (zden * lm); \
@@ -429,9 +449,9 @@ inline float16 motion_blur_cyl16(const float16 dist, const float16 len) {
         const int16 tap = (TAP);   /* lanes past their own S or at their centre: nothing */ \
         const float16 af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f; \
         const float16 cr = MB_GATHER(src, k), cg = MB_GATHER(src + n, k), cb = MB_GATHER(src + 2 * n, k); \
-        cf += af; sfr += af * cr; sfg += af * cg; sfb += af * cb; \
-        co += ao; sor += ao * cr; sog += ao * cg; sob += ao * cb; \
-        wb += ab; sbr += ab * cr; sbg += ab * cg; sbb += ab * cb; \
+        cf += af; sfr = fma(af, cr, sfr); sfg = fma(af, cg, sfg); sfb = fma(af, cb, sfb); \
+        co += ao; sor = fma(ao, cr, sor); sog = fma(ao, cg, sog); sob = fma(ao, cb, sob); \
+        wb += ab; sbr = fma(ab, cr, sbr); sbg = fma(ab, cg, sbg); sbb = fma(ab, cb, sbb); \
     } while (0)
 
 /* motion_blur_16's taps 0 .. N - 1 (N its lanes' largest S): masks only where the lanes' S differ */
@@ -456,8 +476,12 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
     const size_t tn = (size_t)tw * (size_t)th;
     const int16 xs = (int16)(x0) + convert_int16(CLP_ULANES16);
-    const int16 t = (int16)((y / MOTION_BLUR_TILE) * tw) + xs / MOTION_BLUR_TILE;
-    const float16 vnx = MB_GATHER(nmax, t), vny = MB_GATHER(nmax + tn, t);
+    /* v_N: the 16 pixels span at most two tiles, t0 (lane 0's) and t0 + 1: two scalar loads each, not gathers */
+    const int t0 = (y / MOTION_BLUR_TILE) * tw + x0 / MOTION_BLUR_TILE;
+    const int16 second = xs / MOTION_BLUR_TILE != (int16)(x0 / MOTION_BLUR_TILE);
+    const int t1 = min(t0 + 1, (y / MOTION_BLUR_TILE) * tw + (x0 + 15) / MOTION_BLUR_TILE);
+    const float16 vnx = second ? (float16)nmax[t1] : (float16)nmax[t0];
+    const float16 vny = second ? (float16)nmax[tn + t1] : (float16)nmax[tn + t0];
     const float16 cxr = vload16(0, src + i0), cxg = vload16(0, src + n + i0), cxb = vload16(0, src + 2 * n + i0);
     const float16 l2n = vnx * vnx + vny * vny;
     const int16 still = l2n <= 0.25f;             /* nothing in reach moves by half a pixel */
@@ -472,9 +496,11 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     const float16 vxx = own_dir ? hx : vnx, vxy = own_dir ? hy : vny;   /* odd taps follow X's own motion */
     const float16 ln = sqrt(l2n);
     const float16 lv = sqrt(vxx * vxx + vxy * vxy);
-    const float16 cosang = (vnx * vxx + vny * vxy) / fmax(ln * lv, 1e-30f);
+    const float16 rln = 1.0f / fmax(ln, 1e-30f), rlv = 1.0f / fmax(lv, 1e-30f);
+    const float16 cosang = (vnx * vxx + vny * vxy) * (rln * rlv);
     const float16 agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
     const float16 wx = vload16(0, iz + i0);
+    const float16 wx0 = fmax(wx, 1e-30f);   /* fmax(fmax(wx, wy), 1e-30) = fmax(wx0, wy) */
     /* motion_blur_jitter */
     const float j0 = (float)(rnd_hash4(seed, frame, 0u, 0u) >> 8) * (1.0f / 16777216.0f);
     const float16 ja = convert_float16(xs) * MOTION_BLUR_R2X;
@@ -495,7 +521,7 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
     const int2 n2 = min(n4.lo, n4.hi);
     const int smin = min(n2.x, n2.y);
     const float16 pn = ln + MOTION_BLUR_FOOT, pv = lv + MOTION_BLUR_FOOT;   /* paths reach half a pixel beyond |v| */
-    const float16 sn = pn / fmax(ln, 1e-30f), sv = pv / fmax(lv, 1e-30f);
+    const float16 sn = pn * rln, sv = pv * rlv;
     const float16 dnx = vnx * sn, dny = vny * sn, dvx = vxx * sv, dvy = vxy * sv;
     const float16 hdn = pn * inv_s, hdv = pv * inv_s;
     const float16 wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
@@ -569,12 +595,11 @@ inline void motion_blur_16(__global const float *restrict src, __global float *r
 #endif
     default: break;   /* S = 1: the centre only (|v_N| = 0, a still pixel) */
     }
-    const float16 cfc = fmin(cf, 1.0f), coc = fmin(co, 1.0f);
+    const float16 cfc = fmin(cf, 1.0f), ico = 1.0f / co;
     const int16 front = cf > 0.0f;
-    const float16 our = coc * (sor / co) + (1.0f - coc) * (sbr / wb);
-    const float16 oug = coc * (sog / co) + (1.0f - coc) * (sbg / wb);
-    const float16 oub = coc * (sob / co) + (1.0f - coc) * (sbb / wb);
-    const float16 frr = front ? sfr / cf : cxr, frg = front ? sfg / cf : cxg, frb = front ? sfb / cf : cxb;
+    const float16 ao = fmin(ico, 1.0f), ab = (1.0f - fmin(co, 1.0f)) * (1.0f / wb), af = 1.0f / cf;
+    const float16 our = sor * ao + sbr * ab, oug = sog * ao + sbg * ab, oub = sob * ao + sbb * ab;
+    const float16 frr = front ? sfr * af : cxr, frg = front ? sfg * af : cxg, frb = front ? sfb * af : cxb;
     vstore16(still ? cxr : cfc * frr + (1.0f - cfc) * our, 0, dst + i0);
     vstore16(still ? cxg : cfc * frg + (1.0f - cfc) * oug, 0, dst + n + i0);
     vstore16(still ? cxb : cfc * frb + (1.0f - cfc) * oub, 0, dst + 2 * n + i0);

@@ -6,7 +6,7 @@ from hypothesis import given, strategies as st
 from clpost import Camera, Frame, Pipeline
 from clpost.errors import InputError
 from clpost.stages.motion_blur import (DENSITY, SAMPLES, SAMPLES_MAX, TILE, MotionBlur, half_vectors, jitter,
-                                       shutter_fraction, shutter_from_angle, tap_cap, taps, tile_max)
+                                       shutter_fraction, shutter_from_angle, tap_cap, tap_records, taps, tile_max)
 
 from conftest import assert_planned
 
@@ -72,7 +72,7 @@ def test_tap_cap_spends_the_still_tiles_budget_within_bounds():
 
 @pytest.mark.parametrize("quality", list(SAMPLES))
 def test_sparse_motion_takes_more_taps_in_both_forms(rng, monkeypatch, quality):
-    """A mover in 2 of 24 tiles: the frame's cap rises to S_max (draft 5 -> 11); the kernel matches
+    """A mover in 2 of 24 tiles: the frame's cap rises to S_max (draft 5 -> 19); the kernel matches
     the reference and the one-pixel form the 16-wide one."""
     from clpost.runtime import Runtime
 
@@ -292,6 +292,23 @@ def test_clamp_keeps_direction_and_caps_length():
     assert np.isclose(np.hypot(*hv[0, 0]), TILE) and np.isclose(hv[0, 0, 0], -hv[0, 0, 1])
     assert (hv[0, 1] == 0).all()
     np.testing.assert_allclose(hv[0, 2], [0.75, 1.0])
+
+
+def test_tap_record_keeps_length_to_2e_10_and_direction_to_a_step(rng):
+    # what a tap reads of Y (one word): max(|h|, 0.5) to a relative 2^-10, the unit direction to 1/127
+    # per component (< 0.2 px off Y's motion line at the 21 px a tap reaches)
+    v = np.concatenate([rng.normal(size=(2000, 2)) * 10.0, rng.normal(size=(200, 2)) * 1e-3,
+                        [[0.0, 0.0], [3e38, -3e38], [0.0, -5.0], [80.0, 0.0]]]).astype(np.float32)[None]
+    l, e = tap_records(v, 0.25)
+    hv = half_vectors(v, 0.25)[0]
+    length = np.hypot(hv[:, 0], hv[:, 1])
+    want = np.maximum(length, 0.5)
+    assert (np.abs(l[0] - want) <= want * 2.0 ** -11 * 1.0001).all()
+    moving = length > 0
+    unit = hv[moving] / length[moving, None]
+    assert (np.abs(e[0][moving] / 127.0 - unit) <= 0.5 / 127.0 + 1e-6).all()
+    assert (e[0][~moving] == 0).all() and (np.abs(e[0]) <= 127).all()
+    assert l[0, -1] == 20.0 and l[0, -4] == 0.5 and (e[0, -2] == (0, -127)).all()
 
 
 def test_rolling_shutter_matches_reference_and_slants_a_moving_bar():

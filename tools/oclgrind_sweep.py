@@ -24,13 +24,19 @@ SIZES = ((1, 1), (3, 2), (17, 5), (37, 23))
 """Odd sizes; 37×23 is not a multiple of the 16-pixel tiles and vectors in either direction."""
 
 
-def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0, intrinsics=None, labels=0):
+def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0, intrinsics=None, labels=0,
+           moving=None):
     from clpost import Frame
 
     rng = np.random.default_rng(seed + 7919 * w + h)
     color = (rng.random((h, w, 3)) * scale).astype(np.float32)
     d = rng.uniform(0.3, 30.0, (h, w)).astype(np.float32) if depth else None
     v = (rng.standard_normal((h, w, 2)) * velocity).astype(np.float32) if velocity else None
+    if v is not None and moving is not None:  # (y0, y1, x0, x1): only these pixels move
+        y0, y1, x0, x1 = moving
+        keep = np.zeros((h, w), bool)
+        keep[y0:y1, x0:x1] = True
+        v[~keep] = 0.0
     meta = {"frame_index": 3}
     if intrinsics is not None:
         meta["intrinsics"] = intrinsics
@@ -165,6 +171,12 @@ def cases():
         for w, h in ((1, 1), (37, 23)):
             add(f"motion_blur wide {q} {w}x{h}",
                 lambda q=q, w=w, h=h: _run(mb, ["motion_blur"], q, w, h, velocity=6.0, wide=True))
+    # a mover in one corner tile of 6x4: the frame's cap rises to S_max (draft 19 taps; 16-pixel runs
+    # straddling tiles whose lanes take different S), both forms
+    for form in ("wide", "narrow"):
+        add(f"motion_blur sparse {form} draft 101x61",
+            lambda form=form: _run(mb, ["motion_blur"], "draft", 101, 61, velocity=40.0, moving=(2, 14, 3, 17),
+                                   **{form: True}))
 
     # distortion: barrel (bench scenes), strong pincushion + tangential (fold-over, pixels
     # without data), at both filters; sizes include a partial tile in x and in y

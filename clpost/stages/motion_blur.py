@@ -61,7 +61,7 @@ own path"), three layers are gathered:
 - in front of X (or level but off X's path, e.g. a light sliding over a wall at its depth):
   :math:`c_F = \sum f(1-o_i)\,\ell_i\,a_i\,g_i^F`, colour F = their weighted mean; a surface in front
   reaches X only along its own motion line, give or take its footprint and a spinning object's
-  spread of directions: :math:`\ell_i = \mathrm{clamp}(L + \tfrac12 - |d \times h_Y| / |h_Y|, 0, 1)`,
+  spread of directions: :math:`\ell_i = \mathrm{clamp}(L + \tfrac12 - |d \times \hat h_Y|, 0, 1)`,
   L = LINE = 2 px (the cylinder alone is isotropic: a fast neighbour's streak would reach X from any
   side, e.g. a sliding cube's smear onto the static wall below it);
 - X's own surface along its path: :math:`c_O = w_c + \sum f\,o_i\,a_i\,g_i^O` with X itself at
@@ -79,7 +79,9 @@ own path"), three layers are gathered:
     C'(X) = \bar c_F F + (1 - \bar c_F)\big(\bar c_O O + (1 - \bar c_O) B\big),
     \qquad \bar c = \min(c, 1)
 
-|h| clamped to ≥ 0.5 px. Where :math:`h_X` leaves :math:`v_N`'s direction (agreement g =
+|h| clamped to ≥ 0.5 px; a tap reads Y's as one word (:func:`tap_records`): :math:`\max(|h_Y|, ½)` as a float
+with a 10-bit mantissa (relative step 2⁻¹⁰) and the direction :math:`\hat h_Y` in steps of 1/127 (< 0.2 px
+across the 21 px a tap reaches). Where :math:`h_X` leaves :math:`v_N`'s direction (agreement g =
 clamp((cos∠ − 0.8)/0.15, 0, 1)) the tap sets split the work: odd taps carry X's own surface
 (:math:`g^O = g + 2(1-g)`, :math:`g^F = g`), even taps what is in front (:math:`g^F = g +
 2(1-g)`, :math:`g^O = g`). If :math:`|v_N| \le 0.5` px the pixel is left exactly as it is —
@@ -87,7 +89,7 @@ hence the stage is *not planned* when no pixel's half-vector reaches 0.5 px (ski
 
 **Quality** sets :math:`S_q` (the most taps per pixel; measured error and cost in
 ``docs/motion_blur.md``): draft 5, preview 11, final 23, and :math:`S_{max}` (the frame cap's bound)
-draft 11, preview 23, final 23. K = 20 px for all levels.
+draft 19, preview 23, final 23. K = 20 px for all levels.
 
 **Clamping.** :math:`|h|` is limited to K = 20 px (a streak of at most 40 px, i.e. 2K) keeping
 its direction: faster motion blurs as if it moved 2K px during the exposure, so its streak is
@@ -157,7 +159,7 @@ TILE = 20
 SAMPLES = {"draft": 5, "preview": 11, "final": 23}
 """S per quality level (odd: the centre stratum is the pixel itself); fewer than the 7/15/31 taps
 of the filter it replaced, to keep its cost (what each level costs: docs/motion_blur.md)."""
-SAMPLES_MAX = {"draft": 11, "preview": 23, "final": 23}
+SAMPLES_MAX = {"draft": 19, "preview": 23, "final": 23}
 """The most taps per pixel (odd) when the frame's moving tiles leave budget (module docstring, "Taps")."""
 DENSITY = 1.5
 """Taps per px of |v_N|: a pixel takes S = min(S_q, 2⌈DENSITY |v_N|⌉ + 1) taps (module docstring)."""
@@ -168,9 +170,9 @@ FOOT = 0.5
 the tap paths reach |v| + FOOT and the cylinders ramp over |h| ± FOOT (module docstring)."""
 FRINGE = 0.1
 LINE = 2.0
-FIX = 1024.0
-"""Steps per px of the packed half-vector a tap reads (|h| ≤ TILE = 20 px fits a signed 16-bit count)."""
 """A surface in front of X reaches X only within LINE ± ½ px of its own motion line (module docstring)."""
+DIR = 127.0
+"""Steps of the unit direction in the record a tap reads of Y (a signed byte per component: :func:`tap_records`)."""
 JITTER_R2 = (0.7548776662, 0.5698402910)
 """The R2 lattice's steps per pixel in x and y (Roberts 2018, the plastic number's 1/φ₂, 1/φ₂²)."""
 AGREE0, AGREE1 = 0.8, 0.95
@@ -375,14 +377,27 @@ def half_vectors32(velocity: np.ndarray, k: float) -> np.ndarray:
         u = v / np.where(m > 0, m, np.float32(1))
         l2 = (u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1])[..., None]
         length = np.sqrt(l2) * m * np.float32(k)
-        h = u * (np.minimum(length, np.float32(TILE)) / np.sqrt(l2))
+        h = (u * (np.float32(1) / np.sqrt(l2))) * np.minimum(length, np.float32(TILE))   # direction × |h|
     return np.where(m > 0, np.concatenate([h, length], axis=-1), np.float32(0)).astype(np.float32)
 
 
-def packed_half_vectors(h32: np.ndarray) -> np.ndarray:
-    """h as a tap reads it: ``motion_blur_prep`` packs each component as a signed 16-bit count of
-    1/FIX px (rounded to nearest even) in one word; back in float32."""
-    return (np.rint(h32 * np.float32(FIX)).astype(np.int16).astype(np.float32) * np.float32(1.0 / FIX))
+def tap_records(velocity: np.ndarray, k: float) -> tuple[np.ndarray, np.ndarray]:
+    """What a tap reads of Y, as ``motion_blur_prep`` packs it in one word: (l, e) with l = max(|h|,
+    ½) as a float with a 10-bit mantissa (the float32 bits from ½ up, rounded half up), e = h's unit
+    direction in signed counts of 1/DIR (rounded to nearest even; 0 where v = 0); float32, the same
+    operations as the kernel. |h| is the clamped length min(|v·k|, K) of :func:`half_vectors32`."""
+    v = np.asarray(velocity, dtype=np.float32)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        m = np.max(np.abs(v), axis=-1, keepdims=True)
+        u = v / np.where(m > 0, m, np.float32(1))
+        lu = np.sqrt(u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1])[..., None]
+        r = np.minimum(lu * m * np.float32(k), np.float32(TILE))
+        e = np.where(m > 0, u * (np.float32(1) / lu), np.float32(0)).astype(np.float32)
+    l32 = np.maximum(np.where(m > 0, r, np.float32(0)), np.float32(0.5)).astype(np.float32)[..., 0]
+    bits = ((l32.view(np.uint32) + np.uint32(0x1000) - np.uint32(0x3F000000)) >> np.uint32(13)) & np.uint32(0xFFFF)
+    lq = ((bits << np.uint32(13)) + np.uint32(0x3F000000)).astype(np.uint32).view(np.float32)
+    q = np.rint(e * np.float32(DIR)).astype(np.float32)
+    return lq, q
 
 
 def _argmax_len(vecs: np.ndarray) -> np.ndarray:
@@ -472,7 +487,7 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     hk = half_vectors32(velocity, np.float32(fraction / 2.0))
     h32 = hk[..., :2]
     h = h32.astype(np.float64)
-    hp = packed_half_vectors(h32)                            # what a tap reads of Y
+    lrec, erec = tap_records(velocity, np.float32(fraction / 2.0))   # what a tap reads of Y
     _, nmax = tile_max(hk.astype(np.float64))
     ys, xs = np.mgrid[0:hh, 0:ww]
     vn = nmax[ys // TILE, xs // TILE, :2]
@@ -484,6 +499,9 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     vx32 = np.where((lhx > 0.5)[..., None], h32, vn32)   # odd taps: X's own motion
     ln32, lv32 = _len32(vn32), _len32(vx32)
     ln, lv = ln32.astype(np.float64), lv32.astype(np.float64)
+    tiny = np.float32(1e-30)
+    rln32 = np.float32(1) / np.maximum(ln32, tiny)
+    rlv32 = np.float32(1) / np.maximum(lv32, tiny)
     cosang = (vn32[..., 0] * vx32[..., 0] + vn32[..., 1] * vx32[..., 1]) / np.maximum(ln * lv, 1e-30)
     agree = np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0)
     j = jitter(seed, frame_index, xs, ys)
@@ -493,9 +511,8 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     inv64 = inv.astype(np.float64)
     # tap paths reach FOOT beyond |v|: directions scaled to |v| + FOOT, in float32 as the kernel
     pn32, pv32 = ln32 + np.float32(FOOT), lv32 + np.float32(FOOT)
-    tiny = np.float32(1e-30)
-    dn32 = vn32 * (pn32 / np.maximum(ln32, tiny))[..., None]
-    dv32 = vx32 * (pv32 / np.maximum(lv32, tiny))[..., None]
+    dn32 = vn32 * (pn32 * rln32)[..., None]
+    dv32 = vx32 * (pv32 * rlv32)[..., None]
     pn, pv = pn32.astype(np.float64), pv32.astype(np.float64)
     wc = np.maximum((pn32 * inv).astype(np.float64) + (pv32 * inv), 1.0) / (2.0 * lx)   # at least the pixel
     cf, sf = np.zeros((hh, ww)), np.zeros_like(color)          # surfaces in front of X
@@ -512,15 +529,15 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         sy = np.clip(np.floor(ys.astype(np.float32) + oy + np.float32(0.5)).astype(np.int64), 0, hh - 1)
         dx32, dy32 = (sx - xs).astype(np.float32), (sy - ys).astype(np.float32)
         dist = np.sqrt(dx32 * dx32 + dy32 * dy32)
-        ly32 = np.maximum(_len32(hp[sy, sx]), np.float32(0.5))
+        ly32 = lrec[sy, sx]
         ly = ly32.astype(np.float64)
         wy = iz[sy, sx]
         f, b = _front(wy, iz), _front(iz, wy)
         cly = _cylinder32(dist, ly32)
         a = tap * cly * (pv if s % 2 else pn) * inv64 / ly
         own = b * _cylinder32(dist, lx32)        # level with X and on X's own path
-        hy = hp[sy, sx].astype(np.float64)
-        line = np.clip(LINE + 0.5 - np.abs(dx32 * hy[..., 1] - dy32 * hy[..., 0]) / ly, 0.0, 1.0)
+        ey = erec[sy, sx].astype(np.float64)
+        line = np.clip(LINE + 0.5 - np.abs(dx32 * ey[..., 1] - dy32 * ey[..., 0]) / DIR, 0.0, 1.0)
         af = line * f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
         ao = f * own * a * (agree + (1.0 - agree) * (2.0 if s % 2 else 0.0))
         ab = (tap * b * ((1.0 - f) + f * (1.0 - cly)) * _cylinder32(dist, lx32)   # behind, or level and missing X
