@@ -16,26 +16,20 @@ inline float dof_luma(__global const float *src, const size_t i, const size_t n)
  * neighbour) covers half of p or brings half its light (Y_f: the darkest of p's own surface), or when
  * the near surface (darkest near neighbour) covers half of p (Y_f: the brightest of p's own surface);
  * either only when that near surface is brighter (darker) than every other pixel of p's own surface
- * by more than 1 - DOF_FRINGE_STEP (other_min/other_max: p's own surface without p; `unlike`: the
- * same without the near source's twins, DOF_TWIN).
+ * by more than 1 - DOF_FRINGE_STEP (other_min/other_max: p's own surface without p) or, the bright
+ * one, is a source above DOF_SAME_SOURCE x p (an own pixel as bright is that source's twin).
  * Both tests without a division; `span > 0` also rejects "no near neighbour" (+-inf). */
 inline float dof_fringe_depth(const float d, const float lum, const float nearest, const float bright_n,
-                              const float dark_n, const float other_min, const float other_max,
-                              const float unlike)
+                              const float dark_n, const float other_min, const float other_max)
 {
     const float own_min = fmin(other_min, lum), own_max = fmax(other_max, lum);
     const float sb = bright_n - own_min, pb = lum - own_min;
     const float sd = own_max - dark_n, pd = own_max - lum;
     const int take = (sb > 0.0f && (2.0f * pb >= sb || 2.0f * pb * bright_n >= lum * sb)
-                      && DOF_FRINGE_STEP * bright_n > unlike)
+                      && (DOF_FRINGE_STEP * bright_n > other_max || bright_n > DOF_SAME_SOURCE * lum))
                      || (sd > 0.0f && 2.0f * pd >= sd && dark_n < DOF_FRINGE_STEP * other_min);
     return take ? nearest : d;
 }
-
-/* A pixel of p's own surface that is the near source's twin: the brightest near pixel is a source far
- * above p (bright_n > DOF_SAME_SOURCE lum) and the pixel is within DOF_SAME_SOURCE x of it (one light
- * straddling two pixels, its depth sampled in one); left out of `unlike`. Works lane-wise too. */
-#define DOF_TWIN(lq, lum, bright_n) (((bright_n) > DOF_SAME_SOURCE * (lum)) & (DOF_SAME_SOURCE * (lq) >= (bright_n)))
 
 inline float16 dof_luma16(__global const float *p, const size_t n) {
     return DOF_LUMA_R * vload16(0, p) + DOF_LUMA_G * vload16(0, p + n) + DOF_LUMA_B * vload16(0, p + 2 * n);
@@ -236,30 +230,21 @@ inline float dof_coc_px(__global const float *src, __global const float *depth, 
     const float d = depth[i];
     const float lum = dof_luma(src, i, n);
     float nearest = d, bright_n = -INFINITY, dark_n = INFINITY, other_min = INFINITY, other_max = -INFINITY;
-    float own_l[8];  /* p's own-surface neighbours' luminance, -inf for near ones */
-    int m = 0;
     for (int b = -1; b <= 1; ++b)
         for (int a = -1; a <= 1; ++a) {
             if (a == 0 && b == 0) continue;
             const size_t j = (size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1);
             const float dq = depth[j], lq = dof_luma(src, j, n);
             nearest = fmin(nearest, dq);
-            own_l[m] = -INFINITY;
             if (dq < DOF_MIXED_SAME_DEPTH * d) {
                 bright_n = fmax(bright_n, lq);
                 dark_n = fmin(dark_n, lq);
             } else {
                 other_min = fmin(other_min, lq);
                 other_max = fmax(other_max, lq);
-                own_l[m] = lq;
             }
-            ++m;
         }
-    float unlike = -INFINITY;
-    for (m = 0; m < 8; ++m)
-        if (!DOF_TWIN(own_l[m], lum, bright_n))
-            unlike = fmax(unlike, own_l[m]);
-    const float s = dof_fringe_depth(d, lum, nearest, bright_n, dark_n, other_min, other_max, unlike);
+    const float s = dof_fringe_depth(d, lum, nearest, bright_n, dark_n, other_min, other_max);
     const float inv_s = isinf(s) ? 0.0f : 1.0f / s;
     return clamp(k * (inv_u - inv_s), -limit, limit);
 }
@@ -290,8 +275,6 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
             const float16 lum = dof_luma16(src + i, n);
             float16 bright_n = (float16)(-INFINITY), dark_n = (float16)(INFINITY);
             float16 other_min = (float16)(INFINITY), other_max = (float16)(-INFINITY);
-            float16 own_l[8];  /* p's own-surface neighbours' luminance, -inf for near ones */
-            int m = 0;
     #pragma unroll
             for (int b = 0; b < 3; ++b)
     #pragma unroll
@@ -303,18 +286,13 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
                     bright_n = fmax(bright_n, select((float16)(-INFINITY), lq, near));
                     dark_n = fmin(dark_n, select((float16)(INFINITY), lq, near));
                     other_min = fmin(other_min, select(lq, (float16)(INFINITY), near));
-                    own_l[m] = select(lq, (float16)(-INFINITY), near);
-                    other_max = fmax(other_max, own_l[m++]);
+                    other_max = fmax(other_max, select(lq, (float16)(-INFINITY), near));
                 }
-            float16 unlike = (float16)(-INFINITY);
-    #pragma unroll
-            for (m = 0; m < 8; ++m)
-                unlike = fmax(unlike, select(own_l[m], (float16)(-INFINITY), DOF_TWIN(own_l[m], lum, bright_n)));
             const float16 own_min = fmin(other_min, lum), own_max = fmax(other_max, lum);
             const float16 sb = bright_n - own_min, pb = lum - own_min;
             const float16 sd = own_max - dark_n, pd = own_max - lum;
             const int16 take = ((sb > 0.0f) & ((2.0f * pb >= sb) | (2.0f * pb * bright_n >= lum * sb))
-                                & (DOF_FRINGE_STEP * bright_n > unlike))
+                                & ((DOF_FRINGE_STEP * bright_n > other_max) | (bright_n > DOF_SAME_SOURCE * lum)))
                                | ((sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min));
             s = select(d, nearest, take);
         }

@@ -414,11 +414,11 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     Either needs a near surface that differs from p's own: brighter (darker) than every *other*
     pixel of p's surface by more than 1 − :data:`FRINGE_STEP` — a pane's depth speckle next to sky
     of the same colour, or a lamp's pixel next to the pane speckle in front of it (α > 1), is not a
-    mix. Except the near source's *twin*: when the brightest near pixel is a source far above p
-    (:math:`Y_n >` :data:`SAME_SOURCE` :math:`Y_p`), a pixel of p's surface within
-    :data:`SAME_SOURCE`× of it is the same source — a light straddling two pixels whose point-sampled
-    depth hit it in one — and is left out of that comparison (it takes the near depth itself, by the
-    coverage test). When either holds p takes the nearest depth of its 3×3. The depth is first despeckled
+    mix — or, for the bright one, a *source* far above p (:math:`Y_n >` :data:`SAME_SOURCE`
+    :math:`Y_p`): a pixel of p's surface as bright as it is then the same source's *twin* (a light
+    straddling two pixels whose point-sampled depth hit it in one; the twin takes the near depth
+    itself by the coverage test), not a surface that explains p. When either holds p takes the
+    nearest depth of its 3×3. The depth is first despeckled
     (:func:`despeckle_depth`). With :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are
     written without a division. A depth only ever moves nearer; a pixel with no near neighbour
     keeps its own."""
@@ -434,16 +434,11 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
         dark_n = np.where(near, np.minimum(dark_n, lq), dark_n)
         other_min = np.where(near, other_min, np.minimum(other_min, lq))
         other_max = np.where(near, other_max, np.maximum(other_max, lq))
-    source = bright_n > SAME_SOURCE * lum    # the brightest near pixel is a source far above p
-    unlike = np.full_like(d, -np.inf)        # p's own surface without p and the near source's twins
-    for dq, lq in zip(dn[1:], ln[1:]):
-        own = ~(dq < MIXED_SAME_DEPTH * d) & ~(source & (SAME_SOURCE * lq >= bright_n))
-        unlike = np.where(own, np.maximum(unlike, lq), unlike)
     own_min, own_max = np.minimum(other_min, lum), np.maximum(other_max, lum)
     with np.errstate(invalid="ignore"):
         span, part = bright_n - own_min, lum - own_min
         bright = (span > 0) & ((2 * part >= span) | (2 * part * bright_n >= lum * span)) \
-            & (FRINGE_STEP * bright_n > unlike)
+            & ((FRINGE_STEP * bright_n > other_max) | (bright_n > SAME_SOURCE * lum))
         span, part = own_max - dark_n, own_max - lum
         dark = (span > 0) & (2 * part >= span) & (dark_n < FRINGE_STEP * other_min)
     return np.where(bright | dark, nearest, d)
