@@ -753,6 +753,22 @@ def test_a_one_pixel_lamps_fringe_goes_with_the_lamp_past_its_twin():
         # 118 (draft) / 110 (final) such pixels
         assert np.count_nonzero(lamp[beyond] @ D.luma_weights() > 0.05) == 0, q
 
+
+def test_a_textured_pixel_beside_a_white_silhouette_keeps_its_depth():
+    """The twin clause is for lights (HDR): a grey texel (0.3) of a far wall beside a white near
+    object (1.0), with a white texel of the wall (1.0) in its 3×3, is not a fringe of the object —
+    the white texel is the wall's own, not the object's twin. The clause needs the near source's 5 %
+    above p's surface's darkest (here 0.05 vs 0.1); without that it took the object's depth (a
+    form of this change did: thin, occluder, transparent and held-out pixels moved, ≤ 0.03 dB)."""
+    col = np.full((7, 7, 3), 0.1, np.float32)
+    depth = np.full((7, 7), 6.0, np.float32)
+    col[:, :3], depth[:, :3] = 1.0, 2.0          # the white near object, left
+    col[3, 3] = 0.3                               # the texel beside it
+    col[2, 4] = 1.0                               # a white texel of the wall
+    assert D.effective_depth(col.astype(np.float64), depth)[3, 3] == 6.0
+    col[:, :3], col[2, 4], col[3, 3] = 400.0, 400.0, 30.0   # a light, its twin and their fringe: taken
+    assert D.effective_depth(col.astype(np.float64), depth)[3, 3] == 2.0
+
 def _lamp_behind_an_in_focus_pane():
     """Held-out h_panes' lamp00: a 2-px lamp at 6 m seen through a 0.2 pane at 1.2 m over the sky;
     its pixels 124, 201, 234 (depth 6 / 5.99) and 164 (the pane's depth sample), fringe at the
