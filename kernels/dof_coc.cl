@@ -16,7 +16,9 @@ inline float dof_luma(__global const float *src, const size_t i, const size_t n)
  * neighbour) covers half of p or brings half its light (Y_f: the darkest of p's own surface), or when
  * the near surface (darkest near neighbour) covers half of p (Y_f: the brightest of p's own surface);
  * either only when that near surface is brighter (darker) than every other pixel of p's own surface
- * by more than 1 - DOF_FRINGE_STEP (other_min/other_max: p's own surface without p).
+ * by more than 1 - DOF_FRINGE_STEP (other_min/other_max: p's own surface without p) or, the bright
+ * one, is a light above DOF_SAME_SOURCE x p whose 1 - DOF_FRINGE_STEP share is above own_min (an own
+ * pixel as bright is that light's twin).
  * Both tests without a division; `span > 0` also rejects "no near neighbour" (+-inf). */
 inline float dof_fringe_depth(const float d, const float lum, const float nearest, const float bright_n,
                               const float dark_n, const float other_min, const float other_max)
@@ -25,7 +27,8 @@ inline float dof_fringe_depth(const float d, const float lum, const float neares
     const float sb = bright_n - own_min, pb = lum - own_min;
     const float sd = own_max - dark_n, pd = own_max - lum;
     const int take = (sb > 0.0f && (2.0f * pb >= sb || 2.0f * pb * bright_n >= lum * sb)
-                      && DOF_FRINGE_STEP * bright_n > other_max)
+                      && (DOF_FRINGE_STEP * bright_n > other_max
+                          || (bright_n > DOF_SAME_SOURCE * lum && (1.0f - DOF_FRINGE_STEP) * bright_n > own_min)))
                      || (sd > 0.0f && 2.0f * pd >= sd && dark_n < DOF_FRINGE_STEP * other_min);
     return take ? nearest : d;
 }
@@ -291,7 +294,8 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
             const float16 sb = bright_n - own_min, pb = lum - own_min;
             const float16 sd = own_max - dark_n, pd = own_max - lum;
             const int16 take = ((sb > 0.0f) & ((2.0f * pb >= sb) | (2.0f * pb * bright_n >= lum * sb))
-                                & (DOF_FRINGE_STEP * bright_n > other_max))
+                                & ((DOF_FRINGE_STEP * bright_n > other_max)
+                                   | ((bright_n > DOF_SAME_SOURCE * lum) & ((1.0f - DOF_FRINGE_STEP) * bright_n > own_min))))
                                | ((sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min));
             s = select(d, nearest, take);
         }

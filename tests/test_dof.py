@@ -708,6 +708,67 @@ def test_a_one_pixel_lamp_hit_by_the_depth_in_one_of_its_two_pixels_keeps_its_de
     assert D.despeckle_depth(pane, d_pane)[4, 4] == 3.0
 
 
+
+def _one_pixel_lamp_on_a_wall(h=41, w=41, y=20, x=19, lamp_m=1.0):
+    """A 1-px lamp (at ``lamp_m``) straddling two pixels (375 and 361× the wall's luminance, as
+    held-out h_lamps' lamp01) before a wall at 5.9 m; the point-sampled depth hit the lamp in the
+    left pixel only, so its twin and its anti-aliased fringe (5–57×) carry the wall's depth."""
+    col = np.full((h, w, 3), 0.3, np.float32)
+    depth = np.full((h, w), 5.9, np.float32)
+    col[y, x], col[y, x + 1], col[y, x + 2] = 375.2, 361.2, 5.1
+    col[y - 1, x:x + 2], col[y + 1, x:x + 2] = [[51.7] * 3, [37.8] * 3], [[56.6] * 3, [42.6] * 3]
+    depth[y, x] = lamp_m
+    return col, depth
+
+
+def _twin_only_frame():
+    """:func:`_one_pixel_lamp_on_a_wall` with the pixel right of the twin dimmed to 2× the wall
+    (5.1× in h_lamps): two pixels from the lamp's depth sample it is beyond the fringe rule's 3×3
+    reach and still spreads with the wall's CoC (docs/fidelity.md, "Held-out scenes")."""
+    col, depth = _one_pixel_lamp_on_a_wall()
+    col[20, 21] = 0.6
+    return col, depth
+
+
+def test_a_one_pixel_lamps_fringe_goes_with_the_lamp_past_its_twin():
+    """The fringe pixels above and below the lamp had its bright twin (at the wall's depth, within 5 %
+    of the lamp) among their own surface, so the fringe rule's "near surface brighter than every
+    other pixel of p's own surface" failed and they kept the wall's depth: the in-focus lamp got a
+    wall-sized halo (h_lamps lamp01: 65 px at final, Cycles 0). A pixel of p's surface within 1.5×
+    of a near source far above p is that source's twin and is left out of the comparison."""
+    col, depth = _twin_only_frame()
+    eff = D.effective_depth(col.astype(np.float64), depth)
+    assert np.all(eff[19:22, 19:21] == 1.0)                  # lamp, twin and fringe: the lamp's depth
+    assert eff[20, 21] == np.float32(5.9) and eff[17, 19] == np.float32(5.9)  # beyond the 3x3 reach / the wall: the wall's
+    cam = Camera(**{**CAM, "focus_distance_m": 1.0})         # the lamp in focus, the wall's CoC 5 px
+    wall = np.full_like(col, 0.3)
+    yy, xx = np.mgrid[0:41, 0:41]
+    beyond = np.hypot(yy - 20, xx - 19.5) > 3
+    for q in ("draft", "final"):
+        frame = Frame(col, depth=depth)
+        out, pipe = run(cam, frame, q)
+        assert_matches_reference(pipe, frame, out, rtol=1e-3)
+        lamp = out - run(cam, Frame(wall, depth=depth), q)[0]
+        # issue 16: lamp-only light above 5 % of white beyond 3 px; the rule without the twin left
+        # 118 (draft) / 110 (final) such pixels
+        assert np.count_nonzero(lamp[beyond] @ D.luma_weights() > 0.05) == 0, q
+
+
+def test_a_textured_pixel_beside_a_white_silhouette_keeps_its_depth():
+    """The twin clause is for lights (HDR): a grey texel (0.3) of a far wall beside a white near
+    object (1.0), with a white texel of the wall (1.0) in its 3×3, is not a fringe of the object —
+    the white texel is the wall's own, not the object's twin. The clause needs the near source's 5 %
+    above p's surface's darkest (here 0.05 vs 0.1); without that it took the object's depth (a
+    form of this change did: thin, occluder, transparent and held-out pixels moved, ≤ 0.03 dB)."""
+    col = np.full((7, 7, 3), 0.1, np.float32)
+    depth = np.full((7, 7), 6.0, np.float32)
+    col[:, :3], depth[:, :3] = 1.0, 2.0          # the white near object, left
+    col[3, 3] = 0.3                               # the texel beside it
+    col[2, 4] = 1.0                               # a white texel of the wall
+    assert D.effective_depth(col.astype(np.float64), depth)[3, 3] == 6.0
+    col[:, :3], col[2, 4], col[3, 3] = 400.0, 400.0, 30.0   # a light, its twin and their fringe: taken
+    assert D.effective_depth(col.astype(np.float64), depth)[3, 3] == 2.0
+
 def _lamp_behind_an_in_focus_pane():
     """Held-out h_panes' lamp00: a 2-px lamp at 6 m seen through a 0.2 pane at 1.2 m over the sky;
     its pixels 124, 201, 234 (depth 6 / 5.99) and 164 (the pane's depth sample), fringe at the

@@ -414,7 +414,12 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     Either needs a near surface that differs from p's own: brighter (darker) than every *other*
     pixel of p's surface by more than 1 − :data:`FRINGE_STEP` — a pane's depth speckle next to sky
     of the same colour, or a lamp's pixel next to the pane speckle in front of it (α > 1), is not a
-    mix. When either holds p takes the nearest depth of its 3×3. The depth is first despeckled
+    mix — or, for the bright one, a *light* far above p (:math:`Y_n >` :data:`SAME_SOURCE`
+    :math:`Y_p`) whose 5 % outshines p's surface (:math:`(1 -` :data:`FRINGE_STEP`:math:`) Y_n >`
+    the darkest of it): a pixel of p's surface as bright as it is then the light's *twin* (a light
+    straddling two pixels whose point-sampled depth hit it in one; the twin takes the near depth
+    itself by the coverage test), not a surface that explains p; a white texel beside a white
+    object's silhouette still is. When either holds p takes the nearest depth of its 3×3. The depth is first despeckled
     (:func:`despeckle_depth`). With :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are
     written without a division. A depth only ever moves nearer; a pixel with no near neighbour
     keeps its own."""
@@ -434,7 +439,8 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     with np.errstate(invalid="ignore"):
         span, part = bright_n - own_min, lum - own_min
         bright = (span > 0) & ((2 * part >= span) | (2 * part * bright_n >= lum * span)) \
-            & (FRINGE_STEP * bright_n > other_max)
+            & ((FRINGE_STEP * bright_n > other_max)
+               | ((bright_n > SAME_SOURCE * lum) & ((1 - FRINGE_STEP) * bright_n > own_min)))
         span, part = own_max - dark_n, own_max - lum
         dark = (span > 0) & (2 * part >= span) & (dark_n < FRINGE_STEP * other_min)
     return np.where(bright | dark, nearest, d)
