@@ -114,6 +114,32 @@ taps; the pad and tiles passes are the fixed rest of the stage's cost. Draft's 9
 |draft − final| there is 5.3 on values 0.08–500 (mean 0.018). Speed and accuracy against one class
 for all tiles: docs/benchmarks.md, "astigmatism: tile classes".
 
+**Point taps (speed).** Where every pixel of a (non-exact) tile has both semi-axes ≥ 4 px, a
+bilinear tap's four loads per channel buy little: the ellipse is wide and its N taps are sparse
+on it. Those tiles take one load per channel from a copy of the colour box-filtered over
+``POINT_BOX`` × ``POINT_BOX`` = 4 × 4 pixels, at the tap's floor (:math:`P(p) =
+\frac1{16}\sum_{i,j=-1}^{2} C(p + (i, j))`, centred at p + ½, so within ½ px of the tap), and
+from 8 px on 32 taps instead of the quality's N (``POINT_CLASSES``: (8 px, 32), (4 px, 64) at
+every quality). A tap then spreads over the box's variance :math:`(k^2-1)/12` plus the rounding's
+1/12 per axis, :math:`k^2/12` in all, where a bilinear tap spreads over 1/6 on average; the
+difference is taken from the ellipse (variances add), so the second moments stay the closed
+form's:
+
+.. math::
+
+    a'^2 = a^2 - 4\Big(\frac{k^2}{12} - \frac16\Big) = a^2 - \tfrac{14}{3}\ \mathrm{px}^2
+
+for the tile's bound and every pixel's own ellipse (the reach test keeps the sources' own
+semi-axes; a point tile's reach flag compares with its shrunk bound). Accuracy, against a
+1024-tap truth of the tile model on three crops of the bench's worst frame at 1080p (values
+0.3–500, tiles of 4–15 px): 64 bilinear taps rms 0.18–0.52, p99.9 2.6–5.1; the point classes rms
+0.14–0.16, p99.9 1.1–1.8 — the box removes most of the spiral's aliasing of noise and highlights.
+A lone highlight's splat on point tiles (numpy reference, 20 cases, semi-axes 4–11 px): second
+moments within 0.0–6.0 % of the closed form (64 bilinear taps: 0.8–4.6 %; both are patchworks of
+tile kernels), energy within 3.7 % (1.5 %); docs/benchmarks.md, "astigmatism: point classes".
+The box plane is filled only where point tiles read (``astigmatism_reach`` flags the tiles within
+reach of one, ``astigmatism_box`` skips the others).
+
 **Reach test skipped (speed).** A tap's reach weight is 1 when :math:`q^2 \le 1`. The taps of a
 tile have :math:`|u_s| \le A_s|v_x|` and :math:`|u_t| \le A_t|v_y|` with :math:`|v| < 1` (a spiral
 point), and they land within PAD px of the tile. So if every pixel there has
