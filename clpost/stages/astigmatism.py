@@ -136,7 +136,7 @@ semi-axes; a point tile's reach flag compares with its shrunk bound). Accuracy, 
 0.14–0.16, p99.9 1.1–1.8 — the box removes most of the spiral's aliasing of noise and highlights.
 A lone highlight's splat on point tiles (numpy reference, 20 cases, semi-axes 4–11 px): second
 moments within 0.0–6.0 % of the closed form (64 bilinear taps: 0.8–4.6 %; both are patchworks of
-tile kernels), energy within 3.7 % (1.5 %); docs/benchmarks.md, "astigmatism: point classes".
+tile kernels), energy within 3.7 % (2.0 %); docs/benchmarks.md, "astigmatism: point classes".
 The box plane is filled only where point tiles read (``astigmatism_reach`` flags the tiles within
 reach of one, ``astigmatism_box`` skips the others).
 
