@@ -24,8 +24,9 @@
  * unit radial vector (e_x, e_y) from the host and the tile's largest (a_s, a_t) from
  * astigmatism_tiles.
  * Tile classes: astigmatism_tiles appends each tile to one list per class (copy, 4, 8, ...
- * ASTIGMATISM_TAPS taps, exact); the host launches astigmatism_copy, the gather kernels
- * (astigmatism_t<n> and astigmatism for the full count; one compile-time tap count each) and
+ * ASTIGMATISM_TAPS taps, the point classes, exact); the host launches astigmatism_copy, the gather
+ * kernels (astigmatism_t<n> and astigmatism for the full count, astigmatism_p<n> for the point
+ * classes; one compile-time tap count each) and
  * astigmatism_exact with one work-group per tile of the frame — the most a list can hold, so the
  * host never reads the counts (no sync) — and the work-groups past their class's count return at
  * once (ASTIGMATISM_LISTED; a few ns each on PoCL). The tap table holds
@@ -224,8 +225,9 @@ __kernel void astigmatism_tiles(__global const float *restrict axes, __global fl
     tiles[4 * (ty * tiles_x + tx) + 3] = mt;
     tmin[2 * (ty * tiles_x + tx)] = mn_s;  /* for astigmatism_reach */
     tmin[2 * (ty * tiles_x + tx) + 1] = mn_t;
-    /* class: copy below ASTIGMATISM_COPY_PX; else the fewest taps n = 4, 8, ... ASTIGMATISM_TAPS
-     * with B <= n * ASTIGMATISM_TAPS_PER_PX (B the bounding semi-axis); exact path last */
+    /* class: the exact path; a point class where every pixel's smaller semi-axis is large enough
+     * (astigmatism_point_class); copy below ASTIGMATISM_COPY_PX; else the fewest taps n = 4, 8, ...
+     * ASTIGMATISM_TAPS with B <= n * ASTIGMATISM_TAPS_PER_PX (B the bounding semi-axis) */
     const float bound = fmax(ms, mt);
     const int pc = astigmatism_point_class(fmin(mn_s, mn_t));
     point[ty * tiles_x + tx] = !(turn || mixed) && pc >= 0;  /* for astigmatism_reach's need flags */

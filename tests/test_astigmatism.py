@@ -402,16 +402,20 @@ def _point_class_frame(rng, w=801, h=45):
     return cam, Frame(color, depth=depth)
 
 
-@pytest.mark.parametrize("quality", ["draft", "final"])
-def test_point_classes_match_the_reference(rng, quality):
+@pytest.mark.parametrize("quality,wide", [("draft", True), ("final", True), ("final", False)])
+def test_point_classes_match_the_reference(rng, monkeypatch, quality, wide):
     """Tiles whose pixels' semi-axes are all >= 4 px take point taps of the 4 × 4 box-filtered
-    colour (POINT_CLASSES): kernel vs reference with both point classes and the other classes in
-    one frame (the box plane is filled only near point tiles: a missing tile would read garbage)."""
+    colour (point_classes): kernel vs reference with every point class and the other classes in
+    one frame (the box plane is filled only near point tiles: a missing tile would read garbage);
+    the 16-lane form and a GPU's one-pixel form."""
+    from clpost.runtime import Runtime
+
+    monkeypatch.setattr(Runtime, "wide", property(lambda self: wide))
     cam, frame = _point_class_frame(rng)
     stage = ast.Astigmatism(quality)
     *_, exact, taps = stage.tile_plan(cam, frame)
     point = stage.point_taps(cam, frame, exact)
-    assert {n for _, n in ast.POINT_CLASSES} <= set(np.unique(point)), np.unique(point)
+    assert {n for _, n in ast.point_classes(stage.taps)} <= set(np.unique(point)), np.unique(point)
     assert (point == 0).mean() > 0.3 and len(set(np.unique(taps[point == 0]))) >= 3
     pipe = Pipeline(cam, stages=["astigmatism"], quality=quality)
     assert_planned(pipe, frame, "astigmatism")

@@ -119,8 +119,8 @@ bilinear tap's four loads per channel buy little: the ellipse is wide and its N 
 on it. Those tiles take one load per channel from a copy of the colour box-filtered over
 ``POINT_BOX`` × ``POINT_BOX`` = 4 × 4 pixels, at the tap's floor (:math:`P(p) =
 \frac1{16}\sum_{i,j=-1}^{2} C(p + (i, j))`, centred at p + ½, so within ½ px of the tap), and
-from 8 px on 32 taps instead of the quality's N (``POINT_CLASSES``: (8 px, 32), (4 px, 64) at
-every quality). A tap then spreads over the box's variance :math:`(k^2-1)/12` plus the rounding's
+from 8 px on 32 taps instead of final's 64 (``POINT_CLASSES``: (8 px, 32), (4 px, 64); never more
+than the quality's N, so draft takes 16 point taps from 4 px on, where it took 16 bilinear ones). A tap then spreads over the box's variance :math:`(k^2-1)/12` plus the rounding's
 1/12 per axis, :math:`k^2/12` in all, where a bilinear tap spreads over 1/6 on average; the
 difference is taken from the ellipse (variances add), so the second moments stay the closed
 form's:
@@ -201,6 +201,19 @@ MIN_TILE_TAPS = 4
 POINT_CLASSES = ((8.0, 32), (4.0, 64))
 POINT_BOX = 4
 POINT_SHRINK_PX2 = 4.0 * (POINT_BOX * POINT_BOX / 12.0 - 1.0 / 6.0)
+
+
+def point_classes(taps: int) -> tuple[tuple[float, int], ...]:
+    """POINT_CLASSES for a quality of ``taps`` taps: never more than the quality's N (draft 16:
+    one class from 4 px on), classes of equal count merged (the lower threshold)."""
+    out: list[tuple[float, int]] = []
+    for px, n in POINT_CLASSES:
+        n = min(n, taps)
+        if out and out[-1][1] == n:
+            out[-1] = (px, n)
+        else:
+            out.append((px, n))
+    return tuple(out)
 MAX_SEMI_PX = fld.PAD - 1
 MIN_SEMI_PX = 1e-3
 MIN_DEPTH_MM = 1e-3
@@ -319,7 +332,7 @@ class Astigmatism(GatherStage):
                 "ASTIGMATISM_LUT_SIZE": fld.LUT_SIZE, "ASTIGMATISM_TILE_W": fld.TILE_W,
                 "ASTIGMATISM_TILE_H": fld.TILE_H, "ASTIGMATISM_POINT_BOX": POINT_BOX,
                 # copy, one per tap count, one per point class, exact
-                "ASTIGMATISM_CLASSES": len(classes) + len(POINT_CLASSES) + 2,
+                "ASTIGMATISM_CLASSES": len(classes) + len(point_classes(self.taps)) + 2,
                 "ASTIGMATISM_TAP_CLASSES": len(classes),
                 "ASTIGMATISM_COPY_PX": f"{COPY_PX!r}f",
                 "ASTIGMATISM_TAPS_PER_PX": f"{FULL_AT_PX / self.taps!r}f",
@@ -409,7 +422,7 @@ class Astigmatism(GatherStage):
     def point_taps(self, camera, frame, exact=None) -> np.ndarray:
         """Per tile: the point class's tap count (module docstring, "Point taps"), 0 for the tiles
         that take none — the exact ones, and those with a pixel whose smaller semi-axis is below
-        the last class's POINT_CLASSES threshold."""
+        the last class's threshold (:func:`point_classes`)."""
         w, h = frame.width, frame.height
         a_s, a_t, _, _ = self.semi_axes_px(camera, frame)
         ntx, nty = fld.tiles(w, h)
@@ -417,7 +430,7 @@ class Astigmatism(GatherStage):
         big[:h, :w] = np.minimum(a_s, a_t)
         lo = np.nanmin(big.reshape(nty, fld.TILE_H, ntx, fld.TILE_W), axis=(1, 3))
         out = np.zeros(lo.shape, np.int64)
-        for px, n in POINT_CLASSES[::-1]:
+        for px, n in point_classes(self.taps)[::-1]:
             out = np.where(lo >= px, n, out)
         if exact is None:
             exact = self.tile_plan(camera, frame)[4]
@@ -513,4 +526,4 @@ def point_source_axes_px(camera, r_mm: float, depth_m: float, width: int) -> tup
     return (2 * float(residual_semi_px(cs, c0, p)), 2 * float(residual_semi_px(ct, c0, p)))
 
 
-__all__ = ["Astigmatism", "axes_mm", "box_filtered", "focal_offsets", "point_source_axes_px", "thin_lens"]
+__all__ = ["Astigmatism", "axes_mm", "box_filtered", "point_classes", "focal_offsets", "point_source_axes_px", "thin_lens"]

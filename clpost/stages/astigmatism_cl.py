@@ -33,7 +33,8 @@ def program_source(classes: tuple[int, ...]) -> str:
     """The astigmatism program for tap classes ``classes`` (4, 8, ..., N), generated so the kernels
     cannot drift from their Python twins: kernels/common.cl, the stage's constants as
     ``#define``s, the ``astigmatism_taps`` table, ``astigmatism_point_class`` (a tile's smallest
-    semi-axis → its point class, from POINT_CLASSES), kernels/astigmatism.cl, one gather kernel
+    semi-axis → its point class, from :func:`~clpost.stages.astigmatism.point_classes` of N =
+    ``classes[-1]``), kernels/astigmatism.cl, one gather kernel
     ``astigmatism_t<n>`` per class below N and one ``astigmatism_p<n>`` per point class (table
     offset: the spirals before it; the point classes' spirals follow the tap classes').
 
@@ -42,14 +43,15 @@ def program_source(classes: tuple[int, ...]) -> str:
     the work-item vectoriser into vector gathers; the explicit float16 loop reads them as
     scalars)."""
     from ..runtime import kernel_source
-    from .astigmatism import (MAX_SEMI_PX, MIN_DEPTH_MM, MIN_SEMI_PX, POINT_CLASSES, POINT_SHRINK_PX2,
-                              Astigmatism)
+    from .astigmatism import (MAX_SEMI_PX, MIN_DEPTH_MM, MIN_SEMI_PX, POINT_SHRINK_PX2, Astigmatism,
+                              point_classes)
 
     consts = {"ASTIGMATISM_MAX_SEMI": MAX_SEMI_PX, "ASTIGMATISM_MIN_SEMI": MIN_SEMI_PX,
               "ASTIGMATISM_MIN_DEPTH_MM": MIN_DEPTH_MM, "ASTIGMATISM_EXACT_PX": Astigmatism.EXACT_PX,
               "ASTIGMATISM_MIXED": Astigmatism.MIXED, "ASTIGMATISM_POINT_SHRINK": POINT_SHRINK_PX2}
     head = "".join(f"#define {k} {_f(v)}\n" for k, v in consts.items())
-    points = tuple(n for _, n in POINT_CLASSES)
+    pclasses = point_classes(classes[-1])
+    points = tuple(n for _, n in pclasses)
     spirals = classes + points
     taps = np.concatenate([fld.vogel_disc(n) for n in spirals]).ravel()
     vals = ", ".join(f"{float(v)!r}f" for v in taps)
@@ -57,7 +59,7 @@ def program_source(classes: tuple[int, ...]) -> str:
     offsets = np.concatenate([[0], np.cumsum(spirals)])
     # class numbers: 0 copy, 1 .. len(classes) the tap classes, then the point classes, exact last
     first = len(classes) + 1
-    rule = "".join(f"    if (mn >= {_f(px)}) return {first + k};\n" for k, (px, _) in enumerate(POINT_CLASSES))
+    rule = "".join(f"    if (mn >= {_f(px)}) return {first + k};\n" for k, (px, _) in enumerate(pclasses))
     point_class = f"inline int astigmatism_point_class(const float mn)\n{{\n{rule}    return -1;\n}}\n"
     kernels = "".join(f"__kernel void astigmatism_t{n}(ASTIGMATISM_GATHER_ARGS) "
                       f"{{ ASTIGMATISM_GATHER_CALL({n}, {offsets[k]}, 0); }}\n"
@@ -70,12 +72,13 @@ def program_source(classes: tuple[int, ...]) -> str:
 
 def _plan(stage, rt, camera, w, h, cx, cy, pitch, lut):
     """Device buffers and host constants of one (tap count, size, principal point, LUT)."""
-    from .astigmatism import POINT_CLASSES
+    from .astigmatism import point_classes
 
     classes = tuple(stage.tap_classes())
     ntx, nty = fld.tiles(w, h)
     pw, ph = ntx * fld.TILE_W + 2 * fld.PAD, nty * fld.TILE_H + 2 * fld.PAD
-    nclass = len(classes) + len(POINT_CLASSES) + 2
+    pclasses = point_classes(stage.taps)
+    nclass = len(classes) + len(pclasses) + 2
     whole = (ntx * fld.TILE_W, nty * fld.TILE_H) == (w, h)
     lanes = 16 if rt.wide else 1  # the gather's pixels per work-item (kernels/astigmatism.cl)
     defines = {**stage.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole), "ASTIGMATISM_LANES": lanes}
@@ -85,7 +88,7 @@ def _plan(stage, rt, camera, w, h, cx, cy, pitch, lut):
                 np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
     return dict(
         kernel=lambda name: rt.kernel(source, name, defines, "astigmatism"),
-        classes=classes, points=tuple(n for _, n in POINT_CLASSES), nclass=nclass, lanes=lanes, ntx=ntx, nty=nty, pw=pw, ph=ph, sizes=sizes, geometry=geometry,
+        classes=classes, points=tuple(n for _, n in pclasses), nclass=nclass, lanes=lanes, ntx=ntx, nty=nty, pw=pw, ph=ph, sizes=sizes, geometry=geometry,
         ring=tuple(np.int32(e) for e in stage.ring(w, h)),
         tiles_host=stage.tile_directions(w, h, cx, cy),
         zeros=np.zeros(nclass, np.int32),
