@@ -305,7 +305,8 @@ __kernel void astigmatism_box(__global const float *restrict src, __global const
         for (int i = -1; i <= 2; ++i) {
             __global const float *s = src + c * n + (size_t)clamp(y - ASTIGMATISM_PAD + i, 0, height - 1) * width;
             if (inside)
-                acc += (vload16(0, s + sx0 - 1) + vload16(0, s + sx0)) + (vload16(0, s + sx0 + 1) + vload16(0, s + sx0 + 2));
+                acc += (vload16(0, s + sx0 - 1) + vload16(0, s + sx0))
+                     + (vload16(0, s + sx0 + 1) + vload16(0, s + sx0 + 2));
             else
                 acc += (CLP_GATHER16(s, c0) + CLP_GATHER16(s, c1)) + (CLP_GATHER16(s, c2) + CLP_GATHER16(s, c3));
         }
@@ -376,7 +377,8 @@ inline void astigmatism_store1(__global float *restrict dst, const float r, cons
  * independent and overlap. float16 rather than float8 (faster at 64 taps, the same at 16;
  * docs/measurements.md#kernel-forms-on-pocl); the tap loop is unrolled by 4 (see below), not fully. */
 inline void astigmatism_gather(__global const float *restrict padded, __global const float *restrict src,
-                 __global const float *restrict pre, const int box, __global const int *restrict inner, const int test_reach, __global const float *restrict axes,
+                 __global const float *restrict pre, const int box, __global const int *restrict inner,
+                 const int test_reach, __global const float *restrict axes,
                  __global float *restrict dst, __global const float *restrict tiles,
                  __global const int *restrict list, const int list0, const int tiles_x, const int tiles_y,
                  const int width, const int height, const int ntaps, const int tap0)
@@ -469,7 +471,8 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
     if ((int)get_group_id(0) >= (counts)[(list0) / ((tiles_x) * (tiles_y))]) return
 
 #define ASTIGMATISM_GATHER_ARGS __global const float *restrict padded, __global const float *restrict src, \
-    __global const float *restrict pre, __global const int *restrict inner, __global const int *restrict reach, __global const float *restrict axes, \
+    __global const float *restrict pre, __global const int *restrict inner, __global const int *restrict reach, \
+    __global const float *restrict axes, \
     __global float *restrict dst, __global const float *restrict tiles, __global const int *restrict list, \
     __global const int *restrict counts, const int list0, const int tiles_x, const int tiles_y, const int width, \
     const int height
@@ -477,9 +480,11 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
 #define ASTIGMATISM_GATHER_CALL(n, t0, box) \
     ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y); \
     if (reach[list[list0 + (int)get_group_id(0)]]) \
-        astigmatism_gather(padded, src, pre, box, inner, 1, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0); \
+        astigmatism_gather(padded, src, pre, box, inner, 1, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, \
+                           height, n, t0); \
     else \
-        astigmatism_gather(padded, src, pre, box, inner, 0, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0)
+        astigmatism_gather(padded, src, pre, box, inner, 0, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, \
+                           height, n, t0)
 
 /* the quality's ASTIGMATISM_TAPS (its spiral is the table's last) */
 __kernel void astigmatism(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(ASTIGMATISM_TAPS, ASTIGMATISM_FULL_TAP0, 0); }

@@ -153,9 +153,9 @@ def cases():
     # tile model: a flat field at one depth), their box plane and the other classes, both forms
     point = replace(base, f_number=2.0, focus_distance_m=3.0, field_curvature_mm=-0.2, astigmatism_mm=0.0,
                     sensor_mm=(401 * 0.006, 9 * 0.006))
-    for form in ("wide", "narrow"):
-        add(f"astigmatism-point {form} final 401x9",
-            lambda form=form: _run(point, ["astigmatism"], "final", 401, 9, depth=3.0, **{form: True}))
+    for form, q in (("wide", "final"), ("narrow", "final"), ("wide", "draft")):
+        add(f"astigmatism-point {form} {q} 401x9",
+            lambda form=form, q=q: _run(point, ["astigmatism"], q, 401, 9, depth=3.0, **{form: True}))
     for w, h in ((1, 1), (37, 23)):
         add(f"vignetting wide final {w}x{h}",
             lambda w=w, h=h: _run(replace(base, vignetting="natural"), ["vignetting"], "final", w, h, wide=True))

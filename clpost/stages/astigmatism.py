@@ -120,7 +120,8 @@ on it. Those tiles take one load per channel from a copy of the colour box-filte
 ``POINT_BOX`` × ``POINT_BOX`` = 4 × 4 pixels, at the tap's floor (:math:`P(p) =
 \frac1{16}\sum_{i,j=-1}^{2} C(p + (i, j))`, centred at p + ½, so within ½ px of the tap), and
 from 8 px on 32 taps instead of final's 64 (``POINT_CLASSES``: (8 px, 32), (4 px, 64); never more
-than the quality's N, so draft takes 16 point taps from 4 px on, where it took 16 bilinear ones). A tap then spreads over the box's variance :math:`(k^2-1)/12` plus the rounding's
+than the quality's N, so draft takes 16 point taps from 4 px on, where it took 16 bilinear ones).
+A tap then spreads over the box's variance :math:`(k^2-1)/12` plus the rounding's
 1/12 per axis, :math:`k^2/12` in all, where a bilinear tap spreads over 1/6 on average; the
 difference is taken from the ellipse (variances add), so the second moments stay the closed
 form's:

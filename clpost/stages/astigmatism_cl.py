@@ -3,10 +3,10 @@
 Kept apart from :mod:`clpost.stages.astigmatism` (physics, tile planner and float64 oracle), as
 :mod:`clpost.stages.dof_cl` is from dof. Launch sequence: ``astigmatism_offsets`` (per-pixel focal
 offsets; once per camera and size) → ``astigmatism_pad`` (padded copy + per-pixel semi-axes) →
-``astigmatism_tiles`` (tile bounds and class lists) → ``astigmatism_reach`` (and which tiles the point
-classes read) → ``astigmatism_box`` (the point classes' prefiltered colour there) → per class: copy,
-one kernel per tap count, one per point class, exact per-pixel, each over every tile of the frame (the work-groups past the
-class's count return at once: nothing is read back, so the launches are data-independent and a
+``astigmatism_tiles`` (tile bounds and class lists) → ``astigmatism_reach`` (and which tiles the
+point classes read) → ``astigmatism_box`` (the point classes' prefiltered colour there) → per class:
+copy, one kernel per tap count, one per point class, exact per-pixel, each over every tile of the
+frame (the work-groups past the class's count return at once: nothing is read back, so the launches are data-independent and a
 plan records them once).
 
 Everything that depends only on the camera's structure and the frame size — the program source
@@ -88,7 +88,8 @@ def _plan(stage, rt, camera, w, h, cx, cy, pitch, lut):
                 np.float32((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera)))
     return dict(
         kernel=lambda name: rt.kernel(source, name, defines, "astigmatism"),
-        classes=classes, points=tuple(n for _, n in pclasses), nclass=nclass, lanes=lanes, ntx=ntx, nty=nty, pw=pw, ph=ph, sizes=sizes, geometry=geometry,
+        classes=classes, points=tuple(n for _, n in pclasses), nclass=nclass, lanes=lanes, ntx=ntx, nty=nty,
+        pw=pw, ph=ph, sizes=sizes, geometry=geometry,
         ring=tuple(np.int32(e) for e in stage.ring(w, h)),
         tiles_host=stage.tile_directions(w, h, cx, cy),
         zeros=np.zeros(nclass, np.int32),
@@ -167,5 +168,6 @@ def enqueue_astigmatism(stage, rt, camera, frame, src, dst, aux):
                 n_taps = b["classes"][c - 1]
                 name = "astigmatism" if n_taps == stage.taps else f"astigmatism_t{n_taps}"
             events.append(rt.launch(kernel(name), (n * group[0], group[1]), group,
-                                    b["pad"], src, b["pre"], b["inner"], b["reach"], b["axes"], dst, b["tiles"], *sub, *args))
+                                    b["pad"], src, b["pre"], b["inner"], b["reach"], b["axes"], dst, b["tiles"],
+                                    *sub, *args))
     return events
