@@ -24,19 +24,32 @@
  * unit radial vector (e_x, e_y) from the host and the tile's largest (a_s, a_t) from
  * astigmatism_tiles.
  * Tile classes: astigmatism_tiles appends each tile to one list per class (copy, 4, 8, ...
- * ASTIGMATISM_TAPS taps, exact); the host launches astigmatism_copy, the gather kernels
- * (astigmatism_t<n> and astigmatism for the full count; one compile-time tap count each) and
+ * ASTIGMATISM_TAPS taps, the point classes, exact); the host launches astigmatism_copy, the gather
+ * kernels (astigmatism_t<n> and astigmatism for the full count, astigmatism_p<n> for the point
+ * classes; one compile-time tap count each) and
  * astigmatism_exact with one work-group per tile of the frame — the most a list can hold, so the
  * host never reads the counts (no sync) — and the work-groups past their class's count return at
  * once (ASTIGMATISM_LISTED; a few ns each on PoCL). The tap table holds
  * the spirals of 4, 8, ..., ASTIGMATISM_TAPS points one after the other.
  * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE, ASTIGMATISM_TILE_W,
  * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch),
- * ASTIGMATISM_CLASSES, ASTIGMATISM_COPY_PX, ASTIGMATISM_TAPS_PER_PX (FULL_AT_PX / TAPS),
+ * ASTIGMATISM_CLASSES (copy, the tap classes, the point classes, exact), ASTIGMATISM_TAP_CLASSES
+ * (how many tap classes: 4, 8, ... ASTIGMATISM_TAPS), ASTIGMATISM_COPY_PX, ASTIGMATISM_TAPS_PER_PX (FULL_AT_PX / TAPS),
  * ASTIGMATISM_FULL_TAP0 (table offset of the full spiral).
+ * Point classes (clpost/stages/astigmatism.py, "Point taps"): astigmatism_point_class (generated
+ * before this file) maps a tile's smallest semi-axis to its point class or -1; those tiles'
+ * gathers (astigmatism_p<n>) take one tap per channel from pre = 3 planes pw × ph, the colour
+ * box-filtered over ASTIGMATISM_POINT_BOX² pixels (astigmatism_box, only where need[tile]: within
+ * reach of a point tile), on the ellipses shrunk by ASTIGMATISM_POINT_SHRINK px² per axis.
  */
 #if ASTIGMATISM_TILE_W % 16
 #error "the gather reads rows of a tile as float16 (the tile pass as float8): ASTIGMATISM_TILE_W must be a multiple of 16"
+#endif
+#if ASTIGMATISM_PAD % ASTIGMATISM_TILE_W || ASTIGMATISM_PAD % ASTIGMATISM_TILE_H
+#error "astigmatism_box maps a padded row's 16 pixels to one tile: ASTIGMATISM_PAD must be a multiple of the tile size"
+#endif
+#if ASTIGMATISM_POINT_BOX != 4
+#error "astigmatism_box filters 4 x 4 pixels (ASTIGMATISM_POINT_BOX)"
 #endif
 #if ASTIGMATISM_TAPS % 4
 #error "the gather's tap loop is unrolled by 4: ASTIGMATISM_TAPS must be a multiple of 4"
@@ -149,7 +162,7 @@ __kernel void astigmatism_pad(__global const float *restrict src, __global const
  * tiles_x * tiles_y tile indices; counts: one counter per class, zeroed by the host). The order
  * within a list depends on the atomics' order; the result does not (each tile is independent). */
 __kernel void astigmatism_tiles(__global const float *restrict axes, __global float *restrict tiles,
-                                __global float *restrict tmin,
+                                __global float *restrict tmin, __global int *restrict point,
                                 __global int *restrict counts, __global int *restrict lists,
                                 const int width, const int height, const int tiles_x, const int tiles_y)
 {
@@ -212,17 +225,22 @@ __kernel void astigmatism_tiles(__global const float *restrict axes, __global fl
     tiles[4 * (ty * tiles_x + tx) + 3] = mt;
     tmin[2 * (ty * tiles_x + tx)] = mn_s;  /* for astigmatism_reach */
     tmin[2 * (ty * tiles_x + tx) + 1] = mn_t;
-    /* class: copy below ASTIGMATISM_COPY_PX; else the fewest taps n = 4, 8, ... ASTIGMATISM_TAPS
-     * with B <= n * ASTIGMATISM_TAPS_PER_PX (B the bounding semi-axis); exact path last */
+    /* class: the exact path; a point class where every pixel's smaller semi-axis is large enough
+     * (astigmatism_point_class); copy below ASTIGMATISM_COPY_PX; else the fewest taps n = 4, 8, ...
+     * ASTIGMATISM_TAPS with B <= n * ASTIGMATISM_TAPS_PER_PX (B the bounding semi-axis) */
     const float bound = fmax(ms, mt);
+    const int pc = astigmatism_point_class(fmin(mn_s, mn_t));
+    point[ty * tiles_x + tx] = !(turn || mixed) && pc >= 0;  /* for astigmatism_reach's need flags */
     int c;
     if (turn || mixed) {
         c = ASTIGMATISM_CLASSES - 1;
+    } else if (pc >= 0) {
+        c = pc;
     } else if (bound < ASTIGMATISM_COPY_PX) {
         c = 0;
     } else {
         c = 1;
-        while (c < ASTIGMATISM_CLASSES - 2 && bound > (float)(2 << c) * ASTIGMATISM_TAPS_PER_PX) ++c;
+        while (c < ASTIGMATISM_TAP_CLASSES && bound > (float)(2 << c) * ASTIGMATISM_TAPS_PER_PX) ++c;
     }
     lists[c * tiles_x * tiles_y + atomic_inc(counts + c)] = ty * tiles_x + tx;
 }
@@ -236,19 +254,64 @@ __kernel void astigmatism_tiles(__global const float *restrict axes, __global fl
  * smooth depth map, whose ellipses vary by far less than half a pixel over 2 PAD px. */
 #define ASTIGMATISM_REACH_TX ((ASTIGMATISM_PAD + ASTIGMATISM_TILE_W - 1) / ASTIGMATISM_TILE_W)
 #define ASTIGMATISM_REACH_TY ((ASTIGMATISM_PAD + ASTIGMATISM_TILE_H - 1) / ASTIGMATISM_TILE_H)
+/* The same neighbourhood gives need[tile]: some point tile reads this tile's pixels of pre (its taps
+ * land within PAD px of it; the padded border belongs to the edge tiles), so astigmatism_box
+ * filters only those. */
 __kernel void astigmatism_reach(__global const float *restrict tiles, __global const float *restrict tmin,
-                                __global int *restrict reach, const int tiles_x, const int tiles_y)
+                                __global const int *restrict point, __global int *restrict reach,
+                                __global int *restrict need, const int tiles_x, const int tiles_y)
 {
     const int tx = get_global_id(0), ty = get_global_id(1);
     if (tx >= tiles_x || ty >= tiles_y) return;
     float ns = MAXFLOAT, nt = MAXFLOAT;
+    int np = 0;
     for (int y = max(ty - ASTIGMATISM_REACH_TY, 0); y <= min(ty + ASTIGMATISM_REACH_TY, tiles_y - 1); ++y)
         for (int x = max(tx - ASTIGMATISM_REACH_TX, 0); x <= min(tx + ASTIGMATISM_REACH_TX, tiles_x - 1); ++x) {
             ns = fmin(ns, tmin[2 * (y * tiles_x + x)]);
             nt = fmin(nt, tmin[2 * (y * tiles_x + x) + 1]);
+            np |= point[y * tiles_x + x];
         }
     const int id = ty * tiles_x + tx;
-    reach[id] = !(ns + 0.5f >= tiles[4 * id + 2] && nt + 0.5f >= tiles[4 * id + 3]);
+    /* a point tile's taps lie on its shrunk bound (astigmatism_gather) */
+    const float shrink = point[id] ? ASTIGMATISM_POINT_SHRINK : 0.0f;
+    const float bs = sqrt(fmax(tiles[4 * id + 2] * tiles[4 * id + 2] - shrink, 0.0f));
+    const float bt = sqrt(fmax(tiles[4 * id + 3] * tiles[4 * id + 3] - shrink, 0.0f));
+    reach[id] = !(ns + 0.5f >= bs && nt + 0.5f >= bt);
+    need[id] = np;
+}
+
+/* pre: the colour box-filtered over 4 x 4 pixels, pre(p) = mean of C(p + (i, j)), i, j = -1 .. 2
+ * (centre p + (1/2, 1/2); C edge-repeated like the padded copy), for every padded pixel of the
+ * tiles that need it. One work-item = 16 pixels of a padded row (one tile column: PAD is a
+ * multiple of the tile size; the padded border belongs to the edge tiles); whole-vector loads
+ * where the 19 source columns lie inside the frame, clamped per-lane gathers at the sides. */
+__kernel void astigmatism_box(__global const float *restrict src, __global const int *restrict need,
+                              __global float *restrict pre, const int width, const int height,
+                              const int pw, const int ph, const int tiles_x, const int tiles_y)
+{
+    const int x0 = 16 * (int)get_global_id(0), y = get_global_id(1);
+    if (x0 >= pw || y >= ph) return;
+    const int tx = clamp(x0 / ASTIGMATISM_TILE_W - ASTIGMATISM_PAD / ASTIGMATISM_TILE_W, 0, tiles_x - 1);
+    const int ty = clamp(y / ASTIGMATISM_TILE_H - ASTIGMATISM_PAD / ASTIGMATISM_TILE_H, 0, tiles_y - 1);
+    if (!need[ty * tiles_x + tx]) return;
+    const size_t n = (size_t)width * height, pn = (size_t)pw * ph, j = (size_t)y * pw + x0;
+    const int sx0 = x0 - ASTIGMATISM_PAD;
+    const int inside = sx0 - 1 >= 0 && sx0 + 18 <= width;
+    const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const int16 c0 = clamp(sx0 - 1 + lane, 0, width - 1), c1 = clamp(sx0 + lane, 0, width - 1);
+    const int16 c2 = clamp(sx0 + 1 + lane, 0, width - 1), c3 = clamp(sx0 + 2 + lane, 0, width - 1);
+    for (int c = 0; c < 3; ++c) {
+        float16 acc = 0.0f;
+        for (int i = -1; i <= 2; ++i) {
+            __global const float *s = src + c * n + (size_t)clamp(y - ASTIGMATISM_PAD + i, 0, height - 1) * width;
+            if (inside)
+                acc += (vload16(0, s + sx0 - 1) + vload16(0, s + sx0))
+                     + (vload16(0, s + sx0 + 1) + vload16(0, s + sx0 + 2));
+            else
+                acc += (CLP_GATHER16(s, c0) + CLP_GATHER16(s, c1)) + (CLP_GATHER16(s, c2) + CLP_GATHER16(s, c3));
+        }
+        vstore16(acc * (1.0f / 16.0f), 0, pre + c * pn + j);
+    }
 }
 
 #define ASTIGMATISM_ABS(v) as_float(as_uint(v) & 0x7fffffffu)
@@ -314,7 +377,8 @@ inline void astigmatism_store1(__global float *restrict dst, const float r, cons
  * independent and overlap. float16 rather than float8 (faster at 64 taps, the same at 16;
  * docs/measurements.md#kernel-forms-on-pocl); the tap loop is unrolled by 4 (see below), not fully. */
 inline void astigmatism_gather(__global const float *restrict padded, __global const float *restrict src,
-                 __global const int *restrict inner, const int test_reach, __global const float *restrict axes,
+                 __global const float *restrict pre, const int box, __global const int *restrict inner,
+                 const int test_reach, __global const float *restrict axes,
                  __global float *restrict dst, __global const float *restrict tiles,
                  __global const int *restrict list, const int list0, const int tiles_x, const int tiles_y,
                  const int width, const int height, const int ntaps, const int tap0)
@@ -335,11 +399,18 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
     /* the pixels' own ellipses: 1/a^2 (a tap outside gets no weight). The 1e-3 px^2 keeps
      * a = 0 finite and the weights' argument below 4e6, where astigmatism_sat16 is exact in float */
     const AVEC as = AVLOAD(axes + jc), at = AVLOAD(axes + pn + jc);
-    const AVEC is2 = 1.0f / (as * as + 1e-3f), it2 = 1.0f / (at * at + 1e-3f);
+    /* box (compile-time after inlining: a point class): the ellipses shrunk by
+     * ASTIGMATISM_POINT_SHRINK px^2 per axis, a'^2 = max(a^2 - S, 0), for the box filter's and the
+     * tap rounding's own variance (clpost/stages/astigmatism.py, "Point taps") */
+    const float shrink = box ? ASTIGMATISM_POINT_SHRINK : 0.0f;
+    const AVEC is2 = 1.0f / (fmax(as * as - shrink, 0.0f) + 1e-3f), it2 = 1.0f / (fmax(at * at - shrink, 0.0f) + 1e-3f);
     /* the tile's bounding ellipse and direction: the tap offsets are the same for all its pixels */
     __global const float *tile = tiles + 4 * tile_id;
     __constant const float *taps = astigmatism_taps + 2 * tap0;
-    const float tex = tile[0], tey = tile[1], bs = tile[2], bt = tile[3];
+    const float tex = tile[0], tey = tile[1];
+    const float bs = box ? sqrt(fmax(tile[2] * tile[2] - shrink, 0.0f)) : tile[2];
+    const float bt = box ? sqrt(fmax(tile[3] * tile[3] - shrink, 0.0f)) : tile[3];
+    __global const float *pc = pre + jc;  /* a point class's taps: pre, padded layout */
     AVEC ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
     /* unrolled by 4, not fully: a full unroll of 64 float16 taps takes tens of seconds to build
      * cold for about the same speed. By hand (a constant 4-trip inner loop): '#pragma unroll 4'
@@ -367,15 +438,22 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
             const AVEC q2 = us2 * AVLOAD(an + 2 * pn) + ut2 * AVLOAD(an + 3 * pn);
             w *= ASAT((1.5625f - q2) * (1.0f / 0.5625f));
         }
-        /* the bilinear weights are the tap's (scalars, the same for every lane): interpolate, then
-         * weigh by the lane's w (no per-lane products of the four corner weights) */
-        const float b00 = (1.0f - fx) * (1.0f - fy), b01 = fx * (1.0f - fy), b10 = (1.0f - fx) * fy, b11 = fx * fy;
-        __global const float *p = col + iy * stride + ix;
-        ar = mad(w, b00 * AVLOAD(p) + b01 * AVLOAD(p + 1) + b10 * AVLOAD(p + stride) + b11 * AVLOAD(p + stride + 1), ar);
-        p += plane;
-        ag = mad(w, b00 * AVLOAD(p) + b01 * AVLOAD(p + 1) + b10 * AVLOAD(p + stride) + b11 * AVLOAD(p + stride + 1), ag);
-        p += plane;
-        ab = mad(w, b00 * AVLOAD(p) + b01 * AVLOAD(p + 1) + b10 * AVLOAD(p + stride) + b11 * AVLOAD(p + stride + 1), ab);
+        if (box) {  /* one load per channel: pre at floor(x + o), its box centred within 1/2 px of x + o */
+            __global const float *p = pc + iy * pw + ix;
+            ar = mad(w, AVLOAD(p), ar);
+            ag = mad(w, AVLOAD(p + pn), ag);
+            ab = mad(w, AVLOAD(p + 2 * pn), ab);
+        } else {
+            /* the bilinear weights are the tap's (scalars, the same for every lane): interpolate,
+             * then weigh by the lane's w (no per-lane products of the four corner weights) */
+            const float b00 = (1.0f - fx) * (1.0f - fy), b01 = fx * (1.0f - fy), b10 = (1.0f - fx) * fy, b11 = fx * fy;
+            __global const float *p = col + iy * stride + ix;
+            ar = mad(w, b00 * AVLOAD(p) + b01 * AVLOAD(p + 1) + b10 * AVLOAD(p + stride) + b11 * AVLOAD(p + stride + 1), ar);
+            p += plane;
+            ag = mad(w, b00 * AVLOAD(p) + b01 * AVLOAD(p + 1) + b10 * AVLOAD(p + stride) + b11 * AVLOAD(p + stride + 1), ag);
+            p += plane;
+            ab = mad(w, b00 * AVLOAD(p) + b01 * AVLOAD(p + 1) + b10 * AVLOAD(p + stride) + b11 * AVLOAD(p + stride + 1), ab);
+        }
         wsum += w;
     }
     /* copy where both semi-axes are below 1e-3 px or no tap has weight */
@@ -393,22 +471,26 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
     if ((int)get_group_id(0) >= (counts)[(list0) / ((tiles_x) * (tiles_y))]) return
 
 #define ASTIGMATISM_GATHER_ARGS __global const float *restrict padded, __global const float *restrict src, \
-    __global const int *restrict inner, __global const int *restrict reach, __global const float *restrict axes, \
+    __global const float *restrict pre, __global const int *restrict inner, __global const int *restrict reach, \
+    __global const float *restrict axes, \
     __global float *restrict dst, __global const float *restrict tiles, __global const int *restrict list, \
     __global const int *restrict counts, const int list0, const int tiles_x, const int tiles_y, const int width, \
     const int height
 /* the reach test is group-uniform (one tile per work-group): two inlined copies of the loop */
-#define ASTIGMATISM_GATHER_CALL(n, t0) \
+#define ASTIGMATISM_GATHER_CALL(n, t0, box) \
     ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y); \
     if (reach[list[list0 + (int)get_group_id(0)]]) \
-        astigmatism_gather(padded, src, inner, 1, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0); \
+        astigmatism_gather(padded, src, pre, box, inner, 1, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, \
+                           height, n, t0); \
     else \
-        astigmatism_gather(padded, src, inner, 0, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, height, n, t0)
+        astigmatism_gather(padded, src, pre, box, inner, 0, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, \
+                           height, n, t0)
 
 /* the quality's ASTIGMATISM_TAPS (its spiral is the table's last) */
-__kernel void astigmatism(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(ASTIGMATISM_TAPS, ASTIGMATISM_FULL_TAP0); }
-/* the smaller classes: astigmatism_t<n>, the spiral of n points at its table offset — generated
- * after this file from Astigmatism.tap_classes() (clpost/stages/astigmatism_cl.py) */
+__kernel void astigmatism(ASTIGMATISM_GATHER_ARGS) { ASTIGMATISM_GATHER_CALL(ASTIGMATISM_TAPS, ASTIGMATISM_FULL_TAP0, 0); }
+/* the smaller classes: astigmatism_t<n>, the spiral of n points at its table offset, and the point
+ * classes astigmatism_p<n> — generated after this file from Astigmatism.tap_classes() and
+ * POINT_CLASSES (clpost/stages/astigmatism_cl.py) */
 
 /* the tiles whose bounding semi-axis is below ASTIGMATISM_COPY_PX: copied through (the gather's
  * geometry: ASTIGMATISM_LANES pixels per work-item) */

@@ -30,7 +30,10 @@ def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0
 
     rng = np.random.default_rng(seed + 7919 * w + h)
     color = (rng.random((h, w, 3)) * scale).astype(np.float32)
-    d = rng.uniform(0.3, 30.0, (h, w)).astype(np.float32) if depth else None
+    if depth is True:
+        d = rng.uniform(0.3, 30.0, (h, w)).astype(np.float32)
+    else:  # False: none; a number: that depth everywhere
+        d = None if depth is False else np.full((h, w), float(depth), np.float32)
     v = (rng.standard_normal((h, w, 2)) * velocity).astype(np.float32) if velocity else None
     if v is not None and moving is not None:  # (y0, y1, x0, x1): only these pixels move
         y0, y1, x0, x1 = moving
@@ -152,6 +155,13 @@ def cases():
         add(f"astigmatism wide final {w}x{h}", lambda w=w, h=h: _run(aberr, ["astigmatism"], "final", w, h, wide=True))
     add("astigmatism-strong20um wide final 61x35",
         lambda: _run(replace(aberr, sensor_mm=(61 * 0.02, 35 * 0.02)), ["astigmatism"], "final", 61, 35, wide=True))
+    # both point classes (tiles of semi-axes >= 4 and >= 8 px far enough from the centre for the
+    # tile model: a flat field at one depth), their box plane and the other classes, both forms
+    point = replace(base, f_number=2.0, focus_distance_m=3.0, field_curvature_mm=-0.2, astigmatism_mm=0.0,
+                    sensor_mm=(401 * 0.006, 9 * 0.006))
+    for form, q in (("wide", "final"), ("narrow", "final"), ("wide", "draft")):
+        add(f"astigmatism-point {form} {q} 401x9",
+            lambda form=form, q=q: _run(point, ["astigmatism"], q, 401, 9, depth=3.0, **{form: True}))
     for w, h in ((1, 1), (37, 23)):
         add(f"vignetting wide final {w}x{h}",
             lambda w=w, h=h: _run(replace(base, vignetting="natural"), ["vignetting"], "final", w, h, wide=True))
