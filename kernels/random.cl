@@ -64,7 +64,7 @@ inline CLP_F CLP_FN(rnd_normal_pair)(const CLP_U h1, const CLP_U h2, CLP_F *othe
  * vector division (why eight: docs/benchmarks.md, "Grain's Gaussian path and sensor, second
  * pass"). At most 128 steps; for small means — callers switch to a normal
  * approximation above theirs, and pass 0 for those lanes so they stop at once (the search needs
- * e^-mean > 0 in float32, mean < ~100; beyond, it returns 8, a count of nothing).
+ * e^-mean > 0 in float32: mean < ~87, ~103 where subnormals are kept; beyond, it returns 8).
  * clpost/random.py poisson_inversion is the numpy twin (float64, one term per step: the same n
  * but where u lies within float32 rounding of an F(n); tests/test_poisson_sampler.py). */
 #ifndef RND_INV_DEFINED   /* this file is instantiated once per width */
