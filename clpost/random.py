@@ -32,7 +32,8 @@ def hash4(seed, frame, a, b):
 
 
 def uniform(h):
-    """(0, 1) from the 24 high bits, as ``rnd_uniform`` (exact in float64)."""
+    """(0, 1) from the 24 high bits: the bin centre ``rnd_uniform`` rounds to float32, exact in
+    float64 (the kernel's float32 rounds the upper half's centres to even, the top one to 1.0)."""
     return ((np.asarray(h, np.uint32) >> _M(8)).astype(np.float64) + 0.5) / 16777216.0
 
 

@@ -30,7 +30,7 @@ inline float grain_pixel(const float d, const float dmin, const float dmax, cons
     const float t1 = fmin(d_img * inv_half_span, 2.0f);   /* t + 1, exact near D = 0 */
     const float t = t1 - 1.0f;
     /* R(t) as a polynomial in t^2 of the pairs poly[k] + poly[k + 1] t (half the dependent fma's
-     * of Horner's: 0.96x the kernel's time), sqrt(t + 1) beside it, not after it */
+     * of Horner's on the pixel's one long chain), sqrt(t + 1) beside it, not after it */
     const float t2 = t * t;
 #if GRAIN_POLY_DEG % 2
     float p = fma(poly[GRAIN_POLY_DEG], t, poly[GRAIN_POLY_DEG - 1]);

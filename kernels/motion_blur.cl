@@ -53,9 +53,9 @@ inline float motion_blur_jitter(uint seed, uint frame, int x, int y) {
 /* What a tap reads of Y, one word (tap_records in the .py): l = max(|h|, 0.5) in the low 16 bits as a
  * float with a 10-bit mantissa (its bits from 0.5 up, rounded half up: relative step 2^-10, l <= K
  * = 20 px fits), h's unit direction in the high two bytes, each a signed count of 1/127 (x, then y;
- * rounded to nearest even as numpy's rint, by adding 1.5 * 2^23: PoCL's convert_int16_rte made the
- * prep twice as slow). l decodes with two integer operations and no square root; the direction only
- * places X against Y's motion line, where 1/127 is < 0.2 px at 21 px. */
+ * rounded to nearest even as numpy's rint, by adding 1.5 * 2^23: PoCL expands convert_int16_rte
+ * lane by lane, docs/motion_blur.md). l decodes with two integer operations and no square root;
+ * the direction only places X against Y's motion line, where 1/127 is < 0.2 px at 21 px. */
 #define MOTION_BLUR_RINT_MAGIC 12582912.0f   /* 1.5 * 2^23: x + this rounds x (|x| < 2^22) to an integer */
 inline uint motion_blur_pack(float l, float2 e) {
     const uint lw = (as_uint(l) + 0x1000u - 0x3f000000u) >> 13;

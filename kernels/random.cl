@@ -37,8 +37,8 @@ inline CLP_F CLP_FN(rnd_uniform)(const CLP_U h) {
 
 /* Standard normal from two hashes (Box-Muller, cosine branch). ln through clp_log2
  * (kernels/fastmath.cl): PoCL's log does not vectorise. u1 >= 2^-25 is a normal float, inside
- * clp_log2's domain. cos 2 pi u2 = -cos 2 pi v with v = u2 - 1/2 (exact, |v| < 1/2:
- * clp_cossin2pi_half, no range reduction). */
+ * clp_log2's domain. cos 2 pi u2 = -cos 2 pi v with v = u2 - 1/2 (exact, |v| <= 1/2, v = 1/2 for
+ * the top uniform 1.0f: clp_cossin2pi_half, no range reduction). */
 inline CLP_F CLP_FN(rnd_normal)(const CLP_U h1, const CLP_U h2) {
     CLP_F unused;
     const CLP_F c = CLP_FN(clp_cossin2pi_half)(CLP_FN(rnd_uniform)(h2) - 0.5f, &unused);
@@ -61,10 +61,10 @@ inline CLP_F CLP_FN(rnd_normal_pair)(const CLP_U h1, const CLP_U h2, CLP_F *othe
  * iteration, all from p_k: p_{k+j} = p_k mean^j c_j, c_j = 1/((k+1)...(k+j)) (scalar, from the
  * table of 1/k), F(k+j) = F(k) + (p_{k+1} + ... + p_{k+j}). The loop-carried work is one multiply
  * and one add per eight steps, the lane test (any u > F(k)) once per eight, and there is no
- * vector division (the one-term form's mean/k per step and lane test per step took 1.8x the time
- * on the sensor's dark frames; four terms per iteration 1.1x, sixteen no better than eight:
- * docs/benchmarks.md). At most 128 steps; for small means — callers switch to a normal
- * approximation above theirs, and pass 0 for those lanes so they stop at once.
+ * vector division (why eight: docs/benchmarks.md, "Grain's Gaussian path and sensor, second
+ * pass"). At most 128 steps; for small means — callers switch to a normal
+ * approximation above theirs, and pass 0 for those lanes so they stop at once (the search needs
+ * e^-mean > 0 in float32: mean < ~87, ~103 where subnormals are kept; beyond, it returns 8).
  * clpost/random.py poisson_inversion is the numpy twin (float64, one term per step: the same n
  * but where u lies within float32 rounding of an F(n); tests/test_poisson_sampler.py). */
 #ifndef RND_INV_DEFINED   /* this file is instantiated once per width */
@@ -115,8 +115,9 @@ inline CLP_F CLP_FN(rnd_poisson_inversion)(const CLP_F mean, CLP_F u) {
         prob = pj;
         /* where the float32 sum has stopped moving (the tail's terms below its rounding) before
          * reaching u — u rounds to 1.0f for the top 24-bit value, and cdf may end an ulp or two
-         * short of it — no later F(k) reaches u: the lane is done (n is then the quantile of
-         * 1 - ~2^-24 to within 8, not 128) */
+         * short of it — no later F(k) reaches u: the lane is done, with n the end of the block in
+         * which its sum stopped (within -8 .. +16 of the float64 quantile of 1 - 2^-25, not 128;
+         * tests/test_poisson_sampler.py) */
         u = cdf + s == cdf ? (CLP_F)(0.0f) : u;
         cdf += s;
     }

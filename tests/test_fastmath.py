@@ -1,6 +1,5 @@
-"""The branch-free elementary functions of kernels/common.cl (clp_log2, clp_exp2, clp_exp2_bounded, clp_cos2pi,
-clp_cossin2pi_half)
-against float64 numpy over the whole float32 range, including the IEEE special values."""
+"""The branch-free elementary functions of kernels/fastmath.cl (clp_log2, clp_exp2, clp_exp2_bounded, clp_cos2pi,
+clp_cossin2pi_half) against float64 numpy over the whole float32 range, including the IEEE special values."""
 import numpy as np
 import pytest
 

@@ -311,6 +311,50 @@ def test_tap_record_keeps_length_to_2e_10_and_direction_to_a_step(rng):
     assert l[0, -1] == 20.0 and l[0, -4] == 0.5 and (e[0, -2] == (0, -127)).all()
 
 
+@pytest.mark.parametrize("wide", [True, False])
+def test_prep_writes_the_tap_records_of_the_reference_bit_for_bit(rng, monkeypatch, wide):
+    # the record plane motion_blur_prep packs (both forms: 16-pixel rows with edge groups one by one,
+    # or one pixel per work-item) is tap_records' word exactly, and h and the key half_vectors32's:
+    # the image tests compare through tolerances that a changed rounding of |h_Y| or of e_Y may pass
+    import pyopencl as cl
+
+    from clpost.runtime import Runtime
+    from clpost.stages.motion_blur import effective_velocity, half_vectors32
+
+    monkeypatch.setattr(Runtime, "wide", property(lambda self: wide))
+    h, w = 7, 53
+    vel = (rng.normal(size=(h, w, 2)) * 10.0 ** rng.uniform(-3, 2, (h, w, 1))).astype(np.float32)
+    vel[0, :6] = [[0, 0], [1e-45, 0], [3e38, -3e38], [-3.4e38, 3.4e38], [0, -1e-40], [80, 0]]
+    vel[1, ::3] = 0.0
+    a = np.arange(w) * 0.7                          # every direction byte, halfway cases included
+    vel[2] = np.stack([7 * np.cos(a), 7 * np.sin(a)], axis=-1)
+    vel[3, :, 0], vel[3, :, 1] = np.linspace(-90, 90, w), 0.5
+    depth = rng.uniform(1.0, 20.0, (h, w)).astype(np.float32)
+    frame = Frame(np.zeros((h, w, 3), np.float32), depth=depth, velocity=vel)
+    pipe = Pipeline(CAM, quality="draft", stages=["motion_blur"])
+    stage, rt = pipe.plan_for(frame, pipe.camera_for(frame)).stages[0], pipe.runtime
+    assert MotionBlur.lanes(rt) == (16 if wide else 1)
+    k = np.float32(shutter_fraction(CAM) / 2.0)
+    mf = cl.mem_flags
+    vb, db = (cl.Buffer(rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(x))
+              for x in (vel, depth))
+    hv = np.zeros((4, h, w), np.float32)
+    hb, ib = cl.Buffer(rt.context, mf.READ_WRITE, hv.nbytes), cl.Buffer(rt.context, mf.READ_WRITE, hv.nbytes // 4)
+    knl = stage._kernel(rt, CAM, "motion_blur_prep")
+    rt.launch(knl, *stage._row_launch(rt, w, h), vb, db, hb, ib, np.int32(w), np.int32(h), k)
+    cl.enqueue_copy(rt.queue, hv, hb)
+    ve, _ = effective_velocity(vel, depth)
+    lq, q = tap_records(ve, k)
+    qi = q.astype(np.int32).astype(np.uint32)
+    want = (((lq.view(np.uint32) - np.uint32(0x3F000000)) >> np.uint32(13))
+            | ((qi[..., 0] & np.uint32(0xFF)) << np.uint32(16)) | (qi[..., 1] << np.uint32(24)))
+    got = hv[3].view(np.uint32)
+    bad = np.argwhere(got != want)
+    assert not bad.size, f"{len(bad)} records differ, first at (y, x) = {tuple(bad[0])}: {got[tuple(bad[0])]:#x} " \
+                         f"vs {want[tuple(bad[0])]:#x}"
+    np.testing.assert_array_equal(np.moveaxis(hv[:3], 0, -1), half_vectors32(ve, k))
+
+
 def test_rolling_shutter_matches_reference_and_slants_a_moving_bar():
     h, w = 41, 51
     color = np.zeros((h, w, 3), np.float32)

@@ -73,8 +73,8 @@ def test_counts_follow_the_poisson_distribution(lam):
 
 def test_the_top_uniforms_give_the_extreme_quantile_not_the_step_limit():
     # the top 24-bit uniform rounds to 1.0f, and the float32 sum of the pmf may stop an ulp short of
-    # it: the search used to run to its 128-step limit there (on main: 47 % of the means for u = 1,
-    # a 128 e⁻ speck in the shadows about once per 4K frame)
+    # it: a search that only stops where u <= F(n) runs to its 128-step limit there (a 128 e⁻ speck
+    # in the shadows; how often: docs/benchmarks.md)
     mean = np.linspace(0.0, 32.0, 16 * 4000).astype(np.float32)
     want = rnd.poisson_inversion(mean.astype(np.float64), np.full(mean.size, 1.0 - 2.0 ** -25))
     for top in (1.0, 1.0 - 2.0 ** -24, 1.0 - 2.0 ** -23):

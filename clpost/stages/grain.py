@@ -108,10 +108,7 @@ def gaussian_tables(r_px: float, d_span: float, samples_side: int | None):
     first; the kernel evaluates it as a polynomial in t² of pairs of terms, and √(t + 1) beside
     it). Above D_span (input beyond D_max) σ_T/T is held. Error against the exact variance:
     |σ_fit/σ − 1| < 1e-7 for r from 0.005 to 4 px on every stock (tests/test_grain.py checks
-    1e-6; the square root of a degree-10 fit of F/(t + 1) itself, before, was within 5e-6, and
-    put the square root after the polynomial on the kernel's dependent chain; the 64-entry
-    linear-interpolated table before that was off by up to 0.08 in σ_T near D = 0, where σ_T
-    grows like √D)."""
+    1e-6; the forms this replaced and their errors: docs/benchmarks.md)."""
     nodes = 0.5 * d_span * (1.0 - np.cos(np.linspace(0.0, math.pi, 65)))
     nodes[0] = 1e-9 * d_span  # F(D)/D at D → 0 (F(0) = 0 itself)
     var = pixel_covariance(nodes, r_px, samples_side=samples_side)
@@ -245,11 +242,11 @@ class Grain(GatherStage):
 
 GAUSSIAN_ROWS = {1: 6, 3: 14}
 """Rows per work-item (each 32 pixels wide) of the Gaussian path's lane form, by filter taps
-(``GRAIN_TAPS``). White noise (1): one float16 of Box–Muller draws per row, 6 rows (14 measured
-×1.07 the time). The [a, b, a] filter (3): each filtered row of normals serves three output rows,
-so R rows cost R + 2 filtered rows, one float16 of draws each, and two float16 of draws for the
-normals left and right of the block — (R + 4)·16 / (32 R) draws per pixel and layer: 9/14 at 14,
-the most kernels/grain.cl takes (6 rows, 5/6 draws, measured ×1.11 the time; docs/benchmarks.md)."""
+(``GRAIN_TAPS``). White noise (1): one float16 of Box–Muller draws per row, 6 rows. The [a, b, a]
+filter (3): each filtered row of normals serves three output rows, so R rows cost R + 2 filtered
+rows, one float16 of draws each, and two float16 of draws for the normals left and right of the
+block — (R + 4)·16 / (32 R) draws per pixel and layer: 9/14 at 14, the most kernels/grain.cl takes
+(the row counts' measured cost: docs/benchmarks.md)."""
 
 
 def _program_source() -> str:

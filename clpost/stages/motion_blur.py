@@ -367,18 +367,28 @@ def half_vectors(velocity: np.ndarray, k: float, with_length: bool = False) -> n
     return np.concatenate([h, length], axis=-1) if with_length else h
 
 
-def half_vectors32(velocity: np.ndarray, k: float) -> np.ndarray:
-    """``half_vectors(..., with_length=True)`` in float32, operation for operation as
-    ``motion_blur_prep`` computes them (the kernel steps along them: tap positions must round the
-    same way)."""
+def _direction_length32(velocity: np.ndarray, k: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(moving, e, length) of v·k in float32 as ``motion_blur_prep`` computes them: v scaled by its
+    inf-norm first (no overflow up to FLT_MAX), the unit direction e = u/|u| and the unclamped
+    length |u|·m·k (H×W×1 mask, H×W×2, H×W×1); e and length are 0 where v = 0."""
     v = np.asarray(velocity, dtype=np.float32)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         m = np.max(np.abs(v), axis=-1, keepdims=True)
         u = v / np.where(m > 0, m, np.float32(1))
-        l2 = (u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1])[..., None]
-        length = np.sqrt(l2) * m * np.float32(k)
-        h = (u * (np.float32(1) / np.sqrt(l2))) * np.minimum(length, np.float32(TILE))   # direction × |h|
-    return np.where(m > 0, np.concatenate([h, length], axis=-1), np.float32(0)).astype(np.float32)
+        lu = np.sqrt(u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1])[..., None]
+        length = lu * m * np.float32(k)
+        e = u * (np.float32(1) / lu)
+    moving = m > 0
+    return (moving, np.where(moving, e, np.float32(0)).astype(np.float32),
+            np.where(moving, length, np.float32(0)).astype(np.float32))
+
+
+def half_vectors32(velocity: np.ndarray, k: float) -> np.ndarray:
+    """``half_vectors(..., with_length=True)`` in float32, operation for operation as
+    ``motion_blur_prep`` computes them (the kernel steps along them: tap positions must round the
+    same way): h = e · min(|h|, K), the direction times the clamped length."""
+    _, e, length = _direction_length32(velocity, k)
+    return np.concatenate([e * np.minimum(length, np.float32(TILE)), length], axis=-1).astype(np.float32)
 
 
 def tap_records(velocity: np.ndarray, k: float) -> tuple[np.ndarray, np.ndarray]:
@@ -386,14 +396,8 @@ def tap_records(velocity: np.ndarray, k: float) -> tuple[np.ndarray, np.ndarray]
     ½) as a float with a 10-bit mantissa (the float32 bits from ½ up, rounded half up), e = h's unit
     direction in signed counts of 1/DIR (rounded to nearest even; 0 where v = 0); float32, the same
     operations as the kernel. |h| is the clamped length min(|v·k|, K) of :func:`half_vectors32`."""
-    v = np.asarray(velocity, dtype=np.float32)
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        m = np.max(np.abs(v), axis=-1, keepdims=True)
-        u = v / np.where(m > 0, m, np.float32(1))
-        lu = np.sqrt(u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1])[..., None]
-        r = np.minimum(lu * m * np.float32(k), np.float32(TILE))
-        e = np.where(m > 0, u * (np.float32(1) / lu), np.float32(0)).astype(np.float32)
-    l32 = np.maximum(np.where(m > 0, r, np.float32(0)), np.float32(0.5)).astype(np.float32)[..., 0]
+    _, e, length = _direction_length32(velocity, k)
+    l32 = np.maximum(np.minimum(length, np.float32(TILE)), np.float32(0.5)).astype(np.float32)[..., 0]
     bits = ((l32.view(np.uint32) + np.uint32(0x1000) - np.uint32(0x3F000000)) >> np.uint32(13)) & np.uint32(0xFFFF)
     lq = ((bits << np.uint32(13)) + np.uint32(0x3F000000)).astype(np.uint32).view(np.float32)
     q = np.rint(e * np.float32(DIR)).astype(np.float32)
