@@ -389,6 +389,19 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
         ar += gr * DOF_RIGHT(vr); ag += gr * DOF_RIGHT(vg); ab += gr * DOF_RIGHT(vb); aa += gr * DOF_RIGHT(va); \
         wsum += gr; }
 
+/* The narrow-source layer (dof_narrow.cl, prepended to this program): its arguments, and its
+ * light at the 16 pixels (lr, lg, lb; 0 without DOF_NARROW), added after the composite. */
+#define DOF_NARROW_PARAMS __global const int *restrict ncount, __global const float8 *restrict nrec, \
+    const int ncx, const int ncy, const int nblades, const float phi0, const float roundness, const float nsa, \
+    const float ninv_area
+#define DOF_NARROW_ARGS ncount, nrec, ncx, ncy, nblades, phi0, roundness, nsa, ninv_area
+#if DOF_NARROW
+#define DOF_NARROW_ADD(UA) float16 lr = (float16)(0.0f), lg = lr, lb = lr; \
+    dof_narrow16(ncount, nrec, ncx, ncy, x, y, r, (UA), nblades, phi0, roundness, nsa, ninv_area, &lr, &lg, &lb);
+#else
+#define DOF_NARROW_ADD(UA) const float16 lr = (float16)(0.0f), lg = lr, lb = lr;
+#endif
+
 #if DOF_SCALE == 2
 /* 16 floats of row `row` from column `col` on: one vload16 inside the row (edge 0), else per lane
  * with the column clamped to [0, lim - 1] (edge 1: the groups at the image's left/right end, the
@@ -446,7 +459,8 @@ inline void dof_store16(const float16 v, __global float *dst, const size_t i, co
 inline void dof_upsample16(__global const float *restrict src, __global const float *restrict coc,
                            __global const float *restrict blur, __global const float *restrict alpha,
                            __global float *restrict dst, const int x, const int y,
-                           const int width, const int height, const int ww, const int hw, const int edge)
+                           const int width, const int height, const int ww, const int hw, const int edge,
+                           DOF_NARROW_PARAMS)
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x, nw = (size_t)ww * hw;
     const int nlanes = min(16, width - x);
@@ -472,9 +486,11 @@ inline void dof_upsample16(__global const float *restrict src, __global const fl
     const float16 inv = 1.0f / wsum;
     const float16 b = fmax(DOF_HALF_B(r), aa * inv);
     ar *= inv; ag *= inv; ab *= inv;
+    DOF_NARROW_ADD(aa * inv)
     const int16 whole = b >= 1.0f;
     if (all(whole)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
-        dof_store16(ar, dst, i, nlanes); dof_store16(ag, dst + n, i, nlanes); dof_store16(ab, dst + 2 * n, i, nlanes);
+        dof_store16(ar + lr, dst, i, nlanes); dof_store16(ag + lg, dst + n, i, nlanes);
+        dof_store16(ab + lb, dst + 2 * n, i, nlanes);
         return;
     }
     /* the full-resolution 3x3 blur (dof_local_px), lane-wise; rows clamped to the image */
@@ -511,9 +527,9 @@ inline void dof_upsample16(__global const float *restrict src, __global const fl
         cg = select(tg * ic, sg, sharp);
         cb = select(tb * ic, sb, sharp);
     }
-    dof_store16(select(cr + (ar - cr) * b, ar, whole), dst, i, nlanes);
-    dof_store16(select(cg + (ag - cg) * b, ag, whole), dst + n, i, nlanes);
-    dof_store16(select(cb + (ab - cb) * b, ab, whole), dst + 2 * n, i, nlanes);
+    dof_store16(select(cr + (ar - cr) * b, ar, whole) + lr, dst, i, nlanes);
+    dof_store16(select(cg + (ag - cg) * b, ag, whole) + lg, dst + n, i, nlanes);
+    dof_store16(select(cb + (ab - cb) * b, ab, whole) + lb, dst + 2 * n, i, nlanes);
 }
 #endif
 
@@ -524,7 +540,7 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
                            __global const float *restrict blur, __global const float *restrict alpha,
                            __global float *restrict dst,
                            const int width, const int height, const int ww, const int hw,
-                           __global const int *restrict tn_mix, const int tw_mix)
+                           __global const int *restrict tn_mix, const int tw_mix, DOF_NARROW_PARAMS)
 {
     const int x = 16 * get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
@@ -561,9 +577,10 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         const float16 inv = 1.0f / wsum;
         const float16 b = fmax(DOF_HALF_B(r), aa * inv);
         ar *= inv; ag *= inv; ab *= inv;
+        DOF_NARROW_ADD(aa * inv)
         const int16 whole_ = b >= 1.0f;
         if (all(whole_)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
-            vstore16(ar, 0, dst + i); vstore16(ag, 0, dst + n + i); vstore16(ab, 0, dst + 2 * n + i);
+            vstore16(ar + lr, 0, dst + i); vstore16(ag + lg, 0, dst + n + i); vstore16(ab + lb, 0, dst + 2 * n + i);
             return;
         }
         /* the full-resolution 3x3 blur (dof_local_px), lane-wise; columns x - 1 .. x + 16 lie in
@@ -582,9 +599,9 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         const int16 sharp = !need;
         if (all(sharp | whole_)) {  /* no pixel needs the 3x3's taps: its colour is the source's */
             const float16 sr = vload16(0, src + i), sg = vload16(0, src + n + i), sb = vload16(0, src + 2 * n + i);
-            vstore16(select(sr + (ar - sr) * b, ar, whole_), 0, dst + i);
-            vstore16(select(sg + (ag - sg) * b, ag, whole_), 0, dst + n + i);
-            vstore16(select(sb + (ab - sb) * b, ab, whole_), 0, dst + 2 * n + i);
+            vstore16(select(sr + (ar - sr) * b, ar, whole_) + lr, 0, dst + i);
+            vstore16(select(sg + (ag - sg) * b, ag, whole_) + lg, 0, dst + n + i);
+            vstore16(select(sb + (ab - sb) * b, ab, whole_) + lb, 0, dst + 2 * n + i);
             return;
         }
         float16 cr = (float16)(0.0f), cg = cr, cb = cr, cw = cr;
@@ -607,13 +624,13 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         cr = select(cr * ic, vload16(0, src + i), sharp);
         cg = select(cg * ic, vload16(0, src + n + i), sharp);
         cb = select(cb * ic, vload16(0, src + 2 * n + i), sharp);
-        vstore16(select(cr + (ar - cr) * b, ar, whole), 0, dst + i);
-        vstore16(select(cg + (ag - cg) * b, ag, whole), 0, dst + n + i);
-        vstore16(select(cb + (ab - cb) * b, ab, whole), 0, dst + 2 * n + i);
+        vstore16(select(cr + (ar - cr) * b, ar, whole) + lr, 0, dst + i);
+        vstore16(select(cg + (ag - cg) * b, ag, whole) + lg, 0, dst + n + i);
+        vstore16(select(cb + (ab - cb) * b, ab, whole) + lb, 0, dst + 2 * n + i);
         return;
     }
     /* the groups at the image's left/right end: the same formulas, loads clamped per lane */
-    dof_upsample16(src, coc, blur, alpha, dst, x, y, width, height, ww, hw, 1);
+    dof_upsample16(src, coc, blur, alpha, dst, x, y, width, height, ww, hw, 1, DOF_NARROW_ARGS);
 #else
     for (int xi = x; xi < min(x + 16, width); ++xi) {
         const float3 o = dof_upsample_px(src, coc, blur, alpha, xi, y, width, height, ww, hw);

@@ -870,14 +870,20 @@ def local_blur(color: np.ndarray, coc: np.ndarray) -> np.ndarray:
     return np.where(need[..., None], acc / wsum[..., None], np.asarray(color, dtype=np.float64))
 
 
-def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
+def _half_composite(camera, color, coc, scale, rmax, budget, pm=None, narrow=False):
     """The half-resolution path (draft, preview, and final's large-reach tiles): gather at the
     working resolution with the variance-matched radius (:func:`half_radius`), depth-aware
     upsampling, composite with the full-resolution colour (:func:`half_blend`, or the front
-    layer's coverage). ``pm``: the traced profile (:func:`traced_profile`) or None. Returns
-    (output, working CoC)."""
+    layer's coverage). ``pm``: the traced profile (:func:`traced_profile`) or None. ``narrow``:
+    narrow sources (:func:`narrow_sources`) go through the full-resolution layer
+    (:func:`narrow_layer`) instead. Returns (output, working CoC)."""
     hr = half_radius(coc)
-    cw, rw = _working(color, hr, scale)
+    src = None
+    if narrow:
+        src, gathered = narrow_sources(color, coc, scale, luma_weights(camera))
+    else:
+        gathered = color
+    cw, rw = _working(gathered, hr, scale)
     out, alpha = gather_reference(cw, rw, rmax, budget, camera.blades, camera.blade_rotation_deg,
                                   camera.aperture_roundness, camera.spherical_aberration,
                                   camera.optical_vignetting, None if pm is None else (pm, scale))
@@ -885,7 +891,11 @@ def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
     up, up_alpha = _upsample(out, alpha, rw_orig, coc, scale)
     b = np.maximum(half_blend(coc), up_alpha)
     near = local_blur(color, coc)
-    return np.where(b[..., None] < 1.0, near + (up - near) * b[..., None], up), rw
+    out = np.where(b[..., None] < 1.0, near + (up - near) * b[..., None], up)
+    if src is not None and len(src):
+        out = out + narrow_layer(src, coc, up_alpha, camera.blades, camera.blade_rotation_deg,
+                                 camera.aperture_roundness, camera.spherical_aberration)
+    return out, rw
 
 
 SMALL_LO_PX, SMALL_HI_PX = 1.0, math.sqrt(2.0)
@@ -942,7 +952,7 @@ def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "
     coc = coc_px(camera, effective_depth(color, depth, luma_weights(camera)), width_px or w, limit_px=scale * rmax)
     pm = traced_profile(camera, width_px or w, quality)
     if scale > 1:
-        return _half_composite(camera, color, coc, scale, rmax, budget, pm)[0]
+        return _half_composite(camera, color, coc, scale, rmax, budget, pm, narrow_split(camera, pm))[0]
     out, alpha = gather_reference(color, coc, rmax, budget, camera.blades, camera.blade_rotation_deg,
                                   camera.aperture_roundness, camera.spherical_aberration,
                                   camera.optical_vignetting, None if pm is None else (pm, 1))
@@ -1009,6 +1019,10 @@ class Dof(GatherStage):
                 "DOF_SMALL_LO": f"{SMALL_LO_PX!r}f", "DOF_SMALL_K": f"{1.0 / (SMALL_HI_PX - SMALL_LO_PX)!r}f",
                 "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
                 "DOF_UP_SAME": f"{UPSAMPLE_SAME_PX!r}f",
+                "DOF_NARROW": int(scale > 1 and not traced and camera.optical_vignetting == 0),
+                "DOF_NARROW_RATIO": f"{NARROW_RATIO!r}f", "DOF_NARROW_CONTRAST": f"{NARROW_CONTRAST!r}f",
+                "DOF_NARROW_MIN": f"{NARROW_MIN_PX!r}f", "DOF_NARROW_CELL": NARROW_CELL,
+                "DOF_NARROW_MAX": NARROW_MAX,
                 "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
@@ -1020,3 +1034,143 @@ class Dof(GatherStage):
         from .dof_cl import enqueue_dof
 
         return enqueue_dof(self, rt, camera, frame, src, dst, aux)
+
+
+# ---------------------------------------------------------------------------------------------
+# The half-resolution path's narrow-source layer
+# ---------------------------------------------------------------------------------------------
+
+NARROW_RATIO = 4.0
+"""A working pixel (2×2 block) brighter than this × the dimmest of its 8 working neighbours at
+distance 2 (3–5 px away) holds a *narrow source* candidate: a light a few pixels wide
+(:func:`narrow_sources`)."""
+NARROW_CONTRAST = 0.125
+r"""A candidate pixel is split off when its excess luminance spread over its disc,
+:math:`Y_e/(\pi r^2)`, is above this × the surround's :math:`Y_{bg}`: a disc that stands out of
+its surround, whose edge the half-resolution path would soften (a dimmer one's soft edge is not
+seen, and it stays in the cheaper path)."""
+NARROW_MIN_PX = 2.0
+"""Only pixels whose 3×3 has every |CoC| ≥ this are split: there the composite takes the
+half-resolution blur whole (:func:`half_blend` = 1), so no full-resolution 3×3 blur reads the
+pixel's original colour beside the layer."""
+NARROW_CELL = 64
+"""Edge (px) of the cells the sources are listed by (the upsampling reads the lists of the cells
+within the largest CoC of its pixels)."""
+NARROW_MAX = 64
+"""Most sources (pixels) a cell lists; a cell with more splits none (its lights stay in the
+half-resolution path: a bounded cost per pixel whatever the input)."""
+NARROW_RING = ((-2, -2), (-2, 0), (-2, 2), (0, -2), (0, 2), (2, -2), (2, 0), (2, 2))
+"""The working neighbours (dy, dx) a candidate block is compared with, in the kernel's order
+(the first dimmest wins a tie)."""
+
+
+def narrow_split(camera, pm=None) -> bool:
+    """Whether the half-resolution levels split narrow sources off: not with a traced profile or
+    cat's-eye bokeh (the layer has neither; those keep the half-resolution path for every light)."""
+    return pm is None and camera.optical_vignetting == 0
+
+
+def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndarray | None = None):
+    r"""The narrow sources of the half-resolution path (draft, preview): pixels of small bright
+    lights whose light is taken out of the working image and spread at full resolution instead
+    (:func:`narrow_layer`). The half-resolution path's discs have soft edges — the 2×2 box, the
+    working coverage ramp and the bilinear upsampling, ≈ 3 px of ramp whatever the variance match
+    does — and a 100× lamp saturates its whole soft edge: discs 1.2–1.8× Cycles' area, with light
+    spread beyond (docs/fidelity.md, "The narrow-source layer").
+
+    A working pixel P (not within 2 of the working image's edge) is a candidate block when its
+    luminance is above :data:`NARROW_RATIO` × that of the dimmest of its working neighbours at
+    distance 2 (:data:`NARROW_RING`; its colour is the surround's, bg). Each full-resolution pixel
+    q of the block with every |CoC| of its 3×3 ≥ :data:`NARROW_MIN_PX` has the excess
+    :math:`e_q = \max(c_q - bg, 0)` (per channel) and is a source when
+    :math:`Y(e_q) > ` :data:`NARROW_CONTRAST` · Y(bg) · π r_q². Sources are listed per
+    :data:`NARROW_CELL` cell in scan order (working rows, then the block's rows); a cell with more
+    than :data:`NARROW_MAX` lists none.
+
+    Returns (sources, base): sources an (n, 6) array of (x, y, r, e_R, e_G, e_B) (r the signed CoC
+    in px), base the colour with each source's excess taken out (c − e)."""
+    color = np.asarray(color, dtype=np.float64)
+    c = np.asarray(coc, dtype=np.float64)
+    lw = luma_weights() if luma is None else luma
+    h, w = c.shape
+    cw, _ = _working(color, c, scale)
+    yw = cw @ lw
+    hw, ww = yw.shape
+    base = color.copy()
+    if hw < 5 or ww < 5:
+        return np.zeros((0, 6)), base
+    ac = np.abs(np.pad(c, 1, mode="edge"))
+    m3 = np.min([ac[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
+    ring = np.stack([yw[2 + dy:hw - 2 + dy, 2 + dx:ww - 2 + dx] for dy, dx in NARROW_RING])
+    kmin = np.argmin(ring, axis=0)  # the first dimmest, as the kernel
+    bg_ys = np.take_along_axis(ring, kmin[None], 0)[0]
+    cells: dict = {}
+    for py, px in zip(*np.nonzero(yw[2:hw - 2, 2:ww - 2] > NARROW_RATIO * bg_ys)):
+        k, bg_y = kmin[py, px], bg_ys[py, px]
+        py, px = py + 2, px + 2
+        bg = cw[py + NARROW_RING[k][0], px + NARROW_RING[k][1]]
+        for b in range(scale):
+            for a in range(scale):
+                y, x = scale * py + b, scale * px + a
+                e = np.maximum(color[y, x] - bg, 0.0)
+                if m3[y, x] >= NARROW_MIN_PX and e @ lw > NARROW_CONTRAST * bg_y * math.pi * c[y, x] ** 2:
+                    cells.setdefault((y // NARROW_CELL, x // NARROW_CELL), []).append((x, y, c[y, x], *e))
+    rows = []
+    for key in sorted(cells):
+        if len(cells[key]) <= NARROW_MAX:
+            rows += cells[key]
+    src = np.array(rows, dtype=np.float64).reshape(-1, 6)
+    for x, y, _, *e in src:
+        base[int(y), int(x)] -= e
+    return src, base
+
+
+def narrow_weight(dx, dy, rq: float, r, blades: int, rotation_deg: float, roundness: float, sa: float,
+                  area: float):
+    r"""Weight of a source of signed CoC ``rq`` at offset o = (dx, dy) = q − p spread with radius r:
+    the full-resolution gather's :math:`\mathrm{cov}\,I(t)/(a_K r^2)` (1-px coverage ramp, the
+    aperture in the direction p − q for a far source, q − p for a near one)."""
+    far = rq >= 0
+    rho = aperture_radius(np.arctan2(-dy, -dx) if far else np.arctan2(dy, dx), blades, rotation_deg, roundness)
+    rr = r * rho
+    dist = np.hypot(dx, dy)
+    cov = np.clip(rr - dist + 0.5, 0.0, 1.0)
+    t = np.minimum(dist / rr, 1.0)
+    a = -sa if far else sa
+    return cov * (1.0 + a * (2 * t * t - 1.0)) / (area * r * r)
+
+
+def narrow_norm(rq: float, blades: int, rotation_deg: float, roundness: float, sa: float, area: float) -> float:
+    """1 / the sum of a source's weights over its whole disc at its own radius (:func:`narrow_weight`):
+    the lattice's coverage sum differs from a_K r² by a few % at r ≈ 2 px, and the layer is not
+    normalised per pixel, so each source is normalised once (its light is conserved exactly where
+    nothing hides it)."""
+    r = max(abs(rq), 0.5)
+    k = int(math.ceil(r)) + 1
+    dy, dx = np.mgrid[-k:k + 1, -k:k + 1].astype(np.float64)
+    return 1.0 / float(np.sum(narrow_weight(dx, dy, rq, r, blades, rotation_deg, roundness, sa, area)))
+
+
+def narrow_layer(sources: np.ndarray, coc: np.ndarray, alpha: np.ndarray, blades: int, rotation_deg: float,
+                 roundness: float, sa: float) -> np.ndarray:
+    r"""The narrow sources spread at full resolution, added to the half-resolution composite:
+    scatter-as-gather of each source q onto p with the full-resolution gather's weight
+    (:func:`narrow_weight`), *unnormalised* per pixel (a sparse layer: each source's light is its
+    own; :func:`narrow_norm` makes its weights sum to 1): q nearer than p by more than
+    :data:`FRONT_MARGIN_PX` spreads over p with its own radius; otherwise with the smaller of
+    its own radius and p's (a sharper p in front of it is the background clamp of the gather; a
+    blurred foreground does not widen it), times 1 − α_p, the upsampled front-layer coverage (a
+    blurred foreground over p hides that much of what is behind it)."""
+    h, w = coc.shape
+    area = aperture_area(blades, rotation_deg, roundness)
+    out = np.zeros((h, w, 3))
+    ys, xs = np.mgrid[0:h, 0:w]
+    rp = np.asarray(coc, dtype=np.float64)
+    for x, y, rq, *e in sources:
+        front = rq < rp - FRONT_MARGIN_PX
+        rs = max(abs(rq), 0.5)
+        r = np.where(rq > rp + FRONT_MARGIN_PX, np.minimum(np.maximum(np.abs(rp), 0.5), rs), rs)
+        wgt = narrow_weight(x - xs, y - ys, rq, r, blades, rotation_deg, roundness, sa, area)
+        wgt = np.where(front, wgt, wgt * (1.0 - alpha)) * narrow_norm(rq, blades, rotation_deg, roundness, sa, area)
+        out += wgt[..., None] * np.asarray(e)
+    return out

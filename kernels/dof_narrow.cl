@@ -1,0 +1,203 @@
+/* dof: the half-resolution path's narrow-source layer (narrow_sources, narrow_norm and
+ * narrow_layer in clpost/stages/dof.py): small bright lights taken out of the working image and
+ * spread at full resolution by dof_upsample (dof.cl, dof_narrow16).
+ * Structural: DOF_SCALE, DOF_TILE, DOF_NARROW_CELL (cell edge, px), DOF_NARROW_MAX (sources per
+ * cell), DOF_NARROW_RATIO, DOF_NARROW_CONTRAST, DOF_NARROW_MIN (px), DOF_LUMA_R/G/B, DOF_TEXTURE.
+ * Records: float8 (x, y, signed CoC px, e_R, e_G, e_B, 1 / the source's weight sum, 0) per source,
+ * DOF_NARROW_MAX per cell; `ncount` per cell (0 when the cell had more than DOF_NARROW_MAX).
+ */
+
+/* luminance of 16 working pixels of level 0 from padded offset o */
+#define DOF_NY16(o) (DOF_LUMA_R * vload16(0, lv + (o)) + DOF_LUMA_G * vload16(0, lv + pn + (o)) \
+                     + DOF_LUMA_B * vload16(0, lv + 2 * pn + (o)))
+
+/* Candidate blocks: per working pixel, the index (0..7) of the dimmest of its 8 working neighbours
+ * at distance 2 (NARROW_RING: (-2,-2), (-2,0), (-2,2), (0,-2), (0,2), (2,-2), (2,0), (2,2); the
+ * first dimmest) when its luminance is above DOF_NARROW_RATIO x that neighbour's, else -1; -1 too
+ * within 2 of the working image's edge. 16 working pixels of a row per work-item (the padding
+ * covers the ring's reads); launched over (ceil(ww / 16), hw). */
+__kernel void dof_narrow_flag(__global const float *restrict lv, __global int *restrict flag,
+                              const int ww, const int hw, const int pad)
+{
+    const int x = 16 * get_global_id(0), y = get_global_id(1);
+    if (x >= ww || y >= hw) return;
+    const int pw = DOF_PW(ww, pad);
+    const size_t pn = (size_t)pw * DOF_PW(hw, pad);
+    const size_t o = (size_t)(y + pad) * pw + x + pad;
+    const float16 yp = DOF_NY16(o);
+    float16 m = DOF_NY16(o - 2 * pw - 2);
+    int16 k = (int16)(0);
+#define DOF_RING(i, off) { const float16 v = DOF_NY16(o + (off)); const int16 lt = v < m; \
+                           m = select(m, v, lt); k = select(k, (int16)(i), lt); }
+    DOF_RING(1, -2 * (long)pw)
+    DOF_RING(2, -2 * (long)pw + 2)
+    DOF_RING(3, -2)
+    DOF_RING(4, 2)
+    DOF_RING(5, 2 * (long)pw - 2)
+    DOF_RING(6, 2 * (long)pw)
+    DOF_RING(7, 2 * (long)pw + 2)
+#undef DOF_RING
+    const int16 xs = (int16)(x) + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const int16 inside = (xs >= 2) & (xs <= ww - 3) & (int16)(y >= 2 && y <= hw - 3 ? -1 : 0);
+    const int16 out = select((int16)(-1), k, inside & (yp > DOF_NARROW_RATIO * m));
+    if (x + 16 <= ww) {
+        vstore16(out, 0, flag + (size_t)y * ww + x);
+    } else {
+        int t[16];
+        vstore16(out, 0, t);
+        for (int l = 0; l < ww - x; ++l)
+            flag[(size_t)y * ww + x + l] = t[l];
+    }
+}
+#undef DOF_NY16
+
+/* the unit aperture's radius in direction phi (aperture_radius in clpost/stages/dof.py); phi0 =
+ * -pi/2 - rotation */
+inline float dof_aperture(const float phi, const int blades, const float phi0, const float roundness)
+{
+    if (blades == 0)
+        return 1.0f;
+    const float seg = 2.0f * M_PI_F / (float)blades;
+    const float d = phi - phi0;
+    const float t = d - seg * floor(d / seg) - 0.5f * seg;
+    return (1.0f - roundness) * cos(M_PI_F / (float)blades) / cos(t) + roundness;
+}
+
+/* narrow_weight: a source of signed CoC rq at offset (dx, dy) = q - p spread with radius r */
+inline float dof_narrow_w(const float dx, const float dy, const float rq, const float r, const int blades,
+                          const float phi0, const float roundness, const float sa, const float inv_area)
+{
+    const int far = rq >= 0.0f;
+    const float rr = r * dof_aperture(far ? atan2(-dy, -dx) : atan2(dy, dx), blades, phi0, roundness);
+    const float dist = sqrt(dx * dx + dy * dy);
+    float w = clamp(rr - dist + 0.5f, 0.0f, 1.0f);
+#if DOF_TEXTURE
+    const float t = fmin(dist / rr, 1.0f);
+    w *= 1.0f + (far ? -sa : sa) * (2.0f * t * t - 1.0f);
+#endif
+    return w * inv_area / (r * r);
+}
+
+/* One work-item per cell: the cell's sources in scan order (working rows, then the block's rows),
+ * each with 1 / its weight sum (narrow_norm); then, unless there are more than DOF_NARROW_MAX,
+ * each source block's working colour (level 0) recomputed from the colour with the sources'
+ * excess taken out (dof_prepare's 2x2 mean, same order). */
+__kernel void dof_narrow_list(__global const float *restrict src, __global const float *restrict coc,
+                              __global float *restrict lv, __global const int *restrict flag,
+                              __global int *restrict ncount, __global float8 *restrict nrec,
+                              const int width, const int height, const int ww, const int hw, const int pad,
+                              const int ncx, const int ncy, const int blades, const float phi0,
+                              const float roundness, const float sa, const float inv_area)
+{
+    const int cx = get_global_id(0), cy = get_global_id(1);
+    if (cx >= ncx || cy >= ncy) return;
+    const int cw = DOF_NARROW_CELL / DOF_SCALE;
+    const int pw = DOF_PW(ww, pad);
+    const size_t pn = (size_t)pw * DOF_PW(hw, pad), n = (size_t)width * height;
+    const int rdy[8] = {-2, -2, -2, 0, 0, 2, 2, 2}, rdx[8] = {-2, 0, 2, -2, 2, -2, 0, 2};
+    __global float8 *rec = nrec + (size_t)(cy * ncx + cx) * DOF_NARROW_MAX;
+    int count = 0;
+    for (int py = cy * cw; py < min((cy + 1) * cw, hw); ++py)
+        for (int px = cx * cw; px < min((cx + 1) * cw, ww); ++px) {
+            const int k = flag[(size_t)py * ww + px];
+            if (k < 0)
+                continue;
+            const size_t ob = (size_t)(py + rdy[k] + pad) * pw + px + rdx[k] + pad;
+            const float3 bg = (float3)(lv[ob], lv[pn + ob], lv[2 * pn + ob]);
+            const float bgy = DOF_LUMA_R * bg.x + DOF_LUMA_G * bg.y + DOF_LUMA_B * bg.z;
+            for (int b = 0; b < DOF_SCALE; ++b)
+                for (int a = 0; a < DOF_SCALE; ++a) {
+                    const int y = DOF_SCALE * py + b, x = DOF_SCALE * px + a;
+                    const size_t i = (size_t)y * width + x;
+                    /* the block is >= 2 working px from the edge: the 3x3 lies in the image */
+                    float m3 = INFINITY;
+                    for (int v = -1; v <= 1; ++v)
+                        for (int u = -1; u <= 1; ++u)
+                            m3 = fmin(m3, fabs(coc[i + (long)v * width + u]));
+                    const float3 e = fmax((float3)(src[i], src[n + i], src[2 * n + i]) - bg, 0.0f);
+                    const float ey = DOF_LUMA_R * e.x + DOF_LUMA_G * e.y + DOF_LUMA_B * e.z;
+                    const float rq = coc[i];
+                    if (!(m3 >= DOF_NARROW_MIN && ey > DOF_NARROW_CONTRAST * bgy * M_PI_F * rq * rq))
+                        continue;
+                    if (count < DOF_NARROW_MAX) {
+                        const float r = fmax(fabs(rq), 0.5f);
+                        const int kk = (int)ceil(r) + 1;
+                        float ws = 0.0f;
+                        for (int v = -kk; v <= kk; ++v)
+                            for (int u = -kk; u <= kk; ++u)
+                                ws += dof_narrow_w((float)u, (float)v, rq, r, blades, phi0, roundness, sa, inv_area);
+                        rec[count] = (float8)((float)x, (float)y, rq, e.x, e.y, e.z, 1.0f / ws, 0.0f);
+                    }
+                    ++count;
+                }
+        }
+    if (count > DOF_NARROW_MAX) {
+        ncount[cy * ncx + cx] = 0;
+        return;
+    }
+    ncount[cy * ncx + cx] = count;
+    /* the source blocks' working colour without the sources' excess; a block's sources are
+     * consecutive records */
+    for (int j = 0; j < count; ) {
+        const int px = (int)rec[j].s0 / DOF_SCALE, py = (int)rec[j].s1 / DOF_SCALE;
+        float3 p[DOF_SCALE][DOF_SCALE];
+        for (int b = 0; b < DOF_SCALE; ++b)
+            for (int a = 0; a < DOF_SCALE; ++a) {
+                const size_t i = (size_t)(DOF_SCALE * py + b) * width + DOF_SCALE * px + a;
+                p[b][a] = (float3)(src[i], src[n + i], src[2 * n + i]);
+            }
+        for (; j < count && (int)rec[j].s0 / DOF_SCALE == px && (int)rec[j].s1 / DOF_SCALE == py; ++j) {
+            const float8 s = rec[j];
+            p[(int)s.s1 - DOF_SCALE * py][(int)s.s0 - DOF_SCALE * px] -= (float3)(s.s3, s.s4, s.s5);
+        }
+        const size_t o = (size_t)(py + pad) * pw + px + pad;
+#if DOF_SCALE == 2
+        const float3 c = 0.25f * (((p[0][0] + p[0][1]) + p[1][0]) + p[1][1]);
+#else
+        const float3 c = p[0][0];
+#endif
+        lv[o] = c.x; lv[pn + o] = c.y; lv[2 * pn + o] = c.z;
+    }
+}
+
+/* The layer's light at output pixels x .. x + 15 of row y (narrow_layer): the sources of the
+ * cells within the largest CoC (+1 px), each spread with its own radius over a pixel it is in
+ * front of, else with the smaller of its own and the pixel's radius times 1 - the upsampled
+ * front coverage `ua`; scaled by 1 / its weight sum. */
+inline void dof_narrow16(__global const int *restrict ncount, __global const float8 *restrict nrec,
+                         const int ncx, const int ncy, const int x, const int y, const float16 r,
+                         const float16 ua, const int blades, const float phi0, const float roundness,
+                         const float sa, const float inv_area, float16 *o_r, float16 *o_g, float16 *o_b)
+{
+    const int reach = DOF_SCALE * DOF_RMAX + 1;
+    const int cx0 = max(x - reach, 0) / DOF_NARROW_CELL, cx1 = min((x + 15 + reach) / DOF_NARROW_CELL, ncx - 1);
+    const int cy0 = max(y - reach, 0) / DOF_NARROW_CELL, cy1 = min((y + reach) / DOF_NARROW_CELL, ncy - 1);
+    const float16 xs = (float16)((float)x) + (float16)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f, 8.0f, 9.0f,
+                                                      10.0f, 11.0f, 12.0f, 13.0f, 14.0f, 15.0f);
+    for (int cy = cy0; cy <= cy1; ++cy)
+        for (int cx = cx0; cx <= cx1; ++cx) {
+            const int cn = ncount[cy * ncx + cx];
+            __global const float8 *rec = nrec + (size_t)(cy * ncx + cx) * DOF_NARROW_MAX;
+            for (int j = 0; j < cn; ++j) {
+                const float8 s = rec[j];
+                const float rs = fmax(fabs(s.s2), 0.5f);
+                /* a source reaches rs + 1/2 px (rho <= 1, the 1-px ramp) */
+                if (fabs(s.s1 - (float)y) > rs + 0.5f || s.s0 < (float)x - rs - 0.5f || s.s0 > (float)x + 15.5f + rs)
+                    continue;
+                float t[16];
+                float wl[16], rl[16];
+                vstore16(r, 0, rl);
+                vstore16(ua, 0, t);
+                for (int l = 0; l < 16; ++l) {
+                    const float rp = rl[l];
+                    const int behind = s.s2 > rp + DOF_FRONT_MARGIN;
+                    const float rad = behind ? fmin(fmax(fabs(rp), 0.5f), rs) : rs;
+                    const float w = dof_narrow_w(s.s0 - (float)(x + l), s.s1 - (float)y, s.s2, rad, blades, phi0,
+                                                 roundness, sa, inv_area);
+                    wl[l] = (s.s2 < rp - DOF_FRONT_MARGIN ? w : w * (1.0f - t[l])) * s.s6;
+                }
+                const float16 wv = vload16(0, wl);
+                *o_r += wv * s.s3; *o_g += wv * s.s4; *o_b += wv * s.s5;
+            }
+        }
+}
