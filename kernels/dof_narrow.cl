@@ -11,9 +11,8 @@
 #define DOF_NY16(o) (DOF_LUMA_R * vload16(0, lv + (o)) + DOF_LUMA_G * vload16(0, lv + pn + (o)) \
                      + DOF_LUMA_B * vload16(0, lv + 2 * pn + (o)))
 
-/* Candidate blocks: per working pixel, the index (0..7) of the dimmest of its 8 working neighbours
- * at distance 2 (NARROW_RING: (-2,-2), (-2,0), (-2,2), (0,-2), (0,2), (2,-2), (2,0), (2,2); the
- * first dimmest) when its luminance is above DOF_NARROW_RATIO x that neighbour's, else -1; -1 too
+/* Candidate blocks: per working pixel, the index (0..7) of the third brightest of its 8 working
+ * neighbours at distance 2 (NARROW_RING: (-2,-2), (-2,0), (-2,2), (0,-2), (0,2), (2,-2), (2,0), (2,2)) when its luminance is above DOF_NARROW_RATIO x that neighbour's, else -1; -1 too
  * within 2 of the working image's edge. 16 working pixels of a row per work-item (the padding
  * covers the ring's reads); launched over (ceil(ww / 16), hw). */
 __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *restrict flag,
@@ -25,10 +24,15 @@ __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *r
     const size_t pn = (size_t)pw * DOF_PW(hw, pad);
     const size_t o = (size_t)(y + pad) * pw + x + pad;
     const float16 yp = DOF_NY16(o);
-    float16 m = DOF_NY16(o - 2 * pw - 2);
-    int16 k = (int16)(0);
-#define DOF_RING(i, off) { const float16 v = DOF_NY16(o + (off)); const int16 lt = v < m; \
-                           m = select(m, v, lt); k = select(k, (int16)(i), lt); }
+    /* the three brightest (m1 >= m2 >= m3, an earlier one ranks above an equal later one) and
+     * the third's index */
+    float16 m1 = DOF_NY16(o - 2 * pw - 2), m2 = (float16)(-INFINITY), m3 = m2;
+    int16 k1 = (int16)(0), k2 = (int16)(-1), k3 = k2;
+#define DOF_RING(i, off) { const float16 v = DOF_NY16(o + (off)); \
+        const int16 g1 = v > m1, g2 = v > m2, g3 = v > m3; \
+        m3 = select(m3, select(v, m2, g2), g3); k3 = select(k3, select((int16)(i), k2, g2), g3); \
+        m2 = select(m2, select(v, m1, g1), g2); k2 = select(k2, select((int16)(i), k1, g1), g2); \
+        m1 = select(m1, v, g1); k1 = select(k1, (int16)(i), g1); }
     DOF_RING(1, -2 * (long)pw)
     DOF_RING(2, -2 * (long)pw + 2)
     DOF_RING(3, -2)
@@ -39,7 +43,7 @@ __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *r
 #undef DOF_RING
     const int16 xs = (int16)(x) + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     const int16 inside = (xs >= 2) & (xs <= ww - 3) & (int16)(y >= 2 && y <= hw - 3 ? -1 : 0);
-    const int16 out = select((int16)(-1), k, inside & (yp > DOF_NARROW_RATIO * m));
+    const int16 out = select((int16)(-1), k3, inside & (yp > DOF_NARROW_RATIO * m3));
     if (x + 16 <= ww) {
         vstore16(out, 0, flag + (size_t)y * ww + x);
     } else {

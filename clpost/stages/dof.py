@@ -1041,9 +1041,10 @@ class Dof(GatherStage):
 # ---------------------------------------------------------------------------------------------
 
 NARROW_RATIO = 4.0
-"""A working pixel (2×2 block) brighter than this × the dimmest of its 8 working neighbours at
-distance 2 (3–5 px away) holds a *narrow source* candidate: a light a few pixels wide
-(:func:`narrow_sources`)."""
+"""A working pixel (2×2 block) brighter than this × the third brightest of its 8 working
+neighbours at distance 2 (3–5 px away) holds a *narrow source* candidate: a light a few pixels
+wide, a peak on nearly every side — two of the 8 may be bright (its own fringe, a lamp beside
+it), while the edge or corner of a bright surface has at least three (:func:`narrow_sources`)."""
 NARROW_CONTRAST = 0.125
 r"""A candidate pixel is split off when its excess luminance spread over its disc,
 :math:`Y_e/(\pi r^2)`, is above this × the surround's :math:`Y_{bg}`: a disc that stands out of
@@ -1061,7 +1062,7 @@ NARROW_MAX = 64
 half-resolution path: a bounded cost per pixel whatever the input)."""
 NARROW_RING = ((-2, -2), (-2, 0), (-2, 2), (0, -2), (0, 2), (2, -2), (2, 0), (2, 2))
 """The working neighbours (dy, dx) a candidate block is compared with, in the kernel's order
-(the first dimmest wins a tie)."""
+(of equal ones the first ranks brighter)."""
 
 
 def narrow_split(camera, pm=None) -> bool:
@@ -1079,8 +1080,8 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     spread beyond (docs/fidelity.md, "The narrow-source layer").
 
     A working pixel P (not within 2 of the working image's edge) is a candidate block when its
-    luminance is above :data:`NARROW_RATIO` × that of the dimmest of its working neighbours at
-    distance 2 (:data:`NARROW_RING`; its colour is the surround's, bg). Each full-resolution pixel
+    luminance is above :data:`NARROW_RATIO` × that of the third brightest of its working
+    neighbours at distance 2 (:data:`NARROW_RING`; its colour is the surround's, bg). Each full-resolution pixel
     q of the block with every |CoC| of its 3×3 ≥ :data:`NARROW_MIN_PX` has the excess
     :math:`e_q = \max(c_q - bg, 0)` (per channel) and is a source when
     :math:`Y(e_q) > ` :data:`NARROW_CONTRAST` · Y(bg) · π r_q². Sources are listed per
@@ -1102,7 +1103,7 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     ac = np.abs(np.pad(c, 1, mode="edge"))
     m3 = np.min([ac[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
     ring = np.stack([yw[2 + dy:hw - 2 + dy, 2 + dx:ww - 2 + dx] for dy, dx in NARROW_RING])
-    kmin = np.argmin(ring, axis=0)  # the first dimmest, as the kernel
+    kmin = np.argsort(-ring, axis=0, kind="stable")[2]  # the third brightest (ties: the first), as the kernel
     bg_ys = np.take_along_axis(ring, kmin[None], 0)[0]
     cells: dict = {}
     for py, px in zip(*np.nonzero(yw[2:hw - 2, 2:ww - 2] > NARROW_RATIO * bg_ys)):
