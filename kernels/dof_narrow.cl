@@ -55,32 +55,39 @@ __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *r
 }
 #undef DOF_NY16
 
-/* the unit aperture's radius in direction phi (aperture_radius in clpost/stages/dof.py); phi0 =
- * -pi/2 - rotation */
-inline float dof_aperture(const float phi, const int blades, const float phi0, const float roundness)
-{
-    if (blades == 0)
-        return 1.0f;
-    const float seg = 2.0f * M_PI_F / (float)blades;
-    const float d = phi - phi0;
-    const float t = d - seg * floor(d / seg) - 0.5f * seg;
-    return (1.0f - roundness) * cos(M_PI_F / (float)blades) / cos(t) + roundness;
+/* r rho(o) - |o| and |o| for a source at offset o = (dx, dy) = q - p spread with radius r (narrow_weight
+ * in clpost/stages/dof.py): rho of the N-gon (corners on the unit circle, edge normals at
+ * phi0 + (i + 1/2) 2 pi / N) in the direction of o is cos(pi/N) |o| / max_i(o . n_i), blended with
+ * the circle by the roundness; the direction is p - q for a far source (flip the sign of o).
+ * Written for scalars and vectors (DOF_NW_T). */
+#define DOF_NARROW_W(DOF_NW_T, NAME) \
+inline DOF_NW_T NAME(const DOF_NW_T dx, const float dy, const float rq, const DOF_NW_T r, const int blades, \
+                     const float phi0, const float roundness, const float sa, const float inv_area) \
+{ \
+    const float sg = rq >= 0.0f ? -1.0f : 1.0f; \
+    const DOF_NW_T dist = sqrt(dx * dx + dy * dy); \
+    DOF_NW_T rho = (DOF_NW_T)(1.0f); \
+    if (blades > 0) { \
+        const float seg = 2.0f * M_PI_F / (float)blades; \
+        DOF_NW_T m = (DOF_NW_T)(-INFINITY); \
+        for (int i = 0; i < blades; ++i) { \
+            const float psi = phi0 + ((float)i + 0.5f) * seg; \
+            m = fmax(m, sg * (dx * cos(psi) + dy * sin(psi))); \
+        } \
+        rho = (1.0f - roundness) * select(cos(0.5f * seg) * dist / m, (DOF_NW_T)(1.0f), m <= 0.0f) + roundness; \
+    } \
+    const DOF_NW_T rr = r * rho; \
+    DOF_NW_T w = clamp(rr - dist + 0.5f, 0.0f, 1.0f); \
+    DOF_NW_TEXTURE \
+    return w * inv_area / (r * r); \
 }
-
-/* narrow_weight: a source of signed CoC rq at offset (dx, dy) = q - p spread with radius r */
-inline float dof_narrow_w(const float dx, const float dy, const float rq, const float r, const int blades,
-                          const float phi0, const float roundness, const float sa, const float inv_area)
-{
-    const int far = rq >= 0.0f;
-    const float rr = r * dof_aperture(far ? atan2(-dy, -dx) : atan2(dy, dx), blades, phi0, roundness);
-    const float dist = sqrt(dx * dx + dy * dy);
-    float w = clamp(rr - dist + 0.5f, 0.0f, 1.0f);
 #if DOF_TEXTURE
-    const float t = fmin(dist / rr, 1.0f);
-    w *= 1.0f + (far ? -sa : sa) * (2.0f * t * t - 1.0f);
+#define DOF_NW_TEXTURE w *= 1.0f + (sg < 0.0f ? -sa : sa) * (2.0f * fmin(dist / rr, 1.0f) * fmin(dist / rr, 1.0f) - 1.0f);
+#else
+#define DOF_NW_TEXTURE
 #endif
-    return w * inv_area / (r * r);
-}
+DOF_NARROW_W(float, dof_narrow_w)
+DOF_NARROW_W(float16, dof_narrow_w16)
 
 /* One work-item per cell: the cell's sources in scan order (working rows, then the block's rows),
  * each with 1 / its weight sum (narrow_norm); then, unless there are more than DOF_NARROW_MAX,
@@ -164,6 +171,21 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
     }
 }
 
+/* Per cell, the number of sources listed in the cells within the largest CoC (+1 px) of it: the
+ * upsampling's work-items of a cell with none skip the layer after one read. `ncount`: the own
+ * counts (read), then these (written; two planes, no overlap). */
+__kernel void dof_narrow_near(__global int *ncount, const int ncx, const int ncy)
+{
+    const int cx = get_global_id(0), cy = get_global_id(1);
+    if (cx >= ncx || cy >= ncy) return;
+    const int k = (DOF_SCALE * DOF_RMAX + 1 + DOF_NARROW_CELL - 1) / DOF_NARROW_CELL;
+    int t = 0;
+    for (int y = max(cy - k, 0); y <= min(cy + k, ncy - 1); ++y)
+        for (int x = max(cx - k, 0); x <= min(cx + k, ncx - 1); ++x)
+            t += ncount[y * ncx + x];
+    ncount[ncx * ncy + cy * ncx + cx] = t;
+}
+
 /* The layer's light at output pixels x .. x + 15 of row y (narrow_layer): the sources of the
  * cells within the largest CoC (+1 px), each spread with its own radius over a pixel it is in
  * front of, else with the smaller of its own and the pixel's radius times 1 - the upsampled
@@ -173,6 +195,8 @@ inline void dof_narrow16(__global const int *restrict ncount, __global const flo
                          const float16 ua, const int blades, const float phi0, const float roundness,
                          const float sa, const float inv_area, float16 *o_r, float16 *o_g, float16 *o_b)
 {
+    if (!ncount[ncx * ncy + (y / DOF_NARROW_CELL) * ncx + x / DOF_NARROW_CELL])  /* nnear: none in reach */
+        return;
     const int reach = DOF_SCALE * DOF_RMAX + 1;
     const int cx0 = max(x - reach, 0) / DOF_NARROW_CELL, cx1 = min((x + 15 + reach) / DOF_NARROW_CELL, ncx - 1);
     const int cy0 = max(y - reach, 0) / DOF_NARROW_CELL, cy1 = min((y + reach) / DOF_NARROW_CELL, ncy - 1);
@@ -188,19 +212,11 @@ inline void dof_narrow16(__global const int *restrict ncount, __global const flo
                 /* a source reaches rs + 1/2 px (rho <= 1, the 1-px ramp) */
                 if (fabs(s.s1 - (float)y) > rs + 0.5f || s.s0 < (float)x - rs - 0.5f || s.s0 > (float)x + 15.5f + rs)
                     continue;
-                float t[16];
-                float wl[16], rl[16];
-                vstore16(r, 0, rl);
-                vstore16(ua, 0, t);
-                for (int l = 0; l < 16; ++l) {
-                    const float rp = rl[l];
-                    const int behind = s.s2 > rp + DOF_FRONT_MARGIN;
-                    const float rad = behind ? fmin(fmax(fabs(rp), 0.5f), rs) : rs;
-                    const float w = dof_narrow_w(s.s0 - (float)(x + l), s.s1 - (float)y, s.s2, rad, blades, phi0,
-                                                 roundness, sa, inv_area);
-                    wl[l] = (s.s2 < rp - DOF_FRONT_MARGIN ? w : w * (1.0f - t[l])) * s.s6;
-                }
-                const float16 wv = vload16(0, wl);
+                const float16 rs16 = (float16)(rs);
+                const float16 rad = select(rs16, fmin(fmax(fabs(r), 0.5f), rs16), s.s2 > r + DOF_FRONT_MARGIN);
+                const float16 w = dof_narrow_w16(s.s0 - xs, s.s1 - (float)y, s.s2, rad, blades, phi0, roundness, sa,
+                                                 inv_area);
+                const float16 wv = select(w * (1.0f - ua), w, s.s2 < r - DOF_FRONT_MARGIN) * s.s6;
                 *o_r += wv * s.s3; *o_g += wv * s.s4; *o_b += wv * s.s5;
             }
         }

@@ -100,7 +100,7 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
     if defines.get("DOF_NARROW"):
         ncx, ncy = -(-w // D.NARROW_CELL), -(-h // D.NARROW_CELL)
         narrow = {"ncx": ncx, "ncy": ncy, "flag": scratch("nflag", (hw, ww), np.int32),
-                  "ncount": scratch("ncount", (ncy, ncx), np.int32),
+                  "ncount": scratch("ncount", (2, ncy, ncx), np.int32),  # own counts, then dof_narrow_near's
                   "nrec": scratch("nrec", (ncy * ncx * D.NARROW_MAX, 8))}
     return {
         "narrow": narrow,
@@ -139,6 +139,8 @@ def _enqueue_plan(rt, c, src, coc, w, h):
                                       i32(c["ww"]), i32(c["hw"]), i32(c["pad"]), i32(nw["ncx"]), i32(nw["ncy"]),
                                       *c["aperture"])
         evs.append(_launch(rt, k["dof_narrow_list"], (nw["ncx"], nw["ncy"]), 4))
+        k["dof_narrow_near"].set_args(nw["ncount"], i32(nw["ncx"]), i32(nw["ncy"]))
+        evs.append(_launch(rt, k["dof_narrow_near"], (nw["ncx"], nw["ncy"]), 4))
     for lvl in range(c["nlev"]):
         k["dof_levels"].set_args(c["lv"], i32(c["pw"]), i32(c["ph"]), i32(2 ** lvl), i32(lvl))
         evs.append(_launch_rows(rt, k["dof_levels"], (c["pw"], c["ph"])))
