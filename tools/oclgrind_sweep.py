@@ -24,11 +24,16 @@ SIZES = ((1, 1), (3, 2), (17, 5), (37, 23))
 """Odd sizes; 37×23 is not a multiple of the 16-pixel tiles and vectors in either direction."""
 
 
-def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0, intrinsics=None, labels=0):
+def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0, intrinsics=None, labels=0,
+           lights=False):
     from clpost import Frame
 
     rng = np.random.default_rng(seed + 7919 * w + h)
     color = (rng.random((h, w, 3)) * scale).astype(np.float32)
+    if lights:  # small bright lights (dof's narrow-source layer): 2x2 at 100x, every 9 px, one at each edge
+        for y in list(range(4, h - 1, 9)) + [0, h - 2]:
+            for x in list(range(5, w - 1, 9)) + [0, w - 2]:
+                color[max(y, 0):y + 2, max(x, 0):x + 2] = 100.0 * scale
     d = rng.uniform(0.3, 30.0, (h, w)).astype(np.float32) if depth else None
     v = (rng.standard_normal((h, w, 2)) * velocity).astype(np.float32) if velocity else None
     meta = {"frame_index": 3}
@@ -102,6 +107,11 @@ def cases():
             sizes = SIZES if (label == "round" and q == "final") else ((3, 2), (37, 23))
             for w, h in sizes:
                 add(f"dof-{label} {q} {w}x{h}", lambda cam=cam, q=q, w=w, h=h: _run(cam, ["dof"], q, w, h))
+    # the narrow-source layer (draft, preview): lights on a defocused scene, the cells' borders crossed
+    for q in ("draft", "preview"):
+        for w, h in ((37, 23), (141, 75)):
+            add(f"dof-lights {q} {w}x{h}", lambda q=q, w=w, h=h: _run(
+                dof_sized(dof_cams["blades"]), ["dof"], q, w, h, lights=True, scale=0.5))
 
     aberr = replace(base, f_number=2.0, field_curvature_mm=-0.14, astigmatism_mm=0.11, coma_mm=0.087,
                     lateral_color_mm=0.007)
