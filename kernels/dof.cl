@@ -390,16 +390,33 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
         wsum += gr; }
 
 /* The narrow-source layer (dof_narrow.cl, prepended to this program): its arguments, and its
- * light at the 16 pixels (lr, lg, lb; 0 without DOF_NARROW), added after the composite. */
+ * light added to the 16 pixels after the composite is stored (nothing without DOF_NARROW). */
 #define DOF_NARROW_PARAMS __global const int *restrict ncount, __global const float8 *restrict nrec, \
-    const int ncx, const int ncy, const int nblades, const float phi0, const float roundness, const float nsa, \
-    const float ninv_area
-#define DOF_NARROW_ARGS ncount, nrec, ncx, ncy, nblades, phi0, roundness, nsa, ninv_area
+    const int ncx, const int ncy, __global const float2 *restrict normals, const int nblades, const float kpoly, \
+    const float roundness, const float nsa, const float ninv_area
+#define DOF_NARROW_ARGS ncount, nrec, ncx, ncy, normals, nblades, kpoly, roundness, nsa, ninv_area
 #if DOF_NARROW
-#define DOF_NARROW_ADD(UA) float16 lr = (float16)(0.0f), lg = lr, lb = lr; \
-    dof_narrow16(ncount, nrec, ncx, ncy, x, y, r, (UA), nblades, phi0, roundness, nsa, ninv_area, &lr, &lg, &lb);
+/* after the 16 pixels are stored: where a source is in reach of the cell (`nnear`), add the layer
+ * to them (read back, add, store; `nl` lanes inside the image) */
+#define DOF_NARROW_NEAR ncount[ncx * ncy + (y / DOF_NARROW_CELL) * ncx + x / DOF_NARROW_CELL]
+#define DOF_NARROW_APPLY(UA, NL) if (near) { \
+        float16 o3[3]; \
+        for (int c = 0; c < 3; ++c) { \
+            float t[16]; \
+            for (int l = 0; l < 16; ++l) t[l] = l < (NL) ? dst[c * n + i + l] : 0.0f; \
+            o3[c] = vload16(0, t); \
+        } \
+        dof_narrow16(ncount, nrec, ncx, ncy, x, y, r, (UA), normals, nblades, kpoly, roundness, nsa, ninv_area, \
+                     &o3[0], &o3[1], &o3[2]); \
+        for (int c = 0; c < 3; ++c) { \
+            float t[16]; \
+            vstore16(o3[c], 0, t); \
+            for (int l = 0; l < (NL); ++l) dst[c * n + i + l] = t[l]; \
+        } \
+    }
 #else
-#define DOF_NARROW_ADD(UA) const float16 lr = (float16)(0.0f), lg = lr, lb = lr;
+#define DOF_NARROW_NEAR 0
+#define DOF_NARROW_APPLY(UA, NL)
 #endif
 
 #if DOF_SCALE == 2
@@ -486,11 +503,12 @@ inline void dof_upsample16(__global const float *restrict src, __global const fl
     const float16 inv = 1.0f / wsum;
     const float16 b = fmax(DOF_HALF_B(r), aa * inv);
     ar *= inv; ag *= inv; ab *= inv;
-    DOF_NARROW_ADD(aa * inv)
+    const int near = DOF_NARROW_NEAR;
+    const float16 ua = aa * inv;
     const int16 whole = b >= 1.0f;
     if (all(whole)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
-        dof_store16(ar + lr, dst, i, nlanes); dof_store16(ag + lg, dst + n, i, nlanes);
-        dof_store16(ab + lb, dst + 2 * n, i, nlanes);
+        dof_store16(ar, dst, i, nlanes); dof_store16(ag, dst + n, i, nlanes); dof_store16(ab, dst + 2 * n, i, nlanes);
+        DOF_NARROW_APPLY(ua, nlanes)
         return;
     }
     /* the full-resolution 3x3 blur (dof_local_px), lane-wise; rows clamped to the image */
@@ -527,9 +545,10 @@ inline void dof_upsample16(__global const float *restrict src, __global const fl
         cg = select(tg * ic, sg, sharp);
         cb = select(tb * ic, sb, sharp);
     }
-    dof_store16(select(cr + (ar - cr) * b, ar, whole) + lr, dst, i, nlanes);
-    dof_store16(select(cg + (ag - cg) * b, ag, whole) + lg, dst + n, i, nlanes);
-    dof_store16(select(cb + (ab - cb) * b, ab, whole) + lb, dst + 2 * n, i, nlanes);
+    dof_store16(select(cr + (ar - cr) * b, ar, whole), dst, i, nlanes);
+    dof_store16(select(cg + (ag - cg) * b, ag, whole), dst + n, i, nlanes);
+    dof_store16(select(cb + (ab - cb) * b, ab, whole), dst + 2 * n, i, nlanes);
+    DOF_NARROW_APPLY(ua, nlanes)
 }
 #endif
 
@@ -577,10 +596,12 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         const float16 inv = 1.0f / wsum;
         const float16 b = fmax(DOF_HALF_B(r), aa * inv);
         ar *= inv; ag *= inv; ab *= inv;
-        DOF_NARROW_ADD(aa * inv)
+        const int near = DOF_NARROW_NEAR;
+        const float16 ua = aa * inv;
         const int16 whole_ = b >= 1.0f;
         if (all(whole_)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
-            vstore16(ar + lr, 0, dst + i); vstore16(ag + lg, 0, dst + n + i); vstore16(ab + lb, 0, dst + 2 * n + i);
+            vstore16(ar, 0, dst + i); vstore16(ag, 0, dst + n + i); vstore16(ab, 0, dst + 2 * n + i);
+            DOF_NARROW_APPLY(ua, 16)
             return;
         }
         /* the full-resolution 3x3 blur (dof_local_px), lane-wise; columns x - 1 .. x + 16 lie in
@@ -599,9 +620,10 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         const int16 sharp = !need;
         if (all(sharp | whole_)) {  /* no pixel needs the 3x3's taps: its colour is the source's */
             const float16 sr = vload16(0, src + i), sg = vload16(0, src + n + i), sb = vload16(0, src + 2 * n + i);
-            vstore16(select(sr + (ar - sr) * b, ar, whole_) + lr, 0, dst + i);
-            vstore16(select(sg + (ag - sg) * b, ag, whole_) + lg, 0, dst + n + i);
-            vstore16(select(sb + (ab - sb) * b, ab, whole_) + lb, 0, dst + 2 * n + i);
+            vstore16(select(sr + (ar - sr) * b, ar, whole_), 0, dst + i);
+            vstore16(select(sg + (ag - sg) * b, ag, whole_), 0, dst + n + i);
+            vstore16(select(sb + (ab - sb) * b, ab, whole_), 0, dst + 2 * n + i);
+            DOF_NARROW_APPLY(ua, 16)
             return;
         }
         float16 cr = (float16)(0.0f), cg = cr, cb = cr, cw = cr;
@@ -624,9 +646,10 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         cr = select(cr * ic, vload16(0, src + i), sharp);
         cg = select(cg * ic, vload16(0, src + n + i), sharp);
         cb = select(cb * ic, vload16(0, src + 2 * n + i), sharp);
-        vstore16(select(cr + (ar - cr) * b, ar, whole) + lr, 0, dst + i);
-        vstore16(select(cg + (ag - cg) * b, ag, whole) + lg, 0, dst + n + i);
-        vstore16(select(cb + (ab - cb) * b, ab, whole) + lb, 0, dst + 2 * n + i);
+        vstore16(select(cr + (ar - cr) * b, ar, whole), 0, dst + i);
+        vstore16(select(cg + (ag - cg) * b, ag, whole), 0, dst + n + i);
+        vstore16(select(cb + (ab - cb) * b, ab, whole), 0, dst + 2 * n + i);
+        DOF_NARROW_APPLY(ua, 16)
         return;
     }
     /* the groups at the image's left/right end: the same formulas, loads clamped per lane */

@@ -13,17 +13,36 @@
 
 /* Candidate blocks: per working pixel, the index (0..7) of the third brightest of its 8 working
  * neighbours at distance 2 (NARROW_RING: (-2,-2), (-2,0), (-2,2), (0,-2), (0,2), (2,-2), (2,0), (2,2)) when its luminance is above DOF_NARROW_RATIO x that neighbour's, else -1; -1 too
- * within 2 of the working image's edge. 16 working pixels of a row per work-item (the padding
- * covers the ring's reads); launched over (ceil(ww / 16), hw). */
+ * within 2 of the working image's edge; `gflag` per group of 16 (ceil(ww / 16) a row): whether
+ * one of them is a candidate. 16 working pixels of a row per work-item (the padding covers the
+ * ring's reads); launched over (ceil(ww / 16), hw). */
 __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *restrict flag,
-                              const int ww, const int hw, const int pad)
+                              __global int *restrict gflag, const int ww, const int hw, const int pad)
 {
     const int x = 16 * get_global_id(0), y = get_global_id(1);
     if (x >= ww || y >= hw) return;
     const int pw = DOF_PW(ww, pad);
     const size_t pn = (size_t)pw * DOF_PW(hw, pad);
     const size_t o = (size_t)(y + pad) * pw + x + pad;
+    const int ngx = (ww + 15) / 16;
     const float16 yp = DOF_NY16(o);
+    const int16 xs = (int16)(x) + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const int16 inside = (xs >= 2) & (xs <= ww - 3) & (int16)(y >= 2 && y <= hw - 3 ? -1 : 0);
+    /* the third brightest of the 8 is at least the dimmest of any 3 of them: when three are each
+     * >= yp / DOF_NARROW_RATIO for every lane, no lane is a candidate (most of an image) */
+    const float16 ya = DOF_NY16(o - 2 * pw), yb = DOF_NY16(o - 2), yc = DOF_NY16(o + 2);
+    const float16 lim = yp * (1.0f / DOF_NARROW_RATIO);
+    if (!any(inside & (ya < lim | yb < lim | yc < lim))) {
+        const int16 none = (int16)(-1);
+        if (x + 16 <= ww) {
+            vstore16(none, 0, flag + (size_t)y * ww + x);
+        } else {
+            for (int l = 0; l < ww - x; ++l)
+                flag[(size_t)y * ww + x + l] = -1;
+        }
+        gflag[(size_t)y * ngx + x / 16] = 0;
+        return;
+    }
     /* the three brightest (m1 >= m2 >= m3, an earlier one ranks above an equal later one) and
      * the third's index */
     float16 m1 = DOF_NY16(o - 2 * pw - 2), m2 = (float16)(-INFINITY), m3 = m2;
@@ -41,9 +60,8 @@ __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *r
     DOF_RING(6, 2 * (long)pw)
     DOF_RING(7, 2 * (long)pw + 2)
 #undef DOF_RING
-    const int16 xs = (int16)(x) + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    const int16 inside = (xs >= 2) & (xs <= ww - 3) & (int16)(y >= 2 && y <= hw - 3 ? -1 : 0);
     const int16 out = select((int16)(-1), k3, inside & (yp > DOF_NARROW_RATIO * m3));
+    gflag[(size_t)y * ngx + x / 16] = any(out >= 0);
     if (x + 16 <= ww) {
         vstore16(out, 0, flag + (size_t)y * ww + x);
     } else {
@@ -55,26 +73,25 @@ __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *r
 }
 #undef DOF_NY16
 
-/* r rho(o) - |o| and |o| for a source at offset o = (dx, dy) = q - p spread with radius r (narrow_weight
- * in clpost/stages/dof.py): rho of the N-gon (corners on the unit circle, edge normals at
- * phi0 + (i + 1/2) 2 pi / N) in the direction of o is cos(pi/N) |o| / max_i(o . n_i), blended with
- * the circle by the roundness; the direction is p - q for a far source (flip the sign of o).
- * Written for scalars and vectors (DOF_NW_T). */
+/* narrow_weight in clpost/stages/dof.py, for a source of signed CoC rq at offset o = (dx, dy) = q - p
+ * spread with radius r: rho of the N-gon (corners on the unit circle) in the direction of o is
+ * cos(pi/N) |o| / max_i(o . n_i) over its edge normals n_i (`normals`, the host's table at
+ * phi0 + (i + 1/2) 2 pi / N, phi0 = -pi/2 - rotation; `kpoly` = cos(pi/N)), blended with the circle
+ * by the roundness; the direction is p - q for a far source (o's sign flipped). The same angle as
+ * the reference's atan2 form, without a transcendental per lane. For scalars and vectors (DOF_NW_T). */
 #define DOF_NARROW_W(DOF_NW_T, NAME) \
 inline DOF_NW_T NAME(const DOF_NW_T dx, const float dy, const float rq, const DOF_NW_T r, const int blades, \
-                     const float phi0, const float roundness, const float sa, const float inv_area) \
+                     __global const float2 *normals, const float kpoly, const float roundness, const float sa, \
+                     const float inv_area) \
 { \
     const float sg = rq >= 0.0f ? -1.0f : 1.0f; \
     const DOF_NW_T dist = sqrt(dx * dx + dy * dy); \
     DOF_NW_T rho = (DOF_NW_T)(1.0f); \
     if (blades > 0) { \
-        const float seg = 2.0f * M_PI_F / (float)blades; \
         DOF_NW_T m = (DOF_NW_T)(-INFINITY); \
-        for (int i = 0; i < blades; ++i) { \
-            const float psi = phi0 + ((float)i + 0.5f) * seg; \
-            m = fmax(m, sg * (dx * cos(psi) + dy * sin(psi))); \
-        } \
-        rho = (1.0f - roundness) * select(cos(0.5f * seg) * dist / m, (DOF_NW_T)(1.0f), m <= 0.0f) + roundness; \
+        for (int i = 0; i < blades; ++i) \
+            m = fmax(m, sg * (dx * normals[i].x + dy * normals[i].y)); \
+        rho = (1.0f - roundness) * select(kpoly * dist / m, (DOF_NW_T)(1.0f), m <= 0.0f) + roundness; \
     } \
     const DOF_NW_T rr = r * rho; \
     DOF_NW_T w = clamp(rr - dist + 0.5f, 0.0f, 1.0f); \
@@ -95,10 +112,12 @@ DOF_NARROW_W(float16, dof_narrow_w16)
  * excess taken out (dof_prepare's 2x2 mean, same order). */
 __kernel void dof_narrow_list(__global const float *restrict src, __global const float *restrict coc,
                               __global float *restrict lv, __global const int *restrict flag,
+                              __global const int *restrict gflag,
                               __global int *restrict ncount, __global float8 *restrict nrec,
                               const int width, const int height, const int ww, const int hw, const int pad,
-                              const int ncx, const int ncy, const int blades, const float phi0,
-                              const float roundness, const float sa, const float inv_area)
+                              const int ncx, const int ncy, __global const float2 *restrict normals,
+                              const int blades, const float kpoly, const float roundness, const float sa,
+                              const float inv_area)
 {
     const int cx = get_global_id(0), cy = get_global_id(1);
     if (cx >= ncx || cy >= ncy) return;
@@ -108,8 +127,14 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
     const int rdy[8] = {-2, -2, -2, 0, 0, 2, 2, 2}, rdx[8] = {-2, 0, 2, -2, 2, -2, 0, 2};
     __global float8 *rec = nrec + (size_t)(cy * ncx + cx) * DOF_NARROW_MAX;
     int count = 0;
+    float last_rq = NAN, last_norm = 0.0f;
+    const int ngx = (ww + 15) / 16;
     for (int py = cy * cw; py < min((cy + 1) * cw, hw); ++py)
         for (int px = cx * cw; px < min((cx + 1) * cw, ww); ++px) {
+            if (px % 16 == 0 && !gflag[(size_t)py * ngx + px / 16]) {  /* no candidate in these 16 */
+                px += 15;
+                continue;
+            }
             const int k = flag[(size_t)py * ww + px];
             if (k < 0)
                 continue;
@@ -131,13 +156,18 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
                     if (!(m3 >= DOF_NARROW_MIN && ey > DOF_NARROW_CONTRAST * bgy * M_PI_F * rq * rq))
                         continue;
                     if (count < DOF_NARROW_MAX) {
-                        const float r = fmax(fabs(rq), 0.5f);
-                        const int kk = (int)ceil(r) + 1;
-                        float ws = 0.0f;
-                        for (int v = -kk; v <= kk; ++v)
-                            for (int u = -kk; u <= kk; ++u)
-                                ws += dof_narrow_w((float)u, (float)v, rq, r, blades, phi0, roundness, sa, inv_area);
-                        rec[count] = (float8)((float)x, (float)y, rq, e.x, e.y, e.z, 1.0f / ws, 0.0f);
+                        if (rq != last_rq) {  /* a light's pixels mostly share one CoC: sum once */
+                            const float r = fmax(fabs(rq), 0.5f);
+                            const int kk = (int)ceil(r) + 1;
+                            float ws = 0.0f;
+                            for (int v = -kk; v <= kk; ++v)
+                                for (int u = -kk; u <= kk; ++u)
+                                    ws += dof_narrow_w((float)u, (float)v, rq, r, blades, normals, kpoly, roundness,
+                                                       sa, inv_area);
+                            last_rq = rq;
+                            last_norm = 1.0f / ws;
+                        }
+                        rec[count] = (float8)((float)x, (float)y, rq, e.x, e.y, e.z, last_norm, 0.0f);
                     }
                     ++count;
                 }
@@ -192,11 +222,10 @@ __kernel void dof_narrow_near(__global int *ncount, const int ncx, const int ncy
  * front coverage `ua`; scaled by 1 / its weight sum. */
 inline void dof_narrow16(__global const int *restrict ncount, __global const float8 *restrict nrec,
                          const int ncx, const int ncy, const int x, const int y, const float16 r,
-                         const float16 ua, const int blades, const float phi0, const float roundness,
-                         const float sa, const float inv_area, float16 *o_r, float16 *o_g, float16 *o_b)
+                         const float16 ua, __global const float2 *restrict normals, const int blades,
+                         const float kpoly, const float roundness, const float sa, const float inv_area,
+                         float16 *o_r, float16 *o_g, float16 *o_b)
 {
-    if (!ncount[ncx * ncy + (y / DOF_NARROW_CELL) * ncx + x / DOF_NARROW_CELL])  /* nnear: none in reach */
-        return;
     const int reach = DOF_SCALE * DOF_RMAX + 1;
     const int cx0 = max(x - reach, 0) / DOF_NARROW_CELL, cx1 = min((x + 15 + reach) / DOF_NARROW_CELL, ncx - 1);
     const int cy0 = max(y - reach, 0) / DOF_NARROW_CELL, cy1 = min((y + reach) / DOF_NARROW_CELL, ncy - 1);
@@ -214,8 +243,8 @@ inline void dof_narrow16(__global const int *restrict ncount, __global const flo
                     continue;
                 const float16 rs16 = (float16)(rs);
                 const float16 rad = select(rs16, fmin(fmax(fabs(r), 0.5f), rs16), s.s2 > r + DOF_FRONT_MARGIN);
-                const float16 w = dof_narrow_w16(s.s0 - xs, s.s1 - (float)y, s.s2, rad, blades, phi0, roundness, sa,
-                                                 inv_area);
+                const float16 w = dof_narrow_w16(s.s0 - xs, s.s1 - (float)y, s.s2, rad, blades, normals, kpoly,
+                                                 roundness, sa, inv_area);
                 const float16 wv = select(w * (1.0f - ua), w, s.s2 < r - DOF_FRONT_MARGIN) * s.s6;
                 *o_r += wv * s.s3; *o_g += wv * s.s4; *o_b += wv * s.s5;
             }

@@ -861,7 +861,7 @@ def test_narrow_source_layer_matches_the_reference(quality):
     bar = (yy > 90) & (yy < 100)
     depth[bar] = at(-6.0)
     color[bar] = (0.05, 0.05, 0.08)
-    lights = [(30, 30, 2.5), (63, 40, 3.0), (64, 64, 4.5), (150, 30, 2.0), (170, 60, 6.0), (1, 20, 3.0),
+    lights = [(30, 30, 2.5), (63, 40, 3.0), (64, 64, 4.5), (150, 30, 2.6), (170, 60, 6.0), (1, 20, 3.0),
               (80, 104, 4.0), (100, 20, 0.0)]
     for x, y, r in lights:
         color[y:y + 2, x:x + 2] = (60.0, 40.0, 20.0)
@@ -871,6 +871,6 @@ def test_narrow_source_layer_matches_the_reference(quality):
         color[y, x:x + 2] = 30.0
     frame = Frame(color.astype(np.float32), depth=depth.astype(np.float32))
     src, _ = D.narrow_sources(color, D.coc_px(cam, D.effective_depth(color, depth), w, limit_px=64), 2)
-    assert len(src) > 20  # the layer is exercised
+    assert len(src) >= 20  # the layer is exercised (4 pixels of each light split)
     out, pipe = run(cam, frame, quality)
     assert_matches_reference(pipe, frame, out, rtol=1e-3)

@@ -69,6 +69,16 @@ def gather_vector_width(rt) -> int:
     return 16 if getattr(rt.device, "native_vector_width_float", 8) >= 16 else 8
 
 
+def _edge_normals(blades: int, rotation_deg: float) -> np.ndarray:
+    """float2 per blade: the aperture polygon's unit edge normals, at φ0 + (i + ½)·2π/N with
+    φ0 = −π/2 − rotation (:func:`dof.aperture_radius`'s corners; the narrow-source layer's ρ,
+    dof_narrow.cl); one dummy entry for a round aperture."""
+    if blades == 0:
+        return np.zeros((1, 2), np.float32)
+    psi = -math.pi / 2 - math.radians(rotation_deg) + (np.arange(blades) + 0.5) * (2 * math.pi / blades)
+    return np.stack([np.cos(psi), np.sin(psi)], 1).astype(np.float32)
+
+
 def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=None):
     """Kernels and scratch buffers of one gather configuration (working resolution w/scale ×
     h/scale, max CoC ``rmax`` working px, lattice budget ``budget``). ``built``: levels to build
@@ -100,6 +110,7 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
     if defines.get("DOF_NARROW"):
         ncx, ncy = -(-w // D.NARROW_CELL), -(-h // D.NARROW_CELL)
         narrow = {"ncx": ncx, "ncy": ncy, "flag": scratch("nflag", (hw, ww), np.int32),
+                  "gflag": scratch("ngflag", (hw, -(-ww // 16)), np.int32),
                   "ncount": scratch("ncount", (2, ncy, ncx), np.int32),  # own counts, then dof_narrow_near's
                   "nrec": scratch("nrec", (ncy * ncx * D.NARROW_MAX, 8))}
     return {
@@ -115,7 +126,8 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
         "tmax": scratch("tmax", (th, tw)), "tn": scratch("tn", (th, tw), np.int32),
         "alpha": scratch("alpha", (hw, ww)),
         "blur": scratch("blur", (3, hw, ww)) if scale > 1 else None,
-        "aperture": (np.int32(camera.blades), np.float32(-math.pi / 2 - math.radians(camera.blade_rotation_deg)),
+        "aperture": (const("normals", _edge_normals(camera.blades, camera.blade_rotation_deg)),
+                     np.int32(camera.blades), np.float32(math.cos(math.pi / max(camera.blades, 1))),
                      np.float32(camera.aperture_roundness), np.float32(camera.spherical_aberration),
                      np.float32(1.0 / D.aperture_area(camera.blades, camera.blade_rotation_deg,
                                                       camera.aperture_roundness))),
@@ -133,11 +145,11 @@ def _enqueue_plan(rt, c, src, coc, w, h):
     evs.append(_launch_rows(rt, k["dof_prepare"], (c["pw"], c["ph"])))
     nw = c["narrow"]
     if nw:  # narrow sources: listed, and taken out of level 0 before the levels are built
-        k["dof_narrow_flag"].set_args(c["lv"], nw["flag"], i32(c["ww"]), i32(c["hw"]), i32(c["pad"]))
+        k["dof_narrow_flag"].set_args(c["lv"], nw["flag"], nw["gflag"], i32(c["ww"]), i32(c["hw"]), i32(c["pad"]))
         evs.append(_launch_rows(rt, k["dof_narrow_flag"], (c["ww"], c["hw"])))
-        k["dof_narrow_list"].set_args(src, coc, c["lv"], nw["flag"], nw["ncount"], nw["nrec"], i32(w), i32(h),
-                                      i32(c["ww"]), i32(c["hw"]), i32(c["pad"]), i32(nw["ncx"]), i32(nw["ncy"]),
-                                      *c["aperture"])
+        k["dof_narrow_list"].set_args(src, coc, c["lv"], nw["flag"], nw["gflag"], nw["ncount"], nw["nrec"],
+                                      i32(w), i32(h), i32(c["ww"]), i32(c["hw"]), i32(c["pad"]), i32(nw["ncx"]),
+                                      i32(nw["ncy"]), *c["aperture"])
         evs.append(_launch(rt, k["dof_narrow_list"], (nw["ncx"], nw["ncy"]), 4))
         k["dof_narrow_near"].set_args(nw["ncount"], i32(nw["ncx"]), i32(nw["ncy"]))
         evs.append(_launch(rt, k["dof_narrow_near"], (nw["ncx"], nw["ncy"]), 4))
