@@ -218,8 +218,8 @@ __kernel void dof_narrow_near(__global int *ncount, const int ncx, const int ncy
 
 /* The layer's light at output pixels x .. x + 15 of row y (narrow_layer): the sources of the
  * cells within the largest CoC (+1 px), each spread with its own radius over a pixel it is in
- * front of, else with the smaller of its own and the pixel's radius times 1 - the upsampled
- * front coverage `ua`; scaled by 1 / its weight sum. */
+ * front of or on the surface of, with the smaller of its own and the pixel's radius times 1 - the
+ * upsampled front coverage `ua` over a pixel in front of it; scaled by 1 / its weight sum. */
 inline void dof_narrow16(__global const int *restrict ncount, __global const float8 *restrict nrec,
                          const int ncx, const int ncy, const int x, const int y, const float16 r,
                          const float16 ua, __global const float2 *restrict normals, const int blades,
@@ -245,7 +245,7 @@ inline void dof_narrow16(__global const int *restrict ncount, __global const flo
                 const float16 rad = select(rs16, fmin(fmax(fabs(r), 0.5f), rs16), s.s2 > r + DOF_FRONT_MARGIN);
                 const float16 w = dof_narrow_w16(s.s0 - xs, s.s1 - (float)y, s.s2, rad, blades, normals, kpoly,
                                                  roundness, sa, inv_area);
-                const float16 wv = select(w * (1.0f - ua), w, s.s2 < r - DOF_FRONT_MARGIN) * s.s6;
+                const float16 wv = select(w, w * (1.0f - ua), s.s2 > r + DOF_FRONT_MARGIN) * s.s6;
                 *o_r += wv * s.s3; *o_g += wv * s.s4; *o_b += wv * s.s5;
             }
         }

@@ -1157,21 +1157,24 @@ def narrow_layer(sources: np.ndarray, coc: np.ndarray, alpha: np.ndarray, blades
     r"""The narrow sources spread at full resolution, added to the half-resolution composite:
     scatter-as-gather of each source q onto p with the full-resolution gather's weight
     (:func:`narrow_weight`), *unnormalised* per pixel (a sparse layer: each source's light is its
-    own; :func:`narrow_norm` makes its weights sum to 1): q nearer than p by more than
-    :data:`FRONT_MARGIN_PX` spreads over p with its own radius; otherwise with the smaller of
-    its own radius and p's (a sharper p in front of it is the background clamp of the gather; a
-    blurred foreground does not widen it), times 1 − α_p, the upsampled front-layer coverage (a
-    blurred foreground over p hides that much of what is behind it)."""
+    own; :func:`narrow_norm` makes its weights sum to 1): q nearer than p, or on p's surface
+    (within :data:`FRONT_MARGIN_PX`), spreads over p with its own radius; q behind p with the
+    smaller of its own radius and p's (a sharper p in front of it is the background clamp of the
+    gather; a blurred foreground does not widen it), times 1 − α_p, the upsampled front-layer
+    coverage (a blurred foreground over p hides that much of what is behind it). A source on p's
+    surface is not attenuated: the front coverage around a light is mostly its own block's (its
+    CoC is nearer than the sky's fringe pixels around it), whose colour the split left as the
+    surround's — attenuating by it lost h_lamps' lamp05 4 % of its light at draft."""
     h, w = coc.shape
     area = aperture_area(blades, rotation_deg, roundness)
     out = np.zeros((h, w, 3))
     ys, xs = np.mgrid[0:h, 0:w]
     rp = np.asarray(coc, dtype=np.float64)
     for x, y, rq, *e in sources:
-        front = rq < rp - FRONT_MARGIN_PX
+        behind = rq > rp + FRONT_MARGIN_PX
         rs = max(abs(rq), 0.5)
-        r = np.where(rq > rp + FRONT_MARGIN_PX, np.minimum(np.maximum(np.abs(rp), 0.5), rs), rs)
+        r = np.where(behind, np.minimum(np.maximum(np.abs(rp), 0.5), rs), rs)
         wgt = narrow_weight(x - xs, y - ys, rq, r, blades, rotation_deg, roundness, sa, area)
-        wgt = np.where(front, wgt, wgt * (1.0 - alpha)) * narrow_norm(rq, blades, rotation_deg, roundness, sa, area)
+        wgt = np.where(behind, wgt * (1.0 - alpha), wgt) * narrow_norm(rq, blades, rotation_deg, roundness, sa, area)
         out += wgt[..., None] * np.asarray(e)
     return out
