@@ -396,23 +396,22 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
     const float roundness, const float nsa, const float ninv_area
 #define DOF_NARROW_ARGS ncount, nrec, ncx, ncy, normals, nblades, kpoly, roundness, nsa, ninv_area
 #if DOF_NARROW
-/* after the 16 pixels are stored: where a source is in reach of the cell (`nnear`), add the layer
- * to them (read back, add, store; `nl` lanes inside the image) */
+/* after the 16 pixels are stored: where a source is in reach of the cell (`nnear`) and one of its
+ * discs reaches these pixels, add the layer to them (read back, add, store; NL lanes inside the image) */
 #define DOF_NARROW_NEAR ncount[ncx * ncy + (y / DOF_NARROW_CELL) * ncx + x / DOF_NARROW_CELL]
 #define DOF_NARROW_APPLY(UA, NL) if (near) { \
-        float16 o3[3]; \
-        for (int c = 0; c < 3; ++c) { \
-            float t[16]; \
-            for (int l = 0; l < 16; ++l) t[l] = l < (NL) ? dst[c * n + i + l] : 0.0f; \
-            o3[c] = vload16(0, t); \
-        } \
-        dof_narrow16(ncount, nrec, ncx, ncy, x, y, r, (UA), normals, nblades, kpoly, roundness, nsa, ninv_area, \
-                     &o3[0], &o3[1], &o3[2]); \
-        for (int c = 0; c < 3; ++c) { \
-            float t[16]; \
-            vstore16(o3[c], 0, t); \
-            for (int l = 0; l < (NL); ++l) dst[c * n + i + l] = t[l]; \
-        } \
+        float16 l3[3] = {(float16)(0.0f), (float16)(0.0f), (float16)(0.0f)}; \
+        if (dof_narrow16(ncount, nrec, ncx, ncy, x, y, r, (UA), normals, nblades, kpoly, roundness, nsa, \
+                         ninv_area, &l3[0], &l3[1], &l3[2])) \
+            for (int c = 0; c < 3; ++c) { \
+                if ((NL) == 16) { \
+                    vstore16(vload16(0, dst + c * n + i) + l3[c], 0, dst + c * n + i); \
+                } else { \
+                    float t[16]; \
+                    vstore16(l3[c], 0, t); \
+                    for (int l = 0; l < (NL); ++l) dst[c * n + i + l] += t[l]; \
+                } \
+            } \
     }
 #else
 #define DOF_NARROW_NEAR 0

@@ -219,8 +219,9 @@ __kernel void dof_narrow_near(__global int *ncount, const int ncx, const int ncy
 /* The layer's light at output pixels x .. x + 15 of row y (narrow_layer): the sources of the
  * cells within the largest CoC (+1 px), each spread with its own radius over a pixel it is in
  * front of or on the surface of, with the smaller of its own and the pixel's radius times 1 - the
- * upsampled front coverage `ua` over a pixel in front of it; scaled by 1 / its weight sum. */
-inline void dof_narrow16(__global const int *restrict ncount, __global const float8 *restrict nrec,
+ * upsampled front coverage `ua` over a pixel in front of it; scaled by 1 / its weight sum, added
+ * to *o_r, *o_g, *o_b. Returns whether a source's disc reached these pixels. */
+inline int dof_narrow16(__global const int *restrict ncount, __global const float8 *restrict nrec,
                          const int ncx, const int ncy, const int x, const int y, const float16 r,
                          const float16 ua, __global const float2 *restrict normals, const int blades,
                          const float kpoly, const float roundness, const float sa, const float inv_area,
@@ -231,6 +232,7 @@ inline void dof_narrow16(__global const int *restrict ncount, __global const flo
     const int cy0 = max(y - reach, 0) / DOF_NARROW_CELL, cy1 = min((y + reach) / DOF_NARROW_CELL, ncy - 1);
     const float16 xs = (float16)((float)x) + (float16)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f, 8.0f, 9.0f,
                                                       10.0f, 11.0f, 12.0f, 13.0f, 14.0f, 15.0f);
+    int touched = 0;
     for (int cy = cy0; cy <= cy1; ++cy)
         for (int cx = cx0; cx <= cx1; ++cx) {
             const int cn = ncount[cy * ncx + cx];
@@ -247,6 +249,8 @@ inline void dof_narrow16(__global const int *restrict ncount, __global const flo
                                                  roundness, sa, inv_area);
                 const float16 wv = select(w, w * (1.0f - ua), s.s2 > r + DOF_FRONT_MARGIN) * s.s6;
                 *o_r += wv * s.s3; *o_g += wv * s.s4; *o_b += wv * s.s5;
+                touched = 1;
             }
         }
+    return touched;
 }
