@@ -2,7 +2,8 @@
  * narrow_layer in clpost/stages/dof.py): small bright lights taken out of the working image and
  * spread at full resolution by dof_upsample (dof.cl, dof_narrow16).
  * Structural: DOF_SCALE, DOF_TILE, DOF_NARROW_CELL (cell edge, px), DOF_NARROW_MAX (sources per
- * cell), DOF_NARROW_RATIO, DOF_NARROW_CONTRAST, DOF_NARROW_MIN (px), DOF_LUMA_R/G/B, DOF_TEXTURE.
+ * cell), DOF_NARROW_RATIO, DOF_NARROW_CONTRAST, DOF_NARROW_MIN (px), DOF_NARROW_SUM (px), DOF_LUMA_R/G/B,
+ * DOF_TEXTURE.
  * Records: float8 (x, y, signed CoC px, e_R, e_G, e_B, 1 / the source's weight sum, 0) per source,
  * DOF_NARROW_MAX per cell; `ncount` per cell (0 when the cell had more than DOF_NARROW_MAX).
  */
@@ -158,12 +159,15 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
                     if (count < DOF_NARROW_MAX) {
                         if (rq != last_rq) {  /* a light's pixels mostly share one CoC: sum once */
                             const float r = fmax(fabs(rq), 0.5f);
-                            const int kk = (int)ceil(r) + 1;
-                            float ws = 0.0f;
-                            for (int v = -kk; v <= kk; ++v)
-                                for (int u = -kk; u <= kk; ++u)
-                                    ws += dof_narrow_w((float)u, (float)v, rq, r, blades, normals, kpoly, roundness,
-                                                       sa, inv_area);
+                            float ws = 1.0f;  /* from DOF_NARROW_SUM px on the disc's own integral */
+                            if (r < DOF_NARROW_SUM) {
+                                const int kk = (int)ceil(r) + 1;
+                                ws = 0.0f;
+                                for (int v = -kk; v <= kk; ++v)
+                                    for (int u = -kk; u <= kk; ++u)
+                                        ws += dof_narrow_w((float)u, (float)v, rq, r, blades, normals, kpoly,
+                                                           roundness, sa, inv_area);
+                            }
                             last_rq = rq;
                             last_norm = 1.0f / ws;
                         }
@@ -233,6 +237,8 @@ inline int dof_narrow16(__global const int *restrict ncount, __global const floa
     const float16 xs = (float16)((float)x) + (float16)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f, 8.0f, 9.0f,
                                                       10.0f, 11.0f, 12.0f, 13.0f, 14.0f, 15.0f);
     int touched = 0;
+    /* the aperture's smallest radius (the polygon's inscribed circle, blended by the roundness) */
+    const float rho_min = blades > 0 ? (1.0f - roundness) * kpoly + roundness : 1.0f;
     for (int cy = cy0; cy <= cy1; ++cy)
         for (int cx = cx0; cx <= cx1; ++cx) {
             const int cn = ncount[cy * ncx + cx];
@@ -243,13 +249,25 @@ inline int dof_narrow16(__global const int *restrict ncount, __global const floa
                 /* a source reaches rs + 1/2 px (rho <= 1, the 1-px ramp) */
                 if (fabs(s.s1 - (float)y) > rs + 0.5f || s.s0 < (float)x - rs - 0.5f || s.s0 > (float)x + 15.5f + rs)
                     continue;
+                touched = 1;
+                const int16 behind = s.s2 > r + DOF_FRONT_MARGIN;
+#if !DOF_TEXTURE
+                /* every lane well inside the disc (|o| <= r rho_min - 1/2: coverage 1 in any
+                 * direction) and none behind: the weight is the disc's constant 1 / (a_K r^2) */
+                const float dy = s.s1 - (float)y, rin = rs * rho_min - 0.5f;
+                const float16 dx = s.s0 - xs;
+                if (rin > 0.0f && !any(behind) && all(dx * dx + dy * dy <= rin * rin)) {
+                    const float wc = inv_area / (rs * rs) * s.s6;
+                    *o_r += wc * s.s3; *o_g += wc * s.s4; *o_b += wc * s.s5;
+                    continue;
+                }
+#endif
                 const float16 rs16 = (float16)(rs);
-                const float16 rad = select(rs16, fmin(fmax(fabs(r), 0.5f), rs16), s.s2 > r + DOF_FRONT_MARGIN);
+                const float16 rad = select(rs16, fmin(fmax(fabs(r), 0.5f), rs16), behind);
                 const float16 w = dof_narrow_w16(s.s0 - xs, s.s1 - (float)y, s.s2, rad, blades, normals, kpoly,
                                                  roundness, sa, inv_area);
-                const float16 wv = select(w, w * (1.0f - ua), s.s2 > r + DOF_FRONT_MARGIN) * s.s6;
+                const float16 wv = select(w, w * (1.0f - ua), behind) * s.s6;
                 *o_r += wv * s.s3; *o_g += wv * s.s4; *o_b += wv * s.s5;
-                touched = 1;
             }
         }
     return touched;
