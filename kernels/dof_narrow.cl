@@ -15,7 +15,8 @@
 /* Candidate blocks: per working pixel, the index (0..7) of the third brightest of its 8 working
  * neighbours at distance 2 (NARROW_RING: (-2,-2), (-2,0), (-2,2), (0,-2), (0,2), (2,-2), (2,0), (2,2)) when its luminance is above DOF_NARROW_RATIO x that neighbour's, else -1; -1 too
  * within 2 of the working image's edge; `gflag` per group of 16 (ceil(ww / 16) a row): whether
- * one of them is a candidate. 16 working pixels of a row per work-item (the padding covers the
+ * one of them is a candidate (`flag` is written only for the groups that have one, where
+ * dof_narrow_list reads it). 16 working pixels of a row per work-item (the padding covers the
  * ring's reads); launched over (ceil(ww / 16), hw). */
 __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *restrict flag,
                               __global int *restrict gflag, const int ww, const int hw, const int pad)
@@ -34,14 +35,7 @@ __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *r
     const float16 ya = DOF_NY16(o - 2 * pw), yb = DOF_NY16(o - 2), yc = DOF_NY16(o + 2);
     const float16 lim = yp * (1.0f / DOF_NARROW_RATIO);
     if (!any(inside & (ya < lim | yb < lim | yc < lim))) {
-        const int16 none = (int16)(-1);
-        if (x + 16 <= ww) {
-            vstore16(none, 0, flag + (size_t)y * ww + x);
-        } else {
-            for (int l = 0; l < ww - x; ++l)
-                flag[(size_t)y * ww + x + l] = -1;
-        }
-        gflag[(size_t)y * ngx + x / 16] = 0;
+        gflag[(size_t)y * ngx + x / 16] = 0;  /* `flag` is read only where `gflag` is set */
         return;
     }
     /* the three brightest (m1 >= m2 >= m3, an earlier one ranks above an equal later one) and
@@ -62,7 +56,10 @@ __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *r
     DOF_RING(7, 2 * (long)pw + 2)
 #undef DOF_RING
     const int16 out = select((int16)(-1), k3, inside & (yp > DOF_NARROW_RATIO * m3));
-    gflag[(size_t)y * ngx + x / 16] = any(out >= 0);
+    const int anyc = any(out >= 0);
+    gflag[(size_t)y * ngx + x / 16] = anyc;
+    if (!anyc)
+        return;
     if (x + 16 <= ww) {
         vstore16(out, 0, flag + (size_t)y * ww + x);
     } else {
