@@ -137,6 +137,9 @@ wide, the disc's variance :math:`v = r^2/4` is made at full resolution: a separa
 (:func:`local_blur`), alone up to v = ½ (r = √2 px) and mixed by variance with the path's
 narrowest blur up to v = 1 (r = 2 px), :math:`b = \mathrm{clamp}(2v - 1, 0, 1)`
 (:func:`half_blend`); effect on the Cycles truths: docs/fidelity.md, "The half-resolution path".
+Small bright lights (:func:`narrow_sources`) are taken out of the half-resolution input and spread
+at full resolution instead (:func:`narrow_layer`): the path's ≈ 3 px soft disc edge saturates
+around a 100× lamp (docs/fidelity.md, "The narrow-source layer").
 
 Mixed resolution (final, :data:`MIXED`): a working tile (16×16 at half resolution = 32×32 px) is
 *big* when its half-resolution plan (max CoC 32 working px, R_b = 8) needs lattice level ≥ 1
