@@ -392,13 +392,14 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
 /* The narrow-source layer (dof_narrow.cl, prepended to this program): its arguments, and its
  * light added to the 16 pixels after the composite is stored (nothing without DOF_NARROW). */
 #define DOF_NARROW_PARAMS __global const int *restrict ncount, __global const float8 *restrict nrec, \
+    __global const int *restrict ntile, \
     const int ncx, const int ncy, __global const float2 *restrict normals, const int nblades, const float kpoly, \
     const float roundness, const float nsa, const float ninv_area
-#define DOF_NARROW_ARGS ncount, nrec, ncx, ncy, normals, nblades, kpoly, roundness, nsa, ninv_area
+#define DOF_NARROW_ARGS ncount, nrec, ntile, ncx, ncy, normals, nblades, kpoly, roundness, nsa, ninv_area
 #if DOF_NARROW
-/* after the 16 pixels are stored: where a source is in reach of the cell (`nnear`) and one of its
+/* after the 16 pixels are stored: where a source's disc reaches the 16-px tile (`ntile`) and one of its
  * discs reaches these pixels, add the layer to them (read back, add, store; NL lanes inside the image) */
-#define DOF_NARROW_NEAR ncount[ncx * ncy + (y / DOF_NARROW_CELL) * ncx + x / DOF_NARROW_CELL]
+#define DOF_NARROW_NEAR ntile[(y / 16) * ((width + 15) / 16) + x / 16]
 #define DOF_NARROW_APPLY(UA, NL) if (near) { \
         float16 l3[3] = {(float16)(0.0f), (float16)(0.0f), (float16)(0.0f)}; \
         if (dof_narrow16(ncount, nrec, ncx, ncy, x, y, r, (UA), normals, nblades, kpoly, roundness, nsa, \

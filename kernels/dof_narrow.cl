@@ -2,8 +2,8 @@
  * narrow_layer in clpost/stages/dof.py): small bright lights taken out of the working image and
  * spread at full resolution by dof_upsample (dof.cl, dof_narrow16).
  * Structural: DOF_SCALE, DOF_TILE, DOF_NARROW_CELL (cell edge, px), DOF_NARROW_MAX (sources per
- * cell), DOF_NARROW_RATIO, DOF_NARROW_CONTRAST, DOF_NARROW_MIN (px), DOF_NARROW_SUM (px), DOF_LUMA_R/G/B,
- * DOF_TEXTURE.
+ * cell), DOF_NARROW_RATIO, DOF_NARROW_CONTRAST, DOF_NARROW_EDGE (px), DOF_NARROW_MIN (px),
+ * DOF_NARROW_SUM (px), DOF_LUMA_R/G/B, DOF_TEXTURE.
  * Records: float8 (x, y, signed CoC px, e_R, e_G, e_B, 1 / the source's weight sum, 0) per source,
  * DOF_NARROW_MAX per cell; `ncount` per cell (0 when the cell had more than DOF_NARROW_MAX).
  */
@@ -32,8 +32,16 @@ __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *r
     const int16 inside = (xs >= 2) & (xs <= ww - 3) & (int16)(y >= 2 && y <= hw - 3 ? -1 : 0);
     /* the third brightest of the 8 is at least the dimmest of any 3 of them: when three are each
      * >= yp / DOF_NARROW_RATIO for every lane, no lane is a candidate (most of an image) */
-    const float16 ya = DOF_NY16(o - 2 * pw), yb = DOF_NY16(o - 2), yc = DOF_NY16(o + 2);
     const float16 lim = yp * (1.0f / DOF_NARROW_RATIO);
+    /* first on green alone: Y >= DOF_LUMA_G G (every weight and colour >= 0) */
+    const float16 ga = vload16(0, lv + pn + o - 2 * pw), gb = vload16(0, lv + pn + o - 2);
+    const float16 gc = vload16(0, lv + pn + o + 2);
+    const float16 glim = lim * (1.0f / DOF_LUMA_G);
+    if (!any(inside & (ga < glim | gb < glim | gc < glim))) {
+        gflag[(size_t)y * ngx + x / 16] = 0;
+        return;
+    }
+    const float16 ya = DOF_NY16(o - 2 * pw), yb = DOF_NY16(o - 2), yc = DOF_NY16(o + 2);
     if (!any(inside & (ya < lim | yb < lim | yc < lim))) {
         gflag[(size_t)y * ngx + x / 16] = 0;  /* `flag` is read only where `gflag` is set */
         return;
@@ -151,7 +159,8 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
                     const float3 e = fmax((float3)(src[i], src[n + i], src[2 * n + i]) - bg, 0.0f);
                     const float ey = DOF_LUMA_R * e.x + DOF_LUMA_G * e.y + DOF_LUMA_B * e.z;
                     const float rq = coc[i];
-                    if (!(m3 >= DOF_NARROW_MIN && ey > DOF_NARROW_CONTRAST * bgy * M_PI_F * rq * rq))
+                    if (!(m3 >= DOF_NARROW_MIN
+                          && ey > DOF_NARROW_CONTRAST * bgy * M_PI_F * rq * rq * fmax(1.0f, fabs(rq) / DOF_NARROW_EDGE)))
                         continue;
                     if (count < DOF_NARROW_MAX) {
                         if (rq != last_rq) {  /* a light's pixels mostly share one CoC: sum once */
@@ -202,19 +211,30 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
     }
 }
 
-/* Per cell, the number of sources listed in the cells within the largest CoC (+1 px) of it: the
- * upsampling's work-items of a cell with none skip the layer after one read. `ncount`: the own
- * counts (read), then these (written; two planes, no overlap). */
-__kernel void dof_narrow_near(__global int *ncount, const int ncx, const int ncy)
+/* Per 16 x 16-px tile of the output, the number of listed sources whose disc (|r| + 1/2 px) reaches
+ * it: the upsampling's work-items of a tile with none skip the layer after one read. `ncount`: the
+ * cells' counts; `ntile`: (ceil(h / 16), ceil(w / 16)). */
+__kernel void dof_narrow_near(__global const int *restrict ncount, __global const float8 *restrict nrec,
+                              __global int *restrict ntile, const int ncx, const int ncy, const int ntx,
+                              const int nty)
 {
-    const int cx = get_global_id(0), cy = get_global_id(1);
-    if (cx >= ncx || cy >= ncy) return;
-    const int k = (DOF_SCALE * DOF_RMAX + 1 + DOF_NARROW_CELL - 1) / DOF_NARROW_CELL;
+    const int tx = get_global_id(0), ty = get_global_id(1);
+    if (tx >= ntx || ty >= nty) return;
+    const int reach = DOF_SCALE * DOF_RMAX + 1;
+    const float x0 = (float)(16 * tx), y0 = (float)(16 * ty);
+    const int cx0 = max(16 * tx - reach, 0) / DOF_NARROW_CELL, cx1 = min((16 * tx + 15 + reach) / DOF_NARROW_CELL, ncx - 1);
+    const int cy0 = max(16 * ty - reach, 0) / DOF_NARROW_CELL, cy1 = min((16 * ty + 15 + reach) / DOF_NARROW_CELL, ncy - 1);
     int t = 0;
-    for (int y = max(cy - k, 0); y <= min(cy + k, ncy - 1); ++y)
-        for (int x = max(cx - k, 0); x <= min(cx + k, ncx - 1); ++x)
-            t += ncount[y * ncx + x];
-    ncount[ncx * ncy + cy * ncx + cx] = t;
+    for (int cy = cy0; cy <= cy1; ++cy)
+        for (int cx = cx0; cx <= cx1; ++cx) {
+            __global const float8 *rec = nrec + (size_t)(cy * ncx + cx) * DOF_NARROW_MAX;
+            for (int j = 0; j < ncount[cy * ncx + cx]; ++j) {
+                const float rs = fmax(fabs(rec[j].s2), 0.5f) + 0.5f;
+                t += rec[j].s0 >= x0 - rs && rec[j].s0 <= x0 + 15.0f + rs && rec[j].s1 >= y0 - rs
+                     && rec[j].s1 <= y0 + 15.0f + rs;
+            }
+        }
+    ntile[ty * ntx + tx] = t;
 }
 
 /* The layer's light at output pixels x .. x + 15 of row y (narrow_layer): the sources of the

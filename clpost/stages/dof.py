@@ -1025,7 +1025,7 @@ class Dof(GatherStage):
                 "DOF_NARROW": int(scale > 1 and not traced and camera.optical_vignetting == 0),
                 "DOF_NARROW_RATIO": f"{NARROW_RATIO!r}f", "DOF_NARROW_CONTRAST": f"{NARROW_CONTRAST!r}f",
                 "DOF_NARROW_MIN": f"{NARROW_MIN_PX!r}f", "DOF_NARROW_CELL": NARROW_CELL,
-                "DOF_NARROW_SUM": f"{NARROW_SUM_PX!r}f",
+                "DOF_NARROW_SUM": f"{NARROW_SUM_PX!r}f", "DOF_NARROW_EDGE": f"{NARROW_EDGE_PX!r}f",
                 "DOF_NARROW_MAX": NARROW_MAX,
                 "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
@@ -1054,6 +1054,12 @@ r"""A candidate pixel is split off when its excess luminance spread over its dis
 :math:`Y_e/(\pi r^2)`, is above this × the surround's :math:`Y_{bg}`: a disc that stands out of
 its surround, whose edge the half-resolution path would soften (a dimmer one's soft edge is not
 seen, and it stays in the cheaper path)."""
+NARROW_EDGE_PX = 8.0
+r"""Above this |CoC| (px) the contrast a source needs grows with r (:data:`NARROW_CONTRAST` ×
+r / this): the path's soft edge is ≈ 3 px whatever r, a smaller part of a larger disc, while the
+layer's cost per source grows as r². A defocused frame sprinkled with hot pixels (`clpost bench`'s
+worst case: 414 of them at 500× on 1080p, r = 32 px) otherwise put a full-resolution disc on
+nearly every pixel (42 of them are split now; docs/fidelity.md, "The narrow-source layer")."""
 NARROW_MIN_PX = 2.0
 """Only pixels whose 3×3 has every |CoC| ≥ this are split: there the composite takes the
 half-resolution blur whole (:func:`half_blend` = 1), so no full-resolution 3×3 blur reads the
@@ -1064,6 +1070,7 @@ within the largest CoC of its pixels)."""
 NARROW_MAX = 64
 """Most sources (pixels) a cell lists; a cell with more splits none (its lights stay in the
 half-resolution path: a bounded cost per pixel whatever the input)."""
+
 NARROW_RING = ((-2, -2), (-2, 0), (-2, 2), (0, -2), (0, 2), (2, -2), (2, 0), (2, 2))
 """The working neighbours (dy, dx) a candidate block is compared with, in the kernel's order
 (of equal ones the first ranks brighter)."""
@@ -1088,7 +1095,8 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     neighbours at distance 2 (:data:`NARROW_RING`; its colour is the surround's, bg). Each full-resolution pixel
     q of the block with every |CoC| of its 3×3 ≥ :data:`NARROW_MIN_PX` has the excess
     :math:`e_q = \max(c_q - bg, 0)` (per channel) and is a source when
-    :math:`Y(e_q) > ` :data:`NARROW_CONTRAST` · Y(bg) · π r_q². Sources are listed per
+    :math:`Y(e_q) > ` :data:`NARROW_CONTRAST` · Y(bg) · π r_q² · max(1, |r_q| / :data:`NARROW_EDGE_PX`).
+    Sources are listed per
     :data:`NARROW_CELL` cell in scan order (working rows, then the block's rows); a cell with more
     than :data:`NARROW_MAX` lists none.
 
@@ -1118,7 +1126,9 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
             for a in range(scale):
                 y, x = scale * py + b, scale * px + a
                 e = np.maximum(color[y, x] - bg, 0.0)
-                if m3[y, x] >= NARROW_MIN_PX and e @ lw > NARROW_CONTRAST * bg_y * math.pi * c[y, x] ** 2:
+                ar = abs(c[y, x])
+                if m3[y, x] >= NARROW_MIN_PX and e @ lw > NARROW_CONTRAST * bg_y * math.pi * ar * ar * max(
+                        1.0, ar / NARROW_EDGE_PX):
                     cells.setdefault((y // NARROW_CELL, x // NARROW_CELL), []).append((x, y, c[y, x], *e))
     rows = []
     for key in sorted(cells):

@@ -111,7 +111,9 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
         ncx, ncy = -(-w // D.NARROW_CELL), -(-h // D.NARROW_CELL)
         narrow = {"ncx": ncx, "ncy": ncy, "flag": scratch("nflag", (hw, ww), np.int32),
                   "gflag": scratch("ngflag", (hw, -(-ww // 16)), np.int32),
-                  "ncount": scratch("ncount", (2, ncy, ncx), np.int32),  # own counts, then dof_narrow_near's
+                  "ncount": scratch("ncount", (ncy, ncx), np.int32),
+                  "ntx": -(-w // 16), "nty": -(-h // 16),
+                  "ntile": scratch("ntile", (-(-h // 16), -(-w // 16)), np.int32),
                   "nrec": scratch("nrec", (ncy * ncx * D.NARROW_MAX, 8))}
     return {
         "narrow": narrow,
@@ -151,8 +153,9 @@ def _enqueue_plan(rt, c, src, coc, w, h):
                                       i32(w), i32(h), i32(c["ww"]), i32(c["hw"]), i32(c["pad"]), i32(nw["ncx"]),
                                       i32(nw["ncy"]), *c["aperture"])
         evs.append(_launch(rt, k["dof_narrow_list"], (nw["ncx"], nw["ncy"]), 4))
-        k["dof_narrow_near"].set_args(nw["ncount"], i32(nw["ncx"]), i32(nw["ncy"]))
-        evs.append(_launch(rt, k["dof_narrow_near"], (nw["ncx"], nw["ncy"]), 4))
+        k["dof_narrow_near"].set_args(nw["ncount"], nw["nrec"], nw["ntile"], i32(nw["ncx"]), i32(nw["ncy"]),
+                                      i32(nw["ntx"]), i32(nw["nty"]))
+        evs.append(_launch(rt, k["dof_narrow_near"], (nw["ntx"], nw["nty"]), 4))
     for lvl in range(c["nlev"]):
         k["dof_levels"].set_args(c["lv"], i32(c["pw"]), i32(c["ph"]), i32(2 ** lvl), i32(lvl))
         evs.append(_launch_rows(rt, k["dof_levels"], (c["pw"], c["ph"])))
@@ -177,9 +180,9 @@ def _enqueue_upsample(rt, c, src, coc, dst, w, h, tn_mix):
     i32 = np.int32
     nw = c["narrow"]
     # without the layer its arguments are placeholders (DOF_NARROW 0: never read)
-    ncount, nrec = (nw["ncount"], nw["nrec"]) if nw else (tn_mix, c["alpha"])
+    ncount, nrec, ntile = (nw["ncount"], nw["nrec"], nw["ntile"]) if nw else (tn_mix, c["alpha"], tn_mix)
     c["k"]["dof_upsample"].set_args(src, coc, c["blur"], c["alpha"], dst, i32(w), i32(h), i32(c["ww"]),
-                                    i32(c["hw"]), tn_mix, i32(c["tw"]), ncount, nrec,
+                                    i32(c["hw"]), tn_mix, i32(c["tw"]), ncount, nrec, ntile,
                                     i32(nw.get("ncx", 0)), i32(nw.get("ncy", 0)), *c["aperture"])
     return _launch_rows(rt, c["k"]["dof_upsample"], (w, h))
 
