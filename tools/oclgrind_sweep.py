@@ -107,11 +107,15 @@ def cases():
             sizes = SIZES if (label == "round" and q == "final") else ((3, 2), (37, 23))
             for w, h in sizes:
                 add(f"dof-{label} {q} {w}x{h}", lambda cam=cam, q=q, w=w, h=h: _run(cam, ["dof"], q, w, h))
-    # the narrow-source layer (draft, preview): lights on a defocused scene, the cells' borders crossed
+    # the narrow-source layer (draft, preview): lights on a defocused scene, the cells' borders crossed;
+    # "wide": 0.15 mm pixels, CoCs of ~13 px (sources above NARROW_SUM_PX, whole groups inside a disc)
     for q in ("draft", "preview"):
         for w, h in ((37, 23), (141, 75)):
             add(f"dof-lights {q} {w}x{h}", lambda q=q, w=w, h=h: _run(
                 dof_sized(dof_cams["blades"]), ["dof"], q, w, h, lights=True, scale=0.5))
+        add(f"dof-lights-wide {q} 141x75", lambda q=q: _run(
+            replace(dof_cams["round"], sensor_mm=(0.15 * 141, 0.15 * 75)), ["dof"], q, 141, 75, lights=True,
+            scale=0.5))
 
     aberr = replace(base, f_number=2.0, field_curvature_mm=-0.14, astigmatism_mm=0.11, coma_mm=0.087,
                     lateral_color_mm=0.007)
