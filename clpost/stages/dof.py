@@ -1092,13 +1092,12 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
 
     A working pixel P (not within 2 of the working image's edge) is a candidate block when its
     luminance is above :data:`NARROW_RATIO` × that of the third brightest of its working
-    neighbours at distance 2 (:data:`NARROW_RING`; its colour is the surround's, bg). Each full-resolution pixel
-    q of the block with every |CoC| of its 3×3 ≥ :data:`NARROW_MIN_PX` has the excess
-    :math:`e_q = \max(c_q - bg, 0)` (per channel) and is a source when
+    neighbours at distance 2 (:data:`NARROW_RING`; its colour is the surround's, bg). Each
+    full-resolution pixel q of the block with every |CoC| of its 3×3 ≥ :data:`NARROW_MIN_PX` has
+    the excess :math:`e_q = \max(c_q - bg, 0)` (per channel) and is a source when
     :math:`Y(e_q) > ` :data:`NARROW_CONTRAST` · Y(bg) · π r_q² · max(1, |r_q| / :data:`NARROW_EDGE_PX`).
-    Sources are listed per
-    :data:`NARROW_CELL` cell in scan order (working rows, then the block's rows); a cell with more
-    than :data:`NARROW_MAX` lists none.
+    Sources are listed per :data:`NARROW_CELL` cell in scan order (working rows, then the block's
+    rows); a cell with more than :data:`NARROW_MAX` lists none.
 
     Returns (sources, base): sources an (n, 6) array of (x, y, r, e_R, e_G, e_B) (r the signed CoC
     in px), base the colour with each source's excess taken out (c − e)."""
@@ -1115,11 +1114,11 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     ac = np.abs(np.pad(c, 1, mode="edge"))
     m3 = np.min([ac[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
     ring = np.stack([yw[2 + dy:hw - 2 + dy, 2 + dx:ww - 2 + dx] for dy, dx in NARROW_RING])
-    kmin = np.argsort(-ring, axis=0, kind="stable")[2]  # the third brightest (ties: the first), as the kernel
-    bg_ys = np.take_along_axis(ring, kmin[None], 0)[0]
+    k3 = np.argsort(-ring, axis=0, kind="stable")[2]  # the third brightest (ties: the first), as the kernel
+    bg_ys = np.take_along_axis(ring, k3[None], 0)[0]
     cells: dict = {}
     for py, px in zip(*np.nonzero(yw[2:hw - 2, 2:ww - 2] > NARROW_RATIO * bg_ys)):
-        k, bg_y = kmin[py, px], bg_ys[py, px]
+        k, bg_y = k3[py, px], bg_ys[py, px]
         py, px = py + 2, px + 2
         bg = cw[py + NARROW_RING[k][0], px + NARROW_RING[k][1]]
         for b in range(scale):
