@@ -389,6 +389,36 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
         ar += gr * DOF_RIGHT(vr); ag += gr * DOF_RIGHT(vg); ab += gr * DOF_RIGHT(vb); aa += gr * DOF_RIGHT(va); \
         wsum += gr; }
 
+/* The narrow-source layer (dof_narrow.cl, prepended to this program): its arguments, and its
+ * light added to the 16 pixels after the composite is stored (nothing without DOF_NARROW). */
+#define DOF_NARROW_PARAMS __global const int *restrict ncount, __global const float8 *restrict nrec, \
+    __global const int *restrict ntile, \
+    const int ncx, const int ncy, __global const float2 *restrict normals, const int nblades, const float kpoly, \
+    const float roundness, const float nsa, const float ninv_area
+#define DOF_NARROW_ARGS ncount, nrec, ntile, ncx, ncy, normals, nblades, kpoly, roundness, nsa, ninv_area
+#if DOF_NARROW
+/* after the 16 pixels are stored: where a source's disc reaches the 16-px tile (`ntile`) and one of its
+ * discs reaches these pixels, add the layer to them (read back, add, store; NL lanes inside the image) */
+#define DOF_NARROW_NEAR ntile[(y / 16) * ((width + 15) / 16) + x / 16]
+#define DOF_NARROW_APPLY(UA, NL) if (near) { \
+        float16 l3[3] = {(float16)(0.0f), (float16)(0.0f), (float16)(0.0f)}; \
+        if (dof_narrow16(ncount, nrec, ncx, ncy, x, y, r, (UA), normals, nblades, kpoly, roundness, nsa, \
+                         ninv_area, &l3[0], &l3[1], &l3[2])) \
+            for (int c = 0; c < 3; ++c) { \
+                if ((NL) == 16) { \
+                    vstore16(vload16(0, dst + c * n + i) + l3[c], 0, dst + c * n + i); \
+                } else { \
+                    float t[16]; \
+                    vstore16(l3[c], 0, t); \
+                    for (int l = 0; l < (NL); ++l) dst[c * n + i + l] += t[l]; \
+                } \
+            } \
+    }
+#else
+#define DOF_NARROW_NEAR 0
+#define DOF_NARROW_APPLY(UA, NL)
+#endif
+
 #if DOF_SCALE == 2
 /* 16 floats of row `row` from column `col` on: one vload16 inside the row (edge 0), else per lane
  * with the column clamped to [0, lim - 1] (edge 1: the groups at the image's left/right end, the
@@ -446,7 +476,8 @@ inline void dof_store16(const float16 v, __global float *dst, const size_t i, co
 inline void dof_upsample16(__global const float *restrict src, __global const float *restrict coc,
                            __global const float *restrict blur, __global const float *restrict alpha,
                            __global float *restrict dst, const int x, const int y,
-                           const int width, const int height, const int ww, const int hw, const int edge)
+                           const int width, const int height, const int ww, const int hw, const int edge,
+                           DOF_NARROW_PARAMS)
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x, nw = (size_t)ww * hw;
     const int nlanes = min(16, width - x);
@@ -472,9 +503,12 @@ inline void dof_upsample16(__global const float *restrict src, __global const fl
     const float16 inv = 1.0f / wsum;
     const float16 b = fmax(DOF_HALF_B(r), aa * inv);
     ar *= inv; ag *= inv; ab *= inv;
+    const int near = DOF_NARROW_NEAR;
+    const float16 ua = aa * inv;
     const int16 whole = b >= 1.0f;
     if (all(whole)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
         dof_store16(ar, dst, i, nlanes); dof_store16(ag, dst + n, i, nlanes); dof_store16(ab, dst + 2 * n, i, nlanes);
+        DOF_NARROW_APPLY(ua, nlanes)
         return;
     }
     /* the full-resolution 3x3 blur (dof_local_px), lane-wise; rows clamped to the image */
@@ -514,6 +548,7 @@ inline void dof_upsample16(__global const float *restrict src, __global const fl
     dof_store16(select(cr + (ar - cr) * b, ar, whole), dst, i, nlanes);
     dof_store16(select(cg + (ag - cg) * b, ag, whole), dst + n, i, nlanes);
     dof_store16(select(cb + (ab - cb) * b, ab, whole), dst + 2 * n, i, nlanes);
+    DOF_NARROW_APPLY(ua, nlanes)
 }
 #endif
 
@@ -524,7 +559,7 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
                            __global const float *restrict blur, __global const float *restrict alpha,
                            __global float *restrict dst,
                            const int width, const int height, const int ww, const int hw,
-                           __global const int *restrict tn_mix, const int tw_mix)
+                           __global const int *restrict tn_mix, const int tw_mix, DOF_NARROW_PARAMS)
 {
     const int x = 16 * get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
@@ -561,9 +596,12 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         const float16 inv = 1.0f / wsum;
         const float16 b = fmax(DOF_HALF_B(r), aa * inv);
         ar *= inv; ag *= inv; ab *= inv;
+        const int near = DOF_NARROW_NEAR;
+        const float16 ua = aa * inv;
         const int16 whole_ = b >= 1.0f;
         if (all(whole_)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
             vstore16(ar, 0, dst + i); vstore16(ag, 0, dst + n + i); vstore16(ab, 0, dst + 2 * n + i);
+            DOF_NARROW_APPLY(ua, 16)
             return;
         }
         /* the full-resolution 3x3 blur (dof_local_px), lane-wise; columns x - 1 .. x + 16 lie in
@@ -585,6 +623,7 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
             vstore16(select(sr + (ar - sr) * b, ar, whole_), 0, dst + i);
             vstore16(select(sg + (ag - sg) * b, ag, whole_), 0, dst + n + i);
             vstore16(select(sb + (ab - sb) * b, ab, whole_), 0, dst + 2 * n + i);
+            DOF_NARROW_APPLY(ua, 16)
             return;
         }
         float16 cr = (float16)(0.0f), cg = cr, cb = cr, cw = cr;
@@ -610,10 +649,11 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         vstore16(select(cr + (ar - cr) * b, ar, whole), 0, dst + i);
         vstore16(select(cg + (ag - cg) * b, ag, whole), 0, dst + n + i);
         vstore16(select(cb + (ab - cb) * b, ab, whole), 0, dst + 2 * n + i);
+        DOF_NARROW_APPLY(ua, 16)
         return;
     }
     /* the groups at the image's left/right end: the same formulas, loads clamped per lane */
-    dof_upsample16(src, coc, blur, alpha, dst, x, y, width, height, ww, hw, 1);
+    dof_upsample16(src, coc, blur, alpha, dst, x, y, width, height, ww, hw, 1, DOF_NARROW_ARGS);
 #else
     for (int xi = x; xi < min(x + 16, width); ++xi) {
         const float3 o = dof_upsample_px(src, coc, blur, alpha, xi, y, width, height, ww, hw);

@@ -16,6 +16,19 @@ __kernel void dof_tile_max(__global const float *restrict lv, __global float *re
     const int pw = DOF_PW(ww, pad);
     __global const float *pr = lv + (size_t)3 * pw * DOF_PW(hw, pad);  /* level 0 CoC */
     float m = 0.0f;
+#if DOF_TILE == 16
+    if ((tx + 1) * DOF_TILE <= ww && (ty + 1) * DOF_TILE <= hw) {
+        /* a whole tile: one row per vload16 (max is exact in any order) */
+        float16 v = (float16)(0.0f);
+        for (int y = ty * DOF_TILE; y < (ty + 1) * DOF_TILE; ++y)
+            v = fmax(v, fabs(vload16(0, pr + (size_t)(y + pad) * pw + tx * DOF_TILE + pad)));
+        const float8 a = fmax(v.lo, v.hi);
+        const float4 b = fmax(a.lo, a.hi);
+        const float2 c = fmax(b.lo, b.hi);
+        tmax[ty * tw + tx] = fmax(c.x, c.y) * DOF_REACH;
+        return;
+    }
+#endif
     for (int y = ty * DOF_TILE; y < min((ty + 1) * DOF_TILE, hw); ++y)
         for (int x = tx * DOF_TILE; x < min((tx + 1) * DOF_TILE, ww); ++x)
             m = fmax(m, fabs(pr[(size_t)(y + pad) * pw + x + pad]));

@@ -21,11 +21,11 @@ MARGIN_DB = 0.5
 
 # (scene, truth, quality) -> PSNR sRGB dB vs Cycles, measured (docs/fidelity.md, "Held-out scenes")
 MEASURED_PSNR = {
-    ("h_lamps", "dof", "draft"): 32.96,      # was 32.32 / 34.40 / 36.60: a lamp's fringe past its twin
-    ("h_lamps", "dof", "preview"): 35.79,    # kept the wall's depth (the fringe rule's source test)
+    ("h_lamps", "dof", "draft"): 32.96,      # FLOOR-TBD
+    ("h_lamps", "dof", "preview"): 35.79,
     ("h_lamps", "dof", "final"): 42.55,
-    ("h_panes", "dof", "draft"): 31.45,
-    ("h_panes", "dof", "preview"): 32.40,
+    ("h_panes", "dof", "draft"): 32.88,
+    ("h_panes", "dof", "preview"): 32.95,
     ("h_panes", "dof", "final"): 33.10,
     ("h_fence", "dof", "draft"): 36.51,
     ("h_fence", "dof", "final"): 38.76,
@@ -99,3 +99,29 @@ def test_heldout_emitters_do_not_get_worse():
     assert len(areas) == 9 and max(areas) <= 1.11 + 0.1, areas
     assert halo <= 25 * 1.2, halo
     assert min(energy) >= 0.973 - 0.03, energy
+
+
+@pytest.mark.slow
+def test_heldout_lamps_at_draft_and_preview_keep_their_energy():
+    """h_lamps at draft and preview: the half-resolution path spread the defocused lamps' light
+    beyond Cycles' discs (lamp10, 2 px at 4.5 m before the wall at 5.9 m, kept 0.65 of its energy
+    at preview and 0.53 at draft; discs up to 1.8× Cycles' area) until the narrow-source layer
+    (docs/fidelity.md, "The narrow-source layer") spread them at full resolution: measured
+    0.949 (lamp10; final 0.973) … 1.016 and discs 1.00–1.46× (lamp10's 1.46 is final's too: its
+    fringe keeps the wall's depth)."""
+    entry = MANIFEST["scenes"]["h_lamps"]
+    frame = read_frame(DATA / entry["pinhole"]["file"])
+    t = entry["truths"]["dof"]
+    truth, truth_lamps = _channels(DATA / t["file"], ""), _channels(DATA / t["file"], "emit.")
+    emit = _channels(DATA / entry["pinhole"]["file"], "Emission.")
+    dark = Frame(color=np.maximum(frame.color[..., :3] - emit, 0).astype(np.float32), depth=frame.depth,
+                 velocity=frame.velocity)
+    for quality in ("draft", "preview"):
+        out = _run(entry, frame, "dof", quality)
+        lamps_out = out - _run(entry, dark, "dof", quality)
+        m = [fd.emitter_metrics(out, truth, lamps_out, truth_lamps, lamp, entry["shot"], 0.6)
+             for lamp in entry["lamps"]]
+        defocused = {x["name"]: (x["area_ratio"], x["energy_ratio"]) for x in m if not x["in_focus"]}
+        assert len(defocused) == 9
+        assert all(a <= 1.46 + 0.1 for a, _ in defocused.values()), (quality, defocused)
+        assert all(e >= 0.949 - 0.03 for _, e in defocused.values()), (quality, defocused)

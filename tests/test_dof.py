@@ -859,3 +859,81 @@ def test_final_small_coc_is_at_least_as_accurate_as_draft_on_a_flat_textured_wal
         assert err(final) <= err(draft) * 1.001
         assert err(final) < 0.5 * err(gathered)
     assert err(final) < 0.9 * err(gathered)
+
+
+# -- the half-resolution path's narrow-source layer ---------------------------------------------
+
+def _small_light(r_light, r_back, level=40.0, back=0.1, size=81):
+    """(camera, dark, lit): a flat background (``back``) at CoC radius ``r_back`` px and a 2×2 light
+    at ``r_light`` px (nearer: smaller), absent (dark) or ``level`` (lit); r_back = inf: the sky."""
+    cam = Camera(**CAM, blades=6)
+    w = h = size
+    k, inv_u = D.coc_coefficients(cam, w)
+    depth = np.full((h, w), np.inf if math.isinf(r_back) else 1.0 / (inv_u - r_back / k), np.float32)
+    depth[40:42, 40:42] = 1.0 / (inv_u - r_light / k)
+    color = np.full((h, w, 3), back, np.float32)
+    dark = Frame(color.copy(), depth=depth)
+    color[40:42, 40:42] = level
+    return cam, dark, Frame(color, depth=depth)
+
+
+@pytest.mark.parametrize("r_back", [5.0, math.inf])
+def test_small_bright_light_at_half_resolution_keeps_its_energy_and_its_disc(r_back):
+    # issue 16 (an emitter's saturated disc within 10 % of the truth's area, its energy within
+    # 3 %): a 2×2 light 400× its background, 1.5 px of CoC nearer than a wall (h_lamps' lamp10)
+    # or at 4 px over the sky (the emitters scene's far lamps). The half-resolution path's disc
+    # edge (the 2×2 box, the working coverage ramp, the bilinear upsampling) is ≈ 3 px of ramp,
+    # all of it saturated at this level: draft's disc had 1.4–1.6× final's saturated area and the
+    # lamp in front of the wall kept 0.8 of its light (its working block's CoC is the light's, the
+    # wall's light around it pooled). Now the light is spread at full resolution
+    # (dof.narrow_sources): final's disc and energy at draft and preview.
+    cam, dark, lit = _small_light(3.5 if math.isinf(r_back) else r_back - 1.5, r_back)
+    area, energy = {}, {}
+    for q in ("final", "draft", "preview"):
+        pipe = Pipeline(cam, quality=q, stages=["dof"])
+        out = pipe.run(lit).color
+        added = out - pipe.run(dark).color
+        energy[q] = float(added[..., 1].sum()) / (4 * 39.9)
+        area[q] = int(np.count_nonzero(out[..., 1] >= 1.0))
+    assert energy["final"] == pytest.approx(1.0, abs=0.03)
+    for q in ("draft", "preview"):
+        assert energy[q] == pytest.approx(1.0, abs=0.03), (q, energy)
+        assert area[q] == pytest.approx(area["final"], rel=0.10), (q, area)
+
+
+@pytest.mark.parametrize("quality, sa", [("draft", 0.4), ("preview", 0.4), ("draft", 0.0)])
+def test_narrow_source_layer_matches_the_reference(quality, sa):
+    # the layer's kernels (dof_narrow.cl, dof_upsample) against dof.narrow_sources/narrow_layer: an
+    # odd-sized textured frame with lights over the sky, before and behind a slanted wall, on cell
+    # borders (x, y = 63, 64), at the edge (not split), behind a blurred foreground bar, one above
+    # NARROW_SUM_PX (normalised by its integral), with and without texture (without it the kernel
+    # takes the disc's constant weight where a whole group of 16 is inside), rotated round-ish
+    # blades; and a cell with more than NARROW_MAX light pixels (none split)
+    cam = Camera(**CAM, blades=5, blade_rotation_deg=17.0, aperture_roundness=0.3, spherical_aberration=sa)
+    h, w = 141, 203
+    yy, xx = np.mgrid[0:h, 0:w]
+    k, inv_u = D.coc_coefficients(cam, w)
+
+    def at(r):
+        return 1.0 / (inv_u - r / k)
+
+    color = np.stack([0.3 + 0.1 * np.sin(xx / 5.0), 0.25 + 0.1 * np.cos(yy / 7.0), np.full((h, w), 0.4)], -1)
+    depth = np.full((h, w), np.inf)
+    wall = xx > 120
+    depth[wall] = at(3.0 + 0.02 * (xx[wall] - 120))
+    bar = (yy > 90) & (yy < 100)
+    depth[bar] = at(-6.0)
+    color[bar] = (0.05, 0.05, 0.08)
+    lights = [(30, 30, 2.5), (63, 40, 3.0), (64, 64, 4.5), (150, 30, 2.6), (170, 60, 14.0), (1, 20, 3.0),
+              (80, 104, 4.0), (100, 20, 0.0)]
+    for x, y, r in lights:
+        color[y:y + 2, x:x + 2] = (60.0, 40.0, 20.0)
+        depth[y:y + 2, x:x + 2] = at(r) if r else cam.focus_distance_m
+    for i in range(40):  # a starfield in one cell: > NARROW_MAX light pixels
+        x, y = 130 + 6 * (i % 10), 100 + 6 * (i // 10) % 36
+        color[y, x:x + 2] = 30.0
+    frame = Frame(color.astype(np.float32), depth=depth.astype(np.float32))
+    src, _ = D.narrow_sources(color, D.coc_px(cam, D.effective_depth(color, depth), w, limit_px=64), 2)
+    assert len(src) >= 20  # the layer is exercised (4 pixels of each light split)
+    out, pipe = run(cam, frame, quality)
+    assert_matches_reference(pipe, frame, out, rtol=1e-3)

@@ -25,11 +25,15 @@ SIZES = ((1, 1), (3, 2), (17, 5), (37, 23))
 
 
 def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0, intrinsics=None, labels=0,
-           moving=None):
+           moving=None, lights=False):
     from clpost import Frame
 
     rng = np.random.default_rng(seed + 7919 * w + h)
     color = (rng.random((h, w, 3)) * scale).astype(np.float32)
+    if lights:  # small bright lights (dof's narrow-source layer): 2x2 at 100x, every 9 px, one at each edge
+        for y in list(range(4, h - 1, 9)) + [0, h - 2]:
+            for x in list(range(5, w - 1, 9)) + [0, w - 2]:
+                color[max(y, 0):y + 2, max(x, 0):x + 2] = 100.0 * scale
     if depth is True:
         d = rng.uniform(0.3, 30.0, (h, w)).astype(np.float32)
     else:  # False: none; a number: that depth everywhere
@@ -111,6 +115,15 @@ def cases():
             sizes = SIZES if (label == "round" and q == "final") else ((3, 2), (37, 23))
             for w, h in sizes:
                 add(f"dof-{label} {q} {w}x{h}", lambda cam=cam, q=q, w=w, h=h: _run(cam, ["dof"], q, w, h))
+    # the narrow-source layer (draft, preview): lights on a defocused scene, the cells' borders crossed;
+    # "wide": 0.15 mm pixels, CoCs of ~13 px (sources above NARROW_SUM_PX, whole groups inside a disc)
+    for q in ("draft", "preview"):
+        for w, h in ((37, 23), (141, 75)):
+            add(f"dof-lights {q} {w}x{h}", lambda q=q, w=w, h=h: _run(
+                dof_sized(dof_cams["blades"]), ["dof"], q, w, h, lights=True, scale=0.5))
+        add(f"dof-lights-wide {q} 141x75", lambda q=q: _run(
+            replace(dof_cams["round"], sensor_mm=(0.15 * 141, 0.15 * 75)), ["dof"], q, 141, 75, lights=True,
+            scale=0.5))
 
     aberr = replace(base, f_number=2.0, field_curvature_mm=-0.14, astigmatism_mm=0.11, coma_mm=0.087,
                     lateral_color_mm=0.007)

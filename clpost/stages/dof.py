@@ -137,6 +137,9 @@ wide, the disc's variance :math:`v = r^2/4` is made at full resolution: a separa
 (:func:`local_blur`), alone up to v = ½ (r = √2 px) and mixed by variance with the path's
 narrowest blur up to v = 1 (r = 2 px), :math:`b = \mathrm{clamp}(2v - 1, 0, 1)`
 (:func:`half_blend`); effect on the Cycles truths: docs/fidelity.md, "The half-resolution path".
+Small bright lights (:func:`narrow_sources`) are taken out of the half-resolution input and spread
+at full resolution instead (:func:`narrow_layer`): the path's ≈ 3 px soft disc edge saturates
+around a 100× lamp (docs/fidelity.md, "The narrow-source layer").
 
 Mixed resolution (final, :data:`MIXED`): a working tile (16×16 at half resolution = 32×32 px) is
 *big* when its half-resolution plan (max CoC 32 working px, R_b = 8) needs lattice level ≥ 1
@@ -876,14 +879,20 @@ def local_blur(color: np.ndarray, coc: np.ndarray) -> np.ndarray:
     return np.where(need[..., None], acc / wsum[..., None], np.asarray(color, dtype=np.float64))
 
 
-def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
+def _half_composite(camera, color, coc, scale, rmax, budget, pm=None, narrow=False):
     """The half-resolution path (draft, preview, and final's large-reach tiles): gather at the
     working resolution with the variance-matched radius (:func:`half_radius`), depth-aware
     upsampling, composite with the full-resolution colour (:func:`half_blend`, or the front
-    layer's coverage). ``pm``: the traced profile (:func:`traced_profile`) or None. Returns
-    (output, working CoC)."""
+    layer's coverage). ``pm``: the traced profile (:func:`traced_profile`) or None. ``narrow``:
+    narrow sources (:func:`narrow_sources`) go through the full-resolution layer
+    (:func:`narrow_layer`) instead. Returns (output, working CoC)."""
     hr = half_radius(coc)
-    cw, rw = _working(color, hr, scale)
+    src = None
+    if narrow:
+        src, gathered = narrow_sources(color, coc, scale, luma_weights(camera))
+    else:
+        gathered = color
+    cw, rw = _working(gathered, hr, scale)
     out, alpha = gather_reference(cw, rw, rmax, budget, camera.blades, camera.blade_rotation_deg,
                                   camera.aperture_roundness, camera.spherical_aberration,
                                   camera.optical_vignetting, None if pm is None else (pm, scale))
@@ -891,7 +900,11 @@ def _half_composite(camera, color, coc, scale, rmax, budget, pm=None):
     up, up_alpha = _upsample(out, alpha, rw_orig, coc, scale)
     b = np.maximum(half_blend(coc), up_alpha)
     near = local_blur(color, coc)
-    return np.where(b[..., None] < 1.0, near + (up - near) * b[..., None], up), rw
+    out = np.where(b[..., None] < 1.0, near + (up - near) * b[..., None], up)
+    if src is not None and len(src):
+        out = out + narrow_layer(src, coc, up_alpha, camera.blades, camera.blade_rotation_deg,
+                                 camera.aperture_roundness, camera.spherical_aberration)
+    return out, rw
 
 
 SMALL_LO_PX, SMALL_HI_PX = 1.0, math.sqrt(2.0)
@@ -948,7 +961,7 @@ def dof_reference(camera, color: np.ndarray, depth: np.ndarray, quality: str = "
     coc = coc_px(camera, effective_depth(color, depth, luma_weights(camera)), width_px or w, limit_px=scale * rmax)
     pm = traced_profile(camera, width_px or w, quality)
     if scale > 1:
-        return _half_composite(camera, color, coc, scale, rmax, budget, pm)[0]
+        return _half_composite(camera, color, coc, scale, rmax, budget, pm, narrow_split(camera, pm))[0]
     out, alpha = gather_reference(color, coc, rmax, budget, camera.blades, camera.blade_rotation_deg,
                                   camera.aperture_roundness, camera.spherical_aberration,
                                   camera.optical_vignetting, None if pm is None else (pm, 1))
@@ -1015,6 +1028,11 @@ class Dof(GatherStage):
                 "DOF_SMALL_LO": f"{SMALL_LO_PX!r}f", "DOF_SMALL_K": f"{1.0 / (SMALL_HI_PX - SMALL_LO_PX)!r}f",
                 "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
                 "DOF_UP_SAME": f"{UPSAMPLE_SAME_PX!r}f",
+                "DOF_NARROW": int(scale > 1 and not traced and camera.optical_vignetting == 0),
+                "DOF_NARROW_RATIO": f"{NARROW_RATIO!r}f", "DOF_NARROW_CONTRAST": f"{NARROW_CONTRAST!r}f",
+                "DOF_NARROW_MIN": f"{NARROW_MIN_PX!r}f", "DOF_NARROW_CELL": NARROW_CELL,
+                "DOF_NARROW_SUM": f"{NARROW_SUM_PX!r}f", "DOF_NARROW_EDGE": f"{NARROW_EDGE_PX!r}f",
+                "DOF_NARROW_MAX": NARROW_MAX,
                 "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
@@ -1026,3 +1044,164 @@ class Dof(GatherStage):
         from .dof_cl import enqueue_dof
 
         return enqueue_dof(self, rt, camera, frame, src, dst, aux)
+
+
+# ---------------------------------------------------------------------------------------------
+# The half-resolution path's narrow-source layer
+# ---------------------------------------------------------------------------------------------
+
+NARROW_RATIO = 4.0
+"""A working pixel (2×2 block) brighter than this × the third brightest of its 8 working
+neighbours at distance 2 (3–5 px away) holds a *narrow source* candidate: a light a few pixels
+wide, a peak on nearly every side — two of the 8 may be bright (its own fringe, a lamp beside
+it), while the edge or corner of a bright surface has at least three (:func:`narrow_sources`)."""
+NARROW_CONTRAST = 0.125
+r"""A candidate pixel is split off when its excess luminance spread over its disc,
+:math:`Y_e/(\pi r^2)`, is above this × the surround's :math:`Y_{bg}`: a disc that stands out of
+its surround, whose edge the half-resolution path would soften (a dimmer one's soft edge is not
+seen, and it stays in the cheaper path)."""
+NARROW_EDGE_PX = 8.0
+r"""Above this |CoC| (px) the contrast a source needs grows with r (:data:`NARROW_CONTRAST` ×
+r / this): the path's soft edge is ≈ 3 px whatever r, a smaller part of a larger disc, while the
+layer's cost per source grows as r². A defocused frame sprinkled with hot pixels (`clpost bench`'s
+worst case: 414 of them at 500× on 1080p, r = 32 px) otherwise put a full-resolution disc on
+nearly every pixel (42 of them are split now; docs/fidelity.md, "The narrow-source layer")."""
+NARROW_MIN_PX = 2.0
+"""Only pixels whose 3×3 has every |CoC| ≥ this are split: there the composite takes the
+half-resolution blur whole (:func:`half_blend` = 1), so no full-resolution 3×3 blur reads the
+pixel's original colour beside the layer."""
+NARROW_CELL = 64
+"""Edge (px) of the cells the sources are listed by (the upsampling reads the lists of the cells
+within the largest CoC of its pixels)."""
+NARROW_MAX = 64
+"""Most sources (pixels) a cell lists; a cell with more splits none (its lights stay in the
+half-resolution path: a bounded cost per pixel whatever the input)."""
+
+NARROW_RING = ((-2, -2), (-2, 0), (-2, 2), (0, -2), (0, 2), (2, -2), (2, 0), (2, 2))
+"""The working neighbours (dy, dx) a candidate block is compared with, in the kernel's order
+(of equal ones the first ranks brighter)."""
+
+
+def narrow_split(camera, pm=None) -> bool:
+    """Whether the half-resolution levels split narrow sources off: not with a traced profile or
+    cat's-eye bokeh (the layer has neither; those keep the half-resolution path for every light)."""
+    return pm is None and camera.optical_vignetting == 0
+
+
+def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndarray | None = None):
+    r"""The narrow sources of the half-resolution path (draft, preview): pixels of small bright
+    lights whose light is taken out of the working image and spread at full resolution instead
+    (:func:`narrow_layer`). The half-resolution path's discs have soft edges — the 2×2 box, the
+    working coverage ramp and the bilinear upsampling, ≈ 3 px of ramp whatever the variance match
+    does — and a 100× lamp saturates its whole soft edge: discs 1.2–1.8× Cycles' area, with light
+    spread beyond (docs/fidelity.md, "The narrow-source layer").
+
+    A working pixel P (not within 2 of the working image's edge) is a candidate block when its
+    luminance is above :data:`NARROW_RATIO` × that of the third brightest of its working
+    neighbours at distance 2 (:data:`NARROW_RING`; its colour is the surround's, bg). Each
+    full-resolution pixel q of the block with every |CoC| of its 3×3 ≥ :data:`NARROW_MIN_PX` has
+    the excess :math:`e_q = \max(c_q - bg, 0)` (per channel) and is a source when
+    :math:`Y(e_q) > ` :data:`NARROW_CONTRAST` · Y(bg) · π r_q² · max(1, |r_q| / :data:`NARROW_EDGE_PX`).
+    Sources are listed per :data:`NARROW_CELL` cell in scan order (working rows, then the block's
+    rows); a cell with more than :data:`NARROW_MAX` lists none.
+
+    Returns (sources, base): sources an (n, 6) array of (x, y, r, e_R, e_G, e_B) (r the signed CoC
+    in px), base the colour with each source's excess taken out (c − e)."""
+    color = np.asarray(color, dtype=np.float64)
+    c = np.asarray(coc, dtype=np.float64)
+    lw = luma_weights() if luma is None else luma
+    h, w = c.shape
+    cw, _ = _working(color, c, scale)
+    yw = cw @ lw
+    hw, ww = yw.shape
+    base = color.copy()
+    if hw < 5 or ww < 5:
+        return np.zeros((0, 6)), base
+    ac = np.abs(np.pad(c, 1, mode="edge"))
+    m3 = np.min([ac[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
+    ring = np.stack([yw[2 + dy:hw - 2 + dy, 2 + dx:ww - 2 + dx] for dy, dx in NARROW_RING])
+    k3 = np.argsort(-ring, axis=0, kind="stable")[2]  # the third brightest (ties: the first), as the kernel
+    bg_ys = np.take_along_axis(ring, k3[None], 0)[0]
+    cells: dict = {}
+    for py, px in zip(*np.nonzero(yw[2:hw - 2, 2:ww - 2] > NARROW_RATIO * bg_ys)):
+        k, bg_y = k3[py, px], bg_ys[py, px]
+        py, px = py + 2, px + 2
+        bg = cw[py + NARROW_RING[k][0], px + NARROW_RING[k][1]]
+        for b in range(scale):
+            for a in range(scale):
+                y, x = scale * py + b, scale * px + a
+                e = np.maximum(color[y, x] - bg, 0.0)
+                ar = abs(c[y, x])
+                if m3[y, x] >= NARROW_MIN_PX and e @ lw > NARROW_CONTRAST * bg_y * math.pi * ar * ar * max(
+                        1.0, ar / NARROW_EDGE_PX):
+                    cells.setdefault((y // NARROW_CELL, x // NARROW_CELL), []).append((x, y, c[y, x], *e))
+    rows = []
+    for key in sorted(cells):
+        if len(cells[key]) <= NARROW_MAX:
+            rows += cells[key]
+    src = np.array(rows, dtype=np.float64).reshape(-1, 6)
+    for x, y, _, *e in src:
+        base[int(y), int(x)] -= e
+    return src, base
+
+
+def narrow_weight(dx, dy, rq: float, r, blades: int, rotation_deg: float, roundness: float, sa: float,
+                  area: float):
+    r"""Weight of a source of signed CoC ``rq`` at offset o = (dx, dy) = q − p spread with radius r:
+    the full-resolution gather's :math:`\mathrm{cov}\,I(t)/(a_K r^2)` (1-px coverage ramp, the
+    aperture in the direction p − q for a far source, q − p for a near one)."""
+    far = rq >= 0
+    rho = aperture_radius(np.arctan2(-dy, -dx) if far else np.arctan2(dy, dx), blades, rotation_deg, roundness)
+    rr = r * rho
+    dist = np.hypot(dx, dy)
+    cov = np.clip(rr - dist + 0.5, 0.0, 1.0)
+    t = np.minimum(dist / rr, 1.0)
+    a = -sa if far else sa
+    return cov * (1.0 + a * (2 * t * t - 1.0)) / (area * r * r)
+
+
+NARROW_SUM_PX = 8.0
+"""From this |CoC| (px) on, a narrow source's weights are taken to sum to 1 (:func:`narrow_norm`):
+the lattice's coverage sum is then within 0.6 % of a_K r² (6 blades, round, 5 rounded blades;
+1–5 % at r = 2–4 px), and summing a disc of r = 32 px per source cost more than the layer."""
+
+
+def narrow_norm(rq: float, blades: int, rotation_deg: float, roundness: float, sa: float, area: float) -> float:
+    """1 / the sum of a source's weights over its whole disc at its own radius (:func:`narrow_weight`):
+    the lattice's coverage sum differs from a_K r² by a few % at r ≈ 2 px, and the layer is not
+    normalised per pixel, so each source below :data:`NARROW_SUM_PX` is normalised once (its light
+    is conserved exactly where nothing hides it); larger ones by their disc's integral, 1."""
+    r = max(abs(rq), 0.5)
+    if r >= NARROW_SUM_PX:
+        return 1.0
+    k = int(math.ceil(r)) + 1
+    dy, dx = np.mgrid[-k:k + 1, -k:k + 1].astype(np.float64)
+    return 1.0 / float(np.sum(narrow_weight(dx, dy, rq, r, blades, rotation_deg, roundness, sa, area)))
+
+
+def narrow_layer(sources: np.ndarray, coc: np.ndarray, alpha: np.ndarray, blades: int, rotation_deg: float,
+                 roundness: float, sa: float) -> np.ndarray:
+    r"""The narrow sources spread at full resolution, added to the half-resolution composite:
+    scatter-as-gather of each source q onto p with the full-resolution gather's weight
+    (:func:`narrow_weight`), *unnormalised* per pixel (a sparse layer: each source's light is its
+    own; :func:`narrow_norm` makes its weights sum to 1): q nearer than p, or on p's surface
+    (within :data:`FRONT_MARGIN_PX`), spreads over p with its own radius; q behind p with the
+    smaller of its own radius and p's (a sharper p in front of it is the background clamp of the
+    gather; a blurred foreground does not widen it), times 1 − α_p, the upsampled front-layer
+    coverage (a blurred foreground over p hides that much of what is behind it). A source on p's
+    surface is not attenuated: the front coverage around a light is mostly its own block's (its
+    CoC is nearer than the sky's fringe pixels around it), whose colour the split left as the
+    surround's — attenuating by it lost h_lamps' lamp05 4 % of its light at draft."""
+    h, w = coc.shape
+    area = aperture_area(blades, rotation_deg, roundness)
+    out = np.zeros((h, w, 3))
+    ys, xs = np.mgrid[0:h, 0:w]
+    rp = np.asarray(coc, dtype=np.float64)
+    for x, y, rq, *e in sources:
+        behind = rq > rp + FRONT_MARGIN_PX
+        rs = max(abs(rq), 0.5)
+        r = np.where(behind, np.minimum(np.maximum(np.abs(rp), 0.5), rs), rs)
+        wgt = narrow_weight(x - xs, y - ys, rq, r, blades, rotation_deg, roundness, sa, area)
+        wgt = np.where(behind, wgt * (1.0 - alpha), wgt) * narrow_norm(rq, blades, rotation_deg, roundness, sa, area)
+        out += wgt[..., None] * np.asarray(e)
+    return out

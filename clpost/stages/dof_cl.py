@@ -35,6 +35,8 @@ def _kernels(rt, defines):
     out = {}
     for src in ("dof_coc", "dof_levels", "dof_tiles", "dof"):
         head = kernel_source("common") + kernel_source("dof_common")  # DOF_PW: the padded extent
+        if src == "dof":  # the narrow-source layer's kernels and the upsampling's part of it
+            head += kernel_source("dof_narrow")
         out.update(rt.kernels(head + kernel_source(src), src, defines))
     return out
 
@@ -67,6 +69,16 @@ def gather_vector_width(rt) -> int:
     return 16 if getattr(rt.device, "native_vector_width_float", 8) >= 16 else 8
 
 
+def _edge_normals(blades: int, rotation_deg: float) -> np.ndarray:
+    """float2 per blade: the aperture polygon's unit edge normals, at φ0 + (i + ½)·2π/N with
+    φ0 = −π/2 − rotation (:func:`dof.aperture_radius`'s corners; the narrow-source layer's ρ,
+    dof_narrow.cl); one dummy entry for a round aperture."""
+    if blades == 0:
+        return np.zeros((1, 2), np.float32)
+    psi = -math.pi / 2 - math.radians(rotation_deg) + (np.arange(blades) + 0.5) * (2 * math.pi / blades)
+    return np.stack([np.cos(psi), np.sin(psi)], 1).astype(np.float32)
+
+
 def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=None):
     """Kernels and scratch buffers of one gather configuration (working resolution w/scale ×
     h/scale, max CoC ``rmax`` working px, lattice budget ``budget``). ``built``: levels to build
@@ -94,7 +106,17 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
         return rt.scratch(owner, f"{tag}.{name}", shp, dtype)
 
     half = math.hypot(ww / 2.0, hw / 2.0)
+    narrow = {}
+    if defines.get("DOF_NARROW"):
+        ncx, ncy = -(-w // D.NARROW_CELL), -(-h // D.NARROW_CELL)
+        narrow = {"ncx": ncx, "ncy": ncy, "flag": scratch("nflag", (hw, ww), np.int32),
+                  "gflag": scratch("ngflag", (hw, -(-ww // 16)), np.int32),
+                  "ncount": scratch("ncount", (ncy, ncx), np.int32),
+                  "ntx": -(-w // 16), "nty": -(-h // 16),
+                  "ntile": scratch("ntile", (-(-h // 16), -(-w // 16)), np.int32),
+                  "nrec": scratch("nrec", (ncy * ncx * D.NARROW_MAX, 8))}
     return {
+        "narrow": narrow,
         "k": _kernels(rt, defines), "scale": scale, "nlev": nlev, "ww": ww, "hw": hw, "pad": pad,
         "tw": tw, "th": th, "pw": pw, "ph": ph,
         "taps": [const("dx", dx), const("dy", dy), const("dist", dist.astype(np.float32)),
@@ -106,6 +128,11 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
         "tmax": scratch("tmax", (th, tw)), "tn": scratch("tn", (th, tw), np.int32),
         "alpha": scratch("alpha", (hw, ww)),
         "blur": scratch("blur", (3, hw, ww)) if scale > 1 else None,
+        "aperture": (const("normals", _edge_normals(camera.blades, camera.blade_rotation_deg)),
+                     np.int32(camera.blades), np.float32(math.cos(math.pi / max(camera.blades, 1))),
+                     np.float32(camera.aperture_roundness), np.float32(camera.spherical_aberration),
+                     np.float32(1.0 / D.aperture_area(camera.blades, camera.blade_rotation_deg,
+                                                      camera.aperture_roundness))),
         "field": (np.float32(camera.optical_vignetting), np.float32((ww - 1) / 2.0),
                   np.float32((hw - 1) / 2.0), np.float32(1.0 / half)),
     }
@@ -118,6 +145,17 @@ def _enqueue_plan(rt, c, src, coc, w, h):
     k["dof_prepare"].set_args(src, coc, c["lv"], c["pv"], i32(w), i32(h), i32(c["ww"]), i32(c["hw"]),
                               i32(c["pad"]), *c["field"])
     evs.append(_launch_rows(rt, k["dof_prepare"], (c["pw"], c["ph"])))
+    nw = c["narrow"]
+    if nw:  # narrow sources: listed, and taken out of level 0 before the levels are built
+        k["dof_narrow_flag"].set_args(c["lv"], nw["flag"], nw["gflag"], i32(c["ww"]), i32(c["hw"]), i32(c["pad"]))
+        evs.append(_launch_rows(rt, k["dof_narrow_flag"], (c["ww"], c["hw"])))
+        k["dof_narrow_list"].set_args(src, coc, c["lv"], nw["flag"], nw["gflag"], nw["ncount"], nw["nrec"],
+                                      i32(w), i32(h), i32(c["ww"]), i32(c["hw"]), i32(c["pad"]), i32(nw["ncx"]),
+                                      i32(nw["ncy"]), *c["aperture"])
+        evs.append(_launch(rt, k["dof_narrow_list"], (nw["ncx"], nw["ncy"]), 4))
+        k["dof_narrow_near"].set_args(nw["ncount"], nw["nrec"], nw["ntile"], i32(nw["ncx"]), i32(nw["ncy"]),
+                                      i32(nw["ntx"]), i32(nw["nty"]))
+        evs.append(_launch(rt, k["dof_narrow_near"], (nw["ntx"], nw["nty"]), 4))
     for lvl in range(c["nlev"]):
         k["dof_levels"].set_args(c["lv"], i32(c["pw"]), i32(c["ph"]), i32(2 ** lvl), i32(lvl))
         evs.append(_launch_rows(rt, k["dof_levels"], (c["pw"], c["ph"])))
@@ -140,8 +178,12 @@ def _enqueue_gather(rt, c, target, tn, camera, inv_area, vec, prof):
 
 def _enqueue_upsample(rt, c, src, coc, dst, w, h, tn_mix):
     i32 = np.int32
+    nw = c["narrow"]
+    # without the layer its arguments are placeholders (DOF_NARROW 0: never read)
+    ncount, nrec, ntile = (nw["ncount"], nw["nrec"], nw["ntile"]) if nw else (tn_mix, c["alpha"], tn_mix)
     c["k"]["dof_upsample"].set_args(src, coc, c["blur"], c["alpha"], dst, i32(w), i32(h), i32(c["ww"]),
-                                    i32(c["hw"]), tn_mix, i32(c["tw"]))
+                                    i32(c["hw"]), tn_mix, i32(c["tw"]), ncount, nrec, ntile,
+                                    i32(nw.get("ncx", 0)), i32(nw.get("ncy", 0)), *c["aperture"])
     return _launch_rows(rt, c["k"]["dof_upsample"], (w, h))
 
 
