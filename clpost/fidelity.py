@@ -145,6 +145,31 @@ def emitter_metrics(test: np.ndarray, truth: np.ndarray, lamp_test: np.ndarray, 
     return out
 
 
+def without_lamps(frame, emit: np.ndarray):
+    """``frame`` minus its emission pass ``emit`` (linear RGB, clipped at 0): the same scene with the
+    lamps' light removed, the input of the lamp-only image of a post-process."""
+    from .frame import Frame
+
+    return Frame(color=np.maximum(frame.color[..., :3] - emit, 0.0).astype(np.float32), depth=frame.depth,
+                 velocity=frame.velocity, alpha=frame.alpha)
+
+
+def lamp_metrics(run, data, entry: dict, frame, white: float, truth: str = "dof", lamps=None) -> list[dict]:
+    """:func:`emitter_metrics` of each lamp of a Cycles manifest ``entry`` in folder ``data``
+    (``lamps``: a subset) for a post-process ``run(frame) -> linear RGB`` against ``truth``: the
+    result's lamp-only image is its result on ``frame`` minus its result on :func:`without_lamps`
+    of the pinhole's Emission pass."""
+    from pathlib import Path
+
+    data = Path(data)
+    t = data / entry["truths"][truth]["file"]
+    out = run(frame)
+    lamp_img = out - run(without_lamps(frame, read_rgb(data / entry["pinhole"]["file"], "Emission.")))
+    truth_img, truth_lamps = read_rgb(t), read_rgb(t, "emit.")
+    return [emitter_metrics(out, truth_img, lamp_img, truth_lamps, lamp, entry["shot"], white)
+            for lamp in (entry["lamps"] if lamps is None else lamps)]
+
+
 def motion_box(velocity: np.ndarray, shutter_frames: float, margin: int = 4, threshold: float = 0.5):
     """(y0, y1, x0, x1) bounding the pixels that move by more than ``threshold`` px per frame, grown
     by the longest blur (|v|·shutter) + ``margin``; None when nothing moves."""

@@ -15,7 +15,6 @@ import pytest
 
 from clpost import fidelity as fd
 from clpost.exr import read_frame
-from clpost.frame import Frame
 from clpost.pipeline import Pipeline
 
 DATA = Path(__file__).parent / "data" / "cycles"
@@ -64,6 +63,11 @@ def _run(entry, frame, kind, quality):
     w, h = entry["size"]
     cam = fd.cycles_camera(entry["shot"], w, h, dof=kind != "motion", motion=kind != "dof")
     return Pipeline(cam, quality=quality, stages=STAGES[kind]).run(frame).color[..., :3]
+
+
+def _lamps(entry, frame, quality, lamps=None):
+    """Each lamp's emitter metrics (clpost.fidelity.emitter_metrics) for clpost's DoF at ``quality``."""
+    return fd.lamp_metrics(lambda f: _run(entry, f, "dof", quality), DATA, entry, frame, 0.6, lamps=lamps)
 
 
 def test_pinhole_exports_read_as_blender_writes_them():
@@ -130,14 +134,7 @@ def test_emitter_regressions_on_the_emitters_scene():
     are up to 2.1× Cycles' area and in-focus lamps get ≈ 100-pixel halos; the goal is 1 ± 0.1 and
     ≤ 2× Cycles' halo)."""
     entry, frame = _scene("emitters")
-    t = entry["truths"]["dof"]
-    truth, truth_lamps = _channels(DATA / t["file"], ""), _channels(DATA / t["file"], "emit.")
-    emit = _channels(DATA / entry["pinhole"]["file"], "Emission.")
-    out = _run(entry, frame, "dof", "final")
-    dark = Frame(color=np.maximum(frame.color[..., :3] - emit, 0).astype(np.float32), depth=frame.depth,
-                 velocity=frame.velocity)
-    lamps_out = out - _run(entry, dark, "dof", "final")
-    m = [fd.emitter_metrics(out, truth, lamps_out, truth_lamps, lamp, entry["shot"], 0.6) for lamp in entry["lamps"]]
+    m = _lamps(entry, frame, "final")
     areas = [x["area_ratio"] for x in m if x.get("area_ratio") is not None]
     energy = [x["energy_ratio"] for x in m if x["energy_ratio"] is not None]
     halo = sum(x["halo_test"] for x in m if x["in_focus"])
@@ -159,14 +156,7 @@ def test_draft_emitters_keep_final_s_discs_and_energy():
     the narrow-source layer spreads them at full resolution (docs/fidelity.md, "The narrow-source
     layer"): 1.00–1.24× and 0.978–1.015 measured, final's own levels."""
     entry, frame = _scene("emitters")
-    t = entry["truths"]["dof"]
-    truth, truth_lamps = _channels(DATA / t["file"], ""), _channels(DATA / t["file"], "emit.")
-    emit = _channels(DATA / entry["pinhole"]["file"], "Emission.")
-    dark = Frame(color=np.maximum(frame.color[..., :3] - emit, 0).astype(np.float32), depth=frame.depth,
-                 velocity=frame.velocity)
-    out = _run(entry, frame, "dof", "draft")
-    lamps_out = out - _run(entry, dark, "dof", "draft")
-    m = [fd.emitter_metrics(out, truth, lamps_out, truth_lamps, lamp, entry["shot"], 0.6) for lamp in entry["lamps"]]
+    m = _lamps(entry, frame, "draft")
     defocused = {x["name"]: (round(x["area_ratio"], 2), round(x["energy_ratio"], 3)) for x in m
                  if not x["in_focus"] and x["energy_ratio"]}
     assert len(defocused) >= 7
@@ -181,16 +171,9 @@ def test_the_lamp_behind_the_pane_keeps_its_own_depth():
     despeckle's light-behind-a-pane rule (docs/fidelity.md, "Transparent: stochastic depth");
     1.12 / 1.46 measured after."""
     entry, frame = _scene("transparent")
-    t = entry["truths"]["dof"]
-    truth, truth_lamps = _channels(DATA / t["file"], ""), _channels(DATA / t["file"], "emit.")
-    emit = _channels(DATA / entry["pinhole"]["file"], "Emission.")
-    dark = Frame(color=np.maximum(frame.color[..., :3] - emit, 0).astype(np.float32), depth=frame.depth,
-                 velocity=frame.velocity)
     lamp = next(x for x in entry["lamps"] if x["name"] == "lamp01")
     for quality, measured in (("final", 1.12), ("draft", 1.46)):
-        out = _run(entry, frame, "dof", quality)
-        m = fd.emitter_metrics(out, truth, out - _run(entry, dark, "dof", quality), truth_lamps, lamp,
-                               entry["shot"], 0.6)
+        m, = _lamps(entry, frame, quality, lamps=[lamp])
         assert m["area_ratio"] <= measured + 0.1, (quality, m["area_ratio"])
 
 

@@ -6,12 +6,10 @@ the issue's targets — several of which these scenes show unmet (docs/fidelity.
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from clpost import fidelity as fd
 from clpost.exr import read_frame
-from clpost.frame import Frame
 from clpost.pipeline import Pipeline
 
 DATA = Path(__file__).parent / "data" / "cycles_heldout"
@@ -44,6 +42,11 @@ def _run(entry, frame, kind, quality):
     w, h = entry["size"]
     cam = fd.cycles_camera(entry["shot"], w, h, dof=kind != "motion", motion=kind != "dof")
     return Pipeline(cam, quality=quality, stages=STAGES[kind]).run(frame).color[..., :3]
+
+
+def _lamps(entry, frame, quality, lamps=None):
+    """Each lamp's emitter metrics (clpost.fidelity.emitter_metrics) for clpost's DoF at ``quality``."""
+    return fd.lamp_metrics(lambda f: _run(entry, f, "dof", quality), DATA, entry, frame, 0.6, lamps=lamps)
 
 
 def test_heldout_truths_are_sound():
@@ -85,14 +88,7 @@ def test_heldout_emitters_do_not_get_worse():
     (the floor below is the earlier 0.973's, kept). Floors, not targets (1 ± 0.1, ≤ 2× Cycles' halo)."""
     entry = MANIFEST["scenes"]["h_lamps"]
     frame = read_frame(DATA / entry["pinhole"]["file"])
-    t = entry["truths"]["dof"]
-    truth, truth_lamps = _channels(DATA / t["file"], ""), _channels(DATA / t["file"], "emit.")
-    emit = _channels(DATA / entry["pinhole"]["file"], "Emission.")
-    dark = Frame(color=np.maximum(frame.color[..., :3] - emit, 0).astype(np.float32), depth=frame.depth,
-                 velocity=frame.velocity)
-    out = _run(entry, frame, "dof", "final")
-    lamps_out = out - _run(entry, dark, "dof", "final")
-    m = [fd.emitter_metrics(out, truth, lamps_out, truth_lamps, lamp, entry["shot"], 0.6) for lamp in entry["lamps"]]
+    m = _lamps(entry, frame, "final")
     areas = [x["area_ratio"] for x in m if x.get("area_ratio") is not None]
     energy = [x["energy_ratio"] for x in m if x["energy_ratio"] is not None]
     halo = sum(x["halo_test"] for x in m if x["in_focus"])
@@ -111,16 +107,8 @@ def test_heldout_lamps_at_draft_and_preview_keep_their_energy():
     fringe keeps the wall's depth)."""
     entry = MANIFEST["scenes"]["h_lamps"]
     frame = read_frame(DATA / entry["pinhole"]["file"])
-    t = entry["truths"]["dof"]
-    truth, truth_lamps = _channels(DATA / t["file"], ""), _channels(DATA / t["file"], "emit.")
-    emit = _channels(DATA / entry["pinhole"]["file"], "Emission.")
-    dark = Frame(color=np.maximum(frame.color[..., :3] - emit, 0).astype(np.float32), depth=frame.depth,
-                 velocity=frame.velocity)
     for quality in ("draft", "preview"):
-        out = _run(entry, frame, "dof", quality)
-        lamps_out = out - _run(entry, dark, "dof", quality)
-        m = [fd.emitter_metrics(out, truth, lamps_out, truth_lamps, lamp, entry["shot"], 0.6)
-             for lamp in entry["lamps"]]
+        m = _lamps(entry, frame, quality)
         defocused = {x["name"]: (x["area_ratio"], x["energy_ratio"]) for x in m if not x["in_focus"]}
         assert len(defocused) == 9
         assert all(a <= 1.46 + 0.1 for a, _ in defocused.values()), (quality, defocused)

@@ -58,10 +58,7 @@ def load_scene(name: str, data: Path = DATA):
     return entry, frame, emit, truths
 
 
-def without_lamps(frame: Frame, emit: np.ndarray) -> Frame:
-    """The pinhole frame minus its Emit pass: the same scene with the lamps' light removed."""
-    return Frame(color=np.maximum(frame.color[..., :3] - emit, 0.0).astype(np.float32), depth=frame.depth,
-                 velocity=frame.velocity, alpha=frame.alpha)
+without_lamps = fd.without_lamps
 
 
 def run_clpost(frame: Frame, entry: dict, kind: str, quality: str, repeats: int):
