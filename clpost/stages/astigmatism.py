@@ -131,13 +131,11 @@ form's:
     a'^2 = a^2 - 4\Big(\frac{k^2}{12} - \frac16\Big) = a^2 - \tfrac{14}{3}\ \mathrm{px}^2
 
 for the tile's bound and every pixel's own ellipse (the reach test keeps the sources' own
-semi-axes; a point tile's reach flag compares with its shrunk bound). Accuracy, against a
-1024-tap truth of the tile model on three crops of the bench's worst frame at 1080p (values
-0.3–500, tiles of 4–15 px): 64 bilinear taps rms 0.18–0.52, p99.9 2.6–5.1; the point classes rms
-0.14–0.16, p99.9 1.1–1.8 — the box removes most of the spiral's aliasing of noise and highlights.
-A lone highlight's splat on point tiles (numpy reference, 20 cases, semi-axes 4–11 px): second
-moments within 0.0–6.0 % of the closed form (64 bilinear taps: 0.8–4.6 %; both are patchworks of
-tile kernels), energy within 3.7 % (2.0 %); docs/benchmarks.md, "astigmatism: point classes".
+semi-axes; a point tile's reach flag compares with its shrunk bound); the factor 4 is a uniform
+disc's: semi-axis a, variance a²/4 per axis. Unlike a bilinear tap, a point tap is piecewise
+constant in its offset: as a tile's bound moves (a focus pull) its output steps by one tap's share
+of the box's difference where a tap crosses a pixel edge. Accuracy and speed against 64 bilinear taps
+(``tools/astigmatism_point_check.py``): docs/benchmarks.md, "astigmatism: point classes".
 The box plane is filled only where point tiles read (``astigmatism_reach`` flags the tiles within
 reach of one, ``astigmatism_box`` skips the others).
 
