@@ -72,14 +72,7 @@ def test_point_source_gives_the_closed_form_ellipse(fc, a):
     frame = Frame(color, depth=np.full((h, w), 3.0, np.float32))
     out = Pipeline(cam, stages=["astigmatism"]).run(frame).color[..., 1].astype(np.float64)
     assert out.sum() == pytest.approx(1.0, rel=0.02)
-    ys, xs = np.mgrid[0:h, 0:w]
-    m = out / out.sum()
-    mx, my = (m * xs).sum(), (m * ys).sum()
-    vx, vy = (m * (xs - mx) ** 2).sum(), (m * (ys - my) ** 2).sum()
-    taps = fld.vogel_disc(64).astype(np.float64)
-    # variance of the splat: (a/2)² <u²> + 1/6 from bilinear weights at uniform sub-pixel offsets
-    meas_t = 2 * math.sqrt(max(vx - 1 / 6, 0) / np.mean(taps[:, 1] ** 2))
-    meas_s = 2 * math.sqrt(max(vy - 1 / 6, 0) / np.mean(taps[:, 0] ** 2))
+    meas_s, meas_t = ast.splat_axes_px(out, 64)
     assert meas_t == pytest.approx(want_t, rel=0.05), (meas_t, want_t)
     assert meas_s == pytest.approx(want_s, rel=0.05), (meas_s, want_s)
 
@@ -473,12 +466,6 @@ def test_point_classes_give_the_closed_form_ellipse(fc, a, x0, n):
     assert stage.point_taps(cam, frame, exact)[cy // fld.TILE_H, x0 // fld.TILE_W] == n
     out = Pipeline(cam, stages=["astigmatism"]).run(frame).color[..., 1].astype(np.float64)
     assert out.sum() == pytest.approx(1.0, abs=0.04)
-    ys, xs = np.mgrid[0:h, 0:w]
-    m = out / out.sum()
-    mx, my = (m * xs).sum(), (m * ys).sum()
-    vx, vy = (m * (xs - mx) ** 2).sum(), (m * (ys - my) ** 2).sum()
-    taps = fld.vogel_disc(n).astype(np.float64)
-    meas_t = 2 * math.sqrt(max(vx - 1 / 6, 0) / np.mean(taps[:, 1] ** 2))
-    meas_s = 2 * math.sqrt(max(vy - 1 / 6, 0) / np.mean(taps[:, 0] ** 2))
+    meas_s, meas_t = ast.splat_axes_px(out, n)
     assert meas_t == pytest.approx(want_t, rel=0.06), (meas_t, want_t)
     assert meas_s == pytest.approx(want_s, rel=0.06), (meas_s, want_s)

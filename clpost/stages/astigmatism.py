@@ -525,4 +525,23 @@ def point_source_axes_px(camera, r_mm: float, depth_m: float, width: int) -> tup
     return (2 * float(residual_semi_px(cs, c0, p)), 2 * float(residual_semi_px(ct, c0, p)))
 
 
-__all__ = ["Astigmatism", "axes_mm", "box_filtered", "point_classes", "focal_offsets", "point_source_axes_px", "thin_lens"]
+def splat_axes_px(splat, taps: int) -> tuple[float, float]:
+    r"""Measured twin of :func:`point_source_axes_px`: full axes (sagittal, tangential) in px of the
+    splat ``splat`` (H × W, one channel) of a point source on the image's horizontal axis (sagittal
+    along y, tangential along x) gathered with ``taps`` taps, from its second moments. Taps at
+    :math:`a\,u` (:math:`u` the unit spiral, :func:`~clpost.stages._field.vogel_disc`) spread the
+    splat over :math:`\sigma^2 = a^2 \langle u^2\rangle + \frac16` per axis — 1/6 from bilinear
+    weights at uniform sub-pixel offsets, which the point classes' shrunk ellipses keep (module
+    docstring, "Point taps") — so :math:`2a = 2\sqrt{(\sigma^2 - \frac16)/\langle u^2\rangle}`."""
+    m = np.asarray(splat, np.float64)
+    m = m / m.sum()
+    ys, xs = np.mgrid[0:m.shape[0], 0:m.shape[1]]
+    mx, my = (m * xs).sum(), (m * ys).sum()
+    vx, vy = (m * (xs - mx) ** 2).sum(), (m * (ys - my) ** 2).sum()
+    u = fld.vogel_disc(taps).astype(np.float64)
+    return (2 * math.sqrt(max(vy - 1 / 6, 0) / np.mean(u[:, 0] ** 2)),
+            2 * math.sqrt(max(vx - 1 / 6, 0) / np.mean(u[:, 1] ** 2)))
+
+
+__all__ = ["Astigmatism", "axes_mm", "box_filtered", "point_classes", "focal_offsets", "point_source_axes_px",
+           "splat_axes_px", "thin_lens"]
