@@ -450,10 +450,10 @@ def test_point_classes_match_the_reference(rng, monkeypatch, quality, wide, tall
 def test_point_classes_give_the_closed_form_ellipse(fc, a, x0, n):
     """A point source on a point-class tile: the splat's second moments are the closed-form
     ellipse's (the box's and the rounding's variance are taken from the ellipse: semi-axes
-    √(a² − POINT_SHRINK_PX2)). Measured with the class's spiral as in the test above; the 64-tap
-    bilinear model read 0.8–4.0 % on these four (its splat is a patchwork of tile kernels too; up to
-    4.6 % over 20 such cases), the point classes 0.0–5.1 % (up to 6.0 %) — so 6 % here, energy 4 %
-    (64-tap: up to 2.0 %, point classes 3.7 %; tools/astigmatism_point_check.py)."""
+    √(a² − POINT_SHRINK_PX2)). Measured with the class's spiral as in the test above. The splat is a
+    patchwork of tile kernels (so is the 64-tap bilinear one's): 6 % on the axes and 4 % on energy are
+    the point classes' largest errors over 20 such highlights (docs/benchmarks.md, "astigmatism:
+    point classes"; tools/astigmatism_point_check.py)."""
     w, h = 601, 81
     cy, cx = (h - 1) // 2, (w - 1) / 2
     cam = Camera(lens="thin:50", f_number=2.0, focus_distance_m=3.0, field_curvature_mm=fc, astigmatism_mm=a)
