@@ -445,6 +445,23 @@ def test_point_classes_match_the_reference(rng, monkeypatch, quality, wide, tall
     assert out.sum() == pytest.approx(frame.color.sum(), rel=1e-3)
 
 
+def test_point_classes_keep_huge_finite_values_finite(rng):
+    """Adversarial input: four pixels at 1e38 (finite, above FLT_MAX / 16) on a point tile. The box
+    plane is their mean; summed before the division the 16 terms overflowed to inf (408 pixels
+    of this frame), where the bilinear taps stay finite."""
+    cam, frame = _point_class_frame(rng)
+    stage = ast.Astigmatism("final")
+    assert stage.point_taps(cam, frame)[20 // fld.TILE_H, 760 // fld.TILE_W] > 0
+    color = frame.color.copy()
+    color[20, 760:764] = 1e38
+    frame = Frame(color, depth=frame.depth)
+    pipe = Pipeline(cam, stages=["astigmatism"], quality="final")
+    out = pipe.run(frame).color
+    assert np.isfinite(out).all(), np.argwhere(~np.isfinite(out))[:3]
+    err, where = _max_err(out, pipe.reference(frame))
+    assert err < 1e-5 * 1e38, where
+
+
 @pytest.mark.parametrize("fc,a,x0,n", [(-3.0, 1.0, 551, 64), (-4.5, -1.0, 515, 64),
                                        (-5.0, 0.5, 551, 32), (5.0, -0.5, 551, 32)])
 def test_point_classes_give_the_closed_form_ellipse(fc, a, x0, n):
