@@ -30,7 +30,7 @@
  * astigmatism_exact with one work-group per tile of the frame — the most a list can hold, so the
  * host never reads the counts (no sync) — and the work-groups past their class's count return at
  * once (ASTIGMATISM_LISTED; a few ns each on PoCL). The tap table holds
- * the spirals of 4, 8, ..., ASTIGMATISM_TAPS points one after the other.
+ * the spirals of 4, 8, ..., ASTIGMATISM_TAPS points one after the other, then the point classes' spirals.
  * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE, ASTIGMATISM_TILE_W,
  * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch),
  * ASTIGMATISM_CLASSES (copy, the tap classes, the point classes, exact), ASTIGMATISM_TAP_CLASSES

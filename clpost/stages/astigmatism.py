@@ -543,5 +543,5 @@ def splat_axes_px(splat, taps: int) -> tuple[float, float]:
             2 * math.sqrt(max(vx - 1 / 6, 0) / np.mean(u[:, 1] ** 2)))
 
 
-__all__ = ["Astigmatism", "axes_mm", "box_filtered", "point_classes", "focal_offsets", "point_source_axes_px",
+__all__ = ["Astigmatism", "axes_mm", "box_filtered", "focal_offsets", "point_classes", "point_source_axes_px",
            "splat_axes_px", "thin_lens"]
