@@ -748,7 +748,7 @@ def test_a_one_pixel_lamps_fringe_goes_with_the_lamp_past_its_twin():
         out, pipe = run(cam, frame, q)
         assert_matches_reference(pipe, frame, out, rtol=1e-3)
         lamp = out - run(cam, Frame(wall, depth=depth), q)[0]
-        # issue 16: lamp-only light above 5 % of white beyond 3 px; the rule without the twin left
+        # lamp-only light above 5 % of white beyond 3 px; the rule without the twin clause left
         # 118 (draft) / 110 (final) such pixels
         assert np.count_nonzero(lamp[beyond] @ D.luma_weights() > 0.05) == 0, q
 
