@@ -30,7 +30,7 @@
  * astigmatism_exact with one work-group per tile of the frame — the most a list can hold, so the
  * host never reads the counts (no sync) — and the work-groups past their class's count return at
  * once (ASTIGMATISM_LISTED; a few ns each on PoCL). The tap table holds
- * the spirals of 4, 8, ..., ASTIGMATISM_TAPS points one after the other.
+ * the spirals of 4, 8, ..., ASTIGMATISM_TAPS points one after the other, then the point classes' spirals.
  * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE, ASTIGMATISM_TILE_W,
  * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch),
  * ASTIGMATISM_CLASSES (copy, the tap classes, the point classes, exact), ASTIGMATISM_TAP_CLASSES
@@ -301,16 +301,25 @@ __kernel void astigmatism_box(__global const float *restrict src, __global const
     const int16 c0 = clamp(sx0 - 1 + lane, 0, width - 1), c1 = clamp(sx0 + lane, 0, width - 1);
     const int16 c2 = clamp(sx0 + 1 + lane, 0, width - 1), c3 = clamp(sx0 + 2 + lane, 0, width - 1);
     for (int c = 0; c < 3; ++c) {
+        /* each term scaled before the sum: a mean of finite values stays finite (16 terms above
+         * FLT_MAX / 16 summed first overflow) */
+        const float16 k = 1.0f / 16.0f;
         float16 acc = 0.0f;
         for (int i = -1; i <= 2; ++i) {
             __global const float *s = src + c * n + (size_t)clamp(y - ASTIGMATISM_PAD + i, 0, height - 1) * width;
-            if (inside)
-                acc += (vload16(0, s + sx0 - 1) + vload16(0, s + sx0))
-                     + (vload16(0, s + sx0 + 1) + vload16(0, s + sx0 + 2));
-            else
-                acc += (CLP_GATHER16(s, c0) + CLP_GATHER16(s, c1)) + (CLP_GATHER16(s, c2) + CLP_GATHER16(s, c3));
+            if (inside) {
+                acc = mad(k, vload16(0, s + sx0 - 1), acc);
+                acc = mad(k, vload16(0, s + sx0), acc);
+                acc = mad(k, vload16(0, s + sx0 + 1), acc);
+                acc = mad(k, vload16(0, s + sx0 + 2), acc);
+            } else {
+                acc = mad(k, CLP_GATHER16(s, c0), acc);
+                acc = mad(k, CLP_GATHER16(s, c1), acc);
+                acc = mad(k, CLP_GATHER16(s, c2), acc);
+                acc = mad(k, CLP_GATHER16(s, c3), acc);
+            }
         }
-        vstore16(acc * (1.0f / 16.0f), 0, pre + c * pn + j);
+        vstore16(acc, 0, pre + c * pn + j);
     }
 }
 

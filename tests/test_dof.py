@@ -708,7 +708,6 @@ def test_a_one_pixel_lamp_hit_by_the_depth_in_one_of_its_two_pixels_keeps_its_de
     assert D.despeckle_depth(pane, d_pane)[4, 4] == 3.0
 
 
-
 def _one_pixel_lamp_on_a_wall(h=41, w=41, y=20, x=19, lamp_m=1.0):
     """A 1-px lamp (at ``lamp_m``) straddling two pixels (375 and 361× the wall's luminance, as
     held-out h_lamps' lamp01) before a wall at 5.9 m; the point-sampled depth hit the lamp in the
@@ -749,7 +748,7 @@ def test_a_one_pixel_lamps_fringe_goes_with_the_lamp_past_its_twin():
         out, pipe = run(cam, frame, q)
         assert_matches_reference(pipe, frame, out, rtol=1e-3)
         lamp = out - run(cam, Frame(wall, depth=depth), q)[0]
-        # issue 16: lamp-only light above 5 % of white beyond 3 px; the rule without the twin left
+        # lamp-only light above 5 % of white beyond 3 px; the rule without the twin clause left
         # 118 (draft) / 110 (final) such pixels
         assert np.count_nonzero(lamp[beyond] @ D.luma_weights() > 0.05) == 0, q
 
@@ -768,6 +767,7 @@ def test_a_textured_pixel_beside_a_white_silhouette_keeps_its_depth():
     assert D.effective_depth(col.astype(np.float64), depth)[3, 3] == 6.0
     col[:, :3], col[2, 4], col[3, 3] = 400.0, 400.0, 30.0   # a light, its twin and their fringe: taken
     assert D.effective_depth(col.astype(np.float64), depth)[3, 3] == 2.0
+
 
 def _lamp_behind_an_in_focus_pane():
     """Held-out h_panes' lamp00: a 2-px lamp at 6 m seen through a 0.2 pane at 1.2 m over the sky;

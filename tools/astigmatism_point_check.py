@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 
 import numpy as np
 
@@ -56,7 +55,6 @@ def highlights():
     w, h = 601, 81
     cy, cx = (h - 1) // 2, (w - 1) / 2
     st = ast.Astigmatism("final")
-    ys, xs = np.mgrid[0:h, 0:w]
     rows = []
     for fc, a in ((-3.0, 1.0), (-3.5, 0.5), (-4.0, 1.0), (-5.0, 0.5), (-5.5, 1.0), (-6.0, 0.3), (-4.5, -1.0),
                   (4.0, 1.0), (5.0, -0.5)):
@@ -74,14 +72,8 @@ def highlights():
             args = [a_s, a_t] + [fld.per_pixel(v, w, h) for v in (bs, bt, tex, tey)]
 
             def moments(out, taps):
-                out = out[..., 1]
-                mm = out / out.sum()
-                mx, my = (mm * xs).sum(), (mm * ys).sum()
-                vx, vy = (mm * (xs - mx) ** 2).sum(), (mm * (ys - my) ** 2).sum()
-                u = fld.vogel_disc(taps).astype(np.float64)
-                got_t = 2 * math.sqrt(max(vx - 1 / 6, 0) / np.mean(u[:, 1] ** 2))
-                got_s = 2 * math.sqrt(max(vy - 1 / 6, 0) / np.mean(u[:, 0] ** 2))
-                return got_s / want_s - 1, got_t / want_t - 1, out.sum() - 1
+                got_s, got_t = ast.splat_axes_px(out[..., 1], taps)
+                return got_s / want_s - 1, got_t / want_t - 1, out[..., 1].sum() - 1
 
             old = moments(st._gather(color, *args, own=True, n=64), 64)
             new = moments(st._gather(color, *args, own=True, n=n, box=True), n)

@@ -12,7 +12,6 @@ measured on the kernels' output vs the formulas. Uses only the public API.
 from __future__ import annotations
 
 import argparse
-import math
 import statistics
 import time
 
@@ -58,10 +57,7 @@ def closed_form_errors(w, h):
     color = np.zeros((h, w, 3), np.float32)
     color[cy, x0] = 1.0
     res = Pipeline(cam, stages=["astigmatism"]).run(Frame(color, depth=np.full((h, w), 3.0, np.float32))).color[..., 1]
-    _, _, vx, vy = _moments(res.astype(np.float64), xs, ys)
-    taps = np.asarray(__import__("clpost.stages._field", fromlist=["vogel_disc"]).vogel_disc(64), np.float64)
-    got_t = 2 * math.sqrt(max(vx - 1 / 6, 0) / np.mean(taps[:, 1] ** 2))
-    got_s = 2 * math.sqrt(max(vy - 1 / 6, 0) / np.mean(taps[:, 0] ** 2))
+    got_s, got_t = ast.splat_axes_px(res, 64)
     out["astigmatism sagittal axis"] = (want_s, got_s)
     out["astigmatism tangential axis"] = (want_t, got_t)
     out["astigmatism energy"] = (1.0, float(res.sum()))

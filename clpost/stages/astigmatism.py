@@ -131,13 +131,11 @@ form's:
     a'^2 = a^2 - 4\Big(\frac{k^2}{12} - \frac16\Big) = a^2 - \tfrac{14}{3}\ \mathrm{px}^2
 
 for the tile's bound and every pixel's own ellipse (the reach test keeps the sources' own
-semi-axes; a point tile's reach flag compares with its shrunk bound). Accuracy, against a
-1024-tap truth of the tile model on three crops of the bench's worst frame at 1080p (values
-0.3–500, tiles of 4–15 px): 64 bilinear taps rms 0.18–0.52, p99.9 2.6–5.1; the point classes rms
-0.14–0.16, p99.9 1.1–1.8 — the box removes most of the spiral's aliasing of noise and highlights.
-A lone highlight's splat on point tiles (numpy reference, 20 cases, semi-axes 4–11 px): second
-moments within 0.0–6.0 % of the closed form (64 bilinear taps: 0.8–4.6 %; both are patchworks of
-tile kernels), energy within 3.7 % (2.0 %); docs/benchmarks.md, "astigmatism: point classes".
+semi-axes; a point tile's reach flag compares with its shrunk bound); the factor 4 is a uniform
+disc's: semi-axis a, variance a²/4 per axis. Unlike a bilinear tap, a point tap is piecewise
+constant in its offset: as a tile's bound moves (a focus pull) its output steps by one tap's share
+of the box's difference where a tap crosses a pixel edge. Accuracy and speed against 64 bilinear taps
+(``tools/astigmatism_point_check.py``): docs/benchmarks.md, "astigmatism: point classes".
 The box plane is filled only where point tiles read (``astigmatism_reach`` flags the tiles within
 reach of one, ``astigmatism_box`` skips the others).
 
@@ -527,4 +525,23 @@ def point_source_axes_px(camera, r_mm: float, depth_m: float, width: int) -> tup
     return (2 * float(residual_semi_px(cs, c0, p)), 2 * float(residual_semi_px(ct, c0, p)))
 
 
-__all__ = ["Astigmatism", "axes_mm", "box_filtered", "point_classes", "focal_offsets", "point_source_axes_px", "thin_lens"]
+def splat_axes_px(splat, taps: int) -> tuple[float, float]:
+    r"""Measured twin of :func:`point_source_axes_px`: full axes (sagittal, tangential) in px of the
+    splat ``splat`` (H × W, one channel) of a point source on the image's horizontal axis (sagittal
+    along y, tangential along x) gathered with ``taps`` taps, from its second moments. Taps at
+    :math:`a\,u` (:math:`u` the unit spiral, :func:`~clpost.stages._field.vogel_disc`) spread the
+    splat over :math:`\sigma^2 = a^2 \langle u^2\rangle + \frac16` per axis — 1/6 from bilinear
+    weights at uniform sub-pixel offsets, which the point classes' shrunk ellipses keep (module
+    docstring, "Point taps") — so :math:`2a = 2\sqrt{(\sigma^2 - \frac16)/\langle u^2\rangle}`."""
+    m = np.asarray(splat, np.float64)
+    m = m / m.sum()
+    ys, xs = np.mgrid[0:m.shape[0], 0:m.shape[1]]
+    mx, my = (m * xs).sum(), (m * ys).sum()
+    vx, vy = (m * (xs - mx) ** 2).sum(), (m * (ys - my) ** 2).sum()
+    u = fld.vogel_disc(taps).astype(np.float64)
+    return (2 * math.sqrt(max(vy - 1 / 6, 0) / np.mean(u[:, 0] ** 2)),
+            2 * math.sqrt(max(vx - 1 / 6, 0) / np.mean(u[:, 1] ** 2)))
+
+
+__all__ = ["Astigmatism", "axes_mm", "box_filtered", "focal_offsets", "point_classes", "point_source_axes_px",
+           "splat_axes_px", "thin_lens"]

@@ -6,8 +6,8 @@ offsets; once per camera and size) → ``astigmatism_pad`` (padded copy + per-pi
 ``astigmatism_tiles`` (tile bounds and class lists) → ``astigmatism_reach`` (and which tiles the
 point classes read) → ``astigmatism_box`` (the point classes' prefiltered colour there) → per class:
 copy, one kernel per tap count, one per point class, exact per-pixel, each over every tile of the
-frame (the work-groups past the class's count return at once: nothing is read back, so the launches are data-independent and a
-plan records them once).
+frame (the work-groups past the class's count return at once: nothing is read back, so the
+launches are data-independent and a plan records them once).
 
 Everything that depends only on the camera's structure and the frame size — the program source
 with its tap table, the tile directions, the inner-tile mask and its ring, the focal-offset LUT —

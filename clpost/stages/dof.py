@@ -418,11 +418,12 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     pixel of p's surface by more than 1 − :data:`FRINGE_STEP` — a pane's depth speckle next to sky
     of the same colour, or a lamp's pixel next to the pane speckle in front of it (α > 1), is not a
     mix — or, for the bright one, a *light* far above p (:math:`Y_n >` :data:`SAME_SOURCE`
-    :math:`Y_p`) whose 5 % outshines p's surface (:math:`(1 -` :data:`FRINGE_STEP`:math:`) Y_n >`
-    the darkest of it): a pixel of p's surface as bright as it is then the light's *twin* (a light
-    straddling two pixels whose point-sampled depth hit it in one; the twin takes the near depth
-    itself by the coverage test), not a surface that explains p; a white texel beside a white
-    object's silhouette still is. When either holds p takes the nearest depth of its 3×3. The depth is first despeckled
+    :math:`\cdot Y_p`) whose 5 % (1 − :data:`FRINGE_STEP`) outshines the darkest pixel of p's
+    surface: a pixel of p's surface as bright as it is then the light's *twin* (a light straddling
+    two pixels whose point-sampled depth hit it in one; the twin takes the near depth itself by the
+    coverage test), not a surface that explains p; a white texel beside a white object's
+    silhouette still is, where the darkest of p's surface is above 5 % of the object. When either
+    holds p takes the nearest depth of its 3×3. The depth is first despeckled
     (:func:`despeckle_depth`). With :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are
     written without a division. A depth only ever moves nearer; a pixel with no near neighbour
     keeps its own."""
