@@ -2,7 +2,7 @@
  * Formula, constants and the edge rule are documented in clpost/stages/dof.py:
  *   r_px = k (1/u - 1/S), clamped to +-limit; +inf depth -> 1/S = 0 (finite far limit).
  * Structural: DOF_SCALE (working-resolution divisor). Constants of the colour/depth rules from the stage:
- * DOF_FRINGE_STEP (FRINGE_STEP), DOF_SAME_SOURCE (SAME_SOURCE).
+ * DOF_FRINGE_STEP (FRINGE_STEP), DOF_SAME_SOURCE (SAME_SOURCE), DOF_LIGHT_FRINGE (LIGHT_FRINGE).
  */
 
 #define DOF_MIXED_SAME_DEPTH 0.8f
@@ -17,8 +17,8 @@ inline float dof_luma(__global const float *src, const size_t i, const size_t n)
  * the near surface (darkest near neighbour) covers half of p (Y_f: the brightest of p's own surface);
  * either only when that near surface is brighter (darker) than every other pixel of p's own surface
  * by more than 1 - DOF_FRINGE_STEP (other_min/other_max: p's own surface without p) or, the bright
- * one, is a light above DOF_SAME_SOURCE x p whose 1 - DOF_FRINGE_STEP share is above own_min (an own
- * pixel as bright is that light's twin).
+ * one, is a light above DOF_SAME_SOURCE x p whose 1 - DOF_FRINGE_STEP share is above own_min (clamped
+ * to 0) and that covers at most DOF_LIGHT_FRINGE of p (an own pixel as bright is that light's twin).
  * Both tests without a division; `span > 0` also rejects "no near neighbour" (+-inf). */
 inline float dof_fringe_depth(const float d, const float lum, const float nearest, const float bright_n,
                               const float dark_n, const float other_min, const float other_max)
@@ -28,7 +28,8 @@ inline float dof_fringe_depth(const float d, const float lum, const float neares
     const float sd = own_max - dark_n, pd = own_max - lum;
     const int take = (sb > 0.0f && (2.0f * pb >= sb || 2.0f * pb * bright_n >= lum * sb)
                       && (DOF_FRINGE_STEP * bright_n > other_max
-                          || (bright_n > DOF_SAME_SOURCE * lum && (1.0f - DOF_FRINGE_STEP) * bright_n > own_min)))
+                          || (bright_n > DOF_SAME_SOURCE * lum && (1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f)
+                              && pb <= DOF_LIGHT_FRINGE * sb)))
                      || (sd > 0.0f && 2.0f * pd >= sd && dark_n < DOF_FRINGE_STEP * other_min);
     return take ? nearest : d;
 }
@@ -295,7 +296,9 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
             const float16 sd = own_max - dark_n, pd = own_max - lum;
             const int16 take = ((sb > 0.0f) & ((2.0f * pb >= sb) | (2.0f * pb * bright_n >= lum * sb))
                                 & ((DOF_FRINGE_STEP * bright_n > other_max)
-                                   | ((bright_n > DOF_SAME_SOURCE * lum) & ((1.0f - DOF_FRINGE_STEP) * bright_n > own_min))))
+                                   | ((bright_n > DOF_SAME_SOURCE * lum)
+                                      & ((1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f))
+                                      & (pb <= DOF_LIGHT_FRINGE * sb))))
                                | ((sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min));
             s = select(d, nearest, take);
         }

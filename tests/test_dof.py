@@ -769,6 +769,43 @@ def test_a_textured_pixel_beside_a_white_silhouette_keeps_its_depth():
     assert D.effective_depth(col.astype(np.float64), depth)[3, 3] == 2.0
 
 
+@pytest.mark.parametrize("wall", [0.02, 0.0, -0.01])
+def test_a_textured_pixel_beside_a_white_silhouette_on_a_black_wall_keeps_its_depth(wall):
+    """The same texel on a near-black wall: the light clause's "5 % of the light above the darkest
+    of p's surface" holds for any brighter near pixel when that darkest is ~0 (or negative), so the
+    texel took the object's depth (main 46a9c94). A light also covers at most LIGHT_FRINGE (¼) of
+    p: the texel would need 0.29–0.30 of the object, a 1-px lamp's fringe is 0.10–0.15 of it."""
+    col = np.full((7, 7, 3), wall, np.float32)
+    depth = np.full((7, 7), 6.0, np.float32)
+    col[:, :3], depth[:, :3] = 1.0, 2.0
+    col[3, 3], col[2, 4] = 0.3, 1.0
+    assert D.effective_depth(col.astype(np.float64), depth)[3, 3] == 6.0
+    col[:, :3], col[2, 4], col[3, 3] = 400.0, 400.0, 30.0   # a light, its twin and their fringe: taken
+    assert D.effective_depth(col.astype(np.float64), depth)[3, 3] == 2.0
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_black_wall_texels_and_lamp_twins_kernel_matches_its_reference(quality):
+    """The black-wall texel (kept) and the 1-px lamp's twin fringe (taken), tiled over an odd-sized
+    frame so both land in dof_coc's 16-lane groups and in its per-pixel edge path."""
+    h, w = 23, 53
+    col = np.full((h, w, 3), 0.01, np.float32)
+    depth = np.full((h, w), 6.0, np.float32)
+    for y, x in ((3, 1), (3, 20), (3, 45), (15, 8), (15, 30)):     # white objects 3 px wide, texel, white texel
+        col[y - 2:y + 3, x - 1:x + 2], depth[y - 2:y + 3, x - 1:x + 2] = 1.0, 2.0
+        col[y, x + 2], col[y - 1, x + 3] = 0.3, 1.0
+    for y, x in ((10, 3), (10, 25), (19, 49)):                     # 1-px lamps straddling two pixels
+        col[y, x], col[y, x + 1] = 375.2, 361.2
+        col[y - 1, x:x + 2], col[y + 1, x:x + 2] = [[51.7] * 3, [37.8] * 3], [[56.6] * 3, [42.6] * 3]
+        depth[y, x] = 2.0
+    eff = D.effective_depth(col.astype(np.float64), depth)
+    assert eff[3, 22] == 6.0 and eff[15, 10] == 6.0 and eff[9, 25] == 2.0
+    cam = Camera(**{**CAM, "focus_distance_m": 2.0})
+    frame = Frame(col, depth=depth)
+    out, pipe = run(cam, frame, quality)
+    assert_matches_reference(pipe, frame, out, rtol=1e-3)
+
+
 def _lamp_behind_an_in_focus_pane():
     """Held-out h_panes' lamp00: a 2-px lamp at 6 m seen through a 0.2 pane at 1.2 m over the sky;
     its pixels 124, 201, 234 (depth 6 / 5.99) and 164 (the pane's depth sample), fringe at the

@@ -314,6 +314,11 @@ FRINGE_STEP = 0.95
 the fringe rule's near surface must be brighter (darker) than every other pixel of p's own surface
 by more (:func:`effective_depth`), and a speckle's luminance may lie that far outside its
 other-depth neighbours' range (:func:`despeckle_depth`)."""
+LIGHT_FRINGE = 0.25
+"""The fringe rule's *light* clause (:func:`effective_depth`) takes p for a light's fringe only when
+the light covers at most this share of it (α ≤ ¼, half the coverage test's ½): a 1-px lamp's fringe
+is 0.10–0.15 of it (held-out h_lamps' lamp01), a grey texel (0.3) beside a white object (1.0) on a
+near-black wall 0.29–0.30 (docs/fidelity.md, "The twin on a black wall")."""
 
 
 def _same_depth(dq, d):
@@ -442,9 +447,10 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     own_min, own_max = np.minimum(other_min, lum), np.maximum(other_max, lum)
     with np.errstate(invalid="ignore"):
         span, part = bright_n - own_min, lum - own_min
+        light = (bright_n > SAME_SOURCE * lum) & ((1 - FRINGE_STEP) * bright_n > np.maximum(own_min, 0)) \
+            & (part <= LIGHT_FRINGE * span)
         bright = (span > 0) & ((2 * part >= span) | (2 * part * bright_n >= lum * span)) \
-            & ((FRINGE_STEP * bright_n > other_max)
-               | ((bright_n > SAME_SOURCE * lum) & ((1 - FRINGE_STEP) * bright_n > own_min)))
+            & ((FRINGE_STEP * bright_n > other_max) | light)
         span, part = own_max - dark_n, own_max - lum
         dark = (span > 0) & (2 * part >= span) & (dark_n < FRINGE_STEP * other_min)
     return np.where(bright | dark, nearest, d)
@@ -1034,7 +1040,7 @@ class Dof(GatherStage):
                 "DOF_NARROW_MIN": f"{NARROW_MIN_PX!r}f", "DOF_NARROW_CELL": NARROW_CELL,
                 "DOF_NARROW_SUM": f"{NARROW_SUM_PX!r}f", "DOF_NARROW_EDGE": f"{NARROW_EDGE_PX!r}f",
                 "DOF_NARROW_MAX": NARROW_MAX,
-                "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
+                "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_LIGHT_FRINGE": f"{LIGHT_FRINGE!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
 
