@@ -424,10 +424,12 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     of the same colour, or a lamp's pixel next to the pane speckle in front of it (α > 1), is not a
     mix — or, for the bright one, a *light* far above p (:math:`Y_n >` :data:`SAME_SOURCE`
     :math:`\cdot Y_p`) whose 5 % (1 − :data:`FRINGE_STEP`) outshines the darkest pixel of p's
-    surface: a pixel of p's surface as bright as it is then the light's *twin* (a light straddling
-    two pixels whose point-sampled depth hit it in one; the twin takes the near depth itself by the
-    coverage test), not a surface that explains p; a white texel beside a white object's
-    silhouette still is, where the darkest of p's surface is above 5 % of the object. When either
+    surface (clamped to 0) and that covers at most :data:`LIGHT_FRINGE` (¼) of p
+    (:math:`\alpha \le \tfrac14`: p is a faint fringe of it): a pixel of p's surface as bright as
+    it is then the light's *twin* (a light straddling two pixels whose point-sampled depth hit it in
+    one; the twin takes the near depth itself by the coverage test), not a surface that explains p.
+    A white texel beside a white object's silhouette still is: on a grey wall the object's 5 % is
+    below the wall, on a black one a grey texel between them is more than ¼ of the object. When either
     holds p takes the nearest depth of its 3×3. The depth is first despeckled
     (:func:`despeckle_depth`). With :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are
     written without a division. A depth only ever moves nearer; a pixel with no near neighbour
@@ -1040,7 +1042,8 @@ class Dof(GatherStage):
                 "DOF_NARROW_MIN": f"{NARROW_MIN_PX!r}f", "DOF_NARROW_CELL": NARROW_CELL,
                 "DOF_NARROW_SUM": f"{NARROW_SUM_PX!r}f", "DOF_NARROW_EDGE": f"{NARROW_EDGE_PX!r}f",
                 "DOF_NARROW_MAX": NARROW_MAX,
-                "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_LIGHT_FRINGE": f"{LIGHT_FRINGE!r}f", "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
+                "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_LIGHT_FRINGE": f"{LIGHT_FRINGE!r}f",
+                "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
                 **{f"DOF_LUMA_{c}": f"{float(v)!r}f" for c, v in zip("RGB", luma_weights(camera))}}
 
