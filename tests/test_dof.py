@@ -774,7 +774,7 @@ def test_a_textured_pixel_beside_a_white_silhouette_on_a_black_wall_keeps_its_de
     """The same texel on a near-black wall: the light clause's "5 % of the light above the darkest
     of p's surface" holds for any brighter near pixel when that darkest is ~0 (or negative), so the
     texel took the object's depth (main 46a9c94). A light also covers at most LIGHT_FRINGE (¼) of
-    p: the texel would need 0.29–0.30 of the object, a 1-px lamp's fringe is 0.10–0.15 of it."""
+    p: the texel is 0.29–0.31 of the object, a 1-px lamp's fringe is 0.10–0.15 of it."""
     col = np.full((7, 7, 3), wall, np.float32)
     depth = np.full((7, 7), 6.0, np.float32)
     col[:, :3], depth[:, :3] = 1.0, 2.0

@@ -318,7 +318,7 @@ LIGHT_FRINGE = 0.25
 """The fringe rule's *light* clause (:func:`effective_depth`) takes p for a light's fringe only when
 the light covers at most this share of it (α ≤ ¼, half the coverage test's ½): a 1-px lamp's fringe
 is 0.10–0.15 of it (held-out h_lamps' lamp01), a grey texel (0.3) beside a white object (1.0) on a
-near-black wall 0.29–0.30 (docs/fidelity.md, "The twin on a black wall")."""
+near-black wall 0.29–0.31 (docs/fidelity.md, "The twin on a black wall")."""
 
 
 def _same_depth(dq, d):
