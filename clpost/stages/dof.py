@@ -139,7 +139,9 @@ narrowest blur up to v = 1 (r = 2 px), :math:`b = \mathrm{clamp}(2v - 1, 0, 1)`
 (:func:`half_blend`); effect on the Cycles truths: docs/fidelity.md, "The half-resolution path".
 Small bright lights (:func:`narrow_sources`) are taken out of the half-resolution input and spread
 at full resolution instead (:func:`narrow_layer`): the path's ≈ 3 px soft disc edge saturates
-around a 100× lamp (docs/fidelity.md, "The narrow-source layer").
+around a 100× lamp; an in-focus one's excess leaves the input too and stays with the 3×3 blur
+(:data:`NARROW_FOCUS_PX`: the levels' tent spread it over the blurred background beside it)
+(docs/fidelity.md, "The narrow-source layer").
 
 Mixed resolution (final, :data:`MIXED`): a working tile (16×16 at half resolution = 32×32 px) is
 *big* when its half-resolution plan (max CoC 32 working px, R_b = 8) needs lattice level ≥ 1
@@ -1086,8 +1088,9 @@ NARROW_CELL = 64
 """Edge (px) of the cells the sources are listed by (the upsampling reads the lists of the cells
 within the largest CoC of its pixels)."""
 NARROW_MAX = 64
-"""Most sources (pixels) a cell lists; a cell with more splits none (its lights stay in the
-half-resolution path: a bounded cost per pixel whatever the input)."""
+"""Most sources (pixels) a cell lists, its in-focus lights (:data:`NARROW_FOCUS_PX`) counted with
+them; a cell with more splits none (its lights stay in the half-resolution path: a bounded cost
+per pixel whatever the input)."""
 
 NARROW_RING = ((-2, -2), (-2, 0), (-2, 2), (0, -2), (0, 2), (2, -2), (2, 0), (2, 2))
 """The working neighbours (dy, dx) a candidate block is compared with, in the kernel's order
@@ -1115,10 +1118,13 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     the excess :math:`e_q = \max(c_q - bg, 0)` (per channel) and is a source when
     :math:`Y(e_q) > ` :data:`NARROW_CONTRAST` · Y(bg) · π r_q² · max(1, |r_q| / :data:`NARROW_EDGE_PX`).
     Sources are listed per :data:`NARROW_CELL` cell in scan order (working rows, then the block's
-    rows); a cell with more than :data:`NARROW_MAX` lists none.
+    rows); a cell with more than :data:`NARROW_MAX` lists none. A pixel of a candidate block with
+    |r_q| ≤ :data:`NARROW_FOCUS_PX` instead, the same contrast test, and no CoC of the 5×5 working
+    pixels around its block nearer than r_q − :data:`FRONT_MARGIN_PX` is an *in-focus light*: its
+    excess leaves the base too, but it is not listed (counted in its cell's cap, though).
 
     Returns (sources, base): sources an (n, 6) array of (x, y, r, e_R, e_G, e_B) (r the signed CoC
-    in px), base the colour with each source's excess taken out (c − e)."""
+    in px), base the colour with each source's and in-focus light's excess taken out (c − e)."""
     color = np.asarray(color, dtype=np.float64)
     c = np.asarray(coc, dtype=np.float64)
     lw = luma_weights() if luma is None else luma
