@@ -3,9 +3,11 @@
  * spread at full resolution by dof_upsample (dof.cl, dof_narrow16).
  * Structural: DOF_SCALE, DOF_TILE, DOF_NARROW_CELL (cell edge, px), DOF_NARROW_MAX (sources per
  * cell), DOF_NARROW_RATIO, DOF_NARROW_CONTRAST, DOF_NARROW_EDGE (px), DOF_NARROW_MIN (px),
- * DOF_NARROW_SUM (px), DOF_LUMA_R/G/B, DOF_TEXTURE.
+ * DOF_NARROW_SUM (px), DOF_NARROW_FOCUS (px), DOF_LUMA_R/G/B, DOF_TEXTURE.
  * Records: float8 (x, y, signed CoC px, e_R, e_G, e_B, 1 / the source's weight sum, 0) per source,
- * DOF_NARROW_MAX per cell; `ncount` per cell (0 when the cell had more than DOF_NARROW_MAX).
+ * DOF_NARROW_MAX per cell; `ncount` per cell (0 when the cell had more than DOF_NARROW_MAX sources
+ * and in-focus lights together). The in-focus lights (narrow_sources: |CoC| <= DOF_NARROW_FOCUS,
+ * nothing of the block's 5x5 working pixels nearer by DOF_FRONT_MARGIN) are recorded from the cell's last record backwards, only for dof_narrow_list's own use.
  */
 
 /* luminance of 16 working pixels of level 0 from padded offset o */
@@ -132,7 +134,7 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
     const size_t pn = (size_t)pw * DOF_PW(hw, pad), n = (size_t)width * height;
     const int rdy[8] = {-2, -2, -2, 0, 0, 2, 2, 2}, rdx[8] = {-2, 0, 2, -2, 2, -2, 0, 2};
     __global float8 *rec = nrec + (size_t)(cy * ncx + cx) * DOF_NARROW_MAX;
-    int count = 0;
+    int count = 0, nkept = 0;  /* listed sources (from the front), kept in-focus lights (from the back) */
     float last_rq = NAN, last_norm = 0.0f;
     const int ngx = (ww + 15) / 16;
     for (int py = cy * cw; py < min((cy + 1) * cw, hw); ++py)
@@ -147,6 +149,7 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
             const size_t ob = (size_t)(py + rdy[k] + pad) * pw + px + rdx[k] + pad;
             const float3 bg = (float3)(lv[ob], lv[pn + ob], lv[2 * pn + ob]);
             const float bgy = DOF_LUMA_R * bg.x + DOF_LUMA_G * bg.y + DOF_LUMA_B * bg.z;
+            float front5 = NAN;  /* the nearest CoC of the block's 5x5 working pixels, once needed */
             for (int b = 0; b < DOF_SCALE; ++b)
                 for (int a = 0; a < DOF_SCALE; ++a) {
                     const int y = DOF_SCALE * py + b, x = DOF_SCALE * px + a;
@@ -159,10 +162,27 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
                     const float3 e = fmax((float3)(src[i], src[n + i], src[2 * n + i]) - bg, 0.0f);
                     const float ey = DOF_LUMA_R * e.x + DOF_LUMA_G * e.y + DOF_LUMA_B * e.z;
                     const float rq = coc[i];
-                    if (!(m3 >= DOF_NARROW_MIN
+                    const int split = m3 >= DOF_NARROW_MIN;
+                    int kept = fabs(rq) <= DOF_NARROW_FOCUS;
+                    if (kept) {
+                        if (isnan(front5)) {  /* rows/columns past the image replicate its edge */
+                            front5 = INFINITY;
+                            for (int v = DOF_SCALE * (py - 2); v < DOF_SCALE * (py + 3); ++v)
+                                for (int u = DOF_SCALE * (px - 2); u < DOF_SCALE * (px + 3); ++u)
+                                    front5 = fmin(front5, coc[(size_t)min(v, height - 1) * width + min(u, width - 1)]);
+                        }
+                        kept = front5 >= rq - DOF_FRONT_MARGIN;
+                    }
+                    if (!((split || kept)
                           && ey > DOF_NARROW_CONTRAST * bgy * M_PI_F * rq * rq * fmax(1.0f, fabs(rq) / DOF_NARROW_EDGE)))
                         continue;
-                    if (count < DOF_NARROW_MAX) {
+                    if (!split) {  /* in focus: its excess leaves the working image, it is not listed */
+                        if (count + nkept < DOF_NARROW_MAX)
+                            rec[DOF_NARROW_MAX - 1 - nkept] = (float8)((float)x, (float)y, rq, e.x, e.y, e.z, 0.0f, 0.0f);
+                        ++nkept;
+                        continue;
+                    }
+                    if (count + nkept < DOF_NARROW_MAX) {
                         if (rq != last_rq) {  /* a light's pixels mostly share one CoC: sum once */
                             const float r = fmax(fabs(rq), 0.5f);
                             float ws = 1.0f;  /* from DOF_NARROW_SUM px on the disc's own integral */
@@ -182,14 +202,16 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
                     ++count;
                 }
         }
-    if (count > DOF_NARROW_MAX) {
+    if (count + nkept > DOF_NARROW_MAX) {
         ncount[cy * ncx + cx] = 0;
         return;
     }
     ncount[cy * ncx + cx] = count;
-    /* the source blocks' working colour without the sources' excess; a block's sources are
-     * consecutive records */
-    for (int j = 0; j < count; ) {
+    /* the source blocks' and the in-focus lights' blocks' working colour without their excess; a
+     * block's records are consecutive, and a block never has both (a source's 3x3, which holds its
+     * whole 2x2 block, has no |CoC| below DOF_NARROW_MIN > DOF_NARROW_FOCUS) */
+    for (int jj = 0; jj < count + nkept; ) {
+        const int j = jj < count ? jj : DOF_NARROW_MAX - 1 - (jj - count);
         const int px = (int)rec[j].s0 / DOF_SCALE, py = (int)rec[j].s1 / DOF_SCALE;
         float3 p[DOF_SCALE][DOF_SCALE];
         for (int b = 0; b < DOF_SCALE; ++b)
@@ -197,8 +219,10 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
                 const size_t i = (size_t)(DOF_SCALE * py + b) * width + DOF_SCALE * px + a;
                 p[b][a] = (float3)(src[i], src[n + i], src[2 * n + i]);
             }
-        for (; j < count && (int)rec[j].s0 / DOF_SCALE == px && (int)rec[j].s1 / DOF_SCALE == py; ++j) {
-            const float8 s = rec[j];
+        for (; jj < count + nkept; ++jj) {
+            const float8 s = rec[jj < count ? jj : DOF_NARROW_MAX - 1 - (jj - count)];
+            if ((int)s.s0 / DOF_SCALE != px || (int)s.s1 / DOF_SCALE != py)
+                break;
             p[(int)s.s1 - DOF_SCALE * py][(int)s.s0 - DOF_SCALE * px] -= (float3)(s.s3, s.s4, s.s5);
         }
         const size_t o = (size_t)(py + pad) * pw + px + pad;

@@ -974,3 +974,60 @@ def test_narrow_source_layer_matches_the_reference(quality, sa):
     assert len(src) >= 20  # the layer is exercised (4 pixels of each light split)
     out, pipe = run(cam, frame, quality)
     assert_matches_reference(pipe, frame, out, rtol=1e-3)
+
+
+def _in_focus_light_over_the_sky(h=105, w=105, y=51, x=51):
+    """(camera, dark, lit): a 2×2 light 100× white in focus over a defocused sky (0.5; CoC radius
+    8.0 px at f/1.4 on this sensor: draft gathers it at lattice stride 2), absent (dark) or lit."""
+    cam = Camera(**CAM, blades=6)
+    depth = np.full((h, w), np.inf, np.float32)
+    depth[y:y + 2, x:x + 2] = cam.focus_distance_m
+    color = np.full((h, w, 3), 0.5, np.float32)
+    dark = Frame(color.copy(), depth=depth)
+    color[y:y + 2, x:x + 2] = 100.0
+    return cam, dark, Frame(color, depth=depth)
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview"])
+def test_in_focus_light_over_a_defocused_sky_has_no_halo_at_half_resolution(quality):
+    # issue 16 (an in-focus emitter's pixels above 5 % of white beyond 3 px ≤ 2× the truth's, here
+    # 0): h_lamps' lamp00 (2 px in focus over the sky) had a 68 px halo at draft. The light's
+    # working block fed the prefiltered levels, whose tent (half-width = the lattice stride, 4–8
+    # working px) reached it from the sky pixels beside it, and the gather's centre tap blends a
+    # pixel toward its level's colour: the sky around took the lamp's light, blurred, while the
+    # lamp kept its own from the full-resolution 3×3 blur. An in-focus light's excess now leaves
+    # the working image (dof.NARROW_FOCUS_PX): its light stays on its pixels, and is not lost.
+    cam, dark, lit = _in_focus_light_over_the_sky()
+    assert float(D.coc_px(cam, np.float32(np.inf), 105)) == pytest.approx(8.0, abs=0.05)
+    out, pipe = run(cam, lit, quality)
+    assert_matches_reference(pipe, lit, out, rtol=1e-3)
+    added = (out - pipe.run(dark).color)[..., 1]
+    yy, xx = np.mgrid[:105, :105]
+    beyond = np.hypot(yy - 51.5, xx - 51.5) > 3.0
+    assert np.count_nonzero(added[beyond] > 0.05) == 0, np.count_nonzero(added[beyond] > 0.05)
+    assert added.sum() == pytest.approx(4 * 99.5, rel=0.03)
+
+
+def test_in_focus_light_behind_a_blurred_foreground_stays_in_the_half_resolution_image():
+    # the in-focus light's excess leaves the working image only with nothing in front of it in the
+    # 5×5 working pixels around its block: beside a blurred foreground it is the background seen
+    # through the foreground's soft edge (the occluder scene's sharp corners behind the blurred bar
+    # lost 0.14 dB at draft without that test). Kernel = reference on both cases, side by side.
+    cam = Camera(**CAM, blades=6)
+    h, w = 61, 97
+    k, inv_u = D.coc_coefficients(cam, w)
+    depth = np.full((h, w), np.inf, np.float32)
+    color = np.full((h, w, 3), 0.5, np.float32)
+    depth[20:40, 60:70] = 1.0 / (inv_u + 6.0 / k)  # a blurred foreground bar (r = -6 px)
+    color[20:40, 60:70] = 0.05
+    for x in (20, 72):  # one light free, one right beside the bar
+        depth[30:32, x:x + 2] = cam.focus_distance_m
+        color[30:32, x:x + 2] = 100.0
+    color64, depth64 = color.astype(np.float64), depth.astype(np.float64)
+    coc = D.coc_px(cam, D.effective_depth(color64, depth64), w, limit_px=64)
+    src, base = D.narrow_sources(color64, coc, 2)
+    assert len(src) == 0
+    assert (base[30:32, 20:22] < 1.0).all() and (base[30:32, 72:74] == 100.0).all()
+    frame = Frame(color, depth=depth)
+    out, pipe = run(cam, frame, "draft")
+    assert_matches_reference(pipe, frame, out, rtol=1e-3)

@@ -25,7 +25,7 @@ SIZES = ((1, 1), (3, 2), (17, 5), (37, 23))
 
 
 def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0, intrinsics=None, labels=0,
-           moving=None, lights=False):
+           moving=None, lights=False, light_depth=None):
     from clpost import Frame
 
     rng = np.random.default_rng(seed + 7919 * w + h)
@@ -38,6 +38,8 @@ def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0
         d = rng.uniform(0.3, 30.0, (h, w)).astype(np.float32)
     else:  # False: none; a number: that depth everywhere
         d = None if depth is False else np.full((h, w), float(depth), np.float32)
+    if lights and light_depth is not None:  # the lights at their own depth (e.g. in focus over a far background)
+        d[np.asarray(color)[..., 0] == 100.0 * scale] = light_depth
     v = (rng.standard_normal((h, w, 2)) * velocity).astype(np.float32) if velocity else None
     if v is not None and moving is not None:  # (y0, y1, x0, x1): only these pixels move
         y0, y1, x0, x1 = moving
@@ -124,6 +126,10 @@ def cases():
         add(f"dof-lights-wide {q} 141x75", lambda q=q: _run(
             replace(dof_cams["round"], sensor_mm=(0.15 * 141, 0.15 * 75)), ["dof"], q, 141, 75, lights=True,
             scale=0.5))
+        # in-focus lights over a far background (their excess leaves the working image, unlisted)
+        add(f"dof-lights-focus {q} 141x75", lambda q=q: _run(
+            replace(dof_cams["round"], sensor_mm=(0.15 * 141, 0.15 * 75)), ["dof"], q, 141, 75, lights=True,
+            scale=0.5, depth=30.0, light_depth=0.5))
 
     aberr = replace(base, f_number=2.0, field_curvature_mm=-0.14, astigmatism_mm=0.11, coma_mm=0.087,
                     lateral_color_mm=0.007)

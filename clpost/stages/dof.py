@@ -139,7 +139,9 @@ narrowest blur up to v = 1 (r = 2 px), :math:`b = \mathrm{clamp}(2v - 1, 0, 1)`
 (:func:`half_blend`); effect on the Cycles truths: docs/fidelity.md, "The half-resolution path".
 Small bright lights (:func:`narrow_sources`) are taken out of the half-resolution input and spread
 at full resolution instead (:func:`narrow_layer`): the path's ≈ 3 px soft disc edge saturates
-around a 100× lamp (docs/fidelity.md, "The narrow-source layer").
+around a 100× lamp; an in-focus one's excess leaves the input too and stays with the 3×3 blur
+(:data:`NARROW_FOCUS_PX`: the levels' tent spread it over the blurred background beside it)
+(docs/fidelity.md, "The narrow-source layer").
 
 Mixed resolution (final, :data:`MIXED`): a working tile (16×16 at half resolution = 32×32 px) is
 *big* when its half-resolution plan (max CoC 32 working px, R_b = 8) needs lattice level ≥ 1
@@ -1041,7 +1043,7 @@ class Dof(GatherStage):
                 "DOF_NARROW_RATIO": f"{NARROW_RATIO!r}f", "DOF_NARROW_CONTRAST": f"{NARROW_CONTRAST!r}f",
                 "DOF_NARROW_MIN": f"{NARROW_MIN_PX!r}f", "DOF_NARROW_CELL": NARROW_CELL,
                 "DOF_NARROW_SUM": f"{NARROW_SUM_PX!r}f", "DOF_NARROW_EDGE": f"{NARROW_EDGE_PX!r}f",
-                "DOF_NARROW_MAX": NARROW_MAX,
+                "DOF_NARROW_MAX": NARROW_MAX, "DOF_NARROW_FOCUS": f"{NARROW_FOCUS_PX!r}f",
                 "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_LIGHT_FRINGE": f"{LIGHT_FRINGE!r}f",
                 "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
@@ -1080,12 +1082,24 @@ NARROW_MIN_PX = 2.0
 """Only pixels whose 3×3 has every |CoC| ≥ this are split: there the composite takes the
 half-resolution blur whole (:func:`half_blend` = 1), so no full-resolution 3×3 blur reads the
 pixel's original colour beside the layer."""
+NARROW_FOCUS_PX = math.sqrt(4.0 * LOCAL_VAR_PX2)
+"""A candidate pixel with |CoC| ≤ this (px) — in focus: the composite takes it whole from the
+full-resolution 3×3 blur (:func:`half_blend` = 0), which reads its original colour — has its
+excess taken out of the working image too, and is not listed (it needs no layer), when nothing
+of the 5×5 working pixels around its block is in front of it (by more than
+:data:`FRONT_MARGIN_PX`): an in-focus light before a blurred background keeps its light at full
+resolution. In the working image the prefiltered levels' tent spread it over the background
+beside it through the gather's centre tap (a halo of 68 px around h_lamps' in-focus lamp00 at
+draft). A blurred foreground beside it needs it — there it is the background seen through the
+foreground's soft edge (the occluder scene's sharp corners behind the blurred bar lost 0.14 dB
+without the test; docs/fidelity.md, "The narrow-source layer")."""
 NARROW_CELL = 64
 """Edge (px) of the cells the sources are listed by (the upsampling reads the lists of the cells
 within the largest CoC of its pixels)."""
 NARROW_MAX = 64
-"""Most sources (pixels) a cell lists; a cell with more splits none (its lights stay in the
-half-resolution path: a bounded cost per pixel whatever the input)."""
+"""Most sources (pixels) a cell lists, its in-focus lights (:data:`NARROW_FOCUS_PX`) counted with
+them; a cell with more splits none (its lights stay in the half-resolution path: a bounded cost
+per pixel whatever the input)."""
 
 NARROW_RING = ((-2, -2), (-2, 0), (-2, 2), (0, -2), (0, 2), (2, -2), (2, 0), (2, 2))
 """The working neighbours (dy, dx) a candidate block is compared with, in the kernel's order
@@ -1113,10 +1127,13 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     the excess :math:`e_q = \max(c_q - bg, 0)` (per channel) and is a source when
     :math:`Y(e_q) > ` :data:`NARROW_CONTRAST` · Y(bg) · π r_q² · max(1, |r_q| / :data:`NARROW_EDGE_PX`).
     Sources are listed per :data:`NARROW_CELL` cell in scan order (working rows, then the block's
-    rows); a cell with more than :data:`NARROW_MAX` lists none.
+    rows); a cell with more than :data:`NARROW_MAX` lists none. A pixel of a candidate block with
+    |r_q| ≤ :data:`NARROW_FOCUS_PX` instead, the same contrast test, and no CoC of the 5×5 working
+    pixels around its block nearer than r_q − :data:`FRONT_MARGIN_PX` is an *in-focus light*: its
+    excess leaves the base too, but it is not listed (counted in its cell's cap, though).
 
     Returns (sources, base): sources an (n, 6) array of (x, y, r, e_R, e_G, e_B) (r the signed CoC
-    in px), base the colour with each source's excess taken out (c − e)."""
+    in px), base the colour with each source's and in-focus light's excess taken out (c − e)."""
     color = np.asarray(color, dtype=np.float64)
     c = np.asarray(coc, dtype=np.float64)
     lw = luma_weights() if luma is None else luma
@@ -1127,6 +1144,10 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     base = color.copy()
     if hw < 5 or ww < 5:
         return np.zeros((0, 6)), base
+    # per working pixel, the nearest CoC (px) of the 5×5 working pixels around it (its blocks'
+    # min): an in-focus light is kept at full resolution only with nothing in front of it there
+    rw = np.pad(_working(color, c, scale)[1] * scale, 2, mode="edge")
+    front5 = np.min([rw[2 + dy:2 + dy + hw, 2 + dx:2 + dx + ww] for dy in range(-2, 3) for dx in range(-2, 3)], axis=0)
     ac = np.abs(np.pad(c, 1, mode="edge"))
     m3 = np.min([ac[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
     ring = np.stack([yw[2 + dy:hw - 2 + dy, 2 + dx:ww - 2 + dx] for dy, dx in NARROW_RING])
@@ -1142,15 +1163,18 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
                 y, x = scale * py + b, scale * px + a
                 e = np.maximum(color[y, x] - bg, 0.0)
                 ar = abs(c[y, x])
-                if m3[y, x] >= NARROW_MIN_PX and e @ lw > NARROW_CONTRAST * bg_y * math.pi * ar * ar * max(
+                split = m3[y, x] >= NARROW_MIN_PX
+                kept = ar <= NARROW_FOCUS_PX and front5[py, px] >= c[y, x] - FRONT_MARGIN_PX
+                if (split or kept) and e @ lw > NARROW_CONTRAST * bg_y * math.pi * ar * ar * max(
                         1.0, ar / NARROW_EDGE_PX):
-                    cells.setdefault((y // NARROW_CELL, x // NARROW_CELL), []).append((x, y, c[y, x], *e))
-    rows = []
+                    cells.setdefault((y // NARROW_CELL, x // NARROW_CELL), []).append((x, y, c[y, x], split, *e))
+    rows, kept = [], []
     for key in sorted(cells):
         if len(cells[key]) <= NARROW_MAX:
-            rows += cells[key]
+            rows += [(x, y, r, *e) for x, y, r, split, *e in cells[key] if split]
+            kept += [(x, y, *e) for x, y, _, split, *e in cells[key] if not split]
     src = np.array(rows, dtype=np.float64).reshape(-1, 6)
-    for x, y, _, *e in src:
+    for x, y, *e in [(x, y, *e) for x, y, _, *e in src] + kept:
         base[int(y), int(x)] -= e
     return src, base
 
