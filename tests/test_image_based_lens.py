@@ -3,7 +3,6 @@ reversed, COP fit of rays through a known point, single projection for a small f
 below the threshold, bad inputs."""
 from __future__ import annotations
 
-import math
 import os
 import warnings
 

@@ -13,7 +13,6 @@ disc beside a disc drawn from the tracer's R, G, B profiles.
 from __future__ import annotations
 
 import argparse
-import math
 import time
 import warnings
 from pathlib import Path

@@ -10,7 +10,6 @@ R_i R_j × (rays arriving on the ghost path / rays arriving directly). The fit
 (:func:`clpost.optics.ghosts.fit_ghosts`, a separate pair of grids (~570 rays aimed at the stop, ~570 over the rest of the first surface) per angle on the grid
 FIT_FIELD_DEG) is interpolated at the field angle as the stage does (:func:`fit_weights`).
 """
-import math
 import sys
 
 import numpy as np

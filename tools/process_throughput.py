@@ -29,7 +29,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 
 
 def _plain_io(src: Path, dst: Path, compression) -> None:

@@ -39,7 +39,6 @@ stage's code runs every frame (``replay_key`` None).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np

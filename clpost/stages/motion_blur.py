@@ -490,7 +490,6 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     velocity, z = effective_velocity(velocity, z)
     hk = half_vectors32(velocity, np.float32(fraction / 2.0))
     h32 = hk[..., :2]
-    h = h32.astype(np.float64)
     lrec, erec = tap_records(velocity, np.float32(fraction / 2.0))   # what a tap reads of Y
     _, nmax = tile_max(hk.astype(np.float64))
     ys, xs = np.mgrid[0:hh, 0:ww]
