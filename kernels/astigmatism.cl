@@ -64,6 +64,7 @@
  * cap also where the astigmatic focus is at or beyond infinity, den <= 1e-6, or a is not finite) */
 inline float16 astigmatism_semi16(float16 e0, float16 g, float16 d, float16 c0, float aperture, float half_inv_pitch)
 {
+#pragma OPENCL FP_CONTRACT OFF
     const float16 den = 1.0f + d * g;
     const float16 c = aperture * fabs(e0 + d * g) / den;
     const float16 q = (c - c0) * (c + c0);
@@ -79,6 +80,10 @@ inline float16 astigmatism_semi16(float16 e0, float16 g, float16 d, float16 c0, 
  * pixels lie inside the frame, per-lane clamped loads only in the vectors that touch a side
  * (a clamp on every pixel, one pixel per work-item, does not vectorise;
  * docs/measurements.md#kernel-forms-on-pocl); the axes are computed on the 16 lanes either way. */
+/* Tile classes without ties: astigmatism_offsets, astigmatism_pad and astigmatism_semi16 turn
+ * FP_CONTRACT off and use only correctly rounded operations (+ - * / sqrt on a CPU), so the
+ * reference's float32 emulation of them (Astigmatism.semi_axes_px32) is bit-equal and classifies
+ * every tile as astigmatism_tiles does, also at a threshold. */
 /* The focal offsets (sagittal, tangential; mm) at every padded pixel's image height: 2 planes pw x
  * ph (those of the frame pixel it continues), from the LUT. They depend on the camera and frame
  * size only, so the host runs this once per camera and size, not per frame (the 64 per-lane LUT
@@ -87,6 +92,7 @@ __kernel void astigmatism_offsets(__global const float *restrict lut, __global f
                                   const int width, const int height, const int pw, const int ph,
                                   const float cx, const float cy, const float pitch_mm, const float lut_scale)
 {
+#pragma OPENCL FP_CONTRACT OFF
     const int x0 = 16 * (int)get_global_id(0), y = get_global_id(1);
     if (x0 >= pw || y >= ph) return;
     const int sy = clamp(y - ASTIGMATISM_PAD, 0, height - 1);
@@ -102,8 +108,10 @@ __kernel void astigmatism_offsets(__global const float *restrict lut, __global f
     const float16 ft = t - convert_float16(k0);
     const int16 k1 = k0 + 1;
     __global const float *lt = lut + ASTIGMATISM_LUT_SIZE;
-    vstore16(mix(CLP_GATHER16(lut, k0), CLP_GATHER16(lut, k1), ft), 0, offs + j);
-    vstore16(mix(CLP_GATHER16(lt, k0), CLP_GATHER16(lt, k1), ft), 0, offs + pn + j);
+    /* a + (b - a) t written out (mix's rounding is the library's) */
+    const float16 s0 = CLP_GATHER16(lut, k0), t0 = CLP_GATHER16(lt, k0);
+    vstore16(s0 + (CLP_GATHER16(lut, k1) - s0) * ft, 0, offs + j);
+    vstore16(t0 + (CLP_GATHER16(lt, k1) - t0) * ft, 0, offs + pn + j);
 }
 
 __kernel void astigmatism_pad(__global const float *restrict src, __global const float *restrict depth,
@@ -113,6 +121,7 @@ __kernel void astigmatism_pad(__global const float *restrict src, __global const
                               const float aperture_mm, const float v_mm, const float inv_f_mm,
                               const int ring_x0, const int ring_x1, const int ring_y0, const int ring_y1)
 {
+#pragma OPENCL FP_CONTRACT OFF
     const int x0 = 16 * (int)get_global_id(0), y = get_global_id(1);
     if (x0 >= pw || y >= ph) return;
     const int sy = clamp(y - ASTIGMATISM_PAD, 0, height - 1);
