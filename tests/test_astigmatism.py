@@ -484,6 +484,27 @@ def test_point_classes_keep_huge_finite_values_finite(rng):
     assert err < 1e-5 * 1e38, where
 
 
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_every_path_keeps_huge_finite_colour_finite(rng, quality):
+    """The strip of every class (bilinear tap classes, point classes, exact, copy) scaled by 2^119:
+    its hot pixel at 3.3e38, the rest up to ~1e37 (finite, near FLT_MAX = 3.4e38). The gathers
+    scale each weight by 1/ntaps, so their sums stay below the largest colour; summed unscaled,
+    the bilinear and exact tiles' sums overflowed to inf. Power-of-two scaling is exact, so the
+    output is the unscaled frame's, scaled."""
+    cam, frame = _point_class_frame(rng)
+    stage = ast.Astigmatism(quality)
+    *_, exact, taps = stage.tile_plan(cam, frame)
+    point = stage.point_taps(cam, frame, exact)
+    assert exact.any() and (point > 0).any() and ((point == 0) & ~exact & (taps > 0)).any()
+    k = 2.0 ** 119
+    assert 3e38 < frame.color.max() * k < np.finfo(np.float32).max
+    pipe = Pipeline(cam, stages=["astigmatism"], quality=quality)
+    small = pipe.run(frame).color
+    huge = pipe.run(Frame(frame.color * np.float32(k), depth=frame.depth)).color
+    assert np.isfinite(huge).all(), np.argwhere(~np.isfinite(huge))[:3]
+    np.testing.assert_allclose(huge, small.astype(np.float64) * k, rtol=1e-6, atol=0)
+
+
 def _device_classes(stage, rt, cam, w, h):
     """Per tile: the class astigmatism_tiles put it in (its lists and counts of the last run)."""
     import pyopencl as cl
