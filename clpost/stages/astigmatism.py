@@ -91,8 +91,11 @@ kernel that only those work-groups run): the direction — the tile centre's is 
 (half diagonal ≈ 9 px)/r rad, so a tile takes the exact path when :math:`\max(A)\cdot 9/r >
 \frac12` px — and undersampling at depth edges, where a pixel's ellipse is smaller than half the
 tile's bound along an axis longer than ½ px. On the flagship f/1.4 benchmark frame 1.5 % of the
-tiles take the exact path. The reference implements both paths and the same tile plan (a tile
-whose float32 and float64 plans disagree at a threshold would differ; none do in the tests).
+tiles take the exact path. The reference implements both paths and the same tile plan, decided
+on the device's own float32 semi-axes (``semi_axes_px32``: the LUT and float32 arithmetic of the
+kernels, bit-equal on PoCL), so every class threshold (exact, copy, tap counts, point classes)
+splits the tiles as on the device; its gathers use the float64 semi-axes (exact curves, up to
+5e-4 px from the LUT's).
 
 **Tile classes (speed).** Where the ellipses are small, N taps oversample them; each tile's
 bounding semi-axis :math:`B = \max(A_s, A_t)` picks its class (``tile_taps``; the device writes
@@ -155,7 +158,8 @@ computed once for each camera and frame size.
 A frame without depth: not planned (``--explain`` says so).
 
 Domain/range: colour ≥ 0 → convex combination of input colours; depth 0⁺ … +inf (depths below
-1 µm are treated as 1 µm); no NaN/Inf for any finite camera.
+1 µm are treated as 1 µm); no NaN/Inf for any finite camera, and finite colour up to FLT_MAX
+stays finite (the gathers' weights are scaled by 1/N, so no sum exceeds the largest input).
 
 References: W. J. Smith, *Modern Optical Engineering*, 4th ed., §3.6 (astigmatism, field
 curvature, Coddington equations); Hecht, *Optics*, 5th ed., §6.3.1.
