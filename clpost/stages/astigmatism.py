@@ -522,7 +522,10 @@ class Astigmatism(GatherStage):
         if exact.any():
             sel = taps_px == -1
             out[sel] = self._gather(color, a_s, a_t, a_s, a_t, pex, pey, own=False)[sel]
-        still = (a_s < MIN_SEMI_PX) & (a_t < MIN_SEMI_PX)
+        # copied pixels: decided on the device's float32 semi-axes like the tile classes (near the
+        # centre the LUT's linear first segment puts them ~10 % above the exact curves')
+        s32, t32 = self.semi_axes_px32(camera, frame)
+        still = (s32 < np.float32(MIN_SEMI_PX)) & (t32 < np.float32(MIN_SEMI_PX))
         out[still] = color[still]
         return out
 
