@@ -64,6 +64,7 @@
  * cap also where the astigmatic focus is at or beyond infinity, den <= 1e-6, or a is not finite) */
 inline float16 astigmatism_semi16(float16 e0, float16 g, float16 d, float16 c0, float aperture, float half_inv_pitch)
 {
+#pragma OPENCL FP_CONTRACT OFF
     const float16 den = 1.0f + d * g;
     const float16 c = aperture * fabs(e0 + d * g) / den;
     const float16 q = (c - c0) * (c + c0);
@@ -79,6 +80,10 @@ inline float16 astigmatism_semi16(float16 e0, float16 g, float16 d, float16 c0, 
  * pixels lie inside the frame, per-lane clamped loads only in the vectors that touch a side
  * (a clamp on every pixel, one pixel per work-item, does not vectorise;
  * docs/measurements.md#kernel-forms-on-pocl); the axes are computed on the 16 lanes either way. */
+/* Tile classes without ties: astigmatism_offsets, astigmatism_pad and astigmatism_semi16 turn
+ * FP_CONTRACT off and use only correctly rounded operations (+ - * / sqrt on a CPU), so the
+ * reference's float32 emulation of them (Astigmatism.semi_axes_px32) is bit-equal and classifies
+ * every tile as astigmatism_tiles does, also at a threshold. */
 /* The focal offsets (sagittal, tangential; mm) at every padded pixel's image height: 2 planes pw x
  * ph (those of the frame pixel it continues), from the LUT. They depend on the camera and frame
  * size only, so the host runs this once per camera and size, not per frame (the 64 per-lane LUT
@@ -87,6 +92,7 @@ __kernel void astigmatism_offsets(__global const float *restrict lut, __global f
                                   const int width, const int height, const int pw, const int ph,
                                   const float cx, const float cy, const float pitch_mm, const float lut_scale)
 {
+#pragma OPENCL FP_CONTRACT OFF
     const int x0 = 16 * (int)get_global_id(0), y = get_global_id(1);
     if (x0 >= pw || y >= ph) return;
     const int sy = clamp(y - ASTIGMATISM_PAD, 0, height - 1);
@@ -102,8 +108,10 @@ __kernel void astigmatism_offsets(__global const float *restrict lut, __global f
     const float16 ft = t - convert_float16(k0);
     const int16 k1 = k0 + 1;
     __global const float *lt = lut + ASTIGMATISM_LUT_SIZE;
-    vstore16(mix(CLP_GATHER16(lut, k0), CLP_GATHER16(lut, k1), ft), 0, offs + j);
-    vstore16(mix(CLP_GATHER16(lt, k0), CLP_GATHER16(lt, k1), ft), 0, offs + pn + j);
+    /* a + (b - a) t written out (mix's rounding is the library's) */
+    const float16 s0 = CLP_GATHER16(lut, k0), t0 = CLP_GATHER16(lt, k0);
+    vstore16(s0 + (CLP_GATHER16(lut, k1) - s0) * ft, 0, offs + j);
+    vstore16(t0 + (CLP_GATHER16(lt, k1) - t0) * ft, 0, offs + pn + j);
 }
 
 __kernel void astigmatism_pad(__global const float *restrict src, __global const float *restrict depth,
@@ -113,6 +121,7 @@ __kernel void astigmatism_pad(__global const float *restrict src, __global const
                               const float aperture_mm, const float v_mm, const float inv_f_mm,
                               const int ring_x0, const int ring_x1, const int ring_y0, const int ring_y1)
 {
+#pragma OPENCL FP_CONTRACT OFF
     const int x0 = 16 * (int)get_global_id(0), y = get_global_id(1);
     if (x0 >= pw || y >= ph) return;
     const int sy = clamp(y - ASTIGMATISM_PAD, 0, height - 1);
@@ -341,6 +350,17 @@ inline float16 astigmatism_sat16(float16 v)
     return min(max(v, 0.0f), 1.0f);
 }
 
+/* clamp(v, 0, hi): the gather's membership weight scaled by hi = 1/ntaps (astigmatism_gather) */
+inline float astigmatism_satn(float v, float hi)
+{
+    const float m = 0.5f * (v + hi - ASTIGMATISM_ABS(v - hi));
+    return 0.5f * (m + ASTIGMATISM_ABS(m));
+}
+inline float16 astigmatism_satn16(float16 v, float hi)
+{
+    return min(max(v, 0.0f), hi);
+}
+
 /* 16 pixels of a tile row into the planar output (kernels/common.cl; partial tiles: per pixel) */
 #define astigmatism_store16(dst, r, g, b, x, y, width, height) \
     clp_store16_planar(dst, r, g, b, x, y, width, height, ASTIGMATISM_WHOLE_TILES)
@@ -357,12 +377,14 @@ inline float16 astigmatism_sat16(float16 v)
 #define AIVEC int16
 #define AVLOAD(p) vload16(0, (p))
 #define ASAT(v) astigmatism_sat16(v)
+#define ASATN(v, hi) astigmatism_satn16(v, hi)
 #define ASTORE(dst, r, g, b, x, y, width, height) astigmatism_store16(dst, r, g, b, x, y, width, height)
 #elif ASTIGMATISM_LANES == 1
 #define AVEC float
 #define AIVEC int
 #define AVLOAD(p) (*(p))
 #define ASAT(v) astigmatism_sat(v)
+#define ASATN(v, hi) astigmatism_satn(v, hi)
 inline void astigmatism_store1(__global float *restrict dst, const float r, const float g, const float b,
                                const int x, const int y, const int width, const int height)
 {
@@ -420,6 +442,11 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
     const float bs = box ? sqrt(fmax(tile[2] * tile[2] - shrink, 0.0f)) : tile[2];
     const float bt = box ? sqrt(fmax(tile[3] * tile[3] - shrink, 0.0f)) : tile[3];
     __global const float *pc = pre + jc;  /* a point class's taps: pre, padded layout */
+    /* every weight scaled by kn = 1/ntaps (folded into the membership clamp, no extra operation),
+     * so the running sums stay below the largest colour: unscaled, up to ntaps colours near
+     * FLT_MAX overflowed to inf. The tap counts are powers of two, so the scaling is exact and
+     * the result, sum / wsum, is the same bits as without it (but for weights below 1e-36) */
+    const float kn = 1.0f / (float)ntaps;
     AVEC ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
     /* unrolled by 4, not fully: a full unroll of 64 float16 taps takes tens of seconds to build
      * cold for about the same speed. By hand (a constant 4-trip inner loop): '#pragma unroll 4'
@@ -440,7 +467,7 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
         /* does the source pixel's own ellipse (+ half a pixel) reach back to the target? weight 1
          * inside, 0 from 1.25 times its size (in q^2: 1 .. 1.5625). Is the tap inside the
          * target's own ellipse? weight 1 inside, 0 from q^2 = 1.125 */
-        const AVEC own = ASAT(9.0f - 8.0f * (us2 * is2 + ut2 * it2));
+        const AVEC own = ASATN(9.0f * kn - (8.0f * kn) * (us2 * is2 + ut2 * it2), kn);
         AVEC w = own;
         if (test_reach) {  /* compile-time after inlining: 1 on the tiles astigmatism_reach flags */
             __global const float *an = axes + jc + ny * pw + nx;
@@ -563,7 +590,9 @@ __kernel void astigmatism_exact(__global const float *restrict padded, __global 
         /* does the source pixel's own ellipse (+ half a pixel) reach back to the target? */
         const int jn = (int)floor(py + 0.5f) * pw + (int)floor(px + 0.5f);
         const float qs = us / (axes[jn] + 0.5f), qt = ut / (axes[pn + jn] + 0.5f);
-        const float w = clamp((1.5625f - (qs * qs + qt * qt)) * (1.0f / 0.5625f), 0.0f, 1.0f);
+        /* scaled by 1/ASTIGMATISM_TAPS (a power of two: exact), so the sums stay finite (see
+         * astigmatism_gather) */
+        const float w = clamp((1.5625f - (qs * qs + qt * qt)) * (1.0f / 0.5625f), 0.0f, 1.0f) * (1.0f / ASTIGMATISM_TAPS);
         const float fx0 = floor(px), fy0 = floor(py);
         const float fx = px - fx0, fy = py - fy0;
         const int j = ((int)fy0 - off) * stride + (int)fx0 - off;

@@ -126,7 +126,10 @@ __kernel void coma(__global const float *restrict padded, __global const float *
         const float16 hm = 0.5f * (COMA_ABS16(fx) - fx), hp = 0.5f * (COMA_ABS16(fx) + fx);
         const float16 h0 = 1.0f - COMA_ABS16(fx);
         float16 jac = (1.0f - dc * uy) * (1.0f - q * uy) + q * dc * (ux * ux);
-        jac = 0.5f * (jac + COMA_ABS16(jac));
+        /* max(jac, 0), scaled by 1/COMA_TAPS here rather than the sums at the end: summed
+         * unscaled, COMA_TAPS colours near FLT_MAX overflowed to inf (COMA_TAPS is a power of two,
+         * so the scaling is exact and the result the same bits) */
+        jac = (0.5f / (float)COMA_TAPS) * (jac + COMA_ABS16(jac));
         const float16 wm = jac * (0.5f * (COMA_ABS16(fy) - fy)), w0 = jac * (1.0f - COMA_ABS16(fy));
         const float16 wp = jac * (0.5f * (COMA_ABS16(fy) + fy));
         __global const float *p = padded + base + by * pw + bx;
@@ -140,20 +143,19 @@ __kernel void coma(__global const float *restrict padded, __global const float *
 #undef COMA_WIN16
 #undef COMA_ROW16
     }
-    const float inv = 1.0f / (float)COMA_TAPS;
     const size_t n = (size_t)width * height;
     const size_t i = (size_t)y * width + x;
 #if COMA_WHOLE_TILES
-    vstore16(ar * inv, 0, dst + i);
-    vstore16(ag * inv, 0, dst + n + i);
-    vstore16(ab * inv, 0, dst + 2 * n + i);
+    vstore16(ar, 0, dst + i);
+    vstore16(ag, 0, dst + n + i);
+    vstore16(ab, 0, dst + 2 * n + i);
 #else
     /* frames that are not whole tiles: the rounded-up pixels are computed but not stored */
     if (y >= height) return;
     float rr[16], gg[16], bb[16];
-    vstore16(ar * inv, 0, rr);
-    vstore16(ag * inv, 0, gg);
-    vstore16(ab * inv, 0, bb);
+    vstore16(ar, 0, rr);
+    vstore16(ag, 0, gg);
+    vstore16(ab, 0, bb);
     for (int e = 0; e < 16 && x + e < width; ++e) {
         dst[i + e] = rr[e];
         dst[n + i + e] = gg[e];

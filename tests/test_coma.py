@@ -255,3 +255,21 @@ def test_program_has_one_stencil_kernel_pair_per_stencil_size():
     names = {k.function_name for k in prog.all_kernels()}
     want = {f"coma_{kind}{s}" for kind in "sc" for s in STENCIL_SIZES} | {"coma", "coma_pad", "coma_shape"}
     assert want <= names
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_huge_finite_colour_stays_finite(rng, quality):
+    """A frame × 2^119 (values up to ~1e37, a hot pixel at 3.3e38; FLT_MAX = 3.4e38): the window
+    gather scales each tap's weight by 1/COMA_TAPS instead of the sum at the end, where 64 taps of
+    ~1e37 overflowed to inf (430 pixels of this frame at final on main). Power-of-two scaling is
+    exact: the output is the unscaled frame's, scaled."""
+    w, h = 161, 91
+    color = odd_frame(rng, w=w, h=h, scale=10.0).color.copy()
+    color[40, 100] = 500.0
+    k = 2.0 ** 119
+    assert 3e38 < color.max() * k < np.finfo(np.float32).max
+    pipe = Pipeline(Camera(coma_mm=1.2), stages=["coma"], quality=quality)
+    small = pipe.run(Frame(color)).color
+    huge = pipe.run(Frame(color * np.float32(k))).color
+    assert np.isfinite(huge).all(), np.argwhere(~np.isfinite(huge))[:3]
+    np.testing.assert_allclose(huge, small.astype(np.float64) * k, rtol=1e-6, atol=0)

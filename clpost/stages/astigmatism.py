@@ -91,8 +91,11 @@ kernel that only those work-groups run): the direction — the tile centre's is 
 (half diagonal ≈ 9 px)/r rad, so a tile takes the exact path when :math:`\max(A)\cdot 9/r >
 \frac12` px — and undersampling at depth edges, where a pixel's ellipse is smaller than half the
 tile's bound along an axis longer than ½ px. On the flagship f/1.4 benchmark frame 1.5 % of the
-tiles take the exact path. The reference implements both paths and the same tile plan (a tile
-whose float32 and float64 plans disagree at a threshold would differ; none do in the tests).
+tiles take the exact path. The reference implements both paths and the same tile plan, decided
+on the device's own float32 semi-axes (``semi_axes_px32``: the LUT and float32 arithmetic of the
+kernels, bit-equal on PoCL), so every class threshold (exact, copy, tap counts, point classes)
+splits the tiles as on the device; its gathers use the float64 semi-axes (exact curves, up to
+5e-4 px from the LUT's).
 
 **Tile classes (speed).** Where the ellipses are small, N taps oversample them; each tile's
 bounding semi-axis :math:`B = \max(A_s, A_t)` picks its class (``tile_taps``; the device writes
@@ -155,7 +158,8 @@ computed once for each camera and frame size.
 A frame without depth: not planned (``--explain`` says so).
 
 Domain/range: colour ≥ 0 → convex combination of input colours; depth 0⁺ … +inf (depths below
-1 µm are treated as 1 µm); no NaN/Inf for any finite camera.
+1 µm are treated as 1 µm); no NaN/Inf for any finite camera, and finite colour up to FLT_MAX
+stays finite (the gathers' weights are scaled by 1/N, so no sum exceeds the largest input).
 
 References: W. J. Smith, *Modern Optical Engineering*, 4th ed., §3.6 (astigmatism, field
 curvature, Coddington equations); Hecht, *Optics*, 5th ed., §6.3.1.
@@ -386,22 +390,83 @@ class Astigmatism(GatherStage):
         cs, ct, c0 = axes_mm(ds, dt, depth, *thin_lens(camera))
         return residual_semi_px(cs, c0, pitch), residual_semi_px(ct, c0, pitch), ex, ey
 
+    def semi_axes_px32(self, camera, frame):
+        """(a_s, a_t): the kernels' float32 semi-axes (px), operation for operation as
+        astigmatism_offsets and astigmatism_pad compute them (the LUT of the focal offsets, float32
+        arithmetic, no contraction: those kernels turn FP_CONTRACT off). The tile classes are
+        decided on these, so the reference classifies a tile as the device does even where the
+        float64 semi-axes (exact curves, no LUT; up to 5e-4 px away) lie across a threshold; the
+        gathers keep the float64 ones. Bit-equal with PoCL on a CPU (correctly rounded / and
+        sqrt); ``tests/test_astigmatism.py::test_device_semi_axes_are_the_emulated_ones``."""
+        f4 = np.float32
+        w, h = frame.width, frame.height
+        k = fld.frame_geometry(camera, frame)
+        cx, cy = (f4(v) for v in fld.principal_point_px(camera, w, h, k))
+        pitch = f4(fld.pitch_mm(camera, w, k))
+        lut_scale = f4((fld.LUT_SIZE - 1) / fld.lut_range_mm(camera))
+        lut = self._lut(camera).astype(f4)
+        with np.errstate(all="ignore"):
+            # astigmatism_offsets: the LUT over image height, linear
+            dx = np.arange(w, dtype=f4)[None, :] - cx
+            dy = np.arange(h, dtype=f4)[:, None] - cy
+            r = np.sqrt(dx * dx + dy * dy)
+            t = np.fmin(r * pitch * lut_scale, f4(fld.LUT_SIZE - 1))
+            k0 = np.minimum(t.astype(np.int32), fld.LUT_SIZE - 2)
+            ft = t - k0.astype(f4)
+            d_s, d_t = (lt[k0] + (lt[k0 + 1] - lt[k0]) * ft for lt in lut)
+            # astigmatism_pad: thin-lens defocus terms and astigmatism_semi16
+            aperture, v, f = thin_lens(camera)
+            aperture, v, inv_f = f4(aperture), f4(v), f4(1.0 / f)
+            depth = np.full((h, w), np.inf, f4) if frame.depth is None else np.asarray(frame.depth, f4)
+            zmm = np.fmax(depth * f4(1000.0), f4(MIN_DEPTH_MM))
+            inv_z = np.where(np.isinf(zmm), f4(0.0), f4(1.0) / zmm)
+            g = inv_f - inv_z
+            e0 = (f4(1.0) - v * inv_f) + v * inv_z
+            c0 = aperture * np.abs(e0)
+            hip = f4(0.5) / pitch
+
+            def semi(d):
+                den = f4(1.0) + d * g
+                c = aperture * np.abs(e0 + d * g) / den
+                a = np.sqrt(np.fmax((c - c0) * (c + c0), f4(0.0))) * hip
+                ok = (den > f4(1e-6)) & np.isfinite(a)
+                return np.where(ok, np.fmin(a, f4(MAX_SEMI_PX)), f4(MAX_SEMI_PX)).astype(f4)
+
+            return semi(d_s), semi(d_t)
+
     EXACT_PX = 0.5
     MIXED = 0.5
 
     def tile_taps(self, bound) -> np.ndarray:
         """Tap count per tile from its bounding semi-axis B (px): 0 (copy) below COPY_PX, else the
-        fewest n of :meth:`tap_classes` with B <= n · FULL_AT_PX / N (the quality's N)."""
-        bound = np.asarray(bound, np.float64)
+        fewest n of :meth:`tap_classes` with B <= n · FULL_AT_PX / N (the quality's N). Compared
+        in float32, as astigmatism_tiles does."""
+        f4 = np.float32
+        bound = np.asarray(bound, f4)
         out = np.full(bound.shape, self.taps, np.int64)
         for n in self.tap_classes()[-2::-1]:
-            out = np.where(bound <= n * (FULL_AT_PX / self.taps), n, out)
-        return np.where(bound < COPY_PX, 0, out)
+            out = np.where(bound <= f4(n) * f4(FULL_AT_PX / self.taps), n, out)
+        return np.where(bound < f4(COPY_PX), 0, out)
+
+    def _tile_extremes(self, camera, frame):
+        """Per tile, float32, from :meth:`semi_axes_px32` (the device's values, so the classes are
+        the device's): (hi, lo), each (2, tiles_y, tiles_x), the largest and smallest (a_s, a_t)
+        of the tile's pixels."""
+        w, h = frame.width, frame.height
+        a_s, a_t = self.semi_axes_px32(camera, frame)
+        ntx, nty = fld.tiles(w, h)
+        big = np.full((2, nty * fld.TILE_H, ntx * fld.TILE_W), np.nan, np.float32)
+        big[0, :h, :w], big[1, :h, :w] = a_s, a_t
+        blocks = big.reshape(2, nty, fld.TILE_H, ntx, fld.TILE_W)
+        return np.nanmax(blocks, axis=(2, 4)), np.nanmin(blocks, axis=(2, 4))
 
     def tile_plan(self, camera, frame):
-        """Per tile (float64): the bounding semi-axes (A_s, A_t), the tile centre's radial
+        """Per tile: the bounding semi-axes (A_s, A_t; float64), the tile centre's radial
         vector (e_x, e_y), whether it takes the exact per-pixel path (bool), and its tap count
-        (0 = copied; exact tiles take the quality's N)."""
+        (0 = copied; exact tiles take the quality's N). The classes (exact path, tap count) are
+        decided in float32 on the device's semi-axes (:meth:`semi_axes_px32`), as
+        astigmatism_tiles decides them."""
+        f4 = np.float32
         w, h = frame.width, frame.height
         a_s, a_t, _, _ = self.semi_axes_px(camera, frame)
         cx, cy = fld.principal_point_px(camera, w, h, fld.frame_geometry(camera, frame))
@@ -409,28 +474,26 @@ class Astigmatism(GatherStage):
         ntx, nty = fld.tiles(w, h)
         big = np.full((2, nty * fld.TILE_H, ntx * fld.TILE_W), np.nan)
         big[0, :h, :w], big[1, :h, :w] = a_s, a_t
-        blocks = big.reshape(2, nty, fld.TILE_H, ntx, fld.TILE_W)
-        hi, lo = np.nanmax(blocks, axis=(2, 4)), np.nanmin(blocks, axis=(2, 4))
-        half_diag = 0.5 * np.hypot(fld.TILE_W, fld.TILE_H)
-        turn = np.maximum(hi[0], hi[1]) * half_diag > self.EXACT_PX * r
-        mixed = np.any((hi > self.EXACT_PX) & (lo < self.MIXED * hi), axis=0)
+        hi = np.nanmax(big.reshape(2, nty, fld.TILE_H, ntx, fld.TILE_W), axis=(2, 4))
+        hi32, lo32 = self._tile_extremes(camera, frame)
+        half_diag = f4(0.5) * np.sqrt(f4(fld.TILE_W * fld.TILE_W + fld.TILE_H * fld.TILE_H))
+        bound32 = np.fmax(hi32[0], hi32[1])
+        turn = bound32 * half_diag > f4(self.EXACT_PX) * r.astype(f4)
+        mixed = np.any((hi32 > f4(self.EXACT_PX)) & (lo32 < f4(self.MIXED) * hi32), axis=0)
         exact = turn | mixed
-        taps = np.where(exact, self.taps, self.tile_taps(np.maximum(hi[0], hi[1])))
+        taps = np.where(exact, self.taps, self.tile_taps(bound32))
         return hi[0], hi[1], tex, tey, exact, taps
 
     def point_taps(self, camera, frame, exact=None) -> np.ndarray:
         """Per tile: the point class's tap count (module docstring, "Point taps"), 0 for the tiles
         that take none — the exact ones, and those with a pixel whose smaller semi-axis is below
-        the last class's threshold (:func:`point_classes`)."""
-        w, h = frame.width, frame.height
-        a_s, a_t, _, _ = self.semi_axes_px(camera, frame)
-        ntx, nty = fld.tiles(w, h)
-        big = np.full((nty * fld.TILE_H, ntx * fld.TILE_W), np.nan)
-        big[:h, :w] = np.minimum(a_s, a_t)
-        lo = np.nanmin(big.reshape(nty, fld.TILE_H, ntx, fld.TILE_W), axis=(1, 3))
+        the last class's threshold (:func:`point_classes`; on the device's float32 semi-axes,
+        :meth:`semi_axes_px32`)."""
+        _, lo32 = self._tile_extremes(camera, frame)
+        lo = np.fmin(lo32[0], lo32[1])
         out = np.zeros(lo.shape, np.int64)
         for px, n in point_classes(self.taps)[::-1]:
-            out = np.where(lo >= px, n, out)
+            out = np.where(lo >= np.float32(px), n, out)
         if exact is None:
             exact = self.tile_plan(camera, frame)[4]
         return np.where(exact, 0, out)
@@ -459,7 +522,10 @@ class Astigmatism(GatherStage):
         if exact.any():
             sel = taps_px == -1
             out[sel] = self._gather(color, a_s, a_t, a_s, a_t, pex, pey, own=False)[sel]
-        still = (a_s < MIN_SEMI_PX) & (a_t < MIN_SEMI_PX)
+        # copied pixels: decided on the device's float32 semi-axes like the tile classes (near the
+        # centre the LUT's linear first segment puts them ~10 % above the exact curves')
+        s32, t32 = self.semi_axes_px32(camera, frame)
+        still = (s32 < np.float32(MIN_SEMI_PX)) & (t32 < np.float32(MIN_SEMI_PX))
         out[still] = color[still]
         return out
 
