@@ -117,6 +117,13 @@ __kernel void distortion_rest(__global const float *restrict src, __global float
  * clamped. */
 #define DISTORTION_PAD 20
 #define DISTORTION_FIR_K 12
+/* The coefficient planes hold the coefficients / DISTORTION_COEF_SCALE, so huge finite colour stays
+ * finite: the prefilter's gain is sum |h| = 3 per pass (9 in all), its pair sums twice a sample, and
+ * the gathers' 1-4-1 sums of the cell's samples reach 36 x the largest coefficient: 324 x max|f|
+ * unscaled, which overflowed float from max|f| ~ 1e36. / 512 keeps every one below max|f|; the
+ * gathers multiply their result back. A power of two, so (no underflow: |f| > 1e-35) the scaled
+ * arithmetic is exact and the output the same bits as unscaled. */
+#define DISTORTION_COEF_SCALE 512.0f
 /* h_0 ... h_K in float64 printed to float precision (tests/test_distortion.py checks them against
  * fir_taps and the impulse response of scipy.ndimage.spline_filter1d) */
 __constant float distortion_fir[DISTORTION_FIR_K + 1] = {
@@ -157,6 +164,9 @@ __kernel void distortion_fir_rows(__global const float *restrict src, __global f
         b = vload16(1, win);
         c = vload16(2, win);
     }
+    a *= 1.0f / DISTORTION_COEF_SCALE;
+    b *= 1.0f / DISTORTION_COEF_SCALE;
+    c *= 1.0f / DISTORTION_COEF_SCALE;
     /* output lane l, tap k reads window offset K + l + k; the pairs k, -k share a multiply;
      * smallest taps first and the centre last: with the column pass ordered alike, the rounding
      * error of the coefficients fell from 1.4e-6 to 0.64e-6 of max|f| (1e8 spikes, 300x200) */
@@ -254,7 +264,7 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
         const float lo = min(min(a, e), min(d, f)), hi = max(max(a, e), max(d, f));
         const float lin = mix(mix(a, e, tx), mix(d, f, tx), ty);
         const float v = mix(clamp(acc, lo, hi), lin, th);
-        dst[c * n + i] = v;
+        dst[c * n + i] = v * DISTORTION_COEF_SCALE;
     }
 }
 
@@ -350,7 +360,7 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
         const float16 lo = min(min(a, b), min(d, e)), hi = max(max(a, b), max(d, e));
         const float16 lin = mix(mix(a, b, tx), mix(d, e, tx), ty);
         const float16 v = mix(clamp(acc, lo, hi), lin, th);
-        vstore16(select((float16)(0.0f), v, ok), 0, dst + c * n + i);
+        vstore16(select((float16)(0.0f), v * DISTORTION_COEF_SCALE, ok), 0, dst + c * n + i);
     }
 }
 
@@ -365,6 +375,14 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
  * cell's samples from the coefficients they load anyway (36 f = (1 4 1) (x) (1 4 1) c): no loads. */
 #define DISTORTION_R1 32.0f
 #define DISTORTION_R2 128.0f
+/* The channel sum / DISTORTION_HDR_SCALE: R + G + B reaches 3 max|f| and the weight's (R2 - R1) lo
+ * 96 x that, which overflowed float (inf - inf: NaN weights) from max|f| ~ 1e36; / 512 keeps both
+ * below max|f|. The weight is a ratio, so (a power of two, no underflow: |f| > 1e-35) the same up to
+ * native_divide's rounding. Each channel is scaled before the sum, summed in the order (R + G) + B as
+ * before (a mad each: one more operation). */
+#define DISTORTION_HDR_SCALE 512.0f
+#define DISTORTION_SUM3(r, g, b) \
+    mad((b), 1.0f / DISTORTION_HDR_SCALE, mad((g), 1.0f / DISTORTION_HDR_SCALE, (r) * (1.0f / DISTORTION_HDR_SCALE)))
 inline float16 distortion_hdr_t(const float16 lo, const float16 hi)
 {
     /* native_divide: PoCL's correctly rounded float16 division is not vectorised (half the
@@ -393,8 +411,8 @@ __kernel void distortion_dering(__global const float *restrict src, __global flo
     if (inside) {  /* the loops twice, so the branch is not taken per row */
         for (int j = 0; j < DISTORTION_FIR_ROWS + 4; ++j) {
             __global const float *s = src + (size_t)clamp(sy - 2 + j, 0, src_h - 1) * src_w + x0 - 2;
-            const float16 a = vload16(0, s) + vload16(0, s + sn) + vload16(0, s + 2 * sn);
-            const float16 b = vload16(1, s) + vload16(1, s + sn) + vload16(1, s + 2 * sn);
+            const float16 a = DISTORTION_SUM3(vload16(0, s), vload16(0, s + sn), vload16(0, s + 2 * sn));
+            const float16 b = DISTORTION_SUM3(vload16(1, s), vload16(1, s + sn), vload16(1, s + 2 * sn));
             rlo[j] = (float16)(INFINITY);
             rhi[j] = (float16)(-INFINITY);
             DISTORTION_MINMAX5(a, b, rlo[j], rhi[j]);
@@ -405,7 +423,7 @@ __kernel void distortion_dering(__global const float *restrict src, __global flo
             float win[32];
             for (int k = 0; k < 32; ++k) {
                 const int x = clamp(x0 - 2 + k, 0, src_w - 1);
-                win[k] = s[x] + s[sn + x] + s[2 * sn + x];
+                win[k] = DISTORTION_SUM3(s[x], s[sn + x], s[2 * sn + x]);
             }
             const float16 a = vload16(0, win), b = vload16(1, win);
             rlo[j] = (float16)(INFINITY);

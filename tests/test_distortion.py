@@ -391,7 +391,7 @@ def _device_coefficients(planes: np.ndarray) -> np.ndarray:
     import pyopencl as cl
 
     from clpost.runtime import get_runtime, kernel_source
-    from clpost.stages.distortion import FIR_K, FIR_ROWS, PAD, coef_pitch
+    from clpost.stages.distortion import COEF_SCALE, FIR_K, FIR_ROWS, PAD, coef_pitch
 
     rt = get_runtime()
     _, h, w = planes.shape
@@ -407,7 +407,7 @@ def _device_coefficients(planes: np.ndarray) -> np.ndarray:
     cl.enqueue_nd_range_kernel(rt.queue, cols, (pw // 16, ph // FIR_ROWS, 3), None)
     out = np.empty((3, ph, pw), np.float32)
     cl.enqueue_copy(rt.queue, out, coef)
-    return out[:, :h + 2 * PAD, :w + 2 * PAD]
+    return out[:, :h + 2 * PAD, :w + 2 * PAD] * COEF_SCALE  # the planes hold c / COEF_SCALE
 
 
 def test_prefilter_fir_taps_are_the_impulse_response_of_scipys_recursive_prefilter():
@@ -582,3 +582,29 @@ def test_hdr_points_and_lines_leave_no_ring_and_keep_their_energy(quality):
         got = ((v[..., 0] - 0.1) * area)[near].sum()
         want = (img - 0.1)[max(int(cy) - 9, 0):int(cy) + 10, max(int(cx) - 9, 0):int(cx) + 10].sum()
         assert got == pytest.approx(want, rel=0.05), (quality, cx, cy, got / want)
+
+
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_huge_finite_colour_stays_finite(rng, quality):
+    """Huge finite colour gives finite output, the unscaled frame's output scaled: the probe's frame
+    (tools/huge_colour_probe.py) × 2^119 (values up to ~1e37, a hot pixel at 3.3e38; FLT_MAX =
+    3.4e38) and a smooth frame in [0.5, 1.5] × 2^127 (up to 2.6e38, channel sums 7e38). Unscaled, the final
+    filter's coefficients (prefilter gain up to 9, pair sums 2 x a sample, the cell's 1-4-1 sums 36 x
+    a coefficient) and the hand-over weight's channel sum overflowed (328 inf pixels of the first at
+    final on main). The scalings are powers of two: exact, so the rtol is float rounding only."""
+    w, h = 161, 91
+    color = odd_frame(rng, w=w, h=h, scale=10.0).color.copy()
+    color[40, 100] = 500.0
+    smooth = (1.0 + 0.5 * np.sin(np.arange(w) / 7.0)[None, :, None] * np.cos(np.arange(h) / 5.0)[:, None, None]
+              * np.array([1.0, -0.8, 0.6])).astype(np.float32) * np.ones((h, w, 3), np.float32)
+    depth = (1.5 + 2.5 * rng.random((h, w))).astype(np.float32)
+    m = OpenCVModel(w, h, 120, 120, (w - 1) / 2, (h - 1) / 2, k1=-0.3, k2=0.1, p1=0.01, s1=0.002)
+    pipe = Pipeline(Camera(distortion=m), stages=["distortion"], quality=quality)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the render has no overscan: black corners
+        for base, k in ((color, 2.0 ** 119), (smooth, 2.0 ** 127)):
+            assert 2.5e38 < base.max() * k < np.finfo(np.float32).max
+            small = pipe.run(Frame(base, depth=depth)).color
+            huge = pipe.run(Frame(base * np.float32(k), depth=depth)).color
+            assert np.isfinite(huge).all(), (k, int((~np.isfinite(huge)).sum()), np.argwhere(~np.isfinite(huge))[:3])
+            np.testing.assert_allclose(huge, small.astype(np.float64) * k, rtol=1e-6, atol=0)

@@ -395,6 +395,10 @@ FIR_K = 12
 FIR_ROWS = 4
 """Coefficient rows per work-item of the column pass (kernels/distortion.cl DISTORTION_FIR_ROWS)."""
 
+COEF_SCALE = 512.0
+"""The device's coefficient planes hold the B-spline coefficients / COEF_SCALE, so huge finite colour
+stays finite (kernels/distortion.cl DISTORTION_COEF_SCALE, which says why 512)."""
+
 
 def fir_taps(k_max: int = FIR_K) -> np.ndarray:
     r"""h_0 … h_K (float64) of the cubic B-spline prefilter as a symmetric FIR truncated at |k| ≤ K.
