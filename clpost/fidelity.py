@@ -206,3 +206,17 @@ def cycles_camera(shot: dict, width: int, height: int, dof: bool = True, motion:
     if motion:
         kw.update(frame_rate_fps=shot["fps"], shutter_angle_deg=360.0 * shot["shutter_frames"])
     return Camera(**kw)
+
+
+CYCLES_STAGES = {"dof": ["dof"], "motion": ["motion_blur"], "dofmotion": ["dof", "motion_blur"]}
+"""A Cycles truth's kind -> the clpost stages that reproduce it from the pinhole export."""
+
+
+def cycles_pipeline(entry: dict, kind: str, quality: str):
+    """The :class:`~clpost.pipeline.Pipeline` that reproduces truth ``kind`` of a Cycles manifest
+    ``entry`` from its pinhole export (:func:`cycles_camera`, :data:`CYCLES_STAGES`)."""
+    from .pipeline import Pipeline
+
+    w, h = entry["size"]
+    cam = cycles_camera(entry["shot"], w, h, dof=kind != "motion", motion=kind != "dof")
+    return Pipeline(cam, quality=quality, stages=CYCLES_STAGES[kind])

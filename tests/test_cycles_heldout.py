@@ -10,11 +10,9 @@ import pytest
 
 from clpost import fidelity as fd
 from clpost.exr import read_frame
-from clpost.pipeline import Pipeline
 
 DATA = Path(__file__).parent / "data" / "cycles_heldout"
 MANIFEST = json.loads((DATA / "manifest.json").read_text())
-STAGES = {"dof": ["dof"], "motion": ["motion_blur"], "dofmotion": ["dof", "motion_blur"]}
 MARGIN_DB = 0.5
 
 # (scene, truth, quality) -> PSNR sRGB dB vs Cycles, measured (docs/fidelity.md, "Held-out scenes")
@@ -39,9 +37,7 @@ _channels = fd.read_rgb
 
 
 def _run(entry, frame, kind, quality):
-    w, h = entry["size"]
-    cam = fd.cycles_camera(entry["shot"], w, h, dof=kind != "motion", motion=kind != "dof")
-    return Pipeline(cam, quality=quality, stages=STAGES[kind]).run(frame).color[..., :3]
+    return fd.cycles_pipeline(entry, kind, quality).run(frame).color[..., :3]
 
 
 def _lamps(entry, frame, quality, lamps=None):

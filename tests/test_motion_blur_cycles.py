@@ -11,7 +11,6 @@ import pytest
 
 from clpost import fidelity as fd
 from clpost.exr import read_frame
-from clpost.pipeline import Pipeline
 
 DATA = Path(__file__).parent / "data" / "cycles"
 MANIFEST = json.loads((DATA / "manifest.json").read_text())
@@ -40,9 +39,7 @@ def test_motion_box_floor_vs_cycles(quality):
     entry = MANIFEST["scenes"]["motion"]
     frame = read_frame(DATA / entry["pinhole"]["file"])
     truth = _truth(DATA / entry["truths"]["motion"]["file"])
-    w, h = entry["size"]
-    cam = fd.cycles_camera(entry["shot"], w, h, dof=False, motion=True)
-    out = Pipeline(cam, quality=quality, stages=["motion_blur"]).run(frame).color[..., :3]
+    out = fd.cycles_pipeline(entry, "motion", quality).run(frame).color[..., :3]
     y0, y1, x0, x1 = fd.motion_box(frame.velocity, entry["shot"]["shutter_frames"])
     psnr = fd.psnr_srgb(truth[y0:y1, x0:x1], out[y0:y1, x0:x1])
     assert psnr >= MEASURED[quality][0] - 0.3, f"{quality}: {psnr:.2f} dB"

@@ -34,12 +34,11 @@ import numpy as np
 from clpost import fidelity as fd
 from clpost.exr import read_frame, write_frame
 from clpost.frame import Frame
-from clpost.pipeline import Pipeline
 from clpost.stages import QUALITIES
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "tests" / "data" / "cycles"
-STAGES = {"dof": ["dof"], "motion": ["motion_blur"], "dofmotion": ["dof", "motion_blur"]}
+STAGES = fd.CYCLES_STAGES
 WHITE = 0.6  # tools/cycles_truth/scenes.py WHITE: sunlit diffuse white, the halo level's unit
 BEGIN, END = "<!-- cycles_compare: begin -->", "<!-- cycles_compare: end -->"
 
@@ -62,9 +61,7 @@ without_lamps = fd.without_lamps
 
 
 def run_clpost(frame: Frame, entry: dict, kind: str, quality: str, repeats: int):
-    w, h = entry["size"]
-    cam = fd.cycles_camera(entry["shot"], w, h, dof=kind != "motion", motion=kind != "dof")
-    pipe = Pipeline(cam, quality=quality, stages=STAGES[kind])
+    pipe = fd.cycles_pipeline(entry, kind, quality)
     out = pipe.run(frame).color
     events, walls = [], []
     for _ in range(repeats):
