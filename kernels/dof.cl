@@ -372,7 +372,8 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
                                 (v).s5, (v).s6, (v).s6, (v).s7, (v).s7, (v).s8, (v).s8, (v).s9))
 #endif
 
-/* The 16-lane upsampling's shared steps (dof_upsample16 at the row ends, dof_upsample inside):
+/* The 16-lane upsampling's shared steps (dof_upsample16 at the row ends, dof_upsample inside;
+ * macros, not functions: a shared function was measured slower, docs/fidelity.md):
  * p's own surface among the 2x2 working corners (the others are left out, UPSAMPLE_SAME_PX), and
  * one row of corners' weighted colour and alpha, read through DOF_UP_LOAD(plane, row offset),
  * which each caller defines (clamped per lane at the ends, whole-row loads inside). */
@@ -388,6 +389,25 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
         wsum += gl; \
         ar += gr * DOF_RIGHT(vr); ag += gr * DOF_RIGHT(vg); ab += gr * DOF_RIGHT(vb); aa += gr * DOF_RIGHT(va); \
         wsum += gr; }
+
+/* The corners' weighted colour (ar, ag, ab) and alpha (ua) of the 16 pixels, the half-resolution
+ * blend b and `near` (DOF_NARROW_NEAR): declared in the caller's scope from its r, fx, fy, y0, y1, m,
+ * with DOF_UP_LOAD defined by the caller and EDGE its dof_block_min16 clamp (0 inside the image). */
+#define DOF_UP_CORNERS(EDGE) \
+    float16 ar = (float16)(0.0f), ag = ar, ab = ar, aa = ar, wsum = ar; \
+    const float16 vc0 = dof_block_min16(coc, x, y0, width, height, ww, (EDGE)); \
+    const float16 vc1 = dof_block_min16(coc, x, y1, width, height, ww, (EDGE)); \
+    const float16 dl0 = fabs(r - DOF_LEFT(vc0)), dr0 = fabs(r - DOF_RIGHT(vc0)); \
+    const float16 dl1 = fabs(r - DOF_LEFT(vc1)), dr1 = fabs(r - DOF_RIGHT(vc1)); \
+    const float16 wl0 = (1.0f - fx) * (1.0f - fy), wr0 = fx * (1.0f - fy), wl1 = (1.0f - fx) * fy, wr1 = fx * fy; \
+    const int16 same = DOF_UP_OWN_SURFACE; \
+    DOF_UP_ROW(y0, dl0, dr0, wl0, wr0) \
+    DOF_UP_ROW(y1, dl1, dr1, wl1, wr1) \
+    const float16 inv = 1.0f / wsum; \
+    const float16 b = fmax(DOF_HALF_B(r), aa * inv); \
+    ar *= inv; ag *= inv; ab *= inv; \
+    const int near = DOF_NARROW_NEAR; \
+    const float16 ua = aa * inv;
 
 /* The narrow-source layer (dof_narrow.cl, prepended to this program): its arguments, and its
  * light added to the 16 pixels after the composite is stored (nothing without DOF_NARROW). */
@@ -489,22 +509,9 @@ inline void dof_upsample16(__global const float *restrict src, __global const fl
                                   0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f);
     const size_t row = (size_t)y * width;
     const float16 r = dof_row16(coc, row, x, width, edge);
-    float16 ar = (float16)(0.0f), ag = ar, ab = ar, aa = ar, wsum = ar;
-    const float16 vc0 = dof_block_min16(coc, x, y0, width, height, ww, edge);
-    const float16 vc1 = dof_block_min16(coc, x, y1, width, height, ww, edge);
-    const float16 dl0 = fabs(r - DOF_LEFT(vc0)), dr0 = fabs(r - DOF_RIGHT(vc0));
-    const float16 dl1 = fabs(r - DOF_LEFT(vc1)), dr1 = fabs(r - DOF_RIGHT(vc1));
-    const float16 wl0 = (1.0f - fx) * (1.0f - fy), wr0 = fx * (1.0f - fy), wl1 = (1.0f - fx) * fy, wr1 = fx * fy;
-    const int16 same = DOF_UP_OWN_SURFACE;
 #define DOF_UP_LOAD(P, J) dof_row16((P), (J), m - 1, ww, edge)
-    DOF_UP_ROW(y0, dl0, dr0, wl0, wr0)
-    DOF_UP_ROW(y1, dl1, dr1, wl1, wr1)
+    DOF_UP_CORNERS(edge)
 #undef DOF_UP_LOAD
-    const float16 inv = 1.0f / wsum;
-    const float16 b = fmax(DOF_HALF_B(r), aa * inv);
-    ar *= inv; ag *= inv; ab *= inv;
-    const int near = DOF_NARROW_NEAR;
-    const float16 ua = aa * inv;
     const int16 whole = b >= 1.0f;
     if (all(whole)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
         dof_store16(ar, dst, i, nlanes); dof_store16(ag, dst + n, i, nlanes); dof_store16(ab, dst + 2 * n, i, nlanes);
@@ -582,22 +589,9 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         const float16 fx = (float16)(0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f,
                                       0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f, 0.75f, 0.25f);
         const float16 r = vload16(0, coc + i);
-        float16 ar = (float16)(0.0f), ag = ar, ab = ar, aa = ar, wsum = ar;
-        const float16 vc0 = dof_block_min16(coc, x, y0, width, height, ww, 0);
-        const float16 vc1 = dof_block_min16(coc, x, y1, width, height, ww, 0);
-        const float16 dl0 = fabs(r - DOF_LEFT(vc0)), dr0 = fabs(r - DOF_RIGHT(vc0));
-        const float16 dl1 = fabs(r - DOF_LEFT(vc1)), dr1 = fabs(r - DOF_RIGHT(vc1));
-        const float16 wl0 = (1.0f - fx) * (1.0f - fy), wr0 = fx * (1.0f - fy), wl1 = (1.0f - fx) * fy, wr1 = fx * fy;
-        const int16 same = DOF_UP_OWN_SURFACE;
 #define DOF_UP_LOAD(P, J) vload16(0, (P) + (J) + m - 1)
-        DOF_UP_ROW(y0, dl0, dr0, wl0, wr0)
-        DOF_UP_ROW(y1, dl1, dr1, wl1, wr1)
+        DOF_UP_CORNERS(0)
 #undef DOF_UP_LOAD
-        const float16 inv = 1.0f / wsum;
-        const float16 b = fmax(DOF_HALF_B(r), aa * inv);
-        ar *= inv; ag *= inv; ab *= inv;
-        const int near = DOF_NARROW_NEAR;
-        const float16 ua = aa * inv;
         const int16 whole_ = b >= 1.0f;
         if (all(whole_)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
             vstore16(ar, 0, dst + i); vstore16(ag, 0, dst + n + i); vstore16(ab, 0, dst + 2 * n + i);
