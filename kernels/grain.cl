@@ -24,43 +24,26 @@ inline float grain_to_density(const float t, const float dmin, const float dmax)
  * k = 0..15, give counter 32 (X >> 5) + k its cosine and 32 (X >> 5) + 16 + k its sine branch —
  * so a float16 of draws is 32 consecutive normals with no shuffling. The same numbers in both
  * forms below, summed in the same order. */
-inline float grain_pixel(const float d, const float dmin, const float dmax, const float g,
-                         __global const float *poly, const float inv_half_span, const float amount) {
-    const float d_img = fmax(d - dmin, 0.0f);
-    const float t1 = fmin(d_img * inv_half_span, 2.0f);   /* t + 1, exact near D = 0 */
-    const float t = t1 - 1.0f;
-    /* R(t) as a polynomial in t^2 of the pairs poly[k] + poly[k + 1] t (half the dependent fma's
-     * of Horner's on the pixel's one long chain), sqrt(t + 1) beside it, not after it */
-    const float t2 = t * t;
-#if GRAIN_POLY_DEG % 2
-    float p = fma(poly[GRAIN_POLY_DEG], t, poly[GRAIN_POLY_DEG - 1]);
-#else
-    float p = poly[GRAIN_POLY_DEG];
-#endif
-    for (int k = GRAIN_POLY_DEG - 2 - GRAIN_POLY_DEG % 2; k >= 0; k -= 2)
-        p = fma(p, t2, fma(poly[k + 1], t, poly[k]));
-    const float s = sqrt(t1) * p;   /* sigma_T / T */
-    /* dmin - log10(T + amount sigma_T g) with T = 10^-d_img factored out: no exp2 (<= 0 -> D_max) */
-    return clamp(dmin + d_img - 0.30102999566f * clp_log2(fmax(fma(amount * s, g, 1.0f), 1e-30f)), dmin, dmax);
+#define GRAIN_PIXEL(F, NAME, LOG2) \
+inline F NAME(const F d, const float dmin, const float dmax, const F g, \
+              __global const float *poly, const float inv_half_span, const float amount) { \
+    const F d_img = fmax(d - dmin, 0.0f); \
+    const F t1 = fmin(d_img * inv_half_span, 2.0f);   /* t + 1, exact near D = 0 */ \
+    const F t = t1 - 1.0f; \
+    /* R(t) as a polynomial in t^2 of the pairs poly[k] + poly[k + 1] t (half the dependent fma's \
+     * of Horner's on the pixel's one long chain), sqrt(t + 1) beside it, not after it */ \
+    const F t2 = t * t; \
+    F p = GRAIN_POLY_DEG % 2 ? fma((F)(poly[GRAIN_POLY_DEG]), t, (F)(poly[GRAIN_POLY_DEG - 1])) \
+                             : (F)(poly[GRAIN_POLY_DEG]); \
+    for (int k = GRAIN_POLY_DEG - 2 - GRAIN_POLY_DEG % 2; k >= 0; k -= 2) \
+        p = fma(p, t2, fma(poly[k + 1], t, poly[k])); \
+    const F s = sqrt(t1) * p;   /* sigma_T / T */ \
+    /* dmin - log10(T + amount sigma_T g) with T = 10^-d_img factored out: no exp2 (<= 0 -> D_max) */ \
+    return clamp(dmin + d_img - 0.30102999566f * LOG2(fmax(fma(amount * s, g, 1.0f), 1e-30f)), dmin, dmax); \
 }
-
-/* The lane form of grain_pixel. */
-inline float16 grain_pixel16(const float16 d, const float dmin, const float dmax, const float16 g,
-                             __global const float *poly, const float inv_half_span, const float amount) {
-    const float16 d_img = fmax(d - dmin, 0.0f);
-    const float16 t1 = fmin(d_img * inv_half_span, 2.0f);
-    const float16 t = t1 - 1.0f;
-    const float16 t2 = t * t;
-#if GRAIN_POLY_DEG % 2
-    float16 p = fma(poly[GRAIN_POLY_DEG], t, poly[GRAIN_POLY_DEG - 1]);
-#else
-    float16 p = (float16)(poly[GRAIN_POLY_DEG]);
-#endif
-    for (int k = GRAIN_POLY_DEG - 2 - GRAIN_POLY_DEG % 2; k >= 0; k -= 2)
-        p = fma(p, t2, fma(poly[k + 1], t, poly[k]));
-    const float16 s = sqrt(t1) * p;
-    return clamp(dmin + d_img - 0.30102999566f * clp_log2_w16(fmax(fma(amount * s, g, 1.0f), 1e-30f)), dmin, dmax);
-}
+/* the one-pixel form and the lane form (float16: 16 pixels of a row) of the same operations */
+GRAIN_PIXEL(float, grain_pixel, clp_log2)
+GRAIN_PIXEL(float16, grain_pixel16, clp_log2_w16)
 
 /* The normal of counter (X, Y) of layer c (counters of the pixels left of and above the image
  * wrap around as uint: any fixed mapping keeps the noise a function of the counters). */

@@ -5,6 +5,8 @@
         --sizes 1280x720,1920x1080 --qualities draft,final [--repeats 5] [--reference DIR]
     PYTHONPATH=. python tools/ab_stages.py --old 5b84556 --stages astigmatism,coma,lateral_color \\
         --scene no_defocus --sizes 1920x1080 --qualities draft,final [--truth final]
+    PYTHONPATH=. python tools/ab_stages.py --old main --stages grain --with exposure,film --scene full \
+        --sizes 1280x720 --qualities draft,final
     PYTHONPATH=. python tools/ab_stages.py --save-reference DIR [--samples 128,64]
 
 The old tree is ``git archive``-d into a temporary folder and imported as the package
@@ -89,7 +91,7 @@ def interleaved(pipes, frames, stage: str, repeats: int):
     return times, outs
 
 
-def timing(old, stages, scene, sizes, qualities, repeats, truth=None, lens=None, f_number=None):
+def timing(old, stages, scene, sizes, qualities, repeats, truth=None, lens=None, f_number=None, with_=()):
     import clpost
     from clpost.bench import SCENES, synthetic_frame
 
@@ -105,10 +107,10 @@ def timing(old, stages, scene, sizes, qualities, repeats, truth=None, lens=None,
         for stage in stages:
             ref = None
             if truth is not None:
-                ref = old.Pipeline(cam_old, quality=truth, stages=[stage]).run(frames[0]).color.astype(np.float64)
+                ref = old.Pipeline(cam_old, quality=truth, stages=[*with_, stage]).run(frames[0]).color.astype(np.float64)
             for q in qualities:
-                pipes = (old.Pipeline(cam_old, quality=q, stages=[stage]),
-                         clpost.Pipeline(cam, quality=q, stages=[stage]))
+                pipes = (old.Pipeline(cam_old, quality=q, stages=[*with_, stage]),
+                         clpost.Pipeline(cam, quality=q, stages=[*with_, stage]))
                 if stage not in pipes[1].plan(frame):
                     print(f"{w}x{h} {stage} {q}: not planned for scene {scene!r}; skipped")
                     continue
@@ -153,6 +155,8 @@ def main(argv=None) -> int:
     p.add_argument("--old", default=None, help="git revision of the old version")
     p.add_argument("--stages", default="dof", help="comma-separated stage names (default dof)")
     p.add_argument("--scene", default="worst", help="a clpost bench scene (default worst)")
+    p.add_argument("--with", dest="with_", default="",
+                   help="stages planned before each timed one, not timed (grain: exposure,film)")
     p.add_argument("--sizes", default="1280x720,1920x1080")
     p.add_argument("--qualities", default="draft,final")
     p.add_argument("--repeats", type=int, default=5)
@@ -179,7 +183,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="clpost_ab_") as tmp:
         old = load_old(a.old, Path(tmp))
         timing(old, a.stages.split(","), a.scene, sizes, a.qualities.split(","), a.repeats,
-               truth=a.truth, lens=a.lens, f_number=a.f_number)
+               truth=a.truth, lens=a.lens, f_number=a.f_number, with_=[v for v in a.with_.split(",") if v])
         if a.reference:
             accuracy(old, Path(a.reference), a.repeats)
     return 0

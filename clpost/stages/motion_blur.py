@@ -268,11 +268,9 @@ class MotionBlur(GatherStage):
         return 16 if rt.wide else 1
 
     def _kernel(self, rt, camera, name):
-        from ..codegen import library, library_lanes16
-        from ..runtime import kernel_source
-
-        src = library() + library_lanes16() + "\n" + kernel_source("motion_blur")
-        return rt.kernel(src, name, {**self.defines(camera), "MOTION_BLUR_LANES": self.lanes(rt)}, "motion_blur")
+        lanes = self.lanes(rt)
+        return rt.kernel(_program_source(lanes), name, {**self.defines(camera), "MOTION_BLUR_LANES": lanes},
+                         "motion_blur")
 
     def _row_launch(self, rt, w, h):
         """(global, local) of the per-pixel kernels: 16 pixels of a row per work-item in 8×1 groups
@@ -340,6 +338,19 @@ class MotionBlur(GatherStage):
         if _rolling_needed(camera, frame):
             out = reference_rolling(out, frame.velocity, camera.readout_time_s * camera.frame_rate_fps)
         return out
+
+
+def _program_source(lanes: int) -> str:
+    """common.cl and the width-generic libraries, the per-pixel math of kernels/motion_blur_pixels.cl
+    at one pixel (plain names) and, for the 16-lane form, at 16 (``_w16``; the one-pixel functions
+    do its rows' edge pixels), then kernels/motion_blur.cl: one source of every formula for both forms."""
+    from ..codegen import library, library_lanes16
+    from ..runtime import kernel_source
+
+    src = library() + kernel_source("motion_blur_pixels")
+    if lanes == 16:
+        src += library_lanes16() + kernel_source("motion_blur_pixels")
+    return src + kernel_source("motion_blur")
 
 
 # -- numpy reference ---------------------------------------------------------------------------
