@@ -5,8 +5,10 @@
  * traced profile's T_MAX, else 1; DOF_RMAX is then the largest reach), DOF_FRONT_MARGIN.
  * Output per tile: the lattice level l (stride s = 2^l, the smallest with
  * k = ceil(R/s - 0.5) <= R_b) and the number of taps ntaps[k] of the distance-sorted unit lattice
- * table that covers every source whose bokeh can reach a pixel of the tile, packed as
- * taps | l << 24.
+ * table that covers every source whose bokeh can reach a pixel of the tile, and the routing level
+ * m of final's mixed resolution (the same rule with every neighbour's |CoC|, depth order ignored:
+ * dof_tile_mix keeps routing the tiles it routed before the dilation became depth-aware), packed
+ * as taps | l << 24 | m << 28 (l, m <= 7; the gather reads l = (packed >> 24) & 15).
  */
 
 /* tmax[2 t], tmax[2 t + 1]: the signed CoC's min and max over tile t (level 0) */
@@ -57,21 +59,25 @@ __kernel void dof_tile_dilate(__global const float *restrict tmax, __global int 
     if (tx >= tw || ty >= th) return;
     const int reach = (DOF_RMAX + DOF_TILE) / DOF_TILE;
     const float top = tmax[2 * (ty * tw + tx) + 1] + DOF_FRONT_MARGIN;
-    float r = 0.5f;
+    float r = 0.5f, ra = 0.5f;
     for (int ny = max(ty - reach, 0); ny <= min(ty + reach, th - 1); ++ny)
         for (int nx = max(tx - reach, 0); nx <= min(tx + reach, tw - 1); ++nx) {
             const float lo = tmax[2 * (ny * tw + nx)], hi = tmax[2 * (ny * tw + nx) + 1];
-            if (lo > top) continue;
             /* smallest pixel distance between the two tiles */
             const float gx = (float)max(0, (int)abs(nx - tx) * DOF_TILE - (DOF_TILE - 1));
             const float gy = (float)max(0, (int)abs(ny - ty) * DOF_TILE - (DOF_TILE - 1));
+            const float g = sqrt(gx * gx + gy * gy);
+            const float ma = fmax(fabs(lo), fabs(hi)) * DOF_REACH;
+            if (ma + 0.5f > g) ra = fmax(ra, ma);
+            if (lo > top) continue;
             const float m = fmax(fabs(lo), fabs(fmin(hi, top))) * DOF_REACH;
-            if (m + 0.5f > sqrt(gx * gx + gy * gy)) r = fmax(r, m);
+            if (m + 0.5f > g) r = fmax(r, m);
         }
-    int lvl = 0;
+    int lvl = 0, route = 0;
     while (lvl < DOF_LEVELS && (int)ceil(r / (float)(1 << lvl) - 0.5f) > DOF_BUDGET) ++lvl;
+    while (route < DOF_LEVELS && (int)ceil(ra / (float)(1 << route) - 0.5f) > DOF_BUDGET) ++route;
     const int k = clamp((int)ceil(r / (float)(1 << lvl) - 0.5f), 0, DOF_BUDGET);
-    tn[ty * tw + tx] = ntaps[k] | (lvl << 24);
+    tn[ty * tw + tx] = ntaps[k] | (lvl << 24) | (route << 28);
 }
 
 /* Final's mixed resolution (clpost/stages/dof.py, mixed_mask): launched over the tiles of the
@@ -86,10 +92,10 @@ __kernel void dof_tile_dilate(__global const float *restrict tmax, __global int 
 inline int dof_tile_big(__global const int *tn_h, __global const int *tn_full, const int tx, const int ty,
                         const int twh, const int tw, const int th)
 {
-    int big = (tn_h[ty * twh + tx] >> 24) >= DOF_MIX_LEVEL;
+    int big = (tn_h[ty * twh + tx] >> 28) >= DOF_MIX_LEVEL;
     for (int cy = 2 * ty; cy <= min(2 * ty + 1, th - 1); ++cy)
         for (int cx = 2 * tx; cx <= min(2 * tx + 1, tw - 1); ++cx)
-            big |= (tn_full[cy * tw + cx] >> 24) > DOF_MIX_FULL_LEVELS;
+            big |= (tn_full[cy * tw + cx] >> 28) > DOF_MIX_FULL_LEVELS;
     return big;
 }
 

@@ -202,6 +202,7 @@ def test_tile_plan_dilates_only_by_neighbours_that_can_be_in_front():
     rw[:, 32:] = 4.8  # behind the wall: draft (R_b = 3) would need stride 2 for it
     lvl, cnt = D.tile_plan(rw, 16, 3)
     assert lvl[0, 16] == 0 and cnt[0, 16] == cnt[0, 0]  # the wall tile beside the far tile
+    assert D.tile_plan(rw, 16, 3, route=True)[0][0, 16] == 1  # final's routing: as before
     assert lvl[0, 32] == 1
     for near in (-4.8, 2.0 + D.FRONT_MARGIN_PX):
         rw[:, 32:] = near if near < 0 else 4.8
@@ -698,7 +699,7 @@ def test_final_mixed_resolution_when_only_the_full_resolution_plan_is_coarse(rng
     out, pipe = run(cam, frame, "final")
     coc = D.coc_px(cam, D.effective_depth(color, depth), w, D.max_coc_px("final"))
     rw = D._working(color.astype(np.float64), coc, 2)[1]
-    assert D.tile_plan(rw, 32, 8)[0].max() < D.MIXED_LEVEL  # the half-resolution plan alone: no tile
+    assert D.tile_plan(rw, 32, 8, route=True)[0].max() < D.MIXED_LEVEL  # the half-resolution plan alone: no tile
     mask = D.mixed_mask(rw, coc, "final")
     assert 0.2 < mask.mean() < 0.8
     assert np.isfinite(out).all()

@@ -608,7 +608,8 @@ def reach_rmax(rmax: int, reach: float) -> int:
     return int(math.ceil(rmax * reach))
 
 
-def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0,
+              route: bool = False) -> tuple[np.ndarray, np.ndarray]:
     r"""Per tile (Jimenez 2014: tile max, dilated by the reach of the neighbouring tiles) the
     lattice level ℓ and tap count: R = the largest reach (``reach`` × |CoC|) that can reach a
     pixel of the tile, ℓ the smallest level with :math:`k = \lceil R/2^\ell - \tfrac12\rceil \le R_b`,
@@ -620,8 +621,10 @@ def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0) -> tu
     CoC. A neighbouring tile with signed CoC range :math:`[r^N_{lo}, r^N_{hi}]` therefore
     dilates by :math:`\max(|r^N_{lo}|, |\min(r^N_{hi}, r_{hi} + m)|)`, and not at all when
     :math:`r^N_{lo} > r_{hi} + m` — a wall tile beside a farther, blurrier sky keeps the wall's
-    own stride (docs/fidelity.md, "The lattice's own blur"). Float32 as the kernel
-    (``dof_tile_dilate``)."""
+    own stride (docs/fidelity.md, "The lattice's own blur"). ``route``: the levels of the same
+    rule with every neighbour's |CoC| (depth order ignored), by which final's mixed resolution
+    routes tiles (:func:`mixed_mask`; the depth-aware levels would send more tiles to the 4×
+    costlier full-resolution gather). Float32 as the kernel (``dof_tile_dilate``)."""
     h, w = coc.shape
     tw, th = -(-w // TILE), -(-h // TILE)
     rmax = reach_rmax(rmax, reach)
@@ -639,11 +642,12 @@ def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0) -> tu
             top = f32(hi[ty, tx] + f32(FRONT_MARGIN_PX))
             for ny in range(max(ty - reach_t, 0), min(ty + reach_t, th - 1) + 1):
                 for nx in range(max(tx - reach_t, 0), min(tx + reach_t, tw - 1) + 1):
-                    if lo[ny, nx] > top:
+                    if lo[ny, nx] > top and not route:
                         continue  # behind every pixel of the tile: clamped to their own radius
                     gx = max(0, abs(nx - tx) * TILE - (TILE - 1))
                     gy = max(0, abs(ny - ty) * TILE - (TILE - 1))
-                    m = f32(max(abs(lo[ny, nx]), abs(min(hi[ny, nx], top))) * f32(reach))
+                    near = hi[ny, nx] if route else min(hi[ny, nx], top)
+                    m = f32(max(abs(lo[ny, nx]), abs(near)) * f32(reach))
                     if f32(m + f32(0.5)) > f32(math.sqrt(gx * gx + gy * gy)):
                         r = max(r, float(m))
             lv = 0
@@ -955,15 +959,16 @@ def _full_small(color, coc, out, alpha, one_tap=None):
 
 def mixed_mask(rw: np.ndarray, coc: np.ndarray, quality: str, reach: float = 1.0) -> np.ndarray:
     r"""Full-resolution pixels that ``quality`` takes from the half-resolution path: those in a
-    working tile whose half-resolution plan (:func:`tile_plan`) has level ≥ :data:`MIXED_LEVEL`,
-    or one of whose full-resolution child tiles has a level above :data:`MIXED_FULL_LEVELS` in
-    the full-resolution plan (so the full-resolution gather never reads a level it did not build)."""
+    working tile whose half-resolution plan (:func:`tile_plan`'s routing levels) has level ≥
+    :data:`MIXED_LEVEL`, or one of whose full-resolution child tiles has a routing level above
+    :data:`MIXED_FULL_LEVELS` in the full-resolution plan (so the full-resolution gather never
+    reads a level it did not build: its depth-aware level is at most the routing level)."""
     scale, rmax, budget = MIXED[quality]
     _, full_rmax, full_budget = QUALITY[quality]
     h, w = coc.shape
     hw, ww = rw.shape
-    lvl, _ = tile_plan(rw, rmax, budget, reach)
-    lvl_full, _ = tile_plan(coc, full_rmax, full_budget, reach)
+    lvl, _ = tile_plan(rw, rmax, budget, reach, route=True)
+    lvl_full, _ = tile_plan(coc, full_rmax, full_budget, reach, route=True)
     big = np.zeros((hw * scale, ww * scale), bool)
     big[:h, :w] = lvl_full > MIXED_FULL_LEVELS
     big = big.reshape(hw, scale, ww, scale).any(axis=(1, 3))  # per working pixel
