@@ -44,6 +44,9 @@ bokehs that cover it. Ideas used, by source:
 
 * Tiles of max |CoC| dilated by the reach of neighbouring tiles (Jimenez 2014, "Next Generation
   Post Processing in Call of Duty", tile max + neighbourhood max): an in-focus tile reads one tap.
+  Depth-aware: a neighbour's sources behind every pixel of the tile are clamped to the pixel's own
+  radius (the background clamp below), so they do not dilate it (:func:`tile_plan`) — a wall
+  beside a farther, blurrier sky keeps the wall's own lattice stride.
 * A fixed per-pixel budget scaled to the tile's reach R (Abadie 2018, "A Life of a Bokeh": sample
   count independent of the CoC's area): the tile gathers the unit lattice disc
   :math:`\{o \in \mathbb Z^2 : |o| < R_b + 1\}` (sorted by distance) scaled by the stride
