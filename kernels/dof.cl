@@ -169,7 +169,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
      * and offsets are the same for every work-item; edge-tile work-items beyond the image read
      * the padding (DOF_PW) and only skip the final write */
     const int packed = tn[get_group_id(1) * tw + get_group_id(0)];
-    const int count = packed & 0xffffff, lvl = packed >> 24;
+    const int count = packed & 0xffffff, lvl = (packed >> 24) & 15;  /* bits 28+: dof_tile_mix's */
     /* count 0: a tile whose output nobody reads (final's mixed resolution, dof_tile_mix) */
     if (count == 0) return;
     const int s = 1 << lvl;

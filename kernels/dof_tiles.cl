@@ -1,13 +1,17 @@
-/* dof: per-tile max |CoC| and its dilation by the reach of neighbouring tiles (Jimenez 2014).
+/* dof: per-tile signed CoC range and its dilation by the reach of neighbouring tiles (Jimenez 2014),
+ * depth-aware (tile_plan in clpost/stages/dof.py).
  * Structural: DOF_TILE (tile edge, working px), DOF_RMAX (max CoC radius, working px),
  * DOF_BUDGET (lattice radius R_b), DOF_LEVELS, DOF_REACH (a bokeh's reach over its CoC radius: a
- * traced profile's T_MAX, else 1; DOF_RMAX is then the largest reach).
+ * traced profile's T_MAX, else 1; DOF_RMAX is then the largest reach), DOF_FRONT_MARGIN.
  * Output per tile: the lattice level l (stride s = 2^l, the smallest with
  * k = ceil(R/s - 0.5) <= R_b) and the number of taps ntaps[k] of the distance-sorted unit lattice
- * table that covers every source whose bokeh can reach a pixel of the tile, packed as
- * taps | l << 24 (see tile_plan in clpost/stages/dof.py).
+ * table that covers every source whose bokeh can reach a pixel of the tile, and the routing level
+ * m of final's mixed resolution (the same rule with every neighbour's |CoC|, depth order ignored:
+ * dof_tile_mix keeps routing the tiles it routed before the dilation became depth-aware), packed
+ * as taps | l << 24 | m << 28 (l, m <= 7; the gather reads l = (packed >> 24) & 15).
  */
 
+/* tmax[2 t], tmax[2 t + 1]: the signed CoC's min and max over tile t (level 0) */
 __kernel void dof_tile_max(__global const float *restrict lv, __global float *restrict tmax,
                            const int ww, const int hw, const int pad, const int tw, const int th)
 {
@@ -15,46 +19,65 @@ __kernel void dof_tile_max(__global const float *restrict lv, __global float *re
     if (tx >= tw || ty >= th) return;
     const int pw = DOF_PW(ww, pad);
     __global const float *pr = lv + (size_t)3 * pw * DOF_PW(hw, pad);  /* level 0 CoC */
-    float m = 0.0f;
+    const int t = ty * tw + tx;
 #if DOF_TILE == 16
     if ((tx + 1) * DOF_TILE <= ww && (ty + 1) * DOF_TILE <= hw) {
-        /* a whole tile: one row per vload16 (max is exact in any order) */
-        float16 v = (float16)(0.0f);
-        for (int y = ty * DOF_TILE; y < (ty + 1) * DOF_TILE; ++y)
-            v = fmax(v, fabs(vload16(0, pr + (size_t)(y + pad) * pw + tx * DOF_TILE + pad)));
-        const float8 a = fmax(v.lo, v.hi);
-        const float4 b = fmax(a.lo, a.hi);
-        const float2 c = fmax(b.lo, b.hi);
-        tmax[ty * tw + tx] = fmax(c.x, c.y) * DOF_REACH;
+        /* a whole tile: one row per vload16 (min and max are exact in any order) */
+        __global const float *p0 = pr + (size_t)(ty * DOF_TILE + pad) * pw + tx * DOF_TILE + pad;
+        float16 lo = vload16(0, p0), hi = lo;
+        for (int y = 1; y < DOF_TILE; ++y) {
+            const float16 v = vload16(0, p0 + (size_t)y * pw);
+            lo = fmin(lo, v);
+            hi = fmax(hi, v);
+        }
+        const float8 a = fmin(lo.lo, lo.hi), b = fmax(hi.lo, hi.hi);
+        const float4 c = fmin(a.lo, a.hi), d = fmax(b.lo, b.hi);
+        const float2 e = fmin(c.lo, c.hi), f = fmax(d.lo, d.hi);
+        tmax[2 * t] = fmin(e.x, e.y);
+        tmax[2 * t + 1] = fmax(f.x, f.y);
         return;
     }
 #endif
+    float lo = INFINITY, hi = -INFINITY;
     for (int y = ty * DOF_TILE; y < min((ty + 1) * DOF_TILE, hw); ++y)
-        for (int x = tx * DOF_TILE; x < min((tx + 1) * DOF_TILE, ww); ++x)
-            m = fmax(m, fabs(pr[(size_t)(y + pad) * pw + x + pad]));
-    tmax[ty * tw + tx] = m * DOF_REACH;
+        for (int x = tx * DOF_TILE; x < min((tx + 1) * DOF_TILE, ww); ++x) {
+            const float v = pr[(size_t)(y + pad) * pw + x + pad];
+            lo = fmin(lo, v);
+            hi = fmax(hi, v);
+        }
+    tmax[2 * t] = lo;
+    tmax[2 * t + 1] = hi;
 }
 
-/* The border replicates edge pixels, so an edge tile's own max also stands for the padding. */
+/* The border replicates edge pixels, so an edge tile's own range also stands for the padding.
+ * A neighbour's sources behind every pixel of the tile (CoC above the tile's max + the front
+ * margin) are clamped to the pixel's own radius by the gather: they do not dilate. */
 __kernel void dof_tile_dilate(__global const float *restrict tmax, __global int *restrict tn,
                               __global const int *restrict ntaps, const int tw, const int th)
 {
     const int tx = get_global_id(0), ty = get_global_id(1);
     if (tx >= tw || ty >= th) return;
     const int reach = (DOF_RMAX + DOF_TILE) / DOF_TILE;
-    float r = 0.5f;
+    const float top = tmax[2 * (ty * tw + tx) + 1] + DOF_FRONT_MARGIN;
+    float r = 0.5f, ra = 0.5f;
     for (int ny = max(ty - reach, 0); ny <= min(ty + reach, th - 1); ++ny)
         for (int nx = max(tx - reach, 0); nx <= min(tx + reach, tw - 1); ++nx) {
+            const float lo = tmax[2 * (ny * tw + nx)], hi = tmax[2 * (ny * tw + nx) + 1];
             /* smallest pixel distance between the two tiles */
             const float gx = (float)max(0, (int)abs(nx - tx) * DOF_TILE - (DOF_TILE - 1));
             const float gy = (float)max(0, (int)abs(ny - ty) * DOF_TILE - (DOF_TILE - 1));
-            const float m = tmax[ny * tw + nx];
-            if (m + 0.5f > sqrt(gx * gx + gy * gy)) r = fmax(r, m);
+            const float g = sqrt(gx * gx + gy * gy);
+            const float ma = fmax(fabs(lo), fabs(hi)) * DOF_REACH;
+            if (ma + 0.5f > g) ra = fmax(ra, ma);
+            if (lo > top) continue;
+            const float m = fmax(fabs(lo), fabs(fmin(hi, top))) * DOF_REACH;
+            if (m + 0.5f > g) r = fmax(r, m);
         }
-    int lvl = 0;
+    int lvl = 0, route = 0;
     while (lvl < DOF_LEVELS && (int)ceil(r / (float)(1 << lvl) - 0.5f) > DOF_BUDGET) ++lvl;
+    while (route < DOF_LEVELS && (int)ceil(ra / (float)(1 << route) - 0.5f) > DOF_BUDGET) ++route;
     const int k = clamp((int)ceil(r / (float)(1 << lvl) - 0.5f), 0, DOF_BUDGET);
-    tn[ty * tw + tx] = ntaps[k] | (lvl << 24);
+    tn[ty * tw + tx] = ntaps[k] | (lvl << 24) | (route << 28);
 }
 
 /* Final's mixed resolution (clpost/stages/dof.py, mixed_mask): launched over the tiles of the
@@ -69,10 +92,10 @@ __kernel void dof_tile_dilate(__global const float *restrict tmax, __global int 
 inline int dof_tile_big(__global const int *tn_h, __global const int *tn_full, const int tx, const int ty,
                         const int twh, const int tw, const int th)
 {
-    int big = (tn_h[ty * twh + tx] >> 24) >= DOF_MIX_LEVEL;
+    int big = (tn_h[ty * twh + tx] >> 28) >= DOF_MIX_LEVEL;
     for (int cy = 2 * ty; cy <= min(2 * ty + 1, th - 1); ++cy)
         for (int cx = 2 * tx; cx <= min(2 * tx + 1, tw - 1); ++cx)
-            big |= (tn_full[cy * tw + cx] >> 24) > DOF_MIX_FULL_LEVELS;
+            big |= (tn_full[cy * tw + cx] >> 28) > DOF_MIX_FULL_LEVELS;
     return big;
 }
 

@@ -194,6 +194,43 @@ def test_half_resolution_path_blurs_an_edge_like_the_disc(quality, r_px):
     assert np.mean(spread) == pytest.approx(r_px * r_px / 4, rel=0.12)
 
 
+def test_tile_plan_dilates_only_by_neighbours_that_can_be_in_front():
+    """The gather clamps a source behind p to p's own radius, so a farther, blurrier neighbour
+    tile must not raise a tile's reach (stride); a nearer one, or one within the front margin,
+    must."""
+    rw = np.full((16, 48), 2.0)
+    rw[:, 32:] = 4.8  # behind the wall: draft (R_b = 3) would need stride 2 for it
+    lvl, cnt = D.tile_plan(rw, 16, 3)
+    assert lvl[0, 16] == 0 and cnt[0, 16] == cnt[0, 0]  # the wall tile beside the far tile
+    assert D.tile_plan(rw, 16, 3, route=True)[0][0, 16] == 1  # final's routing: as before
+    assert lvl[0, 32] == 1
+    for near in (-4.8, 2.0 + D.FRONT_MARGIN_PX):
+        rw[:, 32:] = near if near < 0 else 4.8
+        rw[0, 32] = near  # one source in front of (or level with) the wall's farthest pixel
+        assert D.tile_plan(rw, 16, 3)[0][0, 16] == (1 if near < 0 else 0)
+    rw[0, 32] = -4.8
+    assert D.tile_plan(rw, 16, 3)[0][0, 16] == 1
+
+
+@pytest.mark.parametrize("quality", ["draft", "preview"])
+def test_a_farther_blurrier_sky_beside_a_wall_does_not_change_the_walls_blur(rng, quality):
+    """A textured wall (r = 5 px) beside the sky (r = 9.8 px, stride 2 at draft): the wall's tile
+    next to the sky tile keeps the wall's own stride, so away from the sky edge the wall is
+    blurred exactly as a wall alone (before, the sky's larger CoC made it stride 2 at draft: the
+    mortar of h_panes' brick wall, docs/fidelity.md)."""
+    h, w = 48, 128
+    cam = Camera(**CAM, blades=5)
+    k, inv_u = D.coc_coefficients(cam, w)
+    color = (0.2 + rng.random((h, w, 3))).astype(np.float32)
+    wall = np.full((h, w), 1.0 / (inv_u - 5.0 / k), np.float32)
+    sky = wall.copy()
+    sky[:, 64:] = np.inf
+    alone, _ = run(cam, Frame(color, depth=wall), quality)
+    beside, pipe = run(cam, Frame(color, depth=sky), quality)
+    np.testing.assert_array_equal(beside[:, :52], alone[:, :52])
+    assert_matches_reference(pipe, Frame(color, depth=sky), beside)
+
+
 def test_local_blur_skips_only_pixels_whose_side_weights_are_all_negligible():
     """local_blur leaves a pixel as it is exactly when its own |r| and every nearer neighbour's are
     under LOCAL_MIN_PX (side weights < 1/32): an in-focus pixel beside a blurred background keeps
@@ -662,7 +699,7 @@ def test_final_mixed_resolution_when_only_the_full_resolution_plan_is_coarse(rng
     out, pipe = run(cam, frame, "final")
     coc = D.coc_px(cam, D.effective_depth(color, depth), w, D.max_coc_px("final"))
     rw = D._working(color.astype(np.float64), coc, 2)[1]
-    assert D.tile_plan(rw, 32, 8)[0].max() < D.MIXED_LEVEL  # the half-resolution plan alone: no tile
+    assert D.tile_plan(rw, 32, 8, route=True)[0].max() < D.MIXED_LEVEL  # the half-resolution plan alone: no tile
     mask = D.mixed_mask(rw, coc, "final")
     assert 0.2 < mask.mean() < 0.8
     assert np.isfinite(out).all()

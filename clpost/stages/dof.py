@@ -44,6 +44,9 @@ bokehs that cover it. Ideas used, by source:
 
 * Tiles of max |CoC| dilated by the reach of neighbouring tiles (Jimenez 2014, "Next Generation
   Post Processing in Call of Duty", tile max + neighbourhood max): an in-focus tile reads one tap.
+  Depth-aware: a neighbour's sources behind every pixel of the tile are clamped to the pixel's own
+  radius (the background clamp below), so they do not dilate it (:func:`tile_plan`) — a wall
+  beside a farther, blurrier sky keeps the wall's own lattice stride.
 * A fixed per-pixel budget scaled to the tile's reach R (Abadie 2018, "A Life of a Bokeh": sample
   count independent of the CoC's area): the tile gathers the unit lattice disc
   :math:`\{o \in \mathbb Z^2 : |o| < R_b + 1\}` (sorted by distance) scaled by the stride
@@ -608,31 +611,48 @@ def reach_rmax(rmax: int, reach: float) -> int:
     return int(math.ceil(rmax * reach))
 
 
-def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0,
+              route: bool = False) -> tuple[np.ndarray, np.ndarray]:
     r"""Per tile (Jimenez 2014: tile max, dilated by the reach of the neighbouring tiles) the
     lattice level ℓ and tap count: R = the largest reach (``reach`` × |CoC|) that can reach a
     pixel of the tile, ℓ the smallest level with :math:`k = \lceil R/2^\ell - \tfrac12\rceil \le R_b`,
-    taps = ntaps[k] of the unit lattice table. Returns per-pixel (level, count) arrays."""
+    taps = ntaps[k] of the unit lattice table. Returns per-pixel (level, count) arrays.
+
+    Depth-aware dilation: a source behind every pixel of the tile (signed CoC above the tile's
+    largest, :math:`r_{hi}`, by more than :data:`FRONT_MARGIN_PX`) is clamped to the pixel's own
+    radius by the gather (the background clamp), so it never reaches farther than the tile's own
+    CoC. A neighbouring tile with signed CoC range :math:`[r^N_{lo}, r^N_{hi}]` therefore
+    dilates by :math:`\max(|r^N_{lo}|, |\min(r^N_{hi}, r_{hi} + m)|)`, and not at all when
+    :math:`r^N_{lo} > r_{hi} + m` — a wall tile beside a farther, blurrier sky keeps the wall's
+    own stride (docs/fidelity.md, "The lattice's own blur"). ``route``: the levels of the same
+    rule with every neighbour's |CoC| (depth order ignored), by which final's mixed resolution
+    routes tiles (:func:`mixed_mask`; the depth-aware levels would send more tiles to the 4×
+    costlier full-resolution gather). Float32 as the kernel (``dof_tile_dilate``)."""
     h, w = coc.shape
     tw, th = -(-w // TILE), -(-h // TILE)
     rmax = reach_rmax(rmax, reach)
-    a = np.pad((np.abs(coc).astype(np.float32) * np.float32(reach)).astype(np.float64),
-               ((0, th * TILE - h), (0, tw * TILE - w)))
-    tmax = a.reshape(th, TILE, tw, TILE).max(axis=(1, 3)).astype(np.float32).astype(np.float64)
+    f32 = np.float32
+    a = np.pad(np.asarray(coc).astype(f32), ((0, th * TILE - h), (0, tw * TILE - w)), mode="edge")
+    blocks = a.reshape(th, TILE, tw, TILE)
+    lo, hi = blocks.min(axis=(1, 3)), blocks.max(axis=(1, 3))
     ntaps = tap_table(budget, 0, 0.0, 0.0)[5]
-    reach = (rmax + TILE) // TILE
+    reach_t = (rmax + TILE) // TILE
     lvl = np.zeros((th, tw), int)
     cnt = np.zeros((th, tw), int)
     for ty in range(th):
         for tx in range(tw):
             r = 0.5
-            for ny in range(max(ty - reach, 0), min(ty + reach, th - 1) + 1):
-                for nx in range(max(tx - reach, 0), min(tx + reach, tw - 1) + 1):
+            top = f32(hi[ty, tx] + f32(FRONT_MARGIN_PX))
+            for ny in range(max(ty - reach_t, 0), min(ty + reach_t, th - 1) + 1):
+                for nx in range(max(tx - reach_t, 0), min(tx + reach_t, tw - 1) + 1):
+                    if lo[ny, nx] > top and not route:
+                        continue  # behind every pixel of the tile: clamped to their own radius
                     gx = max(0, abs(nx - tx) * TILE - (TILE - 1))
                     gy = max(0, abs(ny - ty) * TILE - (TILE - 1))
-                    m = tmax[ny, nx]
-                    if np.float32(m + 0.5) > np.float32(math.sqrt(gx * gx + gy * gy)):
-                        r = max(r, m)
+                    near = hi[ny, nx] if route else min(hi[ny, nx], top)
+                    m = f32(max(abs(lo[ny, nx]), abs(near)) * f32(reach))
+                    if f32(m + f32(0.5)) > f32(math.sqrt(gx * gx + gy * gy)):
+                        r = max(r, float(m))
             lv = 0
             while math.ceil(r / 2 ** lv - 0.5) > budget:
                 lv += 1
@@ -942,15 +962,16 @@ def _full_small(color, coc, out, alpha, one_tap=None):
 
 def mixed_mask(rw: np.ndarray, coc: np.ndarray, quality: str, reach: float = 1.0) -> np.ndarray:
     r"""Full-resolution pixels that ``quality`` takes from the half-resolution path: those in a
-    working tile whose half-resolution plan (:func:`tile_plan`) has level ≥ :data:`MIXED_LEVEL`,
-    or one of whose full-resolution child tiles has a level above :data:`MIXED_FULL_LEVELS` in
-    the full-resolution plan (so the full-resolution gather never reads a level it did not build)."""
+    working tile whose half-resolution plan (:func:`tile_plan`'s routing levels) has level ≥
+    :data:`MIXED_LEVEL`, or one of whose full-resolution child tiles has a routing level above
+    :data:`MIXED_FULL_LEVELS` in the full-resolution plan (so the full-resolution gather never
+    reads a level it did not build: its depth-aware level is at most the routing level)."""
     scale, rmax, budget = MIXED[quality]
     _, full_rmax, full_budget = QUALITY[quality]
     h, w = coc.shape
     hw, ww = rw.shape
-    lvl, _ = tile_plan(rw, rmax, budget, reach)
-    lvl_full, _ = tile_plan(coc, full_rmax, full_budget, reach)
+    lvl, _ = tile_plan(rw, rmax, budget, reach, route=True)
+    lvl_full, _ = tile_plan(coc, full_rmax, full_budget, reach, route=True)
     big = np.zeros((hw * scale, ww * scale), bool)
     big[:h, :w] = lvl_full > MIXED_FULL_LEVELS
     big = big.reshape(hw, scale, ww, scale).any(axis=(1, 3))  # per working pixel

@@ -125,7 +125,7 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
         "ntaps": const("ntaps", ntaps),
         "lv": scratch("lv", (nlev + 1, 5, ph, pw)),
         "pv": scratch("pv", (ph, pw) if camera.optical_vignetting > 0 else (1,)),
-        "tmax": scratch("tmax", (th, tw)), "tn": scratch("tn", (th, tw), np.int32),
+        "tmax": scratch("tmax", (th, tw, 2)), "tn": scratch("tn", (th, tw), np.int32),
         "alpha": scratch("alpha", (hw, ww)),
         "blur": scratch("blur", (3, hw, ww)) if scale > 1 else None,
         "aperture": (const("normals", _edge_normals(camera.blades, camera.blade_rotation_deg)),
