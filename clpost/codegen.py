@@ -128,6 +128,16 @@ def vector_path(stages: "list[PointwiseStage]", wide: bool = True) -> bool:
     return bool(stages) and wide
 
 
+def item_pixels(stages: "list[PointwiseStage]", wide: bool = True) -> int:
+    """Pixels per work-item of the fused kernel: :data:`VECTOR_PIXELS` on the vector path, twice that
+    where a stage keeps per-work-item state between two 16-pixel calls
+    (:attr:`~clpost.stages.base.PointwiseStage.state`: white grain's Box–Muller draws, whose sines
+    are the next 16 pixels' normals), 1 otherwise."""
+    if not vector_path(stages, wide):
+        return 1
+    return 2 * VECTOR_PIXELS if any(s.state for s in stages) else VECTOR_PIXELS
+
+
 def _lanes(vec: str, first: int) -> str:
     """``(float16)(vec[first], vec[first + 3], …)`` from three float16 ``vec0..vec2`` holding 48
     consecutive interleaved floats: channel ``first`` of 16 pixels."""
@@ -163,7 +173,8 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     def calls(width: int, ctx: str, indent: str) -> list[str]:
         out = []
         for s in stages:
-            extra = "".join(f", {b}" for b in AUX_BUFFERS if b in s.reads)
+            extra = f", &{s.name}_st{width}" if s.state else ""
+            extra += "".join(f", {b}" for b in AUX_BUFFERS if b in s.reads)
             extra += "".join(f", {s.name}_{arg}" for _, arg in s.args)
             out.append(f"{indent}{s.name}_apply_w{width}(&r, &g, &b, {ctx}{extra});")
         return out
@@ -177,7 +188,12 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     vec = vector_path(stages, wide) if vector is None else vector
     parts = [kernel_source("common"), _instantiate(stages, 1)]
     nl = "\n"
+
+    def states(width: int, indent: str) -> str:  # per-work-item state of the stages that keep one
+        return "".join(f"{indent}{s.name}_state_w{width} {s.name}_st{width};\n" for s in stages if s.state)
+
     if vec:
+        pixels = item_pixels(stages)
         parts.append(_instantiate(stages, VECTOR_PIXELS))
         if src_layout == INTERLEAVED:
             load16 = ("const float16 v0 = vload16(0, src + 3 * i), v1 = vload16(1, src + 3 * i), "
@@ -191,23 +207,26 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
         else:
             store16 = ("        vstore16(r, 0, dst + i);\n        vstore16(g, 0, dst + n + i);\n"
                        "        vstore16(b, 0, dst + 2 * n + i);")
+        halves = [f"""        {{   /* pixels {h} … {h + VECTOR_PIXELS - 1} of the work-item */
+        const size_t i = i0 + {h};
+        const PixelCtx16 p16 = {{x0 + {h}, y, width, height, i}};
+        {load16}
+{nl.join(calls(VECTOR_PIXELS, "p16", "        "))}
+{store16}
+        }}""" for h in range(0, pixels, VECTOR_PIXELS)]
         parts.append(f"""
 __kernel void {name}({", ".join(params)})
 {{
-    const int x0 = get_global_id(0) * {VECTOR_PIXELS};
+    const int x0 = get_global_id(0) * {pixels};
     const int y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     const size_t n = (size_t)width * (size_t)height;
     const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
     (void)n;
-    if (x0 + {VECTOR_PIXELS} <= width) {{
-        const size_t i = i0;
-        const PixelCtx16 p16 = {{x0, y, width, height, i0}};
-        {load16}
-{nl.join(calls(VECTOR_PIXELS, "p16", "        "))}
-{store16}
-    }} else {{  /* the row's last 1–15 pixels, one by one */
-        for (int x = x0; x < width; ++x) {{
+    if (x0 + {pixels} <= width) {{
+{states(VECTOR_PIXELS, "        ")}{nl.join(halves)}
+    }} else {{  /* the row's last 1–{pixels - 1} pixels, one by one */
+{states(1, "        ")}        for (int x = x0; x < width; ++x) {{
             const size_t i = i0 + (size_t)(x - x0);
             const PixelCtx p = {{x, y, width, height, i}};
             const float3 c = {load};
@@ -229,7 +248,7 @@ __kernel void {name}({", ".join(params)})
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
     const PixelCtx p = {{x, y, width, height, i}};
     (void)n; (void)p;
-    const float3 c = {load};
+{states(1, "    ")}    const float3 c = {load};
     float r = c.x, g = c.y, b = c.z;
 {nl.join(calls(1, "p", "    "))}
     {store}
@@ -250,9 +269,8 @@ def global_size(stages: "list[PointwiseStage]", src_layout: str, dst_layout: str
     (``wide`` as given to :func:`vector_path`)."""
     if not stages and src_layout != dst_layout:
         return (w + CONVERT_PIXELS - 1) // CONVERT_PIXELS, h
-    if vector_path(stages, wide):
-        return (w + VECTOR_PIXELS - 1) // VECTOR_PIXELS, h
-    return w, h
+    k = item_pixels(stages, wide)
+    return (w + k - 1) // k, h
 
 
 def _convert_source(name: str, src_layout: str) -> str:

@@ -138,6 +138,14 @@ class Stage(ABC):
         """Structural ``#define``s (part of the program key); none by default."""
         return {}
 
+    def planned_form(self, camera: "Camera", frame: "Frame") -> "Stage":
+        """The object the plan runs for this stage with this camera and frame: itself, or — where a
+        gather stage's work is per pixel for this camera (white grain) — a :class:`PointwiseStage`
+        of the same name, which the planner fuses with its pointwise neighbours. The choice may
+        depend only on what a plan is keyed by (the camera's structure, the frame's size, the
+        quality)."""
+        return self
+
     def replay_key(self, camera: "Camera", frame: "Frame") -> object:
         """What this stage's launches depend on besides the camera (a plan compares the camera
         itself). A plan records a gather stage's launches (:meth:`GatherStage.enqueue`,
@@ -165,6 +173,12 @@ class PointwiseStage(Stage):
 
     kind = "pointwise"
     args: ClassVar[tuple[tuple[str, str], ...]] = ()
+    state: ClassVar[bool] = False
+    """Whether ``<name>_apply`` keeps per-work-item state: it then takes ``CLP_FN(<name>_state) *st``
+    right after ``p`` (a type its source defines per width), and the generated kernel runs 32
+    pixels per work-item as two 16-pixel calls in order, x0 (a multiple of 32) then x0 + 16, with
+    the same ``st`` (:func:`clpost.codegen.item_pixels`; white grain keeps the sines of its
+    Box–Muller draws for the second call). The one-pixel form gets a state of its own per pixel."""
 
     def source(self) -> str:
         """Width-generic OpenCL C defining ``<name>_apply`` (default: ``kernels/<name>.cl``)."""
