@@ -228,6 +228,9 @@ VECTOR_GROUPS = {
                             ["exposure", "film", "print"]),
     "film+linear print": (dict(film="kodak-ektar-100", film_output="linear", grain_amount=0.0), ["film", "print"]),
     "exposure+sensor": (dict(f_number=2.0, sensor_preset="smartphone", iso=800), ["exposure", "sensor"]),
+    # white grain (the default camera's grain is far under a pixel): GrainWhite, a stage with
+    # per-work-item state, 32 pixels per work-item as two 16-lane calls
+    "film+white grain+print": (dict(film="kodak-ektar-100"), ["film", "grain", "print"]),
 }
 # every other pointwise stage of the registry, alone, with the camera its class declares as an
 # example (Stage.example): a new stage is covered without editing this file
@@ -253,10 +256,11 @@ _LAYOUTS = [("interleaved", "interleaved"), ("planar", "planar"), ("planar", "in
 def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts, group):
     """Every pointwise stage runs 16 pixels per work-item (rows' last 1–15 pixels one by one) from
     its one width-generic source; the result is bit for bit the one-pixel kernel's, for every
-    layout pair."""
+    layout pair. (A group with a stage that keeps per-work-item state runs 32 pixels per work-item,
+    two 16-lane calls: white grain.)"""
     import pyopencl as cl
 
-    from clpost.codegen import global_size, vector_path
+    from clpost.codegen import global_size, item_pixels, vector_path
 
     h = 5
     kw, names = VECTOR_GROUPS[group]
@@ -270,13 +274,14 @@ def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts, gr
     plan = pipe.plan_for(frame, cam)
     stages = plan.stages
     assert [s.name for s in stages] == names
-    assert vector_path(stages) and global_size(stages, *layouts, w, h) == ((w + 15) // 16, h)
+    k = 32 if any(s.state for s in stages) else 16
+    assert vector_path(stages) and item_pixels(stages) == k and global_size(stages, *layouts, w, h) == ((w + k - 1) // k, h)
     rt, bufs = pipe.runtime, plan.buffers
     cl.enqueue_copy(rt.queue, bufs.color_in, np.ascontiguousarray(frame.color))
     defines = {k: v for s in stages for k, v in s.defines(cam).items()}
     args = [np.int32(w), np.int32(h)] + [a for s in stages for a in plan.arg_values(s, cam, frame)]
     outs = []
-    for vec, gsize in ((False, (w, h)), (True, ((w + 15) // 16, h))):
+    for vec, gsize in ((False, (w, h)), (True, ((w + k - 1) // k, h))):
         name, src = fused_source(stages, *layouts, vector=vec)
         kern = cl.Kernel(rt.program(src, name, defines), name)
         dst = rt.empty((h, w, 3))

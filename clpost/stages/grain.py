@@ -162,8 +162,13 @@ class Grain(GatherStage):
 
     def reason_needed(self, camera, frame):
         r = grain_radius_px(camera, fld.image_width_px(frame))
-        how = ("Boolean model (Newson 2017), 64 samples/px" if use_boolean(self.quality, r)
-               else "Gaussian clear fraction matched to the Boolean model")
+        if use_boolean(self.quality, r):
+            how = "Boolean model (Newson 2017), 64 samples/px"
+        elif self.white(camera, fld.image_width_px(frame)):
+            how = ("Gaussian clear fraction matched to the Boolean model, white (lag-1 correlation < "
+                   f"{RHO_WHITE:g}): per pixel, fused with the pointwise stages beside it")
+        else:
+            how = "Gaussian clear fraction matched to the Boolean model, correlated by a 3×3 filter"
         return (f"grain radius {r:.3g} px ({r * camera.pixel_pitch_mm(fld.image_width_px(frame)) * 1e3:.3g} µm), amount "
                 f"{camera.grain_amount:g}: {how}")
 
