@@ -170,10 +170,10 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     if not stages and src_layout != dst_layout:
         return name, kernel_source("common") + _convert_source(name, src_layout)
 
-    def calls(width: int, ctx: str, indent: str) -> list[str]:
+    def calls(width: int, ctx: str, indent: str, slot: int = 0) -> list[str]:
         out = []
         for s in stages:
-            extra = f", &{s.name}_st{width}" if s.state else ""
+            extra = f", &{s.name}_st{width}[{slot}]" if s.state else ""
             extra += "".join(f", {b}" for b in AUX_BUFFERS if b in s.reads)
             extra += "".join(f", {s.name}_{arg}" for _, arg in s.args)
             out.append(f"{indent}{s.name}_apply_w{width}(&r, &g, &b, {ctx}{extra});")
@@ -189,8 +189,16 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     parts = [kernel_source("common"), _instantiate(stages, 1)]
     nl = "\n"
 
-    def states(width: int, indent: str) -> str:  # per-work-item state of the stages that keep one
-        return "".join(f"{indent}{s.name}_state_w{width} {s.name}_st{width};\n" for s in stages if s.state)
+    def states(width: int, ctx: str, slots: int, indent: str) -> str:
+        """The state of the stages that keep one: a slot per call (16-lane half or pixel), filled
+        by ``<name>_prepare`` before the first."""
+        out = ""
+        for s in stages:
+            if s.state:
+                extra = "".join(f", {s.name}_{arg}" for _, arg in s.args)
+                out += (f"{indent}{s.name}_state_w{width} {s.name}_st{width}[{slots}];\n"
+                        f"{indent}{s.name}_prepare_w{width}({ctx}, {s.name}_st{width}{extra});\n")
+        return out
 
     if vec:
         pixels = item_pixels(stages)
@@ -211,9 +219,10 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
         const size_t i = i0 + {h};
         const PixelCtx16 p16 = {{x0 + {h}, y, width, height, i}};
         {load16}
-{nl.join(calls(VECTOR_PIXELS, "p16", "        "))}
+{nl.join(calls(VECTOR_PIXELS, "p16", "        ", h // VECTOR_PIXELS))}
 {store16}
         }}""" for h in range(0, pixels, VECTOR_PIXELS)]
+        first = "((PixelCtx16){x0, y, width, height, i0})"
         parts.append(f"""
 __kernel void {name}({", ".join(params)})
 {{
@@ -224,12 +233,12 @@ __kernel void {name}({", ".join(params)})
     const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
     (void)n;
     if (x0 + {pixels} <= width) {{
-{states(VECTOR_PIXELS, "        ")}{nl.join(halves)}
+{states(VECTOR_PIXELS, first, pixels // VECTOR_PIXELS, "        ")}{nl.join(halves)}
     }} else {{  /* the row's last 1–{pixels - 1} pixels, one by one */
-{states(1, "        ")}        for (int x = x0; x < width; ++x) {{
+        for (int x = x0; x < width; ++x) {{
             const size_t i = i0 + (size_t)(x - x0);
             const PixelCtx p = {{x, y, width, height, i}};
-            const float3 c = {load};
+{states(1, "p", 1, "            ")}            const float3 c = {load};
             float r = c.x, g = c.y, b = c.z;
 {nl.join(calls(1, "p", "            "))}
             {store}
@@ -248,7 +257,7 @@ __kernel void {name}({", ".join(params)})
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
     const PixelCtx p = {{x, y, width, height, i}};
     (void)n; (void)p;
-{states(1, "    ")}    const float3 c = {load};
+{states(1, "p", 1, "    ")}    const float3 c = {load};
     float r = c.x, g = c.y, b = c.z;
 {nl.join(calls(1, "p", "    "))}
     {store}

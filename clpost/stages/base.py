@@ -174,11 +174,14 @@ class PointwiseStage(Stage):
     kind = "pointwise"
     args: ClassVar[tuple[tuple[str, str], ...]] = ()
     state: ClassVar[bool] = False
-    """Whether ``<name>_apply`` keeps per-work-item state: it then takes ``CLP_FN(<name>_state) *st``
-    right after ``p`` (a type its source defines per width), and the generated kernel runs 32
-    pixels per work-item as two 16-pixel calls in order, x0 (a multiple of 32) then x0 + 16, with
-    the same ``st`` (:func:`clpost.codegen.item_pixels`; white grain keeps the sines of its
-    Box–Muller draws for the second call). The one-pixel form gets a state of its own per pixel."""
+    """Whether the stage shares work between the pixels of a work-item: its source then defines,
+    per width, a type ``CLP_FN(<name>_state)`` and ``void CLP_FN(<name>_prepare)(const CLP_CTX p,
+    CLP_FN(<name>_state) *st, <args>)``; the generated kernel runs 32 pixels per work-item as two
+    16-pixel calls (x0, a multiple of 32, then x0 + 16; :func:`clpost.codegen.item_pixels`), calls
+    ``prepare`` once with the first call's ``p`` to fill ``st[0]`` and ``st[1]``, and passes
+    ``&st[k]`` to call k of ``<name>_apply`` right after ``p`` (white grain: one float16 of
+    Box–Muller draws is the normals of all 32 pixels). The one-pixel form prepares ``st[0]`` per
+    pixel."""
 
     def source(self) -> str:
         """Width-generic OpenCL C defining ``<name>_apply`` (default: ``kernels/<name>.cl``)."""
