@@ -41,9 +41,10 @@ found the same)."""
 #
 # on the three channels of CLP_W pixels of a row (helpers named CLP_FN(helper)), and the generator
 # instantiates it at one pixel (float, PixelCtx: a row's last 1-15 pixels) and at VECTOR_PIXELS
-# (float16 lanes, PixelCtx16) — so every fused group runs 16 pixels per work-item and a new stage
-# is fast without a hand-written twin; both instantiations do the same float operations, so they
-# agree bit for bit (tests/test_pipeline.py). kernels/fastmath.cl and kernels/random.cl are written
+# (float16 lanes, PixelCtx16) — so every fused group runs 16 pixels per work-item (32, as two
+# 16-lane calls, where a stage keeps state: PointwiseStage.state) and a new stage is fast without
+# a hand-written twin; both instantiations do the same float operations, so they agree bit for bit
+# (tests/test_pipeline.py). kernels/fastmath.cl and kernels/random.cl are written
 # the same way. The macros (the style of dof's DOF_F / DOF_LOAD in kernels/dof.cl):
 
 WIDTH_MACROS: dict[int, dict[str, str]] = {
@@ -159,8 +160,9 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     (a single stage's kernel is named like the stage); with no stages it only converts layouts.
     Parameters: ``src, dst, width, height``, then ``depth`` / ``velocity`` if any stage reads
     them, then each stage's ``args`` prefixed ``<stage>_``. A stage that reads depth or velocity
-    receives those pointers right after ``p``, in that order. ``vector`` (default
-    :func:`vector_path` with ``wide``): :data:`VECTOR_PIXELS` pixels per work-item, else one.
+    receives those pointers right after ``p``, in that order; a stage with ``state`` its state
+    slot right after ``p`` (:attr:`~clpost.stages.base.PointwiseStage.state`). ``vector`` (default
+    :func:`vector_path` with ``wide``): :func:`item_pixels` pixels per work-item, else one.
     """
     name = "__".join(s.name for s in stages) or f"convert_{src_layout}_to_{dst_layout}"
     params = ["__global const float *restrict src", "__global float *restrict dst",
