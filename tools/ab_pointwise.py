@@ -80,8 +80,8 @@ def main(argv=None) -> int:
                     ms.setdefault((k, tag), []).append(t)
                     pct.setdefault((k, tag), []).append(100.0 * _bytes(k, w, h) / (t * 1e6) / gbps)
     old_tag, new_tag = runs[0][0], runs[1][0]
-    print(f"{w}x{h} {args.quality}, {args.repeats} repeats: device ms min / median, new/old of the mins "
-          f"(where both plans launch the kernel), % of copy (median)")
+    print(f"{w}x{h} {args.quality}, {args.repeats} repeats: device ms min / median (% of copy, median), "
+          f"new/old of the mins and of each repeat (where both plans launch the kernel)")
     for k in dict.fromkeys(kernels[old_tag] + kernels[new_tag]):
         cols = []
         for tag in (old_tag, new_tag):
@@ -89,7 +89,11 @@ def main(argv=None) -> int:
             cols.append(f"{tag} {min(v):7.2f} / {statistics.median(v):7.2f} ({statistics.median(pct[(k, tag)]):3.0f} %)"
                         if v else f"{tag} {'–':>25}")
         o, n = ms.get((k, old_tag)), ms.get((k, new_tag))
-        ratio = f"new/old {min(n) / min(o):.2f}" if o and n else ""
+        ratio = ""
+        if o and n:  # of the mins, and the median of the per-repeat ratios (the two ran back to back)
+            per = sorted(b / a for a, b in zip(o, n))
+            ratio = (f"new/old {min(n) / min(o):.2f} (per repeat: median {statistics.median(per):.2f}, "
+                     f"quartiles {per[len(per) // 4]:.2f}–{per[(3 * len(per)) // 4]:.2f})")
         print(f"  {k:<40} {cols[0]}   {cols[1]}   {ratio}")
     return 0
 
