@@ -281,3 +281,24 @@ def _check_gather_launches(stage, cam, frame, w, h):
         rt = Launches(wide)
         stage.enqueue(rt, cam, frame, None, None, {})
         assert rt.sizes == [want_size]
+
+
+def test_white_grain_fused_replays_per_frame_and_per_amount():
+    """White grain runs as a fused pointwise kernel whose arguments are set again only when they
+    change: one pipeline's frames 1, 2, 1 give noise that changes with the frame index and repeats
+    for the same one, and a per-frame grain_amount (a scalar: no new plan) gives a fresh pipeline's
+    image."""
+    cam = cam_for_radius(0.02, 64)
+    pipe = Pipeline(cam, quality="draft", stages=["grain"], already_applied=("film",))
+    f1, f2 = density_frame(1.0, 8, 64, 1), density_frame(1.0, 8, 64, 2)
+    assert isinstance(pipe.plan_for(f1, pipe.camera_for(f1)).stages[0], GrainWhite)
+    a, c, a2 = (pipe.run(f).color for f in (f1, f2, f1))
+    np.testing.assert_array_equal(a, a2)
+    for k in range(3):
+        assert abs(np.corrcoef(a[..., k].ravel(), c[..., k].ravel())[0, 1]) < 0.2
+    plans = len(pipe._plans)
+    strong = pipe.run(f1, cam.with_(grain_amount=3.0)).color
+    assert len(pipe._plans) == plans
+    fresh = Pipeline(cam.with_(grain_amount=3.0), quality="draft", stages=["grain"], already_applied=("film",)).run(f1).color
+    np.testing.assert_array_equal(strong, fresh)
+    assert np.all(strong.std(axis=(0, 1)) > 2 * a.std(axis=(0, 1)))  # per layer
