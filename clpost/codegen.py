@@ -40,11 +40,10 @@ found the same)."""
 #     inline void <name>_apply(CLP_F *r, CLP_F *g, CLP_F *b, const CLP_CTX p, <args>)
 #
 # on the three channels of CLP_W pixels of a row (helpers named CLP_FN(helper)), and the generator
-# instantiates it at one pixel (float, PixelCtx: a row's last 1-15 pixels) and at VECTOR_PIXELS
-# (float16 lanes, PixelCtx16) — so every fused group runs 16 pixels per work-item (32, as two
-# 16-lane calls, where a stage keeps state: PointwiseStage.state) and a new stage is fast without
-# a hand-written twin; both instantiations do the same float operations, so they agree bit for bit
-# (tests/test_pipeline.py). kernels/fastmath.cl and kernels/random.cl are written
+# instantiates it at one pixel (float, PixelCtx: a row's last 1-31 pixels) and at VECTOR_PIXELS
+# (float16 lanes, PixelCtx16) — so every fused group runs two 16-lane vectors per work-item
+# (ITEM_VECTORS) and a new stage is fast without a hand-written twin; both instantiations do the
+# same float operations, so they agree bit for bit (tests/test_pipeline.py). kernels/fastmath.cl and kernels/random.cl are written
 # the same way. The macros (the style of dof's DOF_F / DOF_LOAD in kernels/dof.cl):
 
 WIDTH_MACROS: dict[int, dict[str, str]] = {
@@ -129,14 +128,18 @@ def vector_path(stages: "list[PointwiseStage]", wide: bool = True) -> bool:
     return bool(stages) and wide
 
 
+ITEM_VECTORS = 2
+"""16-lane vectors per work-item of a fused kernel's vector path (32 pixels of a row): each stage
+is applied to both before the next, which gives PoCL's scheduler two independent dependency chains
+per stage (the film+print group ×0.89 against one vector per work-item, docs/benchmarks.md), and a
+stage with state (:attr:`~clpost.stages.base.PointwiseStage.state`) shares its work between them
+(white grain: one float16 of Box–Muller draws is the normals of all 32 pixels)."""
+
+
 def item_pixels(stages: "list[PointwiseStage]", wide: bool = True) -> int:
-    """Pixels per work-item of the fused kernel: :data:`VECTOR_PIXELS` on the vector path, twice that
-    where a stage keeps per-work-item state between two 16-pixel calls
-    (:attr:`~clpost.stages.base.PointwiseStage.state`: white grain's Box–Muller draws, whose sines
-    are the next 16 pixels' normals), 1 otherwise."""
-    if not vector_path(stages, wide):
-        return 1
-    return 2 * VECTOR_PIXELS if any(s.state for s in stages) else VECTOR_PIXELS
+    """Pixels per work-item of the fused kernel: :data:`ITEM_VECTORS` × :data:`VECTOR_PIXELS` on the
+    vector path, 1 otherwise."""
+    return ITEM_VECTORS * VECTOR_PIXELS if vector_path(stages, wide) else 1
 
 
 def _lanes(vec: str, first: int) -> str:
@@ -146,9 +149,10 @@ def _lanes(vec: str, first: int) -> str:
     return f"(float16)({', '.join(comps)})"
 
 
-def _interleave(part: int) -> str:
-    """The float16 holding interleaved floats 16·part … 16·part + 15 of channels r, g, b."""
-    comps = [f"{'rgb'[f % 3]}.s{f // 3:x}" for f in range(16 * part, 16 * part + 16)]
+def _interleave(part: int, sfx: str = "") -> str:
+    """The float16 holding interleaved floats 16·part … 16·part + 15 of channels ``r<sfx>``,
+    ``g<sfx>``, ``b<sfx>``."""
+    comps = [f"{'rgb'[f % 3]}{sfx}.s{f // 3:x}" for f in range(16 * part, 16 * part + 16)]
     return f"(float16)({', '.join(comps)})"
 
 
@@ -172,14 +176,14 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     if not stages and src_layout != dst_layout:
         return name, kernel_source("common") + _convert_source(name, src_layout)
 
-    def calls(width: int, ctx: str, indent: str, slot: int = 0) -> list[str]:
-        out = []
-        for s in stages:
-            extra = f", &{s.name}_st{width}[{slot}]" if s.state else ""
-            extra += "".join(f", {b}" for b in AUX_BUFFERS if b in s.reads)
-            extra += "".join(f", {s.name}_{arg}" for _, arg in s.args)
-            out.append(f"{indent}{s.name}_apply_w{width}(&r, &g, &b, {ctx}{extra});")
-        return out
+    def call(s, width: int, ctx: str, indent: str, slot: int = 0, sfx: str = "") -> str:
+        extra = f", &{s.name}_st{width}[{slot}]" if s.state else ""
+        extra += "".join(f", {b}" for b in AUX_BUFFERS if b in s.reads)
+        extra += "".join(f", {s.name}_{arg}" for _, arg in s.args)
+        return f"{indent}{s.name}_apply_w{width}(&r{sfx}, &g{sfx}, &b{sfx}, {ctx}{extra});"
+
+    def calls(width: int, ctx: str, indent: str) -> list[str]:
+        return [call(s, width, ctx, indent) for s in stages]
 
     for s in stages:
         for cl_type, arg in s.args:
@@ -205,25 +209,30 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     if vec:
         pixels = item_pixels(stages)
         parts.append(_instantiate(stages, VECTOR_PIXELS))
-        if src_layout == INTERLEAVED:
-            load16 = ("const float16 v0 = vload16(0, src + 3 * i), v1 = vload16(1, src + 3 * i), "
-                      "v2 = vload16(2, src + 3 * i);\n"
-                      f"        float16 r = {_lanes('v', 0)};\n        float16 g = {_lanes('v', 1)};\n"
-                      f"        float16 b = {_lanes('v', 2)};")
-        else:
-            load16 = "float16 r = vload16(0, src + i), g = vload16(0, src + n + i), b = vload16(0, src + 2 * n + i);"
-        if dst_layout == INTERLEAVED:
-            store16 = "\n".join(f"        vstore16({_interleave(k)}, {k}, dst + 3 * i);" for k in range(3))
-        else:
-            store16 = ("        vstore16(r, 0, dst + i);\n        vstore16(g, 0, dst + n + i);\n"
-                       "        vstore16(b, 0, dst + 2 * n + i);")
-        halves = [f"""        {{   /* pixels {h} … {h + VECTOR_PIXELS - 1} of the work-item */
-        const size_t i = i0 + {h};
-        const PixelCtx16 p16 = {{x0 + {h}, y, width, height, i}};
-        {load16}
-{nl.join(calls(VECTOR_PIXELS, "p16", "        ", h // VECTOR_PIXELS))}
-{store16}
-        }}""" for h in range(0, pixels, VECTOR_PIXELS)]
+        def load16(k: int) -> str:  # vector k of the work-item: pixels x0 + 16 k … + 15
+            i = f"iv{k}"
+            head = (f"        const size_t {i} = i0 + {k * VECTOR_PIXELS};\n"
+                    f"        const PixelCtx16 p16_{k} = {{x0 + {k * VECTOR_PIXELS}, y, width, height, {i}}};\n")
+            if src_layout == INTERLEAVED:
+                v = f"v{k}_"
+                return head + (f"        const float16 {v}0 = vload16(0, src + 3 * {i}), {v}1 = vload16(1, src + 3 * {i}), "
+                               f"{v}2 = vload16(2, src + 3 * {i});\n"
+                               f"        float16 r{k} = {_lanes(v, 0)};\n        float16 g{k} = {_lanes(v, 1)};\n"
+                               f"        float16 b{k} = {_lanes(v, 2)};")
+            return head + (f"        float16 r{k} = vload16(0, src + {i}), g{k} = vload16(0, src + n + {i}), "
+                           f"b{k} = vload16(0, src + 2 * n + {i});")
+
+        def store16(k: int) -> str:
+            i = f"iv{k}"
+            if dst_layout == INTERLEAVED:
+                return "\n".join(f"        vstore16({_interleave(j, str(k))}, {j}, dst + 3 * {i});" for j in range(3))
+            return (f"        vstore16(r{k}, 0, dst + {i});\n        vstore16(g{k}, 0, dst + n + {i});\n"
+                    f"        vstore16(b{k}, 0, dst + 2 * n + {i});")
+
+        vectors = range(ITEM_VECTORS)
+        body = "\n".join([load16(k) for k in vectors]
+                         + [call(s, VECTOR_PIXELS, f"p16_{k}", "        ", k, str(k)) for s in stages for k in vectors]
+                         + [store16(k) for k in vectors])
         first = "((PixelCtx16){x0, y, width, height, i0})"
         parts.append(f"""
 __kernel void {name}({", ".join(params)})
@@ -235,7 +244,7 @@ __kernel void {name}({", ".join(params)})
     const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
     (void)n;
     if (x0 + {pixels} <= width) {{
-{states(VECTOR_PIXELS, first, pixels // VECTOR_PIXELS, "        ")}{nl.join(halves)}
+{states(VECTOR_PIXELS, first, ITEM_VECTORS, "        ")}{body}
     }} else {{  /* the row's last 1–{pixels - 1} pixels, one by one */
         for (int x = x0; x < width; ++x) {{
             const size_t i = i0 + (size_t)(x - x0);

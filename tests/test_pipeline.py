@@ -248,16 +248,16 @@ def test_vector_groups_cover_every_pointwise_stage():
 _LAYOUTS = [("interleaved", "interleaved"), ("planar", "planar"), ("planar", "interleaved"), ("interleaved", "planar")]
 
 
-# every width and layout pair for the first group; the other groups at one width with whole
-# vectors and a tail (37 = 2 × 16 + 5), in two layout pairs
+# every width and layout pair for the first group (a row of tail only, one work-item, one and a
+# tail, two and a tail); the other groups at one width with a work-item of two 16-lane vectors and
+# a tail (37 = 32 + 5), in two layout pairs
 @pytest.mark.parametrize("group, w, layouts",
-                         [("vignetting+exposure", w, lay) for w in (16, 37, 53) for lay in _LAYOUTS]
+                         [("vignetting+exposure", w, lay) for w in (16, 32, 37, 69) for lay in _LAYOUTS]
                          + [(g, 37, lay) for g in list(VECTOR_GROUPS)[1:] for lay in _LAYOUTS[::3]])
 def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts, group):
-    """Every pointwise stage runs 16 pixels per work-item (rows' last 1–15 pixels one by one) from
-    its one width-generic source; the result is bit for bit the one-pixel kernel's, for every
-    layout pair. (A group with a stage that keeps per-work-item state runs 32 pixels per work-item,
-    two 16-lane calls: white grain.)"""
+    """Every pointwise stage runs as two 16-lane vectors per work-item (rows' last 1–31 pixels one
+    by one) from its one width-generic source; the result is bit for bit the one-pixel kernel's,
+    for every layout pair (white grain's state shared by the two vectors included)."""
     import pyopencl as cl
 
     from clpost.codegen import global_size, item_pixels, vector_path
@@ -274,7 +274,7 @@ def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts, gr
     plan = pipe.plan_for(frame, cam)
     stages = plan.stages
     assert [s.name for s in stages] == names
-    k = 32 if any(s.state for s in stages) else 16
+    k = 32  # two 16-lane vectors per work-item (codegen.ITEM_VECTORS)
     assert vector_path(stages) and item_pixels(stages) == k and global_size(stages, *layouts, w, h) == ((w + k - 1) // k, h)
     rt, bufs = pipe.runtime, plan.buffers
     cl.enqueue_copy(rt.queue, bufs.color_in, np.ascontiguousarray(frame.color))

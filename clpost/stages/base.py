@@ -20,7 +20,7 @@ A stage is one physical effect. Its module (``clpost/stages/<name>.py``) holds o
 - its OpenCL implementation: a :class:`PointwiseStage` supplies a width-generic per-pixel function
   ``void <name>_apply(CLP_F *r, CLP_F *g, CLP_F *b, const CLP_CTX p, <args>)`` in
   ``kernels/<name>.cl`` that the planner fuses with its pointwise neighbours into one kernel, run
-  16 pixels per work-item (:mod:`clpost.codegen`, "Width-generic code"); a :class:`GatherStage`
+  as two 16-lane vectors per work-item (:mod:`clpost.codegen`, "Width-generic code"); a :class:`GatherStage`
   enqueues its own kernels on planar buffers through the runtime's toolkit
   (:meth:`~clpost.runtime.Runtime.kernel`, ``constant``, ``scratch``, ``cached``, ``launch``).
 
@@ -176,9 +176,9 @@ class PointwiseStage(Stage):
     state: ClassVar[bool] = False
     """Whether the stage shares work between the pixels of a work-item: its source then defines,
     per width, a type ``CLP_FN(<name>_state)`` and ``void CLP_FN(<name>_prepare)(const CLP_CTX p,
-    CLP_FN(<name>_state) *st, <args>)``; the generated kernel runs 32 pixels per work-item as two
-    16-pixel calls (x0, a multiple of 32, then x0 + 16; :func:`clpost.codegen.item_pixels`), calls
-    ``prepare`` once with the first call's ``p`` to fill ``st[0]`` and ``st[1]``, and passes
+    CLP_FN(<name>_state) *st, <args>)``; the generated kernel, which runs 32 pixels per work-item
+    as two 16-lane calls (x0, a multiple of 32, then x0 + 16; :data:`clpost.codegen.ITEM_VECTORS`),
+    calls ``prepare`` once with the first call's ``p`` to fill ``st[0]`` and ``st[1]``, and passes
     ``&st[k]`` to call k of ``<name>_apply`` right after ``p`` (white grain: one float16 of
     Box–Muller draws is the normals of all 32 pixels). The one-pixel form prepares ``st[0]`` per
     pixel."""
