@@ -129,11 +129,13 @@ def vector_path(stages: "list[PointwiseStage]", wide: bool = True) -> bool:
 
 
 ITEM_VECTORS = 2
-"""16-lane vectors per work-item of a fused kernel's vector path (32 pixels of a row): each stage
-is applied to both before the next, which gives PoCL's scheduler two independent dependency chains
-per stage (the film+print group ×0.89 against one vector per work-item, docs/benchmarks.md), and a
-stage with state (:attr:`~clpost.stages.base.PointwiseStage.state`) shares its work between them
-(white grain: one float16 of Box–Muller draws is the normals of all 32 pixels)."""
+"""16-lane vectors per work-item of a fused kernel's vector path (32 pixels of a row; even: a
+stateful stage's state covers a pair): each stage is applied to every vector before the next, which
+gives PoCL's scheduler independent dependency chains per stage (film+print: one vector 1.55 ms,
+two 1.37, four 1.26; the film chain with white grain: two 2.26, four 2.32, six 2.40, eight 2.49 —
+640×360, one thread, min of 151, docs/benchmarks.md), and white grain's state (one float16 of
+Box–Muller draws is the normals of a pair's 32 pixels) is shared by the pair. A row's last pixels
+run as single vectors, then one by one."""
 
 
 def item_pixels(stages: "list[PointwiseStage]", wide: bool = True) -> int:
@@ -176,14 +178,14 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     if not stages and src_layout != dst_layout:
         return name, kernel_source("common") + _convert_source(name, src_layout)
 
-    def call(s, width: int, ctx: str, indent: str, slot: int = 0, sfx: str = "") -> str:
-        extra = f", &{s.name}_st{width}[{slot}]" if s.state else ""
+    def call(s, width: int, ctx: str, indent: str, slot: str = "0", sfx: str = "") -> str:
+        extra = f", &{s.name}_st{width}{slot}" if s.state else ""
         extra += "".join(f", {b}" for b in AUX_BUFFERS if b in s.reads)
         extra += "".join(f", {s.name}_{arg}" for _, arg in s.args)
         return f"{indent}{s.name}_apply_w{width}(&r{sfx}, &g{sfx}, &b{sfx}, {ctx}{extra});"
 
     def calls(width: int, ctx: str, indent: str) -> list[str]:
-        return [call(s, width, ctx, indent) for s in stages]
+        return [call(s, width, ctx, indent, "[0]") for s in stages]
 
     for s in stages:
         for cl_type, arg in s.args:
@@ -195,45 +197,55 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     parts = [kernel_source("common"), _instantiate(stages, 1)]
     nl = "\n"
 
-    def states(width: int, ctx: str, slots: int, indent: str) -> str:
-        """The state of the stages that keep one: a slot per call (16-lane half or pixel), filled
-        by ``<name>_prepare`` before the first."""
+    def states(width: int, ctx: str, slots: int, indent: str, sfx: str = "") -> str:
+        """The state of the stages that keep one: ``slots`` slots, filled by ``<name>_prepare``."""
         out = ""
         for s in stages:
             if s.state:
                 extra = "".join(f", {s.name}_{arg}" for _, arg in s.args)
-                out += (f"{indent}{s.name}_state_w{width} {s.name}_st{width}[{slots}];\n"
-                        f"{indent}{s.name}_prepare_w{width}({ctx}, {s.name}_st{width}{extra});\n")
+                out += (f"{indent}{s.name}_state_w{width} {s.name}_st{width}{sfx}[{slots}];\n"
+                        f"{indent}{s.name}_prepare_w{width}({ctx}, {s.name}_st{width}{sfx}{extra});\n")
         return out
 
     if vec:
         pixels = item_pixels(stages)
         parts.append(_instantiate(stages, VECTOR_PIXELS))
-        def load16(k: int) -> str:  # vector k of the work-item: pixels x0 + 16 k … + 15
+
+        def load16(k, x: str, indent: str) -> str:  # vector k: pixels x … x + 15
             i = f"iv{k}"
-            head = (f"        const size_t {i} = i0 + {k * VECTOR_PIXELS};\n"
-                    f"        const PixelCtx16 p16_{k} = {{x0 + {k * VECTOR_PIXELS}, y, width, height, {i}}};\n")
+            head = (f"{indent}const size_t {i} = i0 + (size_t)({x} - x0);\n"
+                    f"{indent}const PixelCtx16 p16_{k} = {{{x}, y, width, height, {i}}};\n")
             if src_layout == INTERLEAVED:
                 v = f"v{k}_"
-                return head + (f"        const float16 {v}0 = vload16(0, src + 3 * {i}), {v}1 = vload16(1, src + 3 * {i}), "
+                return head + (f"{indent}const float16 {v}0 = vload16(0, src + 3 * {i}), {v}1 = vload16(1, src + 3 * {i}), "
                                f"{v}2 = vload16(2, src + 3 * {i});\n"
-                               f"        float16 r{k} = {_lanes(v, 0)};\n        float16 g{k} = {_lanes(v, 1)};\n"
-                               f"        float16 b{k} = {_lanes(v, 2)};")
-            return head + (f"        float16 r{k} = vload16(0, src + {i}), g{k} = vload16(0, src + n + {i}), "
+                               f"{indent}float16 r{k} = {_lanes(v, 0)};\n{indent}float16 g{k} = {_lanes(v, 1)};\n"
+                               f"{indent}float16 b{k} = {_lanes(v, 2)};")
+            return head + (f"{indent}float16 r{k} = vload16(0, src + {i}), g{k} = vload16(0, src + n + {i}), "
                            f"b{k} = vload16(0, src + 2 * n + {i});")
 
-        def store16(k: int) -> str:
+        def store16(k, indent: str) -> str:
             i = f"iv{k}"
             if dst_layout == INTERLEAVED:
-                return "\n".join(f"        vstore16({_interleave(j, str(k))}, {j}, dst + 3 * {i});" for j in range(3))
-            return (f"        vstore16(r{k}, 0, dst + {i});\n        vstore16(g{k}, 0, dst + n + {i});\n"
-                    f"        vstore16(b{k}, 0, dst + 2 * n + {i});")
+                return "\n".join(f"{indent}vstore16({_interleave(j, str(k))}, {j}, dst + 3 * {i});" for j in range(3))
+            return (f"{indent}vstore16(r{k}, 0, dst + {i});\n{indent}vstore16(g{k}, 0, dst + n + {i});\n"
+                    f"{indent}vstore16(b{k}, 0, dst + 2 * n + {i});")
 
+        ind = "        "
         vectors = range(ITEM_VECTORS)
-        body = "\n".join([load16(k) for k in vectors]
-                         + [call(s, VECTOR_PIXELS, f"p16_{k}", "        ", k, str(k)) for s in stages for k in vectors]
-                         + [store16(k) for k in vectors])
-        first = "((PixelCtx16){x0, y, width, height, i0})"
+        body = "\n".join(
+            [states(VECTOR_PIXELS, f"((PixelCtx16){{x0 + {32 * j}, y, width, height, i0 + {32 * j}}})", 2, ind, f"_{j}")
+             for j in range(ITEM_VECTORS // 2) if any(s.state for s in stages)]
+            + [load16(k, f"x0 + {k * VECTOR_PIXELS}", ind) for k in vectors]
+            + [call(s, VECTOR_PIXELS, f"p16_{k}", ind, f"_{k // 2}[{k % 2}]", str(k)) for s in stages for k in vectors]
+            + [store16(k, ind) for k in vectors])
+        ind2 = "            "
+        tail = "\n".join(
+            [states(VECTOR_PIXELS, "((PixelCtx16){xv & ~31, y, width, height, i0 + (size_t)((xv & ~31) - x0)})",
+                    2, ind2, "_0") if any(s.state for s in stages) else ""]
+            + [load16(0, "xv", ind2)]
+            + [call(s, VECTOR_PIXELS, "p16_0", ind2, "_0[(xv >> 4) & 1]", "0") for s in stages]
+            + [store16(0, ind2)])
         parts.append(f"""
 __kernel void {name}({", ".join(params)})
 {{
@@ -244,9 +256,13 @@ __kernel void {name}({", ".join(params)})
     const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
     (void)n;
     if (x0 + {pixels} <= width) {{
-{states(VECTOR_PIXELS, first, ITEM_VECTORS, "        ")}{body}
-    }} else {{  /* the row's last 1–{pixels - 1} pixels, one by one */
-        for (int x = x0; x < width; ++x) {{
+{body}
+    }} else {{  /* the row's last 1–{pixels - 1} pixels: whole 16-lane vectors, then one by one */
+        int xv = x0;
+        for (; xv + {VECTOR_PIXELS} <= width; xv += {VECTOR_PIXELS}) {{
+{tail}
+        }}
+        for (int x = xv; x < width; ++x) {{
             const size_t i = i0 + (size_t)(x - x0);
             const PixelCtx p = {{x, y, width, height, i}};
 {states(1, "p", 1, "            ")}            const float3 c = {load};

@@ -248,19 +248,21 @@ def test_vector_groups_cover_every_pointwise_stage():
 _LAYOUTS = [("interleaved", "interleaved"), ("planar", "planar"), ("planar", "interleaved"), ("interleaved", "planar")]
 
 
-# every width and layout pair for the first group (a row of tail only, one work-item, one and a
-# tail, two and a tail); the other groups at one width with a work-item of two 16-lane vectors and
-# a tail (37 = 32 + 5), in two layout pairs
+# every width and layout pair for the first group (a row of one single 16-lane vector, a work-item
+# and pixels one by one, two work-items, three and a tail); the other groups at one width with a
+# work-item and a tail (37 = 32 + 5), white grain's also at 100 = 3·32 + 4, in two layout pairs
 @pytest.mark.parametrize("group, w, layouts",
-                         [("vignetting+exposure", w, lay) for w in (16, 32, 37, 69) for lay in _LAYOUTS]
-                         + [(g, 37, lay) for g in list(VECTOR_GROUPS)[1:] for lay in _LAYOUTS[::3]])
+                         [("vignetting+exposure", w, lay) for w in (16, 37, 64, 100) for lay in _LAYOUTS]
+                         + [(g, 37, lay) for g in list(VECTOR_GROUPS)[1:] for lay in _LAYOUTS[::3]]
+                         + [("film+white grain+print", 100, lay) for lay in _LAYOUTS[::3]])
 def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts, group):
-    """Every pointwise stage runs as two 16-lane vectors per work-item (rows' last 1–31 pixels one
-    by one) from its one width-generic source; the result is bit for bit the one-pixel kernel's,
-    for every layout pair (white grain's state shared by the two vectors included)."""
+    """Every pointwise stage runs as 16-lane vectors, several per work-item (a row's last pixels as
+    single vectors, then one by one), from its one width-generic source; the result is bit for bit
+    the one-pixel kernel's, for every layout pair (white grain's state shared by a pair of vectors
+    included)."""
     import pyopencl as cl
 
-    from clpost.codegen import global_size, item_pixels, vector_path
+    from clpost.codegen import ITEM_VECTORS, VECTOR_PIXELS, global_size, item_pixels, vector_path
 
     h = 5
     kw, names = VECTOR_GROUPS[group]
@@ -274,7 +276,7 @@ def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts, gr
     plan = pipe.plan_for(frame, cam)
     stages = plan.stages
     assert [s.name for s in stages] == names
-    k = 32  # two 16-lane vectors per work-item (codegen.ITEM_VECTORS)
+    k = ITEM_VECTORS * VECTOR_PIXELS  # 16-lane vectors per work-item
     assert vector_path(stages) and item_pixels(stages) == k and global_size(stages, *layouts, w, h) == ((w + k - 1) // k, h)
     rt, bufs = pipe.runtime, plan.buffers
     cl.enqueue_copy(rt.queue, bufs.color_in, np.ascontiguousarray(frame.color))

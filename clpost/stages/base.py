@@ -176,11 +176,11 @@ class PointwiseStage(Stage):
     state: ClassVar[bool] = False
     """Whether the stage shares work between the pixels of a work-item: its source then defines,
     per width, a type ``CLP_FN(<name>_state)`` and ``void CLP_FN(<name>_prepare)(const CLP_CTX p,
-    CLP_FN(<name>_state) *st, <args>)``; the generated kernel, which runs 32 pixels per work-item
-    as two 16-lane calls (x0, a multiple of 32, then x0 + 16; :data:`clpost.codegen.ITEM_VECTORS`),
-    calls ``prepare`` once with the first call's ``p`` to fill ``st[0]`` and ``st[1]``, and passes
-    ``&st[k]`` to call k of ``<name>_apply`` right after ``p`` (white grain: one float16 of
-    Box–Muller draws is the normals of all 32 pixels). The one-pixel form prepares ``st[0]`` per
+    CLP_FN(<name>_state) *st, <args>)``: the generated kernel calls ``prepare`` once per 32-pixel
+    block of a row (x0 a multiple of 32, ``p`` its first 16-lane vector) to fill ``st[0]`` and
+    ``st[1]`` for the vectors at x0 and x0 + 16, and passes each vector's slot to ``<name>_apply``
+    right after ``p`` (:data:`clpost.codegen.ITEM_VECTORS`; white grain: one float16 of Box–Muller
+    draws is the normals of the block's 32 pixels). The one-pixel form prepares ``st[0]`` per
     pixel."""
 
     def source(self) -> str:
