@@ -434,9 +434,9 @@ def format_table(doc: dict) -> str:
                    f"{' → '.join(r['plan']) or '(identity)'}; copy kernel {r['copy_kernel_gbps']:.1f} GB/s")
         if r["not_available"]:
             out.append("  not available: " + "; ".join(f"{k} ({v})" for k, v in r["not_available"].items()))
-        out.append(f"  {'kernel':<34} {'ms':>8} {'×copy':>6} {'MB':>7} {'GB/s':>6} {'%copy':>6} {'Gtaps/s':>8}")
+        out.append(f"  {'kernel':<40} {'ms':>8} {'×copy':>6} {'MB':>7} {'GB/s':>6} {'%copy':>6} {'Gtaps/s':>8}")
         for k in r["kernels"]:
-            out.append(f"  {k['kernel'][:34]:<34} {k['ms']:8.2f} {_f(passes(k['ms'], unit), '6.1f'):>6} "
+            out.append(f"  {k['kernel'][:40]:<40} {k['ms']:8.2f} {_f(passes(k['ms'], unit), '6.1f'):>6} "
                        f"{k['bytes'] / 1e6:7.1f} {k['gbps']:6.1f} "
                        f"{k['percent_of_copy']:5.0f}% {_f(k['gtaps_per_s'], '8.2f'):>8}")
         line = (f"  device {r['device_ms']:.2f} ms ({_f(r['device_fps'], '.1f')} fps, "

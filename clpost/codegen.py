@@ -40,10 +40,10 @@ found the same)."""
 #     inline void <name>_apply(CLP_F *r, CLP_F *g, CLP_F *b, const CLP_CTX p, <args>)
 #
 # on the three channels of CLP_W pixels of a row (helpers named CLP_FN(helper)), and the generator
-# instantiates it at one pixel (float, PixelCtx: a row's last 1-15 pixels) and at VECTOR_PIXELS
-# (float16 lanes, PixelCtx16) — so every fused group runs 16 pixels per work-item and a new stage
-# is fast without a hand-written twin; both instantiations do the same float operations, so they
-# agree bit for bit (tests/test_pipeline.py). kernels/fastmath.cl and kernels/random.cl are written
+# instantiates it at one pixel (float, PixelCtx: a row's last 1-31 pixels) and at VECTOR_PIXELS
+# (float16 lanes, PixelCtx16) — so every fused group runs two 16-lane vectors per work-item
+# (ITEM_VECTORS) and a new stage is fast without a hand-written twin; both instantiations do the
+# same float operations, so they agree bit for bit (tests/test_pipeline.py). kernels/fastmath.cl and kernels/random.cl are written
 # the same way. The macros (the style of dof's DOF_F / DOF_LOAD in kernels/dof.cl):
 
 WIDTH_MACROS: dict[int, dict[str, str]] = {
@@ -128,6 +128,22 @@ def vector_path(stages: "list[PointwiseStage]", wide: bool = True) -> bool:
     return bool(stages) and wide
 
 
+ITEM_VECTORS = 2
+"""16-lane vectors per work-item of a fused kernel's vector path (32 pixels of a row; even: a
+stateful stage's state covers a pair): each stage is applied to every vector before the next, which
+gives PoCL's scheduler independent dependency chains per stage (film+print: one vector 1.55 ms,
+two 1.37, four 1.26; the film chain with white grain: two 2.26, four 2.32, six 2.40, eight 2.49 —
+640×360, one thread, min of 151, docs/benchmarks.md), and white grain's state (one float16 of
+Box–Muller draws is the normals of a pair's 32 pixels) is shared by the pair. A row's last pixels
+run as single vectors, then one by one."""
+
+
+def item_pixels(stages: "list[PointwiseStage]", wide: bool = True) -> int:
+    """Pixels per work-item of the fused kernel: :data:`ITEM_VECTORS` × :data:`VECTOR_PIXELS` on the
+    vector path, 1 otherwise."""
+    return ITEM_VECTORS * VECTOR_PIXELS if vector_path(stages, wide) else 1
+
+
 def _lanes(vec: str, first: int) -> str:
     """``(float16)(vec[first], vec[first + 3], …)`` from three float16 ``vec0..vec2`` holding 48
     consecutive interleaved floats: channel ``first`` of 16 pixels."""
@@ -135,9 +151,10 @@ def _lanes(vec: str, first: int) -> str:
     return f"(float16)({', '.join(comps)})"
 
 
-def _interleave(part: int) -> str:
-    """The float16 holding interleaved floats 16·part … 16·part + 15 of channels r, g, b."""
-    comps = [f"{'rgb'[f % 3]}.s{f // 3:x}" for f in range(16 * part, 16 * part + 16)]
+def _interleave(part: int, sfx: str = "") -> str:
+    """The float16 holding interleaved floats 16·part … 16·part + 15 of channels ``r<sfx>``,
+    ``g<sfx>``, ``b<sfx>``."""
+    comps = [f"{'rgb'[f % 3]}{sfx}.s{f // 3:x}" for f in range(16 * part, 16 * part + 16)]
     return f"(float16)({', '.join(comps)})"
 
 
@@ -149,8 +166,9 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     (a single stage's kernel is named like the stage); with no stages it only converts layouts.
     Parameters: ``src, dst, width, height``, then ``depth`` / ``velocity`` if any stage reads
     them, then each stage's ``args`` prefixed ``<stage>_``. A stage that reads depth or velocity
-    receives those pointers right after ``p``, in that order. ``vector`` (default
-    :func:`vector_path` with ``wide``): :data:`VECTOR_PIXELS` pixels per work-item, else one.
+    receives those pointers right after ``p``, in that order; a stage with ``state`` its state
+    slot right after ``p`` (:attr:`~clpost.stages.base.PointwiseStage.state`). ``vector`` (default
+    :func:`vector_path` with ``wide``): :func:`item_pixels` pixels per work-item, else one.
     """
     name = "__".join(s.name for s in stages) or f"convert_{src_layout}_to_{dst_layout}"
     params = ["__global const float *restrict src", "__global float *restrict dst",
@@ -160,13 +178,14 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     if not stages and src_layout != dst_layout:
         return name, kernel_source("common") + _convert_source(name, src_layout)
 
+    def call(s, width: int, ctx: str, indent: str, slot: str = "0", sfx: str = "") -> str:
+        extra = f", &{s.name}_st{width}{slot}" if s.state else ""
+        extra += "".join(f", {b}" for b in AUX_BUFFERS if b in s.reads)
+        extra += "".join(f", {s.name}_{arg}" for _, arg in s.args)
+        return f"{indent}{s.name}_apply_w{width}(&r{sfx}, &g{sfx}, &b{sfx}, {ctx}{extra});"
+
     def calls(width: int, ctx: str, indent: str) -> list[str]:
-        out = []
-        for s in stages:
-            extra = "".join(f", {b}" for b in AUX_BUFFERS if b in s.reads)
-            extra += "".join(f", {s.name}_{arg}" for _, arg in s.args)
-            out.append(f"{indent}{s.name}_apply_w{width}(&r, &g, &b, {ctx}{extra});")
-        return out
+        return [call(s, width, ctx, indent, "[0]") for s in stages]
 
     for s in stages:
         for cl_type, arg in s.args:
@@ -177,40 +196,76 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
     vec = vector_path(stages, wide) if vector is None else vector
     parts = [kernel_source("common"), _instantiate(stages, 1)]
     nl = "\n"
+
+    def states(width: int, ctx: str, slots: int, indent: str, sfx: str = "") -> str:
+        """The state of the stages that keep one: ``slots`` slots, filled by ``<name>_prepare``."""
+        out = ""
+        for s in stages:
+            if s.state:
+                extra = "".join(f", {s.name}_{arg}" for _, arg in s.args)
+                out += (f"{indent}{s.name}_state_w{width} {s.name}_st{width}{sfx}[{slots}];\n"
+                        f"{indent}{s.name}_prepare_w{width}({ctx}, {s.name}_st{width}{sfx}{extra});\n")
+        return out
+
     if vec:
+        pixels = item_pixels(stages)
         parts.append(_instantiate(stages, VECTOR_PIXELS))
-        if src_layout == INTERLEAVED:
-            load16 = ("const float16 v0 = vload16(0, src + 3 * i), v1 = vload16(1, src + 3 * i), "
-                      "v2 = vload16(2, src + 3 * i);\n"
-                      f"        float16 r = {_lanes('v', 0)};\n        float16 g = {_lanes('v', 1)};\n"
-                      f"        float16 b = {_lanes('v', 2)};")
-        else:
-            load16 = "float16 r = vload16(0, src + i), g = vload16(0, src + n + i), b = vload16(0, src + 2 * n + i);"
-        if dst_layout == INTERLEAVED:
-            store16 = "\n".join(f"        vstore16({_interleave(k)}, {k}, dst + 3 * i);" for k in range(3))
-        else:
-            store16 = ("        vstore16(r, 0, dst + i);\n        vstore16(g, 0, dst + n + i);\n"
-                       "        vstore16(b, 0, dst + 2 * n + i);")
+
+        def load16(k, x: str, indent: str) -> str:  # vector k: pixels x … x + 15
+            i = f"iv{k}"
+            head = (f"{indent}const size_t {i} = i0 + (size_t)({x} - x0);\n"
+                    f"{indent}const PixelCtx16 p16_{k} = {{{x}, y, width, height, {i}}};\n")
+            if src_layout == INTERLEAVED:
+                v = f"v{k}_"
+                return head + (f"{indent}const float16 {v}0 = vload16(0, src + 3 * {i}), {v}1 = vload16(1, src + 3 * {i}), "
+                               f"{v}2 = vload16(2, src + 3 * {i});\n"
+                               f"{indent}float16 r{k} = {_lanes(v, 0)};\n{indent}float16 g{k} = {_lanes(v, 1)};\n"
+                               f"{indent}float16 b{k} = {_lanes(v, 2)};")
+            return head + (f"{indent}float16 r{k} = vload16(0, src + {i}), g{k} = vload16(0, src + n + {i}), "
+                           f"b{k} = vload16(0, src + 2 * n + {i});")
+
+        def store16(k, indent: str) -> str:
+            i = f"iv{k}"
+            if dst_layout == INTERLEAVED:
+                return "\n".join(f"{indent}vstore16({_interleave(j, str(k))}, {j}, dst + 3 * {i});" for j in range(3))
+            return (f"{indent}vstore16(r{k}, 0, dst + {i});\n{indent}vstore16(g{k}, 0, dst + n + {i});\n"
+                    f"{indent}vstore16(b{k}, 0, dst + 2 * n + {i});")
+
+        ind = "        "
+        vectors = range(ITEM_VECTORS)
+        body = "\n".join(
+            [states(VECTOR_PIXELS, f"((PixelCtx16){{x0 + {32 * j}, y, width, height, i0 + {32 * j}}})", 2, ind, f"_{j}")
+             for j in range(ITEM_VECTORS // 2) if any(s.state for s in stages)]
+            + [load16(k, f"x0 + {k * VECTOR_PIXELS}", ind) for k in vectors]
+            + [call(s, VECTOR_PIXELS, f"p16_{k}", ind, f"_{k // 2}[{k % 2}]", str(k)) for s in stages for k in vectors]
+            + [store16(k, ind) for k in vectors])
+        ind2 = "            "
+        tail = "\n".join(
+            [states(VECTOR_PIXELS, "((PixelCtx16){xv & ~31, y, width, height, i0 + (size_t)((xv & ~31) - x0)})",
+                    2, ind2, "_0") if any(s.state for s in stages) else ""]
+            + [load16(0, "xv", ind2)]
+            + [call(s, VECTOR_PIXELS, "p16_0", ind2, "_0[(xv >> 4) & 1]", "0") for s in stages]
+            + [store16(0, ind2)])
         parts.append(f"""
 __kernel void {name}({", ".join(params)})
 {{
-    const int x0 = get_global_id(0) * {VECTOR_PIXELS};
+    const int x0 = get_global_id(0) * {pixels};
     const int y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     const size_t n = (size_t)width * (size_t)height;
     const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
     (void)n;
-    if (x0 + {VECTOR_PIXELS} <= width) {{
-        const size_t i = i0;
-        const PixelCtx16 p16 = {{x0, y, width, height, i0}};
-        {load16}
-{nl.join(calls(VECTOR_PIXELS, "p16", "        "))}
-{store16}
-    }} else {{  /* the row's last 1–15 pixels, one by one */
-        for (int x = x0; x < width; ++x) {{
+    if (x0 + {pixels} <= width) {{
+{body}
+    }} else {{  /* the row's last 1–{pixels - 1} pixels: whole 16-lane vectors, then one by one */
+        int xv = x0;
+        for (; xv + {VECTOR_PIXELS} <= width; xv += {VECTOR_PIXELS}) {{
+{tail}
+        }}
+        for (int x = xv; x < width; ++x) {{
             const size_t i = i0 + (size_t)(x - x0);
             const PixelCtx p = {{x, y, width, height, i}};
-            const float3 c = {load};
+{states(1, "p", 1, "            ")}            const float3 c = {load};
             float r = c.x, g = c.y, b = c.z;
 {nl.join(calls(1, "p", "            "))}
             {store}
@@ -229,7 +284,7 @@ __kernel void {name}({", ".join(params)})
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
     const PixelCtx p = {{x, y, width, height, i}};
     (void)n; (void)p;
-    const float3 c = {load};
+{states(1, "p", 1, "    ")}    const float3 c = {load};
     float r = c.x, g = c.y, b = c.z;
 {nl.join(calls(1, "p", "    "))}
     {store}
@@ -250,9 +305,8 @@ def global_size(stages: "list[PointwiseStage]", src_layout: str, dst_layout: str
     (``wide`` as given to :func:`vector_path`)."""
     if not stages and src_layout != dst_layout:
         return (w + CONVERT_PIXELS - 1) // CONVERT_PIXELS, h
-    if vector_path(stages, wide):
-        return (w + VECTOR_PIXELS - 1) // VECTOR_PIXELS, h
-    return w, h
+    k = item_pixels(stages, wide)
+    return (w + k - 1) // k, h
 
 
 def _convert_source(name: str, src_layout: str) -> str:

@@ -163,7 +163,7 @@ class Pipeline:
 
     def _planned(self, frame: Frame, cam: Camera) -> list[Stage]:
         names = {e.stage for e in self.explain(frame, cam, reasons=False) if e.planned}
-        return [s for s in self._stages if s.name in names]
+        return [s.planned_form(cam, frame) for s in self._stages if s.name in names]
 
     def plan_for(self, frame: Frame, camera: Camera | None = None) -> Plan:
         """The :class:`~clpost.plan.Plan` for this frame: built on first use, then reused for

@@ -12,55 +12,10 @@ inline float grain_to_density(const float t, const float dmin, const float dmax)
     return clamp(dmin - 0.30102999566f * clp_log2(fmax(t, 1e-30f)), dmin, dmax);  /* log10, vectorising */
 }
 
-/* draft/preview, and final with unresolved grains: Gaussian clear fraction T + amount sigma_T G
- * with the model's pixel standard deviation in closed form, sigma_T = T sqrt(t + 1) R(t), R the
- * GRAIN_POLY_DEG polynomial in t = min(d, span) inv_half_span - 1 (inv_half_span = 2/span) of
- * clpost/stages/grain.py gaussian_tables (poly[0..GRAIN_POLY_DEG], constant term first), and G
- * the unit normals of counters (x + i, y + j), i, j in {-1, 0, 1}, filtered by the separable
- * [a, b, a] (GRAIN_TAPS 1: white, G = the normal of counter (x, y)).
- *
- * Normals: counters come in blocks of 32 per row; in block X >> 5 of row Y, layer c, the 16
- * Box-Muller draws (rnd_normal_pair) of hashes (seed, frame, 16 (X >> 5) + k, Y << 2 | c),
- * k = 0..15, give counter 32 (X >> 5) + k its cosine and 32 (X >> 5) + 16 + k its sine branch —
- * so a float16 of draws is 32 consecutive normals with no shuffling. The same numbers in both
- * forms below, summed in the same order. */
-#define GRAIN_PIXEL(F, NAME, LOG2) \
-inline F NAME(const F d, const float dmin, const float dmax, const F g, \
-              __global const float *poly, const float inv_half_span, const float amount) { \
-    const F d_img = fmax(d - dmin, 0.0f); \
-    const F t1 = fmin(d_img * inv_half_span, 2.0f);   /* t + 1, exact near D = 0 */ \
-    const F t = t1 - 1.0f; \
-    /* R(t) as a polynomial in t^2 of the pairs poly[k] + poly[k + 1] t (half the dependent fma's \
-     * of Horner's on the pixel's one long chain), sqrt(t + 1) beside it, not after it */ \
-    const F t2 = t * t; \
-    F p = GRAIN_POLY_DEG % 2 ? fma((F)(poly[GRAIN_POLY_DEG]), t, (F)(poly[GRAIN_POLY_DEG - 1])) \
-                             : (F)(poly[GRAIN_POLY_DEG]); \
-    for (int k = GRAIN_POLY_DEG - 2 - GRAIN_POLY_DEG % 2; k >= 0; k -= 2) \
-        p = fma(p, t2, fma(poly[k + 1], t, poly[k])); \
-    const F s = sqrt(t1) * p;   /* sigma_T / T */ \
-    /* dmin - log10(T + amount sigma_T g) with T = 10^-d_img factored out: no exp2 (<= 0 -> D_max) */ \
-    return clamp(dmin + d_img - 0.30102999566f * LOG2(fmax(fma(amount * s, g, 1.0f), 1e-30f)), dmin, dmax); \
-}
-/* the one-pixel form and the lane form (float16: 16 pixels of a row) of the same operations */
-GRAIN_PIXEL(float, grain_pixel, clp_log2)
-GRAIN_PIXEL(float16, grain_pixel16, clp_log2_w16)
-
-/* The normal of counter (X, Y) of layer c (counters of the pixels left of and above the image
- * wrap around as uint: any fixed mapping keeps the noise a function of the counters). */
-inline float grain_normal(const uint seed, const uint frame, const int X, const int Y, const uint c) {
-    const uint ux = (uint)X, block = (uint)((X + 32) >> 5) - 1u;   /* floor(X / 32), X >= -1 */
-    const uint hh = rnd_hash4(seed, frame, (block << 4) | (ux & 15u), ((uint)Y << 2) | c);
-    float sine;
-    const float cosine = rnd_normal_pair(hh, rnd_mix(hh ^ 0x68e31da4u), &sine);
-    return (ux & 16u) ? sine : cosine;
-}
-
-/* The 32 normals of block B of row Y: counters 32 B .. 32 B + 15 (returned), + 16 .. + 31 (*hi). */
-inline float16 grain_block16(const uint seed, const uint frame, const uint B, const int Y, const uint c,
-                             float16 *hi) {
-    const uint16 hh = rnd_hash4_w16(seed, frame, (uint16)(B << 4) + CLP_ULANES16, (uint16)(((uint)Y << 2) | c));
-    return rnd_normal_pair_w16(hh, rnd_mix_w16(hh ^ 0x68e31da4u), hi);
-}
+/* draft/preview, and final with unresolved grains, correlated: the Gaussian path, grain_pixel of
+ * kernels/grain_pixel.cl on the normals of counters (x + i, y + j), i, j in {-1, 0, 1}, filtered by
+ * the separable [a, b, a]. (White noise, a = 0, is per pixel: the plan fuses it with film and print,
+ * kernels/grain_white.cl.) The same numbers in both forms below, summed in the same order. */
 
 /* One pixel (a GPU's form, GRAIN_LANES 1, and the last 1-31 pixels of a row in the lane form). */
 inline void grain_gaussian_px(__global const float *restrict src, __global float *restrict dst,
@@ -71,35 +26,29 @@ inline void grain_gaussian_px(__global const float *restrict src, __global float
     const size_t n = (size_t)width * (size_t)height;
     const size_t i = (size_t)y * (size_t)width + (size_t)x;
     for (uint c = 0; c < 3; ++c) {
-#if GRAIN_TAPS == 1
-        const float g = grain_normal(seed, frame, x, y, c);
-#else
         float hr[3];
         for (int j = 0; j < 3; ++j)
             hr[j] = a * grain_normal(seed, frame, x - 1, y + j - 1, c) + b * grain_normal(seed, frame, x, y + j - 1, c)
                   + a * grain_normal(seed, frame, x + 1, y + j - 1, c);
         const float g = a * hr[0] + b * hr[1] + a * hr[2];
-#endif
         dst[c * n + i] = grain_pixel(src[c * n + i], params[c], params[3 + c], g, poly, inv_half_span, amount);
     }
 }
 
-#if GRAIN_TAPS != 1
 /* Row Y's normals of pixels x0 .. x0 + 31 filtered [a, b, a] along the row: block x0/32 and the
  * normals left (counter x0 - 1) and right (x0 + 32) of it. */
 inline void grain_hrow32(const uint seed, const uint frame, const int x0, const int Y, const uint c,
                          const float a, const float b, const float left, const float right,
                          float16 *h0, float16 *h1) {
     float16 s;
-    const float16 k = grain_block16(seed, frame, (uint)x0 >> 5, Y, c, &s);
+    const float16 k = grain_block_w16(seed, frame, (uint)x0 >> 5, Y, c, &s);
     *h0 = a * (float16)(left, k.s0123, k.s456789ab, k.scde) + b * k + a * (float16)(k.s123, k.s456789ab, k.scdef, s.s0);
     *h1 = a * (float16)(k.sf, s.s0123, s.s456789ab, s.scde) + b * s + a * (float16)(s.s123, s.s456789ab, s.scdef, right);
 }
-#endif
 
 /* 32 pixels of GRAIN_ROWS rows per work-item (x0 = 32 gid0, y0 = GRAIN_ROWS gid1), in float16
- * lanes (kernels/random.cl at width 16): one float16 of draws is a row's 32 normals; white noise
- * costs 1/2 draw per pixel and layer; the [a, b, a] filter reuses each filtered row for three
+ * lanes (kernels/random.cl at width 16): one float16 of draws is a row's 32 normals; the [a, b, a]
+ * filter reuses each filtered row for three
  * output rows and takes the normals left and right of the block (counters x0 - 1, x0 + 32) of the
  * GRAIN_ROWS + 2 rows from two float16 of draws, (GRAIN_ROWS + 4) x 16 / (32 GRAIN_ROWS) draws
  * per pixel and layer (9/14 at 14 rows, clpost/stages/grain.py GAUSSIAN_ROWS). */
@@ -122,7 +71,6 @@ inline void grain_gaussian32(__global const float *restrict src, __global float 
     const size_t n = (size_t)width * (size_t)height;
     for (uint c = 0; c < 3; ++c) {
         const float dmin = params[c], dmax = params[3 + c];
-#if GRAIN_TAPS != 1
         /* lane r: row y0 - 1 + r; left: the sine of draw 15 of block x0/32 - 1, right: the
          * cosine of draw 0 of block x0/32 + 1 */
         float le[16], ri[16];
@@ -138,25 +86,19 @@ inline void grain_gaussian32(__global const float *restrict src, __global float 
         float16 a0, a1, b0, b1;   /* filtered rows y - 1 and y, each as two 16-pixel halves */
         grain_hrow32(seed, frame, x0, y0 - 1, c, a, b, le[0], ri[0], &a0, &a1);
         grain_hrow32(seed, frame, x0, y0, c, a, b, le[1], ri[1], &b0, &b1);
-#endif
         for (int r = 0; r < GRAIN_ROWS; ++r) {
             const int y = y0 + r;
-#if GRAIN_TAPS == 1
-            float16 g1;
-            const float16 g0 = grain_block16(seed, frame, (uint)x0 >> 5, y, c, &g1);
-#else
             float16 c0, c1;
             grain_hrow32(seed, frame, x0, y + 1, c, a, b, le[r + 2], ri[r + 2], &c0, &c1);
             const float16 g0 = a * a0 + b * b0 + a * c0;
             const float16 g1 = a * a1 + b * b1 + a * c1;
             a0 = b0; a1 = b1;
             b0 = c0; b1 = c1;
-#endif
             if (y >= height) break;
             const size_t i = (size_t)y * (size_t)width + (size_t)x0;
-            vstore16(grain_pixel16(vload16(0, src + c * n + i), dmin, dmax, g0, poly, inv_half_span, amount),
+            vstore16(grain_pixel_w16(vload16(0, src + c * n + i), dmin, dmax, g0, poly, inv_half_span, amount),
                      0, dst + c * n + i);
-            vstore16(grain_pixel16(vload16(0, src + c * n + i + 16), dmin, dmax, g1, poly, inv_half_span, amount),
+            vstore16(grain_pixel_w16(vload16(0, src + c * n + i + 16), dmin, dmax, g1, poly, inv_half_span, amount),
                      0, dst + c * n + i + 16);
         }
     }

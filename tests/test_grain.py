@@ -7,7 +7,7 @@ import pytest
 from clpost import Camera, Frame, Pipeline
 from clpost.film_stock import load_stock
 from clpost.grain_model import grain_radius_um, pixel_covariance, rms_granularity
-from clpost.stages.grain import grain_radius_px
+from clpost.stages.grain import GrainWhite, grain_radius_px
 
 from conftest import assert_planned
 
@@ -134,7 +134,11 @@ def test_grain_off_and_plan():
     f = Frame(np.ones((4, 4, 3), np.float32))
     assert "grain" not in Pipeline(Camera(film=STOCK, grain_amount=0)).plan(f)
     pipe = Pipeline(Camera(film=STOCK, luminance_scale=1.0))
-    assert pipe.kernels(f) == ["exposure__film", "grain", "print"]
+    # the default camera's grain is far under a pixel: white noise, a per-pixel stage fused with
+    # film and print (one pass over the frame); correlated grain (0.3 px) stays its own gather
+    assert pipe.kernels(f) == ["exposure__film__grain__print"]
+    correlated = cam_for_radius(0.3, 4, luminance_scale=1.0).with_(film_output="print")
+    assert Pipeline(correlated).kernels(f) == ["exposure__film", "grain", "print"]
 
 
 def test_stages_after_a_resampling_stage_run_at_its_size():
@@ -235,16 +239,31 @@ def test_box_muller_pairs_are_independent_unit_normals():
 @pytest.mark.parametrize("w, h", [(37, 23), (100, 13)])  # one block + tail; three blocks (left neighbours from the previous block) + tail
 def test_one_pixel_form_matches_the_32_pixel_lane_form(rng, monkeypatch, r_px, w, h):
     """The Gaussian path's one-pixel form (a GPU's, Runtime.wide False) draws the same normals and
-    sums them in the same order as the 16-lane form: the same image, and the reference."""
+    sums them in the same order as the 16-lane form: the same image, and the reference. White
+    noise runs as the fused pointwise form (GrainWhite), correlated noise as the gather."""
     from clpost.runtime import Runtime
-
-    from clpost.stages.grain import GAUSSIAN_ROWS
 
     d = load_stock(STOCK).d_min() + rng.uniform(-0.2, 2.5, (h, w, 3))
     frame = Frame(d.astype(np.float32), metadata={"frame_index": 3})
     cam = cam_for_radius(r_px, w)
     pipe, want = run_grain(cam, frame, "draft")
     stage = pipe.plan_for(frame, pipe.camera_for(frame)).stages[0]
+    if r_px < 0.1:  # white: the fused pointwise form, 16-lane vectors sharing draws in pairs, or one pixel
+        from clpost.codegen import global_size, item_pixels
+        k = item_pixels([stage])
+        assert isinstance(stage, GrainWhite) and k % 32 == 0
+        assert global_size([stage], "interleaved", "interleaved", w, h) == (-(-w // k), h)
+    else:
+        _check_gather_launches(stage, pipe.camera_for(frame), frame, w, h)
+    monkeypatch.setattr(Runtime, "wide", property(lambda self: False))
+    pipe, got = run_grain(cam, frame, "draft")
+    np.testing.assert_allclose(got, want, rtol=0, atol=2e-6)  # bit-identical on PoCL 5; the bound allows other compilers
+    err = np.abs(got - pipe.reference(frame))
+    assert np.median(err) < 1e-5 and (err > 1e-3).mean() < 2e-3
+
+
+def _check_gather_launches(stage, cam, frame, w, h):
+    from clpost.stages.grain import GAUSSIAN_ROWS
 
     class Launches:  # what the stage asks a runtime for: 32 pixels x GAUSSIAN_ROWS rows per work-item, or one
         def __init__(self, wide):
@@ -259,13 +278,29 @@ def test_one_pixel_form_matches_the_32_pixel_lane_form(rng, monkeypatch, r_px, w
         def launch(self, lanes, size, local, *args):
             self.sizes.append((lanes, tuple(size)))
 
-    rows = GAUSSIAN_ROWS[1 if stage.taps_per_pixel(pipe.camera_for(frame), frame) == 3 else 3]  # white, correlated
+    rows = GAUSSIAN_ROWS
     for wide, want_size in ((True, (32, (-(-w // 32), -(-h // rows)))), (False, (1, (w, h)))):
         rt = Launches(wide)
-        stage.enqueue(rt, pipe.camera_for(frame), frame, None, None, {})
+        stage.enqueue(rt, cam, frame, None, None, {})
         assert rt.sizes == [want_size]
-    monkeypatch.setattr(Runtime, "wide", property(lambda self: False))
-    pipe, got = run_grain(cam, frame, "draft")
-    np.testing.assert_allclose(got, want, rtol=0, atol=2e-6)  # bit-identical on PoCL 5; the bound allows other compilers
-    err = np.abs(got - pipe.reference(frame))
-    assert np.median(err) < 1e-5 and (err > 1e-3).mean() < 2e-3
+
+
+def test_white_grain_fused_replays_per_frame_and_per_amount():
+    """White grain runs as a fused pointwise kernel whose arguments are set again only when they
+    change: one pipeline's frames 1, 2, 1 give noise that changes with the frame index and repeats
+    for the same one, and a per-frame grain_amount (a scalar: no new plan) gives a fresh pipeline's
+    image."""
+    cam = cam_for_radius(0.02, 64)
+    pipe = Pipeline(cam, quality="draft", stages=["grain"], already_applied=("film",))
+    f1, f2 = density_frame(1.0, 8, 64, 1), density_frame(1.0, 8, 64, 2)
+    assert isinstance(pipe.plan_for(f1, pipe.camera_for(f1)).stages[0], GrainWhite)
+    a, c, a2 = (pipe.run(f).color for f in (f1, f2, f1))
+    np.testing.assert_array_equal(a, a2)
+    for k in range(3):
+        assert abs(np.corrcoef(a[..., k].ravel(), c[..., k].ravel())[0, 1]) < 0.2
+    plans = len(pipe._plans)
+    strong = pipe.run(f1, cam.with_(grain_amount=3.0)).color
+    assert len(pipe._plans) == plans
+    fresh = Pipeline(cam.with_(grain_amount=3.0), quality="draft", stages=["grain"], already_applied=("film",)).run(f1).color
+    np.testing.assert_array_equal(strong, fresh)
+    assert np.all(strong.std(axis=(0, 1)) > 2 * a.std(axis=(0, 1)))  # per layer

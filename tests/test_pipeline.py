@@ -228,6 +228,9 @@ VECTOR_GROUPS = {
                             ["exposure", "film", "print"]),
     "film+linear print": (dict(film="kodak-ektar-100", film_output="linear", grain_amount=0.0), ["film", "print"]),
     "exposure+sensor": (dict(f_number=2.0, sensor_preset="smartphone", iso=800), ["exposure", "sensor"]),
+    # white grain (the default camera's grain is far under a pixel): GrainWhite, a stage with
+    # per-work-item state, 32 pixels per work-item as two 16-lane calls
+    "film+white grain+print": (dict(film="kodak-ektar-100"), ["film", "grain", "print"]),
 }
 # every other pointwise stage of the registry, alone, with the camera its class declares as an
 # example (Stage.example): a new stage is covered without editing this file
@@ -245,18 +248,21 @@ def test_vector_groups_cover_every_pointwise_stage():
 _LAYOUTS = [("interleaved", "interleaved"), ("planar", "planar"), ("planar", "interleaved"), ("interleaved", "planar")]
 
 
-# every width and layout pair for the first group; the other groups at one width with whole
-# vectors and a tail (37 = 2 × 16 + 5), in two layout pairs
+# every width and layout pair for the first group (a row of one single 16-lane vector, a work-item
+# and pixels one by one, two work-items, three and a tail); the other groups at one width with a
+# work-item and a tail (37 = 32 + 5), white grain's also at 100 = 3·32 + 4, in two layout pairs
 @pytest.mark.parametrize("group, w, layouts",
-                         [("vignetting+exposure", w, lay) for w in (16, 37, 53) for lay in _LAYOUTS]
-                         + [(g, 37, lay) for g in list(VECTOR_GROUPS)[1:] for lay in _LAYOUTS[::3]])
+                         [("vignetting+exposure", w, lay) for w in (16, 37, 64, 100) for lay in _LAYOUTS]
+                         + [(g, 37, lay) for g in list(VECTOR_GROUPS)[1:] for lay in _LAYOUTS[::3]]
+                         + [("film+white grain+print", 100, lay) for lay in _LAYOUTS[::3]])
 def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts, group):
-    """Every pointwise stage runs 16 pixels per work-item (rows' last 1–15 pixels one by one) from
-    its one width-generic source; the result is bit for bit the one-pixel kernel's, for every
-    layout pair."""
+    """Every pointwise stage runs as 16-lane vectors, several per work-item (a row's last pixels as
+    single vectors, then one by one), from its one width-generic source; the result is bit for bit
+    the one-pixel kernel's, for every layout pair (white grain's state shared by a pair of vectors
+    included)."""
     import pyopencl as cl
 
-    from clpost.codegen import global_size, vector_path
+    from clpost.codegen import ITEM_VECTORS, VECTOR_PIXELS, global_size, item_pixels, vector_path
 
     h = 5
     kw, names = VECTOR_GROUPS[group]
@@ -270,13 +276,14 @@ def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts, gr
     plan = pipe.plan_for(frame, cam)
     stages = plan.stages
     assert [s.name for s in stages] == names
-    assert vector_path(stages) and global_size(stages, *layouts, w, h) == ((w + 15) // 16, h)
+    k = ITEM_VECTORS * VECTOR_PIXELS  # 16-lane vectors per work-item
+    assert vector_path(stages) and item_pixels(stages) == k and global_size(stages, *layouts, w, h) == ((w + k - 1) // k, h)
     rt, bufs = pipe.runtime, plan.buffers
     cl.enqueue_copy(rt.queue, bufs.color_in, np.ascontiguousarray(frame.color))
     defines = {k: v for s in stages for k, v in s.defines(cam).items()}
     args = [np.int32(w), np.int32(h)] + [a for s in stages for a in plan.arg_values(s, cam, frame)]
     outs = []
-    for vec, gsize in ((False, (w, h)), (True, ((w + 15) // 16, h))):
+    for vec, gsize in ((False, (w, h)), (True, ((w + k - 1) // k, h))):
         name, src = fused_source(stages, *layouts, vector=vec)
         kern = cl.Kernel(rt.program(src, name, defines), name)
         dst = rt.empty((h, w, 3))

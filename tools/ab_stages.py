@@ -87,8 +87,16 @@ def interleaved(pipes, frames, stage: str, repeats: int):
             pipe, frame = pipes[j], frames[j]
             outs[j] = pipe.run(frame).color
             if i:
-                times[j].append(pipe.last_timings[stage])
+                t = pipe.last_timings
+                times[j].append(t[stage] if stage != PLAN else
+                                sum(v for k, v in t.items() if k not in ("upload", "download")))
     return times, outs
+
+
+PLAN = "plan"
+"""``--stages plan``: the scene's whole plan (every stage it plans, as the bench runs it), timed as
+the sum of its kernels — what to compare where the two versions launch different kernels (a fused
+group)."""
 
 
 def timing(old, stages, scene, sizes, qualities, repeats, truth=None, lens=None, f_number=None, with_=()):
@@ -107,11 +115,13 @@ def timing(old, stages, scene, sizes, qualities, repeats, truth=None, lens=None,
         for stage in stages:
             ref = None
             if truth is not None:
-                ref = old.Pipeline(cam_old, quality=truth, stages=[*with_, stage]).run(frames[0]).color.astype(np.float64)
+                ref = old.Pipeline(cam_old, quality=truth, stages=None if stage == PLAN else [*with_, stage]).run(
+                    frames[0]).color.astype(np.float64)
             for q in qualities:
-                pipes = (old.Pipeline(cam_old, quality=q, stages=[*with_, stage]),
-                         clpost.Pipeline(cam, quality=q, stages=[*with_, stage]))
-                if stage not in pipes[1].plan(frame):
+                sel = None if stage == PLAN else [*with_, stage]
+                pipes = (old.Pipeline(cam_old, quality=q, stages=sel),
+                         clpost.Pipeline(cam, quality=q, stages=sel))
+                if stage != PLAN and stage not in pipes[1].plan(frame):
                     print(f"{w}x{h} {stage} {q}: not planned for scene {scene!r}; skipped")
                     continue
                 times, (a, b) = interleaved(pipes, frames, stage, repeats)
@@ -153,7 +163,8 @@ def accuracy(old, ref_dir: Path, repeats: int):
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--old", default=None, help="git revision of the old version")
-    p.add_argument("--stages", default="dof", help="comma-separated stage names (default dof)")
+    p.add_argument("--stages", default="dof", help="comma-separated stage names (default dof); plan: the "
+                   "scene's whole plan, timed as the sum of its kernels")
     p.add_argument("--scene", default="worst", help="a clpost bench scene (default worst)")
     p.add_argument("--with", dest="with_", default="",
                    help="stages planned before each timed one, not timed (grain: exposure,film)")

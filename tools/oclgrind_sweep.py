@@ -164,9 +164,12 @@ def cases():
         add(f"film+grain-correlated+print wide draft {w}x{h}",
             lambda w=w, h=h: _run(replace(base, film="kodak-ektar-100", sensor_mm=(0.025 * w / 70, 0.008 * h / 23)),
                                   ["exposure", "film", "grain", "print"], "draft", w, h, wide=True))
-    add("film+grain-white+print wide draft 37x23",
-        lambda: _run(replace(base, film="kodak-ektar-100"), ["exposure", "film", "grain", "print"], "draft", 37, 23,
-                     wide=True))
+    # white noise: one fused pointwise kernel, 32 pixels per work-item as two 16-lane calls sharing
+    # the Box-Muller draws (one work-item and a tail; three and a tail; exactly two)
+    for w, h in ((37, 23), (100, 5), (64, 3)):
+        add(f"film+grain-white+print wide draft {w}x{h}",
+            lambda w=w, h=h: _run(replace(base, film="kodak-ektar-100"), ["exposure", "film", "grain", "print"], "draft",
+                                  w, h, wide=True))
 
     # and the 16-lane forms a CPU runs (Oclgrind reports a GPU type too, so the cases above without
     # narrow/wide run the one-pixel forms as well)

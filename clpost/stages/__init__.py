@@ -24,7 +24,8 @@ __all__ = ["DOMAINS", "QUALITIES", "GatherStage", "PointwiseStage", "Stage", "or
 
 @lru_cache(maxsize=None)
 def registry() -> dict[str, type[Stage]]:
-    """All stage classes by name, in physical order."""
+    """All stage classes by name, in physical order (a class with ``form_of`` set is another form of
+    a registered stage, which plans it through :meth:`~clpost.stages.base.Stage.planned_form`)."""
     found: dict[str, type[Stage]] = {}
     for mod in pkgutil.iter_modules(__path__):
         if mod.name == "base":
@@ -32,7 +33,7 @@ def registry() -> dict[str, type[Stage]]:
         module = importlib.import_module(f"{__name__}.{mod.name}")
         for obj in vars(module).values():
             if (inspect.isclass(obj) and issubclass(obj, Stage) and not inspect.isabstract(obj)
-                    and obj.__module__ == module.__name__):
+                    and obj.__module__ == module.__name__ and not getattr(obj, "form_of", None)):
                 if obj.name in found:
                     raise RuntimeError(f"two stages are named {obj.name!r}")
                 found[obj.name] = obj

@@ -20,7 +20,7 @@ A stage is one physical effect. Its module (``clpost/stages/<name>.py``) holds o
 - its OpenCL implementation: a :class:`PointwiseStage` supplies a width-generic per-pixel function
   ``void <name>_apply(CLP_F *r, CLP_F *g, CLP_F *b, const CLP_CTX p, <args>)`` in
   ``kernels/<name>.cl`` that the planner fuses with its pointwise neighbours into one kernel, run
-  16 pixels per work-item (:mod:`clpost.codegen`, "Width-generic code"); a :class:`GatherStage`
+  as two 16-lane vectors per work-item (:mod:`clpost.codegen`, "Width-generic code"); a :class:`GatherStage`
   enqueues its own kernels on planar buffers through the runtime's toolkit
   (:meth:`~clpost.runtime.Runtime.kernel`, ``constant``, ``scratch``, ``cached``, ``launch``).
 
@@ -138,6 +138,14 @@ class Stage(ABC):
         """Structural ``#define``s (part of the program key); none by default."""
         return {}
 
+    def planned_form(self, camera: "Camera", frame: "Frame") -> "Stage":
+        """The object the plan runs for this stage with this camera and frame: itself, or — where a
+        gather stage's work is per pixel for this camera (white grain) — a :class:`PointwiseStage`
+        of the same name, which the planner fuses with its pointwise neighbours. The choice may
+        depend only on what a plan is keyed by (the camera's structure, the frame's size, the
+        quality)."""
+        return self
+
     def replay_key(self, camera: "Camera", frame: "Frame") -> object:
         """What this stage's launches depend on besides the camera (a plan compares the camera
         itself). A plan records a gather stage's launches (:meth:`GatherStage.enqueue`,
@@ -165,6 +173,15 @@ class PointwiseStage(Stage):
 
     kind = "pointwise"
     args: ClassVar[tuple[tuple[str, str], ...]] = ()
+    state: ClassVar[bool] = False
+    """Whether the stage shares work between the pixels of a work-item: its source then defines,
+    per width, a type ``CLP_FN(<name>_state)`` and ``void CLP_FN(<name>_prepare)(const CLP_CTX p,
+    CLP_FN(<name>_state) *st, <args>)``: the generated kernel calls ``prepare`` once per 32-pixel
+    block of a row (x0 a multiple of 32, ``p`` its first 16-lane vector) to fill ``st[0]`` and
+    ``st[1]`` for the vectors at x0 and x0 + 16, and passes each vector's slot to ``<name>_apply``
+    right after ``p`` (:data:`clpost.codegen.ITEM_VECTORS`; white grain: one float16 of Box–Muller
+    draws is the normals of the block's 32 pixels). The one-pixel form prepares ``st[0]`` per
+    pixel."""
 
     def source(self) -> str:
         """Width-generic OpenCL C defining ``<name>_apply`` (default: ``kernels/<name>.cl``)."""

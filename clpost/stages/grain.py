@@ -22,7 +22,10 @@ Two implementations, matched in mean, variance and lag-1 autocorrelation (tested
   fraction, :math:`T' = T + σ_T(D_{img})\,G`, with σ_T from the model's exact pixel-box variance
   (in closed form, :func:`gaussian_tables`; where final renders the Boolean model, the variance
   of its 64-sample estimator, so draft matches final) and G a unit-variance field correlated by
-  the separable kernel [a, b, a] so its lag-1 correlation equals the model's.
+  the separable kernel [a, b, a] so its lag-1 correlation equals the model's. Where that
+  correlation is below :data:`RHO_WHITE` the noise is white (a = 0) and the stage is per pixel:
+  the plan runs it as :class:`GrainWhite`, fused with film and print into one pass over the frame
+  (:meth:`Grain.planned_form`); the correlated path and the Boolean model are this gather.
 
 Strength: ``Camera.grain_amount`` a scales the clear fraction's deviation from its mean,
 :math:`T'' = T + a\,(T' - T)`, :math:`T = 10^{-D_{img}}` — σ_T grows a-fold, the mean, the grain
@@ -47,7 +50,7 @@ from ..film_stock import load_stock
 from ..grain_model import LN10, grain_radius_um, pixel_covariance
 from ..params import at_least, param, positive
 from . import _field as fld
-from .base import GatherStage, per_camera
+from .base import GatherStage, PointwiseStage, per_camera
 from .sensor import frame_index
 
 
@@ -159,8 +162,13 @@ class Grain(GatherStage):
 
     def reason_needed(self, camera, frame):
         r = grain_radius_px(camera, fld.image_width_px(frame))
-        how = ("Boolean model (Newson 2017), 64 samples/px" if use_boolean(self.quality, r)
-               else "Gaussian clear fraction matched to the Boolean model")
+        if use_boolean(self.quality, r):
+            how = "Boolean model (Newson 2017), 64 samples/px"
+        elif self.white(camera, fld.image_width_px(frame)):
+            how = ("Gaussian clear fraction matched to the Boolean model, white (lag-1 correlation < "
+                   f"{RHO_WHITE:g}): per pixel, fused with the pointwise stages beside it")
+        else:
+            how = "Gaussian clear fraction matched to the Boolean model, correlated by a 3×3 filter"
         return (f"grain radius {r:.3g} px ({r * camera.pixel_pitch_mm(fld.image_width_px(frame)) * 1e3:.3g} µm), amount "
                 f"{camera.grain_amount:g}: {how}")
 
@@ -178,16 +186,28 @@ class Grain(GatherStage):
     def defines(self, camera):
         return {}
 
+    def white(self, camera, width: int) -> bool:
+        """Whether this camera's grain is the Gaussian path's white noise at ``width`` (filter
+        [0, 1, 0]): per pixel, so the plan runs it as :class:`GrainWhite`, fused with film and
+        print."""
+        _, _, _, span, r, boolean = self._setup(camera, width)
+        return not boolean and gaussian_tables(round(r, 12), span, _stats_samples(r))[1][0] == 0.0
+
+    def planned_form(self, camera, frame):
+        if not self.white(camera, fld.image_width_px(frame)):
+            return self
+        form = self.__dict__.get("_white")
+        if form is None:
+            form = self.__dict__["_white"] = GrainWhite(self)
+        return form
+
     def taps_per_pixel(self, camera, frame) -> int | None:
-        """Filter taps per pixel, all three layers, on the Gaussian path (1 or 3×3 normals per
-        layer, for ``clpost bench`` taps/s — the kernel draws 1/2 (white) or 9/14 Box–Muller pairs
-        per pixel and layer and filters them separably, :data:`GAUSSIAN_ROWS`); None on the Boolean
-        path, whose work varies with density."""
-        _, _, _, span, r, boolean = self._setup(camera, fld.image_width_px(frame))
-        if boolean:
-            return None
-        _, (a, _) = gaussian_tables(round(r, 12), span, _stats_samples(r))
-        return 3 * (1 if a == 0.0 else 9)
+        """Filter taps per pixel, all three layers, of the gather's Gaussian path (3×3 normals per
+        layer, for ``clpost bench`` taps/s — the kernel draws 9/14 Box–Muller pairs per pixel and
+        layer and filters them separably, :data:`GAUSSIAN_ROWS`); None on the Boolean path, whose
+        work varies with density. (White noise runs as :class:`GrainWhite`, not this gather.)"""
+        _, _, _, _, r, boolean = self._setup(camera, fld.image_width_px(frame))
+        return None if boolean else 27
 
     def replay_key(self, camera, frame):
         return (super().replay_key(camera, frame), frame_index(frame))  # the noise hash's frame counter
@@ -203,14 +223,14 @@ class Grain(GatherStage):
         else:
             k = 1
             poly, (a, b) = gaussian_tables(round(r, 12), span, _stats_samples(r))
+            if a == 0.0:
+                raise RuntimeError("white grain is per pixel: plan it through Grain.planned_form (GrainWhite)")
         lanes = 32 if rt.wide else 1
-        taps = 1 if a == 0.0 else 3
-        rows = GAUSSIAN_ROWS[taps]
+        rows = GAUSSIAN_ROWS
         defines = {"GRAIN_BOOLEAN": int(boolean), "GRAIN_NS": GRAIN_NS, "GRAIN_CELLS": k,
-                   "GRAIN_POLY_DEG": SIGMA_POLY_DEG, "GRAIN_ROWS": rows, "GRAIN_LANES": lanes,
-                   "GRAIN_TAPS": taps}
+                   "GRAIN_POLY_DEG": SIGMA_POLY_DEG, "GRAIN_ROWS": rows, "GRAIN_LANES": lanes}
         knl = rt.kernel(_program_source(), "grain", defines)
-        # the Gaussian path: 32 pixels × GAUSSIAN_ROWS[taps] rows per work-item, 8×1 work-groups, where
+        # the Gaussian path: 32 pixels × GAUSSIAN_ROWS rows per work-item, 8×1 work-groups, where
         # the device is wide (a CPU), else one pixel per work-item in 16×8 groups (kernels/grain.cl);
         # the Boolean path one pixel per work-item
         if boolean:
@@ -240,21 +260,81 @@ class Grain(GatherStage):
         return d_min + -np.log10(np.clip(t, t_floor, 1.0))
 
 
-GAUSSIAN_ROWS = {1: 6, 3: 14}
-"""Rows per work-item (each 32 pixels wide) of the Gaussian path's lane form, by filter taps
-(``GRAIN_TAPS``). White noise (1): one float16 of Box–Muller draws per row, 6 rows. The [a, b, a]
-filter (3): each filtered row of normals serves three output rows, so R rows cost R + 2 filtered
-rows, one float16 of draws each, and two float16 of draws for the normals left and right of the
-block — (R + 4)·16 / (32 R) draws per pixel and layer: 9/14 at 14, the most kernels/grain.cl takes
-(the row counts' measured cost: docs/benchmarks.md)."""
+class GrainWhite(PointwiseStage):
+    """grain's white Gaussian path as a pointwise stage (kernels/grain_white.cl): the plan's form of
+    :class:`Grain` where its noise is white (:meth:`Grain.white`), fused with its pointwise
+    neighbours (film, print) so the frame is read and written once for all of them. The same
+    counters and arithmetic as the gather's white path; reasons, skip rules and the float64
+    reference are :class:`Grain`'s."""
+
+    form_of = Grain
+    name = Grain.name
+    order = Grain.order
+    role = Grain.role
+    domains = Grain.domains
+    requires = Grain.requires
+    state = True
+    args = (("__global const float *", "params"), ("__global const float *", "poly"),
+            ("float", "inv_half_span"), ("float", "amount"), ("uint", "seed"), ("uint", "frame"))
+
+    def __init__(self, grain: Grain) -> None:
+        super().__init__(grain.quality)
+        self.grain = grain
+
+    def source(self) -> str:
+        from ..runtime import kernel_source
+
+        return kernel_source("grain_pixel") + kernel_source("grain_white")
+
+    def defines(self, camera):
+        return {"GRAIN_POLY_DEG": SIGMA_POLY_DEG}
+
+    def skip_reason(self, camera, frame):
+        return self.grain.skip_reason(camera, frame)
+
+    def reason_needed(self, camera, frame):
+        return self.grain.reason_needed(camera, frame)
+
+    def replay_key(self, camera, frame):
+        return self.grain.replay_key(camera, frame)
+
+    def reference(self, camera, frame, color):
+        return self.grain.reference(camera, frame, color)
+
+    @per_camera
+    def _tables(self, camera, width):
+        """(params [D_min, D_max] per layer, σ polynomial, 2/span), float32, read-only: uploaded once."""
+        _, d_min, d_max, span, r, _ = self.grain._setup(camera, width)
+        poly, _ = gaussian_tables(round(r, 12), span, _stats_samples(r))
+        params = np.concatenate([d_min, d_max]).astype(np.float32)
+        poly32 = np.asarray(poly, np.float32)
+        for a in (params, poly32):
+            a.setflags(write=False)
+        return params, poly32, np.float32(2.0 / span)
+
+    def values(self, camera, frame):
+        params, poly, inv_half_span = self._tables(camera, fld.image_width_px(frame))
+        return (params, poly, inv_half_span, np.float32(camera.grain_amount), np.uint32(camera.noise_seed),
+                np.uint32(frame_index(frame)))
+
+
+GAUSSIAN_ROWS = 14
+"""Rows per work-item (each 32 pixels wide) of the correlated Gaussian path's lane form: each row of
+normals filtered by [a, b, a] serves three output rows, so R rows cost R + 2 filtered rows, one
+float16 of draws each, and two float16 of draws for the normals left and right of the block —
+(R + 4)·16 / (32 R) draws per pixel and layer: 9/14 at 14, the most kernels/grain.cl takes (the row
+counts' measured cost: docs/benchmarks.md). White noise is :class:`GrainWhite` (half a draw per
+pixel and layer, fused with film and print)."""
 
 
 def _program_source() -> str:
-    """common.cl, the one-pixel libraries (plain names) and the 16-lane ones (``_w16``), grain.cl."""
+    """common.cl, the one-pixel libraries and grain_pixel.cl (plain names), the 16-lane ones
+    (``_w16``), grain.cl."""
     from ..codegen import library, library_lanes16
     from ..runtime import kernel_source
 
-    return library() + library_lanes16() + kernel_source("grain")
+    pixel = kernel_source("grain_pixel")
+    return library() + pixel + library_lanes16() + pixel + kernel_source("grain")
 
 
 def grain_normals(h, w, seed, fr, c):
