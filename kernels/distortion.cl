@@ -293,10 +293,10 @@ inline void distortion_bspline4(const float16 t, float16 *w)
  * DISTORTION_PAD pixels around the render.
  * Where all 16 lanes of a work-item take the same window columns (rows), the work-item reads only
  * those 4 (a branch per work-item, not per lane): 4 x 4 loads and no selects where both agree
- * (77 % of the work-items on the bench's barrel map at 1080p), 4 rows of 5 columns where only the
- * rows do (18 %), the 5 x 5 window with selects in the rest. The sums are the same operations in
+ * (most work-items of a moderate distortion), 4 rows of 5 columns where only the rows do, the
+ * 5 x 5 window with selects in the rest. The sums are the same operations in
  * the same order as the 5 x 5 form, whose extra row enters with weight 0 (docs/benchmarks.md,
- * "Distortion's final filter: one window per work-item"). */
+ * "Worst final, third pass"). */
 /* One channel: the lane's B-spline sum acc over NR rows of the window at p (5: rows 0-3 or 1-4 by
  * down; 4: the rows chosen), columns 0-3 or 1-4 by right where SEL (else the 4 at p), and the
  * cell's samples a b (top) d e (bottom) from the same loads (6 f = d0 + 4 d1 + d2, the B-spline at
