@@ -65,13 +65,16 @@ __kernel void distortion(__global const float *restrict src, __global float *res
  * clpost/stages/distortion.py, bilinear_tiles): the 2x2 taps of every pixel of a tile row lie in
  * the 3x3 window at (x + ox, y + oy), so the loads are vload16 at addresses affine in the lane,
  * and bilinear weights are tent weights max(0, 1 - |f - k|) on that window. One work-item: one
- * row of one tile. tiles: (x0, y0, ox, oy) per tile. */
+ * row of one tile; a work-group: one row of TILE_GROUP consecutive tiles (as
+ * distortion_bspline_tiles, which says why). tiles: (x0, y0, ox, oy) per tile. */
 #define DISTORTION_TILE 16
 __kernel void distortion_tiles(__global const float *restrict src, __global float *restrict dst,
                                __global const float *restrict map, __global const int *restrict tiles,
-                               const int src_w, const int src_h, const int width, const int height)
+                               const int src_w, const int src_h, const int width, const int height,
+                               const int ntiles)
 {
     const int row = get_global_id(0), tile = get_global_id(1);
+    if (tile >= ntiles) return;  /* the tile count rounded up to whole work-groups (host) */
     const int4 t = vload4(tile, tiles);
     const int y = t.y + row;
     const size_t n = (size_t)width * height, sn = (size_t)src_w * src_h;
@@ -290,7 +293,11 @@ inline void distortion_bspline4(const float16 t, float16 *w)
  * from the float32 map; the table's are float64-derived float32; both within a few ulps). Rows
  * likewise: the 5 row sums weighted by the 4 weights placed on rows 0-3 or 1-4. One work-item:
  * one row of one tile; tiles: (x0, y0, ox, oy); coef planes of pitch x ch_rows with
- * DISTORTION_PAD pixels around the render.
+ * DISTORTION_PAD pixels around the render. A work-group is one row of TILE_GROUP consecutive
+ * tiles (clpost/stages/distortion.py; local size (1, TILE_GROUP)), not one tile's 16 rows: its
+ * work-items read the same 5 coefficient rows of each plane 64 bytes further on each, a few
+ * sequential streams, where a tile's 16 rows in turn opened ~160 (docs/benchmarks.md, "Worst
+ * final, third pass").
  * Where all 16 lanes of a work-item take the same window columns (rows), the work-item reads only
  * those 4 (a branch per work-item, not per lane): 4 x 4 loads and no selects where both agree
  * (most work-items of a moderate distortion), 4 rows of 5 columns where only the rows do, the
@@ -375,9 +382,11 @@ inline __attribute__((always_inline)) void distortion_bspline_ch(
 __kernel void distortion_bspline_tiles(__global const float *restrict coef, __global float *restrict dst,
                                        __global const float *restrict map, __global const int *restrict tiles,
                                        __global const float *restrict hdr,
-                                       const int pitch, const int ch_rows, const int width, const int height)
+                                       const int pitch, const int ch_rows, const int width, const int height,
+                                       const int ntiles)
 {
     const int row = get_global_id(0), tile = get_global_id(1);
+    if (tile >= ntiles) return;  /* the tile count rounded up to whole work-groups (host) */
     const int4 t = vload4(tile, tiles);
     const int y = t.y + row;
     if (y >= height) return;  /* a tile across the bottom edge (whole in x: host) */
