@@ -13,8 +13,14 @@ OpenCL event time summed per kernel name, median and min over the repeats. With 
 the recorded launch of ``--kernel`` is re-enqueued with the same arguments and sizes from a
 program built from REV's ``kernels/<file>.cl`` (the file named by the kernel's prefix; the rest of
 the program source, generated defines included, is this tree's) and from this tree's, old and new
-alternating which runs first; old/new is the median of per-repeat ratios. Only for kernels whose
-arguments did not change between the two versions.
+alternating which runs first; old/new is the median of per-repeat ratios. A kernel whose
+arguments or launch changed since REV: ``--old-args N`` gives the old one the first N recorded
+arguments, ``--old-global G`` launches it over G (comma-separated) with the device's own
+work-groups, e.g. the tile gathers before their row-of-tiles groups (docs/benchmarks.md, "Worst
+final, third pass"):
+
+    PYTHONPATH=. python tools/ab_kernel.py --old 2418b09 --kernel distortion_bspline_tiles \
+        --old-args 9 --old-global 16,8148 --repeats 21
 """
 from __future__ import annotations
 
@@ -23,6 +29,7 @@ import collections
 import statistics
 import subprocess
 
+import numpy as np
 import pyopencl as cl
 
 from clpost import Pipeline
@@ -77,6 +84,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--old", help="git revision of the old kernel (with --kernel)")
     ap.add_argument("--kernel", help="kernel name to compare (with --old)")
+    ap.add_argument("--old-args", type=int, help="the old kernel takes the first N recorded arguments")
+    ap.add_argument("--old-global", help="the old kernel's global size (comma-separated), PoCL's groups")
     a = ap.parse_args()
     size = tuple(int(v) for v in a.size.split("x"))
     run_once, restore = record_plan(a.scene, a.quality, size)
@@ -110,20 +119,27 @@ def main() -> None:
     opts = k.program.get_build_info(q.device, cl.program_build_info.OPTIONS)
     kern = {v: getattr(cl.Program(q.context, s).build(options=opts), a.kernel)
             for v, s in (("old", src.replace(new_cl, old_cl)), ("new", src))}
-    for kk in kern.values():
-        kk.set_args(*args)
+    kern["old"].set_args(*(args[:a.old_args] if a.old_args else args))
+    kern["new"].set_args(*args)
+    launch = {"new": (g, loc), "old": (tuple(int(v) for v in a.old_global.split(",")), None) if a.old_global
+              else (g, loc)}
+    outs = {}
     t = collections.defaultdict(list)
     for r in range(a.repeats + 1):
         for v in (("old", "new") if r % 2 else ("new", "old")):
-            ev = cl.enqueue_nd_range_kernel(q, kern[v], g, loc)
+            ev = cl.enqueue_nd_range_kernel(q, kern[v], *launch[v])
             ev.wait()
             if r:
                 t[v].append(event_ms(ev))
+            elif isinstance(args[1], cl.Buffer):  # the second argument, the output of the gathers here
+                outs[v] = np.empty(args[1].size // 4, np.float32)
+                cl.enqueue_copy(q, outs[v], args[1]).wait()
     ratios = [o / n for o, n in zip(t["old"], t["new"])]
     print(f"{a.kernel} ({a.scene} {a.quality} {a.size}, {len(calls)} launch(es), the first): "
           f"old median {statistics.median(t['old']):.2f} min {min(t['old']):.2f} ms | new median "
           f"{statistics.median(t['new']):.2f} min {min(t['new']):.2f} ms | old/new {statistics.median(ratios):.3f} "
-          f"({min(ratios):.2f}-{max(ratios):.2f}), min/min {min(t['old']) / min(t['new']):.3f}")
+          f"({min(ratios):.2f}-{max(ratios):.2f}), min/min {min(t['old']) / min(t['new']):.3f}"
+          + (f" | second argument bit-equal: {np.array_equal(outs['old'], outs['new'])}" if outs else ""))
 
 
 if __name__ == "__main__":
