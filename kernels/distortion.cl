@@ -65,13 +65,16 @@ __kernel void distortion(__global const float *restrict src, __global float *res
  * clpost/stages/distortion.py, bilinear_tiles): the 2x2 taps of every pixel of a tile row lie in
  * the 3x3 window at (x + ox, y + oy), so the loads are vload16 at addresses affine in the lane,
  * and bilinear weights are tent weights max(0, 1 - |f - k|) on that window. One work-item: one
- * row of one tile. tiles: (x0, y0, ox, oy) per tile. */
+ * row of one tile; a work-group: one row of TILE_GROUP consecutive tiles (as
+ * distortion_bspline_tiles, which says why). tiles: (x0, y0, ox, oy) per tile. */
 #define DISTORTION_TILE 16
 __kernel void distortion_tiles(__global const float *restrict src, __global float *restrict dst,
                                __global const float *restrict map, __global const int *restrict tiles,
-                               const int src_w, const int src_h, const int width, const int height)
+                               const int src_w, const int src_h, const int width, const int height,
+                               const int ntiles)
 {
     const int row = get_global_id(0), tile = get_global_id(1);
+    if (tile >= ntiles) return;  /* the tile count rounded up to whole work-groups (host) */
     const int4 t = vload4(tile, tiles);
     const int y = t.y + row;
     const size_t n = (size_t)width * height, sn = (size_t)src_w * src_h;
@@ -290,13 +293,100 @@ inline void distortion_bspline4(const float16 t, float16 *w)
  * from the float32 map; the table's are float64-derived float32; both within a few ulps). Rows
  * likewise: the 5 row sums weighted by the 4 weights placed on rows 0-3 or 1-4. One work-item:
  * one row of one tile; tiles: (x0, y0, ox, oy); coef planes of pitch x ch_rows with
- * DISTORTION_PAD pixels around the render. */
+ * DISTORTION_PAD pixels around the render. A work-group is one row of TILE_GROUP consecutive
+ * tiles (clpost/stages/distortion.py; local size (1, TILE_GROUP)), not one tile's 16 rows: its
+ * work-items read the same 5 coefficient rows of each plane 64 bytes further on each, a few
+ * sequential streams, where a tile's 16 rows in turn opened ~160 (docs/benchmarks.md, "Worst
+ * final, third pass").
+ * Where all 16 lanes of a work-item take the same window columns (rows), the work-item reads only
+ * those 4 (a branch per work-item, not per lane): 4 x 4 loads and no selects where both agree
+ * (most work-items of a moderate distortion), 4 rows of 5 columns where only the rows do, the
+ * 5 x 5 window with selects in the rest. The sums are the same operations in
+ * the same order as the 5 x 5 form, whose extra row enters with weight 0 (docs/benchmarks.md,
+ * "Worst final, third pass"). */
+/* One channel: the lane's B-spline sum acc over NR rows of the window at p (5: rows 0-3 or 1-4 by
+ * down; 4: the rows chosen), columns 0-3 or 1-4 by right where SEL (else the 4 at p), and the
+ * cell's samples a b (top) d e (bottom) from the same loads (6 f = d0 + 4 d1 + d2, the B-spline at
+ * the knots). NR and SEL are constants at every use, so each form compiles without the other's
+ * selects. */
+inline __attribute__((always_inline)) void distortion_bspline_ch(
+    __global const float *p, const size_t pitch, const int NR, const int SEL, const int16 right,
+    const int16 down, const float16 *wx, const float16 *wy, float16 *acc_, float16 *a_, float16 *b_,
+    float16 *d_, float16 *e_)
+{
+    float16 acc = (float16)(0.0f), hl[5], hr[5];
+    /* the rows written out (a loop over NR rows was not unrolled: "loop not unrolled") */
+#define DISTORTION_BSPLINE_ROW(r) do { \
+        __global const float *q = p + (size_t)(r) * pitch; \
+        float16 d0, d1, d2, d3; \
+        if (SEL) { \
+            const float16 c1 = vload16(0, q + 1), c2 = vload16(0, q + 2), c3 = vload16(0, q + 3); \
+            d0 = select(vload16(0, q), c1, right); \
+            d1 = select(c1, c2, right); \
+            d2 = select(c2, c3, right); \
+            d3 = select(c3, vload16(0, q + 4), right); \
+        } else { \
+            d0 = vload16(0, q); \
+            d1 = vload16(0, q + 1); \
+            d2 = vload16(0, q + 2); \
+            d3 = vload16(0, q + 3); \
+        } \
+        float16 rowv = wx[0] * d0; \
+        rowv = mad(wx[1], d1, rowv); \
+        rowv = mad(wx[2], d2, rowv); \
+        rowv = mad(wx[3], d3, rowv); \
+        acc = mad(wy[r], rowv, acc); \
+        hl[r] = mad(4.0f, d1, d0 + d2); \
+        hr[r] = mad(4.0f, d2, d1 + d3); \
+    } while (0)
+    DISTORTION_BSPLINE_ROW(0);
+    DISTORTION_BSPLINE_ROW(1);
+    DISTORTION_BSPLINE_ROW(2);
+    DISTORTION_BSPLINE_ROW(3);
+    if (NR == 5) DISTORTION_BSPLINE_ROW(4);
+#undef DISTORTION_BSPLINE_ROW
+    float16 l0, l1, l2, l3, r0, r1, r2, r3;
+    if (NR == 5) {  /* the cell's rows: window rows 0-3 (fy < 1) or 1-4 */
+        l0 = select(hl[0], hl[1], down); l1 = select(hl[1], hl[2], down);
+        l2 = select(hl[2], hl[3], down); l3 = select(hl[3], hl[4], down);
+        r0 = select(hr[0], hr[1], down); r1 = select(hr[1], hr[2], down);
+        r2 = select(hr[2], hr[3], down); r3 = select(hr[3], hr[4], down);
+    } else {
+        l0 = hl[0]; l1 = hl[1]; l2 = hl[2]; l3 = hl[3];
+        r0 = hr[0]; r1 = hr[1]; r2 = hr[2]; r3 = hr[3];
+    }
+    *acc_ = acc;
+    *a_ = mad(4.0f, l1, l0 + l2) * (1.0f / 36.0f);
+    *b_ = mad(4.0f, r1, r0 + r2) * (1.0f / 36.0f);
+    *d_ = mad(4.0f, l2, l1 + l3) * (1.0f / 36.0f);
+    *e_ = mad(4.0f, r2, r1 + r3) * (1.0f / 36.0f);
+}
+
+/* the output of one channel from its sum and cell samples: clamped to the cell, handed over to
+ * bilinear by th, colour 0 without a preimage */
+#define DISTORTION_BSPLINE_STORE(acc, a, b, d, e, c) do { \
+        const float16 lo = min(min(a, b), min(d, e)), hi = max(max(a, b), max(d, e)); \
+        const float16 lin = mix(mix(a, b, tx), mix(d, e, tx), ty); \
+        const float16 v = mix(clamp(acc, lo, hi), lin, th); \
+        vstore16(select((float16)(0.0f), v * DISTORTION_COEF_SCALE, ok), 0, dst + (c) * n + i); \
+    } while (0)
+#define DISTORTION_BSPLINE_CHANNELS(off, NR, SEL, wyv) do { \
+        for (int c = 0; c < 3; ++c) { \
+            float16 acc, a, b, d, e; \
+            distortion_bspline_ch(coef + c * sn + base + (off), pitch, NR, SEL, right, down, wx, wyv, \
+                                  &acc, &a, &b, &d, &e); \
+            DISTORTION_BSPLINE_STORE(acc, a, b, d, e, c); \
+        } \
+    } while (0)
+
 __kernel void distortion_bspline_tiles(__global const float *restrict coef, __global float *restrict dst,
                                        __global const float *restrict map, __global const int *restrict tiles,
                                        __global const float *restrict hdr,
-                                       const int pitch, const int ch_rows, const int width, const int height)
+                                       const int pitch, const int ch_rows, const int width, const int height,
+                                       const int ntiles)
 {
     const int row = get_global_id(0), tile = get_global_id(1);
+    if (tile >= ntiles) return;  /* the tile count rounded up to whole work-groups (host) */
     const int4 t = vload4(tile, tiles);
     const int y = t.y + row;
     if (y >= height) return;  /* a tile across the bottom edge (whole in x: host) */
@@ -311,11 +401,6 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
     float16 wx[4], v4[4], wy[5];
     distortion_bspline4(tx, wx);
     distortion_bspline4(ty, v4);
-    wy[0] = select(v4[0], (float16)(0.0f), down);
-    wy[1] = select(v4[1], v4[0], down);
-    wy[2] = select(v4[2], v4[1], down);
-    wy[3] = select(v4[3], v4[2], down);
-    wy[4] = select((float16)(0.0f), v4[3], down);
     /* the hand-over weight, bilinear over the lane's 2x2 cell at (x + ox, y + oy) + (right, down):
      * tent weights on the 3x3 samples there, one of the three 0 (as distortion_tiles) */
     const float16 bx0 = max(1.0f - fx, 0.0f), bx2 = max(fx - 1.0f, 0.0f), bx1 = 1.0f - bx0 - bx2;
@@ -329,38 +414,20 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
         th = mad(r == 0 ? by0 : (r == 1 ? by1 : by2),
                  bx0 * vload16(0, q) + bx1 * vload16(0, q + 1) + bx2 * vload16(0, q + 2), th);
     }
-    for (int c = 0; c < 3; ++c) {
-        __global const float *p = coef + c * sn + base;
-        float16 acc = (float16)(0.0f);
-        /* per row: the lane's 4 columns d0-d3, its row sum and 6x the samples at the cell's
-         * columns, 6 f = d0 + 4 d1 + d2 (left), d1 + 4 d2 + d3 (right): the B-spline at the knots,
-         * so the cell's samples cost no loads */
-        float16 hl[5], hr[5];
-#pragma unroll
-        for (int r = 0; r < 5; ++r) {
-            __global const float *q = p + (size_t)r * pitch;
-            const float16 c1 = vload16(0, q + 1), c2 = vload16(0, q + 2), c3 = vload16(0, q + 3);
-            const float16 d0 = select(vload16(0, q), c1, right), d1 = select(c1, c2, right);
-            const float16 d2 = select(c2, c3, right), d3 = select(c3, vload16(0, q + 4), right);
-            float16 rowv = wx[0] * d0;
-            rowv = mad(wx[1], d1, rowv);
-            rowv = mad(wx[2], d2, rowv);
-            rowv = mad(wx[3], d3, rowv);
-            acc = mad(wy[r], rowv, acc);
-            hl[r] = mad(4.0f, d1, d0 + d2);
-            hr[r] = mad(4.0f, d2, d1 + d3);
-        }
-        /* the cell's rows: window rows 0-3 (fy < 1) or 1-4; its samples a b (top) d e (bottom) */
-        const float16 l0 = select(hl[0], hl[1], down), l1 = select(hl[1], hl[2], down);
-        const float16 l2 = select(hl[2], hl[3], down), l3 = select(hl[3], hl[4], down);
-        const float16 r0 = select(hr[0], hr[1], down), r1 = select(hr[1], hr[2], down);
-        const float16 r2 = select(hr[2], hr[3], down), r3 = select(hr[3], hr[4], down);
-        const float16 a = mad(4.0f, l1, l0 + l2) * (1.0f / 36.0f), b = mad(4.0f, r1, r0 + r2) * (1.0f / 36.0f);
-        const float16 d = mad(4.0f, l2, l1 + l3) * (1.0f / 36.0f), e = mad(4.0f, r2, r1 + r3) * (1.0f / 36.0f);
-        const float16 lo = min(min(a, b), min(d, e)), hi = max(max(a, b), max(d, e));
-        const float16 lin = mix(mix(a, b, tx), mix(d, e, tx), ty);
-        const float16 v = mix(clamp(acc, lo, hi), lin, th);
-        vstore16(select((float16)(0.0f), v * DISTORTION_COEF_SCALE, ok), 0, dst + c * n + i);
+    /* one window for every lane? (all() / any() of a vector: one test per work-item) */
+    const int allr = all(right), onex = allr || !any(right);
+    const int alld = all(down), oney = alld || !any(down);
+    if (onex && oney) {
+        DISTORTION_BSPLINE_CHANNELS((size_t)allr + (size_t)alld * pitch, 4, 0, v4);
+    } else if (oney) {
+        DISTORTION_BSPLINE_CHANNELS((size_t)alld * pitch, 4, 1, v4);
+    } else {
+        wy[0] = select(v4[0], (float16)(0.0f), down);
+        wy[1] = select(v4[1], v4[0], down);
+        wy[2] = select(v4[2], v4[1], down);
+        wy[3] = select(v4[3], v4[2], down);
+        wy[4] = select((float16)(0.0f), v4[3], down);
+        DISTORTION_BSPLINE_CHANNELS(0, 5, 1, wy);
     }
 }
 

@@ -381,6 +381,10 @@ def bspline_tiles(model: OpenCVModel, src_size: tuple[int, int],
     return _split_tiles(x0, y0, ox, oy, fast)
 
 
+TILE_GROUP = 64
+"""Tiles per work-group of ``distortion_bspline_tiles`` and ``distortion_tiles``: a group is one row
+of that many consecutive tiles (local size (1, TILE_GROUP); kernels/distortion.cl says why)."""
+
 PAD = 20
 """Edge pixels around the B-spline coefficients (kernels/distortion.cl DISTORTION_PAD). The 4×4
 window of a valid position (in [−½, size − ½]) needs 2 of them; the rest lets the vector gather
@@ -682,12 +686,12 @@ class Distortion(GatherStage):
         if not bspline:
             tiles, rest = bilinear_tiles(model, frame.size, kkey)
             events = []
-            for name, buf, n, gsize in (("distortion_tiles", bufs[1], len(tiles), (TILE, len(tiles))),
-                                        ("distortion_rest", bufs[2], len(rest), (TILE, TILE, len(rest)))):
-                if n:
-                    kern = kernel(name)
-                    events.append(rt.launch(kern, gsize, None, src, dst, bufs[0], buf, np.int32(sw),
-                                            np.int32(sh), *out))
+            if len(tiles):  # one row of TILE_GROUP tiles per work-group, as the final filter's gather
+                events.append(rt.launch(kernel("distortion_tiles"), (TILE, len(tiles)), (1, TILE_GROUP), src, dst,
+                                        bufs[0], bufs[1], np.int32(sw), np.int32(sh), *out, np.int32(len(tiles))))
+            if len(rest):
+                events.append(rt.launch(kernel("distortion_rest"), (TILE, TILE, len(rest)), None, src, dst, bufs[0],
+                                        bufs[2], np.int32(sw), np.int32(sh), *out))
             return events
         base, wts, fmap, tiles_b, rest_b, coef, tmp, hdr = bufs
         tiles, rest = bspline_tiles(model, frame.size, kkey)
@@ -701,8 +705,8 @@ class Distortion(GatherStage):
                             np.int32(pw), np.int32(ph))]
         if len(tiles):
             kern = kernel("distortion_bspline_tiles")
-            events.append(rt.launch(kern, (TILE, len(tiles)), None, coef, dst, fmap, tiles_b, hdr, np.int32(pw),
-                                    np.int32(ph), *out))
+            events.append(rt.launch(kern, (TILE, len(tiles)), (1, TILE_GROUP), coef, dst, fmap, tiles_b, hdr,
+                                    np.int32(pw), np.int32(ph), *out, np.int32(len(tiles))))
         if len(rest):
             kern = kernel("distortion_table")
             events.append(rt.launch(kern, (TILE, TILE, len(rest)), None, coef, dst, base, wts, rest_b, hdr,
