@@ -224,10 +224,10 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
 }
 #undef DOF_SORT2
 
-/* Full-resolution signed CoC radius (px) of one pixel, depth by the fringe rule above. Neighbour
- * rows/columns clamped to the image. */
-inline float dof_coc_px(__global const float *src, __global const float *depth, const int x, const int y,
-                        const int width, const int height, const float k, const float inv_u, const float limit)
+/* The effective depth of one pixel by the fringe rule above (effective_depth's 3x3 rule).
+ * Neighbour rows/columns clamped to the image. */
+inline float dof_fringe_px(__global const float *src, __global const float *depth, const int x, const int y,
+                           const int width, const int height)
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float d = depth[i];
@@ -247,21 +247,26 @@ inline float dof_coc_px(__global const float *src, __global const float *depth, 
                 other_max = fmax(other_max, lq);
             }
         }
-    const float s = dof_fringe_depth(d, lum, nearest, bright_n, dark_n, other_min, other_max);
+    return dof_fringe_depth(d, lum, nearest, bright_n, dark_n, other_min, other_max);
+}
+
+inline float dof_coc_of(const float s, const float k, const float inv_u, const float limit) {
     const float inv_s = isinf(s) ? 0.0f : 1.0f / s;
     return clamp(k * (inv_u - inv_s), -limit, limit);
 }
 
 /* 16 pixels of a row per work-item in explicit float16 (PoCL does not vectorise the per-pixel form;
  * docs/measurements.md#kernel-forms-on-pocl); groups of 16 touching the left/right edge or the
- * image's end take the per-pixel path (same formula). Launched over (ceil(width / 16), height). */
+ * image's end take the per-pixel path (same formula). Launched over (ceil(width / 16), height).
+ * moved[y * ceil(width / 16) + group]: whether the rule moved a pixel of the group (dof_coc_tail). */
 __kernel void dof_coc(__global const float *restrict src, __global const float *restrict depth,
-                      __global float *restrict coc, const int width, const int height,
+                      __global float *restrict coc, __global int *restrict moved, const int width, const int height,
                       const float k, const float inv_u, const float limit)
 {
     const int x = 16 * get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
+    const size_t flag = (size_t)y * ((width + 15) / 16) + get_global_id(0);
     if (x >= 1 && x + 16 <= width - 1) {
         const float16 d = vload16(0, depth + i);
         const float16 near_lim = DOF_MIXED_SAME_DEPTH * d;
@@ -273,6 +278,7 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
             for (int a = -1; a <= 1; ++a)
                 nearest = fmin(nearest, vload16(0, depth + rows[b] + a));
         float16 s = d;
+        int any_take = 0;
         /* no depth step in any of the 16 neighbourhoods (most of an image): no colour test */
         if (any(nearest < near_lim)) {
             const float16 lum = dof_luma16(src + i, n);
@@ -301,13 +307,79 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
                                       & (pb <= DOF_LIGHT_FRINGE * sb))))
                                | ((sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min));
             s = select(d, nearest, take);
+            any_take = any(take);
         }
+        moved[flag] = any_take;
         const float16 inv_s = select(1.0f / s, (float16)(0.0f), isinf(s));
         vstore16(clamp(k * (inv_u - inv_s), -limit, limit), 0, coc + i);
         return;
     }
-    for (int xi = x; xi < min(x + 16, width); ++xi)
-        coc[(size_t)y * width + xi] = dof_coc_px(src, depth, xi, y, width, height, k, inv_u, limit);
+    int any_take = 0;
+    for (int xi = x; xi < min(x + 16, width); ++xi) {
+        const float d = depth[(size_t)y * width + xi], s = dof_fringe_px(src, depth, xi, y, width, height);
+        any_take |= s != d;
+        coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
+    }
+    moved[flag] = any_take;
+}
+
+/* The light's tail (effective_depth's second clause): p, left at its own depth by the rule above,
+ * takes the nearest depth of its 3x3 after that rule when a neighbour at a near depth after it is a
+ * light for p by the rule's light clause (more than DOF_SAME_SOURCE x p, its 1 - DOF_FRINGE_STEP
+ * share above own_min clamped to 0, p at most DOF_LIGHT_FRINGE of it), brings half of p's light,
+ * and p stands DOF_SAME_SOURCE x above every other pixel of its own surface but one (its twin).
+ * Returns the depth (p's own when not). */
+inline float dof_tail_px(__global const float *src, __global const float *depth, const int x, const int y,
+                         const int width, const int height)
+{
+    const size_t n = (size_t)width * height, i = (size_t)y * width + x;
+    const float d = depth[i];
+    if (dof_fringe_px(src, depth, x, y, width, height) != d)
+        return d;  /* moved by the 3x3 rule: its CoC stands (the caller keeps it) */
+    const float lum = dof_luma(src, i, n);
+    float nearest = d, bright_n = -INFINITY, own_min = lum, hi = -INFINITY, hi2 = -INFINITY;
+    for (int b = -1; b <= 1; ++b)
+        for (int a = -1; a <= 1; ++a) {
+            if (a == 0 && b == 0) continue;
+            const int xq = clamp(x + a, 0, width - 1), yq = clamp(y + b, 0, height - 1);
+            const float e = dof_fringe_px(src, depth, xq, yq, width, height);
+            const float lq = dof_luma(src, (size_t)yq * width + xq, n);
+            nearest = fmin(nearest, e);
+            if (e < DOF_MIXED_SAME_DEPTH * d) {
+                bright_n = fmax(bright_n, lq);
+            } else {
+                own_min = fmin(own_min, lq);
+                hi2 = fmax(hi2, fmin(hi, lq));
+                hi = fmax(hi, lq);
+            }
+        }
+    const float sb = bright_n - own_min, pb = lum - own_min;
+    const int take = sb > 0.0f && 2.0f * pb * bright_n >= lum * sb && bright_n > DOF_SAME_SOURCE * lum
+                     && (1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f) && pb <= DOF_LIGHT_FRINGE * sb
+                     && lum > DOF_SAME_SOURCE * hi2;
+    return take ? nearest : d;
+}
+
+/* After dof_coc: the groups of 16 with no moved pixel in their own or the 8 neighbouring groups'
+ * flags (nearly all) return at once; in the others each pixel takes the light's-tail test.
+ * Launched over (ceil(width / 16), height). */
+__kernel void dof_coc_tail(__global const float *restrict src, __global const float *restrict depth,
+                           __global float *restrict coc, __global const int *restrict moved,
+                           const int width, const int height, const float k, const float inv_u, const float limit)
+{
+    const int g = get_global_id(0), y = get_global_id(1), gw = (width + 15) / 16;
+    if (16 * g >= width || y >= height) return;
+    int near_moved = 0;
+    for (int b = max(y - 1, 0); b <= min(y + 1, height - 1); ++b)
+        for (int a = max(g - 1, 0); a <= min(g + 1, gw - 1); ++a)
+            near_moved |= moved[(size_t)b * gw + a];
+    if (!near_moved)
+        return;
+    for (int xi = 16 * g; xi < min(16 * g + 16, width); ++xi) {
+        const float d = depth[(size_t)y * width + xi], s = dof_tail_px(src, depth, xi, y, width, height);
+        if (s != d)
+            coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
+    }
 }
 
 /* Padded working buffers (level 0 of `lv`, see dof_levels.cl): colour = mean of the DOF_SCALE^2 block, CoC = nearest (min signed) of

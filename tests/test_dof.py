@@ -722,8 +722,8 @@ def _one_pixel_lamp_on_a_wall(h=41, w=41, y=20, x=19, lamp_m=1.0):
 
 def _twin_only_frame():
     """:func:`_one_pixel_lamp_on_a_wall` with the pixel right of the twin dimmed to 2× the wall
-    (5.1× in h_lamps): two pixels from the lamp's depth sample it is beyond the fringe rule's 3×3
-    reach and still spreads with the wall's CoC (docs/fidelity.md, "Held-out scenes")."""
+    (5.1× in h_lamps): two pixels from the lamp's depth sample, beyond the fringe rule's 3×3 reach;
+    the light's-tail clause takes it with the lamp (docs/fidelity.md, "Held-out scenes")."""
     col, depth = _one_pixel_lamp_on_a_wall()
     col[20, 21] = 0.6
     return col, depth
@@ -738,7 +738,8 @@ def test_a_one_pixel_lamps_fringe_goes_with_the_lamp_past_its_twin():
     col, depth = _twin_only_frame()
     eff = D.effective_depth(col.astype(np.float64), depth)
     assert np.all(eff[19:22, 19:21] == 1.0)                  # lamp, twin and fringe: the lamp's depth
-    assert eff[20, 21] == np.float32(5.9) and eff[17, 19] == np.float32(5.9)  # beyond the 3x3 reach / the wall: the wall's
+    assert eff[20, 21] == 1.0                                # the twin's tail (2 px from the depth sample): the lamp's
+    assert eff[17, 19] == np.float32(5.9)                    # the wall: the wall's
     cam = Camera(**{**CAM, "focus_distance_m": 1.0})         # the lamp in focus, the wall's CoC 5 px
     wall = np.full_like(col, 0.3)
     yy, xx = np.mgrid[0:41, 0:41]

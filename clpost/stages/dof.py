@@ -457,7 +457,23 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
             & ((FRINGE_STEP * bright_n > other_max) | light)
         span, part = own_max - dark_n, own_max - lum
         dark = (span > 0) & (2 * part >= span) & (dark_n < FRINGE_STEP * other_min)
-    return np.where(bright | dark, nearest, d)
+    first = np.where(bright | dark, nearest, d)
+    # the light's tail: the same light clause, on the 3×3's depths after the rule above
+    en = _neighbourhood(first)
+    bright_n, own_min = np.full_like(d, -np.inf), lum.copy()
+    hi, hi2 = np.full_like(d, -np.inf), np.full_like(d, -np.inf)  # p's own surface, p excluded
+    for eq, lq in zip(en[1:], ln[1:]):
+        near = eq < MIXED_SAME_DEPTH * d
+        bright_n = np.where(near, np.maximum(bright_n, lq), bright_n)
+        own_min = np.where(near, own_min, np.minimum(own_min, lq))
+        hi2 = np.where(near, hi2, np.maximum(hi2, np.minimum(hi, lq)))
+        hi = np.where(near, hi, np.maximum(hi, lq))
+    with np.errstate(invalid="ignore"):
+        span, part = bright_n - own_min, lum - own_min
+        tail = ~(bright | dark) & (span > 0) & (2 * part * bright_n >= lum * span) \
+            & (bright_n > SAME_SOURCE * lum) & ((1 - FRINGE_STEP) * bright_n > np.maximum(own_min, 0)) \
+            & (part <= LIGHT_FRINGE * span) & (lum > SAME_SOURCE * hi2)
+    return np.where(tail, np.minimum.reduce(en), first)
 
 
 # ---------------------------------------------------------------------------------------------

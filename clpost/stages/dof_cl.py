@@ -1,7 +1,7 @@
 """OpenCL side of the dof stage: programs, per-resolution scratch buffers, kernel launches.
 
 Kept apart from :mod:`clpost.stages.dof` (formulas + float64 reference) so the oracle reads
-without OpenCL plumbing. Launch sequence: ``dof_despeckle`` and ``dof_coc`` (full res) → ``dof_prepare`` (padded working
+without OpenCL plumbing. Launch sequence: ``dof_despeckle``, ``dof_coc`` and ``dof_coc_tail`` (full res) → ``dof_prepare`` (padded working
 buffers = level 0) → ``dof_levels`` per prefiltered level → ``dof_tile_max`` →
 ``dof_tile_dilate`` → ``dof`` (the gather) → (half res) ``dof_upsample``. Final (mixed
 resolution, :data:`dof.MIXED`): the same up to the tile plan at full resolution (one level
@@ -222,6 +222,7 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
                             built=D.MIXED_FULL_LEVELS if mixed else None),
             "coc": rt.scratch(stage, "coc", (h, w)),
             "depth": rt.scratch(stage, "depth", (h, w)),
+            "moved": rt.scratch(stage, "moved", (h, -(-w // 16)), np.int32),
             "inv_area": np.float32(1.0 / D.aperture_area(camera.blades, camera.blade_rotation_deg,
                                                          camera.aperture_roundness)),
         }
@@ -241,9 +242,10 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     evs = []
     c["k"]["dof_despeckle"].set_args(src, aux["depth"], cache["depth"], i32(w), i32(h))
     evs.append(_launch_rows(rt, c["k"]["dof_despeckle"], (w, h)))
-    c["k"]["dof_coc"].set_args(src, cache["depth"], cache["coc"], i32(w), i32(h), f32(kc), f32(inv_u),
-                               f32(scale * rmax))
-    evs.append(_launch_rows(rt, c["k"]["dof_coc"], (w, h)))
+    for name in ("dof_coc", "dof_coc_tail"):
+        c["k"][name].set_args(src, cache["depth"], cache["coc"], cache["moved"], i32(w), i32(h), f32(kc),
+                              f32(inv_u), f32(scale * rmax))
+        evs.append(_launch_rows(rt, c["k"][name], (w, h)))
     evs += _enqueue_plan(rt, c, src, cache["coc"], w, h)
     if mixed:
         hc = cache["half"]
