@@ -258,10 +258,11 @@ inline float dof_coc_of(const float s, const float k, const float inv_u, const f
 /* 16 pixels of a row per work-item in explicit float16 (PoCL does not vectorise the per-pixel form;
  * docs/measurements.md#kernel-forms-on-pocl); groups of 16 touching the left/right edge or the
  * image's end take the per-pixel path (same formula). Launched over (ceil(width / 16), height).
- * moved[y * ceil(width / 16) + group]: whether the rule moved a pixel of the group (dof_coc_tail). */
+ * moved[y * ceil(width / 16) + group]: whether the rule moved a pixel of the group; e1: the group's
+ * depths after the rule, written only where it did (dof_coc_tail reads depth elsewhere). */
 __kernel void dof_coc(__global const float *restrict src, __global const float *restrict depth,
-                      __global float *restrict coc, __global int *restrict moved, const int width, const int height,
-                      const float k, const float inv_u, const float limit)
+                      __global float *restrict e1, __global float *restrict coc, __global int *restrict moved,
+                      const int width, const int height, const float k, const float inv_u, const float limit)
 {
     const int x = 16 * get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
@@ -308,6 +309,8 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
                                | ((sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min));
             s = select(d, nearest, take);
             any_take = any(take);
+            if (any_take)
+                vstore16(s, 0, e1 + i);
         }
         moved[flag] = any_take;
         const float16 inv_s = select(1.0f / s, (float16)(0.0f), isinf(s));
@@ -318,9 +321,18 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
     for (int xi = x; xi < min(x + 16, width); ++xi) {
         const float d = depth[(size_t)y * width + xi], s = dof_fringe_px(src, depth, xi, y, width, height);
         any_take |= s != d;
+        e1[(size_t)y * width + xi] = s;
         coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
     }
     moved[flag] = any_take;
+}
+
+/* A pixel's depth after the fringe rule (dof_coc): e1 in the groups of 16 it moved a pixel of, depth elsewhere. */
+inline float dof_e1(__global const float *depth, __global const float *e1, __global const int *moved,
+                    const int x, const int y, const int width)
+{
+    const size_t j = (size_t)y * width + x;
+    return moved[(size_t)y * ((width + 15) / 16) + x / 16] ? e1[j] : depth[j];
 }
 
 /* The light's tail (effective_depth's second clause): p, left at its own depth by the rule above,
@@ -329,12 +341,12 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
  * share above own_min clamped to 0, p at most DOF_LIGHT_FRINGE of it), brings half of p's light,
  * and p stands DOF_SAME_SOURCE x above every other pixel of its own surface but one (its twin).
  * Returns the depth (p's own when not). */
-inline float dof_tail_px(__global const float *src, __global const float *depth, const int x, const int y,
-                         const int width, const int height)
+inline float dof_tail_px(__global const float *src, __global const float *depth, __global const float *e1,
+                         __global const int *moved, const int x, const int y, const int width, const int height)
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float d = depth[i];
-    if (dof_fringe_px(src, depth, x, y, width, height) != d)
+    if (dof_e1(depth, e1, moved, x, y, width) != d)
         return d;  /* moved by the 3x3 rule: its CoC stands (the caller keeps it) */
     const float lum = dof_luma(src, i, n);
     float nearest = d, bright_n = -INFINITY, own_min = lum, hi = -INFINITY, hi2 = -INFINITY;
@@ -342,7 +354,7 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
         for (int a = -1; a <= 1; ++a) {
             if (a == 0 && b == 0) continue;
             const int xq = clamp(x + a, 0, width - 1), yq = clamp(y + b, 0, height - 1);
-            const float e = dof_fringe_px(src, depth, xq, yq, width, height);
+            const float e = dof_e1(depth, e1, moved, xq, yq, width);
             const float lq = dof_luma(src, (size_t)yq * width + xq, n);
             nearest = fmin(nearest, e);
             if (e < DOF_MIXED_SAME_DEPTH * d) {
@@ -360,26 +372,34 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
     return take ? nearest : d;
 }
 
-/* After dof_coc: the groups of 16 with no moved pixel in their own or the 8 neighbouring groups'
- * flags (nearly all) return at once; in the others each pixel takes the light's-tail test.
- * Launched over (ceil(width / 16), height). */
+/* After dof_coc, per 16 x DOF_TAIL_ROWS block (from dof_cl.TAIL_ROWS): a row whose own and neighbouring groups (3 x 3) the
+ * rule moved no pixel of (nearly all) is skipped on the flags alone; in the others each pixel takes
+ * the light's-tail test. Only a pixel with no moved neighbour is unchanged by it: the test on the
+ * raw depths is the rule's light clause, which left it. Launched over (ceil(width / 16),
+ * ceil(height / DOF_TAIL_ROWS)). */
 __kernel void dof_coc_tail(__global const float *restrict src, __global const float *restrict depth,
-                           __global float *restrict coc, __global const int *restrict moved,
-                           const int width, const int height, const float k, const float inv_u, const float limit)
+                           __global const float *restrict e1, __global float *restrict coc,
+                           __global const int *restrict moved, const int width, const int height,
+                           const float k, const float inv_u, const float limit)
 {
-    const int g = get_global_id(0), y = get_global_id(1), gw = (width + 15) / 16;
-    if (16 * g >= width || y >= height) return;
-    int near_moved = 0;
-    for (int b = max(y - 1, 0); b <= min(y + 1, height - 1); ++b)
-        for (int a = max(g - 1, 0); a <= min(g + 1, gw - 1); ++a)
-            near_moved |= moved[(size_t)b * gw + a];
-    if (!near_moved)
-        return;
-    for (int xi = 16 * g; xi < min(16 * g + 16, width); ++xi) {
-        const float d = depth[(size_t)y * width + xi], s = dof_tail_px(src, depth, xi, y, width, height);
-        if (s != d)
-            coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
+    const int g = get_global_id(0), y0 = DOF_TAIL_ROWS * get_global_id(1), gw = (width + 15) / 16;
+    if (16 * g >= width || y0 >= height) return;
+    const int ga = max(g - 1, 0), gb = min(g + 1, gw - 1), y1 = min(y0 + DOF_TAIL_ROWS, height);
+#define DOF_ROW_MOVED(r) (moved[(size_t)(r) * gw + ga] | moved[(size_t)(r) * gw + g] | moved[(size_t)(r) * gw + gb])
+    int prev = DOF_ROW_MOVED(max(y0 - 1, 0)), cur = DOF_ROW_MOVED(y0);
+    for (int y = y0; y < y1; ++y) {
+        const int next = DOF_ROW_MOVED(min(y + 1, height - 1));
+        if (prev | cur | next)
+            for (int xi = 16 * g; xi < min(16 * g + 16, width); ++xi) {
+                const float d = depth[(size_t)y * width + xi];
+                const float s = dof_tail_px(src, depth, e1, moved, xi, y, width, height);
+                if (s != d)
+                    coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
+            }
+        prev = cur;
+        cur = next;
     }
+#undef DOF_ROW_MOVED
 }
 
 /* Padded working buffers (level 0 of `lv`, see dof_levels.cl): colour = mean of the DOF_SCALE^2 block, CoC = nearest (min signed) of

@@ -29,6 +29,10 @@ from . import _field as fld
 from . import dof as D
 
 
+TAIL_ROWS = 16
+"""Rows of one ``dof_coc_tail`` work-item (its ``DOF_TAIL_ROWS``): 16 × 16 pixels read 54 group flags."""
+
+
 def _kernels(rt, defines):
     from ..runtime import kernel_source
 
@@ -212,7 +216,7 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     mixed = D.MIXED.get(stage.quality)
     w, h = frame.width, frame.height
     vec = gather_vector_width(rt)
-    defines = {**stage.defines(camera), "DOF_VEC": vec}
+    defines = {**stage.defines(camera), "DOF_VEC": vec, "DOF_TAIL_ROWS": TAIL_ROWS}
     key = (tuple(sorted(defines.items())), w, h, camera.blades, camera.blade_rotation_deg,
            camera.aperture_roundness)
 
@@ -223,6 +227,7 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
             "coc": rt.scratch(stage, "coc", (h, w)),
             "depth": rt.scratch(stage, "depth", (h, w)),
             "moved": rt.scratch(stage, "moved", (h, -(-w // 16)), np.int32),
+            "e1": rt.scratch(stage, "e1", (h, w)),
             "inv_area": np.float32(1.0 / D.aperture_area(camera.blades, camera.blade_rotation_deg,
                                                          camera.aperture_roundness)),
         }
@@ -242,10 +247,10 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     evs = []
     c["k"]["dof_despeckle"].set_args(src, aux["depth"], cache["depth"], i32(w), i32(h))
     evs.append(_launch_rows(rt, c["k"]["dof_despeckle"], (w, h)))
-    for name in ("dof_coc", "dof_coc_tail"):
-        c["k"][name].set_args(src, cache["depth"], cache["coc"], cache["moved"], i32(w), i32(h), f32(kc),
-                              f32(inv_u), f32(scale * rmax))
-        evs.append(_launch_rows(rt, c["k"][name], (w, h)))
+    for name, rows in (("dof_coc", h), ("dof_coc_tail", -(-h // TAIL_ROWS))):
+        c["k"][name].set_args(src, cache["depth"], cache["e1"], cache["coc"], cache["moved"], i32(w), i32(h),
+                              f32(kc), f32(inv_u), f32(scale * rmax))
+        evs.append(_launch_rows(rt, c["k"][name], (w, rows)))
     evs += _enqueue_plan(rt, c, src, cache["coc"], w, h)
     if mixed:
         hc = cache["half"]
