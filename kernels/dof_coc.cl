@@ -258,8 +258,8 @@ inline float dof_coc_of(const float s, const float k, const float inv_u, const f
 /* 16 pixels of a row per work-item in explicit float16 (PoCL does not vectorise the per-pixel form;
  * docs/measurements.md#kernel-forms-on-pocl); groups of 16 touching the left/right edge or the
  * image's end take the per-pixel path (same formula). Launched over (ceil(width / 16), height).
- * moved[y * ceil(width / 16) + group]: whether the rule moved a pixel of the group; e1: the group's
- * depths after the rule, written only where it did (dof_coc_tail reads depth elsewhere). */
+ * moved[y * ceil(width / 16) + group]: whether the rule moved a pixel of the group; e1: the depths
+ * after the rule (dof_coc_tail). */
 __kernel void dof_coc(__global const float *restrict src, __global const float *restrict depth,
                       __global float *restrict e1, __global float *restrict coc, __global int *restrict moved,
                       const int width, const int height, const float k, const float inv_u, const float limit)
@@ -309,10 +309,9 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
                                | ((sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min));
             s = select(d, nearest, take);
             any_take = any(take);
-            if (any_take)
-                vstore16(s, 0, e1 + i);
         }
         moved[flag] = any_take;
+        vstore16(s, 0, e1 + i);
         const float16 inv_s = select(1.0f / s, (float16)(0.0f), isinf(s));
         vstore16(clamp(k * (inv_u - inv_s), -limit, limit), 0, coc + i);
         return;
@@ -327,14 +326,6 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
     moved[flag] = any_take;
 }
 
-/* A pixel's depth after the fringe rule (dof_coc): e1 in the groups of 16 it moved a pixel of, depth elsewhere. */
-inline float dof_e1(__global const float *depth, __global const float *e1, __global const int *moved,
-                    const int x, const int y, const int width)
-{
-    const size_t j = (size_t)y * width + x;
-    return moved[(size_t)y * ((width + 15) / 16) + x / 16] ? e1[j] : depth[j];
-}
-
 /* The light's tail (effective_depth's second clause): p, left at its own depth by the rule above,
  * takes the nearest depth of its 3x3 after that rule when a neighbour at a near depth after it is a
  * light for p by the rule's light clause (more than DOF_SAME_SOURCE x p, its 1 - DOF_FRINGE_STEP
@@ -342,11 +333,11 @@ inline float dof_e1(__global const float *depth, __global const float *e1, __glo
  * and p stands DOF_SAME_SOURCE x above every other pixel of its own surface but one (its twin).
  * Returns the depth (p's own when not). */
 inline float dof_tail_px(__global const float *src, __global const float *depth, __global const float *e1,
-                         __global const int *moved, const int x, const int y, const int width, const int height)
+                         const int x, const int y, const int width, const int height)
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float d = depth[i];
-    if (dof_e1(depth, e1, moved, x, y, width) != d)
+    if (e1[i] != d)
         return d;  /* moved by the 3x3 rule: its CoC stands (the caller keeps it) */
     const float lum = dof_luma(src, i, n);
     float nearest = d, bright_n = -INFINITY, own_min = lum, hi = -INFINITY, hi2 = -INFINITY;
@@ -354,7 +345,7 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
         for (int a = -1; a <= 1; ++a) {
             if (a == 0 && b == 0) continue;
             const int xq = clamp(x + a, 0, width - 1), yq = clamp(y + b, 0, height - 1);
-            const float e = dof_e1(depth, e1, moved, xq, yq, width);
+            const float e = e1[(size_t)yq * width + xq];
             const float lq = dof_luma(src, (size_t)yq * width + xq, n);
             nearest = fmin(nearest, e);
             if (e < DOF_MIXED_SAME_DEPTH * d) {
@@ -372,32 +363,79 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
     return take ? nearest : d;
 }
 
-/* After dof_coc, per 16 x DOF_TAIL_ROWS block (from dof_cl.TAIL_ROWS): a row whose own and neighbouring groups (3 x 3) the
- * rule moved no pixel of (nearly all) is skipped on the flags alone; in the others each pixel takes
- * the light's-tail test. Only a pixel with no moved neighbour is unchanged by it: the test on the
- * raw depths is the rule's light clause, which left it. Launched over (ceil(width / 16),
- * ceil(height / DOF_TAIL_ROWS)). */
+/* After dof_coc, per 16 x DOF_TAIL_ROWS block (from dof_cl.TAIL_ROWS): a row whose own and
+ * neighbouring groups (3 x 3) the rule moved no pixel of (nearly all) is skipped on the flags alone:
+ * without a moved neighbour the test is the rule's light clause on the raw depths, which left p.
+ * The others take the light's-tail test in float16 (the groups at the left/right edge per pixel),
+ * first on depths alone (a lane needs a near neighbour after the rule), then on luminance.
+ * Launched over (ceil(width / 16), ceil(height / DOF_TAIL_ROWS)). */
 __kernel void dof_coc_tail(__global const float *restrict src, __global const float *restrict depth,
                            __global const float *restrict e1, __global float *restrict coc,
                            __global const int *restrict moved, const int width, const int height,
                            const float k, const float inv_u, const float limit)
 {
     const int g = get_global_id(0), y0 = DOF_TAIL_ROWS * get_global_id(1), gw = (width + 15) / 16;
-    if (16 * g >= width || y0 >= height) return;
+    const int x = 16 * g;
+    if (x >= width || y0 >= height) return;
     const int ga = max(g - 1, 0), gb = min(g + 1, gw - 1), y1 = min(y0 + DOF_TAIL_ROWS, height);
+    const size_t n = (size_t)width * height;
 #define DOF_ROW_MOVED(r) (moved[(size_t)(r) * gw + ga] | moved[(size_t)(r) * gw + g] | moved[(size_t)(r) * gw + gb])
     int prev = DOF_ROW_MOVED(max(y0 - 1, 0)), cur = DOF_ROW_MOVED(y0);
     for (int y = y0; y < y1; ++y) {
         const int next = DOF_ROW_MOVED(min(y + 1, height - 1));
-        if (prev | cur | next)
-            for (int xi = 16 * g; xi < min(16 * g + 16, width); ++xi) {
-                const float d = depth[(size_t)y * width + xi];
-                const float s = dof_tail_px(src, depth, e1, moved, xi, y, width, height);
-                if (s != d)
-                    coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
-            }
+        const int any_moved = prev | cur | next;
         prev = cur;
         cur = next;
+        if (!any_moved)
+            continue;
+        const size_t i = (size_t)y * width + x;
+        if (x >= 1 && x + 16 <= width - 1) {
+            const float16 d = vload16(0, depth + i), lim = DOF_MIXED_SAME_DEPTH * d;
+            const size_t rows[3] = {(size_t)max(y - 1, 0) * width + x, i, (size_t)min(y + 1, height - 1) * width + x};
+            const int16 keep = vload16(0, e1 + i) == d;  /* left at its depth by the rule */
+            float16 nearest = d;
+            int16 near_any = (int16)(0);
+#pragma unroll
+            for (int b = 0; b < 3; ++b)
+#pragma unroll
+                for (int a = -1; a <= 1; ++a) {
+                    if (a == 0 && b == 1) continue;
+                    const float16 e = vload16(0, e1 + rows[b] + a);
+                    nearest = fmin(nearest, e);
+                    near_any |= e < lim;
+                }
+            if (!any(keep & near_any))
+                continue;
+            const float16 lum = dof_luma16(src + i, n);
+            float16 bright_n = (float16)(-INFINITY), own_min = lum, hi = (float16)(-INFINITY), hi2 = hi;
+#pragma unroll
+            for (int b = 0; b < 3; ++b)
+#pragma unroll
+                for (int a = -1; a <= 1; ++a) {
+                    if (a == 0 && b == 1) continue;
+                    const float16 e = vload16(0, e1 + rows[b] + a), lq = dof_luma16(src + rows[b] + a, n);
+                    const int16 near = e < lim;
+                    bright_n = select(bright_n, fmax(bright_n, lq), near);
+                    own_min = select(fmin(own_min, lq), own_min, near);
+                    hi2 = select(fmax(hi2, fmin(hi, lq)), hi2, near);
+                    hi = select(fmax(hi, lq), hi, near);
+                }
+            const float16 sb = bright_n - own_min, pb = lum - own_min;
+            const int16 take = keep & (sb > 0.0f) & (2.0f * pb * bright_n >= lum * sb)
+                               & (bright_n > DOF_SAME_SOURCE * lum)
+                               & ((1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f))
+                               & (pb <= DOF_LIGHT_FRINGE * sb) & (lum > DOF_SAME_SOURCE * hi2);
+            if (any(take)) {
+                const float16 inv_s = select(1.0f / nearest, (float16)(0.0f), isinf(nearest));
+                vstore16(select(vload16(0, coc + i), clamp(k * (inv_u - inv_s), -limit, limit), take), 0, coc + i);
+            }
+            continue;
+        }
+        for (int xi = x; xi < min(x + 16, width); ++xi) {
+            const float d = depth[(size_t)y * width + xi], s = dof_tail_px(src, depth, e1, xi, y, width, height);
+            if (s != d)
+                coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
+        }
     }
 #undef DOF_ROW_MOVED
 }

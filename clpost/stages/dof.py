@@ -435,7 +435,21 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     holds p takes the nearest depth of its 3×3. The depth is first despeckled
     (:func:`despeckle_depth`). With :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are
     written without a division. A depth only ever moves nearer; a pixel with no near neighbour
-    keeps its own."""
+    keeps its own.
+
+    The light's *tail*: a pixel left at its own depth takes the nearest depth of its 3×3 *after*
+    the rule above when the brightest neighbour that is near after it (:math:`Y_n`; :math:`Y_f`
+    the darkest of the rest and p) is a light for p by the light clause (:math:`Y_n >`
+    :data:`SAME_SOURCE` :math:`Y_p`, its 5 % above :math:`\max(Y_f, 0)`, :math:`\alpha \le`
+    :data:`LIGHT_FRINGE`), brings at least half of p's light (:math:`\alpha Y_n \ge \tfrac12
+    Y_p`), and p is more than :data:`SAME_SOURCE`× the second-brightest other pixel of its own
+    surface (a light's tail sample, or two side by side; a texel of a textured surface has others
+    as bright). The reach, two pixels past a depth sample, is the pixel filter's: Cycles' default
+    Blackman–Harris of width 1.5 px samples offsets up to ±1.5 px (its table spans twice the width),
+    so a lamp's light lands up to 2 pixels from any pixel it covers — as single samples
+    (docs/fidelity.md, "In-focus halos"). Without a neighbour moved by the rule the test is the
+    light clause on the raw depths, which p failed: only pixels next to moved ones can change
+    (the kernel skips the rest on per-group flags)."""
     d = despeckle_depth(color, depth, luma)
     lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
     dn, ln = _neighbourhood(d), _neighbourhood(lum)
@@ -458,7 +472,7 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
         span, part = own_max - dark_n, own_max - lum
         dark = (span > 0) & (2 * part >= span) & (dark_n < FRINGE_STEP * other_min)
     first = np.where(bright | dark, nearest, d)
-    # the light's tail: the same light clause, on the 3×3's depths after the rule above
+    # the light's tail (docstring): the light clause on the 3×3's depths after the rule above
     en = _neighbourhood(first)
     bright_n, own_min = np.full_like(d, -np.inf), lum.copy()
     hi, hi2 = np.full_like(d, -np.inf), np.full_like(d, -np.inf)  # p's own surface, p excluded
