@@ -367,7 +367,8 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
  * neighbouring groups (3 x 3) the rule moved no pixel of (nearly all) is skipped on the flags alone:
  * without a moved neighbour the test is the rule's light clause on the raw depths, which left p.
  * The others take the light's-tail test in float16 (the groups at the left/right edge per pixel),
- * first on depths alone (a lane needs a near neighbour after the rule), then on luminance.
+ * first on depths alone (a lane needs a neighbour the rule moved to a depth near for p: without one
+ * the test is the light clause again), then on luminance.
  * Launched over (ceil(width / 16), ceil(height / DOF_TAIL_ROWS)). */
 __kernel void dof_coc_tail(__global const float *restrict src, __global const float *restrict depth,
                            __global const float *restrict e1, __global float *restrict coc,
@@ -402,7 +403,7 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
                     if (a == 0 && b == 1) continue;
                     const float16 e = vload16(0, e1 + rows[b] + a);
                     nearest = fmin(nearest, e);
-                    near_any |= e < lim;
+                    near_any |= (e < lim) & (e != vload16(0, depth + rows[b] + a));
                 }
             if (!any(keep & near_any))
                 continue;
