@@ -330,7 +330,8 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
  * takes the nearest depth of its 3x3 after that rule when a neighbour at a near depth after it is a
  * light for p by the rule's light clause (more than DOF_SAME_SOURCE x p, its 1 - DOF_FRINGE_STEP
  * share above own_min clamped to 0, p at most DOF_LIGHT_FRINGE of it), brings half of p's light,
- * and p stands DOF_SAME_SOURCE x above every other pixel of its own surface but one (its twin).
+ * and p stands DOF_SAME_SOURCE x above every other pixel of its own surface but two (tail samples
+ * beside it along the light's edge).
  * Returns the depth (p's own when not). */
 inline float dof_tail_px(__global const float *src, __global const float *depth, __global const float *e1,
                          const int x, const int y, const int width, const int height)
@@ -339,8 +340,16 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
     const float d = depth[i];
     if (e1[i] != d)
         return d;  /* moved by the 3x3 rule: its CoC stands (the caller keeps it) */
+    int moved_near = 0;  /* a neighbour the rule moved to a depth near for p (else the light clause again) */
+    for (int b = -1; b <= 1; ++b)
+        for (int a = -1; a <= 1; ++a) {
+            const size_t j = (size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1);
+            moved_near |= e1[j] < DOF_MIXED_SAME_DEPTH * d && e1[j] != depth[j];
+        }
+    if (!moved_near)
+        return d;
     const float lum = dof_luma(src, i, n);
-    float nearest = d, bright_n = -INFINITY, own_min = lum, hi = -INFINITY, hi2 = -INFINITY;
+    float nearest = d, bright_n = -INFINITY, own_min = lum, hi = -INFINITY, hi2 = -INFINITY, hi3 = -INFINITY;
     for (int b = -1; b <= 1; ++b)
         for (int a = -1; a <= 1; ++a) {
             if (a == 0 && b == 0) continue;
@@ -352,6 +361,7 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
                 bright_n = fmax(bright_n, lq);
             } else {
                 own_min = fmin(own_min, lq);
+                hi3 = fmax(hi3, fmin(hi2, lq));
                 hi2 = fmax(hi2, fmin(hi, lq));
                 hi = fmax(hi, lq);
             }
@@ -359,7 +369,7 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
     const float sb = bright_n - own_min, pb = lum - own_min;
     const int take = sb > 0.0f && 2.0f * pb * bright_n >= lum * sb && bright_n > DOF_SAME_SOURCE * lum
                      && (1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f) && pb <= DOF_LIGHT_FRINGE * sb
-                     && lum > DOF_SAME_SOURCE * hi2;
+                     && lum > DOF_SAME_SOURCE * hi3;
     return take ? nearest : d;
 }
 
@@ -408,7 +418,7 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
             if (!any(keep & near_any))
                 continue;
             const float16 lum = dof_luma16(src + i, n);
-            float16 bright_n = (float16)(-INFINITY), own_min = lum, hi = (float16)(-INFINITY), hi2 = hi;
+            float16 bright_n = (float16)(-INFINITY), own_min = lum, hi = (float16)(-INFINITY), hi2 = hi, hi3 = hi;
 #pragma unroll
             for (int b = 0; b < 3; ++b)
 #pragma unroll
@@ -418,6 +428,7 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
                     const int16 near = e < lim;
                     bright_n = select(bright_n, fmax(bright_n, lq), near);
                     own_min = select(fmin(own_min, lq), own_min, near);
+                    hi3 = select(fmax(hi3, fmin(hi2, lq)), hi3, near);
                     hi2 = select(fmax(hi2, fmin(hi, lq)), hi2, near);
                     hi = select(fmax(hi, lq), hi, near);
                 }
@@ -425,7 +436,7 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
             const int16 take = keep & (sb > 0.0f) & (2.0f * pb * bright_n >= lum * sb)
                                & (bright_n > DOF_SAME_SOURCE * lum)
                                & ((1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f))
-                               & (pb <= DOF_LIGHT_FRINGE * sb) & (lum > DOF_SAME_SOURCE * hi2);
+                               & (pb <= DOF_LIGHT_FRINGE * sb) & (lum > DOF_SAME_SOURCE * hi3);
             if (any(take)) {
                 const float16 inv_s = select(1.0f / nearest, (float16)(0.0f), isinf(nearest));
                 vstore16(select(vload16(0, coc + i), clamp(k * (inv_u - inv_s), -limit, limit), take), 0, coc + i);
