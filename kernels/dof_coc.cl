@@ -258,7 +258,7 @@ inline float dof_coc_of(const float s, const float k, const float inv_u, const f
 /* 16 pixels of a row per work-item in explicit float16 (PoCL does not vectorise the per-pixel form;
  * docs/measurements.md#kernel-forms-on-pocl); groups of 16 touching the left/right edge or the
  * image's end take the per-pixel path (same formula). Launched over (ceil(width / 16), height).
- * moved[y * ceil(width / 16) + group]: whether the rule moved a pixel of the group; e1: the depths
+ * moved[y * ceil(width / 16) + group]: the lanes (bit l: pixel x + l) the rule moved; e1: the depths
  * after the rule (dof_coc_tail). */
 __kernel void dof_coc(__global const float *restrict src, __global const float *restrict depth,
                       __global float *restrict e1, __global float *restrict coc, __global int *restrict moved,
@@ -308,7 +308,13 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
                                       & (pb <= DOF_LIGHT_FRINGE * sb))))
                                | ((sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min));
             s = select(d, nearest, take);
-            any_take = any(take);
+            /* lane l's bit: 1 << l */
+            const int16 bit = take & (int16)(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192,
+                                             16384, 32768);
+            const int8 b8 = bit.lo | bit.hi;
+            const int4 b4 = b8.lo | b8.hi;
+            const int2 b2 = b4.lo | b4.hi;
+            any_take = b2.x | b2.y;
         }
         moved[flag] = any_take;
         vstore16(s, 0, e1 + i);
@@ -319,7 +325,7 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
     int any_take = 0;
     for (int xi = x; xi < min(x + 16, width); ++xi) {
         const float d = depth[(size_t)y * width + xi], s = dof_fringe_px(src, depth, xi, y, width, height);
-        any_take |= s != d;
+        any_take |= (s != d) << (xi - x);
         e1[(size_t)y * width + xi] = s;
         coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
     }
@@ -373,13 +379,14 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
     return take ? nearest : d;
 }
 
-/* After dof_coc, per 16 x DOF_TAIL_ROWS block (from dof_cl.TAIL_ROWS): a row whose own and
- * neighbouring groups (3 x 3) the rule moved no pixel of (nearly all) is skipped on the flags alone:
- * without a moved neighbour the test is the rule's light clause on the raw depths, which left p.
- * The others take the light's-tail test in float16 (the groups at the left/right edge per pixel),
- * first on depths alone (a lane needs a neighbour the rule moved to a depth near for p: without one
- * the test is the light clause again), then on luminance.
- * Launched over (ceil(width / 16), ceil(height / DOF_TAIL_ROWS)). */
+/* After dof_coc, per 16 x DOF_TAIL_ROWS block (from dof_cl.TAIL_ROWS), from the moved-lane masks
+ * of its own and neighbouring groups (3 x 3): a pixel with no moved neighbour is skipped — without
+ * one the test is the rule's light clause on the raw depths, which left it. In a group inside the
+ * image the 18 columns x - 1 .. x + 16 of the three rows' masks, dilated by one column, are each
+ * lane's moved neighbours: rows with none (nearly all) load nothing else; the others take the
+ * light's-tail test in float16, first on depths alone (a neighbour moved to a depth near for the
+ * lane), then on luminance. The groups at the left/right edge go per pixel when their 3 x 3 groups
+ * moved any pixel. Launched over (ceil(width / 16), ceil(height / DOF_TAIL_ROWS)). */
 __kernel void dof_coc_tail(__global const float *restrict src, __global const float *restrict depth,
                            __global const float *restrict e1, __global float *restrict coc,
                            __global const int *restrict moved, const int width, const int height,
@@ -389,15 +396,18 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
     const int x = 16 * g;
     if (x >= width || y0 >= height) return;
     const int ga = max(g - 1, 0), gb = min(g + 1, gw - 1), y1 = min(y0 + DOF_TAIL_ROWS, height);
+    const int inner = x >= 1 && x + 16 <= width - 1;
     const size_t n = (size_t)width * height;
-#define DOF_ROW_MOVED(r) (moved[(size_t)(r) * gw + ga] | moved[(size_t)(r) * gw + g] | moved[(size_t)(r) * gw + gb])
+    /* row r's moved columns x - 1 .. x + 16 as bits 0 .. 17 (the groups beside exist in an inner group) */
+#define DOF_ROW_MOVED(r) ((moved[(size_t)(r) * gw + ga] >> 15 & 1) | moved[(size_t)(r) * gw + g] << 1 \
+                          | (moved[(size_t)(r) * gw + gb] & 1) << 17)
     int prev = DOF_ROW_MOVED(max(y0 - 1, 0)), cur = DOF_ROW_MOVED(y0);
     for (int y = y0; y < y1; ++y) {
         const int next = DOF_ROW_MOVED(min(y + 1, height - 1));
-        const int any_moved = prev | cur | next;
+        const int w3 = prev | cur | next, lanes = (w3 | w3 >> 1 | w3 >> 2) & 0xffff;
         prev = cur;
         cur = next;
-        if (!any_moved)
+        if (!(inner ? lanes : w3))
             continue;
         const size_t i = (size_t)y * width + x;
         if (x >= 1 && x + 16 <= width - 1) {
