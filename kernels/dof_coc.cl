@@ -19,19 +19,20 @@ inline float dof_luma(__global const float *src, const size_t i, const size_t n)
  * by more than 1 - DOF_FRINGE_STEP (other_min/other_max: p's own surface without p) or, the bright
  * one, is a light above DOF_SAME_SOURCE x p whose 1 - DOF_FRINGE_STEP share is above own_min (clamped
  * to 0) and that covers at most DOF_LIGHT_FRINGE of p (an own pixel as bright is that light's twin).
- * Both tests without a division; `span > 0` also rejects "no near neighbour" (+-inf). */
-inline float dof_fringe_depth(const float d, const float lum, const float nearest, const float bright_n,
-                              const float dark_n, const float other_min, const float other_max)
+ * Both tests without a division; `span > 0` also rejects "no near neighbour" (+-inf). Returns 2 when
+ * the bright hypothesis takes the nearest depth, 1 when only the dark one does, 0 when neither. */
+inline int dof_fringe_take(const float lum, const float bright_n, const float dark_n, const float other_min,
+                           const float other_max)
 {
     const float own_min = fmin(other_min, lum), own_max = fmax(other_max, lum);
     const float sb = bright_n - own_min, pb = lum - own_min;
     const float sd = own_max - dark_n, pd = own_max - lum;
-    const int take = (sb > 0.0f && (2.0f * pb >= sb || 2.0f * pb * bright_n >= lum * sb)
-                      && (DOF_FRINGE_STEP * bright_n > other_max
-                          || (bright_n > DOF_SAME_SOURCE * lum && (1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f)
-                              && pb <= DOF_LIGHT_FRINGE * sb)))
-                     || (sd > 0.0f && 2.0f * pd >= sd && dark_n < DOF_FRINGE_STEP * other_min);
-    return take ? nearest : d;
+    if (sb > 0.0f && (2.0f * pb >= sb || 2.0f * pb * bright_n >= lum * sb)
+        && (DOF_FRINGE_STEP * bright_n > other_max
+            || (bright_n > DOF_SAME_SOURCE * lum && (1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f)
+                && pb <= DOF_LIGHT_FRINGE * sb)))
+        return 2;
+    return sd > 0.0f && 2.0f * pd >= sd && dark_n < DOF_FRINGE_STEP * other_min;
 }
 
 inline float16 dof_luma16(__global const float *p, const size_t n) {
@@ -224,10 +225,10 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
 }
 #undef DOF_SORT2
 
-/* The effective depth of one pixel by the fringe rule above (effective_depth's 3x3 rule).
- * Neighbour rows/columns clamped to the image. */
+/* The effective depth of one pixel by the fringe rule above (effective_depth's 3x3 rule); *bright:
+ * whether its bright hypothesis moved it. Neighbour rows/columns clamped to the image. */
 inline float dof_fringe_px(__global const float *src, __global const float *depth, const int x, const int y,
-                           const int width, const int height)
+                           const int width, const int height, int *bright)
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float d = depth[i];
@@ -247,7 +248,9 @@ inline float dof_fringe_px(__global const float *src, __global const float *dept
                 other_max = fmax(other_max, lq);
             }
         }
-    return dof_fringe_depth(d, lum, nearest, bright_n, dark_n, other_min, other_max);
+    const int take = dof_fringe_take(lum, bright_n, dark_n, other_min, other_max);
+    *bright = take == 2;
+    return take ? nearest : d;
 }
 
 inline float dof_coc_of(const float s, const float k, const float inv_u, const float limit) {
@@ -258,8 +261,8 @@ inline float dof_coc_of(const float s, const float k, const float inv_u, const f
 /* 16 pixels of a row per work-item in explicit float16 (PoCL does not vectorise the per-pixel form;
  * docs/measurements.md#kernel-forms-on-pocl); groups of 16 touching the left/right edge or the
  * image's end take the per-pixel path (same formula). Launched over (ceil(width / 16), height).
- * moved[y * ceil(width / 16) + group]: the lanes (bit l: pixel x + l) the rule moved; e1: the depths
- * after the rule (dof_coc_tail). */
+ * moved[y * ceil(width / 16) + group]: the lanes (bit l: pixel x + l) the rule's bright hypothesis
+ * moved; e1: the depths after the rule (dof_coc_tail). */
 __kernel void dof_coc(__global const float *restrict src, __global const float *restrict depth,
                       __global float *restrict e1, __global float *restrict coc, __global int *restrict moved,
                       const int width, const int height, const float k, const float inv_u, const float limit)
@@ -301,15 +304,15 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
             const float16 own_min = fmin(other_min, lum), own_max = fmax(other_max, lum);
             const float16 sb = bright_n - own_min, pb = lum - own_min;
             const float16 sd = own_max - dark_n, pd = own_max - lum;
-            const int16 take = ((sb > 0.0f) & ((2.0f * pb >= sb) | (2.0f * pb * bright_n >= lum * sb))
-                                & ((DOF_FRINGE_STEP * bright_n > other_max)
-                                   | ((bright_n > DOF_SAME_SOURCE * lum)
-                                      & ((1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f))
-                                      & (pb <= DOF_LIGHT_FRINGE * sb))))
-                               | ((sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min));
-            s = select(d, nearest, take);
-            /* lane l's bit: 1 << l */
-            const int16 bit = take & (int16)(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192,
+            const int16 take_b = (sb > 0.0f) & ((2.0f * pb >= sb) | (2.0f * pb * bright_n >= lum * sb))
+                                 & ((DOF_FRINGE_STEP * bright_n > other_max)
+                                    | ((bright_n > DOF_SAME_SOURCE * lum)
+                                       & ((1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f))
+                                       & (pb <= DOF_LIGHT_FRINGE * sb)));
+            const int16 take_d = (sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min);
+            s = select(d, nearest, take_b | take_d);
+            /* the bright hypothesis's lanes: bit l for lane l */
+            const int16 bit = take_b & (int16)(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192,
                                              16384, 32768);
             const int8 b8 = bit.lo | bit.hi;
             const int4 b4 = b8.lo | b8.hi;
@@ -324,8 +327,9 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
     }
     int any_take = 0;
     for (int xi = x; xi < min(x + 16, width); ++xi) {
-        const float d = depth[(size_t)y * width + xi], s = dof_fringe_px(src, depth, xi, y, width, height);
-        any_take |= (s != d) << (xi - x);
+        int bright;
+        const float s = dof_fringe_px(src, depth, xi, y, width, height, &bright);
+        any_take |= bright << (xi - x);
         e1[(size_t)y * width + xi] = s;
         coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
     }
@@ -333,24 +337,28 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
 }
 
 /* The light's tail (effective_depth's second clause): p, left at its own depth by the rule above,
- * takes the nearest depth of its 3x3 after that rule when a neighbour at a near depth after it is a
- * light for p by the rule's light clause (more than DOF_SAME_SOURCE x p, its 1 - DOF_FRINGE_STEP
- * share above own_min clamped to 0, p at most DOF_LIGHT_FRINGE of it), brings half of p's light,
- * and p stands DOF_SAME_SOURCE x above every other pixel of its own surface but two (tail samples
- * beside it along the light's edge).
- * Returns the depth (p's own when not). */
+ * takes the nearest depth of its 3x3 after that rule's bright hypothesis when a neighbour at a near
+ * depth after it is a light for p by the rule's light clause (more than DOF_SAME_SOURCE x p, its
+ * 1 - DOF_FRINGE_STEP share above own_min clamped to 0, p at most DOF_LIGHT_FRINGE of it), brings
+ * half of p's light, and p stands DOF_SAME_SOURCE x above every other pixel of its own surface but
+ * two (tail samples beside it along the light's edge). Returns the depth (p's own when not). */
 inline float dof_tail_px(__global const float *src, __global const float *depth, __global const float *e1,
-                         const int x, const int y, const int width, const int height)
+                         __global const int *moved, const int x, const int y, const int width, const int height)
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float d = depth[i];
     if (e1[i] != d)
         return d;  /* moved by the 3x3 rule: its CoC stands (the caller keeps it) */
-    int moved_near = 0;  /* a neighbour the rule moved to a depth near for p (else the light clause again) */
+    const int gw = (width + 15) / 16;
+    /* a neighbour's depth after the bright hypothesis: e1 where it moved the pixel, depth elsewhere */
+#define DOF_E1B(xq, yq) ((moved[(size_t)(yq) * gw + (xq) / 16] >> ((xq) & 15) & 1) \
+                         ? e1[(size_t)(yq) * width + (xq)] : depth[(size_t)(yq) * width + (xq)])
+    int moved_near = 0;  /* a neighbour it moved to a depth near for p (else the light clause again) */
     for (int b = -1; b <= 1; ++b)
         for (int a = -1; a <= 1; ++a) {
-            const size_t j = (size_t)clamp(y + b, 0, height - 1) * width + clamp(x + a, 0, width - 1);
-            moved_near |= e1[j] < DOF_MIXED_SAME_DEPTH * d && e1[j] != depth[j];
+            const int xq = clamp(x + a, 0, width - 1), yq = clamp(y + b, 0, height - 1);
+            const size_t j = (size_t)yq * width + xq;
+            moved_near |= DOF_E1B(xq, yq) < DOF_MIXED_SAME_DEPTH * d && DOF_E1B(xq, yq) != depth[j];
         }
     if (!moved_near)
         return d;
@@ -360,7 +368,7 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
         for (int a = -1; a <= 1; ++a) {
             if (a == 0 && b == 0) continue;
             const int xq = clamp(x + a, 0, width - 1), yq = clamp(y + b, 0, height - 1);
-            const float e = e1[(size_t)yq * width + xq];
+            const float e = DOF_E1B(xq, yq);
             const float lq = dof_luma(src, (size_t)yq * width + xq, n);
             nearest = fmin(nearest, e);
             if (e < DOF_MIXED_SAME_DEPTH * d) {
@@ -377,16 +385,18 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
                      && (1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f) && pb <= DOF_LIGHT_FRINGE * sb
                      && lum > DOF_SAME_SOURCE * hi3;
     return take ? nearest : d;
+#undef DOF_E1B
 }
 
-/* After dof_coc, per 16 x DOF_TAIL_ROWS block (from dof_cl.TAIL_ROWS), from the moved-lane masks
- * of its own and neighbouring groups (3 x 3): a pixel with no moved neighbour is skipped — without
- * one the test is the rule's light clause on the raw depths, which left it. In a group inside the
- * image the 18 columns x - 1 .. x + 16 of the three rows' masks, dilated by one column, are each
- * lane's moved neighbours: rows with none (nearly all) load nothing else; the others take the
- * light's-tail test in float16, first on depths alone (a neighbour moved to a depth near for the
- * lane), then on luminance. The groups at the left/right edge go per pixel when their 3 x 3 groups
- * moved any pixel. Launched over (ceil(width / 16), ceil(height / DOF_TAIL_ROWS)). */
+/* After dof_coc, per 16 x DOF_TAIL_ROWS block (from dof_cl.TAIL_ROWS), from the masks of the lanes
+ * the rule's bright hypothesis moved in its own and neighbouring groups (3 x 3): a pixel with no such
+ * neighbour is skipped — without one the test is the rule's light clause on the raw depths, which
+ * left it (a dark-moved neighbour counts at its own depth: a dark near surface is no light). In a
+ * group inside the image the 18 columns x - 1 .. x + 16 of the three rows' masks, dilated by one
+ * column, are each lane's moved neighbours: rows with none (nearly all) load nothing else; the
+ * others take the light's-tail test in float16, first on depths alone (a neighbour moved to a depth
+ * near for the lane), then on luminance. The groups at the left/right edge go per pixel when their
+ * 3 x 3 groups have a moved pixel. Launched over (ceil(width / 16), ceil(height / DOF_TAIL_ROWS)). */
 __kernel void dof_coc_tail(__global const float *restrict src, __global const float *restrict depth,
                            __global const float *restrict e1, __global float *restrict coc,
                            __global const int *restrict moved, const int width, const int height,
@@ -405,6 +415,7 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
     for (int y = y0; y < y1; ++y) {
         const int next = DOF_ROW_MOVED(min(y + 1, height - 1));
         const int w3 = prev | cur | next, lanes = (w3 | w3 >> 1 | w3 >> 2) & 0xffff;
+        const int wr[3] = {prev, cur, next};
         prev = cur;
         cur = next;
         if (!(inner ? lanes : w3))
@@ -414,6 +425,7 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
             const float16 d = vload16(0, depth + i), lim = DOF_MIXED_SAME_DEPTH * d;
             const size_t rows[3] = {(size_t)max(y - 1, 0) * width + x, i, (size_t)min(y + 1, height - 1) * width + x};
             const int16 keep = vload16(0, e1 + i) == d;  /* left at its depth by the rule */
+            const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
             float16 nearest = d;
             int16 near_any = (int16)(0);
 #pragma unroll
@@ -421,9 +433,10 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
 #pragma unroll
                 for (int a = -1; a <= 1; ++a) {
                     if (a == 0 && b == 1) continue;
-                    const float16 e = vload16(0, e1 + rows[b] + a);
+                    const int16 mb = -(((int16)(wr[b] >> (1 + a)) >> lane) & 1);
+                    const float16 e = select(vload16(0, depth + rows[b] + a), vload16(0, e1 + rows[b] + a), mb);
                     nearest = fmin(nearest, e);
-                    near_any |= (e < lim) & (e != vload16(0, depth + rows[b] + a));
+                    near_any |= mb & (e < lim);
                 }
             if (!any(keep & near_any))
                 continue;
@@ -434,7 +447,9 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
 #pragma unroll
                 for (int a = -1; a <= 1; ++a) {
                     if (a == 0 && b == 1) continue;
-                    const float16 e = vload16(0, e1 + rows[b] + a), lq = dof_luma16(src + rows[b] + a, n);
+                    const int16 mb = -(((int16)(wr[b] >> (1 + a)) >> lane) & 1);
+                    const float16 e = select(vload16(0, depth + rows[b] + a), vload16(0, e1 + rows[b] + a), mb);
+                    const float16 lq = dof_luma16(src + rows[b] + a, n);
                     const int16 near = e < lim;
                     bright_n = select(bright_n, fmax(bright_n, lq), near);
                     own_min = select(fmin(own_min, lq), own_min, near);
@@ -454,7 +469,7 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
             continue;
         }
         for (int xi = x; xi < min(x + 16, width); ++xi) {
-            const float d = depth[(size_t)y * width + xi], s = dof_tail_px(src, depth, e1, xi, y, width, height);
+            const float d = depth[(size_t)y * width + xi], s = dof_tail_px(src, depth, e1, moved, xi, y, width, height);
             if (s != d)
                 coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
         }

@@ -438,7 +438,8 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     keeps its own.
 
     The light's *tail*: a pixel left at its own depth takes the nearest depth of its 3×3 *after*
-    the rule above when the brightest neighbour that is near after it (:math:`Y_n`; :math:`Y_f`
+    the rule's bright hypothesis (a dark near surface is no light: a pixel it moved counts at its
+    own depth) when the brightest neighbour that is near after it (:math:`Y_n`; :math:`Y_f`
     the darkest of the rest and p) is a light for p by the light clause (:math:`Y_n >`
     :data:`SAME_SOURCE` :math:`Y_p`, its 5 % above :math:`\max(Y_f, 0)`, :math:`\alpha \le`
     :data:`LIGHT_FRINGE`), brings at least half of p's light (:math:`\alpha Y_n \ge \tfrac12
@@ -447,7 +448,7 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     a textured surface has more as bright). The reach, two pixels past a depth sample, is the pixel filter's: Cycles' default
     Blackman–Harris of width 1.5 px samples offsets up to ±1.5 px (its table spans twice the width),
     so a lamp's light lands up to 2 pixels from any pixel it covers — as single samples
-    (docs/fidelity.md, "In-focus halos"). Without a neighbour moved by the rule the test is the
+    (docs/fidelity.md, "In-focus halos"). Without a neighbour moved by the bright hypothesis the test is the
     light clause on the raw depths, which p failed: only pixels next to moved ones can change
     (the kernel skips the rest on per-group flags)."""
     d = despeckle_depth(color, depth, luma)
@@ -472,8 +473,8 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
         span, part = own_max - dark_n, own_max - lum
         dark = (span > 0) & (2 * part >= span) & (dark_n < FRINGE_STEP * other_min)
     first = np.where(bright | dark, nearest, d)
-    # the light's tail (docstring): the light clause on the 3×3's depths after the rule above
-    en = _neighbourhood(first)
+    # the light's tail (docstring): the light clause on the 3×3's depths after the rule's bright hypothesis
+    en = _neighbourhood(np.where(bright, nearest, d))
     bright_n, own_min = np.full_like(d, -np.inf), lum.copy()
     hi, hi2, hi3 = (np.full_like(d, -np.inf) for _ in range(3))  # p's own surface, p excluded
     for eq, lq in zip(en[1:], ln[1:]):
