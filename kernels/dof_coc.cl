@@ -261,10 +261,11 @@ inline float dof_coc_of(const float s, const float k, const float inv_u, const f
 /* 16 pixels of a row per work-item in explicit float16 (PoCL does not vectorise the per-pixel form;
  * docs/measurements.md#kernel-forms-on-pocl); groups of 16 touching the left/right edge or the
  * image's end take the per-pixel path (same formula). Launched over (ceil(width / 16), height).
- * moved[y * ceil(width / 16) + group]: the lanes (bit l: pixel x + l) the rule's bright hypothesis
- * moved; e1: the depths after the rule (dof_coc_tail). */
+ * moved[y * ceil(width / 16) + group]: bit l, the rule's bright hypothesis moved pixel x + l; bit
+ * 16 + l, the rule moved it; e1: the depths after the rule, written in the groups it moved a pixel of
+ * (dof_coc_tail). */
 __kernel void dof_coc(__global const float *restrict src, __global const float *restrict depth,
-                      __global float *restrict e1, __global float *restrict coc, __global int *restrict moved,
+                      __global float *restrict e1, __global float *restrict coc, __global uint *restrict moved,
                       const int width, const int height, const float k, const float inv_u, const float limit)
 {
     const int x = 16 * get_global_id(0), y = get_global_id(1);
@@ -282,7 +283,7 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
             for (int a = -1; a <= 1; ++a)
                 nearest = fmin(nearest, vload16(0, depth + rows[b] + a));
         float16 s = d;
-        int any_take = 0;
+        uint any_take = 0;
         /* no depth step in any of the 16 neighbourhoods (most of an image): no colour test */
         if (any(nearest < near_lim)) {
             const float16 lum = dof_luma16(src + i, n);
@@ -311,25 +312,26 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
                                        & (pb <= DOF_LIGHT_FRINGE * sb)));
             const int16 take_d = (sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min);
             s = select(d, nearest, take_b | take_d);
-            /* the bright hypothesis's lanes: bit l for lane l */
-            const int16 bit = take_b & (int16)(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192,
-                                             16384, 32768);
-            const int8 b8 = bit.lo | bit.hi;
-            const int4 b4 = b8.lo | b8.hi;
-            const int2 b2 = b4.lo | b4.hi;
+            /* bit l: lane l moved by the bright hypothesis; bit 16 + l: moved at all */
+            const int16 pow2 = (int16)(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192, 16384, 32768);
+            const uint16 bit = convert_uint16(take_b & pow2) | convert_uint16((take_b | take_d) & pow2) << 16;
+            const uint8 b8 = bit.lo | bit.hi;
+            const uint4 b4 = b8.lo | b8.hi;
+            const uint2 b2 = b4.lo | b4.hi;
             any_take = b2.x | b2.y;
+            if (any_take)
+                vstore16(s, 0, e1 + i);
         }
         moved[flag] = any_take;
-        vstore16(s, 0, e1 + i);
         const float16 inv_s = select(1.0f / s, (float16)(0.0f), isinf(s));
         vstore16(clamp(k * (inv_u - inv_s), -limit, limit), 0, coc + i);
         return;
     }
-    int any_take = 0;
+    uint any_take = 0;
     for (int xi = x; xi < min(x + 16, width); ++xi) {
         int bright;
         const float s = dof_fringe_px(src, depth, xi, y, width, height, &bright);
-        any_take |= bright << (xi - x);
+        any_take |= (uint)bright << (xi - x) | (uint)(s != depth[(size_t)y * width + xi]) << (16 + xi - x);
         e1[(size_t)y * width + xi] = s;
         coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
     }
@@ -343,13 +345,13 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
  * half of p's light, and p stands DOF_SAME_SOURCE x above every other pixel of its own surface but
  * two (tail samples beside it along the light's edge). Returns the depth (p's own when not). */
 inline float dof_tail_px(__global const float *src, __global const float *depth, __global const float *e1,
-                         __global const int *moved, const int x, const int y, const int width, const int height)
+                         __global const uint *moved, const int x, const int y, const int width, const int height)
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float d = depth[i];
-    if (e1[i] != d)
-        return d;  /* moved by the 3x3 rule: its CoC stands (the caller keeps it) */
     const int gw = (width + 15) / 16;
+    if (moved[(size_t)y * gw + x / 16] >> (16 + (x & 15)) & 1)
+        return d;  /* moved by the 3x3 rule: its CoC stands (the caller keeps it) */
     /* a neighbour's depth after the bright hypothesis: e1 where it moved the pixel, depth elsewhere */
 #define DOF_E1B(xq, yq) ((moved[(size_t)(yq) * gw + (xq) / 16] >> ((xq) & 15) & 1) \
                          ? e1[(size_t)(yq) * width + (xq)] : depth[(size_t)(yq) * width + (xq)])
@@ -399,7 +401,7 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
  * 3 x 3 groups have a moved pixel. Launched over (ceil(width / 16), ceil(height / DOF_TAIL_ROWS)). */
 __kernel void dof_coc_tail(__global const float *restrict src, __global const float *restrict depth,
                            __global const float *restrict e1, __global float *restrict coc,
-                           __global const int *restrict moved, const int width, const int height,
+                           __global const uint *restrict moved, const int width, const int height,
                            const float k, const float inv_u, const float limit)
 {
     const int g = get_global_id(0), y0 = DOF_TAIL_ROWS * get_global_id(1), gw = (width + 15) / 16;
@@ -409,13 +411,13 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
     const int inner = x >= 1 && x + 16 <= width - 1;
     const size_t n = (size_t)width * height;
     /* row r's moved columns x - 1 .. x + 16 as bits 0 .. 17 (the groups beside exist in an inner group) */
-#define DOF_ROW_MOVED(r) ((moved[(size_t)(r) * gw + ga] >> 15 & 1) | moved[(size_t)(r) * gw + g] << 1 \
+#define DOF_ROW_MOVED(r) ((moved[(size_t)(r) * gw + ga] >> 15 & 1) | (moved[(size_t)(r) * gw + g] & 0xffff) << 1 \
                           | (moved[(size_t)(r) * gw + gb] & 1) << 17)
-    int prev = DOF_ROW_MOVED(max(y0 - 1, 0)), cur = DOF_ROW_MOVED(y0);
+    uint prev = DOF_ROW_MOVED(max(y0 - 1, 0)), cur = DOF_ROW_MOVED(y0);
     for (int y = y0; y < y1; ++y) {
-        const int next = DOF_ROW_MOVED(min(y + 1, height - 1));
-        const int w3 = prev | cur | next, lanes = (w3 | w3 >> 1 | w3 >> 2) & 0xffff;
-        const int wr[3] = {prev, cur, next};
+        const uint next = DOF_ROW_MOVED(min(y + 1, height - 1));
+        const uint w3 = prev | cur | next, lanes = (w3 | w3 >> 1 | w3 >> 2) & 0xffff;
+        const int wr[3] = {(int)prev, (int)cur, (int)next};
         prev = cur;
         cur = next;
         if (!(inner ? lanes : w3))
@@ -424,8 +426,9 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
         if (x >= 1 && x + 16 <= width - 1) {
             const float16 d = vload16(0, depth + i), lim = DOF_MIXED_SAME_DEPTH * d;
             const size_t rows[3] = {(size_t)max(y - 1, 0) * width + x, i, (size_t)min(y + 1, height - 1) * width + x};
-            const int16 keep = vload16(0, e1 + i) == d;  /* left at its depth by the rule */
             const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+            /* left at its depth by the rule */
+            const int16 keep = (((int16)((int)(moved[(size_t)y * gw + g] >> 16)) >> lane) & 1) == 0;
             float16 nearest = d;
             int16 near_any = (int16)(0);
 #pragma unroll
