@@ -19,19 +19,20 @@ inline float dof_luma(__global const float *src, const size_t i, const size_t n)
  * by more than 1 - DOF_FRINGE_STEP (other_min/other_max: p's own surface without p) or, the bright
  * one, is a light above DOF_SAME_SOURCE x p whose 1 - DOF_FRINGE_STEP share is above own_min (clamped
  * to 0) and that covers at most DOF_LIGHT_FRINGE of p (an own pixel as bright is that light's twin).
- * Both tests without a division; `span > 0` also rejects "no near neighbour" (+-inf). */
-inline float dof_fringe_depth(const float d, const float lum, const float nearest, const float bright_n,
-                              const float dark_n, const float other_min, const float other_max)
+ * Both tests without a division; `span > 0` also rejects "no near neighbour" (+-inf). Returns 2 when
+ * the bright hypothesis takes the nearest depth, 1 when only the dark one does, 0 when neither. */
+inline int dof_fringe_take(const float lum, const float bright_n, const float dark_n, const float other_min,
+                           const float other_max)
 {
     const float own_min = fmin(other_min, lum), own_max = fmax(other_max, lum);
     const float sb = bright_n - own_min, pb = lum - own_min;
     const float sd = own_max - dark_n, pd = own_max - lum;
-    const int take = (sb > 0.0f && (2.0f * pb >= sb || 2.0f * pb * bright_n >= lum * sb)
-                      && (DOF_FRINGE_STEP * bright_n > other_max
-                          || (bright_n > DOF_SAME_SOURCE * lum && (1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f)
-                              && pb <= DOF_LIGHT_FRINGE * sb)))
-                     || (sd > 0.0f && 2.0f * pd >= sd && dark_n < DOF_FRINGE_STEP * other_min);
-    return take ? nearest : d;
+    if (sb > 0.0f && (2.0f * pb >= sb || 2.0f * pb * bright_n >= lum * sb)
+        && (DOF_FRINGE_STEP * bright_n > other_max
+            || (bright_n > DOF_SAME_SOURCE * lum && (1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f)
+                && pb <= DOF_LIGHT_FRINGE * sb)))
+        return 2;
+    return sd > 0.0f && 2.0f * pd >= sd && dark_n < DOF_FRINGE_STEP * other_min;
 }
 
 inline float16 dof_luma16(__global const float *p, const size_t n) {
@@ -224,10 +225,10 @@ __kernel void dof_despeckle(__global const float *restrict src, __global const f
 }
 #undef DOF_SORT2
 
-/* Full-resolution signed CoC radius (px) of one pixel, depth by the fringe rule above. Neighbour
- * rows/columns clamped to the image. */
-inline float dof_coc_px(__global const float *src, __global const float *depth, const int x, const int y,
-                        const int width, const int height, const float k, const float inv_u, const float limit)
+/* The effective depth of one pixel by the fringe rule above (effective_depth's 3x3 rule); *bright:
+ * whether its bright hypothesis moved it. Neighbour rows/columns clamped to the image. */
+inline float dof_fringe_px(__global const float *src, __global const float *depth, const int x, const int y,
+                           const int width, const int height, int *bright)
 {
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
     const float d = depth[i];
@@ -247,21 +248,30 @@ inline float dof_coc_px(__global const float *src, __global const float *depth, 
                 other_max = fmax(other_max, lq);
             }
         }
-    const float s = dof_fringe_depth(d, lum, nearest, bright_n, dark_n, other_min, other_max);
+    const int take = dof_fringe_take(lum, bright_n, dark_n, other_min, other_max);
+    *bright = take == 2;
+    return take ? nearest : d;
+}
+
+inline float dof_coc_of(const float s, const float k, const float inv_u, const float limit) {
     const float inv_s = isinf(s) ? 0.0f : 1.0f / s;
     return clamp(k * (inv_u - inv_s), -limit, limit);
 }
 
 /* 16 pixels of a row per work-item in explicit float16 (PoCL does not vectorise the per-pixel form;
  * docs/measurements.md#kernel-forms-on-pocl); groups of 16 touching the left/right edge or the
- * image's end take the per-pixel path (same formula). Launched over (ceil(width / 16), height). */
+ * image's end take the per-pixel path (same formula). Launched over (ceil(width / 16), height).
+ * moved[y * ceil(width / 16) + group]: bit l, the rule's bright hypothesis moved pixel x + l; bit
+ * 16 + l, the rule moved it; e1: the depths after the rule, written in the groups it moved a pixel of
+ * (dof_coc_tail). */
 __kernel void dof_coc(__global const float *restrict src, __global const float *restrict depth,
-                      __global float *restrict coc, const int width, const int height,
-                      const float k, const float inv_u, const float limit)
+                      __global float *restrict e1, __global float *restrict coc, __global uint *restrict moved,
+                      const int width, const int height, const float k, const float inv_u, const float limit)
 {
     const int x = 16 * get_global_id(0), y = get_global_id(1);
     if (x >= width || y >= height) return;
     const size_t n = (size_t)width * height, i = (size_t)y * width + x;
+    const size_t flag = (size_t)y * ((width + 15) / 16) + get_global_id(0);
     if (x >= 1 && x + 16 <= width - 1) {
         const float16 d = vload16(0, depth + i);
         const float16 near_lim = DOF_MIXED_SAME_DEPTH * d;
@@ -273,6 +283,7 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
             for (int a = -1; a <= 1; ++a)
                 nearest = fmin(nearest, vload16(0, depth + rows[b] + a));
         float16 s = d;
+        uint any_take = 0;
         /* no depth step in any of the 16 neighbourhoods (most of an image): no colour test */
         if (any(nearest < near_lim)) {
             const float16 lum = dof_luma16(src + i, n);
@@ -294,20 +305,179 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
             const float16 own_min = fmin(other_min, lum), own_max = fmax(other_max, lum);
             const float16 sb = bright_n - own_min, pb = lum - own_min;
             const float16 sd = own_max - dark_n, pd = own_max - lum;
-            const int16 take = ((sb > 0.0f) & ((2.0f * pb >= sb) | (2.0f * pb * bright_n >= lum * sb))
-                                & ((DOF_FRINGE_STEP * bright_n > other_max)
-                                   | ((bright_n > DOF_SAME_SOURCE * lum)
-                                      & ((1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f))
-                                      & (pb <= DOF_LIGHT_FRINGE * sb))))
-                               | ((sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min));
-            s = select(d, nearest, take);
+            const int16 take_b = (sb > 0.0f) & ((2.0f * pb >= sb) | (2.0f * pb * bright_n >= lum * sb))
+                                 & ((DOF_FRINGE_STEP * bright_n > other_max)
+                                    | ((bright_n > DOF_SAME_SOURCE * lum)
+                                       & ((1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f))
+                                       & (pb <= DOF_LIGHT_FRINGE * sb)));
+            const int16 take_d = (sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min);
+            s = select(d, nearest, take_b | take_d);
+            /* bit l: lane l moved by the bright hypothesis; bit 16 + l: moved at all */
+            const int16 pow2 = (int16)(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192, 16384, 32768);
+            const uint16 bit = convert_uint16(take_b & pow2) | convert_uint16((take_b | take_d) & pow2) << 16;
+            const uint8 b8 = bit.lo | bit.hi;
+            const uint4 b4 = b8.lo | b8.hi;
+            const uint2 b2 = b4.lo | b4.hi;
+            any_take = b2.x | b2.y;
+            if (any_take)
+                vstore16(s, 0, e1 + i);
         }
+        moved[flag] = any_take;
         const float16 inv_s = select(1.0f / s, (float16)(0.0f), isinf(s));
         vstore16(clamp(k * (inv_u - inv_s), -limit, limit), 0, coc + i);
         return;
     }
-    for (int xi = x; xi < min(x + 16, width); ++xi)
-        coc[(size_t)y * width + xi] = dof_coc_px(src, depth, xi, y, width, height, k, inv_u, limit);
+    uint any_take = 0;
+    for (int xi = x; xi < min(x + 16, width); ++xi) {
+        int bright;
+        const float s = dof_fringe_px(src, depth, xi, y, width, height, &bright);
+        any_take |= (uint)bright << (xi - x) | (uint)(s != depth[(size_t)y * width + xi]) << (16 + xi - x);
+        e1[(size_t)y * width + xi] = s;
+        coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
+    }
+    moved[flag] = any_take;
+}
+
+/* The light's tail (effective_depth's second clause): p, left at its own depth by the rule above,
+ * takes the nearest depth of its 3x3 after that rule's bright hypothesis when a neighbour at a near
+ * depth after it is a light for p by the rule's light clause (more than DOF_SAME_SOURCE x p, its
+ * 1 - DOF_FRINGE_STEP share above own_min clamped to 0, p at most DOF_LIGHT_FRINGE of it), brings
+ * half of p's light, and p stands DOF_SAME_SOURCE x above every other pixel of its own surface but
+ * two (tail samples beside it along the light's edge). Returns the depth (p's own when not). */
+inline float dof_tail_px(__global const float *src, __global const float *depth, __global const float *e1,
+                         __global const uint *moved, const int x, const int y, const int width, const int height)
+{
+    const size_t n = (size_t)width * height, i = (size_t)y * width + x;
+    const float d = depth[i];
+    const int gw = (width + 15) / 16;
+    if (moved[(size_t)y * gw + x / 16] >> (16 + (x & 15)) & 1)
+        return d;  /* moved by the 3x3 rule: its CoC stands (the caller keeps it) */
+    /* a neighbour's depth after the bright hypothesis: e1 where it moved the pixel, depth elsewhere */
+#define DOF_E1B(xq, yq) ((moved[(size_t)(yq) * gw + (xq) / 16] >> ((xq) & 15) & 1) \
+                         ? e1[(size_t)(yq) * width + (xq)] : depth[(size_t)(yq) * width + (xq)])
+    int moved_near = 0;  /* a neighbour it moved to a depth near for p (else the light clause again) */
+    for (int b = -1; b <= 1; ++b)
+        for (int a = -1; a <= 1; ++a) {
+            const int xq = clamp(x + a, 0, width - 1), yq = clamp(y + b, 0, height - 1);
+            const size_t j = (size_t)yq * width + xq;
+            moved_near |= DOF_E1B(xq, yq) < DOF_MIXED_SAME_DEPTH * d && DOF_E1B(xq, yq) != depth[j];
+        }
+    if (!moved_near)
+        return d;
+    const float lum = dof_luma(src, i, n);
+    float nearest = d, bright_n = -INFINITY, own_min = lum, hi = -INFINITY, hi2 = -INFINITY, hi3 = -INFINITY;
+    for (int b = -1; b <= 1; ++b)
+        for (int a = -1; a <= 1; ++a) {
+            if (a == 0 && b == 0) continue;
+            const int xq = clamp(x + a, 0, width - 1), yq = clamp(y + b, 0, height - 1);
+            const float e = DOF_E1B(xq, yq);
+            const float lq = dof_luma(src, (size_t)yq * width + xq, n);
+            nearest = fmin(nearest, e);
+            if (e < DOF_MIXED_SAME_DEPTH * d) {
+                bright_n = fmax(bright_n, lq);
+            } else {
+                own_min = fmin(own_min, lq);
+                hi3 = fmax(hi3, fmin(hi2, lq));
+                hi2 = fmax(hi2, fmin(hi, lq));
+                hi = fmax(hi, lq);
+            }
+        }
+    const float sb = bright_n - own_min, pb = lum - own_min;
+    const int take = sb > 0.0f && 2.0f * pb * bright_n >= lum * sb && bright_n > DOF_SAME_SOURCE * lum
+                     && (1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f) && pb <= DOF_LIGHT_FRINGE * sb
+                     && lum > DOF_SAME_SOURCE * hi3;
+    return take ? nearest : d;
+#undef DOF_E1B
+}
+
+/* After dof_coc, per 16 x DOF_TAIL_ROWS block (from dof_cl.TAIL_ROWS), from the masks of the lanes
+ * the rule's bright hypothesis moved in its own and neighbouring groups (3 x 3): a pixel with no such
+ * neighbour is skipped — without one the test is the rule's light clause on the raw depths, which
+ * left it (a dark-moved neighbour counts at its own depth: a dark near surface is no light). In a
+ * group inside the image the 18 columns x - 1 .. x + 16 of the three rows' masks, dilated by one
+ * column, are each lane's moved neighbours: rows with none (nearly all) load nothing else; the
+ * others take the light's-tail test in float16, first on depths alone (a neighbour moved to a depth
+ * near for the lane), then on luminance. The groups at the left/right edge go per pixel when their
+ * 3 x 3 groups have a moved pixel. Launched over (ceil(width / 16), ceil(height / DOF_TAIL_ROWS)). */
+__kernel void dof_coc_tail(__global const float *restrict src, __global const float *restrict depth,
+                           __global const float *restrict e1, __global float *restrict coc,
+                           __global const uint *restrict moved, const int width, const int height,
+                           const float k, const float inv_u, const float limit)
+{
+    const int g = get_global_id(0), y0 = DOF_TAIL_ROWS * get_global_id(1), gw = (width + 15) / 16;
+    const int x = 16 * g;
+    if (x >= width || y0 >= height) return;
+    const int ga = max(g - 1, 0), gb = min(g + 1, gw - 1), y1 = min(y0 + DOF_TAIL_ROWS, height);
+    const int inner = x >= 1 && x + 16 <= width - 1;
+    const size_t n = (size_t)width * height;
+    /* row r's moved columns x - 1 .. x + 16 as bits 0 .. 17 (the groups beside exist in an inner group) */
+#define DOF_ROW_MOVED(r) ((moved[(size_t)(r) * gw + ga] >> 15 & 1) | (moved[(size_t)(r) * gw + g] & 0xffff) << 1 \
+                          | (moved[(size_t)(r) * gw + gb] & 1) << 17)
+    uint prev = DOF_ROW_MOVED(max(y0 - 1, 0)), cur = DOF_ROW_MOVED(y0);
+    for (int y = y0; y < y1; ++y) {
+        const uint next = DOF_ROW_MOVED(min(y + 1, height - 1));
+        const uint w3 = prev | cur | next, lanes = (w3 | w3 >> 1 | w3 >> 2) & 0xffff;
+        const int wr[3] = {(int)prev, (int)cur, (int)next};
+        prev = cur;
+        cur = next;
+        if (!(inner ? lanes : w3))
+            continue;
+        const size_t i = (size_t)y * width + x;
+        if (x >= 1 && x + 16 <= width - 1) {
+            const float16 d = vload16(0, depth + i), lim = DOF_MIXED_SAME_DEPTH * d;
+            const size_t rows[3] = {(size_t)max(y - 1, 0) * width + x, i, (size_t)min(y + 1, height - 1) * width + x};
+            const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+            /* left at its depth by the rule */
+            const int16 keep = (((int16)((int)(moved[(size_t)y * gw + g] >> 16)) >> lane) & 1) == 0;
+            float16 nearest = d;
+            int16 near_any = (int16)(0);
+#pragma unroll
+            for (int b = 0; b < 3; ++b)
+#pragma unroll
+                for (int a = -1; a <= 1; ++a) {
+                    if (a == 0 && b == 1) continue;
+                    const int16 mb = -(((int16)(wr[b] >> (1 + a)) >> lane) & 1);
+                    const float16 e = select(vload16(0, depth + rows[b] + a), vload16(0, e1 + rows[b] + a), mb);
+                    nearest = fmin(nearest, e);
+                    near_any |= mb & (e < lim);
+                }
+            if (!any(keep & near_any))
+                continue;
+            const float16 lum = dof_luma16(src + i, n);
+            float16 bright_n = (float16)(-INFINITY), own_min = lum, hi = (float16)(-INFINITY), hi2 = hi, hi3 = hi;
+#pragma unroll
+            for (int b = 0; b < 3; ++b)
+#pragma unroll
+                for (int a = -1; a <= 1; ++a) {
+                    if (a == 0 && b == 1) continue;
+                    const int16 mb = -(((int16)(wr[b] >> (1 + a)) >> lane) & 1);
+                    const float16 e = select(vload16(0, depth + rows[b] + a), vload16(0, e1 + rows[b] + a), mb);
+                    const float16 lq = dof_luma16(src + rows[b] + a, n);
+                    const int16 near = e < lim;
+                    bright_n = select(bright_n, fmax(bright_n, lq), near);
+                    own_min = select(fmin(own_min, lq), own_min, near);
+                    hi3 = select(fmax(hi3, fmin(hi2, lq)), hi3, near);
+                    hi2 = select(fmax(hi2, fmin(hi, lq)), hi2, near);
+                    hi = select(fmax(hi, lq), hi, near);
+                }
+            const float16 sb = bright_n - own_min, pb = lum - own_min;
+            const int16 take = keep & (sb > 0.0f) & (2.0f * pb * bright_n >= lum * sb)
+                               & (bright_n > DOF_SAME_SOURCE * lum)
+                               & ((1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f))
+                               & (pb <= DOF_LIGHT_FRINGE * sb) & (lum > DOF_SAME_SOURCE * hi3);
+            if (any(take)) {
+                const float16 inv_s = select(1.0f / nearest, (float16)(0.0f), isinf(nearest));
+                vstore16(select(vload16(0, coc + i), clamp(k * (inv_u - inv_s), -limit, limit), take), 0, coc + i);
+            }
+            continue;
+        }
+        for (int xi = x; xi < min(x + 16, width); ++xi) {
+            const float d = depth[(size_t)y * width + xi], s = dof_tail_px(src, depth, e1, moved, xi, y, width, height);
+            if (s != d)
+                coc[(size_t)y * width + xi] = dof_coc_of(s, k, inv_u, limit);
+        }
+    }
+#undef DOF_ROW_MOVED
 }
 
 /* Padded working buffers (level 0 of `lv`, see dof_levels.cl): colour = mean of the DOF_SCALE^2 block, CoC = nearest (min signed) of

@@ -17,9 +17,9 @@ MARGIN_DB = 0.5
 
 # (scene, truth, quality) -> PSNR sRGB dB vs Cycles, measured (docs/fidelity.md, "Held-out scenes")
 MEASURED_PSNR = {
-    ("h_lamps", "dof", "draft"): 40.22,      # 39.06 before the in-focus lights left the working image; 39.94 before the depth-aware tile plan
-    ("h_lamps", "dof", "preview"): 41.34,
-    ("h_lamps", "dof", "final"): 42.55,
+    ("h_lamps", "dof", "draft"): 40.07,      # 39.06 before the in-focus lights left the working image; 39.94 before the depth-aware tile plan and the light's tail
+    ("h_lamps", "dof", "preview"): 41.52,    # 41.34 before the light's tail
+    ("h_lamps", "dof", "final"): 42.86,      # 42.55 before the light's tail
     ("h_panes", "dof", "draft"): 32.90,      # 32.88 (FLIP 0.0342) before the depth-aware tile plan
     ("h_panes", "dof", "preview"): 32.95,
     ("h_panes", "dof", "final"): 33.10,
@@ -77,8 +77,8 @@ def test_heldout_psnr_floor_vs_cycles(scene, kind, quality):
 @pytest.mark.slow
 def test_heldout_emitters_do_not_get_worse():
     """h_lamps at final: the nine defocused lamps' discs are 0.98–1.11× Cycles' area and the in-focus
-    1-px lamp on the wall gets a 25-pixel halo (Cycles: 0) — two pixels from the lamp's depth sample,
-    beyond the fringe rule's reach; energy 0.965–1.027 (docs/fidelity.md, "Held-out scenes", for
+    1-px lamp on the wall had a 25-pixel halo (Cycles: 0) — two pixels from the lamp's depth sample,
+    beyond the fringe rule's 3×3 reach — until the light's tail clause (none since); energy 0.965–1.027 (docs/fidelity.md, "Held-out scenes", for
     these numbers' history). Floors against regressions, not the targets (area 1 ± 0.1, halo ≤ 2×
     Cycles'); the energy floor is an earlier run's 0.973, kept."""
     entry = MANIFEST["scenes"]["h_lamps"]
@@ -88,7 +88,7 @@ def test_heldout_emitters_do_not_get_worse():
     energy = [x["energy_ratio"] for x in m if x["energy_ratio"] is not None]
     halo = sum(x["halo_test"] for x in m if x["in_focus"])
     assert len(areas) == 9 and max(areas) <= 1.11 + 0.1, areas
-    assert halo <= 25 * 1.2, halo
+    assert halo == 0, halo
     assert min(energy) >= 0.973 - 0.03, energy
 
 

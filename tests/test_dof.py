@@ -759,8 +759,8 @@ def _one_pixel_lamp_on_a_wall(h=41, w=41, y=20, x=19, lamp_m=1.0):
 
 def _twin_only_frame():
     """:func:`_one_pixel_lamp_on_a_wall` with the pixel right of the twin dimmed to 2× the wall
-    (5.1× in h_lamps): two pixels from the lamp's depth sample it is beyond the fringe rule's 3×3
-    reach and still spreads with the wall's CoC (docs/fidelity.md, "Held-out scenes")."""
+    (5.1× in h_lamps): two pixels from the lamp's depth sample, beyond the fringe rule's 3×3 reach;
+    the light's-tail clause takes it with the lamp (docs/fidelity.md, "Held-out scenes")."""
     col, depth = _one_pixel_lamp_on_a_wall()
     col[20, 21] = 0.6
     return col, depth
@@ -775,7 +775,8 @@ def test_a_one_pixel_lamps_fringe_goes_with_the_lamp_past_its_twin():
     col, depth = _twin_only_frame()
     eff = D.effective_depth(col.astype(np.float64), depth)
     assert np.all(eff[19:22, 19:21] == 1.0)                  # lamp, twin and fringe: the lamp's depth
-    assert eff[20, 21] == np.float32(5.9) and eff[17, 19] == np.float32(5.9)  # beyond the 3x3 reach / the wall: the wall's
+    assert eff[20, 21] == 1.0                                # the twin's tail (2 px from the depth sample): the lamp's
+    assert eff[17, 19] == np.float32(5.9)                    # the wall: the wall's
     cam = Camera(**{**CAM, "focus_distance_m": 1.0})         # the lamp in focus, the wall's CoC 5 px
     wall = np.full_like(col, 0.3)
     yy, xx = np.mgrid[0:41, 0:41]
@@ -1068,3 +1069,61 @@ def test_in_focus_light_behind_a_blurred_foreground_stays_in_the_half_resolution
     frame = Frame(color, depth=depth)
     out, pipe = run(cam, frame, "draft")
     assert_matches_reference(pipe, frame, out, rtol=1e-3)
+
+
+HIGHLIGHTS_LAMP00 = np.array([[0.14, 2.95, 1.07, 0.14, 0.14],
+                              [27.31, 129.44, 61.04, 1.07, 0.14],
+                              [60.1, 220.32, 128.5, 2.95, 0.14],
+                              [9.51, 63.85, 27.31, 1.07, 0.14],
+                              [0.14, 1.07, 1.07, 0.14, 0.14]])
+"""The Cycles suite's highlights lamp00 (2 px, in focus at 2.5 m over buildings at 40 m) as exported:
+luminance of its 5×5 from (185, 66); the depth pass hit it at (1, 1), (2, 1), (2, 2). The two 1.07
+pixels of the bottom row are single samples of the pixel filter's tail (the lamp's radiance / 256 spp),
+two rows below the depth hits."""
+
+
+def _tail_frame(h=23, w=53, texture=False):
+    """HIGHLIGHTS_LAMP00 tiled so lamps land in dof_coc_tail's 16-lane groups and in its per-pixel
+    edge groups, before a far surface (0.14 at 40 m); ``texture``: the tail row and the one below are
+    the surface's own band of 0.3 texels (bright texels of a textured surface, not tail samples: more
+    than two own neighbours as bright)."""
+    col = np.full((h, w, 3), 0.14, np.float32)
+    depth = np.full((h, w), 40.0, np.float32)
+    spots = ((2, 0), (2, 24), (14, 48), (14, 9))
+    for y, x in spots:
+        col[y:y + 5, x:x + 5] = HIGHLIGHTS_LAMP00[..., None]
+        depth[y + 1, x + 1] = depth[y + 2, x + 1] = depth[y + 2, x + 2] = 2.5
+        if texture:
+            col[y + 4:y + 6, :] = 0.3
+    return col, depth, spots
+
+
+def test_a_lights_tail_two_pixels_from_its_depth_sample_goes_with_the_light():
+    """Issue 16: an in-focus lamp's filter-tail samples two pixels from its depth hits kept the far
+    surface's depth (the fringe rule's 3×3 reach) and spread as a halo (highlights: 13–25 px per lamp
+    at final, Cycles 0). The light's tail clause gives them the light's depth; a texel band of the
+    surface there keeps the surface's."""
+    col, depth, spots = _tail_frame()
+    eff = D.effective_depth(col.astype(np.float64), depth)
+    for y, x in spots:
+        assert np.all(eff[y + 4, x + 1:x + 3] == 2.5), (y, x)     # the tail samples: the lamp's
+        assert eff[y + 4, x + 3] == 40.0 and eff[y + 5, x + 1] == 40.0  # the surface around: its own
+    tex, d_tex, _ = _tail_frame(texture=True)
+    eff_tex = D.effective_depth(tex.astype(np.float64), d_tex)
+    for y, x in spots:
+        assert np.all(eff_tex[y + 4, x + 1:x + 3] == 40.0), (y, x)
+    cam = Camera(**{**CAM, "focus_distance_m": 2.5})               # the surface's CoC ≈ 7 px
+    surface = np.full_like(col, 0.14)
+    yy, xx = np.mgrid[0:col.shape[0], 0:col.shape[1]]
+    for q in ("draft", "final"):
+        for c, d in ((col, depth), (tex, d_tex)):
+            frame = Frame(c, depth=d)
+            out, pipe = run(cam, frame, q)
+            assert_matches_reference(pipe, frame, out, rtol=1e-3)
+        lamp = run(cam, Frame(col, depth=depth), q)[0] - run(cam, Frame(surface, depth=depth), q)[0]
+        far = np.ones(col.shape[:2], bool)
+        for y, x in spots:
+            far &= np.hypot(yy - (y + 2), xx - (x + 1.5)) > 3.5
+        # lamp-only light above 5 % of the lamp's 220 / 256 spp beyond 3.5 px: the rule without the
+        # tail clause left such pixels around every lamp
+        assert np.count_nonzero(lamp[far] @ D.luma_weights() > 0.05) == 0, q

@@ -438,7 +438,22 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
     holds p takes the nearest depth of its 3×3. The depth is first despeckled
     (:func:`despeckle_depth`). With :math:`\alpha = (Y_p - Y_f)/(Y_n - Y_f)` both tests are
     written without a division. A depth only ever moves nearer; a pixel with no near neighbour
-    keeps its own."""
+    keeps its own.
+
+    The light's *tail*: a pixel left at its own depth takes the nearest depth of its 3×3 *after*
+    the rule's bright hypothesis (a dark near surface is no light: a pixel it moved counts at its
+    own depth) when the brightest neighbour that is near after it (:math:`Y_n`; :math:`Y_f`
+    the darkest of the rest and p) is a light for p by the light clause (:math:`Y_n >`
+    :data:`SAME_SOURCE` :math:`Y_p`, its 5 % above :math:`\max(Y_f, 0)`, :math:`\alpha \le`
+    :data:`LIGHT_FRINGE`), brings at least half of p's light (:math:`\alpha Y_n \ge \tfrac12
+    Y_p`), and p is more than :data:`SAME_SOURCE`× the third-brightest other pixel of its own
+    surface (a light's tail sample, with at most two beside it along the light's edge; a texel of
+    a textured surface has more as bright). The reach, two pixels past a depth sample, is the pixel filter's: Cycles' default
+    Blackman–Harris of width 1.5 px samples offsets up to ±1.5 px (its table spans twice the width),
+    so a lamp's light lands up to 2 pixels from any pixel it covers — as single samples
+    (docs/fidelity.md, "In-focus halos"). Without a neighbour moved by the bright hypothesis the test is the
+    light clause on the raw depths, which p failed: only pixels next to moved ones can change
+    (the kernel skips the rest on per-group flags)."""
     d = despeckle_depth(color, depth, luma)
     lum = np.asarray(color, dtype=np.float64)[..., :3] @ (luma_weights() if luma is None else luma)
     dn, ln = _neighbourhood(d), _neighbourhood(lum)
@@ -460,7 +475,24 @@ def effective_depth(color: np.ndarray, depth: np.ndarray, luma: np.ndarray | Non
             & ((FRINGE_STEP * bright_n > other_max) | light)
         span, part = own_max - dark_n, own_max - lum
         dark = (span > 0) & (2 * part >= span) & (dark_n < FRINGE_STEP * other_min)
-    return np.where(bright | dark, nearest, d)
+    first = np.where(bright | dark, nearest, d)
+    # the light's tail (docstring): the light clause on the 3×3's depths after the rule's bright hypothesis
+    en = _neighbourhood(np.where(bright, nearest, d))
+    bright_n, own_min = np.full_like(d, -np.inf), lum.copy()
+    hi, hi2, hi3 = (np.full_like(d, -np.inf) for _ in range(3))  # p's own surface, p excluded
+    for eq, lq in zip(en[1:], ln[1:]):
+        near = eq < MIXED_SAME_DEPTH * d
+        bright_n = np.where(near, np.maximum(bright_n, lq), bright_n)
+        own_min = np.where(near, own_min, np.minimum(own_min, lq))
+        hi3 = np.where(near, hi3, np.maximum(hi3, np.minimum(hi2, lq)))
+        hi2 = np.where(near, hi2, np.maximum(hi2, np.minimum(hi, lq)))
+        hi = np.where(near, hi, np.maximum(hi, lq))
+    with np.errstate(invalid="ignore"):
+        span, part = bright_n - own_min, lum - own_min
+        tail = ~(bright | dark) & (span > 0) & (2 * part * bright_n >= lum * span) \
+            & (bright_n > SAME_SOURCE * lum) & ((1 - FRINGE_STEP) * bright_n > np.maximum(own_min, 0)) \
+            & (part <= LIGHT_FRINGE * span) & (lum > SAME_SOURCE * hi3)
+    return np.where(tail, np.minimum.reduce(en), first)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 """OpenCL side of the dof stage: programs, per-resolution scratch buffers, kernel launches.
 
 Kept apart from :mod:`clpost.stages.dof` (formulas + float64 reference) so the oracle reads
-without OpenCL plumbing. Launch sequence: ``dof_despeckle`` and ``dof_coc`` (full res) → ``dof_prepare`` (padded working
+without OpenCL plumbing. Launch sequence: ``dof_despeckle``, ``dof_coc`` and ``dof_coc_tail`` (full res) → ``dof_prepare`` (padded working
 buffers = level 0) → ``dof_levels`` per prefiltered level → ``dof_tile_max`` →
 ``dof_tile_dilate`` → ``dof`` (the gather) → (half res) ``dof_upsample``. Final (mixed
 resolution, :data:`dof.MIXED`): the same up to the tile plan at full resolution (one level
@@ -27,6 +27,10 @@ import numpy as np
 
 from . import _field as fld
 from . import dof as D
+
+
+TAIL_ROWS = 16
+"""Rows of one ``dof_coc_tail`` work-item (its ``DOF_TAIL_ROWS``): 16 × 16 pixels read 54 group flags."""
 
 
 def _kernels(rt, defines):
@@ -212,7 +216,7 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     mixed = D.MIXED.get(stage.quality)
     w, h = frame.width, frame.height
     vec = gather_vector_width(rt)
-    defines = {**stage.defines(camera), "DOF_VEC": vec}
+    defines = {**stage.defines(camera), "DOF_VEC": vec, "DOF_TAIL_ROWS": TAIL_ROWS}
     key = (tuple(sorted(defines.items())), w, h, camera.blades, camera.blade_rotation_deg,
            camera.aperture_roundness)
 
@@ -222,6 +226,8 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
                             built=D.MIXED_FULL_LEVELS if mixed else None),
             "coc": rt.scratch(stage, "coc", (h, w)),
             "depth": rt.scratch(stage, "depth", (h, w)),
+            "moved": rt.scratch(stage, "moved", (h, -(-w // 16)), np.int32),
+            "e1": rt.scratch(stage, "e1", (h, w)),
             "inv_area": np.float32(1.0 / D.aperture_area(camera.blades, camera.blade_rotation_deg,
                                                          camera.aperture_roundness)),
         }
@@ -241,9 +247,10 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     evs = []
     c["k"]["dof_despeckle"].set_args(src, aux["depth"], cache["depth"], i32(w), i32(h))
     evs.append(_launch_rows(rt, c["k"]["dof_despeckle"], (w, h)))
-    c["k"]["dof_coc"].set_args(src, cache["depth"], cache["coc"], i32(w), i32(h), f32(kc), f32(inv_u),
-                               f32(scale * rmax))
-    evs.append(_launch_rows(rt, c["k"]["dof_coc"], (w, h)))
+    for name, rows in (("dof_coc", h), ("dof_coc_tail", -(-h // TAIL_ROWS))):
+        c["k"][name].set_args(src, cache["depth"], cache["e1"], cache["coc"], cache["moved"], i32(w), i32(h),
+                              f32(kc), f32(inv_u), f32(scale * rmax))
+        evs.append(_launch_rows(rt, c["k"][name], (w, rows)))
     evs += _enqueue_plan(rt, c, src, cache["coc"], w, h)
     if mixed:
         hc = cache["half"]
