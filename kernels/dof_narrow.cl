@@ -3,7 +3,7 @@
  * spread at full resolution by dof_upsample (dof.cl, dof_narrow16).
  * Structural: DOF_SCALE, DOF_TILE, DOF_NARROW_CELL (cell edge, px), DOF_NARROW_MAX (sources per
  * cell), DOF_NARROW_RATIO, DOF_NARROW_CONTRAST, DOF_NARROW_EDGE (px), DOF_NARROW_MIN (px),
- * DOF_NARROW_SUM (px), DOF_NARROW_FOCUS (px), DOF_NARROW_FRONT_MAX, DOF_NARROW_SPREAD (px),
+ * DOF_NARROW_SUM (px), DOF_NARROW_FOCUS (px), DOF_NARROW_FRONT_MAX, DOF_NARROW_SPREAD (px), DOF_NARROW_RAMP (px),
  * DOF_LUMA_R/G/B, DOF_TEXTURE.
  * Records: float8 (x, y, signed CoC px, e_R, e_G, e_B, 1 / the source's weight sum, kind) per
  * source and in-focus light, in scan order, DOF_NARROW_MAX per cell; `ncount` per cell (0 when the
@@ -89,11 +89,12 @@ __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *r
 #undef DOF_NY16
 
 /* narrow_weight in clpost/stages/dof.py, for a source of signed CoC rq at offset o = (dx, dy) = q - p
- * spread with radius r: rho of the N-gon (corners on the unit circle) in the direction of o is
+ * spread with radius r (a coverage ramp DOF_NARROW_RAMP_OF(rq) px wide): rho of the N-gon (corners on the unit circle) in the direction of o is
  * cos(pi/N) |o| / max_i(o . n_i) over its edge normals n_i (`normals`, the host's table at
  * phi0 + (i + 1/2) 2 pi / N, phi0 = -pi/2 - rotation; `kpoly` = cos(pi/N)), blended with the circle
  * by the roundness; the direction is p - q for a far source (o's sign flipped). The same angle as
  * the reference's atan2 form, without a transcendental per lane. For scalars and vectors (DOF_NW_T). */
+#define DOF_NARROW_RAMP_OF(rq) (fmax(fabs(rq), 0.5f) < DOF_NARROW_SUM ? DOF_NARROW_RAMP : 1.0f)
 #define DOF_NARROW_W(DOF_NW_T, NAME) \
 inline DOF_NW_T NAME(const DOF_NW_T dx, const float dy, const float rq, const DOF_NW_T r, const int blades, \
                      __global const float2 *normals, const float kpoly, const float roundness, const float sa, \
@@ -109,7 +110,7 @@ inline DOF_NW_T NAME(const DOF_NW_T dx, const float dy, const float rq, const DO
         rho = (1.0f - roundness) * select(kpoly * dist / m, (DOF_NW_T)(1.0f), m <= 0.0f) + roundness; \
     } \
     const DOF_NW_T rr = r * rho; \
-    DOF_NW_T w = clamp(rr - dist + 0.5f, 0.0f, 1.0f); \
+    DOF_NW_T w = clamp((rr - dist) / DOF_NARROW_RAMP_OF(rq) + 0.5f, 0.0f, 1.0f); \
     DOF_NW_TEXTURE \
     return w * inv_area / (r * r); \
 }
@@ -317,9 +318,9 @@ inline int dof_narrow16(__global const int *restrict ncount, __global const floa
                 touched = 1;
                 const int16 behind = s.s2 > r + DOF_FRONT_MARGIN;
 #if !DOF_TEXTURE
-                /* every lane well inside the disc (|o| <= r rho_min - 1/2: coverage 1 in any
-                 * direction) and none behind: the weight is the disc's constant 1 / (a_K r^2) */
-                const float dy = s.s1 - (float)y, rin = rs * rho_min - 0.5f;
+                /* every lane well inside the disc (|o| <= r rho_min - half the ramp: coverage 1 in
+                 * any direction) and none behind: the weight is the disc's constant 1 / (a_K r^2) */
+                const float dy = s.s1 - (float)y, rin = rs * rho_min - 0.5f * DOF_NARROW_RAMP_OF(s.s2);
                 const float16 dx = s.s0 - xs;
                 if (rin > 0.0f && !any(behind) && all(dx * dx + dy * dy <= rin * rin)) {
                     const float wc = inv_area / (rs * rs) * s.s6;
