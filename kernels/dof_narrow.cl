@@ -157,6 +157,7 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
             const size_t ob = (size_t)(py + rdy[k] + pad) * pw + px + rdx[k] + pad;
             const float3 bg = (float3)(lv[ob], lv[pn + ob], lv[2 * pn + ob]);
             const float bgy = DOF_LUMA_R * bg.x + DOF_LUMA_G * bg.y + DOF_LUMA_B * bg.z;
+            int nfront[DOF_SCALE * DOF_SCALE], have_front = 0;
             for (int b = 0; b < DOF_SCALE; ++b)
                 for (int a = 0; a < DOF_SCALE; ++a) {
                     const int y = DOF_SCALE * py + b, x = DOF_SCALE * px + a;
@@ -171,14 +172,26 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
                     const float rq = coc[i];
                     const int split = m3 >= DOF_NARROW_MIN;
                     int kept = fabs(rq) <= DOF_NARROW_FOCUS;
-                    if (kept) {  /* the pixels of the 5x5 working pixels nearer than it (the block is
-                                  * >= 2 working px from the edge; past the image's last row/column
-                                  * a block has none) */
-                        int nfront = 0;
-                        for (int v = DOF_SCALE * (py - 2); v < min(DOF_SCALE * (py + 3), height); ++v)
-                            for (int u = DOF_SCALE * (px - 2); u < min(DOF_SCALE * (px + 3), width); ++u)
-                                nfront += coc[(size_t)v * width + u] < rq - DOF_FRONT_MARGIN;
-                        kept = nfront <= DOF_NARROW_FRONT_MAX;
+                    if (kept) {
+                        if (!have_front) {  /* once per block, for each of its pixels: the pixels of
+                                             * the 5x5 working pixels nearer than it (the block is
+                                             * >= 2 working px from the edge; past the image's last
+                                             * row/column a block has none) */
+                            float t[DOF_SCALE * DOF_SCALE];
+                            for (int m = 0; m < DOF_SCALE * DOF_SCALE; ++m) {
+                                t[m] = coc[(size_t)(DOF_SCALE * py + m / DOF_SCALE) * width + DOF_SCALE * px
+                                           + m % DOF_SCALE] - DOF_FRONT_MARGIN;
+                                nfront[m] = 0;
+                            }
+                            for (int v = DOF_SCALE * (py - 2); v < min(DOF_SCALE * (py + 3), height); ++v)
+                                for (int u = DOF_SCALE * (px - 2); u < min(DOF_SCALE * (px + 3), width); ++u) {
+                                    const float c = coc[(size_t)v * width + u];
+                                    for (int m = 0; m < DOF_SCALE * DOF_SCALE; ++m)
+                                        nfront[m] += c < t[m];
+                                }
+                            have_front = 1;
+                        }
+                        kept = nfront[b * DOF_SCALE + a] <= DOF_NARROW_FRONT_MAX;
                     }
                     if (!((split || kept)
                           && ey > DOF_NARROW_CONTRAST * bgy * M_PI_F * rq * rq * fmax(1.0f, fabs(rq) / DOF_NARROW_EDGE)))
