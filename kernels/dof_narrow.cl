@@ -3,12 +3,19 @@
  * spread at full resolution by dof_upsample (dof.cl, dof_narrow16).
  * Structural: DOF_SCALE, DOF_TILE, DOF_NARROW_CELL (cell edge, px), DOF_NARROW_MAX (sources per
  * cell), DOF_NARROW_RATIO, DOF_NARROW_CONTRAST, DOF_NARROW_EDGE (px), DOF_NARROW_MIN (px),
- * DOF_NARROW_SUM (px), DOF_NARROW_FOCUS (px), DOF_LUMA_R/G/B, DOF_TEXTURE.
- * Records: float8 (x, y, signed CoC px, e_R, e_G, e_B, 1 / the source's weight sum, 0) per source,
- * DOF_NARROW_MAX per cell; `ncount` per cell (0 when the cell had more than DOF_NARROW_MAX sources
- * and in-focus lights together). The in-focus lights (narrow_sources: |CoC| <= DOF_NARROW_FOCUS,
- * nothing of the block's 5x5 working pixels nearer by DOF_FRONT_MARGIN) are recorded from the cell's last record backwards, only for dof_narrow_list's own use.
+ * DOF_NARROW_SUM (px), DOF_NARROW_FOCUS (px), DOF_NARROW_FRONT_MAX, DOF_NARROW_SPREAD (px), DOF_NARROW_RAMP (px),
+ * DOF_LUMA_R/G/B, DOF_TEXTURE.
+ * Records: float8 (x, y, signed CoC px, e_R, e_G, e_B, 1 / the source's weight sum, kind) per
+ * source and in-focus light, in scan order, DOF_NARROW_MAX per cell; `ncount` per cell (0 when the
+ * cell had more than DOF_NARROW_MAX). Kind (DOF_NK_*): a source spread by the layer (narrow_sources'
+ * `sources`), an in-focus light (|CoC| <= DOF_NARROW_FOCUS, at most DOF_NARROW_FRONT_MAX pixels of
+ * the block's 5x5 working pixels nearer by DOF_FRONT_MARGIN) whose 3x3 share is added back where
+ * the composite takes the half-resolution blur (|CoC| >= DOF_NARROW_SPREAD: `small`, small_layer),
+ * or one that only leaves the working image.
  */
+#define DOF_NK_SOURCE 0.0f
+#define DOF_NK_SMALL 1.0f
+#define DOF_NK_FOCUS 2.0f
 
 /* luminance of 16 working pixels of level 0 from padded offset o */
 #define DOF_NY16(o) (DOF_LUMA_R * vload16(0, lv + (o)) + DOF_LUMA_G * vload16(0, lv + pn + (o)) \
@@ -82,11 +89,12 @@ __kernel void dof_narrow_flag(__global const float *restrict lv, __global int *r
 #undef DOF_NY16
 
 /* narrow_weight in clpost/stages/dof.py, for a source of signed CoC rq at offset o = (dx, dy) = q - p
- * spread with radius r: rho of the N-gon (corners on the unit circle) in the direction of o is
+ * spread with radius r (a coverage ramp DOF_NARROW_RAMP_OF(rq) px wide): rho of the N-gon (corners on the unit circle) in the direction of o is
  * cos(pi/N) |o| / max_i(o . n_i) over its edge normals n_i (`normals`, the host's table at
  * phi0 + (i + 1/2) 2 pi / N, phi0 = -pi/2 - rotation; `kpoly` = cos(pi/N)), blended with the circle
  * by the roundness; the direction is p - q for a far source (o's sign flipped). The same angle as
  * the reference's atan2 form, without a transcendental per lane. For scalars and vectors (DOF_NW_T). */
+#define DOF_NARROW_RAMP_OF(rq) (fmax(fabs(rq), 0.5f) < DOF_NARROW_SUM ? DOF_NARROW_RAMP : 1.0f)
 #define DOF_NARROW_W(DOF_NW_T, NAME) \
 inline DOF_NW_T NAME(const DOF_NW_T dx, const float dy, const float rq, const DOF_NW_T r, const int blades, \
                      __global const float2 *normals, const float kpoly, const float roundness, const float sa, \
@@ -102,7 +110,7 @@ inline DOF_NW_T NAME(const DOF_NW_T dx, const float dy, const float rq, const DO
         rho = (1.0f - roundness) * select(kpoly * dist / m, (DOF_NW_T)(1.0f), m <= 0.0f) + roundness; \
     } \
     const DOF_NW_T rr = r * rho; \
-    DOF_NW_T w = clamp(rr - dist + 0.5f, 0.0f, 1.0f); \
+    DOF_NW_T w = clamp((rr - dist) / DOF_NARROW_RAMP_OF(rq) + 0.5f, 0.0f, 1.0f); \
     DOF_NW_TEXTURE \
     return w * inv_area / (r * r); \
 }
@@ -134,7 +142,7 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
     const size_t pn = (size_t)pw * DOF_PW(hw, pad), n = (size_t)width * height;
     const int rdy[8] = {-2, -2, -2, 0, 0, 2, 2, 2}, rdx[8] = {-2, 0, 2, -2, 2, -2, 0, 2};
     __global float8 *rec = nrec + (size_t)(cy * ncx + cx) * DOF_NARROW_MAX;
-    int count = 0, nkept = 0;  /* listed sources (from the front), kept in-focus lights (from the back) */
+    int count = 0;  /* records: sources and in-focus lights */
     float last_rq = NAN, last_norm = 0.0f;
     const int ngx = (ww + 15) / 16;
     for (int py = cy * cw; py < min((cy + 1) * cw, hw); ++py)
@@ -149,7 +157,7 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
             const size_t ob = (size_t)(py + rdy[k] + pad) * pw + px + rdx[k] + pad;
             const float3 bg = (float3)(lv[ob], lv[pn + ob], lv[2 * pn + ob]);
             const float bgy = DOF_LUMA_R * bg.x + DOF_LUMA_G * bg.y + DOF_LUMA_B * bg.z;
-            float front5 = NAN;  /* the nearest CoC of the block's 5x5 working pixels, once needed */
+            int nfront[DOF_SCALE * DOF_SCALE], have_front = 0;
             for (int b = 0; b < DOF_SCALE; ++b)
                 for (int a = 0; a < DOF_SCALE; ++a) {
                     const int y = DOF_SCALE * py + b, x = DOF_SCALE * px + a;
@@ -165,24 +173,37 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
                     const int split = m3 >= DOF_NARROW_MIN;
                     int kept = fabs(rq) <= DOF_NARROW_FOCUS;
                     if (kept) {
-                        if (isnan(front5)) {  /* rows/columns past the image replicate its edge */
-                            front5 = INFINITY;
-                            for (int v = DOF_SCALE * (py - 2); v < DOF_SCALE * (py + 3); ++v)
-                                for (int u = DOF_SCALE * (px - 2); u < DOF_SCALE * (px + 3); ++u)
-                                    front5 = fmin(front5, coc[(size_t)min(v, height - 1) * width + min(u, width - 1)]);
+                        if (!have_front) {  /* once per block, for each of its pixels: the pixels of
+                                             * the 5x5 working pixels nearer than it (the block is
+                                             * >= 2 working px from the edge; past the image's last
+                                             * row/column a block has none) */
+                            float t[DOF_SCALE * DOF_SCALE];
+                            for (int m = 0; m < DOF_SCALE * DOF_SCALE; ++m) {
+                                t[m] = coc[(size_t)(DOF_SCALE * py + m / DOF_SCALE) * width + DOF_SCALE * px
+                                           + m % DOF_SCALE] - DOF_FRONT_MARGIN;
+                                nfront[m] = 0;
+                            }
+                            for (int v = DOF_SCALE * (py - 2); v < min(DOF_SCALE * (py + 3), height); ++v)
+                                for (int u = DOF_SCALE * (px - 2); u < min(DOF_SCALE * (px + 3), width); ++u) {
+                                    const float c = coc[(size_t)v * width + u];
+                                    for (int m = 0; m < DOF_SCALE * DOF_SCALE; ++m)
+                                        nfront[m] += c < t[m];
+                                }
+                            have_front = 1;
                         }
-                        kept = front5 >= rq - DOF_FRONT_MARGIN;
+                        kept = nfront[b * DOF_SCALE + a] <= DOF_NARROW_FRONT_MAX;
                     }
                     if (!((split || kept)
                           && ey > DOF_NARROW_CONTRAST * bgy * M_PI_F * rq * rq * fmax(1.0f, fabs(rq) / DOF_NARROW_EDGE)))
                         continue;
-                    if (!split) {  /* in focus: its excess leaves the working image, it is not listed */
-                        if (count + nkept < DOF_NARROW_MAX)
-                            rec[DOF_NARROW_MAX - 1 - nkept] = (float8)((float)x, (float)y, rq, e.x, e.y, e.z, 0.0f, 0.0f);
-                        ++nkept;
+                    if (!split) {  /* in focus: its excess leaves the working image */
+                        if (count < DOF_NARROW_MAX)
+                            rec[count] = (float8)((float)x, (float)y, rq, e.x, e.y, e.z, 0.0f,
+                                                  fabs(rq) >= DOF_NARROW_SPREAD ? DOF_NK_SMALL : DOF_NK_FOCUS);
+                        ++count;
                         continue;
                     }
-                    if (count + nkept < DOF_NARROW_MAX) {
+                    if (count < DOF_NARROW_MAX) {
                         if (rq != last_rq) {  /* a light's pixels mostly share one CoC: sum once */
                             const float r = fmax(fabs(rq), 0.5f);
                             float ws = 1.0f;  /* from DOF_NARROW_SUM px on the disc's own integral */
@@ -197,30 +218,28 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
                             last_rq = rq;
                             last_norm = 1.0f / ws;
                         }
-                        rec[count] = (float8)((float)x, (float)y, rq, e.x, e.y, e.z, last_norm, 0.0f);
+                        rec[count] = (float8)((float)x, (float)y, rq, e.x, e.y, e.z, last_norm, DOF_NK_SOURCE);
                     }
                     ++count;
                 }
         }
-    if (count + nkept > DOF_NARROW_MAX) {
+    if (count > DOF_NARROW_MAX) {
         ncount[cy * ncx + cx] = 0;
         return;
     }
     ncount[cy * ncx + cx] = count;
     /* the source blocks' and the in-focus lights' blocks' working colour without their excess; a
-     * block's records are consecutive, and a block never has both (a source's 3x3, which holds its
-     * whole 2x2 block, has no |CoC| below DOF_NARROW_MIN > DOF_NARROW_FOCUS) */
-    for (int jj = 0; jj < count + nkept; ) {
-        const int j = jj < count ? jj : DOF_NARROW_MAX - 1 - (jj - count);
-        const int px = (int)rec[j].s0 / DOF_SCALE, py = (int)rec[j].s1 / DOF_SCALE;
+     * block's records are consecutive (scan order) */
+    for (int jj = 0; jj < count; ) {
+        const int px = (int)rec[jj].s0 / DOF_SCALE, py = (int)rec[jj].s1 / DOF_SCALE;
         float3 p[DOF_SCALE][DOF_SCALE];
         for (int b = 0; b < DOF_SCALE; ++b)
             for (int a = 0; a < DOF_SCALE; ++a) {
                 const size_t i = (size_t)(DOF_SCALE * py + b) * width + DOF_SCALE * px + a;
                 p[b][a] = (float3)(src[i], src[n + i], src[2 * n + i]);
             }
-        for (; jj < count + nkept; ++jj) {
-            const float8 s = rec[jj < count ? jj : DOF_NARROW_MAX - 1 - (jj - count)];
+        for (; jj < count; ++jj) {
+            const float8 s = rec[jj];
             if ((int)s.s0 / DOF_SCALE != px || (int)s.s1 / DOF_SCALE != py)
                 break;
             p[(int)s.s1 - DOF_SCALE * py][(int)s.s0 - DOF_SCALE * px] -= (float3)(s.s3, s.s4, s.s5);
@@ -236,8 +255,9 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
 }
 
 /* Per 16 x 16-px tile of the output, the number of listed sources whose disc (|r| + 1/2 px) reaches
- * it: the upsampling's work-items of a tile with none skip the layer after one read. `ncount`: the
- * cells' counts; `ntile`: (ceil(h / 16), ceil(w / 16)). */
+ * it, in-focus lights with a 3x3 share (DOF_NK_SMALL) counted, the others not: the upsampling's
+ * work-items of a tile with none skip the layer after one read. `ncount`: the cells' counts;
+ * `ntile`: (ceil(h / 16), ceil(w / 16)). */
 __kernel void dof_narrow_near(__global const int *restrict ncount, __global const float8 *restrict nrec,
                               __global int *restrict ntile, const int ncx, const int ncy, const int ntx,
                               const int nty)
@@ -254,7 +274,7 @@ __kernel void dof_narrow_near(__global const int *restrict ncount, __global cons
             __global const float8 *rec = nrec + (size_t)(cy * ncx + cx) * DOF_NARROW_MAX;
             for (int j = 0; j < ncount[cy * ncx + cx]; ++j) {
                 const float rs = fmax(fabs(rec[j].s2), 0.5f) + 0.5f;
-                t += rec[j].s0 >= x0 - rs && rec[j].s0 <= x0 + 15.0f + rs && rec[j].s1 >= y0 - rs
+                t += rec[j].s7 != DOF_NK_FOCUS && rec[j].s0 >= x0 - rs && rec[j].s0 <= x0 + 15.0f + rs && rec[j].s1 >= y0 - rs
                      && rec[j].s1 <= y0 + 15.0f + rs;
             }
         }
@@ -264,8 +284,10 @@ __kernel void dof_narrow_near(__global const int *restrict ncount, __global cons
 /* The layer's light at output pixels x .. x + 15 of row y (narrow_layer): the sources of the
  * cells within the largest CoC (+1 px), each spread with its own radius over a pixel it is in
  * front of or on the surface of, with the smaller of its own and the pixel's radius times 1 - the
- * upsampled front coverage `ua` over a pixel in front of it; scaled by 1 / its weight sum, added
- * to *o_r, *o_g, *o_b. Returns whether a source's disc reached these pixels. */
+ * upsampled front coverage `ua` over a pixel in front of it; scaled by 1 / its weight sum; and
+ * the in-focus lights' 3x3 share where the composite takes the half-resolution blur
+ * (small_layer: the 3x3's weight times max(DOF_HALF_B(r) - ua, 0)); added to *o_r, *o_g, *o_b.
+ * Returns whether a source's disc reached these pixels. */
 inline int dof_narrow16(__global const int *restrict ncount, __global const float8 *restrict nrec,
                          const int ncx, const int ncy, const int x, const int y, const float16 r,
                          const float16 ua, __global const float2 *restrict normals, const int blades,
@@ -286,6 +308,22 @@ inline int dof_narrow16(__global const int *restrict ncount, __global const floa
             __global const float8 *rec = nrec + (size_t)(cy * ncx + cx) * DOF_NARROW_MAX;
             for (int j = 0; j < cn; ++j) {
                 const float8 s = rec[j];
+                if (s.s7 != DOF_NK_SOURCE) {
+                    if (s.s7 == DOF_NK_FOCUS || fabs(s.s1 - (float)y) > 1.0f || s.s0 < (float)x - 1.0f
+                        || s.s0 > (float)x + 16.0f)
+                        continue;
+                    touched = 1;
+                    /* small_layer: a = DOF_LOCAL_A of its CoC over a pixel behind it, else of the
+                     * smaller |CoC| (the 3x3's rule); w(0) = 1 - 2a, w(+-1) = a per axis */
+                    const float16 dx = fabs(s.s0 - xs);
+                    const float16 a = select(fmin(DOF_LOCAL_A(s.s2), DOF_LOCAL_A(r)), (float16)(DOF_LOCAL_A(s.s2)),
+                                             s.s2 < r - DOF_FRONT_MARGIN);
+                    const float16 wx = select(select((float16)(0.0f), a, dx == 1.0f), 1.0f - 2.0f * a, dx == 0.0f);
+                    const float16 wy = s.s1 == (float)y ? 1.0f - 2.0f * a : a;
+                    const float16 wv = wx * wy * fmax(DOF_HALF_B(r) - ua, 0.0f);
+                    *o_r += wv * s.s3; *o_g += wv * s.s4; *o_b += wv * s.s5;
+                    continue;
+                }
                 const float rs = fmax(fabs(s.s2), 0.5f);
                 /* a source reaches rs + 1/2 px (rho <= 1, the 1-px ramp) */
                 if (fabs(s.s1 - (float)y) > rs + 0.5f || s.s0 < (float)x - rs - 0.5f || s.s0 > (float)x + 15.5f + rs)
@@ -293,9 +331,9 @@ inline int dof_narrow16(__global const int *restrict ncount, __global const floa
                 touched = 1;
                 const int16 behind = s.s2 > r + DOF_FRONT_MARGIN;
 #if !DOF_TEXTURE
-                /* every lane well inside the disc (|o| <= r rho_min - 1/2: coverage 1 in any
-                 * direction) and none behind: the weight is the disc's constant 1 / (a_K r^2) */
-                const float dy = s.s1 - (float)y, rin = rs * rho_min - 0.5f;
+                /* every lane well inside the disc (|o| <= r rho_min - half the ramp: coverage 1 in
+                 * any direction) and none behind: the weight is the disc's constant 1 / (a_K r^2) */
+                const float dy = s.s1 - (float)y, rin = rs * rho_min - 0.5f * DOF_NARROW_RAMP_OF(s.s2);
                 const float16 dx = s.s0 - xs;
                 if (rin > 0.0f && !any(behind) && all(dx * dx + dy * dy <= rin * rin)) {
                     const float wc = inv_area / (rs * rs) * s.s6;

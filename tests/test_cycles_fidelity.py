@@ -27,12 +27,13 @@ MARGIN_DB = 0.5
 # (occluder) and 1.42 dB (transparent: under a 0.3-opacity pane Cycles' depth pass is a per-pixel speckle
 # of the pane's and the wall's depth, and the rule moves checker-edge pixels to the pane) — docs/fidelity.md.
 MEASURED_PSNR = {
-    # 33.50; 34.62 before the upsampling compared the original CoC; 35.16 before the narrow-source layer
-    ("emitters", "dof", "draft"): 37.06,
+    # 33.50; 34.62 before the upsampling compared the original CoC; 35.16 before the narrow-source layer;
+    # 37.06 before its 1/4-px coverage ramp
+    ("emitters", "dof", "draft"): 37.38,
     ("emitters", "dof", "final"): 37.34,
     # 38.32; 40.27 before the stricter fringe rule; 40.32 before UPSAMPLE_SAME_PX; 41.04 before the
-    # narrow-source layer
-    ("highlights", "dof", "draft"): 41.64,
+    # narrow-source layer; 41.64 before its 1/4-px coverage ramp
+    ("highlights", "dof", "draft"): 42.07,
     ("highlights", "dof", "final"): 42.72,      # 42.64
     ("occluder", "dof", "final"): 41.12,        # 40.90 before the stricter fringe rule
     ("thin", "dof", "draft"): 39.16,            # 36.25; 37.45 before the 3x3 below r = 2 px; measured 39.06 now
@@ -163,13 +164,15 @@ def test_draft_emitters_keep_final_s_discs_and_energy():
     soft disc edge (2×2 box, working coverage ramp, bilinear upsampling) saturated 1.15–1.48×
     Cycles' disc area at 100–1000× white and spread light beyond the window (energy 0.917–1.012);
     the narrow-source layer spreads them at full resolution (docs/fidelity.md, "The narrow-source
-    layer"): 1.00–1.24× and 0.978–1.015 measured, final's own levels."""
+    layer"): 1.00–1.24× and 0.978–1.015 measured, final's own levels; with its 1/4-px coverage
+    ramp (dof.NARROW_RAMP_PX: the input is already pixel-filtered) 0.93–1.03× — lamp09, 2 px at
+    r = 2.1 px before the wall, was 1.24× with the 1-px ramp — and the same energies."""
     entry, frame = _scene("emitters")
     m = _lamps(entry, frame, "draft")
     defocused = {x["name"]: (round(x["area_ratio"], 2), round(x["energy_ratio"], 3)) for x in m
                  if not x["in_focus"] and x["energy_ratio"]}
     assert len(defocused) >= 7
-    assert all(a <= 1.24 + 0.05 for a, _ in defocused.values()), defocused
+    assert all(0.90 <= a <= 1.10 for a, _ in defocused.values()), defocused
     assert all(abs(e - 1) <= 0.03 for _, e in defocused.values()), defocused
 
 
@@ -178,10 +181,11 @@ def test_the_lamp_behind_the_pane_keeps_its_own_depth():
     pass is a speckle of the pane's depth: its brightest pixel's sample hit the pane, and it spread
     as a near-field blob of 2.7x (final) / 3.7x (draft) Cycles' saturated disc area before the
     despeckle's light-behind-a-pane rule (docs/fidelity.md, "Transparent: stochastic depth");
-    1.12 / 1.46 measured after."""
+    1.12 / 1.46 measured after; draft 1.08 since its excess leaves the working image despite the
+    pane's few depth samples around it (dof.NARROW_FRONT_MAX, dof.small_layer)."""
     entry, frame = _scene("transparent")
     lamp = next(x for x in entry["lamps"] if x["name"] == "lamp01")
-    for quality, measured in (("final", 1.12), ("draft", 1.46)):
+    for quality, measured in (("final", 1.12), ("draft", 1.08)):
         m, = _lamps(entry, frame, quality, lamps=[lamp])
         assert m["area_ratio"] <= measured + 0.1, (quality, m["area_ratio"])
 

@@ -99,7 +99,9 @@ def test_heldout_lamps_at_draft_and_preview_keep_their_energy():
     at preview and 0.53 at draft; discs up to 1.8× Cycles' area) until the narrow-source layer
     (docs/fidelity.md, "The narrow-source layer") spread them at full resolution: measured
     0.949 (lamp10; final 0.973) … 1.016 and discs 1.00–1.46× (lamp10's 1.46 is final's too: its
-    fringe keeps the wall's depth). The in-focus lamps have no halo (Cycles: none): lamp00, 2 px
+    fringe keeps the wall's depth); with the layer's 1/4-px coverage ramp (dof.NARROW_RAMP_PX)
+    0.92–1.01× (lamp10: 0.93; its energy, 0.939, is the pinhole input's own: its Emission pass holds
+    0.939 of the truth's light). The in-focus lamps have no halo (Cycles: none): lamp00, 2 px
     in focus over the sky, had 68 px at draft until its light left the working image
     (docs/fidelity.md, "The narrow-source layer", in-focus lights)."""
     entry = MANIFEST["scenes"]["h_lamps"]
@@ -108,7 +110,7 @@ def test_heldout_lamps_at_draft_and_preview_keep_their_energy():
         m = _lamps(entry, frame, quality)
         defocused = {x["name"]: (x["area_ratio"], x["energy_ratio"]) for x in m if not x["in_focus"]}
         assert len(defocused) == 9
-        assert all(a <= 1.46 + 0.1 for a, _ in defocused.values()), (quality, defocused)
+        assert all(0.90 <= a <= 1.10 for a, _ in defocused.values()), (quality, defocused)
         assert all(e >= 0.949 - 0.03 for _, e in defocused.values()), (quality, defocused)
         halos = {x["name"]: x["halo_test"] for x in m if x["in_focus"]}
         assert len(halos) == 2 and sum(halos.values()) == 0, (quality, halos)

@@ -976,6 +976,47 @@ def test_small_bright_light_at_half_resolution_keeps_its_energy_and_its_disc(r_b
         assert area[q] == pytest.approx(area["final"], rel=0.10), (q, area)
 
 
+def test_small_coc_light_over_a_larger_coc_sky_keeps_final_s_disc_and_energy_at_half_resolution():
+    # issue 16: a light of CoC radius 1.2 px (in focus for the half-resolution path: its pixels take
+    # the full-resolution 3×3 blur whole) over a sky at 2.6 px (taking the half-resolution blur
+    # whole). Its excess leaves the working image (dof.NARROW_FOCUS_PX), so the 3×3's share of it
+    # that the sky pixels around it would take was lost: 0.67 of its light and a quarter of
+    # final's saturated disc at draft. Now that share is added back (dof.small_layer).
+    cam, dark, lit = _small_light(1.2, 2.6, level=60.0)
+    area, energy = {}, {}
+    for q in ("final", "draft", "preview"):
+        out, pipe = run(cam, lit, q)
+        if q != "final":
+            assert_matches_reference(pipe, lit, out, rtol=1e-3)
+        energy[q] = float((out - pipe.run(dark).color)[..., 1].sum()) / (4 * 59.9)
+        area[q] = int(np.count_nonzero(out[..., 1] >= 1.0))
+    for q in ("draft", "preview"):
+        assert energy[q] == pytest.approx(1.0, abs=0.03), (q, energy)
+        assert area[q] == pytest.approx(area["final"], rel=0.10), (q, area)
+
+
+def test_small_coc_light_behind_a_few_nearer_pixels_leaves_the_working_image():
+    # the transparent scene's lamp behind the pane (CoC radius 1.16 px over the sky's 2.08) had
+    # 1.46× Cycles' disc and 1.05 of its light at draft: a few pixels around it carry the pane's
+    # depth (stochastic transparency; clumps the depth despeckle keeps), so the in-focus lights'
+    # front test ("nothing nearer in the 5×5 working pixels") kept it in the working image, whose
+    # blur the sky pixels around it take whole. Up to dof.NARROW_FRONT_MAX nearer pixels of the
+    # 10×10 are now a surface's stochastic depth, not a foreground's soft edge (a light beside a
+    # blurred bar has 20: test_in_focus_light_behind_a_blurred_foreground_stays_...).
+    cam, dark, lit = _small_light(1.2, 2.6, level=60.0)
+    k, inv_u = D.coc_coefficients(cam, 81)
+    for f in (dark, lit):  # two 2×2 clumps of a pane's depth with the sky's colour: 8 of 100
+        f.depth[36:38, 37:39] = f.depth[43:45, 42:44] = 1.0 / (inv_u + 3.5 / k)
+    color64, depth64 = lit.color.astype(np.float64), lit.depth.astype(np.float64)
+    coc = D.coc_px(cam, D.effective_depth(color64, depth64), 81, limit_px=64)
+    assert np.count_nonzero(coc[36:46, 36:46] < 0) == 8
+    _, base = D.narrow_sources(color64, coc, 2)
+    assert (base[40:42, 40:42] < 1.0).all()
+    for q in ("draft", "preview"):
+        out, pipe = run(cam, lit, q)
+        assert_matches_reference(pipe, lit, out, rtol=1e-3)
+
+
 @pytest.mark.parametrize("quality, sa", [("draft", 0.4), ("preview", 0.4), ("draft", 0.0)])
 def test_narrow_source_layer_matches_the_reference(quality, sa):
     # the layer's kernels (dof_narrow.cl, dof_upsample) against dof.narrow_sources/narrow_layer: an

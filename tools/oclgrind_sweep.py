@@ -130,6 +130,11 @@ def cases():
         add(f"dof-lights-focus {q} 141x75", lambda q=q: _run(
             replace(dof_cams["round"], sensor_mm=(0.15 * 141, 0.15 * 75)), ["dof"], q, 141, 75, lights=True,
             scale=0.5, depth=30.0, light_depth=0.5))
+        # lights of CoC ~1.2 px over it: in focus for the half-resolution path, their 3x3 share added
+        # back by the layer (dof.small_layer)
+        add(f"dof-lights-small {q} 141x75", lambda q=q: _run(
+            replace(dof_cams["round"], sensor_mm=(0.15 * 141, 0.15 * 75)), ["dof"], q, 141, 75, lights=True,
+            scale=0.5, depth=30.0, light_depth=0.55))
 
     aberr = replace(base, f_number=2.0, field_curvature_mm=-0.14, astigmatism_mm=0.11, coma_mm=0.087,
                     lateral_color_mm=0.007)

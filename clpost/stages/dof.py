@@ -952,7 +952,7 @@ def _half_composite(camera, color, coc, scale, rmax, budget, pm=None, narrow=Fal
     hr = half_radius(coc)
     src = None
     if narrow:
-        src, gathered = narrow_sources(color, coc, scale, luma_weights(camera))
+        src, gathered, small = narrow_sources(color, coc, scale, luma_weights(camera), small=True)
     else:
         gathered = color
     cw, rw = _working(gathered, hr, scale)
@@ -967,6 +967,8 @@ def _half_composite(camera, color, coc, scale, rmax, budget, pm=None, narrow=Fal
     if src is not None and len(src):
         out = out + narrow_layer(src, coc, up_alpha, camera.blades, camera.blade_rotation_deg,
                                  camera.aperture_roundness, camera.spherical_aberration)
+    if src is not None and len(small):
+        out = out + small_layer(small, coc, up_alpha)
     return out, rw
 
 
@@ -1097,6 +1099,8 @@ class Dof(GatherStage):
                 "DOF_NARROW_MIN": f"{NARROW_MIN_PX!r}f", "DOF_NARROW_CELL": NARROW_CELL,
                 "DOF_NARROW_SUM": f"{NARROW_SUM_PX!r}f", "DOF_NARROW_EDGE": f"{NARROW_EDGE_PX!r}f",
                 "DOF_NARROW_MAX": NARROW_MAX, "DOF_NARROW_FOCUS": f"{NARROW_FOCUS_PX!r}f",
+                "DOF_NARROW_FRONT_MAX": NARROW_FRONT_MAX, "DOF_NARROW_SPREAD": f"{NARROW_SPREAD_PX!r}f",
+                "DOF_NARROW_RAMP": f"{NARROW_RAMP_PX!r}f",
                 "DOF_SAME_SOURCE": f"{SAME_SOURCE!r}f", "DOF_LIGHT_FRINGE": f"{LIGHT_FRINGE!r}f",
                 "DOF_UP_TOL": f"{UPSAMPLE_COC_TOL_PX2!r}f",
                 "DOF_MIXED": 0, "DOF_MIX_LEVEL": MIXED_LEVEL, "DOF_MIX_FULL_LEVELS": MIXED_FULL_LEVELS,
@@ -1146,6 +1150,17 @@ beside it through the gather's centre tap (a halo of 68 px around h_lamps' in-fo
 draft). A blurred foreground beside it needs it — there it is the background seen through the
 foreground's soft edge (the occluder scene's sharp corners behind the blurred bar lost 0.14 dB
 without the test; docs/fidelity.md, "The narrow-source layer")."""
+NARROW_FRONT_MAX = 10
+"""Most pixels nearer than an in-focus light (by :data:`FRONT_MARGIN_PX`) among the 10×10 around its
+block (:data:`NARROW_FOCUS_PX`) for its excess to leave the working image: a transparent surface's
+stochastic depth puts a few scattered nearer pixels around a light behind it (the transparent
+scene's lamp behind the pane: 2–6 of 100), a blurred foreground whose soft edge covers the light
+many (the occluder scene's corners behind the bar: 33–53; a light 2 px beside a bar: 20)."""
+NARROW_SPREAD_PX = 1.0
+"""From this |CoC| (px) on, an in-focus light's share of the 3×3 blur that its neighbours take from
+the half-resolution blur instead is added back (:func:`small_layer`); below, none (the transparent
+scene's lamp at r = 0.69 px over the sky: with it, an 11 px halo Cycles does not have, and +1 %
+of its light)."""
 NARROW_CELL = 64
 """Edge (px) of the cells the sources are listed by (the upsampling reads the lists of the cells
 within the largest CoC of its pixels)."""
@@ -1165,7 +1180,8 @@ def narrow_split(camera, pm=None) -> bool:
     return pm is None and camera.optical_vignetting == 0
 
 
-def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndarray | None = None):
+def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndarray | None = None,
+                   small: bool = False):
     r"""The narrow sources of the half-resolution path (draft, preview): pixels of small bright
     lights whose light is taken out of the working image and spread at full resolution instead
     (:func:`narrow_layer`). The half-resolution path's discs have soft edges — the 2×2 box, the
@@ -1181,12 +1197,15 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     :math:`Y(e_q) > ` :data:`NARROW_CONTRAST` · Y(bg) · π r_q² · max(1, |r_q| / :data:`NARROW_EDGE_PX`).
     Sources are listed per :data:`NARROW_CELL` cell in scan order (working rows, then the block's
     rows); a cell with more than :data:`NARROW_MAX` lists none. A pixel of a candidate block with
-    |r_q| ≤ :data:`NARROW_FOCUS_PX` instead, the same contrast test, and no CoC of the 5×5 working
-    pixels around its block nearer than r_q − :data:`FRONT_MARGIN_PX` is an *in-focus light*: its
-    excess leaves the base too, but it is not listed (counted in its cell's cap, though).
+    |r_q| ≤ :data:`NARROW_FOCUS_PX` instead, the same contrast test, and at most
+    :data:`NARROW_FRONT_MAX` pixels nearer than r_q − :data:`FRONT_MARGIN_PX` among the
+    full-resolution pixels of the 5×5 working pixels around its block is an *in-focus light*: its
+    excess leaves the base too, but it is not in ``sources`` (counted in its cell's cap, though).
 
-    Returns (sources, base): sources an (n, 6) array of (x, y, r, e_R, e_G, e_B) (r the signed CoC
-    in px), base the colour with each source's and in-focus light's excess taken out (c − e)."""
+    Returns (sources, base), or with ``small`` (sources, base, small): sources an (n, 6) array of
+    (x, y, r, e_R, e_G, e_B) (r the signed CoC in px), base the colour with each source's and
+    in-focus light's excess taken out (c − e), small the in-focus lights with
+    |r| ≥ :data:`NARROW_SPREAD_PX` in the same form (:func:`small_layer`)."""
     color = np.asarray(color, dtype=np.float64)
     c = np.asarray(coc, dtype=np.float64)
     lw = luma_weights() if luma is None else luma
@@ -1196,11 +1215,7 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     hw, ww = yw.shape
     base = color.copy()
     if hw < 5 or ww < 5:
-        return np.zeros((0, 6)), base
-    # per working pixel, the nearest CoC (px) of the 5×5 working pixels around it (its blocks'
-    # min): an in-focus light is kept at full resolution only with nothing in front of it there
-    rw = np.pad(_working(color, c, scale)[1] * scale, 2, mode="edge")
-    front5 = np.min([rw[2 + dy:2 + dy + hw, 2 + dx:2 + dx + ww] for dy in range(-2, 3) for dx in range(-2, 3)], axis=0)
+        return (np.zeros((0, 6)), base) + ((np.zeros((0, 6)),) if small else ())
     ac = np.abs(np.pad(c, 1, mode="edge"))
     m3 = np.min([ac[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
     ring = np.stack([yw[2 + dy:hw - 2 + dy, 2 + dx:ww - 2 + dx] for dy, dx in NARROW_RING])
@@ -1217,7 +1232,12 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
                 e = np.maximum(color[y, x] - bg, 0.0)
                 ar = abs(c[y, x])
                 split = m3[y, x] >= NARROW_MIN_PX
-                kept = ar <= NARROW_FOCUS_PX and front5[py, px] >= c[y, x] - FRONT_MARGIN_PX
+                # an in-focus light is kept at full resolution only with (almost) nothing in
+                # front of it among the full-resolution pixels of the 5×5 working pixels around
+                # its block (rows/columns past the image replicate its edge)
+                kept = ar <= NARROW_FOCUS_PX and np.count_nonzero(
+                    c[scale * (py - 2):min(scale * (py + 3), h), scale * (px - 2):min(scale * (px + 3), w)]
+                    < c[y, x] - FRONT_MARGIN_PX) <= NARROW_FRONT_MAX
                 if (split or kept) and e @ lw > NARROW_CONTRAST * bg_y * math.pi * ar * ar * max(
                         1.0, ar / NARROW_EDGE_PX):
                     cells.setdefault((y // NARROW_CELL, x // NARROW_CELL), []).append((x, y, c[y, x], split, *e))
@@ -1225,28 +1245,71 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     for key in sorted(cells):
         if len(cells[key]) <= NARROW_MAX:
             rows += [(x, y, r, *e) for x, y, r, split, *e in cells[key] if split]
-            kept += [(x, y, *e) for x, y, _, split, *e in cells[key] if not split]
+            kept += [(x, y, r, *e) for x, y, r, split, *e in cells[key] if not split]
     src = np.array(rows, dtype=np.float64).reshape(-1, 6)
-    for x, y, *e in [(x, y, *e) for x, y, _, *e in src] + kept:
+    kept = np.array(kept, dtype=np.float64).reshape(-1, 6)
+    for x, y, _, *e in list(src) + list(kept):
         base[int(y), int(x)] -= e
+    if small:
+        return src, base, kept[np.abs(kept[:, 2]) >= NARROW_SPREAD_PX]
     return src, base
 
 
 def narrow_weight(dx, dy, rq: float, r, blades: int, rotation_deg: float, roundness: float, sa: float,
                   area: float):
     r"""Weight of a source of signed CoC ``rq`` at offset o = (dx, dy) = q − p spread with radius r:
-    the full-resolution gather's :math:`\mathrm{cov}\,I(t)/(a_K r^2)` (1-px coverage ramp, the
-    aperture in the direction p − q for a far source, q − p for a near one)."""
+    the full-resolution gather's :math:`\mathrm{cov}\,I(t)/(a_K r^2)` (the aperture in the direction
+    p − q for a far source, q − p for a near one), with a coverage ramp :data:`NARROW_RAMP_PX` wide
+    instead of the gather's 1 px below :data:`NARROW_SUM_PX` (from there on the weights are taken
+    to sum to 1, which the 1-px ramp's do within 0.6 % and a narrower one's only within 2 %)."""
     far = rq >= 0
     rho = aperture_radius(np.arctan2(-dy, -dx) if far else np.arctan2(dy, dx), blades, rotation_deg, roundness)
     rr = r * rho
     dist = np.hypot(dx, dy)
-    cov = np.clip(rr - dist + 0.5, 0.0, 1.0)
+    ramp = NARROW_RAMP_PX if max(abs(rq), 0.5) < NARROW_SUM_PX else 1.0
+    cov = np.clip((rr - dist) / ramp + 0.5, 0.0, 1.0)
     t = np.minimum(dist / rr, 1.0)
     a = -sa if far else sa
     return cov * (1.0 + a * (2 * t * t - 1.0)) / (area * r * r)
 
 
+def small_layer(small: np.ndarray, coc: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    r"""The part of the in-focus lights' light (:func:`narrow_sources`' ``small``) that the
+    composite's 3×3 blur (:func:`local_blur`) would have spread onto pixels that take the
+    half-resolution blur instead: their excess left the working image, and a neighbour p with
+    :func:`half_blend` b_p > 0 takes only 1 − b_p of its 3×3 — over a sky of r ≥ 2 px, none
+    (the transparent scene's lamp behind the pane, r = 1.16 px, lost 6 % of its light that way and
+    kept 1.46× Cycles' disc when its light stayed in the working image instead). Each such light q
+    scatters its excess with the 3×3's separable weight :math:`w(o_x)\,w(o_y)`, w(0) = 1 − 2a,
+    w(±1) = a, a = :func:`local_weight` of r_q where q is nearer than p by more than
+    :data:`FRONT_MARGIN_PX`, else of min(|r_q|, |r_p|) (the 3×3's rule), times
+    :math:`\max(b_p - \alpha_p, 0)` (b_p − α_p: the share the composite takes from the
+    half-resolution blur for p's CoC, the front layer's coverage α_p left out — a blurred
+    foreground over p hides that much of the light)."""
+    h, w = coc.shape
+    rp = np.asarray(coc, dtype=np.float64)
+    k = np.maximum(half_blend(rp) - alpha, 0.0)
+    out = np.zeros((h, w, 3))
+    for x, y, rq, *e in small:
+        x, y = int(x), int(y)
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                py, px = y + dy, x + dx
+                if 0 <= py < h and 0 <= px < w:
+                    front = rq < rp[py, px] - FRONT_MARGIN_PX
+                    a = float(local_weight(rq if front else min(abs(rq), abs(rp[py, px]))))
+                    out[py, px] += (a if dy else 1 - 2 * a) * (a if dx else 1 - 2 * a) * k[py, px] * np.asarray(e)
+    return out
+
+
+NARROW_RAMP_PX = 0.25
+r"""Width (px) of a narrow source's coverage ramp (:func:`narrow_weight`): the input's pixels are
+already the renderer's pixel-filtered samples (Cycles: Blackman–Harris, 1.5 px), so its disc needs
+no further pixel footprint, only enough of a ramp that the sampled polygon's edge does not alias.
+With the full-resolution gather's 1-px ramp every split lamp's saturated disc came out up to
+1.24× Cycles' (the emitters scene's lamp09, r = 2.1 px: the ramp's outer half pixel is still above
+white at 100× white). From :data:`NARROW_SUM_PX` on, 1 px (:func:`narrow_weight`); docs/fidelity.md,
+"The narrow layer's coverage ramp"."""
 NARROW_SUM_PX = 8.0
 """From this |CoC| (px) on, a narrow source's weights are taken to sum to 1 (:func:`narrow_norm`):
 the lattice's coverage sum is then within 0.6 % of a_K r² (6 blades, round, 5 rounded blades;
