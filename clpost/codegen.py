@@ -131,11 +131,10 @@ def vector_path(stages: "list[PointwiseStage]", wide: bool = True) -> bool:
 ITEM_VECTORS = 2
 """16-lane vectors per work-item of a fused kernel's vector path (32 pixels of a row; even: a
 stateful stage's state covers a pair): each stage is applied to every vector before the next, which
-gives PoCL's scheduler independent dependency chains per stage (film+print: one vector 1.55 ms,
-two 1.37, four 1.26; the film chain with white grain: two 2.26, four 2.32, six 2.40, eight 2.49 —
-640×360, one thread, min of 151, docs/benchmarks.md), and white grain's state (one float16 of
-Box–Muller draws is the normals of a pair's 32 pixels) is shared by the pair. A row's last pixels
-run as single vectors, then one by one."""
+gives PoCL's scheduler independent dependency chains per stage, and white grain's state (one
+float16 of Box–Muller draws is the normals of a pair's 32 pixels) is shared by the pair. Two is the
+measured best for the film chain with white grain (1, 2, 4, 6, 8 timed: docs/benchmarks.md, "White
+grain fused with film and print"). A row's last pixels run as single vectors, then one by one."""
 
 
 def item_pixels(stages: "list[PointwiseStage]", wide: bool = True) -> int:

@@ -429,6 +429,11 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
             const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
             /* left at its depth by the rule */
             const int16 keep = (((int16)((int)(moved[(size_t)y * gw + g] >> 16)) >> lane) & 1) == 0;
+            /* neighbour (a, b - 1)'s lanes the bright hypothesis moved (mb, true = -1) and their depths
+             * after it (e: e1 there, depth elsewhere) */
+#define DOF_TAIL_E16(b, a) \
+    const int16 mb = -(((int16)(wr[b] >> (1 + (a))) >> lane) & 1); \
+    const float16 e = select(vload16(0, depth + rows[b] + (a)), vload16(0, e1 + rows[b] + (a)), mb)
             float16 nearest = d;
             int16 near_any = (int16)(0);
 #pragma unroll
@@ -436,8 +441,7 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
 #pragma unroll
                 for (int a = -1; a <= 1; ++a) {
                     if (a == 0 && b == 1) continue;
-                    const int16 mb = -(((int16)(wr[b] >> (1 + a)) >> lane) & 1);
-                    const float16 e = select(vload16(0, depth + rows[b] + a), vload16(0, e1 + rows[b] + a), mb);
+                    DOF_TAIL_E16(b, a);
                     nearest = fmin(nearest, e);
                     near_any |= mb & (e < lim);
                 }
@@ -450,8 +454,7 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
 #pragma unroll
                 for (int a = -1; a <= 1; ++a) {
                     if (a == 0 && b == 1) continue;
-                    const int16 mb = -(((int16)(wr[b] >> (1 + a)) >> lane) & 1);
-                    const float16 e = select(vload16(0, depth + rows[b] + a), vload16(0, e1 + rows[b] + a), mb);
+                    DOF_TAIL_E16(b, a);
                     const float16 lq = dof_luma16(src + rows[b] + a, n);
                     const int16 near = e < lim;
                     bright_n = select(bright_n, fmax(bright_n, lq), near);
@@ -465,6 +468,7 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
                                & (bright_n > DOF_SAME_SOURCE * lum)
                                & ((1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f))
                                & (pb <= DOF_LIGHT_FRINGE * sb) & (lum > DOF_SAME_SOURCE * hi3);
+#undef DOF_TAIL_E16
             if (any(take)) {
                 const float16 inv_s = select(1.0f / nearest, (float16)(0.0f), isinf(nearest));
                 vstore16(select(vload16(0, coc + i), clamp(k * (inv_u - inv_s), -limit, limit), take), 0, coc + i);

@@ -210,6 +210,16 @@ def test_tile_plan_dilates_only_by_neighbours_that_can_be_in_front():
         assert D.tile_plan(rw, 16, 3)[0][0, 16] == (1 if near < 0 else 0)
     rw[0, 32] = -4.8
     assert D.tile_plan(rw, 16, 3)[0][0, 16] == 1
+    # the front margin decides (the level case above holds either way: 2 + margin is stride 1): a
+    # wall at 3.375 px is stride 1 alone, a source within the margin behind it (3.625 px) reaching
+    # it needs stride 2, one beyond the margin is clamped to the wall's radius
+    rw = np.full((16, 48), 3.375)
+    rw[:, 32:] = 4.8
+    assert D.tile_plan(rw, 16, 3)[0][0, 16] == 0
+    rw[0, 32] = 3.375 + D.FRONT_MARGIN_PX
+    assert D.tile_plan(rw, 16, 3)[0][0, 16] == 1
+    rw[0, 32] = 3.375 + 2 * D.FRONT_MARGIN_PX
+    assert D.tile_plan(rw, 16, 3)[0][0, 16] == 0
 
 
 @pytest.mark.parametrize("quality", ["draft", "preview"])

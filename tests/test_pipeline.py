@@ -250,11 +250,12 @@ _LAYOUTS = [("interleaved", "interleaved"), ("planar", "planar"), ("planar", "in
 
 # every width and layout pair for the first group (a row of one single 16-lane vector, a work-item
 # and pixels one by one, two work-items, three and a tail); the other groups at one width with a
-# work-item and a tail (37 = 32 + 5), white grain's also at 100 = 3·32 + 4, in two layout pairs
+# work-item and a tail (37 = 32 + 5), white grain's also at 100 = 3·32 + 4 and at 53 = 32 + 16 + 5
+# (a row's last whole vector, which prepares its own state), in two layout pairs
 @pytest.mark.parametrize("group, w, layouts",
                          [("vignetting+exposure", w, lay) for w in (16, 37, 64, 100) for lay in _LAYOUTS]
                          + [(g, 37, lay) for g in list(VECTOR_GROUPS)[1:] for lay in _LAYOUTS[::3]]
-                         + [("film+white grain+print", 100, lay) for lay in _LAYOUTS[::3]])
+                         + [("film+white grain+print", w, lay) for w in (100, 53) for lay in _LAYOUTS[::3]])
 def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts, group):
     """Every pointwise stage runs as 16-lane vectors, several per work-item (a row's last pixels as
     single vectors, then one by one), from its one width-generic source; the result is bit for bit

@@ -170,8 +170,9 @@ def cases():
             lambda w=w, h=h: _run(replace(base, film="kodak-ektar-100", sensor_mm=(0.025 * w / 70, 0.008 * h / 23)),
                                   ["exposure", "film", "grain", "print"], "draft", w, h, wide=True))
     # white noise: one fused pointwise kernel, 32 pixels per work-item as two 16-lane calls sharing
-    # the Box-Muller draws (one work-item and a tail; three and a tail; exactly two)
-    for w, h in ((37, 23), (100, 5), (64, 3)):
+    # the Box-Muller draws (one work-item and a tail; three and a tail; exactly two; one, a row's
+    # last whole vector with its own state, and a tail)
+    for w, h in ((37, 23), (100, 5), (64, 3), (53, 3)):
         add(f"film+grain-white+print wide draft {w}x{h}",
             lambda w=w, h=h: _run(replace(base, film="kodak-ektar-100"), ["exposure", "film", "grain", "print"], "draft",
                                   w, h, wide=True))

@@ -1234,7 +1234,7 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
                 split = m3[y, x] >= NARROW_MIN_PX
                 # an in-focus light is kept at full resolution only with (almost) nothing in
                 # front of it among the full-resolution pixels of the 5×5 working pixels around
-                # its block (rows/columns past the image replicate its edge)
+                # its block (rows/columns past the image, at an odd height or width, count none)
                 kept = ar <= NARROW_FOCUS_PX and np.count_nonzero(
                     c[scale * (py - 2):min(scale * (py + 3), h), scale * (px - 2):min(scale * (px + 3), w)]
                     < c[y, x] - FRONT_MARGIN_PX) <= NARROW_FRONT_MAX

@@ -95,6 +95,8 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
     T = D.TILE
     ww, hw = -(-w // scale), -(-h // scale)
     plan_levels, nlev = nlev, (nlev if built is None else built)
+    if plan_levels > 7:  # dof_tile_dilate packs taps | level << 24 | routing level << 28 in an int
+        raise RuntimeError(f"dof: {plan_levels} lattice levels do not fit the tile plan's packing (at most 7)")
     pad = 2 ** nlev * (budget + 1) + 1  # gather_pad for the levels built
     tw, th = -(-ww // T), -(-hw // T)
     pw, ph = tw * T + 2 * pad, th * T + 2 * pad  # DOF_PW in dof_common.cl: whole tiles + border
