@@ -231,19 +231,20 @@ def fused_source(stages: "list[PointwiseStage]", src_layout: str, dst_layout: st
                     f"{indent}vstore16(b{k}, 0, dst + 2 * n + {i});")
 
         ind = "        "
+        pair = 2 * VECTOR_PIXELS  # pixels one stage state covers (a pair of vectors)
         vectors = range(ITEM_VECTORS)
         body = "\n".join(
-            [states(VECTOR_PIXELS, f"((PixelCtx16){{x0 + {32 * j}, y, width, height, i0 + {32 * j}}})", 2, ind, f"_{j}")
+            [states(VECTOR_PIXELS, f"((PixelCtx16){{x0 + {pair * j}, y, width, height, i0 + {pair * j}}})", 2, ind, f"_{j}")
              for j in range(ITEM_VECTORS // 2) if any(s.state for s in stages)]
             + [load16(k, f"x0 + {k * VECTOR_PIXELS}", ind) for k in vectors]
             + [call(s, VECTOR_PIXELS, f"p16_{k}", ind, f"_{k // 2}[{k % 2}]", str(k)) for s in stages for k in vectors]
             + [store16(k, ind) for k in vectors])
         ind2 = "            "
         tail = "\n".join(
-            [states(VECTOR_PIXELS, "((PixelCtx16){xv & ~31, y, width, height, i0 + (size_t)((xv & ~31) - x0)})",
+            [states(VECTOR_PIXELS, f"((PixelCtx16){{xv & ~{pair - 1}, y, width, height, i0 + (size_t)((xv & ~{pair - 1}) - x0)}})",
                     2, ind2, "_0") if any(s.state for s in stages) else ""]
             + [load16(0, "xv", ind2)]
-            + [call(s, VECTOR_PIXELS, "p16_0", ind2, "_0[(xv >> 4) & 1]", "0") for s in stages]
+            + [call(s, VECTOR_PIXELS, "p16_0", ind2, f"_0[(xv / {VECTOR_PIXELS}) & 1]", "0") for s in stages]
             + [store16(0, ind2)])
         parts.append(f"""
 __kernel void {name}({", ".join(params)})
