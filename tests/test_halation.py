@@ -49,6 +49,14 @@ def test_taps_sum_to_one_and_are_symmetric():
     np.testing.assert_allclose(k, k.T)
 
 
+def test_taps_of_a_cell_larger_than_the_kernel_are_the_identity():
+    # a 3-px-wide frame on a 36 mm sensor: cells of 12 mm, K's whole reach (< 1 mm) between the
+    # centre cell's sub-samples — the taps were 0/0 = NaN
+    for cell in (12.0, 36.0):
+        k = H.kernel_taps(H.STOCKS["kodak-ektar-100"], cell)
+        assert np.isfinite(k).all() and k.sum() == 1.0 and k[k.shape[0] // 2, k.shape[1] // 2] == 1.0
+
+
 @pytest.mark.parametrize("w, h, sensor", [(83, 61, (8.0, 6.0)), (37, 23, (2.0, 1.5)), (200, 31, (36.0, 6.0))])
 def test_kernel_matches_reference_on_odd_sizes(w, h, sensor):
     frame = lamp_frame(w, h, at=(h // 2, w // 3))

@@ -141,7 +141,11 @@ def kernel_taps(stock: Stock, cell_mm: float) -> np.ndarray:
     xx, yy = np.meshgrid(x, x)
     k = radial_kernel(np.hypot(xx, yy), stock.base_um, stock.n_base)
     k = k.reshape(2 * rad + 1, 8, 2 * rad + 1, 8).mean(axis=(1, 3))
-    return k / k.sum()
+    total = k.sum()
+    if not total > 0.0:  # K lies inside the centre cell, between its sub-samples (cells of mm: 1-3 px frames)
+        k = np.zeros_like(k)
+        k[rad, rad] = total = 1.0
+    return k / total
 
 
 def _down(x: np.ndarray, f: int) -> np.ndarray:
