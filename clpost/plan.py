@@ -153,6 +153,11 @@ class Plan:
         self.nodes = group_nodes(self.stages)
         self._aux_names = [b for b in AUX_BUFFERS if any(b in s.reads for s in self.stages)]
         self.launches = self._launches(camera, frame)
+        self._aux_reread = any(L.out_size != L.in_size and any(b in s.reads for n in self.nodes[k + 1:]
+                                                                for s in n.stages for b in AUX_BUFFERS)
+                               for k, L in enumerate(self.launches))
+        """Whether a stage after a resampling one reads depth or velocity (uploaded again from
+        the resampled host arrays, so :meth:`submit` downloads those in the compute queue's order)."""
         self.buffers = buffers
         self._events: list = []
         self._timings: dict[str, float] = {}
@@ -378,6 +383,16 @@ class Plan:
         slot = bufs.stream.reserve()  # waits for the frame that used it last
         uq, dq = rt.transfer_queues()
         names = ["color", *self._aux_names]
+        copies: list = []  # (host array, slot buffer, event of the copy into it): the downloads
+
+        def download(host: np.ndarray, buf):
+            """A download of the frame's: copied into the slot on the compute queue now, to the
+            host by the download worker (Stream.download) once that copy is done."""
+            staging = slot.output(rt, len(copies), host.nbytes)
+            ev = cl.enqueue_copy(q, staging, buf, byte_count=host.nbytes)
+            copies.append((host, staging, ev))
+            return ev
+
         try:
             events = [("upload", cl.enqueue_copy(uq, slot.input(rt, n, getattr(frame, n)), getattr(frame, n),
                                                  is_blocking=False)) for n in names]
@@ -385,23 +400,22 @@ class Plan:
             for n, (_, up) in zip(names, list(events)):
                 dst = bufs.color_in if n == "color" else self._aux_buffer(n, frame)
                 events.append(("stage_in", cl.enqueue_copy(q, dst, slot.inputs[n], wait_for=[up])))
-            evs, host_out, size = self._enqueue_launches(frame, cam)
-            events += evs
-            dev_out = slot.output(rt, size)
-            staged = cl.enqueue_copy(q, dev_out, self._color_out(size))
-            events.append(("stage_out", staged))
+            # a resampling stage's host depth/velocity that a later stage reads back (uploaded again
+            # from the host, _upload_aux) must be downloaded in the compute queue's order
+            evs, host_out, size = self._enqueue_launches(frame, cam, None if self._aux_reread else download)
+            staged = {id(ev) for *_, ev in copies}
+            events += [("stage_out" if id(ev) in staged else label, ev) for label, ev in evs]
+            download(out, self._color_out(size))
+            events.append(("stage_out", copies[-1][2]))
             q.flush()
-            down = cl.enqueue_copy(dq, out, dev_out, is_blocking=False, wait_for=[staged])
-            events.append(("download", down))
-            dq.flush()
         except BaseException:
             # nothing half-done: whatever was enqueued completes before the error is raised (the
-            # slot stays free; ``out`` is written only by the download, the last command)
-            for queue in (uq, q, dq):
+            # slot stays free; nothing is downloaded: the worker gets the frame's copies last)
+            for queue in (uq, q):
                 queue.finish()
             raise
         pending = PendingFrame(frame.replace(color=out, metadata=meta, validate=False, **host_out), events,
-                               down, self)
+                               bufs.stream.download(dq, copies), self)
         bufs.stream.commit(slot, pending)
         return pending
 
@@ -424,13 +438,14 @@ class Plan:
             buf = bufs.aux[name] = self.runtime.empty(getattr(frame, name).shape)
         return buf
 
-    def _enqueue_launches(self, frame: Frame, cam) -> tuple[list, dict, tuple[int, int]]:
+    def _enqueue_launches(self, frame: Frame, cam, download=None) -> tuple[list, dict, tuple[int, int]]:
         """Enqueue the plan's launches for one frame on the runtime's queue, reading the frame from
         ``buffers.color_in`` and ``buffers.aux`` (enqueued before) and leaving the image in
         :meth:`_color_out`; per-frame scalars set as kernel arguments (OpenCL takes an argument's
         value when the launch is enqueued, so the next frame may set its own at once). Returns
         [(label, event)], the host buffers of resampling stages (fresh arrays, downloaded
-        without blocking) and the output size."""
+        without blocking: on the queue, or by ``download(host, buffer) -> event``) and the output
+        size."""
         import pyopencl as cl
 
         same_camera = cam is self._camera_seen or cam == self._camera_seen
@@ -456,9 +471,9 @@ class Plan:
                 io = (src, dst, *aux.values())
                 if (rec is not None and same_camera and key is not None and key == rec.key and rec.io == io
                         and stage.__dict__.get("_replayed") is rec):
-                    evs, host = rec.replay(q, view)
+                    evs, host = rec.replay(q, view, download)
                 else:  # first frame, or what the launches depend on changed: run the stage's code
-                    rec, evs, host = self._record(node, stage, cam, view, src, dst, aux, key)
+                    rec, evs, host = self._record(node, stage, cam, view, src, dst, aux, key, download)
                     rec.io = io
                     patched += [(f"{stage.name}[{i}]", j) for i, j in rec.patched]
                 events += evs
@@ -490,13 +505,13 @@ class Plan:
             src = dst
         return events, host_out, size
 
-    def _record(self, node: _Node, stage: GatherStage, cam, view: Frame, src, dst, aux, key):
+    def _record(self, node: _Node, stage: GatherStage, cam, view: Frame, src, dst, aux, key, download=None):
         """Run a gather stage's code through a :class:`~clpost.runtime_record.Recorder` (its
         commands are enqueued and recorded; the node's previous recording lends its kernel
         objects, so only changed arguments are set); the recording replaces the node's."""
         from .runtime_record import Recorder
 
-        recorder = Recorder(self.runtime, view, key, node.recording)
+        recorder = Recorder(self.runtime, view, key, node.recording, download)
         returned = [(stage.name, ev) for ev in stage.enqueue(recorder, cam, view, src, dst, aux)]
         host, evs = stage.enqueue_host_buffers(recorder, cam, view, aux)
         returned += evs

@@ -37,18 +37,17 @@ class PendingFrame:
     keep the frame's host arrays alive until their transfers complete; the arrays must not be
     changed before :meth:`result` (the upload reads them while other frames run)."""
 
-    def __init__(self, frame: Frame, events: list | None = None, last=None, plan=None) -> None:
+    def __init__(self, frame: Frame, events: list | None = None, downloads=None, plan=None) -> None:
         self._frame = frame
         self._events = events or []
-        self._last = last
+        self._downloads = downloads
+        """The future of the frame's downloads (:meth:`Stream.download`); None: complete."""
         self._plan = plan
-        self._waited = last is None
+        self._waited = downloads is None
 
     def done(self) -> bool:
-        """Whether the frame's download has completed (its image is in ``out``)."""
-        import pyopencl as cl
-
-        return self._waited or self._last.command_execution_status == cl.command_execution_status.COMPLETE
+        """Whether the frame's downloads have completed (its image is in ``out``)."""
+        return self._waited or self._downloads.done()
 
     def wait(self) -> None:
         """Block until every command of the frame has completed, then let its transfers' events
@@ -57,7 +56,7 @@ class PendingFrame:
             return
         import pyopencl as cl
 
-        self._last.wait()
+        self._events += self._downloads.result()
         for _, ev in self._events:
             if isinstance(ev, cl.NannyEvent):
                 ev.wait()
@@ -75,7 +74,7 @@ class PendingFrame:
 @dataclass
 class Slot:
     """Device staging buffers of one frame in flight: its inputs by name (at the plan's input
-    size) and its output by size."""
+    size) and its downloads (the image, a resampling stage's depth and velocity) by key."""
 
     inputs: dict = field(default_factory=dict)
     outputs: dict = field(default_factory=dict)
@@ -88,21 +87,32 @@ class Slot:
             buf = self.inputs[name] = rt.empty(host.shape, host.dtype)
         return buf
 
-    def output(self, rt, size: tuple[int, int]):
-        buf = self.outputs.get(size)
-        if buf is None:
-            w, h = size
-            buf = self.outputs[size] = rt.empty((h, w, 3))
+    def output(self, rt, key, nbytes: int):
+        buf = self.outputs.get(key)
+        if buf is None or buf.size != max(nbytes, 4):
+            buf = self.outputs[key] = rt.empty((max(nbytes, 4),), np.uint8)
         return buf
+
+
+def _download(queue, copies: list) -> list:
+    """The download worker's job: each (host array, slot buffer, event of the copy into it)
+    copied into its host array once that event completes; blocking, so that a driver that
+    copies into pageable memory synchronously blocks this thread, not the one submitting."""
+    import pyopencl as cl
+
+    return [("download", cl.enqueue_copy(queue, host, buf, wait_for=[staged], is_blocking=True))
+            for host, buf, staged in copies]
 
 
 class Stream:
     """The slots of one :class:`clpost.plan.Buffers` (shared by the plans of a pipeline and size,
-    which share its device buffers and the compute queue), used round robin."""
+    which share its device buffers and the compute queue), used round robin, and the thread
+    that enqueues their frames' downloads, in order."""
 
     def __init__(self, depth: int) -> None:
         self.slots = [Slot() for _ in range(depth)]
         self.next = 0
+        self._worker = None
 
     def resize(self, depth: int) -> None:
         """``depth`` slots (frames in flight); the frames in flight complete first."""
@@ -118,6 +128,14 @@ class Stream:
             slot.pending.wait()
             slot.pending = None
         return slot
+
+    def download(self, queue, copies: list):
+        """Hand a frame's downloads (:func:`_download`) to the worker thread; their future."""
+        if self._worker is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._worker = ThreadPoolExecutor(1, thread_name_prefix="clpost-download")
+        return self._worker.submit(_download, queue, copies)
 
     def commit(self, slot: Slot, pending: PendingFrame) -> None:
         slot.pending = pending

@@ -203,3 +203,33 @@ def test_submit_returns_while_the_device_is_busy_and_waits_only_for_a_slot(worst
     assert not t.is_alive()
     for p, w in zip(pending + third, want):
         np.testing.assert_array_equal(p.result().color, w)
+
+
+def test_a_first_frame_submitted_records_its_stages_with_the_downloads_moved(rng):
+    """A plan whose first frame is submitted records its gather stages there (the Recorder's
+    downloads — distortion's depth and velocity — staged for the download worker) and replays
+    them next; a plan whose later stage would read those host arrays back keeps them on the
+    compute queue. Both: what Plan.run gives."""
+    pipe, frame, cam, stages = _worst_case(rng)
+    frames = _frames(frame, 3)
+    ref = Pipeline(cam, quality="final", stages=stages).plan_for(frame)
+    want = [ref.run(f, cam) for f in frames]
+    plan = pipe.plan_for(frame)
+    plan.pipelined = True
+    assert plan.nodes[0].recording is None and not plan._aux_reread
+    pending = [plan.submit(f, cam) for f in frames]
+    got = [p.result() for p in pending]
+    down = plan.runtime.transfer_queues()[1].int_ptr
+    for p in pending[:2]:  # recorded, then replayed: depth, velocity and image by the download worker
+        assert [ev.get_info(cl.event_info.COMMAND_QUEUE).int_ptr for label, ev in p._events
+                if label == "download"] == [down] * 3
+    plan._aux_reread = True  # as if a stage after distortion read depth (none does today)
+    again = plan.submit(frames[1], cam)
+    compute = plan.runtime.queue.int_ptr
+    assert [ev.get_info(cl.event_info.COMMAND_QUEUE).int_ptr for label, ev in again._events
+            if label == "download"] == [compute, compute]  # distortion's depth and velocity
+    got.append(again.result())
+    for w, g in zip(want + want[1:2], got):
+        np.testing.assert_array_equal(g.color, w.color)
+        np.testing.assert_array_equal(g.depth, w.depth)
+        np.testing.assert_array_equal(g.velocity, w.velocity)
