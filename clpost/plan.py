@@ -538,7 +538,9 @@ class Plan:
 
     @property
     def last_timings(self) -> dict[str, float]:
-        """Device milliseconds of the last :meth:`run`, per kernel and for upload/download."""
+        """Device milliseconds of the last :meth:`run` (or submitted frame whose ``result()`` was
+        taken last), per kernel and for upload/download (and a submitted frame's device-to-device
+        copies through its slot: stage_in, stage_out)."""
         if self._events:
             from .runtime import event_ms
 
