@@ -2,7 +2,8 @@
 the bench scenes, with the frame's arrays and the output in ordinary (pageable) NumPy memory
 and in page-locked memory (``Runtime.pinned_empty``, ``Plan.run(out=...)``), and of
 ``Plan.submit`` with pinned frames: ``--frames`` frames submitted back to back, each result taken
-once ``--in-flight`` later frames are submitted (a streaming consumer), wall / frames — uploads
+once ``--in-flight`` later frames are submitted (a streaming consumer; a column per value), wall /
+frames — uploads
 and downloads overlapping other frames' kernels (``clpost.stream``). On a CPU device the three
 are the same (submit runs each frame at once; ``--force-pipelined`` runs the GPU path there, to
 check it); on a discrete GPU the pinned form copies at the bus's rate. Median of ``--repeats``
@@ -75,13 +76,16 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=5,
                     help="timed runs per column (the first plan builds compile: keep the tool short)")
     ap.add_argument("--frames", type=int, default=12, help="frames per pipelined run")
-    ap.add_argument("--in-flight", type=int, default=2, help="Plan.in_flight of the pipelined run")
+    ap.add_argument("--in-flight", default="2,3",
+                    help="Plan.in_flight of the pipelined runs, comma-separated: a column each")
     ap.add_argument("--force-pipelined", action="store_true",
                     help="pipeline on a CPU device too (a check of the GPU path, not a speed-up)")
     a = ap.parse_args(argv)
     w, h = (int(v) for v in a.size.split("x"))
-    print("| scene | quality | pageable ms | fps | pinned ms | fps | pipelined ms | fps |\n"
-          "|---|---|---:|---:|---:|---:|---:|---:|")
+    depths = [int(v) for v in a.in_flight.split(",")]
+    print("| scene | quality | pageable ms | fps | pinned ms | fps |"
+          + "".join(f" pipelined, {d} in flight, ms | fps |" for d in depths)
+          + "\n|---|---|---:|---:|---:|---:|" + "---:|---:|" * len(depths))
     bad = []
     for name in a.scenes.split(","):
         scene = SCENES[name]
@@ -96,15 +100,17 @@ def main(argv=None) -> int:
             ow, oh = plan.launches[-1].out_size if plan.launches else (w, h)
             out = pipe.runtime.pinned_empty((oh, ow, 3))
             pinned = _wall(plan, pf, rcam, a.repeats, out=out)
-            plan.in_flight = a.in_flight
             plan.pipelined = plan.pipelined or a.force_pipelined
-            outs = [out] + [pipe.runtime.pinned_empty((oh, ow, 3)) for _ in range(a.in_flight)]
-            out.fill(np.nan)  # what the check below compares must be a pipelined frame's
-            piped = _pipelined(plan, pf, rcam, a.repeats, a.frames, outs)
-            if not np.array_equal(outs[0], plan.run(pf, rcam).color):  # the last frame that used outs[0]
-                bad.append(f"{name} {q}")
-            print(f"| {name} | {q} | {plain:.2f} | {1e3 / plain:.0f} | {pinned:.2f} | {1e3 / pinned:.0f} "
-                  f"| {piped:.2f} | {1e3 / piped:.0f} |", flush=True)
+            row = f"| {name} | {q} | {plain:.2f} | {1e3 / plain:.0f} | {pinned:.2f} | {1e3 / pinned:.0f} |"
+            for d in depths:
+                plan.in_flight = d
+                outs = [out] + [pipe.runtime.pinned_empty((oh, ow, 3)) for _ in range(d)]
+                out.fill(np.nan)  # what the check below compares must be a pipelined frame's
+                piped = _pipelined(plan, pf, rcam, a.repeats, a.frames, outs)
+                if not np.array_equal(outs[0], plan.run(pf, rcam).color):  # the last frame that used outs[0]
+                    bad.append(f"{name} {q} ({d} in flight)")
+                row += f" {piped:.2f} | {1e3 / piped:.0f} |"
+            print(row, flush=True)
     if bad:
         print(f"pipelined frames differ from Plan.run's: {', '.join(bad)}", file=sys.stderr)
         return 1
