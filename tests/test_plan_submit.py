@@ -233,3 +233,29 @@ def test_a_first_frame_submitted_records_its_stages_with_the_downloads_moved(rng
         np.testing.assert_array_equal(g.color, w.color)
         np.testing.assert_array_equal(g.depth, w.depth)
         np.testing.assert_array_equal(g.velocity, w.velocity)
+
+
+def test_label_planes_resampled_in_flight_belong_to_their_frame(rng):
+    """Distortion re-records every frame that has label planes (its upload of them is not
+    replayable): each submitted frame's labels, depth and image are its own, as Plan.run's."""
+    import warnings
+
+    from test_labels import MODELS, _frame
+
+    frames = [_frame(rng, MODELS["barrel"]) for _ in range(3)]
+    cam = Camera(distortion=MODELS["barrel"])
+    pipe = Pipeline(cam, stages=["distortion"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rcam = pipe.camera_for(frames[0])
+        plan = pipe.plan_for(frames[0], rcam)
+        want = [plan.run(f, rcam) for f in frames]
+        plan.pipelined = True
+        got = [p.result() for p in [plan.submit(f, rcam) for f in frames]]
+    assert not np.array_equal(want[0].labels["id"], want[1].labels["id"])
+    for w, g in zip(want, got):
+        np.testing.assert_array_equal(g.color, w.color)
+        np.testing.assert_array_equal(g.depth, w.depth)
+        assert g.labels.keys() == w.labels.keys()
+        for k in w.labels:
+            np.testing.assert_array_equal(g.labels[k], w.labels[k])
