@@ -15,9 +15,11 @@ from test_plan import _worst_case, scene
 
 
 def _frames(frame, n):
-    """``n`` frames of different content (scaled colour, shifted depth), fresh arrays each."""
+    """``n`` frames of different content (scaled colour, depth and velocity), fresh arrays each."""
+    vel = frame.velocity
     return [frame.replace(color=(frame.color * (1.0 + 0.37 * i)).astype(np.float32),
                           depth=(frame.depth * (1.0 + 0.1 * i)).astype(np.float32),
+                          velocity=None if vel is None else (vel * (1.0 - 0.2 * i)).astype(np.float32),
                           metadata=dict(frame.metadata, frame_index=i)) for i in range(n)]
 
 
@@ -41,6 +43,7 @@ def test_frames_in_flight_with_a_focus_pull_match_plan_run_frame_by_frame(worst,
     plan.pipelined = False
     want = [plan.run(f, c) for f, c in zip(frames, cams)]
     assert not np.array_equal(want[0].color, want[1].color)
+    assert not np.array_equal(want[0].depth, want[1].depth) and not np.array_equal(want[0].velocity, want[1].velocity)
     plan.pipelined, plan.in_flight = True, in_flight
     try:
         pending = [plan.submit(f, c) for f, c in zip(frames, cams)]
