@@ -8,8 +8,11 @@ How a submitted frame flows (``docs/architecture.md``, "Frames in flight"):
    them) → this frame's *slot*: device staging buffers of its own;
 2. **compute queue** (the runtime's, in order, as :meth:`Plan.run` uses it): the slot's buffers
    copied device-to-device into the plan's fixed input buffers (each copy waits for its upload's
-   event), the plan's launches, the output copied device-to-device into the slot;
-3. **download queue**: the slot's output → the frame's ``out`` array (waits for that copy).
+   event), the plan's launches, the output (and a resampling stage's depth/velocity, through
+   the plan's download hook, ``runtime_record``) copied device-to-device into the slot;
+3. **download thread** (:meth:`Stream.download`), on the download queue: the slot's copies → the
+   frame's ``out`` and fresh host arrays, each waiting for its copy's event — a thread, so that
+   a driver that downloads into pageable memory synchronously blocks it and not the caller.
 
 Why the device-to-device copies: every command that reads or writes a buffer the plan's launches
 use stays on the one in-order compute queue, so frames cannot race on them, and the gather
@@ -18,9 +21,9 @@ were recorded with — keep replaying. A slot is reused only after its last fram
 completed (waited for on the host; that frame's copy out of the staging inputs came before it on
 the compute queue), so at most ``len(slots)`` frames are in flight. The copies cost device
 bandwidth (a 1080p frame's float colour and depth in and colour out: ≈ 58 MB, read and written
-once more — tens of µs at a discrete GPU's memory bandwidth); on a CPU
-device or an integrated GPU they would cost as much as the transfers themselves, so there
-``Plan.submit`` runs the frame at once (:attr:`clpost.runtime.Runtime.discrete`).
+once more — tens of µs at a discrete GPU's memory bandwidth); on a CPU device or an integrated
+GPU they would cost as much as the transfers themselves, so there ``Plan.submit`` runs the frame
+at once (:attr:`clpost.runtime.Runtime.discrete`).
 """
 from __future__ import annotations
 
