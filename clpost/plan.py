@@ -100,6 +100,8 @@ class Buffers:
     args: dict = field(default_factory=dict)
     uploaded: dict = field(default_factory=dict)
     """(stage, arg) → the read-only host array last copied into its buffer (not copied again)."""
+    stream: object = None
+    """The :class:`clpost.stream.Stream` of :meth:`Plan.submit`'s frames in flight (made on first use)."""
 
 
 def group_nodes(stages: list[Stage]) -> list[_Node]:
@@ -151,6 +153,11 @@ class Plan:
         self.nodes = group_nodes(self.stages)
         self._aux_names = [b for b in AUX_BUFFERS if any(b in s.reads for s in self.stages)]
         self.launches = self._launches(camera, frame)
+        self._aux_reread = any(L.out_size != L.in_size and any(b in s.reads for n in self.nodes[k + 1:]
+                                                                for s in n.stages for b in AUX_BUFFERS)
+                               for k, L in enumerate(self.launches))
+        """Whether a stage after a resampling one reads depth or velocity (uploaded again from
+        the resampled host arrays, so :meth:`submit` downloads those in the compute queue's order)."""
         self.buffers = buffers
         self._events: list = []
         self._timings: dict[str, float] = {}
@@ -159,6 +166,12 @@ class Plan:
         """(launch, argument index) of every kernel argument set in the last :meth:`run` because its
         value changed (a per-frame scalar; every argument, the first time a launch is recorded
         or a pointwise kernel runs)."""
+        self.pipelined = runtime is not None and runtime.discrete
+        """Whether :meth:`submit` keeps frames in flight (transfers on their own queues, see
+        :mod:`clpost.stream`) or runs each at once; default: on a discrete GPU
+        (:attr:`clpost.runtime.Runtime.discrete`). Tests set it on a CPU device."""
+        self.in_flight = 2
+        """At most this many submitted frames in flight (:meth:`submit`)."""
         self.last_host_ms = 0.0
         """CPU time of the calling thread in the last :meth:`run` (host work: planning checks,
         tables, argument setting, enqueueing; the device's threads and waits are not in it)."""
@@ -282,6 +295,11 @@ class Plan:
         if camera is not self.camera and camera is not self._camera_seen and structure_key(camera) != self.structure:
             raise InputError("Plan.run: the camera differs from the plan's in more than its per-frame "
                              "scalars (lens, blades, stock …); use Pipeline.run, which re-plans")
+        missing = [n for n in self._aux_names if getattr(frame, n) is None]
+        if missing:
+            readers = [s.name for s in self.stages if missing[0] in s.reads]
+            raise InputError(f"Plan.run: stage '{readers[0]}' needs the frame's {missing[0]} buffer, which "
+                             f"this frame lacks; give every frame of the plan its {missing[0]}")
 
     def run(self, frame: Frame, camera=None, out: np.ndarray | None = None) -> Frame:
         """Process one frame with this plan. ``camera``: this frame's camera (same structure as the
@@ -300,21 +318,142 @@ class Plan:
         import pyopencl as cl
 
         self.check(frame, cam)
+        meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
+        if not self.stages:
+            self._camera_seen = cam
+            self._events, self._timings, self.last_patched = [], {}, []
+            return frame.replace(metadata=meta, validate=False)
+        out = self._out_array(out)
+        rt, q, bufs = self.runtime, self.runtime.queue, self.buffers
+        events = [("upload", cl.enqueue_copy(q, bufs.color_in, frame.color, is_blocking=False))]
+        for name in self._aux_names:
+            events.append(("upload", cl.enqueue_copy(q, self._aux_buffer(name, frame), getattr(frame, name),
+                                                     is_blocking=False)))
+        evs, host_out, size = self._enqueue_launches(frame, cam)
+        events += evs
+        events.append(("download", cl.enqueue_copy(q, out, self._color_out(size), is_blocking=True)))
+        # The queue is in order, so every command is complete: let the transfers' events drop their
+        # host arrays now (NannyEvent.wait), or the previous frame's arrays would be freed — and
+        # counted — in the next run, when these events are replaced.
+        for _, ev in events:
+            if isinstance(ev, cl.NannyEvent):
+                ev.wait()
+        self._events = events  # read into last_timings only when asked (profiling queries cost host time)
+        return frame.replace(color=out, metadata=meta, validate=False, **host_out)
+
+    def submit(self, frame: Frame, camera=None, out: np.ndarray | None = None):
+        """Enqueue one frame and return at once with a :class:`clpost.stream.PendingFrame`, whose
+        ``result()`` is what :meth:`run` returns; up to :attr:`in_flight` frames run at a time,
+        each frame's upload and download on queues of their own beside the other frames'
+        kernels (:mod:`clpost.stream`), so that a sequence costs about the slowest of upload,
+        kernels, download and host work per frame instead of their sum. Arguments as
+        :meth:`run`'s; the frame's arrays and ``out`` belong to the frame until ``result()``
+        (page-locked ones, :meth:`~clpost.runtime.Runtime.pinned_empty`, are what a GPU copies
+        asynchronously). Where :attr:`pipelined` is False (a CPU device) the frame runs at once
+        and the returned frame is complete. A frame or ``out`` this plan refuses raises
+        :class:`~clpost.errors.InputError` before anything is enqueued."""
+        t0 = time.thread_time()
+        try:
+            cam = self.camera if camera is None else camera
+            if not (self.pipelined and self.stages):
+                from .stream import PendingFrame
+
+                return PendingFrame(self._run(frame, cam, out))
+            return self._submit(frame, cam, out)
+        finally:
+            self.last_host_ms = (time.thread_time() - t0) * 1e3
+
+    def drain(self) -> None:
+        """Wait for every frame :meth:`submit` has in flight."""
+        if self.buffers is not None and self.buffers.stream is not None:
+            self.buffers.stream.drain()
+
+    def _submit(self, frame: Frame, cam, out: np.ndarray | None):
+        import pyopencl as cl
+
+        from .stream import PendingFrame, Stream
+
+        self.check(frame, cam)
+        out = self._out_array(out)
+        meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
+        rt, q, bufs = self.runtime, self.runtime.queue, self.buffers
+        if bufs.stream is None:
+            bufs.stream = Stream(self.in_flight)
+        bufs.stream.resize(self.in_flight)
+        slot = bufs.stream.reserve()  # waits for the frame that used it last
+        uq, dq = rt.transfer_queues()
+        names = ["color", *self._aux_names]
+        copies: list = []  # (host array, slot buffer, event of the copy into it): the downloads
+
+        def download(host: np.ndarray, buf):
+            """A download of the frame's: copied into the slot on the compute queue now, to the
+            host by the download worker (Stream.download) once that copy is done."""
+            staging = slot.output(rt, len(copies), host.nbytes)
+            ev = cl.enqueue_copy(q, staging, buf, byte_count=host.nbytes)
+            copies.append((host, staging, ev))
+            return ev
+
+        try:
+            events = [("upload", cl.enqueue_copy(uq, slot.input(rt, n, getattr(frame, n)), getattr(frame, n),
+                                                 is_blocking=False)) for n in names]
+            uq.flush()  # another queue waits for these: submit them to the device now
+            for n, (_, up) in zip(names, list(events)):
+                dst = bufs.color_in if n == "color" else self._aux_buffer(n, frame)
+                events.append(("stage_in", cl.enqueue_copy(q, dst, slot.inputs[n], wait_for=[up])))
+            # a resampling stage's host depth/velocity that a later stage reads back (uploaded again
+            # from the host, _upload_aux) must be downloaded in the compute queue's order
+            evs, host_out, size = self._enqueue_launches(frame, cam, None if self._aux_reread else download)
+            staged = {id(ev) for *_, ev in copies}
+            events += [("stage_out" if id(ev) in staged else label, ev) for label, ev in evs]
+            download(out, self._color_out(size))
+            events.append(("stage_out", copies[-1][2]))
+            q.flush()
+        except BaseException:
+            # nothing half-done: whatever was enqueued completes before the error is raised (the
+            # slot stays free; nothing is downloaded: the worker gets the frame's copies last)
+            for queue in (uq, q):
+                queue.finish()
+            raise
+        pending = PendingFrame(frame.replace(color=out, metadata=meta, validate=False, **host_out), events,
+                               bufs.stream.download(dq, copies), self)
+        bufs.stream.commit(slot, pending)
+        return pending
+
+    def _out_array(self, out: np.ndarray | None) -> np.ndarray:
+        """``out`` checked against the plan's output (one line naming the shape it must have), or a
+        new array; before anything is enqueued, so a wrong one leaves nothing half-done."""
+        w, h = self.output_size
+        if out is None:
+            return np.empty((h, w, 3), np.float32)
+        if out.shape != (h, w, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
+            raise InputError(f"Plan.run: out= must be a C-contiguous float32 array of shape {(h, w, 3)} "
+                             f"(the plan's output), not {out.dtype} {out.shape}")
+        return out
+
+    def _aux_buffer(self, name: str, frame: Frame):
+        """The plan's device buffer of the frame's ``name`` (depth, velocity) at the input size."""
+        bufs = self.buffers
+        buf = bufs.aux.get(name)
+        if buf is None:
+            buf = bufs.aux[name] = self.runtime.empty(getattr(frame, name).shape)
+        return buf
+
+    def _enqueue_launches(self, frame: Frame, cam, download=None) -> tuple[list, dict, tuple[int, int]]:
+        """Enqueue the plan's launches for one frame on the runtime's queue, reading the frame from
+        ``buffers.color_in`` and ``buffers.aux`` (enqueued before) and leaving the image in
+        :meth:`_color_out`; per-frame scalars set as kernel arguments (OpenCL takes an argument's
+        value when the launch is enqueued, so the next frame may set its own at once). Returns
+        [(label, event)], the host buffers of resampling stages (fresh arrays, downloaded
+        without blocking: on the queue, or by ``download(host, buffer) -> event``) and the output
+        size."""
+        import pyopencl as cl
+
         same_camera = cam is self._camera_seen or cam == self._camera_seen
         self._camera_seen = cam
         self._events, self._timings = [], {}
         patched = self.last_patched = []
-        meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
-        if not self.stages:
-            return frame.replace(metadata=meta, validate=False)
         rt, q, bufs = self.runtime, self.runtime.queue, self.buffers
-        events = [("upload", cl.enqueue_copy(q, bufs.color_in, frame.color, is_blocking=False))]
-        for name in self._aux_names:
-            host = getattr(frame, name)
-            buf = bufs.aux.get(name)
-            if buf is None:
-                buf = bufs.aux[name] = rt.empty(host.shape)
-            events.append(("upload", cl.enqueue_copy(q, buf, host, is_blocking=False)))
+        events: list = []
         src, planar_k = bufs.color_in, 0
         size, host_out, aux = self.size, {}, bufs.aux
         view = frame  # the frame as the next stage sees it: resampling stages change its size
@@ -332,9 +471,9 @@ class Plan:
                 io = (src, dst, *aux.values())
                 if (rec is not None and same_camera and key is not None and key == rec.key and rec.io == io
                         and stage.__dict__.get("_replayed") is rec):
-                    evs, host = rec.replay(q, view)
+                    evs, host = rec.replay(q, view, download)
                 else:  # first frame, or what the launches depend on changed: run the stage's code
-                    rec, evs, host = self._record(node, stage, cam, view, src, dst, aux, key)
+                    rec, evs, host = self._record(node, stage, cam, view, src, dst, aux, key, download)
                     rec.io = io
                     patched += [(f"{stage.name}[{i}]", j) for i, j in rec.patched]
                 events += evs
@@ -364,29 +503,15 @@ class Plan:
                                             rt.wide)
                 events.append((node.name, cl.enqueue_nd_range_kernel(q, node.kernel, node.size, None)))
             src = dst
-        w, h = size
-        if out is None:
-            out = np.empty((h, w, 3), np.float32)
-        elif out.shape != (h, w, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
-            raise InputError(f"Plan.run: out= must be a C-contiguous float32 array of shape {(h, w, 3)} "
-                             f"(the plan's output), not {out.dtype} {out.shape}")
-        events.append(("download", cl.enqueue_copy(q, out, self._color_out(size), is_blocking=True)))
-        # The queue is in order, so every command is complete: let the transfers' events drop their
-        # host arrays now (NannyEvent.wait), or the previous frame's arrays would be freed — and
-        # counted — in the next run, when these events are replaced.
-        for _, ev in events:
-            if isinstance(ev, cl.NannyEvent):
-                ev.wait()
-        self._events = events  # read into last_timings only when asked (profiling queries cost host time)
-        return frame.replace(color=out, metadata=meta, validate=False, **host_out)
+        return events, host_out, size
 
-    def _record(self, node: _Node, stage: GatherStage, cam, view: Frame, src, dst, aux, key):
+    def _record(self, node: _Node, stage: GatherStage, cam, view: Frame, src, dst, aux, key, download=None):
         """Run a gather stage's code through a :class:`~clpost.runtime_record.Recorder` (its
         commands are enqueued and recorded; the node's previous recording lends its kernel
         objects, so only changed arguments are set); the recording replaces the node's."""
         from .runtime_record import Recorder
 
-        recorder = Recorder(self.runtime, view, key, node.recording)
+        recorder = Recorder(self.runtime, view, key, node.recording, download)
         returned = [(stage.name, ev) for ev in stage.enqueue(recorder, cam, view, src, dst, aux)]
         host, evs = stage.enqueue_host_buffers(recorder, cam, view, aux)
         returned += evs
@@ -413,7 +538,9 @@ class Plan:
 
     @property
     def last_timings(self) -> dict[str, float]:
-        """Device milliseconds of the last :meth:`run`, per kernel and for upload/download."""
+        """Device milliseconds of the last :meth:`run` (or submitted frame whose ``result()`` was
+        taken last), per kernel and for upload/download (and a submitted frame's device-to-device
+        copies through its slot: stage_in, stage_out)."""
         if self._events:
             from .runtime import event_ms
 

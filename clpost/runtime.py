@@ -273,6 +273,7 @@ class Runtime:
     _constants: "OrderedDict" = field(default_factory=lambda: OrderedDict(), init=False, repr=False)
     _scratch: "weakref.WeakKeyDictionary" = field(default_factory=lambda: weakref.WeakKeyDictionary(),
                                                   init=False, repr=False)
+    _transfer: tuple | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.context = cl.Context([self.device])
@@ -283,6 +284,31 @@ class Runtime:
     @property
     def name(self) -> str:
         return _describe(self.device)
+
+    @property
+    def discrete(self) -> bool:
+        """Whether the device is a GPU with memory of its own (no ``CL_DEVICE_HOST_UNIFIED_MEMORY``):
+        a frame's transfers then cross a bus and are worth overlapping with the kernels of other
+        frames (:meth:`clpost.plan.Plan.submit`). On a CPU device or an integrated GPU a transfer
+        is a copy in the same memory the kernels use, so staging it costs bandwidth and gains
+        nothing."""
+        if not self.device.type & cl.device_type.GPU:
+            return False
+        try:
+            return not self.device.host_unified_memory
+        except cl.Error:  # the query is deprecated since OpenCL 2.0; a driver may refuse it
+            return True
+
+    def transfer_queues(self) -> tuple["cl.CommandQueue", "cl.CommandQueue"]:
+        """(upload, download): two more in-order profiling queues in the runtime's context, made
+        on first use, for :meth:`clpost.plan.Plan.submit`'s transfers, which run beside the
+        kernels of :attr:`queue` (a GPU's copy engines work while its cores compute). Commands of
+        different queues are ordered only by the events they wait for."""
+        if self._transfer is None:
+            props = cl.command_queue_properties.PROFILING_ENABLE
+            self._transfer = (cl.CommandQueue(self.context, properties=props),
+                              cl.CommandQueue(self.context, properties=props))
+        return self._transfer
 
     @property
     def wide(self) -> bool:

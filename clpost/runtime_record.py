@@ -93,14 +93,19 @@ class Recording:
     patched: list = field(default_factory=list)
     """(command index, argument index) set when this recording was made from the previous one."""
 
-    def replay(self, queue, frame) -> tuple[list, dict]:
+    def replay(self, queue, frame, download=None) -> tuple[list, dict]:
         """Enqueue every command again (``frame``: the frame whose arrays the uploads read);
-        returns [(label, event)] and the host buffers."""
+        returns [(label, event)] and the host buffers. ``download(host, buffer) -> event``: how a
+        download into a fresh host array is enqueued instead of on ``queue`` (``Recorder``'s)."""
         events, fresh = [], {}
         for i, (cmd, label) in enumerate(zip(self.commands, self.labels)):
             if type(cmd) is Launch:
                 events.append((label, cl.enqueue_nd_range_kernel(queue, cmd.kernel, cmd.global_size,
                                                                  cmd.local_size)))
+            elif cmd.fresh and download is not None:
+                dst = np.empty(*cmd.fresh)
+                events.append((label, download(dst, cmd.src)))
+                fresh[i] = dst
             else:
                 ev, dst = cmd.enqueue(queue, frame)
                 events.append((label, ev))
@@ -113,11 +118,14 @@ class Recording:
 class Recorder:
     """The runtime as a gather stage sees it while a plan records it (module docstring).
     ``previous``: the stage's last recording, whose kernel objects are reused where the same
-    kernel is launched with the same sizes at the same place."""
+    kernel is launched with the same sizes at the same place. ``download(host, buffer) -> event``:
+    how a download into a host array is enqueued instead of on the runtime's queue (recorded the
+    same; :meth:`clpost.plan.Plan.submit` moves a frame's downloads off the compute queue)."""
 
-    def __init__(self, rt, frame, key, previous: Recording | None = None) -> None:
+    def __init__(self, rt, frame, key, previous: Recording | None = None, download=None) -> None:
         self.rt = rt
         self.frame = frame
+        self._download = download
         self.recording = Recording(key)
         self._events: list = []
         self._old = previous.commands if previous is not None else []
@@ -170,7 +178,10 @@ class Recorder:
         name = next((n for n in FRAME_ARRAYS if src is getattr(self.frame, n, None)), None)
         fresh = (dst.shape, dst.dtype) if isinstance(dst, np.ndarray) else None
         cmd = Copy(dst, None if name else src, name, fresh)
-        ev = cl.enqueue_copy(self.rt.queue, dst, src, is_blocking=False)
+        if fresh and self._download is not None and isinstance(src, cl.MemoryObjectHolder):
+            ev = self._download(dst, src)
+        else:
+            ev = cl.enqueue_copy(self.rt.queue, dst, src, is_blocking=False)
         self.recording.commands.append(cmd)
         self._events.append(ev)
         return ev

@@ -1,8 +1,13 @@
 """End-to-end frame time of ``Plan.run`` (upload, kernels, download, host work: wall clock) for
 the bench scenes, with the frame's arrays and the output in ordinary (pageable) NumPy memory
-and in page-locked memory (``Runtime.pinned_empty``, ``Plan.run(out=...)``). On a CPU device
-the two are the same; on a discrete GPU the pinned form copies at the bus's rate. Median of
-``--repeats`` after warm-up.
+and in page-locked memory (``Runtime.pinned_empty``, ``Plan.run(out=...)``), and of
+``Plan.submit`` with pinned frames: ``--frames`` frames submitted back to back, each result taken
+once ``--in-flight`` later frames are submitted (a streaming consumer; a column per value), wall /
+frames — uploads
+and downloads overlapping other frames' kernels (``clpost.stream``). On a CPU device the three
+are the same (submit runs each frame at once; ``--force-pipelined`` runs the GPU path there, to
+check it); on a discrete GPU the pinned form copies at the bus's rate. Median of ``--repeats``
+after warm-up.
 
     python tools/end_to_end.py --device nvidia --scenes worst,no_defocus,full --qualities draft,final
 """
@@ -10,7 +15,10 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
+
+import numpy as np
 
 from clpost.bench import SCENES, synthetic_frame
 from clpost.pipeline import Pipeline
@@ -37,16 +45,48 @@ def _wall(plan, frame, cam, repeats: int, out=None) -> float:
     return statistics.median(times)
 
 
+def _pipelined(plan, frame, cam, repeats: int, frames: int, outs: list) -> float:
+    """Wall ms per frame of ``frames`` frames through ``Plan.submit`` (median of ``repeats``
+    runs): a frame's result is taken when ``len(outs) - 1`` later frames are in flight, and its
+    ``out`` array is used again after that."""
+    from collections import deque
+
+    depth = len(outs) - 1
+    times = []
+    for i in range(repeats + 1):
+        t0 = time.perf_counter()
+        pending: deque = deque()
+        for k in range(frames):
+            if len(pending) >= depth:
+                pending.popleft().result()
+            pending.append(plan.submit(frame, cam, out=outs[k % len(outs)]))
+        while pending:
+            pending.popleft().result()
+        if i >= 1:
+            times.append((time.perf_counter() - t0) * 1e3 / frames)
+    return statistics.median(times)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--device")
     ap.add_argument("--size", default="1920x1080")
     ap.add_argument("--scenes", default="worst,no_defocus,full")
     ap.add_argument("--qualities", default="draft,final")
-    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--repeats", type=int, default=5,
+                    help="timed runs per column (the first plan builds compile: keep the tool short)")
+    ap.add_argument("--frames", type=int, default=12, help="frames per pipelined run")
+    ap.add_argument("--in-flight", default="2,3",
+                    help="Plan.in_flight of the pipelined runs, comma-separated: a column each")
+    ap.add_argument("--force-pipelined", action="store_true",
+                    help="pipeline on a CPU device too (a check of the GPU path, not a speed-up)")
     a = ap.parse_args(argv)
     w, h = (int(v) for v in a.size.split("x"))
-    print("| scene | quality | pageable ms | fps | pinned ms | fps |\n|---|---|---:|---:|---:|---:|")
+    depths = [int(v) for v in a.in_flight.split(",")]
+    print("| scene | quality | pageable ms | fps | pinned ms | fps |"
+          + "".join(f" pipelined, {d} in flight, ms | fps |" for d in depths)
+          + "\n|---|---|---:|---:|---:|---:|" + "---:|---:|" * len(depths))
+    bad = []
     for name in a.scenes.split(","):
         scene = SCENES[name]
         for q in a.qualities.split(","):
@@ -60,8 +100,20 @@ def main(argv=None) -> int:
             ow, oh = plan.launches[-1].out_size if plan.launches else (w, h)
             out = pipe.runtime.pinned_empty((oh, ow, 3))
             pinned = _wall(plan, pf, rcam, a.repeats, out=out)
-            print(f"| {name} | {q} | {plain:.2f} | {1e3 / plain:.0f} | {pinned:.2f} | {1e3 / pinned:.0f} |",
-                  flush=True)
+            plan.pipelined = plan.pipelined or a.force_pipelined
+            row = f"| {name} | {q} | {plain:.2f} | {1e3 / plain:.0f} | {pinned:.2f} | {1e3 / pinned:.0f} |"
+            for d in depths:
+                plan.in_flight = d
+                outs = [out] + [pipe.runtime.pinned_empty((oh, ow, 3)) for _ in range(d)]
+                out.fill(np.nan)  # what the check below compares must be a pipelined frame's
+                piped = _pipelined(plan, pf, rcam, a.repeats, a.frames, outs)
+                if not np.array_equal(outs[0], plan.run(pf, rcam).color):  # the last frame that used outs[0]
+                    bad.append(f"{name} {q} ({d} in flight)")
+                row += f" {piped:.2f} | {1e3 / piped:.0f} |"
+            print(row, flush=True)
+    if bad:
+        print(f"pipelined frames differ from Plan.run's: {', '.join(bad)}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -1,0 +1,152 @@
+"""Frames in flight (:meth:`clpost.plan.Plan.submit`): each frame's transfers on queues of their
+own, so that on a discrete GPU frame i+1's upload and frame i−1's download run while frame i's
+kernels do.
+
+How a submitted frame flows (``docs/architecture.md``, "Frames in flight"):
+
+1. **upload queue**: the frame's host arrays (colour, and depth/velocity where a stage reads
+   them) → this frame's *slot*: device staging buffers of its own;
+2. **compute queue** (the runtime's, in order, as :meth:`Plan.run` uses it): the slot's buffers
+   copied device-to-device into the plan's fixed input buffers (each copy waits for its upload's
+   event), the plan's launches, the output (and a resampling stage's depth/velocity, through
+   the plan's download hook, ``runtime_record``) copied device-to-device into the slot;
+3. **download thread** (:meth:`Stream.download`), on the download queue: the slot's copies → the
+   frame's ``out`` and fresh host arrays, each waiting for its copy's event — a thread, so that
+   a driver that downloads into pageable memory synchronously blocks it and not the caller.
+
+Why the device-to-device copies: every command that reads or writes a buffer the plan's launches
+use stays on the one in-order compute queue, so frames cannot race on them, and the gather
+stages' recordings — which replay only while their input and output buffers are the ones they
+were recorded with — keep replaying. A slot is reused only after its last frame's download has
+completed (waited for on the host; that frame's copy out of the staging inputs came before it on
+the compute queue), so at most ``len(slots)`` frames are in flight. The copies cost device
+bandwidth (a 1080p frame's float colour and depth in and colour out: ≈ 58 MB, read and written
+once more — tens of µs at a discrete GPU's memory bandwidth); on a CPU device or an integrated
+GPU they would cost as much as the transfers themselves, so there ``Plan.submit`` runs the frame
+at once (:attr:`clpost.runtime.Runtime.discrete`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .frame import Frame
+
+
+class PendingFrame:
+    """A submitted frame: :meth:`result` waits for it and returns the processed :class:`Frame`
+    (what :meth:`clpost.plan.Plan.run` returns); :meth:`done` asks without waiting. Its events
+    keep the frame's host arrays alive until their transfers complete; the arrays must not be
+    changed before :meth:`result` (the upload reads them while other frames run)."""
+
+    def __init__(self, frame: Frame, events: list | None = None, downloads=None, plan=None) -> None:
+        self._frame = frame
+        self._events = events or []
+        self._downloads = downloads
+        """The future of the frame's downloads (:meth:`Stream.download`); None: complete."""
+        self._plan = plan
+        self._waited = downloads is None
+
+    def done(self) -> bool:
+        """Whether the frame's downloads have completed (its image is in ``out``)."""
+        return self._waited or self._downloads.done()
+
+    def wait(self) -> None:
+        """Block until every command of the frame has completed, then let its transfers' events
+        drop their host arrays (``NannyEvent.wait``)."""
+        if self._waited:
+            return
+        import pyopencl as cl
+
+        self._events += self._downloads.result()
+        for _, ev in self._events:
+            if isinstance(ev, cl.NannyEvent):
+                ev.wait()
+        self._waited = True
+
+    def result(self) -> Frame:
+        """The processed frame, after :meth:`wait`; its device times become the plan's
+        ``last_timings``."""
+        self.wait()
+        if self._plan is not None and self._events:
+            self._plan._events, self._plan._timings = list(self._events), {}
+        return self._frame
+
+
+@dataclass
+class Slot:
+    """Device staging buffers of one frame in flight: its inputs by name (at the plan's input
+    size) and its downloads (the image, a resampling stage's depth and velocity) by key."""
+
+    inputs: dict = field(default_factory=dict)
+    outputs: dict = field(default_factory=dict)
+    pending: PendingFrame | None = None
+    """The last frame that used this slot (waited for before the slot is used again)."""
+
+    def input(self, rt, name: str, host: np.ndarray):
+        buf = self.inputs.get(name)
+        if buf is None or buf.size != max(host.nbytes, 4):
+            buf = self.inputs[name] = rt.empty(host.shape, host.dtype)
+        return buf
+
+    def output(self, rt, key, nbytes: int):
+        buf = self.outputs.get(key)
+        if buf is None or buf.size != max(nbytes, 4):
+            buf = self.outputs[key] = rt.empty((max(nbytes, 4),), np.uint8)
+        return buf
+
+
+def _download(queue, copies: list) -> list:
+    """The download worker's job: each (host array, slot buffer, event of the copy into it)
+    copied into its host array once that event completes; blocking, so that a driver that
+    copies into pageable memory synchronously blocks this thread, not the one submitting."""
+    import pyopencl as cl
+
+    return [("download", cl.enqueue_copy(queue, host, buf, wait_for=[staged], is_blocking=True))
+            for host, buf, staged in copies]
+
+
+class Stream:
+    """The slots of one :class:`clpost.plan.Buffers` (shared by the plans of a pipeline and size,
+    which share its device buffers and the compute queue), used round robin, and the thread
+    that enqueues their frames' downloads, in order."""
+
+    def __init__(self, depth: int) -> None:
+        self.slots = [Slot() for _ in range(depth)]
+        self.next = 0
+        self._worker = None
+
+    def resize(self, depth: int) -> None:
+        """``depth`` slots (frames in flight); the frames in flight complete first."""
+        if depth != len(self.slots):
+            self.drain()
+            self.slots = [Slot() for _ in range(depth)]
+            self.next = 0
+
+    def reserve(self) -> Slot:
+        """The next slot, once the frame that used it last is complete."""
+        slot = self.slots[self.next % len(self.slots)]
+        if slot.pending is not None:
+            slot.pending.wait()
+            slot.pending = None
+        return slot
+
+    def download(self, queue, copies: list):
+        """Hand a frame's downloads (:func:`_download`) to the worker thread; their future."""
+        if self._worker is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._worker = ThreadPoolExecutor(1, thread_name_prefix="clpost-download")
+        return self._worker.submit(_download, queue, copies)
+
+    def commit(self, slot: Slot, pending: PendingFrame) -> None:
+        slot.pending = pending
+        self.next += 1
+
+    def drain(self) -> None:
+        """Wait for every frame in flight."""
+        for slot in self.slots:
+            if slot.pending is not None:
+                slot.pending.wait()
+                slot.pending = None

@@ -1,0 +1,264 @@
+"""Plan.submit: frames in flight (transfers on their own queues, staged into the plan's buffers) give
+what Plan.run gives frame by frame. On PoCL (a CPU device) submit runs each frame at once unless
+the plan is told to pipeline (``plan.pipelined = True``), which these tests do to exercise the GPU
+path's queues, events and slots on the CPU; on a GPU (``CLPOST_DEVICE=nvidia``) they check the
+same against the driver's real concurrency."""
+import gc
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from clpost import Camera, Frame, Pipeline
+from clpost.errors import InputError
+from test_plan import _worst_case, scene
+
+
+def _frames(frame, n):
+    """``n`` frames of different content (scaled colour, depth and velocity), fresh arrays each."""
+    vel = frame.velocity
+    return [frame.replace(color=(frame.color * (1.0 + 0.37 * i)).astype(np.float32),
+                          depth=(frame.depth * (1.0 + 0.1 * i)).astype(np.float32),
+                          velocity=None if vel is None else (vel * (1.0 - 0.2 * i)).astype(np.float32),
+                          metadata=dict(frame.metadata, frame_index=i)) for i in range(n)]
+
+
+@pytest.fixture(scope="module")
+def worst():
+    rng = np.random.default_rng(20)
+    pipe, frame, cam, stages = _worst_case(rng)
+    plan = pipe.plan_for(frame)
+    assert plan.stage_names == stages
+    return plan, frame, cam
+
+
+@pytest.mark.parametrize("in_flight", [1, 2, 3])
+def test_frames_in_flight_with_a_focus_pull_match_plan_run_frame_by_frame(worst, in_flight):
+    """The worst case (dof, astigmatism, distortion resampling depth and velocity, vignetting,
+    exposure): five frames of different content and focus submitted back to back, results taken
+    out of order, are bit for bit Plan.run's — image and the distortion's host buffers."""
+    plan, frame, cam = worst
+    cams = [cam.with_(focus_distance_m=f) for f in (2.0, 3.5, 1.0, 1.0, 6.0)]
+    frames = _frames(frame, len(cams))
+    plan.pipelined = False
+    want = [plan.run(f, c) for f, c in zip(frames, cams)]
+    assert not np.array_equal(want[0].color, want[1].color)
+    assert not np.array_equal(want[0].depth, want[1].depth) and not np.array_equal(want[0].velocity, want[1].velocity)
+    plan.pipelined, plan.in_flight = True, in_flight
+    try:
+        pending = [plan.submit(f, c) for f, c in zip(frames, cams)]
+        got = [pending[i].result() for i in (4, 0, 3, 1, 2)]
+        got = [got[i] for i in (1, 3, 4, 2, 0)]
+    finally:
+        plan.pipelined = False
+    for w, g in zip(want, got):
+        np.testing.assert_array_equal(g.color, w.color)
+        np.testing.assert_array_equal(g.depth, w.depth)
+        np.testing.assert_array_equal(g.velocity, w.velocity)
+        assert g.metadata["camera"] == w.metadata["camera"]
+    assert len(plan.buffers.stream.slots) == in_flight
+
+
+def test_submitted_frames_transfer_on_their_own_queues_and_keep_their_arrays_alive(worst):
+    """Uploads and downloads run on the runtime's transfer queues, the staging copies and kernels
+    on the compute queue; a frame whose arrays nobody else holds still uploads them (the events
+    keep them alive); a slot is reused only once its last frame is complete."""
+    plan, frame, cam = worst
+    want = [plan.run(f, cam).color for f in _frames(frame, 3)]
+    plan.pipelined, plan.in_flight = True, 2
+    try:
+        pending = [plan.submit(f, cam) for f in _frames(frame, 3)]  # the frames live only in the events
+        gc.collect()
+        assert pending[0].done()  # the third submit reused the first frame's slot: it waited for it
+        got = [p.result().color for p in pending]
+    finally:
+        plan.pipelined = False
+    for w, g in zip(want, got):
+        np.testing.assert_array_equal(g, w)
+    rt = plan.runtime
+    up, down = rt.transfer_queues()
+    # by label, the first command's queue, and the last download's: distortion's own transfers (the
+    # velocity it alone reads, its resampled depth and velocity) stay on the compute queue
+    events = pending[-1]._events
+    queue_of = {}
+    for label, ev in events:
+        queue_of.setdefault(label, ev.get_info(cl.event_info.COMMAND_QUEUE).int_ptr)
+    assert events[-1][0] == "download"
+    assert events[-1][1].get_info(cl.event_info.COMMAND_QUEUE).int_ptr == down.int_ptr
+    assert queue_of["upload"] == up.int_ptr
+    assert queue_of["stage_in"] == queue_of["stage_out"] == queue_of["dof"] == rt.queue.int_ptr
+    assert set(plan.last_timings) >= {"upload", "stage_in", "dof", "distortion", "stage_out", "download"}
+
+
+def test_submit_downloads_into_pinned_out_arrays_and_mixes_with_run(rng):
+    """Pinned inputs and ``out=`` arrays per frame: the returned colour is ``out``; a Plan.run
+    between submitted frames sees its own frame (one compute queue orders them)."""
+    frame = scene(rng, w=64, h=24)
+    cam = Camera(f_number=2.0, depth_of_field=True, blades=6, focus_distance_m=0.8)
+    plan = Pipeline(cam, quality="draft").plan_for(frame)
+    frames = _frames(frame, 3)
+    want = [plan.run(f).color for f in frames]
+    rt = plan.runtime
+    pinned = []
+    for f in frames:
+        c, d = rt.pinned_empty(f.color.shape), rt.pinned_empty(f.depth.shape)
+        c[...], d[...] = f.color, f.depth
+        pinned.append(f.replace(color=c, depth=d))
+    outs = [rt.pinned_empty(w.shape) for w in want]
+    plan.pipelined = True
+    first = plan.submit(pinned[0], out=outs[0])
+    middle = plan.run(pinned[1], out=outs[1])
+    last = plan.submit(pinned[2], out=outs[2])
+    got = [first.result(), middle, last.result()]
+    for g, o, w in zip(got, outs, want):
+        assert g.color is o
+        np.testing.assert_array_equal(o, w)
+
+
+def test_a_refused_frame_leaves_nothing_in_flight(rng):
+    """A wrong ``out``, a frame of another size or without the depth a stage reads, a camera of
+    another structure: one InputError line each, raised before anything is enqueued (the slot
+    ring does not move, ``out`` is untouched), and the next frame runs as usual."""
+    frame = scene(rng, w=64, h=24)
+    cam = Camera(f_number=2.0, depth_of_field=True, blades=6, focus_distance_m=0.8)
+    plan = Pipeline(cam, quality="draft").plan_for(frame)
+    want = plan.run(frame).color
+    plan.pipelined = True
+    plan.submit(frame).result()
+    stream = plan.buffers.stream
+    before = stream.next
+    bad_out = np.full((24, 64, 3), 7.0, np.float32)[:, :, ::-1]  # right shape, not C-contiguous
+    cases = [
+        (dict(frame=frame, out=np.empty((24, 63, 3), np.float32)), r"out= must be .*\(24, 64, 3\)"),
+        (dict(frame=frame, out=bad_out), "C-contiguous"),
+        (dict(frame=scene(rng, w=16, h=9)), "built for 64x24"),
+        (dict(frame=Frame(frame.color)), "needs the frame's depth"),
+        (dict(frame=frame, camera=cam.with_(blades=5)), "Pipeline.run"),
+        (dict(frame=frame.color), "clpost.Frame"),
+    ]
+    for kwargs, match in cases:
+        with pytest.raises(InputError, match=match) as err:
+            plan.submit(**kwargs)
+        assert "\n" not in str(err.value)
+    assert stream.next == before and np.all(bad_out == 7.0)
+    np.testing.assert_array_equal(plan.submit(frame).result().color, want)
+
+
+def test_on_a_cpu_device_submit_runs_the_frame_at_once(rng):
+    """Without a discrete GPU submit is Plan.run returning a finished frame: no staging, no
+    transfer queues."""
+    frame = scene(rng, w=40, h=16)
+    plan = Pipeline(Camera(f_number=2.0, depth_of_field=True, focus_distance_m=0.8), quality="draft").plan_for(frame)
+    if plan.runtime.discrete:
+        pytest.skip("a discrete GPU pipelines by default")
+    assert plan.pipelined is False
+    pending = plan.submit(frame)
+    assert pending.done() and plan.buffers.stream is None
+    np.testing.assert_array_equal(pending.result().color, plan.run(frame).color)
+
+
+def test_the_frame_index_of_each_submitted_frame_reaches_its_noise(rng):
+    """Motion blur and the sensor hash the frame index (their noise): in flight, each frame gets
+    its own index — the per-frame scalars of a replayed launch are the frame's, not the next's."""
+    w, h = 40, 24
+    velocity = np.zeros((h, w, 2), np.float32)
+    velocity[..., 0] = np.linspace(0, 9, w)[None, :]
+    color = rng.uniform(0, 1, (h, w, 3)).astype(np.float32)
+    cam = Camera(shutter_s=1 / 48, frame_rate_fps=24.0, sensor_preset="smartphone")
+    stages = ["exposure", "motion_blur", "sensor"]
+    frames = [Frame(color, depth=np.full((h, w), 3.0, np.float32), velocity=velocity, metadata={"frame_index": i})
+              for i in range(4)]
+    plan = Pipeline(cam, stages=stages).plan_for(frames[0])
+    assert plan.stage_names == ["motion_blur", "sensor"]
+    want = [plan.run(f).color for f in frames]
+    assert np.any(want[0] != want[1])
+    plan.pipelined = True
+    got = [p.result().color for p in [plan.submit(f) for f in frames]]
+    for g, w_ in zip(got, want):
+        np.testing.assert_array_equal(g, w_)
+
+
+def test_submit_returns_while_the_device_is_busy_and_waits_only_for_a_slot(worst):
+    """With the compute queue held (a user event), ``in_flight`` frames are submitted without
+    waiting; the next waits until the frame that used its slot is complete — the staging
+    buffers are never overwritten under a frame in flight."""
+    import threading
+
+    plan, frame, cam = worst
+    frames = _frames(frame, 3)
+    want = [plan.run(f, cam).color for f in frames]
+    rt = plan.runtime
+    hold = cl.UserEvent(rt.context)
+    plan.pipelined, plan.in_flight = True, 2
+    try:
+        cl.enqueue_barrier(rt.queue, wait_for=[hold])
+        pending = [plan.submit(f, cam) for f in frames[:2]]  # returns: nothing waits for the device
+        assert not pending[0].done()
+        third = []
+        t = threading.Thread(target=lambda: third.append(plan.submit(frames[2], cam)))
+        t.start()
+        t.join(0.5)
+        assert t.is_alive() and not third  # its slot is the first frame's, still in flight
+    finally:
+        hold.set_status(cl.command_execution_status.COMPLETE)
+    t.join(30)
+    plan.pipelined = False
+    assert not t.is_alive()
+    for p, w in zip(pending + third, want):
+        np.testing.assert_array_equal(p.result().color, w)
+
+
+def test_a_first_frame_submitted_records_its_stages_with_the_downloads_moved(rng):
+    """A plan whose first frame is submitted records its gather stages there (the Recorder's
+    downloads — distortion's depth and velocity — staged for the download worker) and replays
+    them next; a plan whose later stage would read those host arrays back keeps them on the
+    compute queue. Both: what Plan.run gives."""
+    pipe, frame, cam, stages = _worst_case(rng)
+    frames = _frames(frame, 3)
+    ref = Pipeline(cam, quality="final", stages=stages).plan_for(frame)
+    want = [ref.run(f, cam) for f in frames]
+    plan = pipe.plan_for(frame)
+    plan.pipelined = True
+    assert plan.nodes[0].recording is None and not plan._aux_reread
+    pending = [plan.submit(f, cam) for f in frames]
+    got = [p.result() for p in pending]
+    down = plan.runtime.transfer_queues()[1].int_ptr
+    for p in pending[:2]:  # recorded, then replayed: depth, velocity and image by the download worker
+        assert [ev.get_info(cl.event_info.COMMAND_QUEUE).int_ptr for label, ev in p._events
+                if label == "download"] == [down] * 3
+    plan._aux_reread = True  # as if a stage after distortion read depth (none does today)
+    again = plan.submit(frames[1], cam)
+    compute = plan.runtime.queue.int_ptr
+    assert [ev.get_info(cl.event_info.COMMAND_QUEUE).int_ptr for label, ev in again._events
+            if label == "download"] == [compute, compute]  # distortion's depth and velocity
+    got.append(again.result())
+    for w, g in zip(want + want[1:2], got):
+        np.testing.assert_array_equal(g.color, w.color)
+        np.testing.assert_array_equal(g.depth, w.depth)
+        np.testing.assert_array_equal(g.velocity, w.velocity)
+
+
+def test_label_planes_resampled_in_flight_belong_to_their_frame(rng):
+    """Distortion re-records every frame that has label planes (its upload of them is not
+    replayable): each submitted frame's labels, depth and image are its own, as Plan.run's."""
+    import warnings
+
+    from test_labels import MODELS, _frame
+
+    frames = [_frame(rng, MODELS["barrel"]) for _ in range(3)]
+    cam = Camera(distortion=MODELS["barrel"])
+    pipe = Pipeline(cam, stages=["distortion"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rcam = pipe.camera_for(frames[0])
+        plan = pipe.plan_for(frames[0], rcam)
+        want = [plan.run(f, rcam) for f in frames]
+        plan.pipelined = True
+        got = [p.result() for p in [plan.submit(f, rcam) for f in frames]]
+    assert not np.array_equal(want[0].labels["id"], want[1].labels["id"])
+    for w, g in zip(want, got):
+        np.testing.assert_array_equal(g.color, w.color)
+        np.testing.assert_array_equal(g.depth, w.depth)
+        assert g.labels.keys() == w.labels.keys()
+        for k in w.labels:
+            np.testing.assert_array_equal(g.labels[k], w.labels[k])
