@@ -138,7 +138,7 @@ __constant float distortion_fir[DISTORTION_FIR_K + 1] = {
 /* Row pass. Work-item (g, r, ch): tmp row r, padded columns 16g ... 16g + 15, the source row
  * clamp(r - PAD - K) (rows repeat the edge, so the column pass needs no clamp either); source
  * column of padded column p: p - PAD. The window x0 ... x0 + 47 (16 + 2K = 40 used) is three
- * vload16 and the 2K + 1 shifted copies are shuffle2 with constant masks (one permute each),
+ * vload16 and the 2K + 1 shifted copies are DISTORTION_SHIFT with literal lanes (one permute each),
  * not 25 unaligned vload16, which split cache lines (same output;
  * docs/measurements.md#kernel-forms-on-pocl). Work-items whose window leaves the row (5 of 123
  * per row at 1080p) copy it with clamped indices to a private array first. tmp: 3 planes of th =
@@ -148,11 +148,11 @@ __constant float distortion_fir[DISTORTION_FIR_K + 1] = {
 #endif
 /* lanes s ... s + 15 of the 32-lane a:b (s a literal 1 ... 15). Where the compiler has it, clang's
  * __builtin_shufflevector with literal indices: one LLVM shufflevector, which every backend lowers
- * to its permutes. shuffle2 with a constant mask means the same, but PoCL 5.0 (LLVM 16) calls its
- * library shuffle2 with the mask as data: lanes picked one by one, which made distortion_fir_rows
- * 180 ms at 1080p on one Skylake core (PoCL 3.1 here folds it: ~10 ms) and distortion_dering
- * 22 ms (docs/benchmarks.md, "Distortion's final filter on 16 cores"). Same lanes, same sums: the
- * output is the same bits either way (tests/test_distortion.py). */
+ * to its permutes. shuffle2 with a constant mask means the same, but PoCL 5.0 (LLVM 16) does not
+ * fold it into one permute: ~17 ns a shift, which made distortion_fir_rows 180 ms at 1080p on one
+ * Skylake core (PoCL 3.1 folds it: ~10 ms) and distortion_dering 22 ms (docs/benchmarks.md,
+ * "Distortion's final filter on 16 cores"). Same lanes, same sums: the output is the same bits
+ * either way (tests/test_distortion.py). */
 #if defined(__has_builtin) && !defined(DISTORTION_SHUFFLE2)  /* -DDISTORTION_SHUFFLE2: the fallback (tests) */
 #if __has_builtin(__builtin_shufflevector)
 #define DISTORTION_HAVE_SHUFFLEVECTOR 1
