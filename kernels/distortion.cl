@@ -138,7 +138,7 @@ __constant float distortion_fir[DISTORTION_FIR_K + 1] = {
 /* Row pass. Work-item (g, r, ch): tmp row r, padded columns 16g ... 16g + 15, the source row
  * clamp(r - PAD - K) (rows repeat the edge, so the column pass needs no clamp either); source
  * column of padded column p: p - PAD. The window x0 ... x0 + 47 (16 + 2K = 40 used) is three
- * vload16 and the 2K + 1 shifted copies are shuffle2 with constant masks (one permute each),
+ * vload16 and the 2K + 1 shifted copies are DISTORTION_SHIFT with literal lanes (one permute each),
  * not 25 unaligned vload16, which split cache lines (same output;
  * docs/measurements.md#kernel-forms-on-pocl). Work-items whose window leaves the row (5 of 123
  * per row at 1080p) copy it with clamped indices to a private array first. tmp: 3 planes of th =
@@ -146,8 +146,25 @@ __constant float distortion_fir[DISTORTION_FIR_K + 1] = {
 #if DISTORTION_FIR_K != 12
 #error "distortion_fir_rows is unrolled for DISTORTION_FIR_K = 12"
 #endif
+/* lanes s ... s + 15 of the 32-lane a:b (s a literal 1 ... 15). Where the compiler has it, clang's
+ * __builtin_shufflevector with literal indices: one LLVM shufflevector, which every backend lowers
+ * to its permutes. shuffle2 with a constant mask means the same, but PoCL 5.0 (LLVM 16) does not
+ * fold it into one permute: ~17 ns a shift, which made distortion_fir_rows 180 ms at 1080p on one
+ * Skylake core (PoCL 3.1 folds it: ~10 ms) and distortion_dering 22 ms (docs/benchmarks.md,
+ * "Distortion's final filter on 16 cores"). Same lanes, same sums: the output is the same bits
+ * either way (tests/test_distortion.py). */
+#if defined(__has_builtin) && !defined(DISTORTION_SHUFFLE2)  /* -DDISTORTION_SHUFFLE2: the fallback (tests) */
+#if __has_builtin(__builtin_shufflevector)
+#define DISTORTION_HAVE_SHUFFLEVECTOR 1
+#endif
+#endif
+#ifdef DISTORTION_HAVE_SHUFFLEVECTOR
+#define DISTORTION_SHIFT(a, b, s) __builtin_shufflevector((a), (b), (s), (s) + 1, (s) + 2, (s) + 3, (s) + 4, \
+    (s) + 5, (s) + 6, (s) + 7, (s) + 8, (s) + 9, (s) + 10, (s) + 11, (s) + 12, (s) + 13, (s) + 14, (s) + 15)
+#else
 #define DISTORTION_SHIFT(a, b, s) shuffle2((a), (b), (uint16)(s) + \
     (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
+#endif
 __kernel void distortion_fir_rows(__global const float *restrict src, __global float *restrict tmp,
                                   const int src_w, const int src_h, const int pitch, const int th)
 {

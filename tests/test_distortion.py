@@ -475,6 +475,44 @@ def test_prefilter_keeps_a_flat_field_flat_and_is_deterministic():
         np.testing.assert_array_equal(got, _device_coefficients(planes))
 
 
+@pytest.mark.parametrize("size", [(150, 37), (37, 23)])
+def test_lane_shifts_are_the_same_bits_with_shufflevector_and_shuffle2(rng, size):
+    """DISTORTION_SHIFT, the row FIR's and the hand-over weight's lane shifts: clang's
+    __builtin_shufflevector (the default where the compiler has it: PoCL 5 runs shuffle2 ≈ 15×
+    slower, docs/benchmarks.md) and the OpenCL shuffle2 fallback (-DDISTORTION_SHUFFLE2) give the
+    same bits from distortion_fir_rows and distortion_dering, on a row wide enough for the vector
+    path (150) and one where every work-item takes the clamped copy (37)."""
+    import pyopencl as cl
+
+    from clpost.runtime import get_runtime, kernel_source
+    from clpost.stages.distortion import FIR_K, FIR_ROWS, PAD, coef_pitch
+
+    rt = get_runtime()
+    w, h = size
+    planes = rng.uniform(0, 1e3, (3, h, w)).astype(np.float32)
+    planes[0][rng.random((h, w)) < 0.05] = 1e5
+    pw, ph = coef_pitch(w), -(-(h + 2 * PAD) // FIR_ROWS) * FIR_ROWS
+    th = ph + 2 * FIR_K
+    src = rt.empty(planes.shape)
+    cl.enqueue_copy(rt.queue, src, planes)
+    outs = []
+    for defines in ({}, {"DISTORTION_SHUFFLE2": 1}):
+        prog = rt.program(kernel_source("common") + kernel_source("distortion"), "distortion", defines)
+        tmp, hdr = rt.empty((3, th, pw)), rt.empty((ph, pw))
+        rows, dering = cl.Kernel(prog, "distortion_fir_rows"), cl.Kernel(prog, "distortion_dering")
+        rows.set_args(src, tmp, np.int32(w), np.int32(h), np.int32(pw), np.int32(th))
+        dering.set_args(src, hdr, np.int32(w), np.int32(h), np.int32(pw), np.int32(ph))
+        cl.enqueue_nd_range_kernel(rt.queue, rows, (pw // 16, th, 3), None)
+        cl.enqueue_nd_range_kernel(rt.queue, dering, (pw // 16, ph // FIR_ROWS), None)
+        got = np.empty((3, th, pw), np.float32), np.empty((ph, pw), np.float32)
+        cl.enqueue_copy(rt.queue, got[0], tmp)
+        cl.enqueue_copy(rt.queue, got[1], hdr)
+        outs.append(got)
+    assert np.abs(outs[0][0]).max() > 0 and np.isfinite(outs[0][1]).all()
+    np.testing.assert_array_equal(outs[0][0], outs[1][0])
+    np.testing.assert_array_equal(outs[0][1], outs[1][1])
+
+
 def test_a_one_pixel_frame_runs_through_a_traced_lens():
     frame = Frame(np.ones((1, 1, 3), np.float32), depth=np.full((1, 1), 2.0, np.float32))
     out = Pipeline(Camera(lens="zeiss-planar-50-f1.4")).run(frame)

@@ -3,7 +3,7 @@ working tree on the same buffers, in one process, alternating (the machines are 
 ratios; docs/benchmarks.md, "Worst final, third pass").
 
     PYTHONPATH=. POCL_MAX_PTHREAD_COUNT=1 python tools/ab_kernel.py --scene worst --quality final \\
-        --size 1920x1080 --repeats 7                      # every kernel launch of the plan, ms
+        --size 1920x1080 --repeats 7                      # every kernel launch of the plan, ms, sizes
     PYTHONPATH=. POCL_MAX_PTHREAD_COUNT=1 python tools/ab_kernel.py --old main \\
         --kernel distortion_bspline_tiles --size 640x360 --repeats 61
 
@@ -90,18 +90,23 @@ def main() -> None:
     size = tuple(int(v) for v in a.size.split("x"))
     run_once, restore = record_plan(a.scene, a.quality, size)
     if not a.old:
-        times = collections.defaultdict(list)
+        times, launches = collections.defaultdict(list), {}
         for _ in range(a.repeats):
             per = collections.Counter()
-            for k, *_, ev in run_once():
+            for k, _q, g, loc, _args, ev in run_once():
                 per[k.function_name] += event_ms(ev)
+                launches.setdefault(k.function_name, (g, loc))
             for name, ms in per.items():
                 times[name].append(ms)
         total = sum(statistics.median(v) for v in times.values())
-        print(f"{a.scene} {a.quality} {a.size}: kernel, median ms, min ms, share of the summed medians")
+        print(f"{a.scene} {a.quality} {a.size}: kernel, median ms, min ms, share of the summed medians, "
+              "the first launch's global and local size and work-group count (auto: the device picks)")
         for name, v in times.items():
             m = statistics.median(v)
-            print(f"  {name:36s} {m:8.2f} {min(v):8.2f} {100 * m / total:5.1f} %")
+            g, loc = launches[name]
+            groups = int(np.prod([-(-gi // li) for gi, li in zip(g, loc)])) if loc else "auto"
+            print(f"  {name:36s} {m:8.2f} {min(v):8.2f} {100 * m / total:5.1f} %  "
+                  f"{'x'.join(map(str, g))} / {'x'.join(map(str, loc)) if loc else '-'} = {groups}")
         print(f"  {'sum':36s} {total:8.2f}")
         return
     calls = [c for c in run_once() if c[0].function_name == a.kernel]
