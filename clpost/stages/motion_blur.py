@@ -501,7 +501,25 @@ def effective_velocity(velocity: np.ndarray, depth: np.ndarray) -> tuple[np.ndar
 
 def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | None, fraction: float,
                    samples: int, frame_index: int = 0, seed: int = SEED, samples_max: int | None = None) -> np.ndarray:
-    """The reconstruction filter of the module docstring in float64 (H×W×3 in and out)."""
+    """The reconstruction filter of the module docstring in float64 (H×W×3 in and out): the three
+    layers of :func:`reference_layers`, composited front to back."""
+    color = np.asarray(color, dtype=np.float64)
+    L = reference_layers(color, velocity, depth, fraction, samples, frame_index, seed, samples_max)
+    cf, co = L["cf"], L["co"]
+    cfc, coc = np.minimum(cf, 1.0)[..., None], np.minimum(co / L["ca"], 1.0)[..., None]   # the own share of X's path
+    own = coc * L["so"] / co[..., None] + (1.0 - coc) * L["sb"] / L["wb"][..., None]
+    fr = np.where((cf > 0)[..., None], L["sf"] / np.where(cf > 0, cf, 1.0)[..., None], color)
+    out = cfc * fr + (1.0 - cfc) * own
+    out[L["still"]] = color[L["still"]]
+    return out
+
+
+def reference_layers(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | None, fraction: float,
+                     samples: int, frame_index: int = 0, seed: int = SEED, samples_max: int | None = None) -> dict:
+    """The gather's sums per pixel (module docstring, "Coverage"), float64 H×W (colour sums H×W×3):
+    ``cf``/``sf`` in front of X, ``co``/``so`` X's own surface, ``ca`` what ``co`` would be if every tap
+    were X's own surface, ``wb``/``sb`` the background; ``still`` where the pixel is left as it is."""
+    color = np.asarray(color, dtype=np.float64)
     hh, ww = color.shape[:2]
     z = np.full((hh, ww), np.inf) if depth is None else np.asarray(depth, dtype=np.float64)
     velocity, z = effective_velocity(velocity, z)
@@ -537,7 +555,7 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     wc = np.maximum((pn32 * inv).astype(np.float64) + (pv32 * inv), 1.0) / (2.0 * lx)   # at least the pixel
     cf, sf = np.zeros((hh, ww)), np.zeros_like(color)          # surfaces in front of X
     co, so = wc.copy(), color * wc[..., None]                  # X's own surface along its path
-    ao_all = wc.copy()                                          # c_O if every tap were X's own surface
+    ca = wc.copy()                                              # c_O if every tap were X's own surface
     wb = np.full((hh, ww), 1e-3)
     sb = color * wb[..., None]                                  # the background behind X
     for s in range(samples):
@@ -563,20 +581,15 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
         af = line * f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
         go = agree + (1.0 - agree) * (2.0 if s % 2 else 0.0)
         ao = f * own * a * go
-        ao_all = ao_all + tap * cx * cx * (pv if s % 2 else pn) * inv64 / lx * go   # Y = X: f = b = 1
+        ca = ca + tap * cx * cx * (pv if s % 2 else pn) * inv64 / lx * go   # Y = X: f = b = 1
         ab = (tap * b * ((1.0 - f) + f * (1.0 - cly)) * cx   # behind, or level and missing X
               / np.maximum(dx32 * dx32 + dy32 * dy32, np.float32(1)))                 # nearest look most like it
         cy = color[sy, sx]
         cf, sf = cf + af, sf + af[..., None] * cy
         co, so = co + ao, so + ao[..., None] * cy
         wb, sb = wb + ab, sb + ab[..., None] * cy
-    cfc, coc = np.minimum(cf, 1.0)[..., None], np.minimum(co / ao_all, 1.0)[..., None]   # the own share of X's path
-    own = coc * so / co[..., None] + (1.0 - coc) * sb / wb[..., None]
-    fr = np.where((cf > 0)[..., None], sf / np.where(cf > 0, cf, 1.0)[..., None], color)
-    out = cfc * fr + (1.0 - cfc) * own
     still = vn[..., 0] ** 2 + vn[..., 1] ** 2 <= 0.25
-    out[still] = color[still]
-    return out
+    return dict(cf=cf, sf=sf, co=co, so=so, ca=ca, wb=wb, sb=sb, still=still)
 
 
 def reference_rolling(color: np.ndarray, velocity: np.ndarray, readout_frames: float) -> np.ndarray:
