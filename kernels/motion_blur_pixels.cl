@@ -191,14 +191,16 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
         const CLP_F line = clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * eyy - ddy * eyx) * (1.0f / MOTION_BLUR_DIR), 0.0f, 1.0f); \
         const CLP_F af0 = line * f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f)); \
         const CLP_F ao0 = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f)); \
+        const CLP_F aa0 = clx * clx * (odd ? kav : kan);   /* ao0 if Y were X (f = b = 1) */ \
         const CLP_F ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx * ((zden * ly) * q); \
         const CLP_I tap = (TAP);   /* pixels past their own S or at their centre: nothing */ \
-        const CLP_F af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f; \
+        const CLP_F af = tap ? af0 : 0.0f, ao = tap ? ao0 : 0.0f, ab = tap ? ab0 : 0.0f, aa = tap ? aa0 : 0.0f; \
         const CLP_F cr = CLP_GATHER(src, k), cg = CLP_GATHER(src + n, k), cb = CLP_GATHER(src + 2 * n, k); \
         /* the layer sums by fused multiply-adds (FP_CONTRACT is off for the tap positions): one \
          * instruction each, the same rounding at every width */ \
         cf += af; sfr = fma(af, cr, sfr); sfg = fma(af, cg, sfg); sfb = fma(af, cb, sfb); \
         co += ao; sor = fma(ao, cr, sor); sog = fma(ao, cg, sog); sob = fma(ao, cb, sob); \
+        ca += aa; \
         wb += ab; sbr = fma(ab, cr, sbr); sbg = fma(ab, cg, sbg); sbb = fma(ab, cb, sbb); \
     } while (0)
 
@@ -277,6 +279,11 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
      * over its streak 2 |h_X|: a static pixel (|h_X| <= 0.5) is its own surface all the time */
     const CLP_F wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
     CLP_F cf = 0.0f, co = wc, wb = 1e-3f;
+    /* ca: what co would be if every tap were X's own surface (Y = X); the own layer's coverage is
+     * the share co / ca of X's path (the taps' rounding cancels), per tap cyl(d, |h_X|)^2 times: */
+    CLP_F ca = wc;
+    const CLP_F rlx = 1.0f / lx;
+    const CLP_F kan = hdn * agree * rlx, kav = hdv * (agree + (1.0f - agree) * 2.0f) * rlx;
     CLP_F sfr = 0.0f, sfg = 0.0f, sfb = 0.0f;
     CLP_F sor = cxr * wc, sog = cxg * wc, sob = cxb * wc;
     CLP_F sbr = cxr * wb, sbg = cxg * wb, sbb = cxb * wb;
@@ -362,11 +369,11 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     default: break;   /* S = 1: the centre only (|v_N| = 0, a still pixel) */
     }
 #endif
-    /* out = cf' F + (1 - cf') [co' O + (1 - co') B], coverages clamped to 1, layer colours normalised
-     * (co' O = so min(1/co, 1); one reciprocal per layer) */
-    const CLP_F cfc = fmin(cf, 1.0f), ico = 1.0f / co;
+    /* out = cf' F + (1 - cf') [co' O + (1 - co') B], cf' = min(cf, 1), co' = min(co / ca, 1), layer
+     * colours normalised (co' O = so min(1/ca, 1/co); one reciprocal per layer) */
+    const CLP_F cfc = fmin(cf, 1.0f);
     const CLP_I front = cf > 0.0f;
-    const CLP_F ao = fmin(ico, 1.0f), ab = (1.0f - fmin(co, 1.0f)) * (1.0f / wb), af = 1.0f / cf;
+    const CLP_F ao = fmin(1.0f / ca, 1.0f / co), ab = (1.0f - co * ao) * (1.0f / wb), af = 1.0f / cf;
     const CLP_F our = sor * ao + sbr * ab, oug = sog * ao + sbg * ab, oub = sob * ao + sbb * ab;
     const CLP_F frr = front ? sfr * af : cxr, frg = front ? sfg * af : cxg, frb = front ? sfb * af : cxb;
     MB_STORE(still ? cxr : cfc * frr + (1.0f - cfc) * our, dst, i0);
