@@ -28,8 +28,12 @@
  * kernels (astigmatism_t<n> and astigmatism for the full count, astigmatism_p<n> for the point
  * classes; one compile-time tap count each) and
  * astigmatism_exact with one work-group per tile of the frame — the most a list can hold, so the
- * host never reads the counts (no sync) — and the work-groups past their class's count return at
- * once (ASTIGMATISM_LISTED; a few ns each on PoCL). The tap table holds
+ * host never reads the counts (no sync). A class's count c of listed tiles is spread evenly over
+ * the launch's n work-groups (astigmatism_slot: group g takes entry g c / n where that steps up)
+ * and the other groups return at once (a few ns each on PoCL): PoCL's CPU device hands each thread
+ * a run of consecutive work-groups, so listed tiles packed into the first c groups ran on one
+ * or a few of its threads (docs/benchmarks.md, "astigmatism: classes spread over the launch").
+ * The tap table holds
  * the spirals of 4, 8, ..., ASTIGMATISM_TAPS points one after the other, then the point classes' spirals.
  * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE, ASTIGMATISM_TILE_W,
  * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch),
@@ -411,13 +415,13 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
                  __global const float *restrict pre, const int box, __global const int *restrict inner,
                  const int test_reach, __global const float *restrict axes,
                  __global float *restrict dst, __global const float *restrict tiles,
-                 __global const int *restrict list, const int list0, const int tiles_x, const int tiles_y,
+                 const int tile_of_group, const int tiles_x, const int tiles_y,
                  const int width, const int height, const int ntaps, const int tap0)
 {
-    /* work-group g = the g-th tile of this class's list; ntaps spiral points from tap0 (both
-     * compile-time constants after inlining: a run-time count makes the loop slower;
+    /* this work-group's tile of the class's list (astigmatism_slot); ntaps spiral points from tap0
+     * (both compile-time constants after inlining: a run-time count makes the loop slower;
      * docs/measurements.md#kernel-forms-on-pocl) */
-    const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
+    const ClpTile t = clp_tile(tile_of_group, tiles_x, tiles_y, ASTIGMATISM_TILE_W,
                                ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, ASTIGMATISM_LANES);
     const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;
     const size_t pn = t.pn;
@@ -501,10 +505,25 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
     ASTORE(dst, r, g, b, x, y, width, height);
 }
 
-/* return from a work-group past its class's count (list0 = class × tiles_x × tiles_y: the row of
- * the class in lists, whose length astigmatism_tiles counted in counts[class]) */
-#define ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y) \
-    if ((int)get_group_id(0) >= (counts)[(list0) / ((tiles_x) * (tiles_y))]) return
+/* The entry of the class's list that this work-group takes, or -1 (it returns at once): the
+ * launch has n = tiles_x × tiles_y groups, the class c <= n listed tiles (list0 = class × n: the
+ * row of the class in lists, whose length astigmatism_tiles counted in counts[class]). Group g
+ * takes entry floor(g c / n) where that steps up to the next group's, so the c busy groups lie
+ * evenly among the n — each entry exactly once (the steps of floor(g c / n), g = 0 .. n, are 0 or
+ * 1 and sum to c) — instead of as the first c, which PoCL ran on one thread's run of groups. */
+inline int astigmatism_slot(__global const int *restrict counts, const int list0, const int tiles_x,
+                            const int tiles_y)
+{
+    const long n = (long)tiles_x * tiles_y, g = get_group_id(0);
+    const long c = counts[list0 / n];
+    const long j = g * c / n;
+    return (g + 1) * c / n > j ? (int)j : -1;
+}
+/* `tile`: the tile id this work-group gathers; return when it takes none */
+#define ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y) \
+    const int tile##_slot = astigmatism_slot(counts, list0, tiles_x, tiles_y); \
+    if (tile##_slot < 0) return; \
+    const int tile = (list)[(list0) + tile##_slot]
 
 #define ASTIGMATISM_GATHER_ARGS __global const float *restrict padded, __global const float *restrict src, \
     __global const float *restrict pre, __global const int *restrict inner, __global const int *restrict reach, \
@@ -514,12 +533,12 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
     const int height
 /* the reach test is group-uniform (one tile per work-group): two inlined copies of the loop */
 #define ASTIGMATISM_GATHER_CALL(n, t0, box) \
-    ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y); \
-    if (reach[list[list0 + (int)get_group_id(0)]]) \
-        astigmatism_gather(padded, src, pre, box, inner, 1, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, \
+    ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y); \
+    if (reach[tile]) \
+        astigmatism_gather(padded, src, pre, box, inner, 1, axes, dst, tiles, tile, tiles_x, tiles_y, width, \
                            height, n, t0); \
     else \
-        astigmatism_gather(padded, src, pre, box, inner, 0, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, \
+        astigmatism_gather(padded, src, pre, box, inner, 0, axes, dst, tiles, tile, tiles_x, tiles_y, width, \
                            height, n, t0)
 
 /* the quality's ASTIGMATISM_TAPS (its spiral is the table's last) */
@@ -535,8 +554,8 @@ __kernel void astigmatism_copy(__global const float *restrict padded, __global c
                                __global const int *restrict list, __global const int *restrict counts,
                                const int list0, const int tiles_x, const int tiles_y, const int width, const int height)
 {
-    ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y);
-    const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
+    ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y);
+    const ClpTile t = clp_tile(tile, tiles_x, tiles_y, ASTIGMATISM_TILE_W,
                                ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, ASTIGMATISM_LANES);
     const int tile_id = t.id, x = t.x, y = t.y, jc = t.jc;
     const size_t pn = t.pn;
@@ -555,8 +574,8 @@ __kernel void astigmatism_exact(__global const float *restrict padded, __global 
                        __global const int *restrict counts, const int list0, const int tiles_x, const int tiles_y,
                        const int width, const int height, const float cx, const float cy)
 {
-    ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y);
-    const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
+    ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y);
+    const ClpTile t = clp_tile(tile, tiles_x, tiles_y, ASTIGMATISM_TILE_W,
                                ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 1);
     const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;
     if (x >= width || y >= height) return;
