@@ -170,17 +170,13 @@ __kernel void astigmatism_pad(__global const float *restrict src, __global const
     vstore16(1.0f / ((at + 0.5f) * (at + 0.5f)), 0, axes + 3 * pn + j);
 }
 
-/* one work-item per tile: the largest semi-axes of the tile's pixels (inside the frame), and the
- * tile's class appended to that class's tile list (lists: ASTIGMATISM_CLASSES rows of
- * tiles_x * tiles_y tile indices; counts: one counter per class, zeroed by the host). The order
- * within a list depends on the atomics' order; the result does not (each tile is independent). */
-__kernel void astigmatism_tiles(__global const float *restrict axes, __global float *restrict tiles,
-                                __global float *restrict tmin, __global int *restrict point,
-                                __global int *restrict counts, __global int *restrict lists,
-                                const int width, const int height, const int tiles_x, const int tiles_y)
+/* tile (tx, ty): the largest and smallest semi-axes of its pixels (inside the frame) into tiles
+ * and tmin, its point flag, and its class (returned; astigmatism_tiles lists it) */
+inline int astigmatism_tile_class(__global const float *restrict axes, __global float *restrict tiles,
+                                  __global float *restrict tmin, __global int *restrict point,
+                                  const int width, const int height, const int tiles_x, const int tiles_y,
+                                  const int tx, const int ty)
 {
-    const int tx = get_global_id(0), ty = get_global_id(1);
-    if (tx >= tiles_x || ty >= tiles_y) return;
     const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
     const size_t pn = (size_t)pw * (tiles_y * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
     const int x1 = min((tx + 1) * ASTIGMATISM_TILE_W, width), y1 = min((ty + 1) * ASTIGMATISM_TILE_H, height);
@@ -255,7 +251,38 @@ __kernel void astigmatism_tiles(__global const float *restrict axes, __global fl
         c = 1;
         while (c < ASTIGMATISM_TAP_CLASSES && bound > (float)(2 << c) * ASTIGMATISM_TAPS_PER_PX) ++c;
     }
-    lists[c * tiles_x * tiles_y + atomic_inc(counts + c)] = ty * tiles_x + tx;
+    return c;
+}
+
+/* one work-item per tile (astigmatism_tile_class), its class appended to that class's tile list
+ * (lists: ASTIGMATISM_CLASSES rows of tiles_x * tiles_y tile indices; counts: one counter per
+ * class, zeroed by the host). A work-group (TILES_GROUP tiles of a row, clpost/stages/astigmatism_cl.py; the host rounds
+ * the global size up) counts its tiles per class in local memory and reserves each class's run
+ * of the list with one global atomic_add: one tile's global atomic_inc each, on the one cache line
+ * of counts, cost the pass about as much as the pad pass on 16 PoCL threads. The order within a
+ * list depends on the atomics' order; the result does not (each tile is independent). */
+__kernel void astigmatism_tiles(__global const float *restrict axes, __global float *restrict tiles,
+                                __global float *restrict tmin, __global int *restrict point,
+                                __global int *restrict counts, __global int *restrict lists,
+                                const int width, const int height, const int tiles_x, const int tiles_y)
+{
+    __local int count[ASTIGMATISM_CLASSES], base[ASTIGMATISM_CLASSES];
+    const int tx = get_global_id(0), ty = get_global_id(1), lid = get_local_id(0);
+    const int valid = tx < tiles_x && ty < tiles_y;
+    for (int k = lid; k < ASTIGMATISM_CLASSES; k += get_local_size(0))
+        count[k] = 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    int c = 0, slot = 0;
+    if (valid) {
+        c = astigmatism_tile_class(axes, tiles, tmin, point, width, height, tiles_x, tiles_y, tx, ty);
+        slot = atomic_inc(count + c);
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int k = lid; k < ASTIGMATISM_CLASSES; k += get_local_size(0))
+        base[k] = count[k] ? atomic_add(counts + k, count[k]) : 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (valid)
+        lists[c * tiles_x * tiles_y + base[c] + slot] = ty * tiles_x + tx;
 }
 
 /* one work-item per tile: does the gather need its reach test? A tap's reach weight is 1 when

@@ -23,6 +23,10 @@ import numpy as np
 from . import _field as fld
 
 
+# astigmatism_tiles' work-group: this many tiles of a row count their classes in local memory
+TILES_GROUP = 64
+
+
 def _f(v: float) -> str:
     """A float32 literal of ``v`` (exact round trip)."""
     return f"{float(np.float32(v))!r}f"
@@ -135,7 +139,8 @@ def enqueue_astigmatism(stage, rt, camera, frame, src, dst, aux):
                             src, aux["depth"], b["offs"], b["pad"], b["axes"], *b["sizes"], b["geometry"][2],
                             np.float32(aperture), np.float32(v), np.float32(1.0 / f), *b["ring"]))
     events.append(rt.copy(b["counts"], b["zeros"]))
-    events.append(rt.launch(kernel("astigmatism_tiles"), (ntx, nty), None,
+    tg = TILES_GROUP  # tiles of a row per work-group (kernels/astigmatism.cl, astigmatism_tiles)
+    events.append(rt.launch(kernel("astigmatism_tiles"), (-(-ntx // tg) * tg, nty), (tg, 1),
                             b["axes"], b["tiles"], b["tmin"], b["point"], b["counts"], b["lists"], np.int32(w),
                             np.int32(h), np.int32(ntx), np.int32(nty)))
     # which tiles' gathers can skip the reach test (every weight of it is 1 there), and which
