@@ -28,18 +28,21 @@
  * kernels (astigmatism_t<n> and astigmatism for the full count, astigmatism_p<n> for the point
  * classes; one compile-time tap count each) and
  * astigmatism_exact with one work-group per tile of the frame — the most a list can hold, so the
- * host never reads the counts (no sync). A class's count c of listed tiles is spread evenly over
- * the launch's n work-groups (astigmatism_slot: group g takes entry g c / n where that steps up)
- * and the other groups return at once (a few ns each on PoCL): PoCL's CPU device hands each thread
- * a run of consecutive work-groups, so listed tiles packed into the first c groups ran on one
- * or a few of its threads (docs/benchmarks.md, "astigmatism: classes spread over the launch").
+ * host never reads the counts (no sync). With ASTIGMATISM_SPREAD (the 16-lane CPU form) a class's
+ * count c of listed tiles is spread evenly over the launch's n work-groups (astigmatism_slot:
+ * group g takes entry g c / n where that steps up), otherwise they are its first c groups; the
+ * other groups return at once (a few ns each on PoCL). PoCL's CPU device hands each thread a run
+ * of consecutive work-groups, so the first c groups ran on one or a few of its threads
+ * (docs/benchmarks.md, "astigmatism: tile classes spread over the launch"); a GPU schedules its
+ * groups as they free up, and keeps the packed order.
  * The tap table holds
  * the spirals of 4, 8, ..., ASTIGMATISM_TAPS points one after the other, then the point classes' spirals.
  * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE, ASTIGMATISM_TILE_W,
  * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch),
  * ASTIGMATISM_CLASSES (copy, the tap classes, the point classes, exact), ASTIGMATISM_TAP_CLASSES
  * (how many tap classes: 4, 8, ... ASTIGMATISM_TAPS), ASTIGMATISM_COPY_PX, ASTIGMATISM_TAPS_PER_PX (FULL_AT_PX / TAPS),
- * ASTIGMATISM_FULL_TAP0 (table offset of the full spiral).
+ * ASTIGMATISM_FULL_TAP0 (table offset of the full spiral), ASTIGMATISM_LANES (16 or 1, below),
+ * ASTIGMATISM_SPREAD (1: spread each class's tiles over its launch, astigmatism_slot).
  * Point classes (clpost/stages/astigmatism.py, "Point taps"): astigmatism_point_class (generated
  * before this file) maps a tile's smallest semi-axis to its point class or -1; those tiles'
  * gathers (astigmatism_p<n>) take one tap per channel from pre = 3 planes pw × ph, the colour
@@ -537,14 +540,22 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
  * row of the class in lists, whose length astigmatism_tiles counted in counts[class]). Group g
  * takes entry floor(g c / n) where that steps up to the next group's, so the c busy groups lie
  * evenly among the n — each entry exactly once (the steps of floor(g c / n), g = 0 .. n, are 0 or
- * 1 and sum to c) — instead of as the first c, which PoCL ran on one thread's run of groups. */
+ * 1 and sum to c) — instead of as the first c, which PoCL ran on one thread's run of groups.
+ * Without ASTIGMATISM_SPREAD: group g takes entry g if g < c. */
+#ifndef ASTIGMATISM_SPREAD
+#define ASTIGMATISM_SPREAD 1
+#endif
 inline int astigmatism_slot(__global const int *restrict counts, const int list0, const int tiles_x,
                             const int tiles_y)
 {
     const long n = (long)tiles_x * tiles_y, g = get_group_id(0);
     const long c = counts[list0 / n];
+#if ASTIGMATISM_SPREAD
     const long j = g * c / n;
     return (g + 1) * c / n > j ? (int)j : -1;
+#else
+    return g < c ? (int)g : -1;
+#endif
 }
 /* `tile`: the tile id this work-group gathers; return when it takes none */
 #define ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y) \

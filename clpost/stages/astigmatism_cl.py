@@ -85,7 +85,9 @@ def _plan(stage, rt, camera, w, h, cx, cy, pitch, lut):
     nclass = len(classes) + len(pclasses) + 2
     whole = (ntx * fld.TILE_W, nty * fld.TILE_H) == (w, h)
     lanes = 16 if rt.wide else 1  # the gather's pixels per work-item (kernels/astigmatism.cl)
-    defines = {**stage.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole), "ASTIGMATISM_LANES": lanes}
+    # the CPU form spreads each class's tiles over its launch (kernels/astigmatism.cl, astigmatism_slot)
+    defines = {**stage.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole), "ASTIGMATISM_LANES": lanes,
+               "ASTIGMATISM_SPREAD": int(rt.wide)}
     source = program_source(classes)
     sizes = (np.int32(w), np.int32(h), np.int32(pw), np.int32(ph))
     geometry = (np.float32(cx), np.float32(cy), np.float32(pitch),
