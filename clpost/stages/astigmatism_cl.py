@@ -6,8 +6,9 @@ offsets; once per camera and size) → ``astigmatism_pad`` (padded copy + per-pi
 ``astigmatism_tiles`` (tile bounds and class lists) → ``astigmatism_reach`` (and which tiles the
 point classes read) → ``astigmatism_box`` (the point classes' prefiltered colour there) → per class:
 copy, one kernel per tap count, one per point class, exact per-pixel, each over every tile of the
-frame (the work-groups past the class's count return at once: nothing is read back, so the
-launches are data-independent and a plan records them once).
+frame (the groups beyond the class's count return at once — on a CPU the class's tiles are
+spread over the launch's groups, ``ASTIGMATISM_SPREAD`` — nothing is read back, so the launches
+are data-independent and a plan records them once).
 
 Everything that depends only on the camera's structure and the frame size — the program source
 with its tap table, the tile directions, the inner-tile mask and its ring, the focal-offset LUT —
@@ -153,8 +154,9 @@ def enqueue_astigmatism(stage, rt, camera, frame, src, dst, aux):
     events.append(rt.launch(kernel("astigmatism_box"), (pw // 16, ph), None,
                             src, b["need"], b["pre"], *b["sizes"], np.int32(ntx), np.int32(nty)))
     # every class is launched over as many work-groups as the frame has tiles, the most its list
-    # can hold; those past the class's count return at once (ASTIGMATISM_LISTED in
-    # kernels/astigmatism.cl), so the host reads nothing back and the launches can be recorded
+    # can hold; the groups beyond the class's count return at once (astigmatism_slot and
+    # ASTIGMATISM_LISTED in kernels/astigmatism.cl), so the host reads nothing back and the
+    # launches can be recorded
     n = ntx * nty
     args = (np.int32(ntx), np.int32(nty), np.int32(w), np.int32(h))
     group = (fld.TILE_W // b["lanes"], fld.TILE_H)  # a tile per work-group
