@@ -603,9 +603,69 @@ __kernel void astigmatism_copy(__global const float *restrict padded, __global c
     ASTORE(dst, AVLOAD(col), AVLOAD(col + plane), AVLOAD(col + 2 * plane), x, y, width, height);
 }
 
-/* the per-pixel model (each pixel's own ellipse and direction; per-pixel addresses, so it does
- * not vectorise) for the tiles of the exact list (one work-group per listed tile), all
- * ASTIGMATISM_TAPS spiral points */
+/* the per-pixel model (each pixel's own ellipse and direction) for the tiles of the exact list
+ * (one work-group per listed tile), all ASTIGMATISM_TAPS spiral points. The 16-lane form (a CPU)
+ * is the one-pixel form's arithmetic on 16 pixels of a tile row, its per-pixel reads as per-lane
+ * gathers (CLP_GATHER16): PoCL does not vectorise the one-pixel form across work-items
+ * (data-dependent addresses), and one exact tile cost ≈ 0.2 ms on one thread in it. */
+#if ASTIGMATISM_LANES == 16
+__kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict src,
+                       __global const int *restrict inner, __global const float *restrict axes,
+                       __global float *restrict dst, __global const int *restrict list,
+                       __global const int *restrict counts, const int list0, const int tiles_x, const int tiles_y,
+                       const int width, const int height, const float cx, const float cy)
+{
+    ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y);
+    const ClpTile t = clp_tile(tile, tiles_x, tiles_y, ASTIGMATISM_TILE_W,
+                               ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 16);
+    const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;
+    if (y >= height) return;  /* lanes right of the frame are computed, not stored */
+    const size_t pn = t.pn;
+    const size_t n = (size_t)width * height;
+    /* colour as in the one-pixel form below */
+    const int in = inner[tile_id];
+    __global const float *col = in ? src : padded;
+    const int stride = in ? width : pw, off = in ? ASTIGMATISM_PAD : 0;
+    const size_t plane = in ? n : pn;
+    const int jo = (y + ASTIGMATISM_PAD - off) * stride + (x + ASTIGMATISM_PAD - off);
+    const int16 xs = x + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const float16 as = vload16(0, axes + jc), at = vload16(0, axes + pn + jc);
+    const float16 dx = convert_float16(xs) - cx;
+    const float dy = (float)y - cy;
+    const float16 r = sqrt(dx * dx + dy * dy);
+    const int16 pos = r > 0.0f;
+    const float16 ex = select((float16)1.0f, dx / r, pos), ey = select((float16)0.0f, dy / r, pos);
+    const float16 bx = convert_float16(xs + ASTIGMATISM_PAD);
+    const float by = (float)(y + ASTIGMATISM_PAD);
+    float16 ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
+    for (int k = 0; k < ASTIGMATISM_TAPS; ++k) {
+        const float ux = astigmatism_taps[2 * (ASTIGMATISM_FULL_TAP0 + k)];
+        const float uy = astigmatism_taps[2 * (ASTIGMATISM_FULL_TAP0 + k) + 1];
+        const float16 us = as * ux, ut = at * uy;
+        const float16 px = bx - ey * us + ex * ut, py = by + ex * us + ey * ut;
+        const int16 jn = convert_int16(floor(py + 0.5f)) * pw + convert_int16(floor(px + 0.5f));
+        const float16 qs = us / (CLP_GATHER16(axes, jn) + 0.5f), qt = ut / (CLP_GATHER16(axes + pn, jn) + 0.5f);
+        const float16 w = clamp((1.5625f - (qs * qs + qt * qt)) * (1.0f / 0.5625f), 0.0f, 1.0f) * (1.0f / ASTIGMATISM_TAPS);
+        const float16 fx0 = floor(px), fy0 = floor(py);
+        const float16 fx = px - fx0, fy = py - fy0;
+        const int16 j = (convert_int16(fy0) - off) * stride + convert_int16(fx0) - off;
+        const int16 j1 = j + 1, js = j + stride, js1 = j + stride + 1;
+        __global const float *c = col;
+        ar += w * mix(mix(CLP_GATHER16(c, j), CLP_GATHER16(c, j1), fx), mix(CLP_GATHER16(c, js), CLP_GATHER16(c, js1), fx), fy);
+        c += plane;
+        ag += w * mix(mix(CLP_GATHER16(c, j), CLP_GATHER16(c, j1), fx), mix(CLP_GATHER16(c, js), CLP_GATHER16(c, js1), fx), fy);
+        c += plane;
+        ab += w * mix(mix(CLP_GATHER16(c, j), CLP_GATHER16(c, j1), fx), mix(CLP_GATHER16(c, js), CLP_GATHER16(c, js1), fx), fy);
+        wsum += w;
+    }
+    /* the one-pixel form copies where both semi-axes are below the minimum, or no tap has weight */
+    const int16 keep = ((as < ASTIGMATISM_MIN_SEMI) & (at < ASTIGMATISM_MIN_SEMI)) | !(wsum > 0.0f);
+    astigmatism_store16(dst, select(ar / wsum, vload16(0, col + jo), keep),
+                        select(ag / wsum, vload16(0, col + plane + jo), keep),
+                        select(ab / wsum, vload16(0, col + 2 * plane + jo), keep), x, y, width, height);
+}
+#else
+/* the one-pixel form (a GPU: a tile per work-group of TILE_W × TILE_H work-items) */
 __kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict src,
                        __global const int *restrict inner, __global const float *restrict axes,
                        __global float *restrict dst, __global const int *restrict list,
@@ -666,3 +726,4 @@ __kernel void astigmatism_exact(__global const float *restrict padded, __global 
     dst[n + i] = keep ? col[plane + jo] : ag / wsum;
     dst[2 * n + i] = keep ? col[2 * plane + jo] : ab / wsum;
 }
+#endif

@@ -166,8 +166,8 @@ def enqueue_astigmatism(stage, rt, camera, frame, src, dst, aux):
             events.append(rt.launch(kernel("astigmatism_copy"), (n * group[0], group[1]), group,
                                     b["pad"], src, b["inner"], dst, *sub, *args))
         elif c == nclass - 1:
-            events.append(rt.launch(kernel("astigmatism_exact"), (n * fld.TILE_W, fld.TILE_H),
-                                    (fld.TILE_W, fld.TILE_H), b["pad"], src, b["inner"], b["axes"], dst, *sub,
+            events.append(rt.launch(kernel("astigmatism_exact"), (n * group[0], group[1]), group,
+                                    b["pad"], src, b["inner"], b["axes"], dst, *sub,
                                     *args, *b["geometry"][:2]))
         else:
             nt = len(b["classes"])
