@@ -28,14 +28,21 @@
  * kernels (astigmatism_t<n> and astigmatism for the full count, astigmatism_p<n> for the point
  * classes; one compile-time tap count each) and
  * astigmatism_exact with one work-group per tile of the frame — the most a list can hold, so the
- * host never reads the counts (no sync) — and the work-groups past their class's count return at
- * once (ASTIGMATISM_LISTED; a few ns each on PoCL). The tap table holds
+ * host never reads the counts (no sync). With ASTIGMATISM_SPREAD (the 16-lane CPU form) a class's
+ * count c of listed tiles is spread evenly over the launch's n work-groups (astigmatism_slot:
+ * group g takes entry g c / n where that steps up), otherwise they are its first c groups; the
+ * other groups return at once (a few ns each on PoCL). PoCL's CPU device hands each thread a run
+ * of consecutive work-groups, so the first c groups ran on one or a few of its threads
+ * (docs/benchmarks.md, "astigmatism: tile classes spread over the launch"); a GPU schedules its
+ * groups as they free up, and keeps the packed order.
+ * The tap table holds
  * the spirals of 4, 8, ..., ASTIGMATISM_TAPS points one after the other, then the point classes' spirals.
  * Defines: ASTIGMATISM_TAPS, ASTIGMATISM_PAD, ASTIGMATISM_LUT_SIZE, ASTIGMATISM_TILE_W,
  * ASTIGMATISM_TILE_H, ASTIGMATISM_WHOLE_TILES (whole tiles: stores without a branch),
  * ASTIGMATISM_CLASSES (copy, the tap classes, the point classes, exact), ASTIGMATISM_TAP_CLASSES
  * (how many tap classes: 4, 8, ... ASTIGMATISM_TAPS), ASTIGMATISM_COPY_PX, ASTIGMATISM_TAPS_PER_PX (FULL_AT_PX / TAPS),
- * ASTIGMATISM_FULL_TAP0 (table offset of the full spiral).
+ * ASTIGMATISM_FULL_TAP0 (table offset of the full spiral), ASTIGMATISM_LANES (16 or 1, below),
+ * ASTIGMATISM_SPREAD (1: spread each class's tiles over its launch, astigmatism_slot).
  * Point classes (clpost/stages/astigmatism.py, "Point taps"): astigmatism_point_class (generated
  * before this file) maps a tile's smallest semi-axis to its point class or -1; those tiles'
  * gathers (astigmatism_p<n>) take one tap per channel from pre = 3 planes pw × ph, the colour
@@ -166,17 +173,13 @@ __kernel void astigmatism_pad(__global const float *restrict src, __global const
     vstore16(1.0f / ((at + 0.5f) * (at + 0.5f)), 0, axes + 3 * pn + j);
 }
 
-/* one work-item per tile: the largest semi-axes of the tile's pixels (inside the frame), and the
- * tile's class appended to that class's tile list (lists: ASTIGMATISM_CLASSES rows of
- * tiles_x * tiles_y tile indices; counts: one counter per class, zeroed by the host). The order
- * within a list depends on the atomics' order; the result does not (each tile is independent). */
-__kernel void astigmatism_tiles(__global const float *restrict axes, __global float *restrict tiles,
-                                __global float *restrict tmin, __global int *restrict point,
-                                __global int *restrict counts, __global int *restrict lists,
-                                const int width, const int height, const int tiles_x, const int tiles_y)
+/* tile (tx, ty): the largest and smallest semi-axes of its pixels (inside the frame) into tiles
+ * and tmin, its point flag, and its class (returned; astigmatism_tiles lists it) */
+inline int astigmatism_tile_class(__global const float *restrict axes, __global float *restrict tiles,
+                                  __global float *restrict tmin, __global int *restrict point,
+                                  const int width, const int height, const int tiles_x, const int tiles_y,
+                                  const int tx, const int ty)
 {
-    const int tx = get_global_id(0), ty = get_global_id(1);
-    if (tx >= tiles_x || ty >= tiles_y) return;
     const int pw = tiles_x * ASTIGMATISM_TILE_W + 2 * ASTIGMATISM_PAD;
     const size_t pn = (size_t)pw * (tiles_y * ASTIGMATISM_TILE_H + 2 * ASTIGMATISM_PAD);
     const int x1 = min((tx + 1) * ASTIGMATISM_TILE_W, width), y1 = min((ty + 1) * ASTIGMATISM_TILE_H, height);
@@ -251,7 +254,38 @@ __kernel void astigmatism_tiles(__global const float *restrict axes, __global fl
         c = 1;
         while (c < ASTIGMATISM_TAP_CLASSES && bound > (float)(2 << c) * ASTIGMATISM_TAPS_PER_PX) ++c;
     }
-    lists[c * tiles_x * tiles_y + atomic_inc(counts + c)] = ty * tiles_x + tx;
+    return c;
+}
+
+/* one work-item per tile (astigmatism_tile_class), its class appended to that class's tile list
+ * (lists: ASTIGMATISM_CLASSES rows of tiles_x * tiles_y tile indices; counts: one counter per
+ * class, zeroed by the host). A work-group (TILES_GROUP tiles of a row, clpost/stages/astigmatism_cl.py; the host rounds
+ * the global size up) counts its tiles per class in local memory and reserves each class's run
+ * of the list with one global atomic_add: one tile's global atomic_inc each, on the one cache line
+ * of counts, cost the pass about as much as the pad pass on 16 PoCL threads. The order within a
+ * list depends on the atomics' order; the result does not (each tile is independent). */
+__kernel void astigmatism_tiles(__global const float *restrict axes, __global float *restrict tiles,
+                                __global float *restrict tmin, __global int *restrict point,
+                                __global int *restrict counts, __global int *restrict lists,
+                                const int width, const int height, const int tiles_x, const int tiles_y)
+{
+    __local int count[ASTIGMATISM_CLASSES], base[ASTIGMATISM_CLASSES];
+    const int tx = get_global_id(0), ty = get_global_id(1), lid = get_local_id(0);
+    const int valid = tx < tiles_x && ty < tiles_y;
+    for (int k = lid; k < ASTIGMATISM_CLASSES; k += get_local_size(0))
+        count[k] = 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    int c = 0, slot = 0;
+    if (valid) {
+        c = astigmatism_tile_class(axes, tiles, tmin, point, width, height, tiles_x, tiles_y, tx, ty);
+        slot = atomic_inc(count + c);
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int k = lid; k < ASTIGMATISM_CLASSES; k += get_local_size(0))
+        base[k] = count[k] ? atomic_add(counts + k, count[k]) : 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (valid)
+        lists[c * tiles_x * tiles_y + base[c] + slot] = ty * tiles_x + tx;
 }
 
 /* one work-item per tile: does the gather need its reach test? A tap's reach weight is 1 when
@@ -411,13 +445,13 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
                  __global const float *restrict pre, const int box, __global const int *restrict inner,
                  const int test_reach, __global const float *restrict axes,
                  __global float *restrict dst, __global const float *restrict tiles,
-                 __global const int *restrict list, const int list0, const int tiles_x, const int tiles_y,
+                 const int tile_of_group, const int tiles_x, const int tiles_y,
                  const int width, const int height, const int ntaps, const int tap0)
 {
-    /* work-group g = the g-th tile of this class's list; ntaps spiral points from tap0 (both
-     * compile-time constants after inlining: a run-time count makes the loop slower;
+    /* this work-group's tile of the class's list (astigmatism_slot); ntaps spiral points from tap0
+     * (both compile-time constants after inlining: a run-time count makes the loop slower;
      * docs/measurements.md#kernel-forms-on-pocl) */
-    const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
+    const ClpTile t = clp_tile(tile_of_group, tiles_x, tiles_y, ASTIGMATISM_TILE_W,
                                ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, ASTIGMATISM_LANES);
     const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;
     const size_t pn = t.pn;
@@ -501,10 +535,33 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
     ASTORE(dst, r, g, b, x, y, width, height);
 }
 
-/* return from a work-group past its class's count (list0 = class × tiles_x × tiles_y: the row of
- * the class in lists, whose length astigmatism_tiles counted in counts[class]) */
-#define ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y) \
-    if ((int)get_group_id(0) >= (counts)[(list0) / ((tiles_x) * (tiles_y))]) return
+/* The entry of the class's list that this work-group takes, or -1 (it returns at once): the
+ * launch has n = tiles_x × tiles_y groups, the class c <= n listed tiles (list0 = class × n: the
+ * row of the class in lists, whose length astigmatism_tiles counted in counts[class]). Group g
+ * takes entry floor(g c / n) where that steps up to the next group's, so the c busy groups lie
+ * evenly among the n — each entry exactly once (the steps of floor(g c / n), g = 0 .. n, are 0 or
+ * 1 and sum to c) — instead of as the first c, which PoCL ran on one thread's run of groups.
+ * Without ASTIGMATISM_SPREAD: group g takes entry g if g < c. */
+#ifndef ASTIGMATISM_SPREAD
+#define ASTIGMATISM_SPREAD 1
+#endif
+inline int astigmatism_slot(__global const int *restrict counts, const int list0, const int tiles_x,
+                            const int tiles_y)
+{
+    const long n = (long)tiles_x * tiles_y, g = get_group_id(0);
+    const long c = counts[list0 / n];
+#if ASTIGMATISM_SPREAD
+    const long j = g * c / n;
+    return (g + 1) * c / n > j ? (int)j : -1;
+#else
+    return g < c ? (int)g : -1;
+#endif
+}
+/* `tile`: the tile id this work-group gathers; return when it takes none */
+#define ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y) \
+    const int tile##_slot = astigmatism_slot(counts, list0, tiles_x, tiles_y); \
+    if (tile##_slot < 0) return; \
+    const int tile = (list)[(list0) + tile##_slot]
 
 #define ASTIGMATISM_GATHER_ARGS __global const float *restrict padded, __global const float *restrict src, \
     __global const float *restrict pre, __global const int *restrict inner, __global const int *restrict reach, \
@@ -514,12 +571,12 @@ inline void astigmatism_gather(__global const float *restrict padded, __global c
     const int height
 /* the reach test is group-uniform (one tile per work-group): two inlined copies of the loop */
 #define ASTIGMATISM_GATHER_CALL(n, t0, box) \
-    ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y); \
-    if (reach[list[list0 + (int)get_group_id(0)]]) \
-        astigmatism_gather(padded, src, pre, box, inner, 1, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, \
+    ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y); \
+    if (reach[tile]) \
+        astigmatism_gather(padded, src, pre, box, inner, 1, axes, dst, tiles, tile, tiles_x, tiles_y, width, \
                            height, n, t0); \
     else \
-        astigmatism_gather(padded, src, pre, box, inner, 0, axes, dst, tiles, list, list0, tiles_x, tiles_y, width, \
+        astigmatism_gather(padded, src, pre, box, inner, 0, axes, dst, tiles, tile, tiles_x, tiles_y, width, \
                            height, n, t0)
 
 /* the quality's ASTIGMATISM_TAPS (its spiral is the table's last) */
@@ -535,8 +592,8 @@ __kernel void astigmatism_copy(__global const float *restrict padded, __global c
                                __global const int *restrict list, __global const int *restrict counts,
                                const int list0, const int tiles_x, const int tiles_y, const int width, const int height)
 {
-    ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y);
-    const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
+    ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y);
+    const ClpTile t = clp_tile(tile, tiles_x, tiles_y, ASTIGMATISM_TILE_W,
                                ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, ASTIGMATISM_LANES);
     const int tile_id = t.id, x = t.x, y = t.y, jc = t.jc;
     const size_t pn = t.pn;
@@ -546,17 +603,77 @@ __kernel void astigmatism_copy(__global const float *restrict padded, __global c
     ASTORE(dst, AVLOAD(col), AVLOAD(col + plane), AVLOAD(col + 2 * plane), x, y, width, height);
 }
 
-/* the per-pixel model (each pixel's own ellipse and direction; per-pixel addresses, so it does
- * not vectorise) for the tiles of the exact list (one work-group per listed tile), all
- * ASTIGMATISM_TAPS spiral points */
+/* the per-pixel model (each pixel's own ellipse and direction) for the tiles of the exact list
+ * (one work-group per listed tile), all ASTIGMATISM_TAPS spiral points. The 16-lane form (a CPU)
+ * is the one-pixel form's arithmetic on 16 pixels of a tile row, its per-pixel reads as per-lane
+ * gathers (CLP_GATHER16): PoCL does not vectorise the one-pixel form across work-items
+ * (data-dependent addresses), and one exact tile cost ≈ 0.2 ms on one thread in it. */
+#if ASTIGMATISM_LANES == 16
 __kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict src,
                        __global const int *restrict inner, __global const float *restrict axes,
                        __global float *restrict dst, __global const int *restrict list,
                        __global const int *restrict counts, const int list0, const int tiles_x, const int tiles_y,
                        const int width, const int height, const float cx, const float cy)
 {
-    ASTIGMATISM_LISTED(counts, list0, tiles_x, tiles_y);
-    const ClpTile t = clp_tile(list[list0 + (int)get_group_id(0)], tiles_x, tiles_y, ASTIGMATISM_TILE_W,
+    ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y);
+    const ClpTile t = clp_tile(tile, tiles_x, tiles_y, ASTIGMATISM_TILE_W,
+                               ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 16);
+    const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;
+    if (y >= height) return;  /* lanes right of the frame are computed, not stored */
+    const size_t pn = t.pn;
+    const size_t n = (size_t)width * height;
+    /* colour as in the one-pixel form below */
+    const int in = inner[tile_id];
+    __global const float *col = in ? src : padded;
+    const int stride = in ? width : pw, off = in ? ASTIGMATISM_PAD : 0;
+    const size_t plane = in ? n : pn;
+    const int jo = (y + ASTIGMATISM_PAD - off) * stride + (x + ASTIGMATISM_PAD - off);
+    const int16 xs = x + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const float16 as = vload16(0, axes + jc), at = vload16(0, axes + pn + jc);
+    const float16 dx = convert_float16(xs) - cx;
+    const float dy = (float)y - cy;
+    const float16 r = sqrt(dx * dx + dy * dy);
+    const int16 pos = r > 0.0f;
+    const float16 ex = select((float16)1.0f, dx / r, pos), ey = select((float16)0.0f, dy / r, pos);
+    const float16 bx = convert_float16(xs + ASTIGMATISM_PAD);
+    const float by = (float)(y + ASTIGMATISM_PAD);
+    float16 ar = 0.0f, ag = 0.0f, ab = 0.0f, wsum = 0.0f;
+    for (int k = 0; k < ASTIGMATISM_TAPS; ++k) {
+        const float ux = astigmatism_taps[2 * (ASTIGMATISM_FULL_TAP0 + k)];
+        const float uy = astigmatism_taps[2 * (ASTIGMATISM_FULL_TAP0 + k) + 1];
+        const float16 us = as * ux, ut = at * uy;
+        const float16 px = bx - ey * us + ex * ut, py = by + ex * us + ey * ut;
+        const int16 jn = convert_int16(floor(py + 0.5f)) * pw + convert_int16(floor(px + 0.5f));
+        const float16 qs = us / (CLP_GATHER16(axes, jn) + 0.5f), qt = ut / (CLP_GATHER16(axes + pn, jn) + 0.5f);
+        const float16 w = clamp((1.5625f - (qs * qs + qt * qt)) * (1.0f / 0.5625f), 0.0f, 1.0f) * (1.0f / ASTIGMATISM_TAPS);
+        const float16 fx0 = floor(px), fy0 = floor(py);
+        const float16 fx = px - fx0, fy = py - fy0;
+        const int16 j = (convert_int16(fy0) - off) * stride + convert_int16(fx0) - off;
+        const int16 j1 = j + 1, js = j + stride, js1 = j + stride + 1;
+        __global const float *c = col;
+        ar += w * mix(mix(CLP_GATHER16(c, j), CLP_GATHER16(c, j1), fx), mix(CLP_GATHER16(c, js), CLP_GATHER16(c, js1), fx), fy);
+        c += plane;
+        ag += w * mix(mix(CLP_GATHER16(c, j), CLP_GATHER16(c, j1), fx), mix(CLP_GATHER16(c, js), CLP_GATHER16(c, js1), fx), fy);
+        c += plane;
+        ab += w * mix(mix(CLP_GATHER16(c, j), CLP_GATHER16(c, j1), fx), mix(CLP_GATHER16(c, js), CLP_GATHER16(c, js1), fx), fy);
+        wsum += w;
+    }
+    /* the one-pixel form copies where both semi-axes are below the minimum, or no tap has weight */
+    const int16 keep = ((as < ASTIGMATISM_MIN_SEMI) & (at < ASTIGMATISM_MIN_SEMI)) | !(wsum > 0.0f);
+    astigmatism_store16(dst, select(ar / wsum, vload16(0, col + jo), keep),
+                        select(ag / wsum, vload16(0, col + plane + jo), keep),
+                        select(ab / wsum, vload16(0, col + 2 * plane + jo), keep), x, y, width, height);
+}
+#else
+/* the one-pixel form (a GPU: a tile per work-group of TILE_W × TILE_H work-items) */
+__kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict src,
+                       __global const int *restrict inner, __global const float *restrict axes,
+                       __global float *restrict dst, __global const int *restrict list,
+                       __global const int *restrict counts, const int list0, const int tiles_x, const int tiles_y,
+                       const int width, const int height, const float cx, const float cy)
+{
+    ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y);
+    const ClpTile t = clp_tile(tile, tiles_x, tiles_y, ASTIGMATISM_TILE_W,
                                ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 1);
     const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;
     if (x >= width || y >= height) return;
@@ -609,3 +726,4 @@ __kernel void astigmatism_exact(__global const float *restrict padded, __global 
     dst[n + i] = keep ? col[plane + jo] : ag / wsum;
     dst[2 * n + i] = keep ? col[2 * plane + jo] : ab / wsum;
 }
+#endif

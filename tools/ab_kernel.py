@@ -4,6 +4,8 @@ ratios; docs/benchmarks.md, "Worst final, third pass").
 
     PYTHONPATH=. POCL_MAX_PTHREAD_COUNT=1 python tools/ab_kernel.py --scene worst --quality final \\
         --size 1920x1080 --repeats 7                      # every kernel launch of the plan, ms, sizes
+    PYTHONPATH=. python tools/ab_kernel.py --scene no_defocus --stages astigmatism --repeats 7
+                                                          # one stage planned alone
     PYTHONPATH=. POCL_MAX_PTHREAD_COUNT=1 python tools/ab_kernel.py --old main \\
         --kernel distortion_bspline_tiles --size 640x360 --repeats 61
 
@@ -37,8 +39,9 @@ from clpost.bench import SCENES, synthetic_frame
 from clpost.runtime import event_ms
 
 
-def record_plan(scene: str, quality: str, size: tuple[int, int]):
-    """A warmed-up plan and a function running it once: [(kernel, queue, global, local, args, event)]."""
+def record_plan(scene: str, quality: str, size: tuple[int, int], stages: list[str] | None = None):
+    """A warmed-up plan (the scene's stages, or ``stages`` alone) and a function running it once:
+    [(kernel, queue, global, local, args, event)]."""
     calls, args = [], {}
     enqueue, set_args, set_arg = cl.enqueue_nd_range_kernel, cl.Kernel.set_args, cl.Kernel.set_arg
 
@@ -62,7 +65,7 @@ def record_plan(scene: str, quality: str, size: tuple[int, int]):
     w, h = size
     frame = synthetic_frame(w, h, velocity_px=sc.velocity_px)
     cam, _ = sc.camera(w, h)
-    pipe = Pipeline(cam, quality=quality, stages=list(sc.wants))
+    pipe = Pipeline(cam, quality=quality, stages=stages or list(sc.wants))
     pipe.run(frame)  # builds, first launches
 
     def run_once():
@@ -82,13 +85,14 @@ def main() -> None:
     ap.add_argument("--quality", default="final")
     ap.add_argument("--size", default="1920x1080")
     ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--stages", help="comma-separated stages planned alone instead of the scene's plan")
     ap.add_argument("--old", help="git revision of the old kernel (with --kernel)")
     ap.add_argument("--kernel", help="kernel name to compare (with --old)")
     ap.add_argument("--old-args", type=int, help="the old kernel takes the first N recorded arguments")
     ap.add_argument("--old-global", help="the old kernel's global size (comma-separated), PoCL's groups")
     a = ap.parse_args()
     size = tuple(int(v) for v in a.size.split("x"))
-    run_once, restore = record_plan(a.scene, a.quality, size)
+    run_once, restore = record_plan(a.scene, a.quality, size, a.stages.split(",") if a.stages else None)
     if not a.old:
         times, launches = collections.defaultdict(list), {}
         for _ in range(a.repeats):

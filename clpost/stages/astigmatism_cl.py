@@ -6,8 +6,9 @@ offsets; once per camera and size) → ``astigmatism_pad`` (padded copy + per-pi
 ``astigmatism_tiles`` (tile bounds and class lists) → ``astigmatism_reach`` (and which tiles the
 point classes read) → ``astigmatism_box`` (the point classes' prefiltered colour there) → per class:
 copy, one kernel per tap count, one per point class, exact per-pixel, each over every tile of the
-frame (the work-groups past the class's count return at once: nothing is read back, so the
-launches are data-independent and a plan records them once).
+frame (the groups beyond the class's count return at once — on a CPU the class's tiles are
+spread over the launch's groups, ``ASTIGMATISM_SPREAD`` — nothing is read back, so the launches
+are data-independent and a plan records them once).
 
 Everything that depends only on the camera's structure and the frame size — the program source
 with its tap table, the tile directions, the inner-tile mask and its ring, the focal-offset LUT —
@@ -21,6 +22,10 @@ from functools import lru_cache
 import numpy as np
 
 from . import _field as fld
+
+
+# astigmatism_tiles' work-group: this many tiles of a row count their classes in local memory
+TILES_GROUP = 64
 
 
 def _f(v: float) -> str:
@@ -81,7 +86,9 @@ def _plan(stage, rt, camera, w, h, cx, cy, pitch, lut):
     nclass = len(classes) + len(pclasses) + 2
     whole = (ntx * fld.TILE_W, nty * fld.TILE_H) == (w, h)
     lanes = 16 if rt.wide else 1  # the gather's pixels per work-item (kernels/astigmatism.cl)
-    defines = {**stage.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole), "ASTIGMATISM_LANES": lanes}
+    # the CPU form spreads each class's tiles over its launch (kernels/astigmatism.cl, astigmatism_slot)
+    defines = {**stage.defines(camera), "ASTIGMATISM_WHOLE_TILES": int(whole), "ASTIGMATISM_LANES": lanes,
+               "ASTIGMATISM_SPREAD": int(rt.wide)}
     source = program_source(classes)
     sizes = (np.int32(w), np.int32(h), np.int32(pw), np.int32(ph))
     geometry = (np.float32(cx), np.float32(cy), np.float32(pitch),
@@ -135,7 +142,8 @@ def enqueue_astigmatism(stage, rt, camera, frame, src, dst, aux):
                             src, aux["depth"], b["offs"], b["pad"], b["axes"], *b["sizes"], b["geometry"][2],
                             np.float32(aperture), np.float32(v), np.float32(1.0 / f), *b["ring"]))
     events.append(rt.copy(b["counts"], b["zeros"]))
-    events.append(rt.launch(kernel("astigmatism_tiles"), (ntx, nty), None,
+    tg = TILES_GROUP  # tiles of a row per work-group (kernels/astigmatism.cl, astigmatism_tiles)
+    events.append(rt.launch(kernel("astigmatism_tiles"), (-(-ntx // tg) * tg, nty), (tg, 1),
                             b["axes"], b["tiles"], b["tmin"], b["point"], b["counts"], b["lists"], np.int32(w),
                             np.int32(h), np.int32(ntx), np.int32(nty)))
     # which tiles' gathers can skip the reach test (every weight of it is 1 there), and which
@@ -146,8 +154,9 @@ def enqueue_astigmatism(stage, rt, camera, frame, src, dst, aux):
     events.append(rt.launch(kernel("astigmatism_box"), (pw // 16, ph), None,
                             src, b["need"], b["pre"], *b["sizes"], np.int32(ntx), np.int32(nty)))
     # every class is launched over as many work-groups as the frame has tiles, the most its list
-    # can hold; those past the class's count return at once (ASTIGMATISM_LISTED in
-    # kernels/astigmatism.cl), so the host reads nothing back and the launches can be recorded
+    # can hold; the groups beyond the class's count return at once (astigmatism_slot and
+    # ASTIGMATISM_LISTED in kernels/astigmatism.cl), so the host reads nothing back and the
+    # launches can be recorded
     n = ntx * nty
     args = (np.int32(ntx), np.int32(nty), np.int32(w), np.int32(h))
     group = (fld.TILE_W // b["lanes"], fld.TILE_H)  # a tile per work-group
@@ -157,8 +166,8 @@ def enqueue_astigmatism(stage, rt, camera, frame, src, dst, aux):
             events.append(rt.launch(kernel("astigmatism_copy"), (n * group[0], group[1]), group,
                                     b["pad"], src, b["inner"], dst, *sub, *args))
         elif c == nclass - 1:
-            events.append(rt.launch(kernel("astigmatism_exact"), (n * fld.TILE_W, fld.TILE_H),
-                                    (fld.TILE_W, fld.TILE_H), b["pad"], src, b["inner"], b["axes"], dst, *sub,
+            events.append(rt.launch(kernel("astigmatism_exact"), (n * group[0], group[1]), group,
+                                    b["pad"], src, b["inner"], b["axes"], dst, *sub,
                                     *args, *b["geometry"][:2]))
         else:
             nt = len(b["classes"])
