@@ -4,6 +4,8 @@
  * (the float64 reference mirrors this line by line).
  * Structural: DOF_TILE (tile = work-group of DOF_TILE/DOF_VEC x DOF_TILE work-items), DOF_VEC,
  * DOF_RMAX, DOF_SCALE, DOF_BUDGET, DOF_LEVELS, DOF_VIGNETTING,
+ * DOF_LIGHTS (lights' 1/4-px ramp at stride 1, LIGHT_RAMP_PX: the full-resolution gather only, and not
+ * with DOF_VIGNETTING or DOF_PROFILE),
  * DOF_TEXTURE (spherical aberration's texture on: σ ≠ 0),
  * DOF_PROFILE (a traced lens's per-channel texture, the pencil map: clpost/optics/pencil.py; with
  * DOF_PROF_ND rows, DOF_PROF_NR bins over [0, DOF_PROF_TMAX], DOF_PROF_RK = output px -> row
@@ -81,6 +83,26 @@ inline void dof_profile(__global const float4 *restrict prof, const DOF_F rq, co
 }
 #endif
 
+/* a light tap's lattice sums (light_sums / light_sum_at in clpost/stages/dof.py): rows of
+ * DOF_LIGHT_N, N₁(r) and N_¼(r) of a far light, then of a near one; linear in r, ends clamped;
+ * per lane */
+inline void dof_light_sums(__global const float *restrict lsum, const DOF_F r, const DOF_I far, DOF_F *n1,
+                           DOF_F *n4)
+{
+    const DOF_F f = clamp((r - DOF_LIGHT_R0) * DOF_LIGHT_K, 0.0f, (float)(DOF_LIGHT_N - 1));
+    const DOF_F i0 = fmin(floor(f), (float)(DOF_LIGHT_N - 2));
+    float a[DOF_VEC], v1[DOF_VEC], v4[DOF_VEC];
+    int at[DOF_VEC];
+    DOF_STORE(f - i0, a);
+    DOF_STORE(DOF_CONVERT_I(i0) + select((DOF_I)(2 * DOF_LIGHT_N), (DOF_I)(0), far), at);
+    for (int l = 0; l < DOF_VEC; ++l) {
+        __global const float *q = lsum + at[l];
+        v1[l] = q[0] + (q[1] - q[0]) * a[l];
+        v4[l] = q[DOF_LIGHT_N] + (q[DOF_LIGHT_N + 1] - q[DOF_LIGHT_N]) * a[l];
+    }
+    *n1 = DOF_LOAD(v1); *n4 = DOF_LOAD(v4);
+}
+
 /* one source tap for 8 neighbouring target pixels: colours (cr, cg, cb), signed CoC rq and
  * iq = 1/max(|rq|, 1/2) at offset (dx, dy) px, |o| = dist px; the tap's constants (ρ and 1/ρ
  * of both layers) are uniform scalars. Selects and DOF_F arithmetic only: no branch, no
@@ -90,7 +112,8 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
                      const float dist, const float rhof, const float rhon, const float irhof,
                      const float irhon, const float inv_ramp, const float cell, const float sa,
                      const DOF_F hx, const DOF_F hy, const int dx, const int dy, const DOF_F pvq,
-                     const float vig, __global const float4 *restrict prof)
+                     const float vig, __global const float4 *restrict prof, const int lights,
+                     __global const float *restrict lsum)
 {
     const DOF_I front = rq < rp - DOF_FRONT_MARGIN;
     const DOF_I behind = rq > rp + DOF_FRONT_MARGIN;
@@ -100,7 +123,32 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
     const DOF_F ir = select(iq, iarp, behind);
     const DOF_F rr = r * select((DOF_F)(rhon), (DOF_F)(rhof), far);
     const DOF_F cov = clamp((rr * DOF_TMAX - dist) * inv_ramp + 0.5f, 0.0f, 1.0f);
-    DOF_F w = cov * (cell * ir * ir);
+    /* a light at stride 1 (LIGHT_LUMA in clpost/stages/dof.py): its colour weight on the ¼-px
+     * ramp × N₁/N_¼ (in front 1/N_¼; r ≥ DOF_LIGHT_RMAX: the 1-px ramp, in front 1/N₁); `cov`
+     * stays the normalising weight. `lights`: a compile-time 1 in the tap loop of a level-0 tile
+     * near a light (the kernel's DOF_TAPS), 0 in every other; there only work-items that see a
+     * light pay for it */
+    DOF_F covc = cov, wsmall = (DOF_F)(0.0f);
+    DOF_I small = (DOF_I)(0);
+    if (DOF_LIGHTS && lights) {  /* stride 1, a light near the tile; not with cat's-eye bokeh or a traced profile */
+        const DOF_I bright = DOF_LIGHT_Y0 * cr + DOF_LIGHT_Y1 * cg + DOF_LIGHT_Y2 * cb > DOF_LIGHT_LUMA;
+        if (any(bright)) {
+            DOF_F n1, n4;
+            dof_light_sums(lsum, r, far, &n1, &n4);
+            /* (a texture of |sa| = 1 can zero a small disc's sums: such a light keeps the 1-px ramp) */
+            const DOF_I light = bright & (r < DOF_LIGHT_RMAX) & (n4 > 0.0f);
+            const DOF_F cl = clamp((rr * DOF_TMAX - dist) * DOF_LIGHT_INV_RAMP + 0.5f, 0.0f, 1.0f);
+            covc = select(select(cov, cov / select((DOF_F)(1.0f), n1, n1 > 0.0f), bright & front),
+                          cl * select(n1, (DOF_F)(1.0f), front) / select((DOF_F)(1.0f), n4, n4 > 0.0f), light);
+            /* LIGHT_SMALL_PX: the 3x3's separable weight, the whole colour weight (texture-free) */
+            small = light & (r >= DOF_LIGHT_SMALL_LO) & (r < DOF_LIGHT_SMALL_HI);
+            if (abs(dx) <= 1 && abs(dy) <= 1) {
+                const DOF_F aw = DOF_LOCAL_A(r);
+                wsmall = (dx ? aw : 1.0f - 2.0f * aw) * (dy ? aw : 1.0f - 2.0f * aw) * select(n1, (DOF_F)(1.0f), front);
+            }
+        }
+    }
+    DOF_F w = cell * ir * ir;  /* every factor but the coverage: applied to both weights */
 #if DOF_TEXTURE
     {
         const DOF_F t = fmin(dist * ir * select((DOF_F)(irhon), (DOF_F)(irhof), far), 1.0f);
@@ -120,6 +168,9 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
         w *= clamp((1.0f - e) * r + 0.5f, 0.0f, 1.0f) * pvq;
     }
 #endif
+    /* wn: the normalising (1-px) weight of the background pool, 0 in front */
+    const DOF_F wn = select(w * cov, (DOF_F)(0.0f), front);
+    w = select(w * covc, wsmall, small);
 #if DOF_PROFILE
     DOF_F pr, pg, pb;
     dof_profile(prof, rq, dist * ir * select((DOF_F)(irhon), (DOF_F)(irhof), far), &pr, &pg, &pb);
@@ -129,11 +180,11 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
     acc->fr += fwr * cr; acc->fg += fwg * cg; acc->fb += fwb * cb;
     acc->wf += fwr; acc->wfg += fwg; acc->wfb += fwb;
     acc->r += (wr - fwr) * cr; acc->g += (wg - fwg) * cg; acc->b += (wb3 - fwb) * cb;
-    acc->wb += wr - fwr; acc->wbg += wg - fwg; acc->wbb += wb3 - fwb;
+    acc->wb += wn * pr; acc->wbg += wn * pg; acc->wbb += wn * pb;
 #else
     const DOF_F wfr = select((DOF_F)(0.0f), w, front), wbk = w - wfr;
     acc->fr += wfr * cr; acc->fg += wfr * cg; acc->fb += wfr * cb; acc->wf += wfr;
-    acc->r += wbk * cr; acc->g += wbk * cg; acc->b += wbk * cb; acc->wb += wbk;
+    acc->r += wbk * cr; acc->g += wbk * cg; acc->b += wbk * cb; acc->wb += wn;
 #endif
 }
 
@@ -162,7 +213,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                   const int ww, const int hw, const int pad, const int tw,
                   const float inv_area, const float sa, const float vig,
                   const float cx, const float cy, const float inv_half,
-                  __global const float4 *restrict prof)
+                  __global const float4 *restrict prof, __global const float *restrict lsum)
 {
     const int x = DOF_VEC * get_global_id(0), y = get_global_id(1);
     /* per work-group (= tile) values from the group id: uniform, so the tap loop's trip count
@@ -192,28 +243,38 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
 #endif
                    };
     const DOF_F pvp = DOF_VIGNETTING ? DOF_LOAD(pv + c0) : (DOF_F)(1.0f);
-    {
-        /* centre tap: own colour, blended toward the level's as p's own bokeh outgrows the
-         * lattice spacing (a point light's centre must not stay a one-pixel spike) */
-        const DOF_F beta = clamp(fabs(rp) * inv_s, 0.0f, 1.0f);
-        const DOF_F ob = 1.0f - beta;
-        dof_tapv(&acc, DOF_LOAD(lv + c0) * ob + DOF_LOAD(L + c0) * beta,
-                 DOF_LOAD(lv + pn + c0) * ob + DOF_LOAD(L + pn + c0) * beta,
-                 DOF_LOAD(lv + 2 * pn + c0) * ob + DOF_LOAD(L + 2 * pn + c0) * beta,
-                 rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0],
-                 inv_ramp, cell, sa, hx0, (DOF_F)(hy0), 0, 0,
-                 pvp, vig, prof);
-    }
-    for (int k = 1; k < count; ++k) {
-        const int dx = s * tap_dx[k], dy = s * tap_dy[k];
-        const size_t q = (size_t)((long)c0 + (long)dy * pw + dx);
-        dof_tapv(&acc, DOF_LOAD(L + q), DOF_LOAD(L + pn + q), DOF_LOAD(L + 2 * pn + q),
-                 DOF_LOAD(L + 3 * pn + q), DOF_LOAD(L + 4 * pn + q), rp, arp, iarp, fs * tap_dist[k],
-                 rho_far[k], rho_near[k], inv_rho_far[k], inv_rho_near[k], inv_ramp, cell, sa,
-                 ((float)x + 0.5f * (float)dx + lane - cx) * inv_half,
-                 (DOF_F)(((float)y + 0.5f * (float)dy - cy) * inv_half),
-                 dx, dy, DOF_VIGNETTING ? 0.5f * (pvp + DOF_LOAD(pv + q)) : (DOF_F)(1.0f), vig, prof);
-    }
+    /* the taps; the light path (dof_tapv's `lights`) only in a level-0 tile that dof_tile_dilate
+     * found within one tile of a light (bit 31 of its packed plan): the same loop without it
+     * elsewhere, so a frame without lights runs the plain tap loop */
+#define DOF_TAPS(LIGHT) { \
+    {\
+        /* centre tap: own colour, blended toward the level's as p's own bokeh outgrows the\
+         * lattice spacing (a point light's centre must not stay a one-pixel spike) */\
+        const DOF_F beta = clamp(fabs(rp) * inv_s, 0.0f, 1.0f);\
+        const DOF_F ob = 1.0f - beta;\
+        dof_tapv(&acc, DOF_LOAD(lv + c0) * ob + DOF_LOAD(L + c0) * beta,\
+                 DOF_LOAD(lv + pn + c0) * ob + DOF_LOAD(L + pn + c0) * beta,\
+                 DOF_LOAD(lv + 2 * pn + c0) * ob + DOF_LOAD(L + 2 * pn + c0) * beta,\
+                 rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0],\
+                 inv_ramp, cell, sa, hx0, (DOF_F)(hy0), 0, 0,\
+                 pvp, vig, prof, (LIGHT), lsum);\
+    }\
+    for (int k = 1; k < count; ++k) {\
+        const int dx = s * tap_dx[k], dy = s * tap_dy[k];\
+        const size_t q = (size_t)((long)c0 + (long)dy * pw + dx);\
+        dof_tapv(&acc, DOF_LOAD(L + q), DOF_LOAD(L + pn + q), DOF_LOAD(L + 2 * pn + q),\
+                 DOF_LOAD(L + 3 * pn + q), DOF_LOAD(L + 4 * pn + q), rp, arp, iarp, fs * tap_dist[k],\
+                 rho_far[k], rho_near[k], inv_rho_far[k], inv_rho_near[k], inv_ramp, cell, sa,\
+                 ((float)x + 0.5f * (float)dx + lane - cx) * inv_half,\
+                 (DOF_F)(((float)y + 0.5f * (float)dy - cy) * inv_half),\
+                 dx, dy, DOF_VIGNETTING ? 0.5f * (pvp + DOF_LOAD(pv + q)) : (DOF_F)(1.0f), vig, prof,\
+                 (LIGHT), lsum);\
+    } }
+    if (DOF_LIGHTS && lvl == 0 && packed < 0)
+        DOF_TAPS(1)
+    else
+        DOF_TAPS(0)
+#undef DOF_TAPS
     /* per channel (one weight for all three without DOF_PROFILE); alpha_out: green's coverage.
      * No background weight (a strong SA texture zeroes the centre tap and every other tap is in
      * front): the background is the pixel's own colour, never 0/0 */

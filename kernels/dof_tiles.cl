@@ -8,11 +8,44 @@
  * table that covers every source whose bokeh can reach a pixel of the tile, and the routing level
  * m of final's mixed resolution (the same rule with every neighbour's |CoC|, depth order ignored:
  * dof_tile_mix keeps routing the tiles it routed before the dilation became depth-aware), packed
- * as taps | l << 24 | m << 28 (l, m <= 7; the gather reads l = (packed >> 24) & 15).
+ * as taps | l << 24 | m << 28 (l, m <= 7; the gather reads l = (packed >> 24) & 15), and bit 31
+ * (DOF_LIGHT_BIT: the packed int is negative) on a level-0 tile within one tile of a light
+ * (`tlight`: a level-0 pixel whose luma is above DOF_LIGHT_LUMA; the gather runs its light path
+ * only there, so every other tile keeps the plain tap loop).
  */
+#define DOF_LIGHT_BIT ((int)0x80000000)
+#if DOF_BUDGET > DOF_TILE
+#error "the light bit assumes a level-0 tile's taps stay within the 3x3 tiles around it"
+#endif
 
-/* tmax[2 t], tmax[2 t + 1]: the signed CoC's min and max over tile t (level 0) */
+/* tlight[t]: whether a level-0 pixel of tile t is a light (DOF_LIGHTS; the light test of dof_tapv) */
+inline int dof_tile_light(__global const float *lv, const size_t pn, const int pw, const int pad, const int ww,
+                          const int hw, const int tx, const int ty)
+{
+    if (!DOF_LIGHTS)
+        return 0;
+#if DOF_TILE == 16
+    if ((tx + 1) * DOF_TILE <= ww && (ty + 1) * DOF_TILE <= hw) {  /* a whole tile: one row per vload16 */
+        __global const float *p0 = lv + (size_t)(ty * DOF_TILE + pad) * pw + tx * DOF_TILE + pad;
+        int16 on = (int16)(0);
+        for (int y = 0; y < DOF_TILE; ++y, p0 += pw)
+            on |= DOF_LIGHT_Y0 * vload16(0, p0) + DOF_LIGHT_Y1 * vload16(0, p0 + pn)
+                  + DOF_LIGHT_Y2 * vload16(0, p0 + 2 * pn) > DOF_LIGHT_LUMA;
+        return any(on);
+    }
+#endif
+    for (int y = ty * DOF_TILE; y < min((ty + 1) * DOF_TILE, hw); ++y)
+        for (int x = tx * DOF_TILE; x < min((tx + 1) * DOF_TILE, ww); ++x) {
+            const size_t i = (size_t)(y + pad) * pw + x + pad;
+            if (DOF_LIGHT_Y0 * lv[i] + DOF_LIGHT_Y1 * lv[pn + i] + DOF_LIGHT_Y2 * lv[2 * pn + i] > DOF_LIGHT_LUMA)
+                return 1;
+        }
+    return 0;
+}
+
+/* tmax[2 t], tmax[2 t + 1]: the signed CoC's min and max over tile t (level 0); tlight[t] */
 __kernel void dof_tile_max(__global const float *restrict lv, __global float *restrict tmax,
+                           __global int *restrict tlight,
                            const int ww, const int hw, const int pad, const int tw, const int th)
 {
     const int tx = get_global_id(0), ty = get_global_id(1);
@@ -20,6 +53,7 @@ __kernel void dof_tile_max(__global const float *restrict lv, __global float *re
     const int pw = DOF_PW(ww, pad);
     __global const float *pr = lv + (size_t)3 * pw * DOF_PW(hw, pad);  /* level 0 CoC */
     const int t = ty * tw + tx;
+    tlight[t] = dof_tile_light(lv, (size_t)pw * DOF_PW(hw, pad), pw, pad, ww, hw, tx, ty);
 #if DOF_TILE == 16
     if ((tx + 1) * DOF_TILE <= ww && (ty + 1) * DOF_TILE <= hw) {
         /* a whole tile: one row per vload16 (min and max are exact in any order) */
@@ -52,8 +86,9 @@ __kernel void dof_tile_max(__global const float *restrict lv, __global float *re
 /* The border replicates edge pixels, so an edge tile's own range also stands for the padding.
  * A neighbour's sources behind every pixel of the tile (CoC above the tile's max + the front
  * margin) are clamped to the pixel's own radius by the gather: they do not dilate. */
-__kernel void dof_tile_dilate(__global const float *restrict tmax, __global int *restrict tn,
-                              __global const int *restrict ntaps, const int tw, const int th)
+__kernel void dof_tile_dilate(__global const float *restrict tmax, __global const int *restrict tlight,
+                              __global int *restrict tn, __global const int *restrict ntaps, const int tw,
+                              const int th)
 {
     const int tx = get_global_id(0), ty = get_global_id(1);
     if (tx >= tw || ty >= th) return;
@@ -77,7 +112,13 @@ __kernel void dof_tile_dilate(__global const float *restrict tmax, __global int 
     while (lvl < DOF_LEVELS && (int)ceil(r / (float)(1 << lvl) - 0.5f) > DOF_BUDGET) ++lvl;
     while (route < DOF_LEVELS && (int)ceil(ra / (float)(1 << route) - 0.5f) > DOF_BUDGET) ++route;
     const int k = clamp((int)ceil(r / (float)(1 << lvl) - 0.5f), 0, DOF_BUDGET);
-    tn[ty * tw + tx] = ntaps[k] | (lvl << 24) | (route << 28);
+    /* a level-0 tile's taps reach DOF_BUDGET <= DOF_TILE px: the 3x3 tiles around it hold them */
+    int light = 0;
+    if (DOF_LIGHTS && lvl == 0)
+        for (int ny = max(ty - 1, 0); ny <= min(ty + 1, th - 1); ++ny)
+            for (int nx = max(tx - 1, 0); nx <= min(tx + 1, tw - 1); ++nx)
+                light |= tlight[ny * tw + nx];
+    tn[ty * tw + tx] = ntaps[k] | (lvl << 24) | (route << 28) | (light ? DOF_LIGHT_BIT : 0);
 }
 
 /* Final's mixed resolution (clpost/stages/dof.py, mixed_mask): launched over the tiles of the
@@ -92,10 +133,10 @@ __kernel void dof_tile_dilate(__global const float *restrict tmax, __global int 
 inline int dof_tile_big(__global const int *tn_h, __global const int *tn_full, const int tx, const int ty,
                         const int twh, const int tw, const int th)
 {
-    int big = (tn_h[ty * twh + tx] >> 28) >= DOF_MIX_LEVEL;
+    int big = ((tn_h[ty * twh + tx] >> 28) & 7) >= DOF_MIX_LEVEL;
     for (int cy = 2 * ty; cy <= min(2 * ty + 1, th - 1); ++cy)
         for (int cx = 2 * tx; cx <= min(2 * tx + 1, tw - 1); ++cx)
-            big |= (tn_full[cy * tw + cx] >> 28) > DOF_MIX_FULL_LEVELS;
+            big |= ((tn_full[cy * tw + cx] >> 28) & 7) > DOF_MIX_FULL_LEVELS;
     return big;
 }
 

@@ -21,10 +21,10 @@ MEASURED_PSNR = {
     # depth-aware tile plan, the light's tail and the narrow layer's 1/4-px coverage ramp
     ("h_lamps", "dof", "draft"): 41.22,
     ("h_lamps", "dof", "preview"): 42.66,
-    ("h_lamps", "dof", "final"): 42.86,
+    ("h_lamps", "dof", "final"): 44.63,      # 42.86 before the lights' 1/4-px ramp (dof.LIGHT_RAMP_PX)
     ("h_panes", "dof", "draft"): 32.96,      # 32.88 (FLIP 0.0342) before the depth-aware tile plan and the 1/4-px ramp
     ("h_panes", "dof", "preview"): 33.02,
-    ("h_panes", "dof", "final"): 33.10,
+    ("h_panes", "dof", "final"): 33.17,      # 33.10 before the lights' 1/4-px ramp
     ("h_fence", "dof", "draft"): 36.51,
     ("h_fence", "dof", "final"): 38.76,
     ("h_spin", "dof", "draft"): 49.96,
@@ -78,20 +78,30 @@ def test_heldout_psnr_floor_vs_cycles(scene, kind, quality):
 
 @pytest.mark.slow
 def test_heldout_emitters_do_not_get_worse():
-    """h_lamps at final: the nine defocused lamps' discs are 0.98–1.11× Cycles' area and the in-focus
-    1-px lamp on the wall had a 25-pixel halo (Cycles: 0) — two pixels from the lamp's depth sample,
-    beyond the fringe rule's 3×3 reach — until the light's tail clause (none since); energy 0.965–1.027 (docs/fidelity.md, "Held-out scenes", for
-    these numbers' history). Floors against regressions, not the targets (area 1 ± 0.1, halo ≤ 2×
-    Cycles'); the energy floor is an earlier run's 0.973, kept."""
+    """h_lamps at final: the nine defocused lamps' discs were 0.98–1.11× Cycles' area, 0.92–1.02× since
+    the lights' ¼-px ramp (dof.LIGHT_RAMP_PX: issue 16's 1 ± 0.1 held), and the in-focus 1-px lamp on
+    the wall had a 25-pixel halo (Cycles: 0) — two pixels from the lamp's depth sample, beyond the
+    fringe rule's 3×3 reach — until the light's tail clause (none since) (docs/fidelity.md,
+    "Held-out scenes", for these numbers' history).
+
+    Energy: each lamp's against what the input holds of it — the pinhole's Emission pass over the
+    same window, as a share of the truth's (the identity's emitter metrics): no post-process can
+    restore light its input lacks (lamp10's pinhole holds 0.939 of Cycles' light in any window).
+    The floor was 0.943 of the truth's (an earlier run's 0.973 − 0.03), which lamp10 met only by
+    adding 2.8 % to its input's (0.965: a small-CoC light's 1-px-ramp lattice sum in front of the
+    wall, docs/fidelity.md "Final's small lights"); with the lights' ¼-px ramp (dof.LIGHT_RAMP_PX)
+    every lamp keeps 0.999–1.001 of its input's, held here to 1 %."""
     entry = MANIFEST["scenes"]["h_lamps"]
     frame = read_frame(DATA / entry["pinhole"]["file"])
     m = _lamps(entry, frame, "final")
+    held = {x["name"]: x["energy_ratio"]
+            for x in fd.lamp_metrics(lambda f: f.color[..., :3], DATA, entry, frame, 0.6)}
     areas = [x["area_ratio"] for x in m if x.get("area_ratio") is not None]
-    energy = [x["energy_ratio"] for x in m if x["energy_ratio"] is not None]
+    kept = {x["name"]: x["energy_ratio"] / held[x["name"]] for x in m if x["energy_ratio"] is not None}
     halo = sum(x["halo_test"] for x in m if x["in_focus"])
-    assert len(areas) == 9 and max(areas) <= 1.11 + 0.1, areas
+    assert len(areas) == 9 and all(0.9 <= a <= 1.1 for a in areas), areas  # 0.92–1.02 (0.98–1.11 before the ¼-px ramp)
     assert halo == 0, halo
-    assert min(energy) >= 0.973 - 0.03, energy
+    assert len(kept) == 11 and all(abs(k - 1.0) <= 0.01 for k in kept.values()), kept
 
 
 @pytest.mark.slow

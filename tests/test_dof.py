@@ -79,19 +79,24 @@ def test_kernel_matches_reference_on_odd_sizes(rng, quality, extra):
     assert_matches_reference(pipe, frame, out)
 
 
-@given(st.integers(0, 2**31 - 1), st.sampled_from([0, 3, 6, 8]), st.floats(-1, 1), st.floats(0.7, 8))
-@example(0, 0, 1.0, 1.0)  # SA texture zeroes the centre tap: no background weight was 0/0 = NaN
-def test_kernel_matches_reference_random(seed, blades, sa, n):
+@given(st.integers(0, 2**31 - 1), st.sampled_from([0, 3, 6, 8]), st.floats(-1, 1), st.floats(0.7, 8),
+       st.sampled_from(["draft", "final"]))
+@example(0, 0, 1.0, 1.0, "draft")  # SA texture zeroes the centre tap: no background weight was 0/0 = NaN
+@example(0, 0, 1.0, 1.0, "final")  # ... and a light's textured lattice sums to 0 (dof.light_sums)
+@example(1500004200, 0, 0.0, 0.7, "draft")  # 2.4e-4 when the working gather had the lights' ¼-px ramp
+def test_kernel_matches_reference_random(seed, blades, sa, n, quality):
     rng = np.random.default_rng(seed)
     h, w = int(rng.integers(3, 30)), int(rng.integers(3, 30))
     color = (rng.random((h, w, 3)) * 10 ** rng.uniform(-3, 3, (h, w, 1))).astype(np.float32)
     depth = rng.uniform(0.5, 8, (h, w)).astype(np.float32)
     cam = Camera(**{**CAM, "f_number": n}, blades=blades, spherical_aberration=sa)
     frame = Frame(color, depth=depth)
-    out, pipe = run(cam, frame, "draft")
+    out, pipe = run(cam, frame, quality)
     assert np.isfinite(out).all()
     if "dof" in pipe.plan(frame):
         assert np.isfinite(pipe.reference(frame)).all()
+        # random colours up to 1000× their neighbours: final's full-resolution gather takes many of
+        # them as lights (dof.LIGHT_LUMA; 121 draws: max 1.1e-5)
         assert_matches_reference(pipe, frame, out)
     else:  # an all-in-focus draw: skipped, so the output is the input (skipped <=> identity)
         np.testing.assert_array_equal(out, color)
@@ -991,18 +996,36 @@ def test_small_coc_light_over_a_larger_coc_sky_keeps_final_s_disc_and_energy_at_
     # the full-resolution 3×3 blur whole) over a sky at 2.6 px (taking the half-resolution blur
     # whole). Its excess leaves the working image (dof.NARROW_FOCUS_PX), so the 3×3's share of it
     # that the sky pixels around it would take was lost: 0.67 of its light and a quarter of
-    # final's saturated disc at draft. Now that share is added back (dof.small_layer).
+    # final's saturated disc at draft. Now that share is added back (dof.small_layer). Final spreads
+    # such a light with the same 3×3 weights (dof.LIGHT_SMALL_PX): it kept 1.090 of its light (the
+    # 1-px ramp's lattice sum in the sky's front layer, and _full_small's lerp on its own pixels);
+    # with the lights' ¼-px disc instead, 1.029 and 12 saturated px where the 2×2 square's
+    # continuous convolution with the r = 1.2 px hexagon saturates 16, as the 3×3 does.
     cam, dark, lit = _small_light(1.2, 2.6, level=60.0)
     area, energy = {}, {}
     for q in ("final", "draft", "preview"):
         out, pipe = run(cam, lit, q)
-        if q != "final":
-            assert_matches_reference(pipe, lit, out, rtol=1e-3)
+        assert_matches_reference(pipe, lit, out, rtol=1e-3)
         energy[q] = float((out - pipe.run(dark).color)[..., 1].sum()) / (4 * 59.9)
         area[q] = int(np.count_nonzero(out[..., 1] >= 1.0))
+    assert energy["final"] == pytest.approx(1.0, abs=0.005) and area["final"] == 16, (energy, area)
     for q in ("draft", "preview"):
         assert energy[q] == pytest.approx(1.0, abs=0.03), (q, energy)
         assert area[q] == pytest.approx(area["final"], rel=0.10), (q, area)
+
+
+@pytest.mark.parametrize("sa", [0.6, -0.6])
+@pytest.mark.parametrize("r_light, r_back", [(2.68, 2.68), (2.68, 4.2), (3.5, math.inf), (-3.0, 2.0)])
+def test_final_light_keeps_its_energy_with_spherical_aberration(sa, r_light, r_back):
+    # final's lights (dof.LIGHT_RAMP_PX) have their ¼-px weights rescaled by their lattice sums;
+    # without the texture in those sums (dof.light_sums) a 2×2 light kept 0.980 / 1.019 of its light
+    # over a wall at its own CoC (σ = ±0.6) and 0.971 / 1.031 before a wall at 4.2 px; with it
+    # 1.000 (the near light before a far wall: 1.017 / 0.970, the 1-px ramp's 1.010 / 0.977)
+    cam, dark, lit = _small_light(r_light, r_back)
+    cam = cam.with_(spherical_aberration=sa)
+    out, pipe = run(cam, lit, "final")
+    energy = float((out - pipe.run(dark).color)[..., 1].sum()) / (4 * 39.9)
+    assert energy == pytest.approx(1.0, abs=0.005 if r_light > 0 else 0.035), energy
 
 
 def test_small_coc_light_behind_a_few_nearer_pixels_leaves_the_working_image():

@@ -118,8 +118,10 @@ def cases():
             for w, h in sizes:
                 add(f"dof-{label} {q} {w}x{h}", lambda cam=cam, q=q, w=w, h=h: _run(cam, ["dof"], q, w, h))
     # the narrow-source layer (draft, preview): lights on a defocused scene, the cells' borders crossed;
-    # "wide": 0.15 mm pixels, CoCs of ~13 px (sources above NARROW_SUM_PX, whole groups inside a disc)
-    for q in ("draft", "preview"):
+    # "wide": 0.15 mm pixels, CoCs of ~13 px (sources above NARROW_SUM_PX, whole groups inside a disc);
+    # final: the full-resolution gather's lights (dof.LIGHT_RAMP_PX; the small ones' 3x3,
+    # dof.LIGHT_SMALL_PX; textured light sums on "blades")
+    for q in ("draft", "preview", "final"):
         for w, h in ((37, 23), (141, 75)):
             add(f"dof-lights {q} {w}x{h}", lambda q=q, w=w, h=h: _run(
                 dof_sized(dof_cams["blades"]), ["dof"], q, w, h, lights=True, scale=0.5))

@@ -566,6 +566,77 @@ def tap_table(rmax: int, blades: int, rotation_deg: float, roundness: float):
     return dx.astype(np.int32), dy.astype(np.int32), dist, rho_far, rho_near, ntaps
 
 
+LIGHT_LUMA = 8.0
+"""A stride-1 tap whose colour's Rec. 709 luma (:data:`LIGHT_LUMA_WEIGHTS`) exceeds this (13× the
+test scenes' diffuse white) is a *light*: its disc edge takes the :data:`LIGHT_RAMP_PX` ramp. The
+input is already pixel-filtered, so the 1-px ramp on a small bright source widens its disc by a
+visible pixel (emitters lamp09 1.235× the truth's area); the threshold is not critical (2-16 swept,
+docs/fidelity.md, "Small lights and the layer's coverage ramp", `rl2`)."""
+LIGHT_LUMA_WEIGHTS = (0.2126, 0.7152, 0.0722)
+LIGHT_RAMP_PX = 0.25
+"""Width (px) of a light tap's disc-edge coverage ramp (every other tap: max(s/2, 1) px). In the
+colour sums a light's weight is rescaled by N₁(r)/N_¼(r) (:func:`light_sums`), so its disc holds
+the lattice sum of the 1-px ramp's; the normalising sums keep every tap's 1-px weight, so a light
+keeps its energy and a constant field of lights stays flat. A light in p's front layer (added
+unnormalised) takes 1/N_¼(r): exactly its energy. In final's full-resolution gather only (draft's
+and preview's lights take the narrow layer, whose ramp is the same), and only where the narrow
+layer splits lights (:func:`narrow_split`: no cat's-eye bokeh, no traced profile): N₁/N_¼ are the
+sums of the unclipped parametric disc (its texture included), a cat's-eye disc's (cut by a second,
+1-px edge) and a traced profile's (a per-channel radial texture) differ — with the rescale a
+corner point light kept 0.985 of its energy (η = 1). The kernel runs this only in level-0 tiles
+with a light within one tile (dof_tile_max, dof_tile_dilate): as a test in every tap it cost
+final 25–45 % (docs/fidelity.md, "Final's lights: the ¼-px ramp")."""
+LIGHT_RMAX_PX = 8.0
+"""Lights with bokeh radius r at or above this keep the 1-px ramp (in front: divided by N₁(r))."""
+LIGHT_SMALL_PX = (1.0, math.sqrt(2.0))
+r"""A light whose bokeh radius r lies in [lo, hi) spreads with the 3×3's separable weight
+:math:`w(o_x)\,w(o_y)`, w(0) = 1 − 2a, w(±1) = a, a = :func:`local_weight` of r, instead of a disc
+(in the colour sums, × N₁(r) behind p's front layer; exactly its energy in front: the weights sum
+to 1): the rule of the half-resolution path's small layer over the same range
+(:data:`NARROW_SPREAD_PX` … :data:`NARROW_FOCUS_PX`, :func:`small_layer`), so every quality spreads
+such a light alike. The disc's ¼-px ramp is wrong there: a disc under √2 px is smaller than the
+pixel it spreads, whose light also reaches the diagonal neighbours — a 2×2-px square emitter at
+60× blurred by the hexagon of r = 1.2 px saturates 16 pixels (continuous convolution, box or
+Blackman–Harris pixel filter), the 3×3 16, the ¼-px disc 12 (diagonals out of reach). Below lo
+the ¼-px disc reaches no neighbour at all, as the small layer adds none below
+:data:`NARROW_SPREAD_PX` (an in-focus light keeps its light on its own pixels)."""
+LIGHT_TABLE_R = (0.5, 17.0, 1651)
+"""r grid (first, last, count; step 0.01 px) of :func:`light_sums`; beyond it the ends hold."""
+
+
+def light_sums(blades: int, rotation_deg: float, roundness: float, sa: float = 0.0) -> np.ndarray:
+    """(4, n) lattice sums of a light's disc, r on :data:`LIGHT_TABLE_R` (linear in between): rows
+    N₁(r), N_¼(r) of a far light, then of a near one, N(r) = Σ_o clip((r ρ(o) − |o|)/ramp + ½, 0, 1)
+    (1 + a(2t² − 1)) / (a_K r²) over every integer offset o, for the 1-px and :data:`LIGHT_RAMP_PX`
+    ramps, with the gather's texture (a = −σ far, +σ near, t = min(|o|/(r ρ), 1); ρ of the far or
+    near layer's direction, as :func:`tap_table`). N is not 1 at small r (6 blades, σ = 0: 1.05 at
+    r = 1, 1.10 at 1.2, 1.07 at 2.11) and differs between the ramps; without the texture in it the
+    rescale N₁/N_¼ cost a light 2–10 % of its energy at σ = ±0.6."""
+    r0, r1, n = LIGHT_TABLE_R
+    rs = np.linspace(r0, r1, n)
+    _, _, dists, rf, rn, _ = tap_table(int(math.ceil(r1)) + 1, blades, rotation_deg, roundness)
+    area = aperture_area(blades, rotation_deg, roundness)
+    rows = []
+    for rho, a in ((rf, -sa), (rn, sa)):
+        rr = rs[:, None] * rho[None, :]
+        t = np.minimum(dists[None, :] / rr, 1.0)
+        tex = 1.0 + a * (2.0 * t * t - 1.0)
+        rows += [(np.clip((rr - dists[None, :]) / ramp + 0.5, 0.0, 1.0) * tex).sum(axis=1) / (area * rs * rs)
+                 for ramp in (1.0, LIGHT_RAMP_PX)]
+    return np.stack(rows)
+
+
+def light_sum_at(table: np.ndarray, r: np.ndarray, far: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N₁(r), N_¼(r)) of :func:`light_sums`' ``table`` for a far (``far``) or near light, linear in
+    r, ends clamped."""
+    r0, r1, n = LIGHT_TABLE_R
+    f = np.clip((r - r0) * ((n - 1) / (r1 - r0)), 0.0, n - 1)
+    i0 = np.minimum(np.floor(f).astype(int), n - 2)
+    a = f - i0
+    return tuple(np.where(far, t[i0] + (t[i0 + 1] - t[i0]) * a, u[i0] + (u[i0 + 1] - u[i0]) * a)
+                 for t, u in ((table[0], table[2]), (table[1], table[3])))
+
+
 # ---------------------------------------------------------------------------------------------
 # The float64 reference of the whole stage
 # ---------------------------------------------------------------------------------------------
@@ -696,14 +767,19 @@ def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0,
 
 def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int, blades: int,
                      rotation_deg: float, roundness: float, sa: float,
-                     vignetting: float, profile=None) -> tuple[np.ndarray, np.ndarray]:
+                     vignetting: float, profile=None, lights: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """The lattice gather in float64 (see the module docstring), tile plan included. ``profile``:
     ``(PencilMap, scale)`` of a traced lens (the traced texture, per channel; ``sa`` unused) or
-    None. Returns (colour, front coverage α of green)."""
+    None. ``lights``: the full-resolution gather's lights (:data:`LIGHT_RAMP_PX`; not at half
+    resolution, whose working pixels are 2×2 box means — a second pixel footprint, so the ¼-px
+    ramp's premise does not hold there — and whose lights the narrow layer spreads). Returns
+    (colour, front coverage α of green)."""
     h, w = coc.shape
     reach = pencil.T_MAX if profile is not None else 1.0
     dxs, dys, dists, rf, rn, _ = tap_table(budget, blades, rotation_deg, roundness)
     area = aperture_area(blades, rotation_deg, roundness)
+    lsum = light_sums(blades, rotation_deg, roundness, sa)
+    lights = lights and profile is None and vignetting <= 0  # narrow_split's rule (LIGHT_RAMP_PX)
     nlev = levels_for(reach_rmax(rmax, reach), budget)
     pad = gather_pad(reach_rmax(rmax, reach), budget)
     pc = np.pad(color, ((pad, pad), (pad, pad), (0, 0)), mode="edge")
@@ -740,13 +816,30 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
         rho = np.where(far, rf[k], rn[k])
         rr = r * rho
         cov = np.clip((rr * reach - dist) / np.maximum(s / 2, 1.0) + 0.5, 0.0, 1.0)
+        # a light (LIGHT_LUMA): the LIGHT_RAMP_PX ramp in the colour sums, rescaled by its lattice
+        # sums; `cov` (1-px ramp) stays the normalising weight
+        bright = (s == 1) & lights & (cq @ np.array(LIGHT_LUMA_WEIGHTS) > LIGHT_LUMA)
+        n1, n4 = light_sum_at(lsum, r, far)
+        # (a texture of |σ| = 1 can zero a small disc's sums: such a light keeps the 1-px ramp)
+        light = bright & (r < LIGHT_RMAX_PX) & (n4 > 0)
+        n1s, n4s = np.where(n1 > 0, n1, 1.0), np.where(n4 > 0, n4, 1.0)
+        ramp_l = np.clip((rr * reach - dist) / LIGHT_RAMP_PX + 0.5, 0.0, 1.0)
+        cov_c = np.where(light, ramp_l * np.where(front, 1.0, n1) / n4s,
+                         np.where(front & bright, cov / n1s, cov))
+        # a small light (LIGHT_SMALL_PX): the 3×3's separable weight, texture-free, as the whole
+        # colour weight (lights: no profile, no vignetting, s = 1)
+        small = light & (r >= LIGHT_SMALL_PX[0]) & (r < LIGHT_SMALL_PX[1])
+        aw = local_weight(r)
+        near3 = (np.abs(dx) <= 1) & (np.abs(dy) <= 1)
+        sep = np.where(near3, np.where(dx != 0, aw, 1.0 - 2.0 * aw) * np.where(dy != 0, aw, 1.0 - 2.0 * aw), 0.0)
+        w_small = sep * np.where(front, 1.0, n1)
         if profile is None:
             t = np.minimum(dist / rr, 1.0)
             a = np.where(far, -sa, sa)
-            wgt = cov * (1.0 + a * (2 * t * t - 1.0)) * s * s / (area * r * r)
+            g = (1.0 + a * (2 * t * t - 1.0)) * s * s / (area * r * r)
             prof = np.ones(3)
         else:
-            wgt = cov * s * s / (area * r * r)
+            g = s * s / (area * r * r)
             prof = profile_weight(profile, rq, dist / rr)
         if vignetting > 0:
             # the pupil at the midpoint of p and q, and the mean of their 1/φ: w(p, q) = w(q, p),
@@ -759,12 +852,12 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
             e = np.maximum(np.hypot(ax - bx, ay - by), np.hypot(ax + bx, ay + by))
             inv_phi = 0.5 * (1.0 / pupil.area_fraction(np.hypot(*field_position(xs, ys, w, h)))
                              + 1.0 / pupil.area_fraction(np.hypot(hqx, hqy)))
-            wgt = wgt * np.clip((1.0 - e) * r + 0.5, 0.0, 1.0) * inv_phi
-        wgt = np.where(live, wgt, 0.0)[..., None] * prof
+            g = g * np.clip((1.0 - e) * r + 0.5, 0.0, 1.0) * inv_phi
+        g = np.where(live, g, 0.0)[..., None] * prof
+        wgt = np.where(small[..., None], np.where(live, w_small, 0.0)[..., None], g * cov_c[..., None])
         wf = np.where(front[..., None], wgt, 0.0)
-        wb = wgt - wf
         F += wf * cq; Wf += wf
-        B += wb * cq; Wb += wb
+        B += (wgt - wf) * cq; Wb += np.where(front[..., None], 0.0, g * cov[..., None])
     alpha = np.minimum(1.0, Wf)
     fr = np.where(Wf > 0, F / np.where(Wf > 0, Wf, 1.0), 0.0)
     # no background weight at all (a strong spherical-aberration texture zeroes the centre tap
@@ -958,7 +1051,7 @@ def _half_composite(camera, color, coc, scale, rmax, budget, pm=None, narrow=Fal
     cw, rw = _working(gathered, hr, scale)
     out, alpha = gather_reference(cw, rw, rmax, budget, camera.blades, camera.blade_rotation_deg,
                                   camera.aperture_roundness, camera.spherical_aberration,
-                                  camera.optical_vignetting, None if pm is None else (pm, scale))
+                                  camera.optical_vignetting, None if pm is None else (pm, scale), lights=False)
     _, rw_orig = _working(color, coc, scale)
     up, up_alpha = _upsample(out, alpha, rw_orig, coc, scale)
     b = np.maximum(half_blend(coc), up_alpha)
@@ -1093,6 +1186,13 @@ class Dof(GatherStage):
                 "DOF_LOCAL_VAR": f"{LOCAL_VAR_PX2!r}f", "DOF_LOCAL_MIN": f"{LOCAL_MIN_PX!r}f",
                 "DOF_SMALL_LO": f"{SMALL_LO_PX!r}f", "DOF_SMALL_K": f"{1.0 / (SMALL_HI_PX - SMALL_LO_PX)!r}f",
                 "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
+                "DOF_LIGHTS": int(not traced and camera.optical_vignetting == 0),
+                "DOF_LIGHT_SMALL_LO": f"{LIGHT_SMALL_PX[0]!r}f", "DOF_LIGHT_SMALL_HI": f"{LIGHT_SMALL_PX[1]!r}f",
+                "DOF_LIGHT_LUMA": f"{LIGHT_LUMA!r}f", "DOF_LIGHT_RMAX": f"{LIGHT_RMAX_PX!r}f",
+                "DOF_LIGHT_INV_RAMP": f"{1.0 / LIGHT_RAMP_PX!r}f", "DOF_LIGHT_N": LIGHT_TABLE_R[2],
+                "DOF_LIGHT_R0": f"{LIGHT_TABLE_R[0]!r}f",
+                "DOF_LIGHT_K": f"{(LIGHT_TABLE_R[2] - 1) / (LIGHT_TABLE_R[1] - LIGHT_TABLE_R[0])!r}f",
+                **{f"DOF_LIGHT_Y{i}": f"{v!r}f" for i, v in enumerate(LIGHT_LUMA_WEIGHTS)},
                 "DOF_UP_SAME": f"{UPSAMPLE_SAME_PX!r}f",
                 "DOF_NARROW": int(scale > 1 and not traced and camera.optical_vignetting == 0),
                 "DOF_NARROW_RATIO": f"{NARROW_RATIO!r}f", "DOF_NARROW_CONTRAST": f"{NARROW_CONTRAST!r}f",

@@ -100,8 +100,9 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
     pad = 2 ** nlev * (budget + 1) + 1  # gather_pad for the levels built
     tw, th = -(-ww // T), -(-hw // T)
     pw, ph = tw * T + 2 * pad, th * T + 2 * pad  # DOF_PW in dof_common.cl: whole tiles + border
+    # the lights' ¼-px ramp is the full-resolution gather's only (dof.gather_reference's `lights`)
     defines = {**defines, "DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_BUDGET": budget,
-               "DOF_LEVELS": plan_levels}
+               "DOF_LEVELS": plan_levels, "DOF_LIGHTS": defines["DOF_LIGHTS"] if scale == 1 else 0}
     shape = (budget, camera.blades, camera.blade_rotation_deg, camera.aperture_roundness)
     dx, dy, dist, rf, rn, ntaps = D.tap_table(*shape)
 
@@ -129,9 +130,13 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
                  const("rf", rf.astype(np.float32)), const("rn", rn.astype(np.float32)),
                  const("inv_rf", (1.0 / rf).astype(np.float32)), const("inv_rn", (1.0 / rn).astype(np.float32))],
         "ntaps": const("ntaps", ntaps),
+        # a light tap's lattice sums N₁(r), N_¼(r), far and near (dof.light_sums), one row each
+        "lsum": rt.constant(D.light_sums(*shape[1:], camera.spherical_aberration).astype(np.float32),
+                            ("dof_light_sums", shape[1:], camera.spherical_aberration)),
         "lv": scratch("lv", (nlev + 1, 5, ph, pw)),
         "pv": scratch("pv", (ph, pw) if camera.optical_vignetting > 0 else (1,)),
         "tmax": scratch("tmax", (th, tw, 2)), "tn": scratch("tn", (th, tw), np.int32),
+        "tlight": scratch("tlight", (th, tw), np.int32),
         "alpha": scratch("alpha", (hw, ww)),
         "blur": scratch("blur", (3, hw, ww)) if scale > 1 else None,
         "aperture": (const("normals", _edge_normals(camera.blades, camera.blade_rotation_deg)),
@@ -165,10 +170,10 @@ def _enqueue_plan(rt, c, src, coc, w, h):
     for lvl in range(c["nlev"]):
         k["dof_levels"].set_args(c["lv"], i32(c["pw"]), i32(c["ph"]), i32(2 ** lvl), i32(lvl))
         evs.append(_launch_rows(rt, k["dof_levels"], (c["pw"], c["ph"])))
-    k["dof_tile_max"].set_args(c["lv"], c["tmax"], i32(c["ww"]), i32(c["hw"]), i32(c["pad"]), i32(c["tw"]),
+    k["dof_tile_max"].set_args(c["lv"], c["tmax"], c["tlight"], i32(c["ww"]), i32(c["hw"]), i32(c["pad"]), i32(c["tw"]),
                                i32(c["th"]))
     evs.append(_launch(rt, k["dof_tile_max"], (c["tw"], c["th"]), 4))
-    k["dof_tile_dilate"].set_args(c["tmax"], c["tn"], c["ntaps"], i32(c["tw"]), i32(c["th"]))
+    k["dof_tile_dilate"].set_args(c["tmax"], c["tlight"], c["tn"], c["ntaps"], i32(c["tw"]), i32(c["th"]))
     evs.append(_launch(rt, k["dof_tile_dilate"], (c["tw"], c["th"]), 4))
     return evs
 
@@ -177,7 +182,7 @@ def _enqueue_gather(rt, c, target, tn, camera, inv_area, vec, prof):
     T, i32, f32 = D.TILE, np.int32, np.float32
     c["k"]["dof"].set_args(c["lv"], c["pv"], tn, *c["taps"], target, c["alpha"], i32(c["ww"]), i32(c["hw"]),
                            i32(c["pad"]), i32(c["tw"]), inv_area, f32(camera.spherical_aberration), *c["field"],
-                           prof)
+                           prof, c["lsum"])
     # one work-group per tile, DOF_VEC pixels of a row per work-item (dof.cl)
     return rt.launch(c["k"]["dof"], (c["tw"] * T // vec, c["th"] * T), (T // vec, T))
 
