@@ -446,11 +446,28 @@ class Plan:
         [(label, event)], the host buffers of resampling stages (fresh arrays, downloaded
         without blocking: on the queue, or by ``download(host, buffer) -> event``) and the output
         size."""
-        import pyopencl as cl
-
         same_camera = cam is self._camera_seen or cam == self._camera_seen
         self._camera_seen = cam
         self._events, self._timings = [], {}
+        try:
+            return self._enqueue_nodes(frame, cam, same_camera, download)
+        except BaseException:
+            self._forget()
+            raise
+
+    def _forget(self) -> None:
+        """After an error part-way through a frame's launches: drop what the next frame would
+        otherwise trust — the recordings (a re-recording that stopped may have set some of its
+        kernel objects' arguments, which it shares with the previous recording, to values that
+        recording does not list) and the pointwise launches' arguments — so the next frame runs
+        every stage's code and sets every argument again."""
+        self._camera_seen = None
+        for node in self.nodes:
+            node.recording, node.args, node.key = None, None, None
+
+    def _enqueue_nodes(self, frame: Frame, cam, same_camera: bool, download) -> tuple[list, dict, tuple[int, int]]:
+        import pyopencl as cl
+
         patched = self.last_patched = []
         rt, q, bufs = self.runtime, self.runtime.queue, self.buffers
         events: list = []

@@ -262,3 +262,35 @@ def test_label_planes_resampled_in_flight_belong_to_their_frame(rng):
         assert g.labels.keys() == w.labels.keys()
         for k in w.labels:
             np.testing.assert_array_equal(g.labels[k], w.labels[k])
+
+
+@pytest.mark.parametrize("submit", [False, True])
+def test_an_error_mid_enqueue_leaves_no_stale_kernel_argument(rng, monkeypatch, submit):
+    """A stage that raises part-way through a re-recording (its first launches already given the
+    new focus on the kernel objects it shares with the previous recording) must not leave those
+    arguments behind: the next frame, at the old focus, is what a fresh plan gives — image and
+    errors alike."""
+    from clpost import runtime_record
+
+    pipe, frame, cam, stages = _worst_case(rng)
+    plan = pipe.plan_for(frame)
+    near = cam.with_(focus_distance_m=0.7)
+    fresh = Pipeline(cam, quality="final", stages=stages).plan_for(frame)
+    want = fresh.run(frame, cam).color
+    plan.pipelined = submit
+    go = (lambda c: plan.submit(frame, c).result()) if submit else (lambda c: plan.run(frame, c))
+    np.testing.assert_array_equal(go(cam).color, want)
+    launch, calls = runtime_record.Recorder.launch, []
+
+    def failing(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise RuntimeError("injected")
+        return launch(self, *args, **kwargs)
+
+    monkeypatch.setattr(runtime_record.Recorder, "launch", failing)
+    with pytest.raises(RuntimeError, match="injected"):
+        go(near)
+    monkeypatch.setattr(runtime_record.Recorder, "launch", launch)
+    np.testing.assert_array_equal(go(cam).color, want)
+    np.testing.assert_array_equal(go(near).color, fresh.run(frame, near).color)
