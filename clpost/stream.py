@@ -47,6 +47,7 @@ class PendingFrame:
         """The future of the frame's downloads (:meth:`Stream.download`); None: complete."""
         self._plan = plan
         self._waited = downloads is None
+        self._error: BaseException | None = None
 
     def done(self) -> bool:
         """Whether the frame's downloads have completed (its image is in ``out``)."""
@@ -54,16 +55,26 @@ class PendingFrame:
 
     def wait(self) -> None:
         """Block until every command of the frame has completed, then let its transfers' events
-        drop their host arrays (``NannyEvent.wait``)."""
+        drop their host arrays (``NannyEvent.wait``). A download that failed raises here, each
+        time (the frame's commands complete first, so its slot is free either way)."""
         if self._waited:
+            if self._error is not None:
+                raise self._error
             return
         import pyopencl as cl
 
-        self._events += self._downloads.result()
-        for _, ev in self._events:
-            if isinstance(ev, cl.NannyEvent):
-                ev.wait()
-        self._waited = True
+        try:
+            self._events += self._downloads.result()
+        except BaseException as e:
+            self._error = e
+            raise
+        finally:
+            if self._events:
+                cl.wait_for_events([ev for _, ev in self._events])
+            for _, ev in self._events:
+                if isinstance(ev, cl.NannyEvent):
+                    ev.wait()
+            self._waited = True
 
     def result(self) -> Frame:
         """The processed frame, after :meth:`wait`; its device times become the plan's
@@ -127,9 +138,7 @@ class Stream:
     def reserve(self) -> Slot:
         """The next slot, once the frame that used it last is complete."""
         slot = self.slots[self.next % len(self.slots)]
-        if slot.pending is not None:
-            slot.pending.wait()
-            slot.pending = None
+        _complete(slot)
         return slot
 
     def download(self, queue, copies: list):
@@ -147,6 +156,15 @@ class Stream:
     def drain(self) -> None:
         """Wait for every frame in flight."""
         for slot in self.slots:
-            if slot.pending is not None:
-                slot.pending.wait()
-                slot.pending = None
+            _complete(slot)
+
+
+def _complete(slot: Slot) -> None:
+    """Wait for the last frame that used ``slot``; a download of its that failed is that frame's
+    error (its ``result()`` raises it), not the caller's, and leaves the slot free."""
+    pending, slot.pending = slot.pending, None
+    if pending is not None:
+        try:
+            pending.wait()
+        except Exception:
+            pass

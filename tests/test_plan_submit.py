@@ -294,3 +294,30 @@ def test_an_error_mid_enqueue_leaves_no_stale_kernel_argument(rng, monkeypatch, 
     monkeypatch.setattr(runtime_record.Recorder, "launch", launch)
     np.testing.assert_array_equal(go(cam).color, want)
     np.testing.assert_array_equal(go(near).color, fresh.run(frame, near).color)
+
+
+def test_a_failed_download_is_its_frames_error_and_frees_its_slot(rng, monkeypatch):
+    """A frame whose download fails raises from its own ``result()`` (every time); the frames
+    submitted after it, which reuse its slot, run as usual instead of raising its error."""
+    import clpost.stream as stream
+
+    frame = scene(rng, w=64, h=24)
+    plan = Pipeline(Camera(f_number=2.0, depth_of_field=True, blades=6, focus_distance_m=0.8),
+                    quality="draft").plan_for(frame)
+    want = plan.run(frame).color
+    plan.pipelined, plan.in_flight = True, 2
+    download = stream._download
+
+    def failing(queue, copies):
+        raise RuntimeError("download failed")
+
+    monkeypatch.setattr(stream, "_download", failing)
+    bad = plan.submit(frame)
+    monkeypatch.setattr(stream, "_download", download)
+    later = [plan.submit(frame) for _ in range(4)]
+    for _ in range(2):
+        with pytest.raises(RuntimeError, match="download failed"):
+            bad.result()
+    for p in later:
+        np.testing.assert_array_equal(p.result().color, want)
+    plan.drain()
