@@ -478,7 +478,7 @@ def test_prefilter_keeps_a_flat_field_flat_and_is_deterministic():
 @pytest.mark.parametrize("size", [(150, 37), (37, 23)])
 def test_lane_shifts_are_the_same_bits_with_shufflevector_and_shuffle2(rng, size):
     """DISTORTION_SHIFT, the row FIR's and the hand-over weight's lane shifts: clang's
-    __builtin_shufflevector (the default where the compiler has it: PoCL 5 runs shuffle2 ≈ 15×
+    __builtin_shufflevector (the default where the compiler has it: PoCL 5 runs shuffle2 many times
     slower, docs/benchmarks.md) and the OpenCL shuffle2 fallback (-DDISTORTION_SHUFFLE2) give the
     same bits from distortion_fir_rows and distortion_dering, on a row wide enough for the vector
     path (150) and one where every work-item takes the clamped copy (37)."""
