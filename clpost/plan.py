@@ -374,13 +374,14 @@ class Plan:
         from .stream import PendingFrame, Stream
 
         self.check(frame, cam)
-        out = self._out_array(out)
-        meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
         rt, q, bufs = self.runtime, self.runtime.queue, self.buffers
         if bufs.stream is None:
             bufs.stream = Stream(self.in_flight)
         bufs.stream.resize(self.in_flight)
-        slot = bufs.stream.reserve()  # waits for the frame that used it last
+        stream = bufs.stream
+        out = self._out_array(out, stream.slots[stream.next % len(stream.slots)])
+        meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
+        slot = stream.reserve()  # waits for the frame that used it last
         uq, dq = rt.transfer_queues()
         names = ["color", *self._aux_names]
         copies: list = []  # (host array, slot buffer, event of the copy into it): the downloads
@@ -419,8 +420,10 @@ class Plan:
         bufs.stream.commit(slot, pending)
         return pending
 
-    def _out_array(self, out: np.ndarray | None) -> np.ndarray:
-        """``out`` checked against the plan's output (one line naming the shape it must have), or a
+    def _out_array(self, out: np.ndarray | None, free=None) -> np.ndarray:
+        """``out`` checked against the plan's output (one line naming the shape it must have) and
+        against the frames in flight (it must not be the image array of one whose ``result()`` was
+        not taken, except the frame of slot ``free``, which :meth:`submit` waits for first), or a
         new array; before anything is enqueued, so a wrong one leaves nothing half-done."""
         w, h = self.output_size
         if out is None:
@@ -428,6 +431,12 @@ class Plan:
         if out.shape != (h, w, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
             raise InputError(f"Plan.run: out= must be a C-contiguous float32 array of shape {(h, w, 3)} "
                              f"(the plan's output), not {out.dtype} {out.shape}")
+        stream = self.buffers.stream if self.buffers is not None else None
+        if stream is not None and any(s is not free and s.pending is not None and s.pending.holds(out)
+                                      for s in stream.slots):
+            raise InputError("Plan.run: out= is the image array of a submitted frame still in flight (its "
+                             "download would overwrite this frame's); take that frame's result() first, "
+                             "or give another array")
         return out
 
     def _aux_buffer(self, name: str, frame: Frame):

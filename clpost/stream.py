@@ -49,6 +49,11 @@ class PendingFrame:
         self._waited = downloads is None
         self._error: BaseException | None = None
 
+    def holds(self, array: np.ndarray) -> bool:
+        """Whether ``array`` shares memory with the frame's image (its ``out``) and ``result()``
+        has not been taken: the download may still write it."""
+        return not self._waited and np.may_share_memory(self._frame.color, array)
+
     def done(self) -> bool:
         """Whether the frame's downloads have completed (its image is in ``out``)."""
         return self._waited or self._downloads.done()

@@ -321,3 +321,34 @@ def test_a_failed_download_is_its_frames_error_and_frees_its_slot(rng, monkeypat
     for p in later:
         np.testing.assert_array_equal(p.result().color, want)
     plan.drain()
+
+
+def test_an_out_array_still_in_flight_is_refused(rng):
+    """``out`` belongs to its frame until ``result()``: giving it to another frame while that
+    frame's download may still write it (submit or run) is one InputError line, and the first
+    frame's image is its own. The frame whose slot a submit waits for first does not hold its
+    ``out`` any more, so two arrays round robin over two frames in flight are fine."""
+    frame = scene(rng, w=64, h=24)
+    cam = Camera(f_number=2.0, depth_of_field=True, blades=6, focus_distance_m=0.8)
+    plan = Pipeline(cam, quality="draft").plan_for(frame)
+    frames = _frames(frame, 4)
+    want = [plan.run(f).color for f in frames]
+    plan.pipelined, plan.in_flight = True, 2
+    rt = plan.runtime
+    out = np.empty_like(want[0])
+    hold = cl.UserEvent(rt.context)
+    try:
+        cl.enqueue_barrier(rt.queue, wait_for=[hold])
+        first = plan.submit(frames[0], out=out)
+        for call in (plan.submit, plan.run):
+            with pytest.raises(InputError, match="still in flight") as err:
+                call(frames[1], out=out[:, :])
+            assert "\n" not in str(err.value)
+    finally:
+        hold.set_status(cl.command_execution_status.COMPLETE)
+    np.testing.assert_array_equal(first.result().color, want[0])
+    np.testing.assert_array_equal(plan.submit(frames[1], out=out).result().color, want[1])
+    outs = [np.empty_like(want[0]) for _ in range(2)]
+    pending = [plan.submit(f, out=outs[k % 2]) for k, f in enumerate(frames)]
+    for p, w in zip(pending[2:], want[2:]):
+        np.testing.assert_array_equal(p.result().color, w)
