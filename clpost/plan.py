@@ -374,6 +374,9 @@ class Plan:
         from .stream import PendingFrame, Stream
 
         self.check(frame, cam)
+        if isinstance(self.in_flight, bool) or not isinstance(self.in_flight, (int, np.integer)) or self.in_flight < 1:
+            raise InputError(f"Plan.in_flight must be a whole number of frames >= 1, not {self.in_flight!r}; "
+                             "set it to 1 for one frame at a time")
         rt, q, bufs = self.runtime, self.runtime.queue, self.buffers
         if bufs.stream is None:
             bufs.stream = Stream(self.in_flight)

@@ -140,6 +140,12 @@ def test_a_refused_frame_leaves_nothing_in_flight(rng):
         with pytest.raises(InputError, match=match) as err:
             plan.submit(**kwargs)
         assert "\n" not in str(err.value)
+    for bad in (0, -1, 1.5, True):
+        plan.in_flight = bad
+        with pytest.raises(InputError, match="in_flight must be .* >= 1, not") as err:
+            plan.submit(frame)
+        assert "\n" not in str(err.value)
+    plan.in_flight = 2
     assert stream.next == before and np.all(bad_out == 7.0)
     np.testing.assert_array_equal(plan.submit(frame).result().color, want)
 
