@@ -70,16 +70,18 @@ class PendingFrame:
 
         try:
             self._events += self._downloads.result()
-        except BaseException as e:
+        except Exception as e:  # the download failed (an interrupt of this wait is not: it still runs)
             self._error = e
-            raise
-        finally:
+        try:
             if self._events:
                 cl.wait_for_events([ev for _, ev in self._events])
             for _, ev in self._events:
                 if isinstance(ev, cl.NannyEvent):
                     ev.wait()
+        finally:
             self._waited = True
+        if self._error is not None:
+            raise self._error
 
     def result(self) -> Frame:
         """The processed frame, after :meth:`wait`; its device times become the plan's
@@ -167,9 +169,10 @@ class Stream:
 def _complete(slot: Slot) -> None:
     """Wait for the last frame that used ``slot``; a download of its that failed is that frame's
     error (its ``result()`` raises it), not the caller's, and leaves the slot free."""
-    pending, slot.pending = slot.pending, None
+    pending = slot.pending
     if pending is not None:
         try:
             pending.wait()
         except Exception:
             pass
+        slot.pending = None  # not on an interrupt of the wait: the frame may still be in flight

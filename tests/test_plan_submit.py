@@ -358,3 +358,26 @@ def test_an_out_array_still_in_flight_is_refused(rng):
     pending = [plan.submit(f, out=outs[k % 2]) for k, f in enumerate(frames)]
     for p, w in zip(pending[2:], want[2:]):
         np.testing.assert_array_equal(p.result().color, w)
+
+
+def test_an_interrupted_wait_keeps_the_frame_in_flight(rng, monkeypatch):
+    """A KeyboardInterrupt while ``result()`` waits for the download thread is not the frame's
+    error: the frame stays in flight (its slot is not handed to the next frame), and the next
+    ``result()`` gives its image."""
+    import concurrent.futures
+
+    frame = scene(rng, w=64, h=24)
+    plan = Pipeline(Camera(f_number=2.0, depth_of_field=True, blades=6, focus_distance_m=0.8),
+                    quality="draft").plan_for(frame)
+    want = plan.run(frame).color
+    plan.pipelined, plan.in_flight = True, 1
+    pending = plan.submit(frame)
+    result = concurrent.futures.Future.result
+    monkeypatch.setattr(concurrent.futures.Future, "result",
+                        lambda self, timeout=None: (_ for _ in ()).throw(KeyboardInterrupt()))
+    with pytest.raises(KeyboardInterrupt):
+        pending.result()
+    assert plan.buffers.stream.slots[0].pending is pending and not pending._waited
+    monkeypatch.setattr(concurrent.futures.Future, "result", result)
+    np.testing.assert_array_equal(pending.result().color, want)
+    np.testing.assert_array_equal(plan.submit(frame).result().color, want)
