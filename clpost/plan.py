@@ -349,7 +349,7 @@ class Plan:
         kernels, download and host work per frame instead of their sum. Arguments as
         :meth:`run`'s; the frame's arrays and ``out`` belong to the frame until ``result()``
         (page-locked ones, :meth:`~clpost.runtime.Runtime.pinned_empty`, are what a GPU copies
-        asynchronously). Where :attr:`pipelined` is False (a CPU device) the frame runs at once
+        asynchronously; a Frame keeps them only when made with ``copy=False``). Where :attr:`pipelined` is False (a CPU device) the frame runs at once
         and the returned frame is complete. A frame or ``out`` this plan refuses raises
         :class:`~clpost.errors.InputError` before anything is enqueued."""
         t0 = time.thread_time()

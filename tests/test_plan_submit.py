@@ -103,7 +103,8 @@ def test_submit_downloads_into_pinned_out_arrays_and_mixes_with_run(rng):
     for f in frames:
         c, d = rt.pinned_empty(f.color.shape), rt.pinned_empty(f.depth.shape)
         c[...], d[...] = f.color, f.depth
-        pinned.append(f.replace(color=c, depth=d))
+        pinned.append(f.replace(color=c, depth=d, copy=False))  # a Frame copies its arrays unless told
+        assert pinned[-1].color is c and pinned[-1].depth is d
     outs = [rt.pinned_empty(w.shape) for w in want]
     plan.pipelined = True
     first = plan.submit(pinned[0], out=outs[0])
