@@ -349,7 +349,7 @@ class Plan:
         kernels, download and host work per frame instead of their sum. Arguments as
         :meth:`run`'s; the frame's arrays and ``out`` belong to the frame until ``result()``
         (page-locked ones, :meth:`~clpost.runtime.Runtime.pinned_empty`, are what a GPU copies
-        asynchronously). Where :attr:`pipelined` is False (a CPU device) the frame runs at once
+        asynchronously; a Frame keeps them only when made with ``copy=False``). Where :attr:`pipelined` is False (a CPU device) the frame runs at once
         and the returned frame is complete. A frame or ``out`` this plan refuses raises
         :class:`~clpost.errors.InputError` before anything is enqueued."""
         t0 = time.thread_time()
@@ -374,13 +374,17 @@ class Plan:
         from .stream import PendingFrame, Stream
 
         self.check(frame, cam)
-        out = self._out_array(out)
-        meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
+        if isinstance(self.in_flight, bool) or not isinstance(self.in_flight, (int, np.integer)) or self.in_flight < 1:
+            raise InputError(f"Plan.in_flight must be a whole number of frames >= 1, not {self.in_flight!r}; "
+                             "set it to 1 for one frame at a time")
         rt, q, bufs = self.runtime, self.runtime.queue, self.buffers
         if bufs.stream is None:
             bufs.stream = Stream(self.in_flight)
         bufs.stream.resize(self.in_flight)
-        slot = bufs.stream.reserve()  # waits for the frame that used it last
+        stream = bufs.stream
+        out = self._out_array(out, stream.slots[stream.next % len(stream.slots)])
+        meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
+        slot = stream.reserve()  # waits for the frame that used it last
         uq, dq = rt.transfer_queues()
         names = ["color", *self._aux_names]
         copies: list = []  # (host array, slot buffer, event of the copy into it): the downloads
@@ -419,8 +423,10 @@ class Plan:
         bufs.stream.commit(slot, pending)
         return pending
 
-    def _out_array(self, out: np.ndarray | None) -> np.ndarray:
-        """``out`` checked against the plan's output (one line naming the shape it must have), or a
+    def _out_array(self, out: np.ndarray | None, free=None) -> np.ndarray:
+        """``out`` checked against the plan's output (one line naming the shape it must have) and
+        against the frames in flight (it must not be the image array of one whose ``result()`` was
+        not taken, except the frame of slot ``free``, which :meth:`submit` waits for first), or a
         new array; before anything is enqueued, so a wrong one leaves nothing half-done."""
         w, h = self.output_size
         if out is None:
@@ -428,6 +434,12 @@ class Plan:
         if out.shape != (h, w, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
             raise InputError(f"Plan.run: out= must be a C-contiguous float32 array of shape {(h, w, 3)} "
                              f"(the plan's output), not {out.dtype} {out.shape}")
+        stream = self.buffers.stream if self.buffers is not None else None
+        if stream is not None and any(s is not free and s.pending is not None and s.pending.holds(out)
+                                      for s in stream.slots):
+            raise InputError("Plan.run: out= is the image array of a submitted frame still in flight (its "
+                             "download would overwrite this frame's); take that frame's result() first, "
+                             "or give another array")
         return out
 
     def _aux_buffer(self, name: str, frame: Frame):
@@ -446,11 +458,28 @@ class Plan:
         [(label, event)], the host buffers of resampling stages (fresh arrays, downloaded
         without blocking: on the queue, or by ``download(host, buffer) -> event``) and the output
         size."""
-        import pyopencl as cl
-
         same_camera = cam is self._camera_seen or cam == self._camera_seen
         self._camera_seen = cam
         self._events, self._timings = [], {}
+        try:
+            return self._enqueue_nodes(frame, cam, same_camera, download)
+        except BaseException:
+            self._forget()
+            raise
+
+    def _forget(self) -> None:
+        """After an error part-way through a frame's launches: drop what the next frame would
+        otherwise trust — the recordings (a re-recording that stopped may have set some of its
+        kernel objects' arguments, which it shares with the previous recording, to values that
+        recording does not list) and the pointwise launches' arguments — so the next frame runs
+        every stage's code and sets every argument again."""
+        self._camera_seen = None
+        for node in self.nodes:
+            node.recording, node.args, node.key = None, None, None
+
+    def _enqueue_nodes(self, frame: Frame, cam, same_camera: bool, download) -> tuple[list, dict, tuple[int, int]]:
+        import pyopencl as cl
+
         patched = self.last_patched = []
         rt, q, bufs = self.runtime, self.runtime.queue, self.buffers
         events: list = []

@@ -47,6 +47,12 @@ class PendingFrame:
         """The future of the frame's downloads (:meth:`Stream.download`); None: complete."""
         self._plan = plan
         self._waited = downloads is None
+        self._error: BaseException | None = None
+
+    def holds(self, array: np.ndarray) -> bool:
+        """Whether ``array`` shares memory with the frame's image (its ``out``) and ``result()``
+        has not been taken: the download may still write it."""
+        return not self._waited and np.may_share_memory(self._frame.color, array)
 
     def done(self) -> bool:
         """Whether the frame's downloads have completed (its image is in ``out``)."""
@@ -54,16 +60,28 @@ class PendingFrame:
 
     def wait(self) -> None:
         """Block until every command of the frame has completed, then let its transfers' events
-        drop their host arrays (``NannyEvent.wait``)."""
+        drop their host arrays (``NannyEvent.wait``). A download that failed raises here, each
+        time (the frame's commands complete first, so its slot is free either way)."""
         if self._waited:
+            if self._error is not None:
+                raise self._error
             return
         import pyopencl as cl
 
-        self._events += self._downloads.result()
-        for _, ev in self._events:
-            if isinstance(ev, cl.NannyEvent):
-                ev.wait()
-        self._waited = True
+        try:
+            self._events += self._downloads.result()
+        except Exception as e:  # the download failed (an interrupt of this wait is not: it still runs)
+            self._error = e
+        try:
+            if self._events:
+                cl.wait_for_events([ev for _, ev in self._events])
+            for _, ev in self._events:
+                if isinstance(ev, cl.NannyEvent):
+                    ev.wait()
+        finally:
+            self._waited = True
+        if self._error is not None:
+            raise self._error
 
     def result(self) -> Frame:
         """The processed frame, after :meth:`wait`; its device times become the plan's
@@ -127,9 +145,7 @@ class Stream:
     def reserve(self) -> Slot:
         """The next slot, once the frame that used it last is complete."""
         slot = self.slots[self.next % len(self.slots)]
-        if slot.pending is not None:
-            slot.pending.wait()
-            slot.pending = None
+        _complete(slot)
         return slot
 
     def download(self, queue, copies: list):
@@ -147,6 +163,16 @@ class Stream:
     def drain(self) -> None:
         """Wait for every frame in flight."""
         for slot in self.slots:
-            if slot.pending is not None:
-                slot.pending.wait()
-                slot.pending = None
+            _complete(slot)
+
+
+def _complete(slot: Slot) -> None:
+    """Wait for the last frame that used ``slot``; a download of its that failed is that frame's
+    error (its ``result()`` raises it), not the caller's, and leaves the slot free."""
+    pending = slot.pending
+    if pending is not None:
+        try:
+            pending.wait()
+        except Exception:
+            pass
+        slot.pending = None  # not on an interrupt of the wait: the frame may still be in flight

@@ -149,10 +149,9 @@ __constant float distortion_fir[DISTORTION_FIR_K + 1] = {
 /* lanes s ... s + 15 of the 32-lane a:b (s a literal 1 ... 15). Where the compiler has it, clang's
  * __builtin_shufflevector with literal indices: one LLVM shufflevector, which every backend lowers
  * to its permutes. shuffle2 with a constant mask means the same, but PoCL 5.0 (LLVM 16) does not
- * fold it into one permute: ~17 ns a shift, which made distortion_fir_rows 180 ms at 1080p on one
- * Skylake core (PoCL 3.1 folds it: ~10 ms) and distortion_dering 22 ms (docs/benchmarks.md,
- * "Distortion's final filter on 16 cores"). Same lanes, same sums: the output is the same bits
- * either way (tests/test_distortion.py). */
+ * fold it into one permute, which made distortion_fir_rows and distortion_dering many times slower
+ * there (PoCL 3.1 folds it; docs/benchmarks.md, "Distortion's final filter on 16 cores"). Same
+ * lanes, same sums: the output is the same bits either way (tests/test_distortion.py). */
 #if defined(__has_builtin) && !defined(DISTORTION_SHUFFLE2)  /* -DDISTORTION_SHUFFLE2: the fallback (tests) */
 #if __has_builtin(__builtin_shufflevector)
 #define DISTORTION_HAVE_SHUFFLEVECTOR 1

@@ -103,7 +103,8 @@ def test_submit_downloads_into_pinned_out_arrays_and_mixes_with_run(rng):
     for f in frames:
         c, d = rt.pinned_empty(f.color.shape), rt.pinned_empty(f.depth.shape)
         c[...], d[...] = f.color, f.depth
-        pinned.append(f.replace(color=c, depth=d))
+        pinned.append(f.replace(color=c, depth=d, copy=False))  # a Frame copies its arrays unless told
+        assert pinned[-1].color is c and pinned[-1].depth is d
     outs = [rt.pinned_empty(w.shape) for w in want]
     plan.pipelined = True
     first = plan.submit(pinned[0], out=outs[0])
@@ -140,6 +141,12 @@ def test_a_refused_frame_leaves_nothing_in_flight(rng):
         with pytest.raises(InputError, match=match) as err:
             plan.submit(**kwargs)
         assert "\n" not in str(err.value)
+    for bad in (0, -1, 1.5, True):
+        plan.in_flight = bad
+        with pytest.raises(InputError, match="in_flight must be .* >= 1, not") as err:
+            plan.submit(frame)
+        assert "\n" not in str(err.value)
+    plan.in_flight = 2
     assert stream.next == before and np.all(bad_out == 7.0)
     np.testing.assert_array_equal(plan.submit(frame).result().color, want)
 
@@ -262,3 +269,116 @@ def test_label_planes_resampled_in_flight_belong_to_their_frame(rng):
         assert g.labels.keys() == w.labels.keys()
         for k in w.labels:
             np.testing.assert_array_equal(g.labels[k], w.labels[k])
+
+
+@pytest.mark.parametrize("submit", [False, True])
+def test_an_error_mid_enqueue_leaves_no_stale_kernel_argument(rng, monkeypatch, submit):
+    """A stage that raises part-way through a re-recording (its first launches already given the
+    new focus on the kernel objects it shares with the previous recording) must not leave those
+    arguments behind: the next frame, at the old focus, is what a fresh plan gives — image and
+    errors alike."""
+    from clpost import runtime_record
+
+    pipe, frame, cam, stages = _worst_case(rng)
+    plan = pipe.plan_for(frame)
+    near = cam.with_(focus_distance_m=0.7)
+    fresh = Pipeline(cam, quality="final", stages=stages).plan_for(frame)
+    want = fresh.run(frame, cam).color
+    plan.pipelined = submit
+    go = (lambda c: plan.submit(frame, c).result()) if submit else (lambda c: plan.run(frame, c))
+    np.testing.assert_array_equal(go(cam).color, want)
+    launch, calls = runtime_record.Recorder.launch, []
+
+    def failing(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise RuntimeError("injected")
+        return launch(self, *args, **kwargs)
+
+    monkeypatch.setattr(runtime_record.Recorder, "launch", failing)
+    with pytest.raises(RuntimeError, match="injected"):
+        go(near)
+    monkeypatch.setattr(runtime_record.Recorder, "launch", launch)
+    np.testing.assert_array_equal(go(cam).color, want)
+    np.testing.assert_array_equal(go(near).color, fresh.run(frame, near).color)
+
+
+def test_a_failed_download_is_its_frames_error_and_frees_its_slot(rng, monkeypatch):
+    """A frame whose download fails raises from its own ``result()`` (every time); the frames
+    submitted after it, which reuse its slot, run as usual instead of raising its error."""
+    import clpost.stream as stream
+
+    frame = scene(rng, w=64, h=24)
+    plan = Pipeline(Camera(f_number=2.0, depth_of_field=True, blades=6, focus_distance_m=0.8),
+                    quality="draft").plan_for(frame)
+    want = plan.run(frame).color
+    plan.pipelined, plan.in_flight = True, 2
+    download = stream._download
+
+    def failing(queue, copies):
+        raise RuntimeError("download failed")
+
+    monkeypatch.setattr(stream, "_download", failing)
+    bad = plan.submit(frame)
+    monkeypatch.setattr(stream, "_download", download)
+    later = [plan.submit(frame) for _ in range(4)]
+    for _ in range(2):
+        with pytest.raises(RuntimeError, match="download failed"):
+            bad.result()
+    for p in later:
+        np.testing.assert_array_equal(p.result().color, want)
+    plan.drain()
+
+
+def test_an_out_array_still_in_flight_is_refused(rng):
+    """``out`` belongs to its frame until ``result()``: giving it to another frame while that
+    frame's download may still write it (submit or run) is one InputError line, and the first
+    frame's image is its own. The frame whose slot a submit waits for first does not hold its
+    ``out`` any more, so two arrays round robin over two frames in flight are fine."""
+    frame = scene(rng, w=64, h=24)
+    cam = Camera(f_number=2.0, depth_of_field=True, blades=6, focus_distance_m=0.8)
+    plan = Pipeline(cam, quality="draft").plan_for(frame)
+    frames = _frames(frame, 4)
+    want = [plan.run(f).color for f in frames]
+    plan.pipelined, plan.in_flight = True, 2
+    rt = plan.runtime
+    out = np.empty_like(want[0])
+    hold = cl.UserEvent(rt.context)
+    try:
+        cl.enqueue_barrier(rt.queue, wait_for=[hold])
+        first = plan.submit(frames[0], out=out)
+        for call in (plan.submit, plan.run):
+            with pytest.raises(InputError, match="still in flight") as err:
+                call(frames[1], out=out[:, :])
+            assert "\n" not in str(err.value)
+    finally:
+        hold.set_status(cl.command_execution_status.COMPLETE)
+    np.testing.assert_array_equal(first.result().color, want[0])
+    np.testing.assert_array_equal(plan.submit(frames[1], out=out).result().color, want[1])
+    outs = [np.empty_like(want[0]) for _ in range(2)]
+    pending = [plan.submit(f, out=outs[k % 2]) for k, f in enumerate(frames)]
+    for p, w in zip(pending[2:], want[2:]):
+        np.testing.assert_array_equal(p.result().color, w)
+
+
+def test_an_interrupted_wait_keeps_the_frame_in_flight(rng, monkeypatch):
+    """A KeyboardInterrupt while ``result()`` waits for the download thread is not the frame's
+    error: the frame stays in flight (its slot is not handed to the next frame), and the next
+    ``result()`` gives its image."""
+    import concurrent.futures
+
+    frame = scene(rng, w=64, h=24)
+    plan = Pipeline(Camera(f_number=2.0, depth_of_field=True, blades=6, focus_distance_m=0.8),
+                    quality="draft").plan_for(frame)
+    want = plan.run(frame).color
+    plan.pipelined, plan.in_flight = True, 1
+    pending = plan.submit(frame)
+    result = concurrent.futures.Future.result
+    monkeypatch.setattr(concurrent.futures.Future, "result",
+                        lambda self, timeout=None: (_ for _ in ()).throw(KeyboardInterrupt()))
+    with pytest.raises(KeyboardInterrupt):
+        pending.result()
+    assert plan.buffers.stream.slots[0].pending is pending and not pending._waited
+    monkeypatch.setattr(concurrent.futures.Future, "result", result)
+    np.testing.assert_array_equal(pending.result().color, want)
+    np.testing.assert_array_equal(plan.submit(frame).result().color, want)

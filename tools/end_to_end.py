@@ -32,7 +32,9 @@ def _pinned_frame(rt, frame):
             p = rt.pinned_empty(a.shape, a.dtype)
             p[...] = a
             arrays[name] = p
-    return frame.replace(**arrays)
+    pinned = frame.replace(copy=False, **arrays)  # a Frame copies its arrays (pageable) unless told
+    assert all(getattr(pinned, k) is v for k, v in arrays.items())
+    return pinned
 
 
 def _wall(plan, frame, cam, repeats: int, out=None) -> float:

@@ -71,9 +71,9 @@ own path"), three layers are gathered:
   :math:`\bar c_O = \min(c_O / A_O, 1)` with :math:`A_O = w_c + \sum \mathrm{cyl}(d, |h_X|)^2\,
   \delta_i / (2|h_X|)\,g_i^O` — what :math:`c_O` would be if every tap were X's own surface (Y = X,
   f = b = 1): a ratio estimator, so the taps' rounding to pixels and the cylinder's steps at the
-  path's ends cancel. The absolute sum scatters around 1 inside a surface moving as one (0.87–1.07
-  at 5 taps, 0.89–0.98 at 11, 0.98–1.03 at 19; docs/motion_blur.md) and, clamped, let the
-  background through wherever it fell short;
+  path's ends cancel. The absolute sum :math:`\min(c_O, 1)` scatters around 1 inside a surface
+  moving as one and let the background through wherever it fell short (docs/motion_blur.md, "The
+  own layer's coverage as a share of X's path");
 - behind X (revealed as X's surface moves away): weights :math:`b\,\big((1-f) + f\,(1 -
   \mathrm{cyl}(d, |h_Y|))\big)\,\mathrm{cyl}(d, |h_X|) / \max(d, 1)^2` (surfaces behind X, or level
   with it whose streak misses X; inverse-square in the distance: what X hides looks most like the
