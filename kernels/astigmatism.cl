@@ -261,8 +261,8 @@ inline int astigmatism_tile_class(__global const float *restrict axes, __global 
  * (lists: ASTIGMATISM_CLASSES rows of tiles_x * tiles_y tile indices; counts: one counter per
  * class, zeroed by the host). A work-group (TILES_GROUP tiles of a row, clpost/stages/astigmatism_cl.py; the host rounds
  * the global size up) counts its tiles per class in local memory and reserves each class's run
- * of the list with one global atomic_add: one tile's global atomic_inc each, on the one cache line
- * of counts, cost the pass about as much as the pad pass on 16 PoCL threads. The order within a
+ * of the list with one global atomic_add instead of one atomic_inc per tile on the one cache line
+ * of counts (docs/benchmarks.md, "astigmatism: tile classes spread over the launch"). The order within a
  * list depends on the atomics' order; the result does not (each tile is independent). */
 __kernel void astigmatism_tiles(__global const float *restrict axes, __global float *restrict tiles,
                                 __global float *restrict tmin, __global int *restrict point,
@@ -607,7 +607,7 @@ __kernel void astigmatism_copy(__global const float *restrict padded, __global c
  * (one work-group per listed tile), all ASTIGMATISM_TAPS spiral points. The 16-lane form (a CPU)
  * is the one-pixel form's arithmetic on 16 pixels of a tile row, its per-pixel reads as per-lane
  * gathers (CLP_GATHER16): PoCL does not vectorise the one-pixel form across work-items
- * (data-dependent addresses), and one exact tile cost ≈ 0.2 ms on one thread in it. */
+ * (data-dependent addresses; measured in docs/benchmarks.md). */
 #if ASTIGMATISM_LANES == 16
 __kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict src,
                        __global const int *restrict inner, __global const float *restrict axes,
