@@ -37,8 +37,8 @@ def _record_kernels(module, tag: str, into: dict) -> None:
     rec_cls = module.Recording
     replay = rec_cls.replay
 
-    def wrapped(self, queue, frame, _replay=replay):
-        events, host = _replay(self, queue, frame)
+    def wrapped(self, queue, frame, *rest, _replay=replay):  # rest: a newer replay's download hook
+        events, host = _replay(self, queue, frame, *rest)
         for (_, ev), cmd in zip(events, self.commands):
             if getattr(cmd, "kernel", None) is not None:
                 into.setdefault(tag + cmd.kernel.function_name, []).append(ev)
