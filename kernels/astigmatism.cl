@@ -603,19 +603,23 @@ __kernel void astigmatism_copy(__global const float *restrict padded, __global c
     ASTORE(dst, AVLOAD(col), AVLOAD(col + plane), AVLOAD(col + 2 * plane), x, y, width, height);
 }
 
+/* the exact list's kernel, both forms: its arguments and its listed tile */
+#define ASTIGMATISM_EXACT_HEAD                                                                          \
+__kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict src,   \
+                       __global const int *restrict inner, __global const float *restrict axes,             \
+                       __global float *restrict dst, __global const int *restrict list,                     \
+                       __global const int *restrict counts, const int list0, const int tiles_x, const int tiles_y, \
+                       const int width, const int height, const float cx, const float cy)                   \
+{                                                                                                    \
+    ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y);
+
 /* the per-pixel model (each pixel's own ellipse and direction) for the tiles of the exact list
  * (one work-group per listed tile), all ASTIGMATISM_TAPS spiral points. The 16-lane form (a CPU)
  * is the one-pixel form's arithmetic on 16 pixels of a tile row, its per-pixel reads as per-lane
  * gathers (CLP_GATHER16): PoCL does not vectorise the one-pixel form across work-items
  * (data-dependent addresses; measured in docs/benchmarks.md). */
 #if ASTIGMATISM_LANES == 16
-__kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict src,
-                       __global const int *restrict inner, __global const float *restrict axes,
-                       __global float *restrict dst, __global const int *restrict list,
-                       __global const int *restrict counts, const int list0, const int tiles_x, const int tiles_y,
-                       const int width, const int height, const float cx, const float cy)
-{
-    ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y);
+ASTIGMATISM_EXACT_HEAD
     const ClpTile t = clp_tile(tile, tiles_x, tiles_y, ASTIGMATISM_TILE_W,
                                ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 16);
     const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;
@@ -666,13 +670,7 @@ __kernel void astigmatism_exact(__global const float *restrict padded, __global 
 }
 #else
 /* the one-pixel form (a GPU: a tile per work-group of TILE_W × TILE_H work-items) */
-__kernel void astigmatism_exact(__global const float *restrict padded, __global const float *restrict src,
-                       __global const int *restrict inner, __global const float *restrict axes,
-                       __global float *restrict dst, __global const int *restrict list,
-                       __global const int *restrict counts, const int list0, const int tiles_x, const int tiles_y,
-                       const int width, const int height, const float cx, const float cy)
-{
-    ASTIGMATISM_LISTED(tile, list, counts, list0, tiles_x, tiles_y);
+ASTIGMATISM_EXACT_HEAD
     const ClpTile t = clp_tile(tile, tiles_x, tiles_y, ASTIGMATISM_TILE_W,
                                ASTIGMATISM_TILE_H, ASTIGMATISM_PAD, 1);
     const int tile_id = t.id, x = t.x, y = t.y, pw = t.pw, jc = t.jc;
