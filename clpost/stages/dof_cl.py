@@ -130,9 +130,12 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
                  const("rf", rf.astype(np.float32)), const("rn", rn.astype(np.float32)),
                  const("inv_rf", (1.0 / rf).astype(np.float32)), const("inv_rn", (1.0 / rn).astype(np.float32))],
         "ntaps": const("ntaps", ntaps),
-        # a light tap's lattice sums N₁(r), N_¼(r), far and near (dof.light_sums), one row each
-        "lsum": rt.constant(D.light_sums(*shape[1:], camera.spherical_aberration).astype(np.float32),
-                            ("dof_light_sums", shape[1:], camera.spherical_aberration)),
+        # a light tap's lattice sums N₁(r), N_¼(r), far and near (dof.light_sums), one row each; at
+        # half resolution (no lights there) the texture's rescale in the same layout (dof.texture_sums)
+        "lsum": (rt.constant(D.light_sums(*shape[1:], camera.spherical_aberration).astype(np.float32),
+                             ("dof_light_sums", shape[1:], camera.spherical_aberration)) if scale == 1 else
+                 rt.constant(D.texture_sums(*shape[1:], camera.spherical_aberration).astype(np.float32),
+                             ("dof_texture_sums", shape[1:], camera.spherical_aberration))),
         "lv": scratch("lv", (nlev + 1, 5, ph, pw)),
         "pv": scratch("pv", (ph, pw) if camera.optical_vignetting > 0 else (1,)),
         "tmax": scratch("tmax", (th, tw, 2)), "tn": scratch("tn", (th, tw), np.int32),
