@@ -93,7 +93,14 @@ Spherical aberration texture (parametric): :math:`I(t) = 1 + a\,(2t^2 - 1)`, t t
 radius in the bokeh; :math:`\int I = \int 1` for any a, so energy is unchanged. a = +σ in the near
 field and −σ in the far field for σ = ``spherical_aberration`` (undercorrected σ > 0: foreground
 bokeh with a dark core and bright rim, background bokeh with a bright core fading out; σ < 0 swaps
-them). |σ| ≤ 1 keeps I ≥ 0.
+them). |σ| ≤ 1 keeps I ≥ 0. A tap behind p, whose radius the background clamp sets to p's, takes
+p's layer's a (the clamped tap stands in for p's own disc: a near light's own pixel is then
+normalised against its own texture, not a far wall's opposite one). At half resolution, whose
+working discs are small (r' of a few working px), each tap's textured weight is also multiplied by
+:math:`N(r/s; 0)/N(r/s; a)` (:func:`texture_sums`), so the texture keeps the lattice sum of the
+untextured disc (on a small disc's lattice the rim's value fills the coverage ramp: the sum moved a
+near light's energy in a far wall's unnormalised front layer by up to ±40 %; docs/fidelity.md,
+"Lights under the spherical-aberration texture").
 
 Traced texture (a ``lens_data`` lens; σ is then unused): the weight of a tap is multiplied per
 channel by the lens's own profile :math:`P_c(t; r_q)` — the pencil map of
@@ -635,7 +642,8 @@ def texture_sums(blades: int, rotation_deg: float, roundness: float, sa: float) 
     lattice of a small disc the texture's rim value fills the whole coverage ramp beyond the edge:
     at r = 0.96 px (6 blades) N = 1.225 at a = +0.6, 1.081 at 0, 0.937 at −0.6 — a near light
     in a far wall's front layer (added unnormalised) kept that much more or less of its light
-    (docs/fidelity.md, "Draft's lights under the texture"). 1 where N(r; a) ≤ 0 (|σ| = 1)."""
+    (docs/fidelity.md, "Lights under the spherical-aberration texture"). 1 where N(r; a) ≤ 0
+    (|σ| = 1)."""
     r0, r1, n = LIGHT_TABLE_R
     rs = np.linspace(r0, r1, n)
     _, _, dists, rf, rn, _ = tap_table(int(math.ceil(r1)) + 1, blades, rotation_deg, roundness)
