@@ -6,7 +6,8 @@
  * DOF_RMAX, DOF_SCALE, DOF_BUDGET, DOF_LEVELS, DOF_VIGNETTING,
  * DOF_LIGHTS (lights' 1/4-px ramp at stride 1, LIGHT_RAMP_PX: the full-resolution gather only, and not
  * with DOF_VIGNETTING or DOF_PROFILE),
- * DOF_TEXTURE (spherical aberration's texture on: σ ≠ 0),
+ * DOF_TEXTURE (spherical aberration's texture on: σ ≠ 0; with DOF_SCALE > 1 also DOF_TEX_PLANE, the
+ * levels' sixth plane: dof_common.cl),
  * DOF_PROFILE (a traced lens's per-channel texture, the pencil map: clpost/optics/pencil.py; with
  * DOF_PROF_ND rows, DOF_PROF_NR bins over [0, DOF_PROF_TMAX], DOF_PROF_RK = output px -> row
  * units (1 / the largest CoC radius); DOF_REACH = DOF_PROF_TMAX, the bokeh's reach over its CoC radius, else 1).
