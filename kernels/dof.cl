@@ -6,7 +6,8 @@
  * DOF_RMAX, DOF_SCALE, DOF_BUDGET, DOF_LEVELS, DOF_VIGNETTING,
  * DOF_LIGHTS (lights' 1/4-px ramp at stride 1, LIGHT_RAMP_PX: the full-resolution gather only, and not
  * with DOF_VIGNETTING or DOF_PROFILE),
- * DOF_TEXTURE (spherical aberration's texture on: σ ≠ 0),
+ * DOF_TEXTURE (spherical aberration's texture on: σ ≠ 0; with DOF_SCALE > 1 also DOF_TEX_PLANE, the
+ * levels' sixth plane: dof_common.cl),
  * DOF_PROFILE (a traced lens's per-channel texture, the pencil map: clpost/optics/pencil.py; with
  * DOF_PROF_ND rows, DOF_PROF_NR bins over [0, DOF_PROF_TMAX], DOF_PROF_RK = output px -> row
  * units (1 / the largest CoC radius); DOF_REACH = DOF_PROF_TMAX, the bokeh's reach over its CoC radius, else 1).
@@ -113,7 +114,7 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
                      const float irhon, const float inv_ramp, const float cell, const float sa,
                      const DOF_F hx, const DOF_F hy, const int dx, const int dy, const DOF_F pvq,
                      const float vig, __global const float4 *restrict prof, const int lights,
-                     __global const float *restrict lsum)
+                     __global const float *restrict lsum, const DOF_F tq, const DOF_F tp)
 {
     const DOF_I front = rq < rp - DOF_FRONT_MARGIN;
     const DOF_I behind = rq > rp + DOF_FRONT_MARGIN;
@@ -151,9 +152,17 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
     DOF_F w = cell * ir * ir;  /* every factor but the coverage: applied to both weights */
 #if DOF_TEXTURE
     {
+        /* a tap behind p (clamped to p's radius) takes p's layer's texture */
+        const DOF_I texfar = select(far, rp >= 0.0f, behind);
         const DOF_F t = fmin(dist * ir * select((DOF_F)(irhon), (DOF_F)(irhof), far), 1.0f);
-        const DOF_F a = select((DOF_F)(sa), (DOF_F)(-sa), far);
+        const DOF_F a = select((DOF_F)(sa), (DOF_F)(-sa), texfar);
         w *= 1.0f + a * (2.0f * t * t - 1.0f);
+#if DOF_TEX_PLANE
+        /* half resolution: the texture keeps the disc's untextured lattice sum, N(r/s; 0)/N(r/s; a)
+         * (texture_sums in clpost/stages/dof.py): the source's own from its level's plane, p's
+         * behind p (r and the texture's sign are p's there) */
+        w *= select(tq, tp, behind);
+#endif
     }
 #endif
 #if DOF_VIGNETTING
@@ -243,6 +252,15 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
 #endif
                    };
     const DOF_F pvp = DOF_VIGNETTING ? DOF_LOAD(pv + c0) : (DOF_F)(1.0f);
+    /* p's own texture rescale (DOF_TEX_PLANE): its centre tap's and every tap's behind it */
+    DOF_F tp = (DOF_F)(1.0f);
+#if DOF_TEX_PLANE
+    {
+        DOF_F t1, th;
+        dof_light_sums(lsum, arp * inv_s, rp >= 0.0f, &t1, &th);
+        tp = lvl > 0 ? th : t1;
+    }
+#endif
     /* the taps; the light path (dof_tapv's `lights`) only in a level-0 tile that dof_tile_dilate
      * found within one tile of a light (bit 31 of its packed plan): the same loop without it
      * elsewhere, so a frame without lights runs the plain tap loop */
@@ -257,7 +275,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                  DOF_LOAD(lv + 2 * pn + c0) * ob + DOF_LOAD(L + 2 * pn + c0) * beta,\
                  rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0],\
                  inv_ramp, cell, sa, hx0, (DOF_F)(hy0), 0, 0,\
-                 pvp, vig, prof, (LIGHT), lsum);\
+                 pvp, vig, prof, (LIGHT), lsum, tp, tp);\
     }\
     for (int k = 1; k < count; ++k) {\
         const int dx = s * tap_dx[k], dy = s * tap_dy[k];\
@@ -268,7 +286,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                  ((float)x + 0.5f * (float)dx + lane - cx) * inv_half,\
                  (DOF_F)(((float)y + 0.5f * (float)dy - cy) * inv_half),\
                  dx, dy, DOF_VIGNETTING ? 0.5f * (pvp + DOF_LOAD(pv + q)) : (DOF_F)(1.0f), vig, prof,\
-                 (LIGHT), lsum);\
+                 (LIGHT), lsum, DOF_TEX_PLANE ? DOF_LOAD(L + 5 * pn + q) : (DOF_F)(1.0f), tp);\
     } }
     if (DOF_LIGHTS && lvl == 0 && packed < 0)
         DOF_TAPS(1)

@@ -120,7 +120,8 @@ def cases():
     # the narrow-source layer (draft, preview): lights on a defocused scene, the cells' borders crossed;
     # "wide": 0.15 mm pixels, CoCs of ~13 px (sources above NARROW_SUM_PX, whole groups inside a disc);
     # final: the full-resolution gather's lights (dof.LIGHT_RAMP_PX; the small ones' 3x3,
-    # dof.LIGHT_SMALL_PX; textured light sums on "blades")
+    # dof.LIGHT_SMALL_PX; textured light sums on "blades"; "blades" at draft/preview: the texture's
+    # level plane, dof_texture_plane)
     for q in ("draft", "preview", "final"):
         for w, h in ((37, 23), (141, 75)):
             add(f"dof-lights {q} {w}x{h}", lambda q=q, w=w, h=h: _run(

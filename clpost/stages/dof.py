@@ -93,7 +93,14 @@ Spherical aberration texture (parametric): :math:`I(t) = 1 + a\,(2t^2 - 1)`, t t
 radius in the bokeh; :math:`\int I = \int 1` for any a, so energy is unchanged. a = +σ in the near
 field and −σ in the far field for σ = ``spherical_aberration`` (undercorrected σ > 0: foreground
 bokeh with a dark core and bright rim, background bokeh with a bright core fading out; σ < 0 swaps
-them). |σ| ≤ 1 keeps I ≥ 0.
+them). |σ| ≤ 1 keeps I ≥ 0. A tap behind p, whose radius the background clamp sets to p's, takes
+p's layer's a (the clamped tap stands in for p's own disc: a near light's own pixel is then
+normalised against its own texture, not a far wall's opposite one). At half resolution, whose
+working discs are small (r' of a few working px), each tap's textured weight is also multiplied by
+:math:`N(r/s; 0)/N(r/s; a)` (:func:`texture_sums`), so the texture keeps the lattice sum of the
+untextured disc (on a small disc's lattice the rim's value fills the coverage ramp: the sum moved a
+near light's energy in a far wall's unnormalised front layer by up to ±40 %; docs/fidelity.md,
+"Lights under the spherical-aberration texture").
 
 Traced texture (a ``lens_data`` lens; σ is then unused): the weight of a tap is multiplied per
 channel by the lens's own profile :math:`P_c(t; r_q)` — the pencil map of
@@ -626,6 +633,31 @@ def light_sums(blades: int, rotation_deg: float, roundness: float, sa: float = 0
     return np.stack(rows)
 
 
+def texture_sums(blades: int, rotation_deg: float, roundness: float, sa: float) -> np.ndarray:
+    r"""(4, n) texture rescale of the half-resolution gather, r/s (lattice units) on
+    :data:`LIGHT_TABLE_R`, laid out as :func:`light_sums` (rows far ramp 1, far ramp ½, near ramp 1,
+    near ramp ½; :func:`light_sum_at` reads it): :math:`N(r; 0)/N(r; a)`, N(r; a) = Σ_o cov(o)
+    (1 + a(2t² − 1)) over every integer offset (a = −σ far, +σ near, t = min(|o|/(rρ), 1)) with
+    the 1-px ramp (stride 1) or the ramp of half a lattice step (stride ≥ 2). ∫ I = ∫ 1, but on the
+    lattice of a small disc the texture's rim value fills the whole coverage ramp beyond the edge:
+    at r = 0.96 px (6 blades) N = 1.225 at a = +0.6, 1.081 at 0, 0.937 at −0.6 — a near light
+    in a far wall's front layer (added unnormalised) kept that much more or less of its light
+    (docs/fidelity.md, "Lights under the spherical-aberration texture"). 1 where N(r; a) ≤ 0
+    (|σ| = 1)."""
+    r0, r1, n = LIGHT_TABLE_R
+    rs = np.linspace(r0, r1, n)
+    _, _, dists, rf, rn, _ = tap_table(int(math.ceil(r1)) + 1, blades, rotation_deg, roundness)
+    rows = []
+    for rho, a in ((rf, -sa), (rn, sa)):
+        for ramp in (1.0, 0.5):
+            rr = rs[:, None] * rho[None, :]
+            t = np.minimum(dists[None, :] / rr, 1.0)
+            cov = np.clip((rr - dists[None, :]) / ramp + 0.5, 0.0, 1.0)
+            na = (cov * (1.0 + a * (2.0 * t * t - 1.0))).sum(axis=1)
+            rows.append(np.where(na > 0, cov.sum(axis=1) / np.where(na > 0, na, 1.0), 1.0))
+    return np.stack(rows)
+
+
 def light_sum_at(table: np.ndarray, r: np.ndarray, far: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(N₁(r), N_¼(r)) of :func:`light_sums`' ``table`` for a far (``far``) or near light, linear in
     r, ends clamped."""
@@ -775,11 +807,14 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
     ramp's premise does not hold there — and whose lights the narrow layer spreads). Returns
     (colour, front coverage α of green)."""
     h, w = coc.shape
+    lights_arg = lights
     reach = pencil.T_MAX if profile is not None else 1.0
     dxs, dys, dists, rf, rn, _ = tap_table(budget, blades, rotation_deg, roundness)
     area = aperture_area(blades, rotation_deg, roundness)
     lsum = light_sums(blades, rotation_deg, roundness, sa)
     lights = lights and profile is None and vignetting <= 0  # narrow_split's rule (LIGHT_RAMP_PX)
+    tsum = (texture_sums(blades, rotation_deg, roundness, sa)
+            if not lights_arg and profile is None and sa != 0 else None)
     nlev = levels_for(reach_rmax(rmax, reach), budget)
     pad = gather_pad(reach_rmax(rmax, reach), budget)
     pc = np.pad(color, ((pad, pad), (pad, pad), (0, 0)), mode="edge")
@@ -813,6 +848,14 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
         behind = rq > rp + FRONT_MARGIN_PX
         r = np.where(behind, np.maximum(np.abs(rp), 0.5), np.maximum(np.abs(rq), 0.5))
         far = rq >= 0
+        # a tap behind p, clamped to p's radius, takes p's layer's texture (a far wall's taps behind
+        # a near light: the light's own pixel is normalised against its own disc's texture)
+        texfar = np.where(behind, rp >= 0, far)
+        # the texture at half resolution: its lattice sum kept the untextured one's (texture_sums)
+        tscale = 1.0
+        if tsum is not None:
+            t1, th = light_sum_at(tsum, r / s, texfar)
+            tscale = np.where(s >= 2, th, t1)
         rho = np.where(far, rf[k], rn[k])
         rr = r * rho
         cov = np.clip((rr * reach - dist) / np.maximum(s / 2, 1.0) + 0.5, 0.0, 1.0)
@@ -835,8 +878,8 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
         w_small = sep * np.where(front, 1.0, n1)
         if profile is None:
             t = np.minimum(dist / rr, 1.0)
-            a = np.where(far, -sa, sa)
-            g = (1.0 + a * (2 * t * t - 1.0)) * s * s / (area * r * r)
+            a = np.where(texfar, -sa, sa)
+            g = (1.0 + a * (2 * t * t - 1.0)) * tscale * s * s / (area * r * r)
             prof = np.ones(3)
         else:
             g = s * s / (area * r * r)

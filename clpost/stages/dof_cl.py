@@ -104,6 +104,7 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
     defines = {**defines, "DOF_SCALE": scale, "DOF_RMAX": rmax, "DOF_BUDGET": budget,
                "DOF_LEVELS": plan_levels, "DOF_LIGHTS": defines["DOF_LIGHTS"] if scale == 1 else 0}
     shape = (budget, camera.blades, camera.blade_rotation_deg, camera.aperture_roundness)
+    tex_plane = bool(defines["DOF_TEXTURE"]) and scale > 1
     dx, dy, dist, rf, rn, ntaps = D.tap_table(*shape)
 
     def const(name, a):
@@ -130,10 +131,16 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
                  const("rf", rf.astype(np.float32)), const("rn", rn.astype(np.float32)),
                  const("inv_rf", (1.0 / rf).astype(np.float32)), const("inv_rn", (1.0 / rn).astype(np.float32))],
         "ntaps": const("ntaps", ntaps),
-        # a light tap's lattice sums N₁(r), N_¼(r), far and near (dof.light_sums), one row each
-        "lsum": rt.constant(D.light_sums(*shape[1:], camera.spherical_aberration).astype(np.float32),
-                            ("dof_light_sums", shape[1:], camera.spherical_aberration)),
-        "lv": scratch("lv", (nlev + 1, 5, ph, pw)),
+        # a light tap's lattice sums N₁(r), N_¼(r), far and near (dof.light_sums), one row each; at
+        # half resolution (no lights there) the texture's rescale in the same layout (dof.texture_sums)
+        "lsum": (rt.constant(D.light_sums(*shape[1:], camera.spherical_aberration).astype(np.float32),
+                             ("dof_light_sums", shape[1:], camera.spherical_aberration)) if scale == 1 else
+                 rt.constant(D.texture_sums(*shape[1:], camera.spherical_aberration).astype(np.float32),
+                             ("dof_texture_sums", shape[1:], camera.spherical_aberration))),
+        # planes per level: R, G, B, CoC, 1/r, and the texture's rescale at half resolution
+        # (dof_common.cl's DOF_PLANES, DOF_TEX_PLANE)
+        "tex_plane": tex_plane,
+        "lv": scratch("lv", (nlev + 1, 6 if tex_plane else 5, ph, pw)),
         "pv": scratch("pv", (ph, pw) if camera.optical_vignetting > 0 else (1,)),
         "tmax": scratch("tmax", (th, tw, 2)), "tn": scratch("tn", (th, tw), np.int32),
         "tlight": scratch("tlight", (th, tw), np.int32),
@@ -170,6 +177,10 @@ def _enqueue_plan(rt, c, src, coc, w, h):
     for lvl in range(c["nlev"]):
         k["dof_levels"].set_args(c["lv"], i32(c["pw"]), i32(c["ph"]), i32(2 ** lvl), i32(lvl))
         evs.append(_launch_rows(rt, k["dof_levels"], (c["pw"], c["ph"])))
+    if c["tex_plane"]:  # the texture's rescale of every level's own CoC (dof_levels.cl)
+        for lvl in range(c["nlev"] + 1):
+            k["dof_texture_plane"].set_args(c["lv"], c["lsum"], i32(c["pw"]), i32(c["ph"]), i32(lvl))
+            evs.append(_launch_rows(rt, k["dof_texture_plane"], (c["pw"], c["ph"]), per_item=1))
     k["dof_tile_max"].set_args(c["lv"], c["tmax"], c["tlight"], i32(c["ww"]), i32(c["hw"]), i32(c["pad"]), i32(c["tw"]),
                                i32(c["th"]))
     evs.append(_launch(rt, k["dof_tile_max"], (c["tw"], c["th"]), 4))
