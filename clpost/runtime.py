@@ -26,6 +26,7 @@ no ``-cl-fast-relaxed-math``, ``-cl-finite-math-only`` or ``-cl-denorms-are-zero
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import threading
@@ -316,6 +317,20 @@ class Runtime:
         registers) or one (GPUs: a warp's loads coalesce; groups of a tile's pixels): the fused
         pointwise kernels (:func:`clpost.codegen.vector_path`) and astigmatism's gather."""
         return not (self.device.type & cl.device_type.GPU)
+
+    @staticmethod
+    @contextlib.contextmanager
+    def forced_width(wide: bool):
+        """Every runtime's :attr:`wide` reads ``wide`` inside the block: the other form of the
+        kernels that have two, on this device (a GPU's one-pixel forms timed or checked on a CPU,
+        or the reverse: tools/gpu_forms.py, tools/oclgrind_sweep.py). Plans built inside keep the
+        form they were built with."""
+        saved = Runtime.wide
+        Runtime.wide = property(lambda self: wide)
+        try:
+            yield
+        finally:
+            Runtime.wide = saved
 
     def program(self, source: str, name: str, defines: dict[str, object] | None = None) -> "cl.Program":
         """Build ``source`` once per (source, defines); ``name`` is used in error messages."""

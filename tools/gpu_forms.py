@@ -16,7 +16,6 @@ astigmatism's forms, so the plan's device ms moves with them; the stage rows are
 from __future__ import annotations
 
 import argparse
-import contextlib
 import statistics
 import warnings
 
@@ -26,17 +25,6 @@ from clpost.bench import SCENES, synthetic_frame
 from clpost.pipeline import Pipeline
 from clpost.runtime import Runtime
 
-@contextlib.contextmanager
-def forced_width(wide: bool):
-    """Runtime.wide forced to ``wide`` (how the tests and tools/oclgrind_sweep.py pick a form)."""
-    saved = Runtime.wide
-    Runtime.wide = property(lambda self: wide)
-    try:
-        yield
-    finally:
-        Runtime.wide = saved
-
-
 def measure(device: str | None, w: int, h: int, quality: str, repeats: int, warmup: int = 2) -> dict:
     """Per form (True: wide, False: narrow): stage ms medians, plan device ms median, last output."""
     scene = SCENES["full"]
@@ -44,11 +32,11 @@ def measure(device: str | None, w: int, h: int, quality: str, repeats: int, warm
     frame = synthetic_frame(w, h, velocity_px=scene.velocity_px)
     pipes, times, outs = {}, {True: {}, False: {}}, {}
     for wide in (True, False):
-        with forced_width(wide):
+        with Runtime.forced_width(wide):
             pipes[wide] = Pipeline(cam, quality=quality, stages=list(scene.wants), device=device)
     for i in range(warmup + repeats):
         for wide in ((True, False) if i % 2 else (False, True)):
-            with forced_width(wide):
+            with Runtime.forced_width(wide):
                 out = pipes[wide].run(frame)
             if i >= warmup:
                 t = pipes[wide].last_timings

@@ -61,12 +61,8 @@ def _run(camera, stages, quality, w, h, *, narrow=False, wide=False, **frame_kw)
     from clpost.runtime import Runtime
 
     if narrow or wide:
-        saved = Runtime.wide
-        Runtime.wide = property(lambda self: wide)
-        try:
+        with Runtime.forced_width(wide):
             return _run(camera, stages, quality, w, h, **frame_kw)
-        finally:
-            Runtime.wide = saved
     if callable(camera):  # a camera that depends on the size
         camera = camera(w, h)
     pipe = Pipeline(camera, quality=quality, stages=list(stages), device="oclgrind")
