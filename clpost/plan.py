@@ -382,7 +382,7 @@ class Plan:
             bufs.stream = Stream(self.in_flight)
         bufs.stream.resize(self.in_flight)
         stream = bufs.stream
-        out = self._out_array(out, stream.slots[stream.next % len(stream.slots)])
+        out = self._out_array(out, stream.upcoming)
         meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
         slot = stream.reserve()  # waits for the frame that used it last
         uq, dq = rt.transfer_queues()

@@ -142,9 +142,14 @@ class Stream:
             self.slots = [Slot() for _ in range(depth)]
             self.next = 0
 
+    @property
+    def upcoming(self) -> Slot:
+        """The slot the next frame takes (:meth:`reserve` waits for its last frame)."""
+        return self.slots[self.next % len(self.slots)]
+
     def reserve(self) -> Slot:
         """The next slot, once the frame that used it last is complete."""
-        slot = self.slots[self.next % len(self.slots)]
+        slot = self.upcoming
         _complete(slot)
         return slot
 
