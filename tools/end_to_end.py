@@ -47,10 +47,10 @@ def _wall(plan, frame, cam, repeats: int, out=None) -> float:
     return statistics.median(times)
 
 
-def _pipelined(plan, frame, cam, repeats: int, frames: int, outs: list) -> float:
+def _pipelined(plan, inputs: list, cam, repeats: int, frames: int, outs: list) -> float:
     """Wall ms per frame of ``frames`` frames through ``Plan.submit`` (median of ``repeats``
-    runs): a frame's result is taken when ``len(outs) - 1`` later frames are in flight, and its
-    ``out`` array is used again after that."""
+    runs): frame k is ``inputs[k % len(inputs)]`` into ``outs[k % len(outs)]``, its result taken
+    when ``len(outs) - 1`` later frames are in flight (then its ``out`` is used again)."""
     from collections import deque
 
     depth = len(outs) - 1
@@ -61,7 +61,7 @@ def _pipelined(plan, frame, cam, repeats: int, frames: int, outs: list) -> float
         for k in range(frames):
             if len(pending) >= depth:
                 pending.popleft().result()
-            pending.append(plan.submit(frame, cam, out=outs[k % len(outs)]))
+            pending.append(plan.submit(inputs[k % len(inputs)], cam, out=outs[k % len(outs)]))
         while pending:
             pending.popleft().result()
         if i >= 1:
@@ -102,14 +102,20 @@ def main(argv=None) -> int:
             ow, oh = plan.launches[-1].out_size if plan.launches else (w, h)
             out = pipe.runtime.pinned_empty((oh, ow, 3))
             pinned = _wall(plan, pf, rcam, a.repeats, out=out)
+            # two different frames alternate in the pipelined runs, so a mix-up between frames shows
+            inputs = [pf, _pinned_frame(pipe.runtime, frame.replace(color=frame.color[::-1].copy()))]
             plan.pipelined = plan.pipelined or a.force_pipelined
             row = f"| {name} | {q} | {plain:.2f} | {1e3 / plain:.0f} | {pinned:.2f} | {1e3 / pinned:.0f} |"
             for d in depths:
                 plan.in_flight = d
                 outs = [out] + [pipe.runtime.pinned_empty((oh, ow, 3)) for _ in range(d)]
-                out.fill(np.nan)  # what the check below compares must be a pipelined frame's
-                piped = _pipelined(plan, pf, rcam, a.repeats, a.frames, outs)
-                if not np.array_equal(outs[0], plan.run(pf, rcam).color):  # the last frame that used outs[0]
+                for o in outs:  # what the check below compares must be pipelined frames'
+                    o.fill(np.nan)
+                piped = _pipelined(plan, inputs, rcam, a.repeats, a.frames, outs)
+                # each out holds the last frame that used it: a frame given another's image fails
+                want = [plan.run(f, rcam).color for f in inputs]
+                last = {k % len(outs): k for k in range(a.frames)}
+                if not all(np.array_equal(outs[j], want[k % len(inputs)]) for j, k in last.items()):
                     bad.append(f"{name} {q} ({d} in flight)")
                 row += f" {piped:.2f} | {1e3 / piped:.0f} |"
             print(row, flush=True)
