@@ -236,8 +236,11 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     w, h = frame.width, frame.height
     vec = gather_vector_width(rt)
     defines = {**stage.defines(camera), "DOF_VEC": vec, "DOF_TAIL_ROWS": TAIL_ROWS}
+    # every camera field _config reads (its tables, "aperture" and "field"): the stage object, and
+    # so this cache, outlives a plan — a camera differing only in σ or the cat's eye kept the last
+    # camera's sum table and arguments
     key = (tuple(sorted(defines.items())), w, h, camera.blades, camera.blade_rotation_deg,
-           camera.aperture_roundness)
+           camera.aperture_roundness, camera.spherical_aberration, camera.optical_vignetting)
 
     def make():
         cache = {
