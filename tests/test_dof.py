@@ -631,6 +631,23 @@ def test_extreme_apertures_focus_and_depths_stay_finite(rng, n, u):
     assert_matches_reference(pipe, frame, out, rtol=1e-3)
 
 
+@pytest.mark.parametrize("quality", ["final", "draft"])
+@pytest.mark.parametrize("change", [dict(spherical_aberration=0.9), dict(optical_vignetting=0.9)])
+def test_a_pipeline_replanned_for_another_aperture_matches_a_fresh_one(rng, quality, change):
+    # the stage (and its cached tables) outlives a plan: a second camera differing only in σ or the
+    # cat's eye once kept the first's light/texture sums and arguments (up to 5.5 off at draft)
+    frame = odd_frame(rng)
+    color = frame.color.copy()
+    color[5, 7], color[12, 20] = 200.0, 150.0  # lights: the sum table's taps
+    frame = Frame(color, depth=frame.depth)
+    first = Camera(**CAM, blades=6, spherical_aberration=0.3, optical_vignetting=0.3)
+    second = Camera(**{**CAM, "blades": 6, "spherical_aberration": 0.3, "optical_vignetting": 0.3, **change})
+    pipe = Pipeline(first, quality=quality, stages=["dof"])
+    pipe.run(frame)
+    fresh = Pipeline(second, quality=quality, stages=["dof"]).run(frame).color
+    assert np.array_equal(pipe.run(frame, second).color, fresh)
+
+
 def test_not_planned_when_off_or_all_in_focus():
     frame = point_frame(5.0)
     assert "dof" not in Pipeline(Camera(), stages=["dof"]).plan(frame)

@@ -611,6 +611,25 @@ LIGHT_TABLE_R = (0.5, 17.0, 1651)
 """r grid (first, last, count; step 0.01 px) of :func:`light_sums`; beyond it the ends hold."""
 
 
+def _disc_lattice_sums(blades: int, rotation_deg: float, roundness: float, sa: float, ramps):
+    """The lattice sums :func:`light_sums` and :func:`texture_sums` are built from: r on
+    :data:`LIGHT_TABLE_R`, and per layer (far: a = −σ, then near: a = +σ; ρ as :func:`tap_table`)
+    and per ramp of ``ramps``, (Σ_o cov(o), Σ_o cov(o) (1 + a(2t² − 1))), cov(o) = clip((r ρ(o) −
+    |o|)/ramp + ½, 0, 1), t = min(|o|/(r ρ), 1), over every integer offset o."""
+    r0, r1, n = LIGHT_TABLE_R
+    rs = np.linspace(r0, r1, n)
+    _, _, dists, rf, rn, _ = tap_table(int(math.ceil(r1)) + 1, blades, rotation_deg, roundness)
+    sums = []
+    for rho, a in ((rf, -sa), (rn, sa)):
+        rr = rs[:, None] * rho[None, :]
+        t = np.minimum(dists[None, :] / rr, 1.0)
+        tex = 1.0 + a * (2.0 * t * t - 1.0)
+        for ramp in ramps:
+            cov = np.clip((rr - dists[None, :]) / ramp + 0.5, 0.0, 1.0)
+            sums.append((cov.sum(axis=1), (cov * tex).sum(axis=1)))
+    return rs, sums
+
+
 def light_sums(blades: int, rotation_deg: float, roundness: float, sa: float = 0.0) -> np.ndarray:
     """(4, n) lattice sums of a light's disc, r on :data:`LIGHT_TABLE_R` (linear in between): rows
     N₁(r), N_¼(r) of a far light, then of a near one, N(r) = Σ_o clip((r ρ(o) − |o|)/ramp + ½, 0, 1)
@@ -619,18 +638,9 @@ def light_sums(blades: int, rotation_deg: float, roundness: float, sa: float = 0
     near layer's direction, as :func:`tap_table`). N is not 1 at small r (6 blades, σ = 0: 1.05 at
     r = 1, 1.10 at 1.2, 1.07 at 2.11) and differs between the ramps; without the texture in it the
     rescale N₁/N_¼ cost a light 2–10 % of its energy at σ = ±0.6."""
-    r0, r1, n = LIGHT_TABLE_R
-    rs = np.linspace(r0, r1, n)
-    _, _, dists, rf, rn, _ = tap_table(int(math.ceil(r1)) + 1, blades, rotation_deg, roundness)
+    rs, sums = _disc_lattice_sums(blades, rotation_deg, roundness, sa, (1.0, LIGHT_RAMP_PX))
     area = aperture_area(blades, rotation_deg, roundness)
-    rows = []
-    for rho, a in ((rf, -sa), (rn, sa)):
-        rr = rs[:, None] * rho[None, :]
-        t = np.minimum(dists[None, :] / rr, 1.0)
-        tex = 1.0 + a * (2.0 * t * t - 1.0)
-        rows += [(np.clip((rr - dists[None, :]) / ramp + 0.5, 0.0, 1.0) * tex).sum(axis=1) / (area * rs * rs)
-                 for ramp in (1.0, LIGHT_RAMP_PX)]
-    return np.stack(rows)
+    return np.stack([na / (area * rs * rs) for _, na in sums])
 
 
 def texture_sums(blades: int, rotation_deg: float, roundness: float, sa: float) -> np.ndarray:
@@ -644,18 +654,8 @@ def texture_sums(blades: int, rotation_deg: float, roundness: float, sa: float) 
     in a far wall's front layer (added unnormalised) kept that much more or less of its light
     (docs/fidelity.md, "Lights under the spherical-aberration texture"). 1 where N(r; a) ≤ 0
     (|σ| = 1)."""
-    r0, r1, n = LIGHT_TABLE_R
-    rs = np.linspace(r0, r1, n)
-    _, _, dists, rf, rn, _ = tap_table(int(math.ceil(r1)) + 1, blades, rotation_deg, roundness)
-    rows = []
-    for rho, a in ((rf, -sa), (rn, sa)):
-        for ramp in (1.0, 0.5):
-            rr = rs[:, None] * rho[None, :]
-            t = np.minimum(dists[None, :] / rr, 1.0)
-            cov = np.clip((rr - dists[None, :]) / ramp + 0.5, 0.0, 1.0)
-            na = (cov * (1.0 + a * (2.0 * t * t - 1.0))).sum(axis=1)
-            rows.append(np.where(na > 0, cov.sum(axis=1) / np.where(na > 0, na, 1.0), 1.0))
-    return np.stack(rows)
+    _, sums = _disc_lattice_sums(blades, rotation_deg, roundness, sa, (1.0, 0.5))
+    return np.stack([np.where(na > 0, n0 / np.where(na > 0, na, 1.0), 1.0) for n0, na in sums])
 
 
 def light_sum_at(table: np.ndarray, r: np.ndarray, far: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -106,6 +106,7 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
     shape = (budget, camera.blades, camera.blade_rotation_deg, camera.aperture_roundness)
     tex_plane = bool(defines["DOF_TEXTURE"]) and scale > 1
     dx, dy, dist, rf, rn, ntaps = D.tap_table(*shape)
+    sums = D.light_sums if scale == 1 else D.texture_sums
 
     def const(name, a):
         return rt.constant(a, ("dof_taps", name, shape))
@@ -133,10 +134,10 @@ def _config(rt, owner, tag, defines, camera, w, h, scale, rmax, budget, built=No
         "ntaps": const("ntaps", ntaps),
         # a light tap's lattice sums N₁(r), N_¼(r), far and near (dof.light_sums), one row each; at
         # half resolution (no lights there) the texture's rescale in the same layout (dof.texture_sums)
-        "lsum": (rt.constant(D.light_sums(*shape[1:], camera.spherical_aberration).astype(np.float32),
-                             ("dof_light_sums", shape[1:], camera.spherical_aberration)) if scale == 1 else
-                 rt.constant(D.texture_sums(*shape[1:], camera.spherical_aberration).astype(np.float32),
-                             ("dof_texture_sums", shape[1:], camera.spherical_aberration))),
+        # (a callable: built only when its key is new, not on every re-plan — another frame size or
+        # quality, another Pipeline — of the same aperture)
+        "lsum": rt.constant(lambda: sums(*shape[1:], camera.spherical_aberration).astype(np.float32),
+                            (f"dof_{sums.__name__}", shape[1:], camera.spherical_aberration)),
         # planes per level: R, G, B, CoC, 1/r, and the texture's rescale at half resolution
         # (dof_common.cl's DOF_PLANES, DOF_TEX_PLANE)
         "tex_plane": tex_plane,
@@ -235,8 +236,11 @@ def enqueue_dof(stage, rt, camera, frame, src, dst, aux):
     w, h = frame.width, frame.height
     vec = gather_vector_width(rt)
     defines = {**stage.defines(camera), "DOF_VEC": vec, "DOF_TAIL_ROWS": TAIL_ROWS}
+    # every camera field _config reads (its tables, "aperture" and "field"): the stage object, and
+    # so this cache, outlives a plan — a camera differing only in σ or the cat's eye kept the last
+    # camera's sum table and arguments
     key = (tuple(sorted(defines.items())), w, h, camera.blades, camera.blade_rotation_deg,
-           camera.aperture_roundness)
+           camera.aperture_roundness, camera.spherical_aberration, camera.optical_vignetting)
 
     def make():
         cache = {
