@@ -11,14 +11,26 @@ inline float dof_luma(__global const float *src, const size_t i, const size_t n)
     return DOF_LUMA_R * src[i] + DOF_LUMA_G * src[n + i] + DOF_LUMA_B * src[2 * n + i];
 }
 
+/* the light clause of the rules below: p's near neighbour of luma bright_n is a light above
+ * DOF_SAME_SOURCE x p whose 1 - DOF_FRINGE_STEP share is above own_min (clamped to 0) and that covers
+ * at most DOF_LIGHT_FRINGE of p (sb = bright_n - own_min, pb = lum - own_min); one definition for the
+ * one-pixel and the 16-lane forms (scalar 0/1, vector 0/-1) */
+#define DOF_LIGHT_CLAUSE(lum, bright_n, own_min, sb, pb)                                              \
+    (((bright_n) > DOF_SAME_SOURCE * (lum)) & ((1.0f - DOF_FRINGE_STEP) * (bright_n) > fmax((own_min), 0.0f)) \
+     & ((pb) <= DOF_LIGHT_FRINGE * (sb)))
+/* the light's tail (dof_coc_tail): the light clause where p's own share also holds, and p stands
+ * above DOF_SAME_SOURCE x its surface's third-brightest other pixel hi3 */
+#define DOF_TAIL_TAKE(lum, bright_n, own_min, sb, pb, hi3)                                             \
+    (((sb) > 0.0f) & (2.0f * (pb) * (bright_n) >= (lum) * (sb)) & DOF_LIGHT_CLAUSE(lum, bright_n, own_min, sb, pb) \
+     & ((lum) > DOF_SAME_SOURCE * (hi3)))
+
 /* The fringe rule (effective_depth in clpost/stages/dof.py): p, a mix of a near and a far surface
  * Y_p = a Y_n + (1 - a) Y_f, takes the nearest depth of its 3x3 when the near surface (brightest near
  * neighbour) covers half of p or brings half its light (Y_f: the darkest of p's own surface), or when
  * the near surface (darkest near neighbour) covers half of p (Y_f: the brightest of p's own surface);
  * either only when that near surface is brighter (darker) than every other pixel of p's own surface
  * by more than 1 - DOF_FRINGE_STEP (other_min/other_max: p's own surface without p) or, the bright
- * one, is a light above DOF_SAME_SOURCE x p whose 1 - DOF_FRINGE_STEP share is above own_min (clamped
- * to 0) and that covers at most DOF_LIGHT_FRINGE of p (an own pixel as bright is that light's twin).
+ * one, is a light for p (DOF_LIGHT_CLAUSE; an own pixel as bright is that light's twin).
  * Both tests without a division; `span > 0` also rejects "no near neighbour" (+-inf). Returns 2 when
  * the bright hypothesis takes the nearest depth, 1 when only the dark one does, 0 when neither. */
 inline int dof_fringe_take(const float lum, const float bright_n, const float dark_n, const float other_min,
@@ -29,8 +41,7 @@ inline int dof_fringe_take(const float lum, const float bright_n, const float da
     const float sd = own_max - dark_n, pd = own_max - lum;
     if (sb > 0.0f && (2.0f * pb >= sb || 2.0f * pb * bright_n >= lum * sb)
         && (DOF_FRINGE_STEP * bright_n > other_max
-            || (bright_n > DOF_SAME_SOURCE * lum && (1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f)
-                && pb <= DOF_LIGHT_FRINGE * sb)))
+            || DOF_LIGHT_CLAUSE(lum, bright_n, own_min, sb, pb)))
         return 2;
     return sd > 0.0f && 2.0f * pd >= sd && dark_n < DOF_FRINGE_STEP * other_min;
 }
@@ -307,9 +318,7 @@ __kernel void dof_coc(__global const float *restrict src, __global const float *
             const float16 sd = own_max - dark_n, pd = own_max - lum;
             const int16 take_b = (sb > 0.0f) & ((2.0f * pb >= sb) | (2.0f * pb * bright_n >= lum * sb))
                                  & ((DOF_FRINGE_STEP * bright_n > other_max)
-                                    | ((bright_n > DOF_SAME_SOURCE * lum)
-                                       & ((1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f))
-                                       & (pb <= DOF_LIGHT_FRINGE * sb)));
+                                    | DOF_LIGHT_CLAUSE(lum, bright_n, own_min, sb, pb));
             const int16 take_d = (sd > 0.0f) & (2.0f * pd >= sd) & (dark_n < DOF_FRINGE_STEP * other_min);
             s = select(d, nearest, take_b | take_d);
             /* bit l: lane l moved by the bright hypothesis; bit 16 + l: moved at all */
@@ -383,9 +392,7 @@ inline float dof_tail_px(__global const float *src, __global const float *depth,
             }
         }
     const float sb = bright_n - own_min, pb = lum - own_min;
-    const int take = sb > 0.0f && 2.0f * pb * bright_n >= lum * sb && bright_n > DOF_SAME_SOURCE * lum
-                     && (1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f) && pb <= DOF_LIGHT_FRINGE * sb
-                     && lum > DOF_SAME_SOURCE * hi3;
+    const int take = DOF_TAIL_TAKE(lum, bright_n, own_min, sb, pb, hi3);
     return take ? nearest : d;
 #undef DOF_E1B
 }
@@ -464,10 +471,7 @@ __kernel void dof_coc_tail(__global const float *restrict src, __global const fl
                     hi = select(fmax(hi, lq), hi, near);
                 }
             const float16 sb = bright_n - own_min, pb = lum - own_min;
-            const int16 take = keep & (sb > 0.0f) & (2.0f * pb * bright_n >= lum * sb)
-                               & (bright_n > DOF_SAME_SOURCE * lum)
-                               & ((1.0f - DOF_FRINGE_STEP) * bright_n > fmax(own_min, 0.0f))
-                               & (pb <= DOF_LIGHT_FRINGE * sb) & (lum > DOF_SAME_SOURCE * hi3);
+            const int16 take = keep & DOF_TAIL_TAKE(lum, bright_n, own_min, sb, pb, hi3);
 #undef DOF_TAIL_E16
             if (any(take)) {
                 const float16 inv_s = select(1.0f / nearest, (float16)(0.0f), isinf(nearest));
