@@ -172,6 +172,8 @@ class Plan:
         (:attr:`clpost.runtime.Runtime.discrete`). Tests set it on a CPU device."""
         self.in_flight = 2
         """At most this many submitted frames in flight (:meth:`submit`)."""
+        self.closed = False
+        """Whether :meth:`close` was called (``run`` and ``submit`` then refuse frames)."""
         self.last_host_ms = 0.0
         """CPU time of the calling thread in the last :meth:`run` (host work: planning checks,
         tables, argument setting, enqueueing; the device's threads and waits are not in it)."""
@@ -315,6 +317,7 @@ class Plan:
         Returns a new Frame whose color is the camera's output."""
         t0 = time.thread_time()
         try:
+            self._check_open("run")
             return self._run(frame, self.camera if camera is None else camera, out)
         finally:
             self.last_host_ms = (time.thread_time() - t0) * 1e3
@@ -359,6 +362,7 @@ class Plan:
         :class:`~clpost.errors.InputError` before anything is enqueued."""
         t0 = time.thread_time()
         try:
+            self._check_open("submit")
             cam = self.camera if camera is None else camera
             if not (self.pipelined and self.stages):
                 from .stream import PendingFrame
@@ -372,6 +376,28 @@ class Plan:
         """Wait for every frame :meth:`submit` has in flight."""
         if self.buffers is not None and self.buffers.stream is not None:
             self.buffers.stream.drain()
+
+    def close(self) -> None:
+        """Wait for every frame in flight, then stop the thread that downloads submitted frames
+        (:meth:`clpost.stream.Stream.close`); ``run`` and ``submit`` then refuse frames with one
+        :class:`~clpost.errors.InputError` line. Idempotent; ``with plan:`` closes at the end
+        of the block. The pipeline's other plans of this size share the stream: their next
+        ``submit`` starts the thread again. Without it the thread ends with the plan's buffers
+        or the interpreter (a daemon, never waited for at exit)."""
+        self.closed = True
+        if self.buffers is not None and self.buffers.stream is not None:
+            self.buffers.stream.close()
+
+    def __enter__(self) -> "Plan":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _check_open(self, call: str) -> None:
+        if self.closed:
+            raise InputError(f"Plan.{call}: this plan was closed (Plan.close or Pipeline.close); "
+                             "get a new one from Pipeline.plan_for")
 
     def _submit(self, frame: Frame, cam, out: np.ndarray | None):
         import pyopencl as cl
