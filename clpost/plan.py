@@ -243,26 +243,37 @@ class Plan:
             return self.buffers.color_out
         return self._scratch(("color_out", size), (size[1], size[0], 3))
 
-    def arg_values(self, stage: PointwiseStage, cam, frame: Frame, upload=None) -> list:
+    def arg_values(self, stage: PointwiseStage, cam, frame: Frame, upload=None, events=None) -> list:
         """The kernel arguments of a pointwise stage for this frame: scalars as they are, host
         arrays in device buffers (a read-only array that is the same object as last time is not
-        copied again — a stage's static table). ``upload(buffer, host)``: how a table is copied
-        (:meth:`_enqueue_nodes`'s, which does not block); default a blocking copy on the queue."""
+        copied again — a stage's static table), a :class:`~clpost.stages.base.DeviceTable` filled
+        on the device when its key changes (its launches' events added to ``events``).
+        ``upload(buffer, host)``: how a table is copied (:meth:`_enqueue_nodes`'s, which does not
+        block); default a blocking copy on the queue."""
         import pyopencl as cl
+
+        from .stages.base import DeviceTable
 
         if upload is None:
             def upload(buf, host):
-                cl.enqueue_copy(self.runtime.queue, buf, host, is_blocking=True)
+                return cl.enqueue_copy(self.runtime.queue, buf, host, is_blocking=True)
         bufs, vals = self.buffers, []
         for (cl_type, arg), v in zip(stage.args, stage.values(cam, frame)):
             if "*" in cl_type:
-                a = np.ascontiguousarray(v)
+                a = v if isinstance(v, DeviceTable) else np.ascontiguousarray(v)
                 key = (stage.name, arg)
                 buf = bufs.args.get(key)
                 if buf is None or buf.size != max(a.nbytes, 4):
                     buf = bufs.args[key] = self.runtime.empty(a.shape, a.dtype)
                     bufs.uploaded.pop(key, None)
-                if not (bufs.uploaded.get(key) is a and not a.flags.writeable):
+                if isinstance(a, DeviceTable):
+                    last = bufs.uploaded.get(key)
+                    if not (isinstance(last, DeviceTable) and last.key == a.key):
+                        evs = a.fill(self.runtime, buf, upload)
+                        if events is not None:
+                            events += evs
+                        bufs.uploaded[key] = a
+                elif not (bufs.uploaded.get(key) is a and not a.flags.writeable):
                     # copied without blocking: a table the stage might change later goes as a copy
                     upload(buf, a if not a.flags.writeable else a.copy())
                     bufs.uploaded[key] = a
@@ -541,6 +552,7 @@ class Plan:
             that read its buffer; not blocking (its event keeps ``host`` alive)."""
             ev = upload(buf, host) if upload is not None else cl.enqueue_copy(q, buf, host, is_blocking=False)
             events.append(("upload", ev))
+            return ev
         src, planar_k = bufs.color_in, 0
         size, host_out, aux = self.size, {}, bufs.aux
         view = frame  # the frame as the next stage sees it: resampling stages change its size
@@ -580,7 +592,7 @@ class Plan:
                     args = [src, dst, np.int32(w), np.int32(h)]
                     args += [aux[b] for b in AUX_BUFFERS if any(b in s.reads for s in node.stages)]
                     for s in node.stages:
-                        args += self.arg_values(s, cam, view, table)
+                        args += self.arg_values(s, cam, view, table, events)
                     self._set_changed(node, args, patched)
                     node.key = key
                     # the tables in the buffers (shared by the pipeline's plans of this size) now
