@@ -5,7 +5,9 @@ kernels do.
 How a submitted frame flows (``docs/architecture.md``, "Frames in flight"):
 
 1. **upload queue**: the frame's host arrays (colour, and depth/velocity where a stage reads
-   them) → this frame's *slot*: device staging buffers of its own;
+   them) → this frame's *slot*: device staging buffers of its own; so do the host arrays the
+   stages copy mid-frame (a table a focus pull changes, a gather stage's uploads), each copied
+   device-to-device into its plan buffer on the compute queue once its upload is done;
 2. **compute queue** (the runtime's, in order, as :meth:`Plan.run` uses it): the slot's buffers
    copied device-to-device into the plan's fixed input buffers (each copy waits for its upload's
    event), the plan's launches, the output (and a resampling stage's depth/velocity, through
@@ -13,6 +15,8 @@ How a submitted frame flows (``docs/architecture.md``, "Frames in flight"):
 3. **download thread** (:meth:`Stream.download`), on the download queue: the slot's copies → the
    frame's ``out`` and fresh host arrays, each waiting for its copy's event — a thread, so that
    a driver that downloads into pageable memory synchronously blocks it and not the caller.
+   :meth:`Stream.close` (``Plan.close``) ends it; it is a daemon with a finalizer, so neither a
+   forgotten close nor a frame that never completes holds the interpreter's exit.
 
 Why the device-to-device copies: every command that reads or writes a buffer the plan's launches
 use stays on the one in-order compute queue, so frames cannot race on them, and the gather
