@@ -227,15 +227,22 @@ class Vignetting(PointwiseStage):
         r_max = self._r_max(camera)
 
         def fill(rt, buf, upload):
-            from ..runtime import kernel_source
+            from ..runtime import kernel_source, private_kernel
 
             radius = rt.constant(lambda: self._radius_plane(pitch, cx, cy, w, h).astype(np.float32),
                                  key=("vignetting_radius", pitch, cx, cy, w, h))
             lut_buf = rt.scratch(self, "lut", (LUT_SIZE,))
             upload(lut_buf, lut)
-            k = rt.kernel(kernel_source("vignetting_plane"), "vignetting_plane")
-            return [("vignetting_plane", rt.launch(k, (w * h,), None, lut_buf, radius, buf, np.int32(w * h),
-                                                   np.int32(LUT_SIZE), np.float32((LUT_SIZE - 1) / r_max)))]
+            # a kernel object of the stage's own, its arguments set only when the buffers or the
+            # scale change: a focus pull changes the LUT's content, which sets no argument
+            args = (lut_buf, radius, buf, np.int32(w * h), np.int32(LUT_SIZE), np.float32((LUT_SIZE - 1) / r_max))
+            key = tuple(a.int_ptr if hasattr(a, "int_ptr") else a for a in args)
+            have = self.__dict__.get("_plane_kernel")
+            if have is None or have[0] != key:
+                k = private_kernel(rt.kernel(kernel_source("vignetting_plane"), "vignetting_plane"))
+                k.set_args(*args)
+                have = self.__dict__["_plane_kernel"] = (key, k, args)  # args: its buffers kept alive
+            return [("vignetting_plane", rt.launch(have[1], (w * h,), None))]
 
         return (DeviceTable((lut.tobytes(), pitch, cx, cy, w, h, r_max), (h, w), fill),)
 
