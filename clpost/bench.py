@@ -185,7 +185,8 @@ def launch_bytes(stages, camera: Camera, frame: Frame, in_size: tuple[int, int],
     view = frame if frame.size == tuple(in_size) else resized_view(frame, tuple(in_size), {}, "bench")
     for s in stages:  # a pointwise stage's tables (vignetting's per-pixel RI plane, film's LUT)
         if isinstance(s, PointwiseStage):
-            b += sum(np.asarray(v).nbytes for (t, _), v in zip(s.args, s.values(camera, view)) if "*" in t)
+            b += sum(getattr(v, "nbytes", None) or np.asarray(v).nbytes  # a DeviceTable has no array
+                     for (t, _), v in zip(s.args, s.values(camera, view)) if "*" in t)
     return b
 
 

@@ -178,7 +178,7 @@ class Pipeline:
         key = (structure_key(cam), frame.size,
                tuple((s.name, tuple(sorted(s.defines(cam).items()))) for s in planned))
         plan = self._plans.get(key)
-        if plan is None:
+        if plan is None or plan.closed:
             if len(self._plans) >= self.MAX_PLANS:  # a long run over many sizes: drop the oldest
                 self._plans.pop(next(iter(self._plans)))
             bufs = self._buffers if self._buffers is not None and self._buffers.size == frame.size else None
@@ -189,6 +189,23 @@ class Pipeline:
 
     MAX_PLANS = 16
     """Plans kept per pipeline (each holds kernels and, per size, device buffers)."""
+
+    def close(self) -> None:
+        """:meth:`Plan.close` every plan this pipeline made (waits for their submitted frames
+        in flight and stops the download thread) and forget them: a later :meth:`run` or
+        :meth:`plan_for` plans anew. Idempotent; ``with Pipeline(...) as pipe:`` closes at the
+        end of the block."""
+        for plan in self._plans.values():
+            plan.close()
+        self._plans.clear()
+        self._buffers = None
+        self.last_plan = None
+
+    def __enter__(self) -> "Pipeline":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
     def kernels(self, frame: Frame) -> list[str]:
         """The kernel launches of this frame's plan (fused groups joined by ``__``)."""

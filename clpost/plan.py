@@ -172,6 +172,8 @@ class Plan:
         (:attr:`clpost.runtime.Runtime.discrete`). Tests set it on a CPU device."""
         self.in_flight = 2
         """At most this many submitted frames in flight (:meth:`submit`)."""
+        self.closed = False
+        """Whether :meth:`close` was called (``run`` and ``submit`` then refuse frames)."""
         self.last_host_ms = 0.0
         """CPU time of the calling thread in the last :meth:`run` (host work: planning checks,
         tables, argument setting, enqueueing; the device's threads and waits are not in it)."""
@@ -241,23 +243,39 @@ class Plan:
             return self.buffers.color_out
         return self._scratch(("color_out", size), (size[1], size[0], 3))
 
-    def arg_values(self, stage: PointwiseStage, cam, frame: Frame) -> list:
+    def arg_values(self, stage: PointwiseStage, cam, frame: Frame, upload=None, events=None) -> list:
         """The kernel arguments of a pointwise stage for this frame: scalars as they are, host
         arrays in device buffers (a read-only array that is the same object as last time is not
-        copied again — a stage's static table)."""
+        copied again — a stage's static table), a :class:`~clpost.stages.base.DeviceTable` filled
+        on the device when its key changes (its launches' events added to ``events``).
+        ``upload(buffer, host)``: how a table is copied (:meth:`_enqueue_nodes`'s, which does not
+        block); default a blocking copy on the queue."""
         import pyopencl as cl
 
+        from .stages.base import DeviceTable
+
+        if upload is None:
+            def upload(buf, host):
+                return cl.enqueue_copy(self.runtime.queue, buf, host, is_blocking=True)
         bufs, vals = self.buffers, []
         for (cl_type, arg), v in zip(stage.args, stage.values(cam, frame)):
             if "*" in cl_type:
-                a = np.ascontiguousarray(v)
+                a = v if isinstance(v, DeviceTable) else np.ascontiguousarray(v)
                 key = (stage.name, arg)
                 buf = bufs.args.get(key)
                 if buf is None or buf.size != max(a.nbytes, 4):
                     buf = bufs.args[key] = self.runtime.empty(a.shape, a.dtype)
                     bufs.uploaded.pop(key, None)
-                if not (bufs.uploaded.get(key) is a and not a.flags.writeable):
-                    cl.enqueue_copy(self.runtime.queue, buf, a)
+                if isinstance(a, DeviceTable):
+                    last = bufs.uploaded.get(key)
+                    if not (isinstance(last, DeviceTable) and last.key == a.key):
+                        evs = a.fill(self.runtime, buf, upload)
+                        if events is not None:
+                            events += evs
+                        bufs.uploaded[key] = a
+                elif not (bufs.uploaded.get(key) is a and not a.flags.writeable):
+                    # copied without blocking: a table the stage might change later goes as a copy
+                    upload(buf, a if not a.flags.writeable else a.copy())
                     bufs.uploaded[key] = a
                 vals.append(buf)
             else:
@@ -310,6 +328,7 @@ class Plan:
         Returns a new Frame whose color is the camera's output."""
         t0 = time.thread_time()
         try:
+            self._check_open("run")
             return self._run(frame, self.camera if camera is None else camera, out)
         finally:
             self.last_host_ms = (time.thread_time() - t0) * 1e3
@@ -354,6 +373,7 @@ class Plan:
         :class:`~clpost.errors.InputError` before anything is enqueued."""
         t0 = time.thread_time()
         try:
+            self._check_open("submit")
             cam = self.camera if camera is None else camera
             if not (self.pipelined and self.stages):
                 from .stream import PendingFrame
@@ -367,6 +387,28 @@ class Plan:
         """Wait for every frame :meth:`submit` has in flight."""
         if self.buffers is not None and self.buffers.stream is not None:
             self.buffers.stream.drain()
+
+    def close(self) -> None:
+        """Wait for every frame in flight, then stop the thread that downloads submitted frames
+        (:meth:`clpost.stream.Stream.close`); ``run`` and ``submit`` then refuse frames with one
+        :class:`~clpost.errors.InputError` line. Idempotent; ``with plan:`` closes at the end
+        of the block. The pipeline's other plans of this size share the stream: their next
+        ``submit`` starts the thread again. Without it the thread ends with the plan's buffers
+        or the interpreter (a daemon, never waited for at exit)."""
+        self.closed = True
+        if self.buffers is not None and self.buffers.stream is not None:
+            self.buffers.stream.close()
+
+    def __enter__(self) -> "Plan":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _check_open(self, call: str) -> None:
+        if self.closed:
+            raise InputError(f"Plan.{call}: this plan was closed (Plan.close or Pipeline.close); "
+                             "get a new one from Pipeline.plan_for")
 
     def _submit(self, frame: Frame, cam, out: np.ndarray | None):
         import pyopencl as cl
@@ -397,6 +439,23 @@ class Plan:
             copies.append((host, staging, ev))
             return ev
 
+        uploads: list = []  # ("upload", event) of the tables and arrays the stages copy mid-frame
+        staged_in: set = set()
+
+        def upload(buf, host: np.ndarray):
+            """A host array a stage copies to the device mid-frame (a changed table: a focus pull's
+            vignetting; a gather stage's uploads): on the upload queue into the slot's own staging
+            buffer, then device-to-device into ``buf`` on the compute queue once that upload is
+            done — after the earlier frames' launches that read ``buf``, and waiting for no other
+            frame's upload."""
+            staging = slot.table(rt, len(uploads), host.nbytes)
+            up = cl.enqueue_copy(uq, staging, host, is_blocking=False)
+            uq.flush()  # the compute queue waits for it: submit it to the device now
+            uploads.append(("upload", up))
+            ev = cl.enqueue_copy(q, buf, staging, byte_count=host.nbytes, wait_for=[up])
+            staged_in.add(id(ev))
+            return ev
+
         try:
             events = [("upload", cl.enqueue_copy(uq, slot.input(rt, n, getattr(frame, n)), getattr(frame, n),
                                                  is_blocking=False)) for n in names]
@@ -406,9 +465,11 @@ class Plan:
                 events.append(("stage_in", cl.enqueue_copy(q, dst, slot.inputs[n], wait_for=[up])))
             # a resampling stage's host depth/velocity that a later stage reads back (uploaded again
             # from the host, _upload_aux) must be downloaded in the compute queue's order
-            evs, host_out, size = self._enqueue_launches(frame, cam, None if self._aux_reread else download)
+            evs, host_out, size = self._enqueue_launches(frame, cam, None if self._aux_reread else download, upload)
             staged = {id(ev) for *_, ev in copies}
-            events += [("stage_out" if id(ev) in staged else label, ev) for label, ev in evs]
+            events += uploads
+            events += [("stage_out" if id(ev) in staged else "stage_in" if id(ev) in staged_in else label, ev)
+                       for label, ev in evs]
             download(out, self._color_out(size))
             events.append(("stage_out", copies[-1][2]))
             q.flush()
@@ -450,19 +511,21 @@ class Plan:
             buf = bufs.aux[name] = self.runtime.empty(getattr(frame, name).shape)
         return buf
 
-    def _enqueue_launches(self, frame: Frame, cam, download=None) -> tuple[list, dict, tuple[int, int]]:
+    def _enqueue_launches(self, frame: Frame, cam, download=None, upload=None) -> tuple[list, dict, tuple[int, int]]:
         """Enqueue the plan's launches for one frame on the runtime's queue, reading the frame from
         ``buffers.color_in`` and ``buffers.aux`` (enqueued before) and leaving the image in
         :meth:`_color_out`; per-frame scalars set as kernel arguments (OpenCL takes an argument's
         value when the launch is enqueued, so the next frame may set its own at once). Returns
         [(label, event)], the host buffers of resampling stages (fresh arrays, downloaded
         without blocking: on the queue, or by ``download(host, buffer) -> event``) and the output
-        size."""
+        size. Host arrays the stages copy to the device (a pointwise stage's changed table, a
+        gather stage's uploads) go without blocking: on the queue, or by ``upload(buffer, host)
+        -> event`` (the event on the queue after which the buffer holds them)."""
         same_camera = cam is self._camera_seen or cam == self._camera_seen
         self._camera_seen = cam
         self._events, self._timings = [], {}
         try:
-            return self._enqueue_nodes(frame, cam, same_camera, download)
+            return self._enqueue_nodes(frame, cam, same_camera, download, upload)
         except BaseException:
             self._forget()
             raise
@@ -477,12 +540,19 @@ class Plan:
         for node in self.nodes:
             node.recording, node.args, node.key = None, None, None
 
-    def _enqueue_nodes(self, frame: Frame, cam, same_camera: bool, download) -> tuple[list, dict, tuple[int, int]]:
+    def _enqueue_nodes(self, frame: Frame, cam, same_camera: bool, download, upload) -> tuple[list, dict, tuple[int, int]]:
         import pyopencl as cl
 
         patched = self.last_patched = []
         rt, q, bufs = self.runtime, self.runtime.queue, self.buffers
         events: list = []
+
+        def table(buf, host):
+            """A pointwise stage's changed table, in the queue's order after the launches before
+            that read its buffer; not blocking (its event keeps ``host`` alive)."""
+            ev = upload(buf, host) if upload is not None else cl.enqueue_copy(q, buf, host, is_blocking=False)
+            events.append(("upload", ev))
+            return ev
         src, planar_k = bufs.color_in, 0
         size, host_out, aux = self.size, {}, bufs.aux
         view = frame  # the frame as the next stage sees it: resampling stages change its size
@@ -500,9 +570,9 @@ class Plan:
                 io = (src, dst, *aux.values())
                 if (rec is not None and same_camera and key is not None and key == rec.key and rec.io == io
                         and stage.__dict__.get("_replayed") is rec):
-                    evs, host = rec.replay(q, view, download)
+                    evs, host = rec.replay(q, view, download, upload)
                 else:  # first frame, or what the launches depend on changed: run the stage's code
-                    rec, evs, host = self._record(node, stage, cam, view, src, dst, aux, key, download)
+                    rec, evs, host = self._record(node, stage, cam, view, src, dst, aux, key, download, upload)
                     rec.io = io
                     patched += [(f"{stage.name}[{i}]", j) for i, j in rec.patched]
                 events += evs
@@ -522,7 +592,7 @@ class Plan:
                     args = [src, dst, np.int32(w), np.int32(h)]
                     args += [aux[b] for b in AUX_BUFFERS if any(b in s.reads for s in node.stages)]
                     for s in node.stages:
-                        args += self.arg_values(s, cam, view)
+                        args += self.arg_values(s, cam, view, table, events)
                     self._set_changed(node, args, patched)
                     node.key = key
                     # the tables in the buffers (shared by the pipeline's plans of this size) now
@@ -534,13 +604,14 @@ class Plan:
             src = dst
         return events, host_out, size
 
-    def _record(self, node: _Node, stage: GatherStage, cam, view: Frame, src, dst, aux, key, download=None):
+    def _record(self, node: _Node, stage: GatherStage, cam, view: Frame, src, dst, aux, key, download=None,
+                upload=None):
         """Run a gather stage's code through a :class:`~clpost.runtime_record.Recorder` (its
         commands are enqueued and recorded; the node's previous recording lends its kernel
         objects, so only changed arguments are set); the recording replaces the node's."""
         from .runtime_record import Recorder
 
-        recorder = Recorder(self.runtime, view, key, node.recording, download)
+        recorder = Recorder(self.runtime, view, key, node.recording, download, upload)
         returned = [(stage.name, ev) for ev in stage.enqueue(recorder, cam, view, src, dst, aux)]
         host, evs = stage.enqueue_host_buffers(recorder, cam, view, aux)
         returned += evs

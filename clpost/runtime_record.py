@@ -56,6 +56,12 @@ class Copy:
     frame_src: str | None = None
     fresh: tuple | None = None
 
+    @property
+    def uploads(self) -> bool:
+        """Whether it copies a host array (the frame's, or a stage's table) into a buffer."""
+        return (self.frame_src is not None or isinstance(self.src, np.ndarray)) and isinstance(
+            self.dst, cl.MemoryObjectHolder)
+
     def enqueue(self, queue, frame):
         src = getattr(frame, self.frame_src) if self.frame_src else self.src
         dst = np.empty(*self.fresh) if self.fresh else self.dst
@@ -93,10 +99,11 @@ class Recording:
     patched: list = field(default_factory=list)
     """(command index, argument index) set when this recording was made from the previous one."""
 
-    def replay(self, queue, frame, download=None) -> tuple[list, dict]:
+    def replay(self, queue, frame, download=None, upload=None) -> tuple[list, dict]:
         """Enqueue every command again (``frame``: the frame whose arrays the uploads read);
         returns [(label, event)] and the host buffers. ``download(host, buffer) -> event``: how a
-        download into a fresh host array is enqueued instead of on ``queue`` (``Recorder``'s)."""
+        download into a fresh host array is enqueued instead of on ``queue``; ``upload(buffer,
+        host) -> event``: how a copy of a host array into a buffer is (``Recorder``'s)."""
         events, fresh = [], {}
         for i, (cmd, label) in enumerate(zip(self.commands, self.labels)):
             if type(cmd) is Launch:
@@ -106,6 +113,8 @@ class Recording:
                 dst = np.empty(*cmd.fresh)
                 events.append((label, download(dst, cmd.src)))
                 fresh[i] = dst
+            elif upload is not None and cmd.uploads:
+                events.append((label, upload(cmd.dst, getattr(frame, cmd.frame_src) if cmd.frame_src else cmd.src)))
             else:
                 ev, dst = cmd.enqueue(queue, frame)
                 events.append((label, ev))
@@ -120,12 +129,15 @@ class Recorder:
     ``previous``: the stage's last recording, whose kernel objects are reused where the same
     kernel is launched with the same sizes at the same place. ``download(host, buffer) -> event``:
     how a download into a host array is enqueued instead of on the runtime's queue (recorded the
-    same; :meth:`clpost.plan.Plan.submit` moves a frame's downloads off the compute queue)."""
+    same; :meth:`clpost.plan.Plan.submit` moves a frame's downloads off the compute queue);
+    ``upload(buffer, host) -> event``: likewise for a copy of a host array into a buffer (the
+    returned event is the one after which the buffer holds it)."""
 
-    def __init__(self, rt, frame, key, previous: Recording | None = None, download=None) -> None:
+    def __init__(self, rt, frame, key, previous: Recording | None = None, download=None, upload=None) -> None:
         self.rt = rt
         self.frame = frame
         self._download = download
+        self._upload = upload
         self.recording = Recording(key)
         self._events: list = []
         self._old = previous.commands if previous is not None else []
@@ -180,6 +192,8 @@ class Recorder:
         cmd = Copy(dst, None if name else src, name, fresh)
         if fresh and self._download is not None and isinstance(src, cl.MemoryObjectHolder):
             ev = self._download(dst, src)
+        elif self._upload is not None and isinstance(src, np.ndarray) and isinstance(dst, cl.MemoryObjectHolder):
+            ev = self._upload(dst, src)
         else:
             ev = cl.enqueue_copy(self.rt.queue, dst, src, is_blocking=False)
         self.recording.commands.append(cmd)

@@ -5,7 +5,9 @@ kernels do.
 How a submitted frame flows (``docs/architecture.md``, "Frames in flight"):
 
 1. **upload queue**: the frame's host arrays (colour, and depth/velocity where a stage reads
-   them) → this frame's *slot*: device staging buffers of its own;
+   them) → this frame's *slot*: device staging buffers of its own; so do the host arrays the
+   stages copy mid-frame (a table a focus pull changes, a gather stage's uploads), each copied
+   device-to-device into its plan buffer on the compute queue once its upload is done;
 2. **compute queue** (the runtime's, in order, as :meth:`Plan.run` uses it): the slot's buffers
    copied device-to-device into the plan's fixed input buffers (each copy waits for its upload's
    event), the plan's launches, the output (and a resampling stage's depth/velocity, through
@@ -13,6 +15,8 @@ How a submitted frame flows (``docs/architecture.md``, "Frames in flight"):
 3. **download thread** (:meth:`Stream.download`), on the download queue: the slot's copies → the
    frame's ``out`` and fresh host arrays, each waiting for its copy's event — a thread, so that
    a driver that downloads into pageable memory synchronously blocks it and not the caller.
+   :meth:`Stream.close` (``Plan.close``) ends it; it is a daemon with a finalizer, so neither a
+   forgotten close nor a frame that never completes holds the interpreter's exit.
 
 Why the device-to-device copies: every command that reads or writes a buffer the plan's launches
 use stays on the one in-order compute queue, so frames cannot race on them, and the gather
@@ -27,7 +31,11 @@ at once (:attr:`clpost.runtime.Runtime.discrete`).
 """
 from __future__ import annotations
 
+import threading
+import weakref
+from concurrent.futures import Future
 from dataclasses import dataclass, field
+from queue import SimpleQueue
 
 import numpy as np
 
@@ -95,24 +103,33 @@ class PendingFrame:
 @dataclass
 class Slot:
     """Device staging buffers of one frame in flight: its inputs by name (at the plan's input
-    size) and its downloads (the image, a resampling stage's depth and velocity) by key."""
+    size), the tables and arrays its stages copy to the device mid-frame (``tables``, by their
+    order in the frame) and its downloads (the image, a resampling stage's depth and velocity) by
+    key. A slot's buffers are written only by its own frame, so a frame's upload never
+    overwrites what another frame in flight still reads."""
 
     inputs: dict = field(default_factory=dict)
+    tables: dict = field(default_factory=dict)
     outputs: dict = field(default_factory=dict)
     pending: PendingFrame | None = None
     """The last frame that used this slot (waited for before the slot is used again)."""
 
     def input(self, rt, name: str, host: np.ndarray):
-        buf = self.inputs.get(name)
-        if buf is None or buf.size != max(host.nbytes, 4):
-            buf = self.inputs[name] = rt.empty(host.shape, host.dtype)
-        return buf
+        return _staging(self.inputs, rt, name, host.nbytes)
+
+    def table(self, rt, key, nbytes: int):
+        return _staging(self.tables, rt, key, nbytes)
 
     def output(self, rt, key, nbytes: int):
-        buf = self.outputs.get(key)
-        if buf is None or buf.size != max(nbytes, 4):
-            buf = self.outputs[key] = rt.empty((max(nbytes, 4),), np.uint8)
-        return buf
+        return _staging(self.outputs, rt, key, nbytes)
+
+
+def _staging(buffers: dict, rt, key, nbytes: int):
+    """``buffers[key]``, made anew when missing or of another size."""
+    buf = buffers.get(key)
+    if buf is None or buf.size != max(nbytes, 4):
+        buf = buffers[key] = rt.empty((max(nbytes, 4),), np.uint8)
+    return buf
 
 
 def _download(queue, copies: list) -> list:
@@ -128,12 +145,19 @@ def _download(queue, copies: list) -> list:
 class Stream:
     """The slots of one :class:`clpost.plan.Buffers` (shared by the plans of a pipeline and size,
     which share its device buffers and the compute queue), used round robin, and the thread
-    that enqueues their frames' downloads, in order."""
+    that enqueues their frames' downloads, in order.
+
+    The thread is started by the first download and stopped by :meth:`close` (after the frames in
+    flight complete; a later download starts it again). It is a daemon thread, and a
+    ``weakref.finalize`` stops it when the stream is collected or the interpreter exits, without
+    waiting: a download that never completes (a device that hangs) cannot hold the exit."""
 
     def __init__(self, depth: int) -> None:
         self.slots = [Slot() for _ in range(depth)]
         self.next = 0
-        self._worker = None
+        self._jobs = None
+        self._thread = None
+        self._finalizer = None
 
     def resize(self, depth: int) -> None:
         """``depth`` slots (frames in flight); the frames in flight complete first."""
@@ -153,13 +177,18 @@ class Stream:
         _complete(slot)
         return slot
 
-    def download(self, queue, copies: list):
+    def download(self, queue, copies: list) -> Future:
         """Hand a frame's downloads (:func:`_download`) to the worker thread; their future."""
-        if self._worker is None:
-            from concurrent.futures import ThreadPoolExecutor
-
-            self._worker = ThreadPoolExecutor(1, thread_name_prefix="clpost-download")
-        return self._worker.submit(_download, queue, copies)
+        if self._thread is None:
+            self._jobs = SimpleQueue()
+            self._thread = threading.Thread(target=_serve, args=(self._jobs,), name="clpost-download",
+                                            daemon=True)
+            self._thread.start()
+            # references the queue and thread only (not the stream), so the stream can be collected
+            self._finalizer = weakref.finalize(self, _stop, self._jobs, self._thread, 0.0)
+        future = Future()
+        self._jobs.put((future, _download, (queue, copies)))
+        return future
 
     def commit(self, slot: Slot, pending: PendingFrame) -> None:
         slot.pending = pending
@@ -169,6 +198,39 @@ class Stream:
         """Wait for every frame in flight."""
         for slot in self.slots:
             _complete(slot)
+
+    def close(self) -> None:
+        """Wait for every frame in flight, then stop the download thread and wait for it to end.
+        Idempotent; a later download starts a new thread."""
+        self.drain()
+        if self._thread is not None:
+            self._finalizer.detach()
+            _stop(self._jobs, self._thread, None)
+            self._jobs = self._thread = self._finalizer = None
+
+
+def _serve(jobs: SimpleQueue) -> None:
+    """The download thread: run each (future, function, arguments) of ``jobs`` in order, its
+    result or exception into its future, until a None."""
+    while True:
+        job = jobs.get()
+        if job is None:
+            return
+        future, fn, args = job
+        if not future.set_running_or_notify_cancel():
+            continue
+        try:
+            future.set_result(fn(*args))
+        except BaseException as e:  # the frame's error (its result() raises it), not the thread's end
+            future.set_exception(e)
+
+
+def _stop(jobs: SimpleQueue, thread: threading.Thread, timeout: float | None) -> None:
+    """Ask the download thread to end after the downloads handed to it; wait ``timeout`` s for it
+    (None: until it ends; 0: not at all — the finalizer's, at exit)."""
+    jobs.put(None)
+    if timeout != 0.0 and thread is not threading.current_thread():
+        thread.join(timeout)
 
 
 def _complete(slot: Slot) -> None:

@@ -1,7 +1,7 @@
 /* vignetting: multiply by the relative illumination RI at the pixel.
  *
- * ri is a plane of W x H factors built once per curve, principal point and size on the host
- * (clpost/stages/vignetting.py, Vignetting.ri_plane: RI(r) at the pixel's image height r in mm
+ * ri is a plane of W x H factors built once per curve, principal point and size on the device
+ * (kernels/vignetting_plane.cl; clpost/stages/vignetting.py, Vignetting.values: RI(r) at the pixel's image height r in mm
  * from the principal point; cos^4 theta of the thin lens, a lens's traced curve or a
  * manufacturer table). One contiguous load per pixel: PoCL does not vectorise data-dependent
  * loads, so a per-pixel LUT lookup here would cost more than the rest of the stage

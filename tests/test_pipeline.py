@@ -298,8 +298,9 @@ def test_sixteen_pixel_vector_path_equals_the_one_pixel_path(rng, w, layouts, gr
 
 
 def test_static_tables_are_uploaded_once_and_changed_ones_again(rng, monkeypatch):
-    """vignetting's per-pixel RI plane is read-only and cached: the second frame does not copy it
-    again; a camera with another curve (focus moves the exit pupil) uploads its new plane."""
+    """vignetting's per-pixel RI plane is built on the device from the LUT and kept: the second
+    frame copies neither again; a camera with another curve (focus moves the exit pupil)
+    uploads its new LUT — not a plane: no host pass over the pixels — and the image follows it."""
     import pyopencl as cl
 
     frame = odd_frame(rng, w=37, h=23)
@@ -315,12 +316,13 @@ def test_static_tables_are_uploaded_once_and_changed_ones_again(rng, monkeypatch
 
     monkeypatch.setattr(cl, "enqueue_copy", spy)
     first = pipe.run(frame).color
-    assert plane_bytes not in copies  # colour in/out (37·23·12 bytes) only
+    lut_bytes = 1024 * 4  # vignetting.LUT_SIZE float32
+    assert plane_bytes not in copies and lut_bytes not in copies  # colour in/out (37·23·12 bytes) only
     pipe2 = Pipeline(Camera(luminance_scale=1.0, vignetting="natural", focus_distance_m=0.3), stages=["vignetting", "exposure"])
     pipe2._buffers = pipe._buffers  # same device buffers, new curve
     copies.clear()
     second = pipe2.run(frame).color
-    assert plane_bytes in copies and not np.array_equal(first, second)
+    assert lut_bytes in copies and plane_bytes not in copies and not np.array_equal(first, second)
     assert_planned(pipe2, frame, "vignetting", "exposure")
     np.testing.assert_allclose(second, pipe2.reference(frame), rtol=2e-5)
 

@@ -382,3 +382,129 @@ def test_an_interrupted_wait_keeps_the_frame_in_flight(rng, monkeypatch):
     monkeypatch.setattr(concurrent.futures.Future, "result", result)
     np.testing.assert_array_equal(pending.result().color, want)
     np.testing.assert_array_equal(plan.submit(frame).result().color, want)
+
+
+def _complete_within(events, seconds: float) -> bool:
+    """Whether every event completes within ``seconds`` (polled, so a queue that is held cannot
+    hang the test)."""
+    import time
+
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if all(ev.command_execution_status == cl.command_execution_status.COMPLETE for ev in events):
+            return True
+        time.sleep(0.01)
+    return False
+
+
+@pytest.mark.parametrize("in_flight", [2, 3])
+def test_a_focus_pull_uploads_each_frames_tables_beside_a_busy_compute_queue(worst, in_flight):
+    """A focus pull changes vignetting's table every frame (the exit pupil moves). With the
+    compute queue held, ``in_flight`` frames of the pull are submitted without waiting for it
+    (their table uploads go on the upload queue, not blocking on the compute queue) and all their
+    uploads complete before any kernel runs; still each frame reads its own table — bit for bit
+    Plan.run's. A staging buffer shared between slots would hand the earlier frames the last
+    one's table; a table copied on the compute queue would block the submits."""
+    import threading
+
+    plan, frame, cam = worst
+    cams = [cam.with_(focus_distance_m=f) for f in (1.2, 2.5, 5.0)[:in_flight]]
+    frames = _frames(frame, in_flight)
+    plan.pipelined = False
+    want, tables = [], []
+    for f, c in zip(frames, cams):
+        want.append(plan.run(f, c))
+        tables.append(plan.buffers.uploaded[("vignetting", "ri")].key)  # built from the frame's LUT
+    assert all(a != b for a, b in zip(tables, tables[1:]))  # a new table each frame
+    rt = plan.runtime
+    up = rt.transfer_queues()[0].int_ptr
+    hold = cl.UserEvent(rt.context)
+    plan.pipelined, plan.in_flight = True, in_flight
+    pending: list = []
+    t = threading.Thread(target=lambda: pending.extend(plan.submit(f, c) for f, c in zip(frames, cams)))
+    try:
+        cl.enqueue_barrier(rt.queue, wait_for=[hold])
+        t.start()
+        t.join(60)
+        submitted = not t.is_alive()
+        if submitted:
+            uploads = [ev for p in pending for label, ev in p._events if label == "upload"]
+            assert {ev.get_info(cl.event_info.COMMAND_QUEUE).int_ptr for ev in uploads} == {up}
+            assert _complete_within(uploads, 30)  # while the compute queue still holds every frame
+            assert not any(p.done() for p in pending)
+    finally:
+        hold.set_status(cl.command_execution_status.COMPLETE)
+        t.join(60)
+        plan.pipelined = False
+    assert submitted, "a submit waited for the compute queue (a table copied on it, blocking)"
+    for w, p in zip(want, pending):
+        g = p.result()
+        np.testing.assert_array_equal(g.color, w.color)
+        np.testing.assert_array_equal(g.depth, w.depth)
+    assert all(slot.tables for slot in plan.buffers.stream.slots)  # each slot staged its frame's tables
+
+
+def test_close_ends_the_download_thread_and_a_closed_plan_refuses_frames(rng):
+    """``with pipeline:`` (Pipeline.close → Plan.close) waits for the frames in flight and ends
+    the download thread; the closed plan's run and submit are one InputError line each; the
+    pipeline plans anew afterwards, and a plan dropped without close ends its thread too (the
+    stream's finalizer)."""
+    import threading
+
+    frame = scene(rng, w=64, h=24)
+    cam = Camera(f_number=2.0, depth_of_field=True, blades=6, focus_distance_m=0.8)
+    frames = _frames(frame, 3)
+    with Pipeline(cam, quality="draft") as pipe:
+        plan = pipe.plan_for(frame)
+        want = [plan.run(f).color for f in frames]
+        plan.pipelined = True
+        pending = [plan.submit(f) for f in frames]
+        thread = plan.buffers.stream._thread
+        assert thread in threading.enumerate()
+    assert thread not in threading.enumerate() and plan.closed
+    assert all(p.done() for p in pending)
+    for p, w in zip(pending, want):
+        np.testing.assert_array_equal(p.result().color, w)
+    for call in (plan.submit, plan.run):
+        with pytest.raises(InputError, match="closed .*Pipeline.plan_for") as err:
+            call(frame)
+        assert "\n" not in str(err.value)
+    plan.close()  # idempotent
+    again = pipe.plan_for(frame)
+    assert again is not plan and not again.closed
+    again.pipelined = True
+    np.testing.assert_array_equal(again.submit(frames[1]).result().color, want[1])
+    thread = again.buffers.stream._thread
+    assert thread.is_alive()
+    del again, pipe, plan, pending
+    gc.collect()
+    thread.join(10)
+    assert not thread.is_alive()
+
+
+def test_the_interpreter_exits_with_a_download_that_never_completes(tmp_path):
+    """A frame whose download never ends (here the download function waits forever; a device
+    that hangs does the same to the download thread) must not hold the interpreter's exit: the
+    download thread is a daemon, not joined at exit. (With a thread pool it hung.)"""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = tmp_path / "hang.py"
+    script.write_text(
+        "import threading\n"
+        "import numpy as np\n"
+        "import clpost.stream as stream\n"
+        "from clpost import Camera, Frame, Pipeline\n"
+        "stream._download = lambda queue, copies: threading.Event().wait()\n"
+        "rng = np.random.default_rng(1)\n"
+        "frame = Frame(rng.uniform(0, 1, (24, 64, 3)).astype(np.float32), depth=np.full((24, 64), 2.0, np.float32))\n"
+        "plan = Pipeline(Camera(f_number=2.0, depth_of_field=True, focus_distance_m=0.8), quality='draft').plan_for(frame)\n"
+        "plan.pipelined = True\n"
+        "pending = plan.submit(frame)\n"
+        "assert not pending.done()\n"
+        "print('submitted', flush=True)\n")
+    root = Path(__file__).resolve().parents[1]
+    run = subprocess.run([sys.executable, str(script)], cwd=root, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "submitted" in run.stdout

@@ -117,3 +117,30 @@ def test_wide_open_flagship_vignettes_more_than_stopped_down(rng):
 def test_bad_mode_is_refused():
     with pytest.raises(InputError, match="natural"):
         Camera(luminance_scale=1.0, vignetting="cos4")
+
+
+def test_a_focus_pull_builds_each_frames_plane_on_the_device(rng):
+    """The RI plane is built on the device from the LUT (a focus pull changes the LUT every
+    frame): what the kernel reads equals the host's float64 interpolation (``ri_plane``) to
+    float32 rounding, for each focus of a pull run through one plan, and the host makes no
+    plane (the stage's host-plane cache stays empty)."""
+    import pyopencl as cl
+
+    w, h = 61, 37
+    frame = Frame(rng.uniform(0.1, 1.0, (h, w, 3)).astype(np.float32))
+    cam = Camera(luminance_scale=1.0, lens="thin:20", f_number=2.0, vignetting="natural")
+    plan = Pipeline(cam, stages=["vignetting"]).plan_for(frame)
+    stage = plan.stages[0]
+    planes = []
+    for focus in (0.3, 0.6, 4.0):
+        c = cam.with_(focus_distance_m=focus)
+        out = plan.run(frame, c).color
+        assert stage._plane == (None, None)  # no per-frame pass over the pixels on the host
+        got = np.empty((h, w), np.float32)
+        cl.enqueue_copy(plan.runtime.queue, got, plan.buffers.args[("vignetting", "ri")], is_blocking=True)
+        want = stage.ri_plane(c, frame)
+        stage._plane = (None, None)
+        np.testing.assert_allclose(got, want, rtol=0, atol=2e-6)
+        np.testing.assert_allclose(out, plan.reference(frame, c), rtol=2e-5)
+        planes.append(got)
+    assert all(np.max(np.abs(a - b)) > 1e-3 for a, b in zip(planes, planes[1:]))  # the pull changes the plane

@@ -7,7 +7,13 @@ frames — uploads
 and downloads overlapping other frames' kernels (``clpost.stream``). On a CPU device the three
 are the same (submit runs each frame at once; ``--force-pipelined`` runs the GPU path there, to
 check it); on a discrete GPU the pinned form copies at the bus's rate. Median of ``--repeats``
-after warm-up.
+after warm-up. ``--focus-pull``: each submitted frame has its own focus distance (a pull over
+``FOCUS_PULL_M``), so the stages' per-frame tables change every frame. The "host ms" columns are
+the submitting thread's CPU time per ``submit`` (``Plan.last_host_ms``, median): per-frame host
+work, which should not grow with the frame's pixels (compare two ``--size``s).
+
+    python tools/end_to_end.py --force-pipelined --focus-pull --size 480x270 --scenes worst,full \
+        --qualities draft --in-flight 2
 
     python tools/end_to_end.py --device nvidia --scenes worst,no_defocus,full --qualities draft,final
 """
@@ -47,26 +53,33 @@ def _wall(plan, frame, cam, repeats: int, out=None) -> float:
     return statistics.median(times)
 
 
-def _pipelined(plan, inputs: list, cam, repeats: int, frames: int, outs: list) -> float:
-    """Wall ms per frame of ``frames`` frames through ``Plan.submit`` (median of ``repeats``
-    runs): frame k is ``inputs[k % len(inputs)]`` into ``outs[k % len(outs)]``, its result taken
-    when ``len(outs) - 1`` later frames are in flight (then its ``out`` is used again)."""
+FOCUS_PULL_M = (0.5, 0.7, 1.0, 1.5, 2.5, 4.0)
+"""``--focus-pull``'s focus distances, frame k taking ``FOCUS_PULL_M[k % 6]``."""
+
+
+def _pipelined(plan, inputs: list, cams: list, repeats: int, frames: int, outs: list) -> tuple[float, float]:
+    """(wall ms per frame, median host ms per submit) of ``frames`` frames through
+    ``Plan.submit`` (median of ``repeats`` runs): frame k is ``inputs[k % len(inputs)]`` with
+    ``cams[k % len(cams)]`` into ``outs[k % len(outs)]``, its result taken when ``len(outs) - 1``
+    later frames are in flight (then its ``out`` is used again)."""
     from collections import deque
 
     depth = len(outs) - 1
-    times = []
+    times, host = [], []
     for i in range(repeats + 1):
         t0 = time.perf_counter()
         pending: deque = deque()
         for k in range(frames):
             if len(pending) >= depth:
                 pending.popleft().result()
-            pending.append(plan.submit(inputs[k % len(inputs)], cam, out=outs[k % len(outs)]))
+            pending.append(plan.submit(inputs[k % len(inputs)], cams[k % len(cams)], out=outs[k % len(outs)]))
+            if i >= 1:
+                host.append(plan.last_host_ms)
         while pending:
             pending.popleft().result()
         if i >= 1:
             times.append((time.perf_counter() - t0) * 1e3 / frames)
-    return statistics.median(times)
+    return statistics.median(times), statistics.median(host)
 
 
 def main(argv=None) -> int:
@@ -82,12 +95,14 @@ def main(argv=None) -> int:
                     help="Plan.in_flight of the pipelined runs, comma-separated: a column each")
     ap.add_argument("--force-pipelined", action="store_true",
                     help="pipeline on a CPU device too (a check of the GPU path, not a speed-up)")
+    ap.add_argument("--focus-pull", action="store_true",
+                    help="each frame its own focus distance (FOCUS_PULL_M): per-frame tables change")
     a = ap.parse_args(argv)
     w, h = (int(v) for v in a.size.split("x"))
     depths = [int(v) for v in a.in_flight.split(",")]
     print("| scene | quality | pageable ms | fps | pinned ms | fps |"
-          + "".join(f" pipelined, {d} in flight, ms | fps |" for d in depths)
-          + "\n|---|---|---:|---:|---:|---:|" + "---:|---:|" * len(depths))
+          + "".join(f" pipelined, {d} in flight, ms | fps | host ms |" for d in depths)
+          + "\n|---|---|---:|---:|---:|---:|" + "---:|---:|---:|" * len(depths))
     bad = []
     for name in a.scenes.split(","):
         scene = SCENES[name]
@@ -104,6 +119,7 @@ def main(argv=None) -> int:
             pinned = _wall(plan, pf, rcam, a.repeats, out=out)
             # two different frames alternate in the pipelined runs, so a mix-up between frames shows
             inputs = [pf, _pinned_frame(pipe.runtime, frame.replace(color=frame.color[::-1].copy()))]
+            cams = [rcam.with_(focus_distance_m=f) for f in FOCUS_PULL_M] if a.focus_pull else [rcam]
             plan.pipelined = plan.pipelined or a.force_pipelined
             row = f"| {name} | {q} | {plain:.2f} | {1e3 / plain:.0f} | {pinned:.2f} | {1e3 / pinned:.0f} |"
             for d in depths:
@@ -111,14 +127,15 @@ def main(argv=None) -> int:
                 outs = [out] + [pipe.runtime.pinned_empty((oh, ow, 3)) for _ in range(d)]
                 for o in outs:  # what the check below compares must be pipelined frames'
                     o.fill(np.nan)
-                piped = _pipelined(plan, inputs, rcam, a.repeats, a.frames, outs)
+                piped, host = _pipelined(plan, inputs, cams, a.repeats, a.frames, outs)
                 # each out holds the last frame that used it: a frame given another's image fails
-                want = [plan.run(f, rcam).color for f in inputs]
                 last = {k % len(outs): k for k in range(a.frames)}
-                if not all(np.array_equal(outs[j], want[k % len(inputs)]) for j, k in last.items()):
+                if not all(np.array_equal(outs[j], plan.run(inputs[k % len(inputs)], cams[k % len(cams)]).color)
+                           for j, k in last.items()):
                     bad.append(f"{name} {q} ({d} in flight)")
-                row += f" {piped:.2f} | {1e3 / piped:.0f} |"
+                row += f" {piped:.2f} | {1e3 / piped:.0f} | {host:.2f} |"
             print(row, flush=True)
+            pipe.close()  # the frames in flight and the download thread end with the row
     if bad:
         print(f"pipelined frames differ from Plan.run's: {', '.join(bad)}", file=sys.stderr)
         return 1

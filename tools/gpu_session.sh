@@ -21,6 +21,7 @@ if python3 -c "import pytest" 2>/dev/null; then
     CLPOST_DEVICE=nvidia step 90 submit_tests python3 -m pytest -q -x -p no:cacheprovider tests/test_plan_submit.py
 fi
 step 150 end_to_end python3 -W ignore tools/end_to_end.py --device nvidia
+step 90 end_to_end_pull python3 -W ignore tools/end_to_end.py --device nvidia --focus-pull --scenes worst,full --qualities draft
 step 90 bench_gpu python3 -W ignore -c "$C" $B --device nvidia --repeats 7
 step 100 device_vs_device python3 -W ignore tools/device_vs_device.py
 step 120 bench_pocl python3 -W ignore -c "$C" $B --device pocl --repeats 5

@@ -77,6 +77,27 @@ QUALITIES = ("draft", "preview", "final")
 """Quality levels; each stage documents what they change (sample counts, resolution)."""
 
 
+class DeviceTable:
+    """A pointwise stage's table argument that the device builds from small host inputs, which
+    :meth:`PointwiseStage.values` returns in place of a host array when the table is big and
+    changes with a per-frame scalar (vignetting's W×H plane, interpolated from a LUT that a focus
+    pull changes every frame): the plan enqueues ``fill(rt, buffer, upload) -> [(label, event)]``
+    into the argument's buffer — on the compute queue, in order — only when ``key`` (what
+    determines the content) changes, so a frame's host work is the small inputs, not a pass over
+    the pixels. ``fill`` copies its host inputs with ``upload(buffer, host) -> event`` (the plan's:
+    not blocking; :meth:`clpost.plan.Plan.submit` stages them per frame in flight)."""
+
+    def __init__(self, key, shape: tuple[int, ...], fill, dtype=np.float32) -> None:
+        self.key = key
+        self.shape = tuple(int(v) for v in shape)
+        self.dtype = np.dtype(dtype)
+        self.fill = fill
+
+    @property
+    def nbytes(self) -> int:
+        return int(np.prod(self.shape)) * self.dtype.itemsize
+
+
 def per_camera(method):
     """Memoise a stage method ``method(self, camera, *args)`` per camera value and arguments (the
     last 8, on the stage): LUTs sampled from a camera's curves are plan-time work, not per-frame

@@ -27,8 +27,8 @@ Other sources of RI(r) (all normalised to 1 on the axis):
 The curve is sampled on the host into a LUT of ``LUT_SIZE`` entries over
 :math:`[0, \sqrt{w^2 + h^2}]` of the sensor (twice the half diagonal, so an off-centre principal
 point stays inside), interpolated linearly (max error < 1e-5 for cos⁴ of a 12 mm lens) at every
-pixel's image height once per curve and size (:meth:`Vignetting.ri_plane`); the kernel multiplies
-by that plane. Fused with exposure (both linear, pointwise).
+pixel's image height once per curve and size — on the device (``kernels/vignetting_plane.cl``;
+:meth:`Vignetting.ri_plane` is its host form); the kernel multiplies by that plane. Fused with exposure (both linear, pointwise).
 
 Default: ``off`` (opt-in). A real camera always vignettes, but turning it on by default would
 change every existing output and plan (exposure-only plans, metered levels); ``--vignetting
@@ -49,7 +49,7 @@ import numpy as np
 from ..errors import InputError
 from ..params import param
 from . import _field as fld
-from .base import PointwiseStage, per_camera
+from .base import DeviceTable, PointwiseStage, per_camera
 
 
 def _check_mode(name, v):
@@ -200,10 +200,8 @@ class Vignetting(PointwiseStage):
 
     def ri_plane(self, camera, frame) -> np.ndarray:
         """RI at every pixel (float32 (h, w), read-only): the LUT interpolated in float64 at the
-        pixel's image height. Built once per curve, principal point and size and uploaded once
-        (the pipeline does not re-copy an unchanged read-only table); the kernel reads one float
-        per pixel — PoCL cannot vectorise data-dependent loads, so a per-pixel LUT lookup in the
-        kernel would be most of the stage's cost (docs/measurements.md#kernel-forms-on-pocl)."""
+        pixel's image height — the host form of the plane :meth:`values` has the device build
+        (tests compare the two)."""
         lut = self._lut(camera)
         pitch, cx, cy = field_geometry(camera, frame)
         w, h = frame.size
@@ -217,7 +215,36 @@ class Vignetting(PointwiseStage):
         return self._plane[1]
 
     def values(self, camera, frame):
-        return (self.ri_plane(camera, frame),)
+        """The RI plane as a :class:`~clpost.stages.base.DeviceTable`: built on the device
+        (``kernels/vignetting_plane.cl``) once per curve, principal point and size — a focus pull
+        changes the curve every frame, and interpolating a 1080p plane on the host took ≈ 20 ms of
+        the frame's host time. The apply kernel reads one float per pixel: PoCL cannot vectorise
+        data-dependent loads, so a per-pixel LUT lookup there would be most of the stage's cost
+        (docs/measurements.md#kernel-forms-on-pocl)."""
+        lut = self._lut(camera)
+        pitch, cx, cy = field_geometry(camera, frame)
+        w, h = frame.size
+        r_max = self._r_max(camera)
+
+        def fill(rt, buf, upload):
+            from ..runtime import kernel_source, private_kernel
+
+            radius = rt.constant(lambda: self._radius_plane(pitch, cx, cy, w, h).astype(np.float32),
+                                 key=("vignetting_radius", pitch, cx, cy, w, h))
+            lut_buf = rt.scratch(self, "lut", (LUT_SIZE,))
+            upload(lut_buf, lut)
+            # a kernel object of the stage's own, its arguments set only when the buffers or the
+            # scale change: a focus pull changes the LUT's content, which sets no argument
+            args = (lut_buf, radius, buf, np.int32(w * h), np.int32(LUT_SIZE), np.float32((LUT_SIZE - 1) / r_max))
+            key = tuple(a.int_ptr if hasattr(a, "int_ptr") else a for a in args)
+            have = self.__dict__.get("_plane_kernel")
+            if have is None or have[0] != key:
+                k = private_kernel(rt.kernel(kernel_source("vignetting_plane"), "vignetting_plane"))
+                k.set_args(*args)
+                have = self.__dict__["_plane_kernel"] = (key, k, args)  # args: its buffers kept alive
+            return [("vignetting_plane", rt.launch(have[1], (w * h,), None))]
+
+        return (DeviceTable((lut.tobytes(), pitch, cx, cy, w, h, r_max), (h, w), fill),)
 
     def reference(self, camera, frame, color):
         color = np.asarray(color, np.float64)
