@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import mmap
 import os
 import threading
 import weakref
@@ -450,9 +451,51 @@ class Runtime:
                                        tuple(shape), dtype, is_blocking=True)
         return arr
 
+    @functools.cached_property
+    def huge_pages(self) -> bool:
+        """Whether :meth:`empty` backs its large buffers with transparent huge pages: PoCL's CPU
+        device (its buffers are host memory, and a ``USE_HOST_PTR`` buffer is the host array
+        itself) on Linux, unless ``CLPOST_HUGE_PAGES=0``. Why: PoCL allocates buffers in 4 KiB
+        pages, and every gather and row pass here walks several planes of tens of MB at once;
+        on the project's (virtualised) 2-core box the page walks cost the worst final plan
+        about as much as its arithmetic — the same kernels on the same data in 2 MiB pages ran
+        ×1.8–2.5 faster, bit for bit the same output (docs/benchmarks.md, "Huge pages for the
+        CPU device's buffers")."""
+        if os.environ.get("CLPOST_HUGE_PAGES", "1") == "0" or not hasattr(mmap, "MADV_HUGEPAGE"):
+            return False
+        return bool(self.device.type & cl.device_type.CPU) and "Portable Computing Language" in self.device.platform.name
+
     def empty(self, shape: tuple[int, ...], dtype=np.float32) -> "cl.Buffer":
         nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        if nbytes >= HUGE_PAGE and self.huge_pages:
+            host = huge_page_array(nbytes)
+            if host is not None:  # pyopencl keeps a reference to it for the buffer's life
+                return cl.Buffer(self.context, cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR,
+                                 hostbuf=host[:nbytes])
         return cl.Buffer(self.context, cl.mem_flags.READ_WRITE, size=max(nbytes, 4))
+
+
+HUGE_PAGE = 2 << 20
+"""Bytes of an x86-64 transparent huge page; :meth:`Runtime.empty` backs buffers of at least this
+with them (:attr:`Runtime.huge_pages`)."""
+
+
+def huge_page_array(nbytes: int) -> np.ndarray | None:
+    """``nbytes`` (rounded up to whole huge pages) of zeroed anonymous memory as a uint8 array,
+    aligned to :data:`HUGE_PAGE` and advised for transparent huge pages (``MADV_HUGEPAGE``: the
+    kernel's default THP mode, ``madvise``, gives them only to advised memory); None where the
+    mapping or the advice fails (the caller falls back to a plain buffer). Pages are faulted in
+    by their first use, as PoCL's own allocations are; where no huge page is free the kernel
+    gives 4 KiB ones, as before."""
+    size = -(-nbytes // HUGE_PAGE) * HUGE_PAGE
+    try:
+        m = mmap.mmap(-1, size + HUGE_PAGE, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+        m.madvise(mmap.MADV_HUGEPAGE)
+    except (OSError, ValueError, AttributeError):
+        return None
+    whole = np.frombuffer(m, np.uint8)  # holds the mapping while any view of it lives
+    off = (-whole.ctypes.data) % HUGE_PAGE
+    return whole[off:off + size]
 
 
 _runtimes: dict[int, Runtime] = {}
