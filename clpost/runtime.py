@@ -257,7 +257,9 @@ class Runtime:
     - :meth:`program` / :meth:`kernel` / :meth:`kernels`: programs built once per (source,
       defines); ``cl.Kernel`` objects cached per (program, kernel name) and thread — a kernel
       object holds its arguments, so two threads never share one;
-    - :meth:`constant`: a read-only buffer uploaded once per content key;
+    - :meth:`empty`: a device buffer (on PoCL's CPU device in transparent huge pages from
+      2 MiB on, :attr:`huge_pages`); :meth:`constant`: a read-only buffer uploaded once per
+      content key;
     - :meth:`scratch`: a work buffer per (owner, name), reused across frames while its shape and
       dtype stay the same; :meth:`cached`: a plan-time object per (owner, name) rebuilt only when
       its structural key changes;
@@ -455,15 +457,20 @@ class Runtime:
     def huge_pages(self) -> bool:
         """Whether :meth:`empty` backs its large buffers with transparent huge pages: PoCL's CPU
         device (its buffers are host memory, and a ``USE_HOST_PTR`` buffer is the host array
-        itself) on Linux, unless ``CLPOST_HUGE_PAGES=0``. Why: PoCL allocates buffers in 4 KiB
-        pages, and every gather and row pass here walks several planes of tens of MB at once;
-        on the project's (virtualised) 2-core box the page walks cost the worst final plan
-        about as much as its arithmetic — the same kernels on the same data in 2 MiB pages ran
-        ×1.8–2.5 faster, bit for bit the same output (docs/benchmarks.md, "Huge pages for the
-        CPU device's buffers")."""
+        itself) on Linux with 2 MiB huge pages, unless ``CLPOST_HUGE_PAGES=0``. Why: PoCL
+        allocates buffers in 4 KiB pages, and every gather and row pass here walks several
+        planes of tens of MB at once, so a tap's loads touch dozens of pages; on the project's
+        (virtualised) 2-core box the page walks cost the plans a large part of their time. Same
+        kernels, same output bits (docs/benchmarks.md, "Huge pages for the CPU device's
+        buffers"; ``tools/ab_kernel.py --pages`` measures it)."""
         if os.environ.get("CLPOST_HUGE_PAGES", "1") == "0" or not hasattr(mmap, "MADV_HUGEPAGE"):
             return False
-        return bool(self.device.type & cl.device_type.CPU) and "Portable Computing Language" in self.device.platform.name
+        try:  # the kernel's huge page size: 2 MiB on x86-64 (other sizes: plain buffers)
+            pmd = int(Path("/sys/kernel/mm/transparent_hugepage/hpage_pmd_size").read_text())
+        except (OSError, ValueError):
+            return False
+        return (pmd == HUGE_PAGE and bool(self.device.type & cl.device_type.CPU)
+                and "Portable Computing Language" in self.device.platform.name)
 
     def empty(self, shape: tuple[int, ...], dtype=np.float32) -> "cl.Buffer":
         nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
@@ -477,7 +484,7 @@ class Runtime:
 
 HUGE_PAGE = 2 << 20
 """Bytes of an x86-64 transparent huge page; :meth:`Runtime.empty` backs buffers of at least this
-with them (:attr:`Runtime.huge_pages`)."""
+with them where the kernel's page size is this (:attr:`Runtime.huge_pages`)."""
 
 
 def huge_page_array(nbytes: int) -> np.ndarray | None:
