@@ -476,10 +476,26 @@ class Runtime:
         nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
         if nbytes >= HUGE_PAGE and self.huge_pages:
             host = huge_page_array(nbytes)
-            if host is not None:  # pyopencl keeps a reference to it for the buffer's life
-                return cl.Buffer(self.context, cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR,
-                                 hostbuf=host[:nbytes])
+            if host is not None:
+                buf = _HostBuffer(self.context, cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR,
+                                  hostbuf=host[:nbytes])
+                # the memory is the buffer's: freed only after every command queued before the
+                # buffer's release has run (pyopencl drops its reference with the buffer object)
+                weakref.finalize(buf, _finish_queues, self, host).atexit = False
+                return buf
         return cl.Buffer(self.context, cl.mem_flags.READ_WRITE, size=max(nbytes, 4))
+
+
+class _HostBuffer(cl.Buffer):
+    """A ``USE_HOST_PTR`` buffer of :meth:`Runtime.empty` (a Python subclass: it takes weak
+    references, for the finalizer that keeps its memory until the queues are done with it)."""
+
+
+def _finish_queues(rt: Runtime, host) -> None:
+    """A huge-page buffer's finalizer: wait for the runtime's queues; ``host`` (its memory) is
+    freed when this returns."""
+    for q in (rt.queue, *(rt._transfer or ())):
+        q.finish()
 
 
 HUGE_PAGE = 2 << 20

@@ -151,6 +151,16 @@ def test_large_buffers_on_pocl_live_in_huge_page_aligned_host_memory(monkeypatch
     cl.enqueue_copy(rt.queue, buf, host, is_blocking=True)
     cl.enqueue_copy(rt.queue, out, buf, is_blocking=True)
     np.testing.assert_array_equal(out, host)
+    # the memory outlives the buffer object until the queue has run what was queued on it
+    import gc
+    import weakref
+    host_ref = weakref.ref(buf.hostbuf.base)
+    rt.launch(rt.kernel(_SRC, "fill"), (n,), (64,), buf, np.int32(n), np.float32(3.0))
+    del buf
+    gc.collect()
+    rt.queue.finish()
+    gc.collect()
+    assert host_ref() is None
     monkeypatch.setenv("CLPOST_HUGE_PAGES", "0")
     plain = Runtime(rt.device)
     assert not plain.huge_pages and not plain.empty((n,)).flags & cl.mem_flags.USE_HOST_PTR
