@@ -141,6 +141,9 @@ def main() -> None:
     ap.add_argument("--kernel", help="kernel name to compare (with --old)")
     ap.add_argument("--old-args", type=int, help="the old kernel takes the first N recorded arguments")
     ap.add_argument("--old-global", help="the old kernel's global size (comma-separated), PoCL's groups")
+    ap.add_argument("--out-arg", type=int, default=1,
+                    help="index of the kernel's output argument, compared between old and new (default 1: "
+                         "distortion's gathers; astigmatism's gathers: 6)")
     ap.add_argument("--pages", action="store_true",
                     help="the plan's buffers in 4 KiB pages (old) against huge pages (new), every kernel")
     a = ap.parse_args()
@@ -189,7 +192,8 @@ def main() -> None:
               else (g, loc)}
     outs = {}
     t = collections.defaultdict(list)
-    out_buf = args[1] if isinstance(args[1], cl.Buffer) else None  # the output of the gathers here
+    out = args[a.out_arg]
+    out_buf = out if isinstance(out, cl.Buffer) else None  # the kernel's output (--out-arg)
     if out_buf is not None:  # as recorded, put back after the compared first runs
         recorded = np.empty(out_buf.size, np.uint8)
         cl.enqueue_copy(q, recorded, out_buf).wait()
@@ -212,7 +216,7 @@ def main() -> None:
           f"old median {statistics.median(t['old']):.2f} min {min(t['old']):.2f} ms | new median "
           f"{statistics.median(t['new']):.2f} min {min(t['new']):.2f} ms | old/new {statistics.median(ratios):.3f} "
           f"({min(ratios):.2f}-{max(ratios):.2f}), min/min {min(t['old']) / min(t['new']):.3f}"
-          + (f" | second argument bit-equal: {np.array_equal(outs['old'], outs['new'])}" if outs else ""))
+          + (f" | argument {a.out_arg} bit-equal: {np.array_equal(outs['old'], outs['new'])}" if outs else ""))
 
 
 if __name__ == "__main__":
