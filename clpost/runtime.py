@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import mmap
 import os
 import threading
 import weakref
@@ -256,7 +257,9 @@ class Runtime:
     - :meth:`program` / :meth:`kernel` / :meth:`kernels`: programs built once per (source,
       defines); ``cl.Kernel`` objects cached per (program, kernel name) and thread — a kernel
       object holds its arguments, so two threads never share one;
-    - :meth:`constant`: a read-only buffer uploaded once per content key;
+    - :meth:`empty`: a device buffer (on PoCL's CPU device in transparent huge pages from
+      2 MiB on, :attr:`huge_pages`); :meth:`constant`: a read-only buffer uploaded once per
+      content key;
     - :meth:`scratch`: a work buffer per (owner, name), reused across frames while its shape and
       dtype stay the same; :meth:`cached`: a plan-time object per (owner, name) rebuilt only when
       its structural key changes;
@@ -450,9 +453,72 @@ class Runtime:
                                        tuple(shape), dtype, is_blocking=True)
         return arr
 
+    @functools.cached_property
+    def huge_pages(self) -> bool:
+        """Whether :meth:`empty` backs its large buffers with transparent huge pages: PoCL's CPU
+        device (its buffers are host memory, and a ``USE_HOST_PTR`` buffer is the host array
+        itself) on Linux with 2 MiB huge pages, unless ``CLPOST_HUGE_PAGES=0``. Why: PoCL
+        allocates buffers in 4 KiB pages, and every gather and row pass here walks several
+        planes of tens of MB at once, so a tap's loads touch dozens of pages; on the project's
+        (virtualised) 2-core box the page walks cost the plans a large part of their time. Same
+        kernels, same output bits (docs/benchmarks.md, "Huge pages for the CPU device's
+        buffers"; ``tools/ab_kernel.py --pages`` measures it)."""
+        if os.environ.get("CLPOST_HUGE_PAGES", "1") == "0" or not hasattr(mmap, "MADV_HUGEPAGE"):
+            return False
+        try:  # the kernel's huge page size: 2 MiB on x86-64 (other sizes: plain buffers)
+            pmd = int(Path("/sys/kernel/mm/transparent_hugepage/hpage_pmd_size").read_text())
+        except (OSError, ValueError):
+            return False
+        return (pmd == HUGE_PAGE and bool(self.device.type & cl.device_type.CPU)
+                and "Portable Computing Language" in self.device.platform.name)
+
     def empty(self, shape: tuple[int, ...], dtype=np.float32) -> "cl.Buffer":
         nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        if nbytes >= HUGE_PAGE and self.huge_pages:
+            host = huge_page_array(nbytes)
+            if host is not None:
+                buf = _HostBuffer(self.context, cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR,
+                                  hostbuf=host[:nbytes])
+                # the memory is the buffer's: freed only after every command queued before the
+                # buffer's release has run (pyopencl drops its reference with the buffer object)
+                weakref.finalize(buf, _finish_queues, self, host).atexit = False
+                return buf
         return cl.Buffer(self.context, cl.mem_flags.READ_WRITE, size=max(nbytes, 4))
+
+
+class _HostBuffer(cl.Buffer):
+    """A ``USE_HOST_PTR`` buffer of :meth:`Runtime.empty` (a Python subclass: it takes weak
+    references, for the finalizer that keeps its memory until the queues are done with it)."""
+
+
+def _finish_queues(rt: Runtime, host) -> None:
+    """A huge-page buffer's finalizer: wait for the runtime's queues; ``host`` (its memory) is
+    freed when this returns."""
+    for q in (rt.queue, *(rt._transfer or ())):
+        q.finish()
+
+
+HUGE_PAGE = 2 << 20
+"""Bytes of an x86-64 transparent huge page; :meth:`Runtime.empty` backs buffers of at least this
+with them where the kernel's page size is this (:attr:`Runtime.huge_pages`)."""
+
+
+def huge_page_array(nbytes: int) -> np.ndarray | None:
+    """``nbytes`` (rounded up to whole huge pages) of zeroed anonymous memory as a uint8 array,
+    aligned to :data:`HUGE_PAGE` and advised for transparent huge pages (``MADV_HUGEPAGE``: the
+    kernel's default THP mode, ``madvise``, gives them only to advised memory); None where the
+    mapping or the advice fails (the caller falls back to a plain buffer). Pages are faulted in
+    by their first use, as PoCL's own allocations are; where no huge page is free the kernel
+    gives 4 KiB ones, as before."""
+    size = -(-nbytes // HUGE_PAGE) * HUGE_PAGE
+    try:
+        m = mmap.mmap(-1, size + HUGE_PAGE, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+        m.madvise(mmap.MADV_HUGEPAGE)
+    except (OSError, ValueError, AttributeError):
+        return None
+    whole = np.frombuffer(m, np.uint8)  # holds the mapping while any view of it lives
+    off = (-whole.ctypes.data) % HUGE_PAGE
+    return whole[off:off + size]
 
 
 _runtimes: dict[int, Runtime] = {}

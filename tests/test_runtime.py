@@ -123,3 +123,44 @@ def test_launch_rounds_global_size_to_whole_work_groups():
     np.testing.assert_array_equal(out, 2.0 + np.arange(n))
     from clpost.runtime import round_up
     assert round_up(37, 8) == 40 and round_up(40, 8) == 40
+
+
+def test_large_buffers_on_pocl_live_in_huge_page_aligned_host_memory(monkeypatch):
+    """Runtime.empty on PoCL's CPU device: buffers of at least a huge page are USE_HOST_PTR
+    buffers on 2 MiB-aligned, MADV_HUGEPAGE memory of exactly the asked size, and a kernel and a
+    round trip see the same data as in a plain buffer; CLPOST_HUGE_PAGES=0 (read by each new
+    runtime) and small buffers keep plain ones."""
+    import numpy as np
+    import pyopencl as cl
+
+    from clpost.runtime import HUGE_PAGE, Runtime
+
+    rt = get_runtime()
+    if not rt.huge_pages:
+        pytest.skip(f"not PoCL's CPU device: {rt.name}")
+    n = HUGE_PAGE // 4 + 37  # not a whole number of huge pages
+    buf = rt.empty((n,))
+    assert buf.flags & cl.mem_flags.USE_HOST_PTR and buf.size == 4 * n
+    assert buf.hostbuf.ctypes.data % HUGE_PAGE == 0
+    assert not rt.empty((1000,)).flags & cl.mem_flags.USE_HOST_PTR
+    ev = rt.launch(rt.kernel(_SRC, "fill"), (n,), (64,), buf, np.int32(n), np.float32(2.0))
+    out = np.empty(n, np.float32)
+    cl.enqueue_copy(rt.queue, out, buf, wait_for=[ev], is_blocking=True)
+    np.testing.assert_array_equal(out, 2.0 + np.arange(n, dtype=np.float32))
+    host = np.random.default_rng(0).random(n, dtype=np.float32)
+    cl.enqueue_copy(rt.queue, buf, host, is_blocking=True)
+    cl.enqueue_copy(rt.queue, out, buf, is_blocking=True)
+    np.testing.assert_array_equal(out, host)
+    # the memory outlives the buffer object until the queue has run what was queued on it
+    import gc
+    import weakref
+    host_ref = weakref.ref(buf.hostbuf.base)
+    rt.launch(rt.kernel(_SRC, "fill"), (n,), (64,), buf, np.int32(n), np.float32(3.0))
+    del buf
+    gc.collect()
+    rt.queue.finish()
+    gc.collect()
+    assert host_ref() is None
+    monkeypatch.setenv("CLPOST_HUGE_PAGES", "0")
+    plain = Runtime(rt.device)
+    assert not plain.huge_pages and not plain.empty((n,)).flags & cl.mem_flags.USE_HOST_PTR

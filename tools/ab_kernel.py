@@ -23,6 +23,13 @@ final, third pass"):
 
     PYTHONPATH=. python tools/ab_kernel.py --old 2418b09 --kernel distortion_bspline_tiles \
         --old-args 9 --old-global 16,8148 --repeats 21
+
+``--pages`` compares the buffers' pages instead of a kernel: the plan recorded twice, its buffers
+in PoCL's own 4 KiB pages ("old") and in huge pages (``Runtime.huge_pages``, "new"), both run
+alternating, every kernel's old/new, and the two plans' outputs compared (docs/benchmarks.md,
+"Huge pages for the CPU device's buffers"):
+
+    PYTHONPATH=. python tools/ab_kernel.py --pages --scene worst --quality final --repeats 9
 """
 from __future__ import annotations
 
@@ -39,9 +46,11 @@ from clpost.bench import SCENES, synthetic_frame
 from clpost.runtime import event_ms
 
 
-def record_plan(scene: str, quality: str, size: tuple[int, int], stages: list[str] | None = None):
+def record_plan(scene: str, quality: str, size: tuple[int, int], stages: list[str] | None = None,
+                outputs: list | None = None):
     """A warmed-up plan (the scene's stages, or ``stages`` alone) and a function running it once:
-    [(kernel, queue, global, local, args, event)]."""
+    [(kernel, queue, global, local, args, event)]; each run's output arrays (colour and the
+    frame's aux planes) are appended to ``outputs`` when given."""
     calls, args = [], {}
     enqueue, set_args, set_arg = cl.enqueue_nd_range_kernel, cl.Kernel.set_args, cl.Kernel.set_arg
 
@@ -70,13 +79,55 @@ def record_plan(scene: str, quality: str, size: tuple[int, int], stages: list[st
 
     def run_once():
         calls.clear()
-        pipe.run(frame)
+        out = pipe.run(frame)
+        if outputs is not None:
+            outputs.append([np.array(out.color)] + [np.array(getattr(out, n)) for n in ("depth", "velocity")
+                                                     if getattr(out, n, None) is not None])
         for c in calls:
             c[-1].wait()
         return list(calls)
 
     return run_once, lambda: (setattr(cl, "enqueue_nd_range_kernel", enqueue),
                               setattr(cl.Kernel, "set_args", set_args), setattr(cl.Kernel, "set_arg", set_arg))
+
+
+def compare_pages(a) -> None:
+    """--pages: the scene's plan with 4 KiB-page buffers against huge-page ones, in one process."""
+    from clpost.runtime import get_runtime
+
+    rt = get_runtime()
+    if not rt.huge_pages:
+        raise SystemExit(f"ab_kernel: --pages needs PoCL's CPU device with huge pages on, not {rt.name}")
+    size = tuple(int(v) for v in a.size.split("x"))
+    stages = a.stages.split(",") if a.stages else None
+    runs, outs, restores = {}, {}, []
+    for v, huge in (("old", False), ("new", True)):
+        rt.__dict__["huge_pages"] = huge  # the cached property, for the buffers this plan makes
+        # the second recording wraps the first's hooks: each run records its own plan's launches
+        runs[v], restore = record_plan(a.scene, a.quality, size, stages, outs.setdefault(v, []))
+        restores.append(restore)
+    rt.__dict__["huge_pages"] = True
+    t = {v: collections.defaultdict(list) for v in runs}
+    for r in range(a.repeats):
+        for v in (("old", "new") if r % 2 else ("new", "old")):
+            per = collections.Counter()
+            for k, _q, _g, _loc, _args, ev in runs[v]():
+                per[k.function_name] += event_ms(ev)
+            for name, ms in per.items():
+                t[v][name].append(ms)
+            t[v]["(all kernels)"].append(sum(per.values()))
+    print(f"{a.scene} {a.quality} {a.size}, {a.repeats} repeats alternating: kernel, 4 KiB pages (old) | huge "
+          "pages (new), median and min ms; old/new as the median of per-repeat ratios, and min/min")
+    for name, old in t["old"].items():
+        new = t["new"][name]
+        ratios = [o / n for o, n in zip(old, new) if n > 0] or [float("nan")]
+        print(f"  {name:36s} {statistics.median(old):8.2f} {min(old):8.2f} | {statistics.median(new):8.2f} "
+              f"{min(new):8.2f} | {statistics.median(ratios):5.2f} ({min(ratios):.2f}-{max(ratios):.2f}) "
+              f"{min(old) / max(min(new), 1e-9):5.2f}")
+    for restore in restores[::-1]:
+        restore()
+    same = all(np.array_equal(x, y) for x, y in zip(outs["old"][-1], outs["new"][-1]))
+    print(f"  outputs of the last runs (colour and aux) bit-equal: {same}")
 
 
 def main() -> None:
@@ -90,7 +141,14 @@ def main() -> None:
     ap.add_argument("--kernel", help="kernel name to compare (with --old)")
     ap.add_argument("--old-args", type=int, help="the old kernel takes the first N recorded arguments")
     ap.add_argument("--old-global", help="the old kernel's global size (comma-separated), PoCL's groups")
+    ap.add_argument("--out-arg", type=int, default=1,
+                    help="index of the kernel's output argument, compared between old and new (default 1: "
+                         "distortion's gathers; astigmatism's gathers: 6)")
+    ap.add_argument("--pages", action="store_true",
+                    help="the plan's buffers in 4 KiB pages (old) against huge pages (new), every kernel")
     a = ap.parse_args()
+    if a.pages:
+        return compare_pages(a)
     size = tuple(int(v) for v in a.size.split("x"))
     run_once, restore = record_plan(a.scene, a.quality, size, a.stages.split(",") if a.stages else None)
     if not a.old:
@@ -134,7 +192,8 @@ def main() -> None:
               else (g, loc)}
     outs = {}
     t = collections.defaultdict(list)
-    out_buf = args[1] if isinstance(args[1], cl.Buffer) else None  # the output of the gathers here
+    out = args[a.out_arg]
+    out_buf = out if isinstance(out, cl.Buffer) else None  # the kernel's output (--out-arg)
     if out_buf is not None:  # as recorded, put back after the compared first runs
         recorded = np.empty(out_buf.size, np.uint8)
         cl.enqueue_copy(q, recorded, out_buf).wait()
@@ -157,7 +216,7 @@ def main() -> None:
           f"old median {statistics.median(t['old']):.2f} min {min(t['old']):.2f} ms | new median "
           f"{statistics.median(t['new']):.2f} min {min(t['new']):.2f} ms | old/new {statistics.median(ratios):.3f} "
           f"({min(ratios):.2f}-{max(ratios):.2f}), min/min {min(t['old']) / min(t['new']):.3f}"
-          + (f" | second argument bit-equal: {np.array_equal(outs['old'], outs['new'])}" if outs else ""))
+          + (f" | argument {a.out_arg} bit-equal: {np.array_equal(outs['old'], outs['new'])}" if outs else ""))
 
 
 if __name__ == "__main__":
