@@ -75,18 +75,6 @@ inline CLP_F CLP_FN(motion_blur_cylinder)(const CLP_F dist, const CLP_F len) {
     return 1.0f - t * t * (3.0f - 2.0f * t);
 }
 
-/* floor(v) as an integer, for |v| < 2^24: truncate, then step down where that rounded up (v < 0 and
- * not an integer). The same integer as convert_int(floor(v)), in four vector operations where
- * PoCL expands floor to a dozen (no rounding instruction): the tap positions' rounding */
-inline CLP_I CLP_FN(motion_blur_floor)(const CLP_F v) {
-    const CLP_I t = CLP_TO_I(v);
-#if CLP_W == 1
-    return t - (v < (float)t ? 1 : 0);
-#else
-    return t + (v < convert_float16(t));   /* a true lane compares as -1 */
-#endif
-}
-
 /* Taps per pixel from the length of v_N (its tile's neighbour max; <= K, so no int overflow): the
  * S strata of the path 2|v_N| are 2|v_N|/S px apart, so more than 2 ceil(DENSITY |v_N|) + 1 of them
  * only resample the same pixels. Odd, at most cap (the frame's, motion_blur_budget). */
@@ -169,8 +157,10 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
         const CLP_F tt = 2.0f * u - 1.0f; \
         const CLP_F ox = dx * tt; \
         const CLP_F oy = dy * tt; \
-        const CLP_I sx = clamp(CLP_FN(motion_blur_floor)(xf + ox + 0.5f), 0, width - 1); \
-        const CLP_I sy = clamp(CLP_FN(motion_blur_floor)(yf + oy + 0.5f), 0, height - 1); \
+        /* the nearest pixel, floor(p + 1/2) clamped to the image, as truncation: the same for p + 1/2 >= 0, \
+         * and every p + 1/2 < 0 clamps to 0 either way (PoCL expands floor() to a dozen operations) */ \
+        const CLP_I sx = clamp(CLP_TO_I(xf + ox + 0.5f), 0, width - 1); \
+        const CLP_I sy = clamp(CLP_TO_I(yf + oy + 0.5f), 0, height - 1); \
         const CLP_I k = sy * width + sx; \
         const CLP_F ddx = CLP_TO_F(sx - xs), ddy = CLP_TO_F(sy - y); \
         const CLP_F d2 = ddx * ddx + ddy * ddy; \
