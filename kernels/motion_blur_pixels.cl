@@ -157,8 +157,10 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
         const CLP_F tt = 2.0f * u - 1.0f; \
         const CLP_F ox = dx * tt; \
         const CLP_F oy = dy * tt; \
-        const CLP_I sx = clamp(CLP_TO_I(floor(xf + ox + 0.5f)), 0, width - 1); \
-        const CLP_I sy = clamp(CLP_TO_I(floor(yf + oy + 0.5f)), 0, height - 1); \
+        /* the nearest pixel, floor(p + 1/2) clamped to the image, as truncation: the same for p + 1/2 >= 0, \
+         * and every p + 1/2 < 0 clamps to 0 either way (PoCL expands floor() to a dozen operations) */ \
+        const CLP_I sx = clamp(CLP_TO_I(xf + ox + 0.5f), 0, width - 1); \
+        const CLP_I sy = clamp(CLP_TO_I(yf + oy + 0.5f), 0, height - 1); \
         const CLP_I k = sy * width + sx; \
         const CLP_F ddx = CLP_TO_F(sx - xs), ddy = CLP_TO_F(sy - y); \
         const CLP_F d2 = ddx * ddx + ddy * ddy; \
@@ -170,7 +172,7 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
         /* soft depth test: f = Y in front of X, b = X in front of Y (1 when nearer or equal, 0 when \
          * farther by more than MOTION_BLUR_SOFT_Z relative); one division for the three per-tap \
          * quotients (depth test, 1/|h_Y|, 1/max(d, 1)^2) */ \
-        const CLP_F zden = MOTION_BLUR_SOFT_Z * fmax(wx0, wy); \
+        const CLP_F zden = MOTION_BLUR_SOFT_Z * (wy > wx0 ? wy : wx0);   /* fmax(wx0, wy): wx0 is never NaN */ \
         const CLP_F md2 = fmax(d2, 1.0f); \
         const CLP_F lm = ly * md2; \
         const CLP_F q = 1.0f / (zden * lm); \
@@ -189,8 +191,8 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
         /* a surface in front reaches X only along its own motion line, give or take its footprint \
          * and a spinning object's spread of directions: |d x e_Y| (e_Y = h_Y / |h_Y|) within LINE +- 1/2 px */ \
         const CLP_F line = clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * eyy - ddy * eyx) * (1.0f / MOTION_BLUR_DIR), 0.0f, 1.0f); \
-        const CLP_F af0 = line * f * (1.0f - own) * a * (agree + (1.0f - agree) * (odd ? 0.0f : 2.0f)); \
-        const CLP_F ao0 = f * own * a * (agree + (1.0f - agree) * (odd ? 2.0f : 0.0f)); \
+        const CLP_F af0 = line * f * (1.0f - own) * a * (odd ? agree : agree2); \
+        const CLP_F ao0 = f * own * a * (odd ? agree2 : agree); \
         const CLP_F aa0 = clx * clx * (odd ? kav : kan);   /* ao0 if Y were X (f = b = 1) */ \
         const CLP_F ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx * ((zden * ly) * q); \
         const CLP_I tap = (TAP);   /* pixels past their own S or at their centre: nothing */ \
@@ -283,7 +285,10 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
      * the share co / ca of X's path (the taps' rounding cancels), per tap cyl(d, |h_X|)^2 times: */
     CLP_F ca = wc;
     const CLP_F rlx = 1.0f / lx;
-    const CLP_F kan = hdn * agree * rlx, kav = hdv * (agree + (1.0f - agree) * 2.0f) * rlx;
+    /* a set's weight where the sets split: agree + (1 - agree) 2 on the set that carries the layer,
+     * agree (+ (1 - agree) 0, exactly) on the other */
+    const CLP_F agree2 = agree + (1.0f - agree) * 2.0f;
+    const CLP_F kan = hdn * agree * rlx, kav = hdv * agree2 * rlx;
     CLP_F sfr = 0.0f, sfg = 0.0f, sfb = 0.0f;
     CLP_F sor = cxr * wc, sog = cxg * wc, sob = cxb * wc;
     CLP_F sbr = cxr * wb, sbg = cxg * wb, sbb = cxb * wb;
