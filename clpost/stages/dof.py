@@ -147,8 +147,8 @@ wide, the disc's variance :math:`v = r^2/4` is made at full resolution: a separa
 (:func:`local_blur`), alone up to v = ½ (r = √2 px) and mixed by variance with the path's
 narrowest blur up to v = 1 (r = 2 px), :math:`b = \mathrm{clamp}(2v - 1, 0, 1)`
 (:func:`half_blend`); effect on the Cycles truths: docs/fidelity.md, "The half-resolution path".
-Small bright lights (:func:`narrow_sources`) are taken out of the half-resolution input and spread
-at full resolution instead (:func:`narrow_layer`): the path's ≈ 3 px soft disc edge saturates
+Small bright lights (:func:`narrow_sources`) are taken out of the half-resolution input and of the
+composite's 3×3 blur, and spread at full resolution instead (:func:`narrow_layer`): the path's ≈ 3 px soft disc edge saturates
 around a 100× lamp; an in-focus one's excess leaves the input too and stays with the 3×3 blur
 (:data:`NARROW_FOCUS_PX`: the levels' tent spread it over the blurred background beside it)
 (docs/fidelity.md, "The narrow-source layer").
@@ -1350,8 +1350,9 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     A working pixel P (not within 2 of the working image's edge) is a candidate block when its
     luminance is above :data:`NARROW_RATIO` × that of the third brightest of its working
     neighbours at distance 2 (:data:`NARROW_RING`; its colour is the surround's, bg). Each
-    full-resolution pixel q of the block with every |CoC| of its 3×3 ≥ :data:`NARROW_MIN_PX` has
-    the excess :math:`e_q = \max(c_q - bg, 0)` (per channel) and is a source when
+    full-resolution pixel q of the block with :math:`|r_q| >` :data:`NARROW_FOCUS_PX` and no pixel
+    of its 3×3 nearer than it by more than :data:`FRONT_MARGIN_PX` with |CoC| <
+    :data:`NARROW_MIN_PX` has the excess :math:`e_q = \max(c_q - bg, 0)` (per channel) and is a source when
     :math:`Y(e_q) > ` :data:`NARROW_CONTRAST` · Y(bg) · π r_q² · max(1, |r_q| / :data:`NARROW_EDGE_PX`).
     Sources are listed per :data:`NARROW_CELL` cell in scan order (working rows, then the block's
     rows); a cell with more than :data:`NARROW_MAX` lists none. A pixel of a candidate block with
