@@ -499,9 +499,9 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
 /* after the 16 pixels are stored: where a source's disc reaches the 16-px tile (`ntile`) and one of its
  * discs reaches these pixels, add the layer to them (read back, add, store; NL lanes inside the image) */
 #define DOF_NARROW_NEAR ntile[(y / 16) * ((width + 15) / 16) + x / 16]
-#define DOF_NARROW_APPLY(UA, NL) if (near) { \
+#define DOF_NARROW_APPLY(UA, KW, NL) if (near) { \
         float16 l3[3] = {(float16)(0.0f), (float16)(0.0f), (float16)(0.0f)}; \
-        if (dof_narrow16(ncount, nrec, ncx, ncy, x, y, r, (UA), normals, nblades, kpoly, roundness, nsa, \
+        if (dof_narrow16(ncount, nrec, ncx, ncy, x, y, r, (UA), (KW), normals, nblades, kpoly, roundness, nsa, \
                          ninv_area, &l3[0], &l3[1], &l3[2])) \
             for (int c = 0; c < 3; ++c) { \
                 if ((NL) == 16) { \
@@ -515,7 +515,7 @@ inline float3 dof_upsample_px(__global const float *src, __global const float *c
     }
 #else
 #define DOF_NARROW_NEAR 0
-#define DOF_NARROW_APPLY(UA, NL)
+#define DOF_NARROW_APPLY(UA, KW, NL)
 #endif
 
 #if DOF_SCALE == 2
@@ -594,7 +594,7 @@ inline void dof_upsample16(__global const float *restrict src, __global const fl
     const int16 whole = b >= 1.0f;
     if (all(whole)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
         dof_store16(ar, dst, i, nlanes); dof_store16(ag, dst + n, i, nlanes); dof_store16(ab, dst + 2 * n, i, nlanes);
-        DOF_NARROW_APPLY(ua, nlanes)
+        DOF_NARROW_APPLY(ua, (float16)(0.0f), nlanes)
         return;
     }
     /* the full-resolution 3x3 blur (dof_local_px), lane-wise; rows clamped to the image */
@@ -611,7 +611,7 @@ inline void dof_upsample16(__global const float *restrict src, __global const fl
     const int16 sharp = !need;
     const float16 sr = dof_row16(src, row, x, width, edge), sg = dof_row16(src + n, row, x, width, edge);
     const float16 sb = dof_row16(src + 2 * n, row, x, width, edge);
-    float16 cr = sr, cg = sg, cb = sb;
+    float16 cr = sr, cg = sg, cb = sb, kw = (float16)(0.0f);  /* kw: DOF_NARROW_APPLY's */
     if (!all(sharp | whole)) {  /* some pixel needs the 3x3's taps */
         float16 tr = (float16)(0.0f), tg = tr, tb = tr, cw = tr;
 #pragma unroll
@@ -630,11 +630,12 @@ inline void dof_upsample16(__global const float *restrict src, __global const fl
         cr = select(tr * ic, sr, sharp);
         cg = select(tg * ic, sg, sharp);
         cb = select(tb * ic, sb, sharp);
+        kw = select((1.0f - b) * ic, (float16)(0.0f), sharp | whole);
     }
     dof_store16(select(cr + (ar - cr) * b, ar, whole), dst, i, nlanes);
     dof_store16(select(cg + (ag - cg) * b, ag, whole), dst + n, i, nlanes);
     dof_store16(select(cb + (ab - cb) * b, ab, whole), dst + 2 * n, i, nlanes);
-    DOF_NARROW_APPLY(ua, nlanes)
+    DOF_NARROW_APPLY(ua, kw, nlanes)
 }
 #endif
 
@@ -674,7 +675,7 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         const int16 whole_ = b >= 1.0f;
         if (all(whole_)) {  /* every pixel takes the half-resolution blur whole (r >= 2 px) */
             vstore16(ar, 0, dst + i); vstore16(ag, 0, dst + n + i); vstore16(ab, 0, dst + 2 * n + i);
-            DOF_NARROW_APPLY(ua, 16)
+            DOF_NARROW_APPLY(ua, (float16)(0.0f), 16)
             return;
         }
         /* the full-resolution 3x3 blur (dof_local_px), lane-wise; columns x - 1 .. x + 16 lie in
@@ -696,7 +697,7 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
             vstore16(select(sr + (ar - sr) * b, ar, whole_), 0, dst + i);
             vstore16(select(sg + (ag - sg) * b, ag, whole_), 0, dst + n + i);
             vstore16(select(sb + (ab - sb) * b, ab, whole_), 0, dst + 2 * n + i);
-            DOF_NARROW_APPLY(ua, 16)
+            DOF_NARROW_APPLY(ua, (float16)(0.0f), 16)
             return;
         }
         float16 cr = (float16)(0.0f), cg = cr, cb = cr, cw = cr;
@@ -722,7 +723,7 @@ __kernel void dof_upsample(__global const float *restrict src, __global const fl
         vstore16(select(cr + (ar - cr) * b, ar, whole), 0, dst + i);
         vstore16(select(cg + (ag - cg) * b, ag, whole), 0, dst + n + i);
         vstore16(select(cb + (ab - cb) * b, ab, whole), 0, dst + 2 * n + i);
-        DOF_NARROW_APPLY(ua, 16)
+        DOF_NARROW_APPLY(ua, select((1.0f - b) * ic, (float16)(0.0f), sharp | whole), 16)
         return;
     }
     /* the groups at the image's left/right end: the same formulas, loads clamped per lane */

@@ -162,15 +162,17 @@ __kernel void dof_narrow_list(__global const float *restrict src, __global const
                 for (int a = 0; a < DOF_SCALE; ++a) {
                     const int y = DOF_SCALE * py + b, x = DOF_SCALE * px + a;
                     const size_t i = (size_t)y * width + x;
-                    /* the block is >= 2 working px from the edge: the 3x3 lies in the image */
-                    float m3 = INFINITY;
-                    for (int v = -1; v <= 1; ++v)
-                        for (int u = -1; u <= 1; ++u)
-                            m3 = fmin(m3, fabs(coc[i + (long)v * width + u]));
                     const float3 e = fmax((float3)(src[i], src[n + i], src[2 * n + i]) - bg, 0.0f);
                     const float ey = DOF_LUMA_R * e.x + DOF_LUMA_G * e.y + DOF_LUMA_B * e.z;
                     const float rq = coc[i];
-                    const int split = m3 >= DOF_NARROW_MIN;
+                    /* not split behind a sharper pixel of its 3x3 (NARROW_MIN_PX; the block is >= 2
+                     * working px from the edge: the 3x3 lies in the image) */
+                    int split = fabs(rq) > DOF_NARROW_FOCUS;
+                    for (int v = -1; v <= 1; ++v)
+                        for (int u = -1; u <= 1; ++u) {
+                            const float c = coc[i + (long)v * width + u];
+                            split &= !(fabs(c) < DOF_NARROW_MIN && c < rq - DOF_FRONT_MARGIN);
+                        }
                     int kept = fabs(rq) <= DOF_NARROW_FOCUS;
                     if (kept) {
                         if (!have_front) {  /* once per block, for each of its pixels: the pixels of
@@ -286,11 +288,13 @@ __kernel void dof_narrow_near(__global const int *restrict ncount, __global cons
  * front of or on the surface of, with the smaller of its own and the pixel's radius times 1 - the
  * upsampled front coverage `ua` over a pixel in front of it; scaled by 1 / its weight sum; and
  * the in-focus lights' 3x3 share where the composite takes the half-resolution blur
- * (small_layer: the 3x3's weight times max(DOF_HALF_B(r) - ua, 0)); added to *o_r, *o_g, *o_b.
+ * (small_layer: the 3x3's weight times max(DOF_HALF_B(r) - ua, 0)), less each source's share of the
+ * composite's 3x3 blur (`kw`: 1 - b over its weight sum where the composite uses it, else 0; the 3x3
+ * reads the colour without the sources' excess in _half_composite); added to *o_r, *o_g, *o_b.
  * Returns whether a source's disc reached these pixels. */
 inline int dof_narrow16(__global const int *restrict ncount, __global const float8 *restrict nrec,
                          const int ncx, const int ncy, const int x, const int y, const float16 r,
-                         const float16 ua, __global const float2 *restrict normals, const int blades,
+                         const float16 ua, const float16 kw, __global const float2 *restrict normals, const int blades,
                          const float kpoly, const float roundness, const float sa, const float inv_area,
                          float16 *o_r, float16 *o_g, float16 *o_b)
 {
@@ -329,6 +333,18 @@ inline int dof_narrow16(__global const int *restrict ncount, __global const floa
                 if (fabs(s.s1 - (float)y) > rs + 0.5f || s.s0 < (float)x - rs - 0.5f || s.s0 > (float)x + 15.5f + rs)
                     continue;
                 touched = 1;
+                if (fabs(s.s1 - (float)y) <= 1.0f && s.s0 >= (float)x - 1.0f && s.s0 <= (float)x + 16.0f) {
+                    /* the 3x3 share of its excess the composite took from the colour (kw: 1 - b over
+                     * the 3x3's weight sum where it is used, else 0): the 3x3 reads the colour
+                     * without the sources' excess (_half_composite), weights as small_layer's */
+                    const float16 dx = fabs(s.s0 - xs);
+                    const float16 a = select(fmin(DOF_LOCAL_A(s.s2), DOF_LOCAL_A(r)), (float16)(DOF_LOCAL_A(s.s2)),
+                                             s.s2 < r - DOF_FRONT_MARGIN);
+                    const float16 wx = select(select((float16)(0.0f), a, dx == 1.0f), 1.0f - 2.0f * a, dx == 0.0f);
+                    const float16 wy = s.s1 == (float)y ? 1.0f - 2.0f * a : a;
+                    const float16 wv = wx * wy * kw;
+                    *o_r -= wv * s.s3; *o_g -= wv * s.s4; *o_b -= wv * s.s5;
+                }
                 const int16 behind = s.s2 > r + DOF_FRONT_MARGIN;
 #if !DOF_TEXTURE
                 /* every lane well inside the disc (|o| <= r rho_min - half the ramp: coverage 1 in

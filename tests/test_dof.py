@@ -1069,7 +1069,9 @@ def test_near_light_in_the_working_image_keeps_its_energy_under_the_texture():
     # untextured 1.039: its own pixel normalised against the wall's opposite texture (above), and
     # the small disc's textured lattice sum (the rim value fills the coverage ramp: 1.225 / 0.937
     # of the plain disc's 1.081, dof.texture_sums) in the wall's unnormalised front layer. Now the
-    # texture moves it by under 2 % (1.018 / 1.055; the untextured 4 % is the path's own).
+    # texture moves it by under 2 % (1.018 / 1.055; the untextured 4 % is the path's own). Since
+    # near lights over walls sharper than 2 px are split too (the next test's cases) this one is
+    # a narrow source: the layer normalises its textured disc, 1.000 at every σ.
     cam, dark, lit = _small_light(-3.0, 2.0)
     energy = {}
     for sa in (-0.6, 0.0, 0.6):
@@ -1083,6 +1085,42 @@ def test_near_light_in_the_working_image_keeps_its_energy_under_the_texture():
         assert energy[q, 0.0] == pytest.approx(1.0, abs=0.05), energy
         for sa in (-0.6, 0.6):
             assert energy[q, sa] == pytest.approx(energy[q, 0.0], rel=0.03), energy
+
+
+def _light_over_wall(r_light, r_back, n, off):
+    """(camera, dark, lit): an n×n light at 40 (CoC ``r_light`` px) at (40 + off, 40 + off) over a
+    0.1 wall at ``r_back`` px (inf: the sky), 81×81 (:func:`_small_light`'s camera)."""
+    cam = Camera(**CAM, blades=6)
+    k, inv_u = D.coc_coefficients(cam, 81)
+    depth = np.full((81, 81), np.inf if math.isinf(r_back) else 1.0 / (inv_u - r_back / k), np.float32)
+    depth[40 + off:40 + off + n, 40 + off:40 + off + n] = 1.0 / (inv_u - r_light / k)
+    color = np.full((81, 81, 3), 0.1, np.float32)
+    dark = Frame(color.copy(), depth=depth)
+    color[40 + off:40 + off + n, 40 + off:40 + off + n] = 40.0
+    return cam, dark, Frame(color, depth=depth)
+
+
+@pytest.mark.parametrize("r_light, r_back, n, off", [
+    (-2.5, 1.2, 1, 0), (-4.0, 1.8, 3, 1), (-6.0, 1.0, 2, 1), (-1.7, 3.0, 2, 0), (-3.0, 1.5, 2, 1)])
+def test_near_light_over_a_sharp_wall_keeps_final_s_energy_and_disc_at_half_resolution(r_light, r_back, n, off):
+    # issue 16 (each emitter's energy within 3 %): a near light over a wall sharper than 2 px was
+    # not split off (every |CoC| of its 3×3 had to be ≥ dof.NARROW_MIN_PX), and the composite's
+    # per-pixel lerp(3×3, half blur, max(b, α)) took b of the light's front layer and 1 − b of its
+    # 3×3 share on the wall: these kept 0.99 / 0.82 / 0.51 / 0.76 / 0.61 of their light at draft
+    # and preview, as a centre spike (peak 4.5 / 1.3 / 3.7 / 1.7 / 0.95× final's; L1 distance from
+    # final's excess 0.98 / 0.34 / 0.98 / 0.86 / 0.43 of the light). Now the light is split (the
+    # layer: final's disc) and the 3×3 reads the colour without its excess.
+    cam, dark, lit = _light_over_wall(r_light, r_back, n, off)
+    ex = {}
+    for q in ("draft", "preview", "final"):
+        out, pipe = run(cam, lit, q)
+        if q == "draft":
+            assert_matches_reference(pipe, lit, out, rtol=1e-3)
+        ex[q] = (out - pipe.run(dark).color)[..., 1] / (n * n * 39.9)
+    for q in ("draft", "preview"):
+        assert float(ex[q].sum()) == pytest.approx(1.0, abs=0.03), (q, float(ex[q].sum()))
+        assert float(ex[q].max()) <= 1.1 * float(ex["final"].max()), (q, float(ex[q].max()), float(ex["final"].max()))
+        assert float(np.abs(ex[q] - ex["final"]).sum()) < 0.1, q
 
 
 def test_small_coc_light_behind_a_few_nearer_pixels_leaves_the_working_image():

@@ -134,6 +134,12 @@ def cases():
         add(f"dof-lights-small {q} 141x75", lambda q=q: _run(
             replace(dof_cams["round"], sensor_mm=(0.15 * 141, 0.15 * 75)), ["dof"], q, 141, 75, lights=True,
             scale=0.5, depth=30.0, light_depth=0.55))
+        # near lights (CoC -3 px) over a wall sharper than 2 px (1.5 px): split, and the composite's
+        # 3x3 share of their excess taken off by the layer (dof_narrow16's kw)
+        if q != "final":
+            add(f"dof-lights-wall {q} 141x75", lambda q=q: _run(
+                replace(dof_cams["round"], sensor_mm=(0.15 * 141, 0.15 * 75)), ["dof"], q, 141, 75, lights=True,
+                scale=0.5, depth=0.564, light_depth=0.4076))
 
     aberr = replace(base, f_number=2.0, field_curvature_mm=-0.14, astigmatism_mm=0.11, coma_mm=0.087,
                     lateral_color_mm=0.007)

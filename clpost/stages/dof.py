@@ -147,8 +147,8 @@ wide, the disc's variance :math:`v = r^2/4` is made at full resolution: a separa
 (:func:`local_blur`), alone up to v = ½ (r = √2 px) and mixed by variance with the path's
 narrowest blur up to v = 1 (r = 2 px), :math:`b = \mathrm{clamp}(2v - 1, 0, 1)`
 (:func:`half_blend`); effect on the Cycles truths: docs/fidelity.md, "The half-resolution path".
-Small bright lights (:func:`narrow_sources`) are taken out of the half-resolution input and spread
-at full resolution instead (:func:`narrow_layer`): the path's ≈ 3 px soft disc edge saturates
+Small bright lights (:func:`narrow_sources`) are taken out of the half-resolution input and of the
+composite's 3×3 blur, and spread at full resolution instead (:func:`narrow_layer`): the path's ≈ 3 px soft disc edge saturates
 around a 100× lamp; an in-focus one's excess leaves the input too and stays with the 3×3 blur
 (:data:`NARROW_FOCUS_PX`: the levels' tent spread it over the blurred background beside it)
 (docs/fidelity.md, "The narrow-source layer").
@@ -1098,7 +1098,15 @@ def _half_composite(camera, color, coc, scale, rmax, budget, pm=None, narrow=Fal
     _, rw_orig = _working(color, coc, scale)
     up, up_alpha = _upsample(out, alpha, rw_orig, coc, scale)
     b = np.maximum(half_blend(coc), up_alpha)
-    near = local_blur(color, coc)
+    if src is not None and len(src):
+        # the 3×3 blur reads the colour without the sources' excess: the layer spreads all of it
+        # (a sharp wall pixel beside a near light took its 3×3 share on top of it)
+        base = color.copy()
+        for x, y, _, *e in src:
+            base[int(y), int(x)] -= e
+    else:
+        base = color
+    near = local_blur(base, coc)
     out = np.where(b[..., None] < 1.0, near + (up - near) * b[..., None], up)
     if src is not None and len(src):
         out = out + narrow_layer(src, coc, up_alpha, camera.blades, camera.blade_rotation_deg,
@@ -1279,9 +1287,16 @@ layer's cost per source grows as r². A defocused frame sprinkled with hot pixel
 worst case: 414 of them at 500× on 1080p, r = 32 px) otherwise put a full-resolution disc on
 nearly every pixel (42 of them are split now; docs/fidelity.md, "The narrow-source layer")."""
 NARROW_MIN_PX = 2.0
-"""Only pixels whose 3×3 has every |CoC| ≥ this are split: there the composite takes the
-half-resolution blur whole (:func:`half_blend` = 1), so no full-resolution 3×3 blur reads the
-pixel's original colour beside the layer."""
+"""A candidate pixel with |CoC| above :data:`NARROW_FOCUS_PX` is split off unless one of its 3×3
+is nearer than it (by more than :data:`FRONT_MARGIN_PX`) with |CoC| below this (:func:`half_blend`
+< 1): a light seen through a sharper foreground's gap, whose light the gather's background clamp
+keeps in the gap (final) and the layer would spread as a disc of the gap's radius, losing most of
+it (a 2×2 light at 4 px behind an in-focus wall: 0.10 of its light); it stays in the working image.
+A sharp pixel *behind* a source, or beside it on its surface, takes the composite's 3×3 share of
+the colour without the source's excess (:func:`_half_composite`), so it needs no such test: before,
+every |CoC| of the 3×3 had to be ≥ this, and a near light over a wall sharper than 2 px stayed in
+the working image, where the composite's per-pixel mix of the two blurs kept 0.62–0.96 of its light
+(docs/fidelity.md, "Near lights over sharp walls at draft")."""
 NARROW_FOCUS_PX = math.sqrt(4.0 * LOCAL_VAR_PX2)
 """A candidate pixel with |CoC| ≤ this (px) — in focus: the composite takes it whole from the
 full-resolution 3×3 blur (:func:`half_blend` = 0), which reads its original colour — has its
@@ -1335,8 +1350,9 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     A working pixel P (not within 2 of the working image's edge) is a candidate block when its
     luminance is above :data:`NARROW_RATIO` × that of the third brightest of its working
     neighbours at distance 2 (:data:`NARROW_RING`; its colour is the surround's, bg). Each
-    full-resolution pixel q of the block with every |CoC| of its 3×3 ≥ :data:`NARROW_MIN_PX` has
-    the excess :math:`e_q = \max(c_q - bg, 0)` (per channel) and is a source when
+    full-resolution pixel q of the block with :math:`|r_q| >` :data:`NARROW_FOCUS_PX` and no pixel
+    of its 3×3 nearer than it by more than :data:`FRONT_MARGIN_PX` with |CoC| <
+    :data:`NARROW_MIN_PX` has the excess :math:`e_q = \max(c_q - bg, 0)` (per channel) and is a source when
     :math:`Y(e_q) > ` :data:`NARROW_CONTRAST` · Y(bg) · π r_q² · max(1, |r_q| / :data:`NARROW_EDGE_PX`).
     Sources are listed per :data:`NARROW_CELL` cell in scan order (working rows, then the block's
     rows); a cell with more than :data:`NARROW_MAX` lists none. A pixel of a candidate block with
@@ -1359,8 +1375,8 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
     base = color.copy()
     if hw < 5 or ww < 5:
         return (np.zeros((0, 6)), base) + ((np.zeros((0, 6)),) if small else ())
-    ac = np.abs(np.pad(c, 1, mode="edge"))
-    m3 = np.min([ac[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
+    pc = np.pad(c, 1, mode="edge")
+    c3 = np.stack([pc[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=-1)
     ring = np.stack([yw[2 + dy:hw - 2 + dy, 2 + dx:ww - 2 + dx] for dy, dx in NARROW_RING])
     k3 = np.argsort(-ring, axis=0, kind="stable")[2]  # the third brightest (ties: the first), as the kernel
     bg_ys = np.take_along_axis(ring, k3[None], 0)[0]
@@ -1374,7 +1390,8 @@ def narrow_sources(color: np.ndarray, coc: np.ndarray, scale: int, luma: np.ndar
                 y, x = scale * py + b, scale * px + a
                 e = np.maximum(color[y, x] - bg, 0.0)
                 ar = abs(c[y, x])
-                split = m3[y, x] >= NARROW_MIN_PX
+                split = ar > NARROW_FOCUS_PX and not np.any(
+                    (np.abs(c3[y, x]) < NARROW_MIN_PX) & (c3[y, x] < c[y, x] - FRONT_MARGIN_PX))
                 # an in-focus light is kept at full resolution only with (almost) nothing in
                 # front of it among the full-resolution pixels of the 5×5 working pixels around
                 # its block (rows/columns past the image, at an odd height or width, count none)
