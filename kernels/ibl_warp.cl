@@ -64,8 +64,10 @@ __kernel void ibl_warp(__global const float *src, const int src_w, const int src
     acc[2 * out_plane + o] += v.z;
 }
 
-/* cell_i: 10 ints per cell: box i0, i1, j0, j1; src offset (floats), src_w, src_h; node offset
- * (float4s), gx_n, gy_n. cell_f: per cell (node_x0, node_y0, inv_sx, inv_sy). */
+/* cell_i: 11 ints per cell: box i0, i1, j0, j1; src offset (floats) of the render's first (bottom)
+ * row, src_w, src_h; node offset (float4s), gx_n, gy_n; src row stride (pixels: src_w for a render
+ * stored alone, the page's width for one tile of a page of renders). cell_f: per cell (node_x0,
+ * node_y0, inv_sx, inv_sy). */
 __kernel void ibl_warp_cells(__global const float *src, __global const float4 *nodes,
                              __global const int *cell_i, __global const float4 *cell_f, const int n_cells,
                              __global float *acc, const int out_w, const int out_h)
@@ -76,13 +78,13 @@ __kernel void ibl_warp_cells(__global const float *src, __global const float4 *n
         return;
     float3 sum = (float3)(0.0f);
     for (int c = 0; c < n_cells; ++c) {
-        __global const int *ci = cell_i + 10 * c;
+        __global const int *ci = cell_i + 11 * c;
         if (x < ci[0] || x >= ci[1] || y < ci[2] || y >= ci[3])
             continue;
         const float4 cf = cell_f[c];
         /* RGBA rows bottom-up (OpenGL's order, as read back): row 0 of the image is the last */
-        __global const float *top = src + ci[4] + 4 * (ci[6] - 1) * ci[5];
-        sum += warp_sample(top, ci[5], ci[6], 4, -4 * ci[5], 1, nodes + ci[7], ci[8], ci[9], cf.x, cf.y, cf.z, cf.w,
+        __global const float *top = src + ci[4] + 4 * (ci[6] - 1) * ci[10];
+        sum += warp_sample(top, ci[5], ci[6], 4, -4 * ci[10], 1, nodes + ci[7], ci[8], ci[9], cf.x, cf.y, cf.z, cf.w,
                            x, y);
     }
     const int out_plane = out_w * out_h;

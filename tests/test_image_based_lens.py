@@ -491,6 +491,7 @@ def test_a_rasterizer_that_fails_at_its_first_render_falls_back_to_the_numpy_pat
 
     monkeypatch.setattr(ibl_raster.FloatRasterizer, "render_into", no_float)
     monkeypatch.setattr(ibl_raster.FloatRasterizer, "render", no_float)
+    monkeypatch.setattr(ibl_raster.FloatRasterizer, "render_pages", no_float)  # the frame's tiled render
     cam = Camera(lens="thorlabs-lb1471", f_number=8.0, focus_distance_m=3.0, sensor_mm=(6.0, 4.0))
     said = []
     frames = render_image_based_sequence(cam, (30, 20), 2, scene=planes_scene(), rasterizer=True,
