@@ -140,6 +140,7 @@ class FloatRasterizer:
         self.window.SwapBuffersOff()  # the image is read from the render framebuffer, never shown
         self.renderers: list = []  # one per tile of a page, grown on demand; all share the actors
         self._float_size: tuple[int, int] | None = None  # the size the float framebuffer was made at
+        self._tile_state = None  # the page size, camera and tiles the renderers are set up for
         self._read = vtk.vtkFloatArray()
         self._read.SetNumberOfComponents(4)
         self._spare = np.zeros(4, np.float32)
@@ -259,8 +260,6 @@ class FloatRasterizer:
         C-contiguous array per page: RGBA, rows bottom-up): per page one ``Render()`` of one
         renderer per tile and one read-back (module docstring); alpha 0 marks sky pixels, which
         get the sky of their direction."""
-        from .pyvista_renderer import set_vtk_camera
-
         if self.cam_pose is None:
             raise RuntimeError("FloatRasterizer.render before prepare()")
         if len(views) != len(layout.tiles) or len(pages) != len(layout.pages):
@@ -275,27 +274,35 @@ class FloatRasterizer:
                 raise ValueError(f"render_pages needs a C-contiguous {ph}x{pw}x4 float32 array for page {p}, got "
                                  f"{out.shape} {out.dtype}")
             self._float_framebuffer(pw, ph)
-            while len(self.renderers) < len(by_page[p]):
-                self._add_renderer()
-            poses = []
-            for r, k in zip(self.renderers, by_page[p]):
-                _, x, y = layout.tiles[k]
-                cop_m, f_px, c, (w, h) = views[k]
-                # viewport in [0, 1] of the page; VTK rounds it back to exactly these pixels
-                r.SetViewport(x / pw, y / ph, (x + w) / pw, (y + h) / ph)
-                pose = self.cam_pose.copy()
-                pose[:3, 3] += rot @ np.asarray(cop_m, np.float64)
-                set_vtk_camera(r.GetActiveCamera(), pose, f_px, h, (float(c[0]), float(c[1]), w))
-                r.DrawOn()
-                poses.append(pose)
-            for r in self.renderers[len(by_page[p]):]:
-                r.DrawOff()
+            tiles = [(layout.tiles[k][1:], tuple(map(float, views[k][0])), float(views[k][1]),
+                      tuple(map(float, views[k][2])), tuple(map(int, views[k][3]))) for k in by_page[p]]
+            state = (pw, ph, self.cam_pose.tobytes(), tiles)
+            if state != self._tile_state:  # a static scene and model: the same cameras every frame
+                self._set_tiles(tiles, pw, ph)
+                self._tile_state = state
             self.window.Render()
             self._read_page(out)
             for k in by_page[p]:
                 _, x, y = layout.tiles[k]
                 cop_m, f_px, c, (w, h) = views[k]
                 self._fill_sky(out[y:y + h, x:x + w], rot, f_px, c)
+
+    def _set_tiles(self, tiles: list, pw: int, ph: int) -> None:
+        """One renderer per tile: its viewport (in [0, 1] of the page; VTK rounds it back to exactly
+        the tile's pixels) and the projection's camera; the renderers left over draw nothing."""
+        from .pyvista_renderer import set_vtk_camera
+
+        while len(self.renderers) < len(tiles):
+            self._add_renderer()
+        rot = self.cam_pose[:3, :3]
+        for r, ((x, y), cop_m, f_px, c, (w, h)) in zip(self.renderers, tiles):
+            r.SetViewport(x / pw, y / ph, (x + w) / pw, (y + h) / ph)
+            pose = self.cam_pose.copy()
+            pose[:3, 3] += rot @ np.asarray(cop_m, np.float64)
+            set_vtk_camera(r.GetActiveCamera(), pose, f_px, h, (c[0], c[1], w))
+            r.DrawOn()
+        for r in self.renderers[len(tiles):]:
+            r.DrawOff()
 
     def _add_renderer(self) -> None:
         r = self.vtk.vtkRenderer()
