@@ -325,6 +325,62 @@ def test_batched_warp_kernel_matches_the_float64_reference_with_overlapping_pupi
         warper.add_cells([s[:-1] for s in srcs], cells)
 
 
+def test_pack_tiles_places_renders_without_overlap_and_equal_renders_in_one_column(rng):
+    """pack_tiles: every tile inside its page, no two tiles of a page overlapping; ten equal
+    renders (the paper's 10-sample frame) stack into one column with no pixel wasted; renders that
+    do not fit one page go on to the next."""
+    from clpost.render.ibl_warp import pack_tiles
+
+    equal = pack_tiles([(262, 262)] * 10)
+    assert equal.pages == ((262, 2620),) and [t[1:] for t in equal.tiles] == [(0, 262 * k) for k in range(10)]
+    for sizes, side in (([tuple(int(v) for v in rng.integers(3, 90, 2)) for _ in range(60)], 4096),
+                        ([(70, 70)] * 5 + [(134, 133)] * 9 + [(263, 262)] * 7, 600)):
+        layout = pack_tiles(sizes, side)
+        assert len(layout.tiles) == len(sizes)
+        for p, (pw, ph) in enumerate(layout.pages):
+            assert pw <= side and ph <= side
+            cover = np.zeros((ph, pw), int)
+            for (q, x, y), (w, h) in zip(layout.tiles, sizes):
+                if q == p:
+                    assert x >= 0 and y >= 0 and x + w <= pw and y + h <= ph
+                    cover[y:y + h, x:x + w] += 1
+            assert cover.max() == 1
+    assert len(pack_tiles([(263, 262)] * 7, 600).pages) > 1
+    with pytest.raises(InputError, match="exceeds"):
+        pack_tiles([(700, 10)], 600)
+
+
+def test_warp_of_tiled_pages_equals_the_warp_of_separate_renders(rng):
+    """Warper.map_pages (renders as tiles of shared pages, a row stride per cell) against
+    map_cells (each render alone) and the float64 reference, same cells and renders."""
+    size = (37, 23)
+    boxes = ((0, 20, 0, 11), (20, 37, 0, 11), (0, 37, 11, 23), (5, 30, 3, 19))
+    cells, srcs = [], []
+    ref = np.zeros((23, 37, 3))
+    for box in boxes:
+        src_size = (int(rng.integers(3, 40)), int(rng.integers(3, 30)))
+        src = rng.uniform(0, 10, (src_size[1], src_size[0], 3)).astype(np.float32)
+        cell = _random_cell(rng, size, box, src_size)
+        cells.append(cell)
+        srcs.append(src)
+        warp_reference(ref, src, cell)
+    warper = Warper(size)
+    warper.add_cells(srcs, cells)
+    separate = warper.result()
+    warper.reset()
+    layout, pages = warper.map_pages(cells)
+    assert len(layout.pages) == 1 and len(set(t[1:] for t in layout.tiles)) == len(cells)
+    pages[0][:] = np.nan  # page pixels outside every tile must never be read
+    for src, (p, x, y), cell in zip(srcs, layout.tiles, cells):
+        w, h = cell.render_size
+        pages[p][y:y + h, x:x + w, :3] = src[::-1]  # rows bottom-up
+    warper.launch_cells()
+    tiled = warper.result()
+    np.testing.assert_array_equal(tiled, separate)
+    err = np.abs(tiled - ref) / np.maximum(np.abs(ref), 1.0)
+    assert err.max() < 2e-4
+
+
 # -- the rasterizer path (baked radiance, VTK float framebuffer) ------------------------------
 
 def _rasterizer(scene):

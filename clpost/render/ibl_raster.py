@@ -353,9 +353,10 @@ class FloatRasterizer:
         """The sky radiance of their direction in a tile's pixels of alpha 0 (rows bottom-up)."""
         from .pyvista_renderer import _sky
 
-        sky = tile[..., 3] <= 0.0
-        if not sky.any():
+        alpha = tile[..., 3]
+        if alpha.min() > 0.0:  # no sky in view (a reduction, no mask: the usual case)
             return
+        sky = alpha <= 0.0
         h = tile.shape[0]
         jb, ii = np.nonzero(sky)
         jj = h - 1 - jb  # rows bottom-up
