@@ -15,11 +15,8 @@ own render framebuffer is re-created at the page's size with a float32 (RGBA32F)
 attachment, and one ``vtkRenderer`` per tile, its viewport the tile and its camera the
 projection's, shares the scene's actors. One ``Render()`` rasterises the whole page and one
 ``glReadPixels`` reads it back straight into the warp's buffer (the page is laid out there as
-OpenGL reads it). Against one ``Render()`` and one read-back per projection through a
-``vtkFramebufferPass`` this removes, per projection, the pass's blit of its float texture into
-the window, the texture's download through a freshly allocated pixel buffer and its element-wise
-copy, and the round trip to Mesa's rasterizer threads (docs/image_based_lens.md, "Rasterizer
-path").
+OpenGL reads it): no per-projection blit, download buffer or round trip to Mesa's rasterizer
+threads (why and how much: docs/image_based_lens.md, "Rasterizer path").
 
 Baked region and texel. Per object, the bake covers the part of the object that the union of the
 frame's projection frusta can see (the corner rays of each projection's render frustum intersected
@@ -116,9 +113,10 @@ def bake_region(cells: list[WarpCell], cam_pose: np.ndarray, obj_pose: np.ndarra
 
 
 class FloatRasterizer:
-    """One offscreen VTK window with a float32 framebuffer pass; the scene's planes as unlit
-    actors carrying baked radiance textures (module docstring). :meth:`prepare` bakes for a
-    frame's projections, :meth:`render` rasterises one projection."""
+    """One offscreen VTK window whose render framebuffer is float32; the scene's planes as unlit
+    actors carrying baked radiance textures, shared by one renderer per tile (module docstring).
+    :meth:`prepare` bakes for a frame's projections, :meth:`render_pages` rasterises all of them
+    as the tiles of a few pages, :meth:`render` one projection."""
 
     def __init__(self, scene: DemoScene) -> None:
         others = [o.name for o in scene.objects if not isinstance(o.shape, Plane)]
