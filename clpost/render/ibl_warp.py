@@ -227,7 +227,8 @@ def _shelves(sizes, width: int, max_side: int) -> TileLayout:
 def pack_tiles(sizes, max_side: int = PAGE_MAX_PX) -> TileLayout:
     """A :class:`TileLayout` for renders of ``sizes`` (w, h): shelf packing (:func:`_shelves`) at
     the page width, among multiples of the widest render up to ``max_side``, that needs the
-    fewest page pixels in all (what a rasterizer reads back), then the fewest pages. Ten equal renders stack into one column: no pixel wasted."""
+    fewest page pixels in all (what a rasterizer reads back), then the fewest pages. Ten equal
+    renders stack into one column: no pixel wasted."""
     sizes = [(int(w), int(h)) for w, h in sizes]
     if not sizes:
         return TileLayout((), ())
