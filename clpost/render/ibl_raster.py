@@ -252,12 +252,13 @@ class FloatRasterizer:
         w, h = int(size[0]), int(size[1])
         self.render_pages([out], [(cop_m, f_px, c, (w, h))], TileLayout.separate([(w, h)]))
 
-    def render_pages(self, pages: list[np.ndarray], views: list, layout) -> None:
+    def render_pages(self, pages: list[np.ndarray], views: list, layout, fill_sky: bool = True) -> None:
         """Render the projections ``views`` = [(cop_m, f_px, c, (w, h)), …] as the tiles of
         ``layout`` (:class:`~clpost.render.ibl_warp.TileLayout`) into ``pages`` (one h×w×4 float32
         C-contiguous array per page: RGBA, rows bottom-up): per page one ``Render()`` of one
         renderer per tile and one read-back (module docstring); alpha 0 marks sky pixels, which
-        get the sky of their direction."""
+        (``fill_sky``) get the sky of their direction here — or are left to the warp kernel,
+        which computes it per texel from :meth:`sky` (no pass over the pixels in Python)."""
         if self.cam_pose is None:
             raise RuntimeError("FloatRasterizer.render before prepare()")
         if len(views) != len(layout.tiles) or len(pages) != len(layout.pages):
@@ -280,7 +281,7 @@ class FloatRasterizer:
                 self._tile_state = state
             self.window.Render()
             self._read_page(out)
-            for k in by_page[p]:
+            for k in by_page[p] if fill_sky else ():
                 _, x, y = layout.tiles[k]
                 cop_m, f_px, c, (w, h) = views[k]
                 self._fill_sky(out[y:y + h, x:x + w], rot, f_px, c)
@@ -301,6 +302,15 @@ class FloatRasterizer:
             r.DrawOn()
         for r in self.renderers[len(tiles):]:
             r.DrawOff()
+
+    def sky(self, cells) -> tuple:
+        """What the warp kernel needs to fill the sky of ``cells`` ' renders (the prepared
+        frame's camera): (:func:`~clpost.render.ibl_warp.sky_table`, horizon, zenith colours)."""
+        from .ibl_warp import sky_table
+
+        if self.cam_pose is None:
+            raise RuntimeError("FloatRasterizer.sky before prepare()")
+        return sky_table(self.cam_pose[:3, :3], cells), self.scene.sky_horizon, self.scene.sky_zenith
 
     def _add_renderer(self) -> None:
         r = self.vtk.vtkRenderer()

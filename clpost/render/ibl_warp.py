@@ -247,6 +247,24 @@ def pack_tiles(sizes, max_side: int = PAGE_MAX_PX) -> TileLayout:
     return best[1]
 
 
+def _float4(v):
+    from pyopencl import cltypes
+
+    x, y, z = (float(t) for t in np.asarray(v, np.float64).reshape(-1)[:3])
+    return cltypes.make_float4(x, y, z, 0.0)
+
+
+def sky_table(cam_rotation: np.ndarray, cells: list[WarpCell]) -> np.ndarray:
+    """Per cell the rows of the camera-to-world rotation with w = 1 / f, c_x, c_y: what
+    ``ibl_warp_cells`` needs to compute the sky of a texel's direction (kernels/ibl_warp.cl,
+    ``texel``). A projection's camera is the frame's camera moved to the COP, axes unchanged."""
+    table = np.zeros((len(cells), 3, 4), np.float32)
+    table[:, :, :3] = np.asarray(cam_rotation, np.float64)
+    for k, cell in enumerate(cells):
+        table[k, :, 3] = (1.0 / cell.render_f_px, cell.render_c[0], cell.render_c[1])
+    return table
+
+
 class Warper:
     """The OpenCL side: a planar accumulator of the output size and :meth:`add` per projection."""
 
@@ -362,18 +380,31 @@ class Warper:
         in one piece. Fill them, then :meth:`launch_cells`."""
         return self._map(cells, True)
 
-    def launch_cells(self, run: bool = True) -> None:
+    def launch_cells(self, run: bool = True, sky=None) -> None:
         """Unmap the buffer of :meth:`map_cells` and (``run``) add all its cells in one launch of
-        ``ibl_warp_cells``: the same sum as :meth:`add` per cell, in the same order."""
+        ``ibl_warp_cells``: the same sum as :meth:`add` per cell, in the same order. ``sky`` =
+        (rotation, f, c) per cell and the scene's (horizon, zenith) colours, from
+        :func:`sky_table`: texels of alpha 0 (nothing drawn) are then the sky of their direction,
+        computed by the kernel, instead of the render's RGB."""
         cells, tiled, stage = self._mapped
         self._mapped = None
         stage.base.release(self.rt.queue)
         if not run or not cells:
             return
         _, _, (node_buf, ci_buf, cf_buf), _, _ = self._cells_meta(cells, tiled)
+        cl = self.cl
+        if sky is None:
+            table, horizon, zenith = np.zeros(4, np.float32), np.zeros(4, np.float32), np.zeros(4, np.float32)
+        else:
+            table, horizon, zenith = sky
+            if table.shape != (len(cells), 3, 4):
+                raise ValueError(f"a sky table of shape {table.shape} for {len(cells)} cells")
+        sky_buf = cl.Buffer(self.rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                            hostbuf=np.ascontiguousarray(table, np.float32))
         w, h = self.size
         self.events.append(self.kernel_cells(self.rt.queue, (w, h), None, self._src_buf, node_buf, ci_buf, cf_buf,
-                                             np.int32(len(cells)), self.acc, np.int32(w), np.int32(h)))
+                                             np.int32(len(cells)), self.acc, np.int32(w), np.int32(h), sky_buf,
+                                             np.int32(sky is not None), _float4(horizon), _float4(zenith)))
 
     def add_cells(self, srcs: list[np.ndarray], cells: list[WarpCell]) -> None:
         """:meth:`map_cells`, each render (h×w×3, rows top-down) copied in, :meth:`launch_cells`."""

@@ -60,7 +60,8 @@ def render_image_based(model: ImageBasedLens, size: tuple[int, int], render_fn, 
     frame's :class:`WarpCell` s — the rasterizer path bakes its textures there; a
     ``render_fn.render_into(view, cop, f, c, size)`` writes straight into the warp's RGBA buffer
     with rows bottom-up instead of returning; a ``render_fn.render_pages(pages, cells, layout)``
-    renders all of them at once as the tiles of :meth:`Warper.map_pages`), warped onto its
+    renders all of them at once as the tiles of :meth:`Warper.map_pages`, leaving pixels of alpha 0
+    to the warp kernel's sky if it has ``render_fn.warp_sky(cells)``), warped onto its
     film cell with weight W by the ``ibl_warp_cells`` kernel (all projections in one launch) and
     summed over pupil samples, then normalised by the axial point's weight,
 
@@ -102,7 +103,8 @@ def render_image_based(model: ImageBasedLens, size: tuple[int, int], render_fn, 
         warper.launch_cells(run=False)
         raise
     t_render = time.perf_counter() - t0
-    warper.launch_cells()
+    warp_sky = getattr(render_fn, "warp_sky", None) if pages is not None else None
+    warper.launch_cells(sky=warp_sky(cells) if warp_sky is not None else None)
     out = warper.result() / np.float32(axial)
     return out.astype(np.float32), {"projections": len(cells), "render_s": t_render, "prepare_s": t_prepare,
                                      "warp_device_ms": warper.device_ms()}
@@ -137,7 +139,10 @@ class _RasterRenderFn:
 
     def render_pages(self, pages, cells, layout) -> None:
         self.raster.render_pages(pages, [(c.cop_camera_m, c.render_f_px, c.render_c, c.render_size) for c in cells],
-                                 layout)
+                                 layout, fill_sky=False)  # the warp kernel fills the sky (warp_sky)
+
+    def warp_sky(self, cells):
+        return self.raster.sky(cells)
 
 
 def rasterizer_render_fn(raster, frame_index: int = 0):
