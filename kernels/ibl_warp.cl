@@ -15,11 +15,29 @@
  * over the cells in order and adds those whose box holds it (one launch instead of one per
  * projection: the launches, not the arithmetic, were the warp's cost).
  */
+/* One texel of a render; with `sky` (ibl_warp_cells, RGBA renders) a texel of alpha 0 — no surface
+ * drawn there — is the sky of its direction instead, the formula of pyvista_renderer._sky:
+ * d = R (x, y, 1) with x = (iu - cx) / f, y = (iv - cy) / f (iv counted from the image's top row),
+ * t = sqrt(clamp(d_z / |d|, 0, 1)), colour = mix(horizon, zenith, t). sky_r0..2: the rows of the
+ * camera-to-world rotation R, with w = 1 / f, cx, cy. */
+static float3 texel(__global const float *s, const int ch_stride, const int sky, const int iu, const int iv,
+                    const float4 sky_r0, const float4 sky_r1, const float4 sky_r2, const float3 horizon,
+                    const float3 zenith)
+{
+    if (sky && !(s[3 * ch_stride] > 0.0f)) {
+        const float3 ray = (float3)(((float)iu - sky_r1.w) * sky_r0.w, ((float)iv - sky_r2.w) * sky_r0.w, 1.0f);
+        const float3 d = (float3)(dot(sky_r0.xyz, ray), dot(sky_r1.xyz, ray), dot(sky_r2.xyz, ray));
+        return mix(horizon, zenith, sqrt(clamp(d.z / length(d), 0.0f, 1.0f)));
+    }
+    return (float3)(s[0], s[ch_stride], s[2 * ch_stride]);
+}
+
 static float3 warp_sample(__global const float *src, const int src_w, const int src_h,
                           const int px_stride, const int row_stride, const int ch_stride,
                           __global const float4 *nodes, const int gx_n, const int gy_n,
                           const float node_x0, const float node_y0, const float inv_sx, const float inv_sy,
-                          const int x, const int y)
+                          const int x, const int y, const int sky, const float4 sky_r0, const float4 sky_r1,
+                          const float4 sky_r2, const float3 horizon, const float3 zenith)
 {
     /* the box lies inside the node grid up to rounding: clamp only absorbs that */
     const float gx = clamp(((float)x - node_x0) * inv_sx, 0.0f, (float)(gx_n - 1));
@@ -39,12 +57,13 @@ static float3 warp_sample(__global const float *src, const int src_w, const int 
     const int iv = min((int)v, src_h - 2);
     const float fu = u - (float)iu;
     const float fv = v - (float)iv;
-    float val[3];
-    for (int c = 0; c < 3; ++c) {
-        __global const float *s = src + c * ch_stride + iv * row_stride + iu * px_stride;
-        val[c] = n.z * mix(mix(s[0], s[px_stride], fu), mix(s[row_stride], s[row_stride + px_stride], fu), fv);
-    }
-    return (float3)(val[0], val[1], val[2]);
+    __global const float *s = src + iv * row_stride + iu * px_stride;
+    const float3 t00 = texel(s, ch_stride, sky, iu, iv, sky_r0, sky_r1, sky_r2, horizon, zenith);
+    const float3 t10 = texel(s + px_stride, ch_stride, sky, iu + 1, iv, sky_r0, sky_r1, sky_r2, horizon, zenith);
+    const float3 t01 = texel(s + row_stride, ch_stride, sky, iu, iv + 1, sky_r0, sky_r1, sky_r2, horizon, zenith);
+    const float3 t11 = texel(s + row_stride + px_stride, ch_stride, sky, iu + 1, iv + 1, sky_r0, sky_r1, sky_r2,
+                             horizon, zenith);
+    return n.z * mix(mix(t00, t10, fu), mix(t01, t11, fu), fv);
 }
 
 __kernel void ibl_warp(__global const float *src, const int src_w, const int src_h,
@@ -56,7 +75,8 @@ __kernel void ibl_warp(__global const float *src, const int src_w, const int src
     const int x = px0 + (int)get_global_id(0);
     const int y = py0 + (int)get_global_id(1);
     const float3 v = warp_sample(src, src_w, src_h, 1, src_w, src_w * src_h, nodes, gx_n, gy_n,
-                                 node_x0, node_y0, inv_sx, inv_sy, x, y);
+                                 node_x0, node_y0, inv_sx, inv_sy, x, y, 0, (float4)(0.0f), (float4)(0.0f),
+                                 (float4)(0.0f), (float3)(0.0f), (float3)(0.0f));
     const int out_plane = out_w * out_h;
     const int o = y * out_w + x;
     acc[o] += v.x;
@@ -64,11 +84,16 @@ __kernel void ibl_warp(__global const float *src, const int src_w, const int src
     acc[2 * out_plane + o] += v.z;
 }
 
-/* cell_i: 10 ints per cell: box i0, i1, j0, j1; src offset (floats), src_w, src_h; node offset
- * (float4s), gx_n, gy_n. cell_f: per cell (node_x0, node_y0, inv_sx, inv_sy). */
+/* cell_i: 11 ints per cell: box i0, i1, j0, j1; src offset (floats) of the render's first (bottom)
+ * row, src_w, src_h; node offset (float4s), gx_n, gy_n; src row stride (pixels: src_w for a render
+ * stored alone, the page's width for one tile of a page of renders). cell_f: per cell (node_x0,
+ * node_y0, inv_sx, inv_sy). sky != 0: cell_sky holds 3 float4 per cell (texel()'s sky_r0..2) and
+ * texels of alpha 0 are the sky (texel()); sky == 0: cell_sky is not read. */
 __kernel void ibl_warp_cells(__global const float *src, __global const float4 *nodes,
                              __global const int *cell_i, __global const float4 *cell_f, const int n_cells,
-                             __global float *acc, const int out_w, const int out_h)
+                             __global float *acc, const int out_w, const int out_h,
+                             __global const float4 *cell_sky, const int sky, const float4 horizon,
+                             const float4 zenith)
 {
     const int x = (int)get_global_id(0);
     const int y = (int)get_global_id(1);
@@ -76,14 +101,17 @@ __kernel void ibl_warp_cells(__global const float *src, __global const float4 *n
         return;
     float3 sum = (float3)(0.0f);
     for (int c = 0; c < n_cells; ++c) {
-        __global const int *ci = cell_i + 10 * c;
+        __global const int *ci = cell_i + 11 * c;
         if (x < ci[0] || x >= ci[1] || y < ci[2] || y >= ci[3])
             continue;
         const float4 cf = cell_f[c];
         /* RGBA rows bottom-up (OpenGL's order, as read back): row 0 of the image is the last */
-        __global const float *top = src + ci[4] + 4 * (ci[6] - 1) * ci[5];
-        sum += warp_sample(top, ci[5], ci[6], 4, -4 * ci[5], 1, nodes + ci[7], ci[8], ci[9], cf.x, cf.y, cf.z, cf.w,
-                           x, y);
+        __global const float *top = src + ci[4] + 4 * (ci[6] - 1) * ci[10];
+        const float4 r0 = sky ? cell_sky[3 * c] : (float4)(0.0f);
+        const float4 r1 = sky ? cell_sky[3 * c + 1] : (float4)(0.0f);
+        const float4 r2 = sky ? cell_sky[3 * c + 2] : (float4)(0.0f);
+        sum += warp_sample(top, ci[5], ci[6], 4, -4 * ci[10], 1, nodes + ci[7], ci[8], ci[9], cf.x, cf.y, cf.z, cf.w,
+                           x, y, sky, r0, r1, r2, horizon.xyz, zenith.xyz);
     }
     const int out_plane = out_w * out_h;
     const int o = y * out_w + x;

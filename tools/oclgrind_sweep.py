@@ -331,6 +331,19 @@ def cases():
         batched = Warper((w, h), device="oclgrind")  # ibl_warp_cells: all cells in one launch
         batched.add_cells(srcs, cells)
         batched.result()
+        # the rasterizer path's form: renders as tiles of a page (a row stride per cell), alpha-0
+        # texels filled with the sky by the kernel
+        from clpost.render.ibl_warp import sky_table
+
+        tiled = Warper((w, h), device="oclgrind")
+        layout, pages = tiled.map_pages(cells)
+        for page in pages:
+            page[:] = 0.0
+        for src, (p, x, y) in zip(srcs, layout.tiles):
+            pages[p][y:y + sh, x:x + sw, :3] = src[::-1]
+            pages[p][y:y + sh, x:x + sw, 3] = rng.random((sh, sw)) < 0.7  # 30 % sky
+        tiled.launch_cells(sky=(sky_table(np.eye(3), cells), (0.9, 1.0, 1.0), (0.3, 0.5, 1.0)))
+        tiled.result()
 
     add("ibl_warp 17x5", lambda: ibl_case(17, 5))
 

@@ -6,8 +6,17 @@ only the texture's filter footprint does. Per frame, the radiance of every objec
 **baked** once into a float texture by the renderer's own numpy shading
 (:func:`clpost.render.pyvista_renderer.surface_radiance`: albedo × sun with shadows + ambient +
 emitters, box-filtered over one texel), and every projection is then a plain VTK rasterisation of
-unlit textured polygons into a **float32 framebuffer** (``vtkFramebufferPass``), read back without
-clipping or quantisation. Background pixels (alpha 0) get the sky of their ray direction.
+unlit textured polygons into a **float32 framebuffer**, read back without clipping or
+quantisation. Background pixels (alpha 0) get the sky of their ray direction.
+
+One framebuffer for all of a frame's projections. The renders are packed as tiles of a page
+(:func:`clpost.render.ibl_warp.pack_tiles`, ten 262² renders: one 262×2620 column); the window's
+own render framebuffer is re-created at the page's size with a float32 (RGBA32F) colour
+attachment, and one ``vtkRenderer`` per tile, its viewport the tile and its camera the
+projection's, shares the scene's actors. One ``Render()`` rasterises the whole page and one
+``glReadPixels`` reads it back straight into the warp's buffer (the page is laid out there as
+OpenGL reads it): no per-projection blit, download buffer or round trip to Mesa's rasterizer
+threads (why and how much: docs/image_based_lens.md, "Rasterizer path").
 
 Baked region and texel. Per object, the bake covers the part of the object that the union of the
 frame's projection frusta can see (the corner rays of each projection's render frustum intersected
@@ -104,9 +113,10 @@ def bake_region(cells: list[WarpCell], cam_pose: np.ndarray, obj_pose: np.ndarra
 
 
 class FloatRasterizer:
-    """One offscreen VTK window with a float32 framebuffer pass; the scene's planes as unlit
-    actors carrying baked radiance textures (module docstring). :meth:`prepare` bakes for a
-    frame's projections, :meth:`render` rasterises one projection."""
+    """One offscreen VTK window whose render framebuffer is float32; the scene's planes as unlit
+    actors carrying baked radiance textures, shared by one renderer per tile (module docstring).
+    :meth:`prepare` bakes for a frame's projections, :meth:`render_pages` rasterises all of them
+    as the tiles of a few pages, :meth:`render` one projection."""
 
     def __init__(self, scene: DemoScene) -> None:
         others = [o.name for o in scene.objects if not isinstance(o.shape, Plane)]
@@ -117,24 +127,21 @@ class FloatRasterizer:
                                     "renders any scene")
         try:
             import vtk
-            from vtkmodules.vtkRenderingOpenGL2 import vtkFramebufferPass, vtkRenderStepsPass, vtkTextureObject
+            from vtkmodules.vtkRenderingOpenGL2 import vtkOpenGLFramebufferObject  # noqa: F401
 
             from .pyvista_renderer import _offscreen_window
-        except ImportError as e:  # a VTK build without the OpenGL2 render passes
-            raise RasterUnavailable(f"VTK's OpenGL2 render passes are missing ({e})") from e
+        except ImportError as e:  # a VTK build without the OpenGL2 backend
+            raise RasterUnavailable(f"VTK's OpenGL2 framebuffer objects are missing ({e})") from e
         self.vtk = vtk
         self.scene = scene
         self.window = _offscreen_window()
-        self.window.SwapBuffersOff()  # the image is read from the pass's texture, never shown
-        self.renderer = vtk.vtkRenderer()
-        self.renderer.SetBackground(0.0, 0.0, 0.0)
-        self.renderer.SetBackgroundAlpha(0.0)
-        self.renderer.SetUseFXAA(False)
-        self.window.AddRenderer(self.renderer)
-        self.fb = vtkFramebufferPass()
-        self.fb.SetColorFormat(vtkTextureObject.Float32)
-        self.fb.SetDelegatePass(vtkRenderStepsPass())
-        self.renderer.SetPass(self.fb)
+        self.window.SwapBuffersOff()  # the image is read from the render framebuffer, never shown
+        self.renderers: list = []  # one per tile of a page, grown on demand; all share the actors
+        self._float_size: tuple[int, int] | None = None  # the size the float framebuffer was made at
+        self._tile_state = None  # the page size, camera and tiles the renderers are set up for
+        self._read = vtk.vtkFloatArray()
+        self._read.SetNumberOfComponents(4)
+        self._spare = np.zeros(4, np.float32)
         self.actors, self.sources, self.textures = [], [], []
         for _ in scene.objects:
             src = vtk.vtkPlaneSource()
@@ -152,13 +159,11 @@ class FloatRasterizer:
             tex.MipmapOn()
             tex.EdgeClampOn()
             actor.SetTexture(tex)
-            self.renderer.AddActor(actor)
             self.actors.append(actor)
             self.sources.append(src)
             self.textures.append(tex)
         self._baked: dict[int, tuple] = {}
         self._prepared_cells, self._prepared_state = None, b""
-        self.size: tuple[int, int] | None = None
         self.cam_pose: np.ndarray | None = None
         self.bake_s = 0.0
         self.baked_texels = 0
@@ -242,33 +247,129 @@ class FloatRasterizer:
     def render_into(self, out: np.ndarray, cop_m, f_px: float, c, size) -> None:
         """:meth:`render` into ``out`` (h×w×4 float32, C-contiguous): RGBA with the rows bottom-up,
         as OpenGL reads them back (the warp's buffer layout); alpha 0 marks sky pixels."""
-        from .pyvista_renderer import _sky, set_vtk_camera
+        from .ibl_warp import TileLayout
 
-        vtk = self.vtk
+        w, h = int(size[0]), int(size[1])
+        self.render_pages([out], [(cop_m, f_px, c, (w, h))], TileLayout.separate([(w, h)]))
+
+    def render_pages(self, pages: list[np.ndarray], views: list, layout, fill_sky: bool = True) -> None:
+        """Render the projections ``views`` = [(cop_m, f_px, c, (w, h)), …] as the tiles of
+        ``layout`` (:class:`~clpost.render.ibl_warp.TileLayout`) into ``pages`` (one h×w×4 float32
+        C-contiguous array per page: RGBA, rows bottom-up): per page one ``Render()`` of one
+        renderer per tile and one read-back (module docstring); alpha 0 marks sky pixels, which
+        (``fill_sky``) get the sky of their direction here — or are left to the warp kernel,
+        which computes it per texel from :meth:`sky` (no pass over the pixels in Python)."""
         if self.cam_pose is None:
             raise RuntimeError("FloatRasterizer.render before prepare()")
-        w, h = int(size[0]), int(size[1])
-        if out.shape != (h, w, 4) or out.dtype != np.float32 or not out.flags.c_contiguous:
-            raise ValueError(f"render_into needs a C-contiguous {h}x{w}x4 float32 array, got {out.shape} {out.dtype}")
-        if self.size != (w, h):
-            self.window.SetSize(w, h)
-            self.size = (w, h)
-        pose = self.cam_pose.copy()
-        pose[:3, 3] += pose[:3, :3] @ np.asarray(cop_m, np.float64)
-        set_vtk_camera(self.renderer.GetActiveCamera(), pose, f_px, h, (float(c[0]), float(c[1]), w))
-        self.window.Render()
-        tex = self.fb.GetColorTexture()
-        if tex.GetVTKDataType() != vtk.VTK_FLOAT or (tex.GetWidth(), tex.GetHeight()) != (w, h):
-            raise RasterUnavailable(f"VTK's framebuffer pass gave a {tex.GetWidth()}x{tex.GetHeight()} texture of "
-                                    f"VTK type {tex.GetVTKDataType()}, not {w}x{h} float32")
-        if not tex.Download().Download2D(vtk.VTK_FLOAT, out, [w, h], 4, [0, 0]):
+        if len(views) != len(layout.tiles) or len(pages) != len(layout.pages):
+            raise ValueError(f"{len(views)} projections and {len(pages)} pages for a layout of "
+                             f"{len(layout.tiles)} tiles on {len(layout.pages)} pages")
+        by_page: list[list[int]] = [[] for _ in layout.pages]
+        for k, (p, _, _) in enumerate(layout.tiles):
+            by_page[p].append(k)
+        rot = self.cam_pose[:3, :3]
+        for p, (out, (pw, ph)) in enumerate(zip(pages, layout.pages)):
+            if out.shape != (ph, pw, 4) or out.dtype != np.float32 or not out.flags.c_contiguous:
+                raise ValueError(f"render_pages needs a C-contiguous {ph}x{pw}x4 float32 array for page {p}, got "
+                                 f"{out.shape} {out.dtype}")
+            self._float_framebuffer(pw, ph)
+            tiles = [(layout.tiles[k][1:], tuple(map(float, views[k][0])), float(views[k][1]),
+                      tuple(map(float, views[k][2])), tuple(map(int, views[k][3]))) for k in by_page[p]]
+            state = (pw, ph, self.cam_pose.tobytes(), tiles)
+            if state != self._tile_state:  # a static scene and model: the same cameras every frame
+                self._set_tiles(tiles, pw, ph)
+                self._tile_state = state
+            self.window.Render()
+            self._read_page(out)
+            for k in by_page[p] if fill_sky else ():
+                _, x, y = layout.tiles[k]
+                cop_m, f_px, c, (w, h) = views[k]
+                self._fill_sky(out[y:y + h, x:x + w], rot, f_px, c)
+
+    def _set_tiles(self, tiles: list, pw: int, ph: int) -> None:
+        """One renderer per tile: its viewport (in [0, 1] of the page; VTK rounds it back to exactly
+        the tile's pixels) and the projection's camera; the renderers left over draw nothing."""
+        from .pyvista_renderer import set_vtk_camera
+
+        while len(self.renderers) < len(tiles):
+            self._add_renderer()
+        rot = self.cam_pose[:3, :3]
+        for r, ((x, y), cop_m, f_px, c, (w, h)) in zip(self.renderers, tiles):
+            r.SetViewport(x / pw, y / ph, (x + w) / pw, (y + h) / ph)
+            pose = self.cam_pose.copy()
+            pose[:3, 3] += rot @ np.asarray(cop_m, np.float64)
+            set_vtk_camera(r.GetActiveCamera(), pose, f_px, h, (c[0], c[1], w))
+            r.DrawOn()
+        for r in self.renderers[len(tiles):]:
+            r.DrawOff()
+
+    def sky(self, cells) -> tuple:
+        """What the warp kernel needs to fill the sky of ``cells`` ' renders (the prepared
+        frame's camera): (:func:`~clpost.render.ibl_warp.sky_table`, horizon, zenith colours)."""
+        from .ibl_warp import sky_table
+
+        if self.cam_pose is None:
+            raise RuntimeError("FloatRasterizer.sky before prepare()")
+        return sky_table(self.cam_pose[:3, :3], cells), self.scene.sky_horizon, self.scene.sky_zenith
+
+    def _add_renderer(self) -> None:
+        r = self.vtk.vtkRenderer()
+        r.SetBackground(0.0, 0.0, 0.0)
+        r.SetBackgroundAlpha(0.0)
+        r.SetUseFXAA(False)
+        for actor in self.actors:
+            r.AddActor(actor)
+        self.window.AddRenderer(r)
+        self.renderers.append(r)
+
+    def _float_framebuffer(self, w: int, h: int) -> None:
+        """Make the window ``w``×``h`` with a float32 RGBA colour attachment on its render
+        framebuffer (what VTK draws into; its own is 8-bit), re-created when the size changes."""
+        vtk = self.vtk
+        if self._float_size == (w, h):
+            return
+        self.window.SetSize(w, h)
+        self.window.Render()  # the context and VTK's framebuffers at this size
+        self.window.MakeCurrent()
+        fbo = self.window.GetRenderFramebuffer()
+        if not fbo.PopulateFramebuffer(w, h, True, 1, vtk.VTK_FLOAT, True, 32, 0, False):
+            raise RasterUnavailable(f"VTK could not make a {w}x{h} float32 framebuffer")
+        tex = fbo.GetColorAttachmentAsTextureObject(0)
+        if tex is None or tex.GetVTKDataType() != vtk.VTK_FLOAT or (tex.GetWidth(), tex.GetHeight()) != (w, h):
+            got = "none" if tex is None else f"{tex.GetWidth()}x{tex.GetHeight()} of VTK type {tex.GetVTKDataType()}"
+            raise RasterUnavailable(f"VTK's render framebuffer has a colour attachment {got}, not {w}x{h} float32")
+        self._float_size = (w, h)
+
+    def _read_page(self, out: np.ndarray) -> None:
+        """glReadPixels of the whole render framebuffer (float RGBA, rows bottom-up) into ``out``:
+        VTK reads into the float array ``_read``, which wraps ``out``'s memory (no copy)."""
+        ph, pw = out.shape[:2]
+        flat = out.reshape(-1)
+        self._read.SetArray(flat, flat.size, 1)  # 1: VTK never frees numpy's memory
+        if not self.window.GetRGBAPixelData(0, 0, pw - 1, ph - 1, 0, self._read, 0):
             raise RasterUnavailable("VTK could not read back the float framebuffer")
-        sky = out[..., 3] <= 0.0
-        if sky.any():
-            jb, ii = np.nonzero(sky)
-            jj = h - 1 - jb  # rows bottom-up
-            rays = np.stack([(ii - c[0]) / f_px, (jj - c[1]) / f_px, np.ones(ii.size)], -1)
-            out[jb, ii, :3] = _sky(rays @ pose[:3, :3].T, self.scene)
+        if self._read.GetNumberOfValues() != flat.size:
+            raise RasterUnavailable(f"VTK read back {self._read.GetNumberOfValues()} floats, not {flat.size}")
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+
+        got = vtk_to_numpy(self._read)
+        if got.ctypes.data != out.ctypes.data:  # VTK re-allocated instead of reading in place: copy
+            flat[:] = got
+        self._read.SetArray(self._spare, self._spare.size, 1)  # let go of ``out`` (never freed by VTK)
+
+    def _fill_sky(self, tile: np.ndarray, rot: np.ndarray, f_px: float, c) -> None:
+        """The sky radiance of their direction in a tile's pixels of alpha 0 (rows bottom-up)."""
+        from .pyvista_renderer import _sky
+
+        alpha = tile[..., 3]
+        if alpha.min() > 0.0:  # no sky in view (a reduction, no mask: the usual case)
+            return
+        sky = alpha <= 0.0
+        h = tile.shape[0]
+        jb, ii = np.nonzero(sky)
+        jj = h - 1 - jb  # rows bottom-up
+        rays = np.stack([(ii - c[0]) / f_px, (jj - c[1]) / f_px, np.ones(ii.size)], -1)
+        tile[jb, ii, :3] = _sky(rays @ rot.T, self.scene)
 
     def close(self) -> None:
         self.window.Finalize()

@@ -184,6 +184,87 @@ def warp_reference(acc: np.ndarray, src: np.ndarray, cell: WarpCell) -> None:
     acc[j0:j1, i0:i1] += wgt * val
 
 
+PAGE_MAX_PX = 4096
+"""Largest side of a page of tiled renders (:func:`pack_tiles`); OpenGL implementations render
+at least 8192² (llvmpipe 16384²), and a page holds every projection of a usual frame."""
+
+
+@dataclass(frozen=True)
+class TileLayout:
+    """Where the renders of a frame's cells lie in the warp's source buffer: ``pages`` (w, h)
+    stored one after another, each RGBA float32 with the rows bottom-up (OpenGL's order); cell k's
+    render is the tile at pixel (x, y) of page p, ``tiles[k] = (p, x, y)``, y counted from the
+    page's bottom row."""
+
+    pages: tuple[tuple[int, int], ...]
+    tiles: tuple[tuple[int, int, int], ...]
+
+    @staticmethod
+    def separate(sizes) -> "TileLayout":
+        """Every render a page of its own (the layout of :meth:`Warper.map_cells`)."""
+        return TileLayout(tuple(tuple(s) for s in sizes), tuple((k, 0, 0) for k in range(len(sizes))))
+
+
+def _shelves(sizes, width: int, max_side: int) -> TileLayout:
+    """Shelf packing in the given order: tiles left to right along a shelf as long as they fit in
+    ``width``, shelves bottom to top, a new page where a shelf would pass ``max_side``."""
+    pages, tiles = [], []
+    page_w = x = y = shelf_h = 0
+    for w, h in sizes:
+        if x + w > width:  # next shelf
+            x, y, shelf_h = 0, y + shelf_h, 0
+        if y + h > max_side and (x, y) != (0, 0):  # next page
+            pages.append((page_w, y + shelf_h if x else y))
+            page_w = x = y = shelf_h = 0
+        tiles.append((len(pages), x, y))
+        x += w
+        shelf_h = max(shelf_h, h)
+        page_w = max(page_w, x)
+    pages.append((page_w, y + shelf_h))
+    return TileLayout(tuple(pages), tuple(tiles))
+
+
+def pack_tiles(sizes, max_side: int = PAGE_MAX_PX) -> TileLayout:
+    """A :class:`TileLayout` for renders of ``sizes`` (w, h): shelf packing (:func:`_shelves`) at
+    the page width, among multiples of the widest render up to ``max_side``, that needs the
+    fewest page pixels in all (what a rasterizer reads back), then the fewest pages. Ten equal
+    renders stack into one column: no pixel wasted."""
+    sizes = [(int(w), int(h)) for w, h in sizes]
+    if not sizes:
+        return TileLayout((), ())
+    widest = max(w for w, _ in sizes)
+    if widest > max_side or max(h for _, h in sizes) > max_side:
+        raise InputError(f"image-based lens: a projection's render of {widest}x{max(h for _, h in sizes)} px "
+                         f"exceeds the {max_side}-px page of tiled renders; use a smaller output size")
+    best = None
+    for m in range(1, max_side // widest + 1):
+        layout = _shelves(sizes, m * widest, max_side)
+        cost = (sum(w * h for w, h in layout.pages), len(layout.pages), m)
+        if best is None or cost < best[0]:
+            best = (cost, layout)
+        if len(layout.pages) == 1 and layout.tiles[-1][2] == 0:
+            break  # every tile on one shelf: wider pages change nothing
+    return best[1]
+
+
+def _float4(v):
+    from pyopencl import cltypes
+
+    x, y, z = (float(t) for t in np.asarray(v, np.float64).reshape(-1)[:3])
+    return cltypes.make_float4(x, y, z, 0.0)
+
+
+def sky_table(cam_rotation: np.ndarray, cells: list[WarpCell]) -> np.ndarray:
+    """Per cell the rows of the camera-to-world rotation with w = 1 / f, c_x, c_y: what
+    ``ibl_warp_cells`` needs to compute the sky of a texel's direction (kernels/ibl_warp.cl,
+    ``texel``). A projection's camera is the frame's camera moved to the COP, axes unchanged."""
+    table = np.zeros((len(cells), 3, 4), np.float32)
+    table[:, :, :3] = np.asarray(cam_rotation, np.float64)
+    for k, cell in enumerate(cells):
+        table[k, :, 3] = (1.0 / cell.render_f_px, cell.render_c[0], cell.render_c[1])
+    return table
+
+
 class Warper:
     """The OpenCL side: a planar accumulator of the output size and :meth:`add` per projection."""
 
@@ -233,62 +314,97 @@ class Warper:
         self.cl.enqueue_fill_buffer(self.rt.queue, self.acc, np.float32(0), 0, 3 * w * h * 4)
         self.events = []
 
-    def _cells_meta(self, cells: list[WarpCell]):
-        """Per-cell metadata and nodes on the device, kept for the last cell list (a model's warp
-        data is cached, so every frame of a sequence passes the same list)."""
-        if self._meta is not None and self._meta[0] is cells:
+    def _cells_meta(self, cells: list[WarpCell], tiled: bool = False):
+        """Per-cell metadata and nodes on the device and the source buffer's :class:`TileLayout`
+        (``tiled``: :func:`pack_tiles`; else every render alone, one after another), kept for the
+        last cell list (a model's warp data is cached, so every frame of a sequence passes the same
+        list)."""
+        if self._meta is not None and self._meta[0] is cells and self._meta[1] == tiled:
             return self._meta
         cl = self.cl
-        cell_i = np.zeros((len(cells), 10), np.int32)
-        cell_f = np.zeros((len(cells), 4), np.float32)
-        nodes = []
-        s_off = n_off = 0
-        for k, cell in enumerate(cells):
+        for cell in cells:
             sw, sh = cell.render_size
             if sw < 2 or sh < 2:
                 raise InputError(f"image-based lens: a projection's render of {sw}x{sh} px is too small to sample")
+        sizes = [tuple(int(v) for v in c.render_size) for c in cells]
+        layout = pack_tiles(sizes) if tiled else TileLayout.separate(sizes)
+        page_off = np.concatenate([[0], np.cumsum([4 * pw * ph for pw, ph in layout.pages])]).astype(np.int64)
+        cell_i = np.zeros((len(cells), 11), np.int32)
+        cell_f = np.zeros((len(cells), 4), np.float32)
+        nodes = []
+        n_off = 0
+        for k, (cell, (page, x, y)) in enumerate(zip(cells, layout.tiles)):
+            sw, sh = cell.render_size
             gy, gx = cell.nodes.shape[:2]
-            cell_i[k] = (*cell.box, s_off, sw, sh, n_off, gx, gy)  # s_off: RGBA floats
+            pw = layout.pages[page][0]
+            s_off = int(page_off[page]) + 4 * (y * pw + x)  # RGBA floats to the tile's bottom-left pixel
+            cell_i[k] = (*cell.box, s_off, sw, sh, n_off, gx, gy, pw)
             cell_f[k] = (cell.node_origin[0], cell.node_origin[1], 1.0 / cell.node_step[0], 1.0 / cell.node_step[1])
             nodes.append(np.asarray(cell.nodes, np.float32).reshape(-1, 4))
-            s_off += 4 * sw * sh
             n_off += gx * gy
+        if int(page_off[-1]) >= 2 ** 31:
+            raise InputError(f"image-based lens: the frame's renders hold {page_off[-1] // 4} pixels, more than the "
+                             "warp's 32-bit offsets address; use a smaller output or fewer pupil samples")
         mf = cl.mem_flags
         bufs = [cl.Buffer(self.rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
                 for a in (np.concatenate(nodes), cell_i, cell_f)]
-        self._meta = (cells, bufs, cell_i[:, 4].copy(), s_off)
+        self._meta = (cells, tiled, bufs, layout, page_off)
         return self._meta
+
+    def _map(self, cells: list[WarpCell], tiled: bool):
+        cl = self.cl
+        if self._mapped is not None:
+            raise RuntimeError("Warper.map_cells twice without launch_cells")
+        _, _, _, layout, page_off = self._cells_meta(cells, tiled)
+        total = int(page_off[-1])
+        if self._src_buf is None or self._src_buf.size < 4 * total:
+            self._src_buf = cl.Buffer(self.rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.ALLOC_HOST_PTR,
+                                      size=4 * max(total, 1))
+        stage, _ = cl.enqueue_map_buffer(self.rt.queue, self._src_buf, cl.map_flags.WRITE_INVALIDATE_REGION, 0,
+                                         (max(total, 1),), np.float32)
+        self._mapped = (cells, tiled, stage)
+        return layout, [stage[off:off + 4 * pw * ph].reshape(ph, pw, 4)
+                        for (pw, ph), off in zip(layout.pages, page_off)]
 
     def map_cells(self, cells: list[WarpCell]) -> list[np.ndarray]:
         """Writable (h, w, 4) float32 views, one per cell, into one mapped host-allocated buffer
         (pinned on a GPU; on a CPU device the kernel reads it in place, no upload): RGBA pixels
         with the rows bottom-up, as OpenGL reads a framebuffer back, so a rasterizer can download
         straight into them (alpha is not read). Fill them, then :meth:`launch_cells`."""
-        cl = self.cl
-        if self._mapped is not None:
-            raise RuntimeError("Warper.map_cells twice without launch_cells")
-        _, _, offsets, total = self._cells_meta(cells)
-        if self._src_buf is None or self._src_buf.size < 4 * total:
-            self._src_buf = cl.Buffer(self.rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.ALLOC_HOST_PTR,
-                                      size=4 * max(total, 1))
-        stage, _ = cl.enqueue_map_buffer(self.rt.queue, self._src_buf, cl.map_flags.WRITE_INVALIDATE_REGION, 0,
-                                         (max(total, 1),), np.float32)
-        self._mapped = (cells, stage)
-        return [stage[off:off + 4 * c.render_size[0] * c.render_size[1]].reshape(c.render_size[1], c.render_size[0], 4)
-                for c, off in zip(cells, offsets)]
+        return self._map(cells, False)[1]
 
-    def launch_cells(self, run: bool = True) -> None:
+    def map_pages(self, cells: list[WarpCell]) -> tuple[TileLayout, list[np.ndarray]]:
+        """:meth:`map_cells` with the renders packed as tiles of a few pages (:func:`pack_tiles`):
+        the layout and one writable (h, w, 4) view per page (RGBA, rows bottom-up), so a rasterizer
+        renders all the frame's projections into one framebuffer per page and reads each page back
+        in one piece. Fill them, then :meth:`launch_cells`."""
+        return self._map(cells, True)
+
+    def launch_cells(self, run: bool = True, sky=None) -> None:
         """Unmap the buffer of :meth:`map_cells` and (``run``) add all its cells in one launch of
-        ``ibl_warp_cells``: the same sum as :meth:`add` per cell, in the same order."""
-        cells, stage = self._mapped
+        ``ibl_warp_cells``: the same sum as :meth:`add` per cell, in the same order. ``sky`` =
+        (rotation, f, c) per cell and the scene's (horizon, zenith) colours, from
+        :func:`sky_table`: texels of alpha 0 (nothing drawn) are then the sky of their direction,
+        computed by the kernel, instead of the render's RGB."""
+        cells, tiled, stage = self._mapped
         self._mapped = None
         stage.base.release(self.rt.queue)
         if not run or not cells:
             return
-        _, (node_buf, ci_buf, cf_buf), _, _ = self._cells_meta(cells)
+        _, _, (node_buf, ci_buf, cf_buf), _, _ = self._cells_meta(cells, tiled)
+        cl = self.cl
+        if sky is None:
+            table, horizon, zenith = np.zeros(4, np.float32), np.zeros(4, np.float32), np.zeros(4, np.float32)
+        else:
+            table, horizon, zenith = sky
+            if table.shape != (len(cells), 3, 4):
+                raise ValueError(f"a sky table of shape {table.shape} for {len(cells)} cells")
+        sky_buf = cl.Buffer(self.rt.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                            hostbuf=np.ascontiguousarray(table, np.float32))
         w, h = self.size
         self.events.append(self.kernel_cells(self.rt.queue, (w, h), None, self._src_buf, node_buf, ci_buf, cf_buf,
-                                             np.int32(len(cells)), self.acc, np.int32(w), np.int32(h)))
+                                             np.int32(len(cells)), self.acc, np.int32(w), np.int32(h), sky_buf,
+                                             np.int32(sky is not None), _float4(horizon), _float4(zenith)))
 
     def add_cells(self, srcs: list[np.ndarray], cells: list[WarpCell]) -> None:
         """:meth:`map_cells`, each render (h×w×3, rows top-down) copied in, :meth:`launch_cells`."""

@@ -59,7 +59,9 @@ def render_image_based(model: ImageBasedLens, size: tuple[int, int], render_fn, 
     off-axis frustum; ``render_fn.prepare(cells)``, if there is one, is called first with all the
     frame's :class:`WarpCell` s — the rasterizer path bakes its textures there; a
     ``render_fn.render_into(view, cop, f, c, size)`` writes straight into the warp's RGBA buffer
-    with rows bottom-up instead of returning), warped onto its
+    with rows bottom-up instead of returning; a ``render_fn.render_pages(pages, cells, layout)``
+    renders all of them at once as the tiles of :meth:`Warper.map_pages`, leaving pixels of alpha 0
+    to the warp kernel's sky if it has ``render_fn.warp_sky(cells)``), warped onto its
     film cell with weight W by the ``ibl_warp_cells`` kernel (all projections in one launch) and
     summed over pupil samples, then normalised by the axial point's weight,
 
@@ -78,23 +80,31 @@ def render_image_based(model: ImageBasedLens, size: tuple[int, int], render_fn, 
     if prepare is not None:
         prepare(cells)
     t_prepare = time.perf_counter() - t0
+    pages = getattr(render_fn, "render_pages", None)
     into = getattr(render_fn, "render_into", None)
-    views = warper.map_cells(cells)
+    if pages is not None:  # all projections as the tiles of a few pages, one render + read-back per page
+        layout, views = warper.map_pages(cells)
+    else:
+        views = warper.map_cells(cells)
     try:
-        for cell, view in zip(cells, views):
-            if into is not None:  # straight into the warp's buffer (RGBA, rows bottom-up)
-                into(view, cell.cop_camera_m, cell.render_f_px, cell.render_c, cell.render_size)
-                continue
-            src = np.asarray(render_fn(cell.cop_camera_m, cell.render_f_px, cell.render_c, cell.render_size))
-            if src.shape != (cell.render_size[1], cell.render_size[0], 3):
-                raise InputError(f"image-based lens: render_fn returned shape {src.shape}, expected "
-                                 f"{(cell.render_size[1], cell.render_size[0], 3)} (h, w, 3)")
-            view[::-1, :, :3] = src
+        if pages is not None:
+            pages(views, cells, layout)
+        else:
+            for cell, view in zip(cells, views):
+                if into is not None:  # straight into the warp's buffer (RGBA, rows bottom-up)
+                    into(view, cell.cop_camera_m, cell.render_f_px, cell.render_c, cell.render_size)
+                    continue
+                src = np.asarray(render_fn(cell.cop_camera_m, cell.render_f_px, cell.render_c, cell.render_size))
+                if src.shape != (cell.render_size[1], cell.render_size[0], 3):
+                    raise InputError(f"image-based lens: render_fn returned shape {src.shape}, expected "
+                                     f"{(cell.render_size[1], cell.render_size[0], 3)} (h, w, 3)")
+                view[::-1, :, :3] = src
     except BaseException:
         warper.launch_cells(run=False)
         raise
     t_render = time.perf_counter() - t0
-    warper.launch_cells()
+    warp_sky = getattr(render_fn, "warp_sky", None) if pages is not None else None
+    warper.launch_cells(sky=warp_sky(cells) if warp_sky is not None else None)
     out = warper.result() / np.float32(axial)
     return out.astype(np.float32), {"projections": len(cells), "render_s": t_render, "prepare_s": t_prepare,
                                      "warp_device_ms": warper.device_ms()}
@@ -126,6 +136,13 @@ class _RasterRenderFn:
 
     def render_into(self, view, cop_m, f_px, c, size) -> None:
         self.raster.render_into(view, cop_m, f_px, c, size)
+
+    def render_pages(self, pages, cells, layout) -> None:
+        self.raster.render_pages(pages, [(c.cop_camera_m, c.render_f_px, c.render_c, c.render_size) for c in cells],
+                                 layout, fill_sky=False)  # the warp kernel fills the sky (warp_sky)
+
+    def warp_sky(self, cells):
+        return self.raster.sky(cells)
 
 
 def rasterizer_render_fn(raster, frame_index: int = 0):
