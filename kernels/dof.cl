@@ -55,6 +55,14 @@ typedef struct { DOF_F r, g, b, wf, fr, fg, fb, wb;
 #if DOF_PROFILE
                  DOF_F wfg, wfb, wbg, wbb;
 #endif
+                 /* the background hidden behind p (gather_reference's H, Hk, Wh, dmin): the
+                  * estimate's colour sums and weight, the behind taps' colour weight (wh, and
+                  * whg, whb per channel with DOF_PROFILE), the nearest behind tap's distance
+                  * + half the ramp (-1: none yet) and its inverse */
+                 DOF_F hr, hg, hb, hk, wh, dh, idh;
+#if DOF_PROFILE
+                 DOF_F whg, whb;
+#endif
 } DofAccV;
 
 #if DOF_PROFILE
@@ -177,6 +185,19 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
         w *= clamp((1.0f - e) * r + 0.5f, 0.0f, 1.0f) * pvq;
     }
 #endif
+    /* the hidden background's estimate (gather_reference): a kernel of the behind surface's own
+     * radius (at most p's), widened to the nearest behind tap (taps come in distance order) */
+    {
+        const DOF_I first = behind & (acc->dh < 0.0f);
+        const float dh = dist + 0.5f / inv_ramp;
+        acc->dh = select(acc->dh, (DOF_F)(dh), first);
+        acc->idh = select(acc->idh, (DOF_F)(1.0f / dh), first);
+        const DOF_F rhos = select((DOF_F)(rhon), (DOF_F)(rhof), far);
+        const DOF_F rh = fmax(fmin(fmax(fabs(rq), 0.5f), arp) * rhos, acc->dh);
+        const DOF_F irh = fmin(fmax(iq, iarp) * select((DOF_F)(irhon), (DOF_F)(irhof), far), acc->idh);
+        const DOF_F kh = select((DOF_F)(0.0f), clamp((rh - dist) * inv_ramp + 0.5f, 0.0f, 1.0f) * irh * irh, behind);
+        acc->hr += kh * cr; acc->hg += kh * cg; acc->hb += kh * cb; acc->hk += kh;
+    }
     /* wn: the normalising (1-px) weight of the background pool, 0 in front */
     const DOF_F wn = select(w * cov, (DOF_F)(0.0f), front);
     w = select(w * covc, wsmall, small);
@@ -186,14 +207,19 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
     const DOF_F wr = w * pr, wg = w * pg, wb3 = w * pb;
     const DOF_F fwr = select((DOF_F)(0.0f), wr, front), fwg = select((DOF_F)(0.0f), wg, front);
     const DOF_F fwb = select((DOF_F)(0.0f), wb3, front);
+    /* behind p: the weight goes to the hidden background's estimate (dof_hidden), not its colour */
+    const DOF_F hwr = select((DOF_F)(0.0f), wr, behind), hwg = select((DOF_F)(0.0f), wg, behind);
+    const DOF_F hwb = select((DOF_F)(0.0f), wb3, behind);
     acc->fr += fwr * cr; acc->fg += fwg * cg; acc->fb += fwb * cb;
     acc->wf += fwr; acc->wfg += fwg; acc->wfb += fwb;
-    acc->r += (wr - fwr) * cr; acc->g += (wg - fwg) * cg; acc->b += (wb3 - fwb) * cb;
+    acc->r += (wr - fwr - hwr) * cr; acc->g += (wg - fwg - hwg) * cg; acc->b += (wb3 - fwb - hwb) * cb;
+    acc->wh += hwr; acc->whg += hwg; acc->whb += hwb;
     acc->wb += wn * pr; acc->wbg += wn * pg; acc->wbb += wn * pb;
 #else
-    const DOF_F wfr = select((DOF_F)(0.0f), w, front), wbk = w - wfr;
+    const DOF_F wfr = select((DOF_F)(0.0f), w, front), whk = select((DOF_F)(0.0f), w, behind);
+    const DOF_F wbk = w - wfr - whk;  /* behind p: the weight goes to the hidden background's estimate */
     acc->fr += wfr * cr; acc->fg += wfr * cg; acc->fb += wfr * cb; acc->wf += wfr;
-    acc->r += wbk * cr; acc->g += wbk * cg; acc->b += wbk * cb; acc->wb += wn;
+    acc->r += wbk * cr; acc->g += wbk * cg; acc->b += wbk * cb; acc->wb += wn; acc->wh += whk;
 #endif
 }
 
@@ -251,6 +277,11 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                    (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f)
 #endif
                    };
+    acc.hr = acc.hg = acc.hb = acc.hk = acc.wh = (DOF_F)(0.0f);
+    acc.dh = (DOF_F)(-1.0f); acc.idh = (DOF_F)(0.0f);
+#if DOF_PROFILE
+    acc.whg = acc.whb = (DOF_F)(0.0f);
+#endif
     const DOF_F pvp = DOF_VIGNETTING ? DOF_LOAD(pv + c0) : (DOF_F)(1.0f);
     /* p's own texture rescale (DOF_TEX_PLANE): its centre tap's and every tap's behind it */
     DOF_F tp = (DOF_F)(1.0f);
@@ -293,6 +324,15 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     else
         DOF_TAPS(0)
 #undef DOF_TAPS
+    /* the behind taps' weight takes the hidden background's estimate as its colour */
+    {
+        const DOF_F ihk = select((DOF_F)(0.0f), 1.0f / acc.hk, acc.hk > 0.0f);
+#if DOF_PROFILE
+        acc.r += acc.wh * acc.hr * ihk; acc.g += acc.whg * acc.hg * ihk; acc.b += acc.whb * acc.hb * ihk;
+#else
+        acc.r += acc.wh * acc.hr * ihk; acc.g += acc.wh * acc.hg * ihk; acc.b += acc.wh * acc.hb * ihk;
+#endif
+    }
     /* per channel (one weight for all three without DOF_PROFILE); alpha_out: green's coverage.
      * No background weight (a strong SA texture zeroes the centre tap and every other tap is in
      * front): the background is the pixel's own colour, never 0/0 */
