@@ -58,8 +58,8 @@ typedef struct { DOF_F r, g, b, wf, fr, fg, fb, wb;
                  /* the background hidden behind p (gather_reference's H, Hk, Wh, dmin): the
                   * estimate's colour sums and weight, the behind taps' colour weight (wh, and
                   * whg, whb per channel with DOF_PROFILE), the nearest behind tap's distance
-                  * + half the ramp (-1: none yet) and its inverse */
-                 DOF_F hr, hg, hb, hk, wh, dh, idh;
+                  * + half the ramp (-1: none yet) */
+                 DOF_F hr, hg, hb, hk, wh, dh;
 #if DOF_PROFILE
                  DOF_F whg, whb;
 #endif
@@ -112,6 +112,19 @@ inline void dof_light_sums(__global const float *restrict lsum, const DOF_F r, c
     *n1 = DOF_LOAD(v1); *n4 = DOF_LOAD(v4);
 }
 
+/* a tap behind p and sharper than p (by DOF_HIDDEN_MARGIN px) feeds the estimate of the
+ * background hidden behind p (gather_reference in clpost/stages/dof.py): weight
+ * clamp((R - |o|) / ramp + 1/2, 0, 1) with R the behind surface's own radius, widened to the nearest behind tap's distance + half the ramp (taps come in
+ * distance order; dh < 0: none yet) */
+inline void dof_hidden(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F cb, const DOF_F rq,
+                       const DOF_I hid, const float dist, const float inv_ramp)
+{
+    acc->dh = select(acc->dh, (DOF_F)(dist + 0.5f / inv_ramp), hid & (acc->dh < 0.0f));
+    const DOF_F rh = fmax(fmax(fabs(rq), 0.5f), acc->dh);
+    const DOF_F kh = select((DOF_F)(0.0f), clamp((rh - dist) * inv_ramp + 0.5f, 0.0f, 1.0f), hid);
+    acc->hr += kh * cr; acc->hg += kh * cg; acc->hb += kh * cb; acc->hk += kh;
+}
+
 /* one source tap for 8 neighbouring target pixels: colours (cr, cg, cb), signed CoC rq and
  * iq = 1/max(|rq|, 1/2) at offset (dx, dy) px, |o| = dist px; the tap's constants (ρ and 1/ρ
  * of both layers) are uniform scalars. Selects and DOF_F arithmetic only: no branch, no
@@ -121,7 +134,7 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
                      const float dist, const float rhof, const float rhon, const float irhof,
                      const float irhon, const float inv_ramp, const float cell, const float sa,
                      const DOF_F hx, const DOF_F hy, const int dx, const int dy, const DOF_F pvq,
-                     const float vig, __global const float4 *restrict prof, const int lights,
+                     const float vig, __global const float4 *restrict prof, const int lights, const int hidden,
                      __global const float *restrict lsum, const DOF_F tq, const DOF_F tp)
 {
     const DOF_I front = rq < rp - DOF_FRONT_MARGIN;
@@ -185,19 +198,6 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
         w *= clamp((1.0f - e) * r + 0.5f, 0.0f, 1.0f) * pvq;
     }
 #endif
-    /* the hidden background's estimate (gather_reference): a kernel of the behind surface's own
-     * radius (at most p's), widened to the nearest behind tap (taps come in distance order) */
-    {
-        const DOF_I first = behind & (acc->dh < 0.0f);
-        const float dh = dist + 0.5f / inv_ramp;
-        acc->dh = select(acc->dh, (DOF_F)(dh), first);
-        acc->idh = select(acc->idh, (DOF_F)(1.0f / dh), first);
-        const DOF_F rhos = select((DOF_F)(rhon), (DOF_F)(rhof), far);
-        const DOF_F rh = fmax(fmin(fmax(fabs(rq), 0.5f), arp) * rhos, acc->dh);
-        const DOF_F irh = fmin(fmax(iq, iarp) * select((DOF_F)(irhon), (DOF_F)(irhof), far), acc->idh);
-        const DOF_F kh = select((DOF_F)(0.0f), clamp((rh - dist) * inv_ramp + 0.5f, 0.0f, 1.0f) * irh * irh, behind);
-        acc->hr += kh * cr; acc->hg += kh * cg; acc->hb += kh * cb; acc->hk += kh;
-    }
     /* wn: the normalising (1-px) weight of the background pool, 0 in front */
     const DOF_F wn = select(w * cov, (DOF_F)(0.0f), front);
     w = select(w * covc, wsmall, small);
@@ -207,19 +207,31 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
     const DOF_F wr = w * pr, wg = w * pg, wb3 = w * pb;
     const DOF_F fwr = select((DOF_F)(0.0f), wr, front), fwg = select((DOF_F)(0.0f), wg, front);
     const DOF_F fwb = select((DOF_F)(0.0f), wb3, front);
-    /* behind p: the weight goes to the hidden background's estimate (dof_hidden), not its colour */
-    const DOF_F hwr = select((DOF_F)(0.0f), wr, behind), hwg = select((DOF_F)(0.0f), wg, behind);
-    const DOF_F hwb = select((DOF_F)(0.0f), wb3, behind);
+    /* behind p and sharper: the weight goes to the hidden background's estimate (dof_hidden) */
+    const DOF_I hid = behind & (fabs(rq) < arp - DOF_HIDDEN_MARGIN);
+    const DOF_F hwr = select((DOF_F)(0.0f), wr, hid), hwg = select((DOF_F)(0.0f), wg, hid);
+    const DOF_F hwb = select((DOF_F)(0.0f), wb3, hid);
     acc->fr += fwr * cr; acc->fg += fwg * cg; acc->fb += fwb * cb;
     acc->wf += fwr; acc->wfg += fwg; acc->wfb += fwb;
     acc->r += (wr - fwr - hwr) * cr; acc->g += (wg - fwg - hwg) * cg; acc->b += (wb3 - fwb - hwb) * cb;
     acc->wh += hwr; acc->whg += hwg; acc->whb += hwb;
+    dof_hidden(acc, cr, cg, cb, rq, hid, dist, inv_ramp);
     acc->wb += wn * pr; acc->wbg += wn * pg; acc->wbb += wn * pb;
 #else
-    const DOF_F wfr = select((DOF_F)(0.0f), w, front), whk = select((DOF_F)(0.0f), w, behind);
-    const DOF_F wbk = w - wfr - whk;  /* behind p: the weight goes to the hidden background's estimate */
+    const DOF_F wfr = select((DOF_F)(0.0f), w, front);
+    DOF_F wbk = w - wfr;
+    /* `hidden`: a compile-time 0 in the tap loop of 8 or 16 pixels none of which is in front of
+     * the focus by DOF_HIDDEN_MARGIN (no tap can be behind and sharper there) */
+    const DOF_I hid = hidden ? behind & (fabs(rq) < arp - DOF_HIDDEN_MARGIN) : (DOF_I)(0);
+    if (hidden && any(hid)) {
+        /* behind p and sharper: the weight goes to the hidden background's estimate (dof_hidden) */
+        const DOF_F whk = select((DOF_F)(0.0f), w, hid);
+        wbk -= whk;
+        acc->wh += whk;
+        dof_hidden(acc, cr, cg, cb, rq, hid, dist, inv_ramp);
+    }
     acc->fr += wfr * cr; acc->fg += wfr * cg; acc->fb += wfr * cb; acc->wf += wfr;
-    acc->r += wbk * cr; acc->g += wbk * cg; acc->b += wbk * cb; acc->wb += wn; acc->wh += whk;
+    acc->r += wbk * cr; acc->g += wbk * cg; acc->b += wbk * cb; acc->wb += wn;
 #endif
 }
 
@@ -278,7 +290,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
 #endif
                    };
     acc.hr = acc.hg = acc.hb = acc.hk = acc.wh = (DOF_F)(0.0f);
-    acc.dh = (DOF_F)(-1.0f); acc.idh = (DOF_F)(0.0f);
+    acc.dh = (DOF_F)(-1.0f);
 #if DOF_PROFILE
     acc.whg = acc.whb = (DOF_F)(0.0f);
 #endif
@@ -295,7 +307,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     /* the taps; the light path (dof_tapv's `lights`) only in a level-0 tile that dof_tile_dilate
      * found within one tile of a light (bit 31 of its packed plan): the same loop without it
      * elsewhere, so a frame without lights runs the plain tap loop */
-#define DOF_TAPS(LIGHT) { \
+#define DOF_TAPS(LIGHT, HIDDEN) { \
     {\
         /* centre tap: own colour, blended toward the level's as p's own bokeh outgrows the\
          * lattice spacing (a point light's centre must not stay a one-pixel spike) */\
@@ -306,7 +318,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                  DOF_LOAD(lv + 2 * pn + c0) * ob + DOF_LOAD(L + 2 * pn + c0) * beta,\
                  rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0],\
                  inv_ramp, cell, sa, hx0, (DOF_F)(hy0), 0, 0,\
-                 pvp, vig, prof, (LIGHT), lsum, tp, tp);\
+                 pvp, vig, prof, (LIGHT), (HIDDEN), lsum, tp, tp);\
     }\
     for (int k = 1; k < count; ++k) {\
         const int dx = s * tap_dx[k], dy = s * tap_dy[k];\
@@ -317,12 +329,19 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                  ((float)x + 0.5f * (float)dx + lane - cx) * inv_half,\
                  (DOF_F)(((float)y + 0.5f * (float)dy - cy) * inv_half),\
                  dx, dy, DOF_VIGNETTING ? 0.5f * (pvp + DOF_LOAD(pv + q)) : (DOF_F)(1.0f), vig, prof,\
-                 (LIGHT), lsum, DOF_TEX_PLANE ? DOF_LOAD(L + 5 * pn + q) : (DOF_F)(1.0f), tp);\
+                 (LIGHT), (HIDDEN), lsum, DOF_TEX_PLANE ? DOF_LOAD(L + 5 * pn + q) : (DOF_F)(1.0f), tp);\
     } }
-    if (DOF_LIGHTS && lvl == 0 && packed < 0)
-        DOF_TAPS(1)
+    /* the hidden background's taps (dof_hidden) only where a pixel is in front of the focus */
+    const int hidden = any(rp < -DOF_HIDDEN_MARGIN);
+    if (DOF_LIGHTS && lvl == 0 && packed < 0) {
+        if (hidden)
+            DOF_TAPS(1, 1)
+        else
+            DOF_TAPS(1, 0)
+    } else if (hidden)
+        DOF_TAPS(0, 1)
     else
-        DOF_TAPS(0)
+        DOF_TAPS(0, 0)
 #undef DOF_TAPS
     /* the behind taps' weight takes the hidden background's estimate as its colour */
     {
