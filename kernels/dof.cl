@@ -55,6 +55,14 @@ typedef struct { DOF_F r, g, b, wf, fr, fg, fb, wb;
 #if DOF_PROFILE
                  DOF_F wfg, wfb, wbg, wbb;
 #endif
+                 /* the background hidden behind p (gather_reference's H, Hk, Wh, dmin): the
+                  * estimate's colour sums and weight, the behind taps' colour weight (wh, and
+                  * whg, whb per channel with DOF_PROFILE), the nearest behind tap's distance
+                  * + half the ramp (-1: none yet) */
+                 DOF_F hr, hg, hb, hk, wh, dh;
+#if DOF_PROFILE
+                 DOF_F whg, whb;
+#endif
 } DofAccV;
 
 #if DOF_PROFILE
@@ -104,6 +112,19 @@ inline void dof_light_sums(__global const float *restrict lsum, const DOF_F r, c
     *n1 = DOF_LOAD(v1); *n4 = DOF_LOAD(v4);
 }
 
+/* a tap behind p and sharper than p (by DOF_HIDDEN_MARGIN px) feeds the estimate of the
+ * background hidden behind p (gather_reference in clpost/stages/dof.py): weight
+ * clamp((R - |o|) / ramp + 1/2, 0, 1) with R the behind surface's own radius, widened to the nearest behind tap's distance + half the ramp (taps come in
+ * distance order; dh < 0: none yet) */
+inline void dof_hidden(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F cb, const DOF_F rq,
+                       const DOF_I hid, const float dist, const float inv_ramp)
+{
+    acc->dh = select(acc->dh, (DOF_F)(dist + 0.5f / inv_ramp), hid & (acc->dh < 0.0f));
+    const DOF_F rh = fmax(fmax(fabs(rq), 0.5f), acc->dh);
+    const DOF_F kh = select((DOF_F)(0.0f), clamp((rh - dist) * inv_ramp + 0.5f, 0.0f, 1.0f), hid);
+    acc->hr += kh * cr; acc->hg += kh * cg; acc->hb += kh * cb; acc->hk += kh;
+}
+
 /* one source tap for 8 neighbouring target pixels: colours (cr, cg, cb), signed CoC rq and
  * iq = 1/max(|rq|, 1/2) at offset (dx, dy) px, |o| = dist px; the tap's constants (ρ and 1/ρ
  * of both layers) are uniform scalars. Selects and DOF_F arithmetic only: no branch, no
@@ -113,7 +134,7 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
                      const float dist, const float rhof, const float rhon, const float irhof,
                      const float irhon, const float inv_ramp, const float cell, const float sa,
                      const DOF_F hx, const DOF_F hy, const int dx, const int dy, const DOF_F pvq,
-                     const float vig, __global const float4 *restrict prof, const int lights,
+                     const float vig, __global const float4 *restrict prof, const int lights, const int hidden,
                      __global const float *restrict lsum, const DOF_F tq, const DOF_F tp)
 {
     const DOF_I front = rq < rp - DOF_FRONT_MARGIN;
@@ -186,12 +207,29 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
     const DOF_F wr = w * pr, wg = w * pg, wb3 = w * pb;
     const DOF_F fwr = select((DOF_F)(0.0f), wr, front), fwg = select((DOF_F)(0.0f), wg, front);
     const DOF_F fwb = select((DOF_F)(0.0f), wb3, front);
+    /* behind p and sharper: the weight goes to the hidden background's estimate (dof_hidden) */
+    const DOF_I hid = behind & (fabs(rq) < arp - DOF_HIDDEN_MARGIN);
+    const DOF_F hwr = select((DOF_F)(0.0f), wr, hid), hwg = select((DOF_F)(0.0f), wg, hid);
+    const DOF_F hwb = select((DOF_F)(0.0f), wb3, hid);
     acc->fr += fwr * cr; acc->fg += fwg * cg; acc->fb += fwb * cb;
     acc->wf += fwr; acc->wfg += fwg; acc->wfb += fwb;
-    acc->r += (wr - fwr) * cr; acc->g += (wg - fwg) * cg; acc->b += (wb3 - fwb) * cb;
+    acc->r += (wr - fwr - hwr) * cr; acc->g += (wg - fwg - hwg) * cg; acc->b += (wb3 - fwb - hwb) * cb;
+    acc->wh += hwr; acc->whg += hwg; acc->whb += hwb;
+    dof_hidden(acc, cr, cg, cb, rq, hid, dist, inv_ramp);
     acc->wb += wn * pr; acc->wbg += wn * pg; acc->wbb += wn * pb;
 #else
-    const DOF_F wfr = select((DOF_F)(0.0f), w, front), wbk = w - wfr;
+    const DOF_F wfr = select((DOF_F)(0.0f), w, front);
+    DOF_F wbk = w - wfr;
+    /* `hidden`: a compile-time 0 in the tap loop of 8 or 16 pixels none of which is in front of
+     * the focus by DOF_HIDDEN_MARGIN (no tap can be behind and sharper there) */
+    const DOF_I hid = hidden ? behind & (fabs(rq) < arp - DOF_HIDDEN_MARGIN) : (DOF_I)(0);
+    if (hidden && any(hid)) {
+        /* behind p and sharper: the weight goes to the hidden background's estimate (dof_hidden) */
+        const DOF_F whk = select((DOF_F)(0.0f), w, hid);
+        wbk -= whk;
+        acc->wh += whk;
+        dof_hidden(acc, cr, cg, cb, rq, hid, dist, inv_ramp);
+    }
     acc->fr += wfr * cr; acc->fg += wfr * cg; acc->fb += wfr * cb; acc->wf += wfr;
     acc->r += wbk * cr; acc->g += wbk * cg; acc->b += wbk * cb; acc->wb += wn;
 #endif
@@ -251,6 +289,11 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                    (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f), (DOF_F)(0.0f)
 #endif
                    };
+    acc.hr = acc.hg = acc.hb = acc.hk = acc.wh = (DOF_F)(0.0f);
+    acc.dh = (DOF_F)(-1.0f);
+#if DOF_PROFILE
+    acc.whg = acc.whb = (DOF_F)(0.0f);
+#endif
     const DOF_F pvp = DOF_VIGNETTING ? DOF_LOAD(pv + c0) : (DOF_F)(1.0f);
     /* p's own texture rescale (DOF_TEX_PLANE): its centre tap's and every tap's behind it */
     DOF_F tp = (DOF_F)(1.0f);
@@ -264,7 +307,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
     /* the taps; the light path (dof_tapv's `lights`) only in a level-0 tile that dof_tile_dilate
      * found within one tile of a light (bit 31 of its packed plan): the same loop without it
      * elsewhere, so a frame without lights runs the plain tap loop */
-#define DOF_TAPS(LIGHT) { \
+#define DOF_TAPS(LIGHT, HIDDEN) { \
     {\
         /* centre tap: own colour, blended toward the level's as p's own bokeh outgrows the\
          * lattice spacing (a point light's centre must not stay a one-pixel spike) */\
@@ -275,7 +318,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                  DOF_LOAD(lv + 2 * pn + c0) * ob + DOF_LOAD(L + 2 * pn + c0) * beta,\
                  rp, iarp, rp, arp, iarp, 0.0f, rho_far[0], rho_near[0], inv_rho_far[0], inv_rho_near[0],\
                  inv_ramp, cell, sa, hx0, (DOF_F)(hy0), 0, 0,\
-                 pvp, vig, prof, (LIGHT), lsum, tp, tp);\
+                 pvp, vig, prof, (LIGHT), (HIDDEN), lsum, tp, tp);\
     }\
     for (int k = 1; k < count; ++k) {\
         const int dx = s * tap_dx[k], dy = s * tap_dy[k];\
@@ -286,13 +329,29 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                  ((float)x + 0.5f * (float)dx + lane - cx) * inv_half,\
                  (DOF_F)(((float)y + 0.5f * (float)dy - cy) * inv_half),\
                  dx, dy, DOF_VIGNETTING ? 0.5f * (pvp + DOF_LOAD(pv + q)) : (DOF_F)(1.0f), vig, prof,\
-                 (LIGHT), lsum, DOF_TEX_PLANE ? DOF_LOAD(L + 5 * pn + q) : (DOF_F)(1.0f), tp);\
+                 (LIGHT), (HIDDEN), lsum, DOF_TEX_PLANE ? DOF_LOAD(L + 5 * pn + q) : (DOF_F)(1.0f), tp);\
     } }
-    if (DOF_LIGHTS && lvl == 0 && packed < 0)
-        DOF_TAPS(1)
+    /* the hidden background's taps (dof_hidden) only where a pixel is in front of the focus */
+    const int hidden = any(rp < -DOF_HIDDEN_MARGIN);
+    if (DOF_LIGHTS && lvl == 0 && packed < 0) {
+        if (hidden)
+            DOF_TAPS(1, 1)
+        else
+            DOF_TAPS(1, 0)
+    } else if (hidden)
+        DOF_TAPS(0, 1)
     else
-        DOF_TAPS(0)
+        DOF_TAPS(0, 0)
 #undef DOF_TAPS
+    /* the behind taps' weight takes the hidden background's estimate as its colour */
+    {
+        const DOF_F ihk = select((DOF_F)(0.0f), 1.0f / acc.hk, acc.hk > 0.0f);
+#if DOF_PROFILE
+        acc.r += acc.wh * acc.hr * ihk; acc.g += acc.whg * acc.hg * ihk; acc.b += acc.whb * acc.hb * ihk;
+#else
+        acc.r += acc.wh * acc.hr * ihk; acc.g += acc.wh * acc.hg * ihk; acc.b += acc.wh * acc.hb * ihk;
+#endif
+    }
     /* per channel (one weight for all three without DOF_PROFILE); alpha_out: green's coverage.
      * No background weight (a strong SA texture zeroes the centre tap and every other tap is in
      * front): the background is the pixel's own colour, never 0/0 */

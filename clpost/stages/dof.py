@@ -833,6 +833,10 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
     F = np.zeros((h, w, 3)); Wf = np.zeros((h, w, 3))  # per channel: a traced profile differs
     B = np.zeros((h, w, 3)); Wb = np.zeros((h, w, 3))  # per colour (axial colour)
     col_stack, coc_stack = np.stack(cols), np.stack(cocs)
+    # the background hidden behind p (HIDDEN_BG): the behind taps' colour estimate and weights
+    H = np.zeros((h, w, 3)); Hk = np.zeros((h, w)); Wh = np.zeros((h, w, 3))
+    dmin = np.full((h, w), np.inf)
+    ramp = np.maximum(s / 2, 1.0)
     for k in range(int(cnt.max())):
         live = k < cnt
         dx = (s * dxs[k]).astype(int)
@@ -900,7 +904,17 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
         wgt = np.where(small[..., None], np.where(live, w_small, 0.0)[..., None], g * cov_c[..., None])
         wf = np.where(front[..., None], wgt, 0.0)
         F += wf * cq; Wf += wf
-        B += (wgt - wf) * cq; Wb += np.where(front[..., None], 0.0, g * cov[..., None])
+        hid = behind & live & (np.abs(rq) < np.abs(rp) - HIDDEN_MARGIN_PX)
+        wh = np.where(hid[..., None], wgt, 0.0)
+        Wh += wh
+        B += (wgt - wf - wh) * cq; Wb += np.where(front[..., None], 0.0, g * cov[..., None])
+        # the estimate's kernel: the background's own radius (at most p's), widened to the
+        # nearest behind tap (taps come in distance order): the hidden surface's colour at p
+        dmin = np.where(hid & np.isinf(dmin), dist, dmin)
+        rh = np.maximum(np.maximum(np.abs(rq), 0.5), dmin + 0.5 * ramp)
+        kh = np.where(hid, np.clip((rh - dist) / ramp + 0.5, 0.0, 1.0), 0.0)
+        H += kh[..., None] * cq; Hk += kh
+    B += Wh * np.where(Hk[..., None] > 0, H / np.where(Hk > 0, Hk, 1.0)[..., None], 0.0)
     alpha = np.minimum(1.0, Wf)
     fr = np.where(Wf > 0, F / np.where(Wf > 0, Wf, 1.0), 0.0)
     # no background weight at all (a strong spherical-aberration texture zeroes the centre tap
@@ -909,6 +923,8 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
     out = alpha * fr + (1 - alpha) * bg
     return out, alpha[..., 1]
 
+
+HIDDEN_MARGIN_PX = 1.0
 
 PROFILE_RMAX_PX = 64.0
 """Signed CoC radius (output px) of the pencil map's outermost rows: the largest max_coc_px of
@@ -1236,7 +1252,7 @@ class Dof(GatherStage):
                 "DOF_HALF_BLEND": f"{1.0 / (HALF_PATH_VAR_PX2 - LOCAL_VAR_PX2)!r}f",
                 "DOF_LOCAL_VAR": f"{LOCAL_VAR_PX2!r}f", "DOF_LOCAL_MIN": f"{LOCAL_MIN_PX!r}f",
                 "DOF_SMALL_LO": f"{SMALL_LO_PX!r}f", "DOF_SMALL_K": f"{1.0 / (SMALL_HI_PX - SMALL_LO_PX)!r}f",
-                "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
+                "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_HIDDEN_MARGIN": f"{HIDDEN_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
                 "DOF_LIGHTS": int(not traced and camera.optical_vignetting == 0),
                 "DOF_LIGHT_SMALL_LO": f"{LIGHT_SMALL_PX[0]!r}f", "DOF_LIGHT_SMALL_HI": f"{LIGHT_SMALL_PX[1]!r}f",
                 "DOF_LIGHT_LUMA": f"{LIGHT_LUMA!r}f", "DOF_LIGHT_RMAX": f"{LIGHT_RMAX_PX!r}f",
