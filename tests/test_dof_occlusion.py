@@ -16,9 +16,9 @@ from clpost.stages import dof as D
 CAM = dict(depth_of_field=True, f_number=1.4, focus_distance_m=2.0, sensor_mm=(6.0, 4.0), blades=0)
 H, W = 48, 96
 BAR = (36.0, 60.0)           # the bar's x extent on the pinhole image (px, pixel centres at integers)
-BAR_M, WALL_M = 0.9, 2.0     # depths: the bar in front of the focus, the checker on it
+BAR_M, WALL_M = 1.1, 2.0     # depths: the bar in front of the focus, the checker on it
 BAR_RGB = np.array([0.9, 0.25, 0.1])
-CHECK = 6                    # checker square (px)
+CHECK = 16                   # checker square (px): wider than the blur, so the hidden part continues the seen
 
 
 def checker(x, y):
@@ -67,15 +67,18 @@ def band_psnr(out, truth, mask):
     return 10 * np.log10(1.0 / np.mean((out[mask] - truth[mask]) ** 2))
 
 
-@pytest.mark.parametrize("quality, floor_db", [("final", 33.0), ("preview", 27.5), ("draft", 27.5)])
+@pytest.mark.parametrize("quality, floor_db", [("final", 31.0), ("preview", 28.0), ("draft", 28.0)])
 def test_the_background_behind_a_blurred_bars_edge_stays_sharp(scene, quality, floor_db):
     """Inside the bar's soft edge the truth is the bar's coverage over the checker *at that pixel*
     (in focus, hidden in the pinhole); the gather used to fill the uncovered share with the
-    visible checker averaged over the bar's disc — a smeared checker (final 30.4 dB here). The
-    hidden background's estimate (the nearest behind taps) keeps the checker's edges."""
+    visible checker averaged over the bar's disc — the checker's edges smeared across the band
+    (24.8 dB at final, 25.4 at draft and preview). The hidden background's estimate (the nearest
+    behind taps) continues them: 34.3 and 29.9 dB."""
     cam, r_bar, frame, truth = scene
     out = Pipeline(cam, quality=quality, stages=["dof"]).run(frame).color[..., :3]
     xx = np.arange(W)[None, :].repeat(H, 0)
     inside = in_bar(xx) & ((xx - BAR[0] < abs(r_bar)) | (BAR[1] - xx < abs(r_bar)))
     inside[:, :] &= (np.arange(H)[:, None] >= 4) & (np.arange(H)[:, None] < H - 4)
     assert band_psnr(out, truth, inside) > floor_db
+    if quality == "final":  # the whole image (34.2 dB before): the wall side was right already
+        assert band_psnr(out, truth, np.ones_like(inside)) > 40.0
