@@ -65,7 +65,9 @@ def test_json_schema_and_markdown(tmp_path, capsys):
             assert key in r, key
         assert r["device_ms"] == sum(k["ms"] for k in r["kernels"])
         for k in r["kernels"]:
-            assert k["bytes"] >= 2 * 12 * 48 * 32
+            # a plan's kernel reads and writes the colour at least; a companion kernel building a
+            # table (vignetting_plane: 8 B a pixel) moves its own planes, never nothing
+            assert k["bytes"] >= (48 * 32 * 8 if k["kind"] == "aux" else 2 * 12 * 48 * 32), k["kernel"]
             if k["ms"] > 0:
                 assert np.isclose(k["gbps"], k["bytes"] / k["ms"] / 1e6)
                 assert np.isclose(k["percent_of_copy"], 100 * k["gbps"] / r["copy_kernel_gbps"])

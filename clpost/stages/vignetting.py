@@ -246,6 +246,12 @@ class Vignetting(PointwiseStage):
 
         return (DeviceTable((lut.tobytes(), pitch, cx, cy, w, h, r_max), (h, w), fill),)
 
+    def aux_bytes(self, camera, frame) -> int:
+        """Bytes ``vignetting_plane`` moves (``clpost bench``): per pixel its image height read and
+        its RI written, plus the LUT."""
+        w, h = frame.size
+        return w * h * (4 + 4) + 4 * LUT_SIZE
+
     def reference(self, camera, frame, color):
         color = np.asarray(color, np.float64)
         h, w = color.shape[:2]
