@@ -862,7 +862,7 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
             tscale = np.where(s >= 2, th, t1)
         rho = np.where(far, rf[k], rn[k])
         rr = r * rho
-        cov = np.clip((rr * reach - dist) / np.maximum(s / 2, 1.0) + 0.5, 0.0, 1.0)
+        cov = np.clip((rr * reach - dist) / ramp + 0.5, 0.0, 1.0)
         # a light (LIGHT_LUMA): the LIGHT_RAMP_PX ramp in the colour sums, rescaled by its lattice
         # sums; `cov` (1-px ramp) stays the normalising weight
         bright = (s == 1) & lights & (cq @ np.array(LIGHT_LUMA_WEIGHTS) > LIGHT_LUMA)
