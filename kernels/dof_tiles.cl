@@ -18,32 +18,10 @@
 #error "the light bit assumes a level-0 tile's taps stay within the 3x3 tiles around it"
 #endif
 
-/* tlight[t]: whether a level-0 pixel of tile t is a light (DOF_LIGHTS; the light test of dof_tapv) */
-inline int dof_tile_light(__global const float *lv, const size_t pn, const int pw, const int pad, const int ww,
-                          const int hw, const int tx, const int ty)
-{
-    if (!DOF_LIGHTS)
-        return 0;
-#if DOF_TILE == 16
-    if ((tx + 1) * DOF_TILE <= ww && (ty + 1) * DOF_TILE <= hw) {  /* a whole tile: one row per vload16 */
-        __global const float *p0 = lv + (size_t)(ty * DOF_TILE + pad) * pw + tx * DOF_TILE + pad;
-        int16 on = (int16)(0);
-        for (int y = 0; y < DOF_TILE; ++y, p0 += pw)
-            on |= DOF_LIGHT_Y0 * vload16(0, p0) + DOF_LIGHT_Y1 * vload16(0, p0 + pn)
-                  + DOF_LIGHT_Y2 * vload16(0, p0 + 2 * pn) > DOF_LIGHT_LUMA;
-        return any(on);
-    }
-#endif
-    for (int y = ty * DOF_TILE; y < min((ty + 1) * DOF_TILE, hw); ++y)
-        for (int x = tx * DOF_TILE; x < min((tx + 1) * DOF_TILE, ww); ++x) {
-            const size_t i = (size_t)(y + pad) * pw + x + pad;
-            if (DOF_LIGHT_Y0 * lv[i] + DOF_LIGHT_Y1 * lv[pn + i] + DOF_LIGHT_Y2 * lv[2 * pn + i] > DOF_LIGHT_LUMA)
-                return 1;
-        }
-    return 0;
-}
-
-/* tmax[2 t], tmax[2 t + 1]: the signed CoC's min and max over tile t (level 0); tlight[t] */
+/* tmax[2 t], tmax[2 t + 1]: the signed CoC's min and max over tile t (level 0); tlight[t]: whether a
+ * level-0 pixel of tile t is a light (DOF_LIGHTS; the light test of dof_tapv). One walk over the
+ * tile reads the four planes (min, max and the light flag are exact in any order). */
+#define DOF_IS_LIGHT(r, g, b) (DOF_LIGHT_Y0 * (r) + DOF_LIGHT_Y1 * (g) + DOF_LIGHT_Y2 * (b) > DOF_LIGHT_LUMA)
 __kernel void dof_tile_max(__global const float *restrict lv, __global float *restrict tmax,
                            __global int *restrict tlight,
                            const int ww, const int hw, const int pad, const int tw, const int th)
@@ -51,37 +29,47 @@ __kernel void dof_tile_max(__global const float *restrict lv, __global float *re
     const int tx = get_global_id(0), ty = get_global_id(1);
     if (tx >= tw || ty >= th) return;
     const int pw = DOF_PW(ww, pad);
-    __global const float *pr = lv + (size_t)3 * pw * DOF_PW(hw, pad);  /* level 0 CoC */
+    const size_t pn = (size_t)pw * DOF_PW(hw, pad);
+    __global const float *pr = lv + 3 * pn;  /* level 0 CoC */
     const int t = ty * tw + tx;
-    tlight[t] = dof_tile_light(lv, (size_t)pw * DOF_PW(hw, pad), pw, pad, ww, hw, tx, ty);
 #if DOF_TILE == 16
-    if ((tx + 1) * DOF_TILE <= ww && (ty + 1) * DOF_TILE <= hw) {
-        /* a whole tile: one row per vload16 (min and max are exact in any order) */
-        __global const float *p0 = pr + (size_t)(ty * DOF_TILE + pad) * pw + tx * DOF_TILE + pad;
-        float16 lo = vload16(0, p0), hi = lo;
-        for (int y = 1; y < DOF_TILE; ++y) {
-            const float16 v = vload16(0, p0 + (size_t)y * pw);
+    if ((tx + 1) * DOF_TILE <= ww && (ty + 1) * DOF_TILE <= hw) {  /* a whole tile: one row per vload16 */
+        const size_t o0 = (size_t)(ty * DOF_TILE + pad) * pw + tx * DOF_TILE + pad;
+        float16 lo = vload16(0, pr + o0), hi = lo;
+        int16 on = (int16)(0);
+        for (int y = 0; y < DOF_TILE; ++y) {
+            const size_t o = o0 + (size_t)y * pw;
+            const float16 v = vload16(0, pr + o);
             lo = fmin(lo, v);
             hi = fmax(hi, v);
+            if (DOF_LIGHTS)
+                on |= DOF_IS_LIGHT(vload16(0, lv + o), vload16(0, lv + pn + o), vload16(0, lv + 2 * pn + o));
         }
         const float8 a = fmin(lo.lo, lo.hi), b = fmax(hi.lo, hi.hi);
         const float4 c = fmin(a.lo, a.hi), d = fmax(b.lo, b.hi);
         const float2 e = fmin(c.lo, c.hi), f = fmax(d.lo, d.hi);
         tmax[2 * t] = fmin(e.x, e.y);
         tmax[2 * t + 1] = fmax(f.x, f.y);
+        tlight[t] = DOF_LIGHTS ? any(on) : 0;
         return;
     }
 #endif
     float lo = INFINITY, hi = -INFINITY;
+    int on = 0;
     for (int y = ty * DOF_TILE; y < min((ty + 1) * DOF_TILE, hw); ++y)
         for (int x = tx * DOF_TILE; x < min((tx + 1) * DOF_TILE, ww); ++x) {
-            const float v = pr[(size_t)(y + pad) * pw + x + pad];
+            const size_t i = (size_t)(y + pad) * pw + x + pad;
+            const float v = pr[i];
             lo = fmin(lo, v);
             hi = fmax(hi, v);
+            if (DOF_LIGHTS)
+                on |= DOF_IS_LIGHT(lv[i], lv[pn + i], lv[2 * pn + i]);
         }
     tmax[2 * t] = lo;
     tmax[2 * t + 1] = hi;
+    tlight[t] = on;
 }
+#undef DOF_IS_LIGHT
 
 /* The border replicates edge pixels, so an edge tile's own range also stands for the padding.
  * A neighbour's sources behind every pixel of the tile (CoC above the tile's max + the front
