@@ -57,22 +57,24 @@ __kernel void dof_levels(__global float *restrict lv, const int pw, const int ph
 #undef DOF_XM
 
 #if DOF_TEX_PLANE
-/* the texture's rescale plane (DOF_PLANES) of level `lvl` (stride s = 2^lvl): N(r/s; 0)/N(r/s; a)
- * of r = max(|CoC|, 1/2) and the CoC's sign, from the table `tsum` (texture_sums in
- * clpost/stages/dof.py: rows far ramp 1, far ramp 1/2, near ramp 1, near ramp 1/2 of DOF_LIGHT_N,
- * linear in r/s, ends clamped; ramp 1 at stride 1, else ramp 1/2) */
+/* the texture's rescale plane (DOF_PLANES) of every level l = 0 .. nlev (stride s = 2^l), one
+ * launch for all of them: N(r/s; 0)/N(r/s; a) of r = max(|CoC|, 1/2) and the CoC's sign, from the
+ * table `tsum` (texture_sums in clpost/stages/dof.py: rows far ramp 1, far ramp 1/2, near ramp 1,
+ * near ramp 1/2 of DOF_LIGHT_N, linear in r/s, ends clamped; ramp 1 at stride 1, else ramp 1/2) */
 __kernel void dof_texture_plane(__global float *restrict lv, __global const float *restrict tsum, const int pw,
-                                const int ph, const int lvl)
+                                const int ph, const int nlev)
 {
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= pw || y >= ph) return;
     const size_t pn = (size_t)pw * ph, o = (size_t)y * pw + x;
-    __global float *L = lv + (size_t)DOF_PLANES * lvl * pn;
-    const float c = L[3 * pn + o];
-    const float f = clamp((fmax(fabs(c), 0.5f) / (float)(1 << lvl) - DOF_LIGHT_R0) * DOF_LIGHT_K, 0.0f,
-                          (float)(DOF_LIGHT_N - 1));
-    const float i0 = fmin(floor(f), (float)(DOF_LIGHT_N - 2));
-    __global const float *q = tsum + (int)i0 + (c >= 0.0f ? 0 : 2 * DOF_LIGHT_N) + (lvl > 0 ? DOF_LIGHT_N : 0);
-    L[5 * pn + o] = q[0] + (q[1] - q[0]) * (f - i0);
+    for (int lvl = 0; lvl <= nlev; ++lvl) {
+        __global float *L = lv + (size_t)DOF_PLANES * lvl * pn;
+        const float c = L[3 * pn + o];
+        const float f = clamp((fmax(fabs(c), 0.5f) / (float)(1 << lvl) - DOF_LIGHT_R0) * DOF_LIGHT_K, 0.0f,
+                              (float)(DOF_LIGHT_N - 1));
+        const float i0 = fmin(floor(f), (float)(DOF_LIGHT_N - 2));
+        __global const float *q = tsum + (int)i0 + (c >= 0.0f ? 0 : 2 * DOF_LIGHT_N) + (lvl > 0 ? DOF_LIGHT_N : 0);
+        L[5 * pn + o] = q[0] + (q[1] - q[0]) * (f - i0);
+    }
 }
 #endif

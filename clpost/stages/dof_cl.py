@@ -178,10 +178,9 @@ def _enqueue_plan(rt, c, src, coc, w, h):
     for lvl in range(c["nlev"]):
         k["dof_levels"].set_args(c["lv"], i32(c["pw"]), i32(c["ph"]), i32(2 ** lvl), i32(lvl))
         evs.append(_launch_rows(rt, k["dof_levels"], (c["pw"], c["ph"])))
-    if c["tex_plane"]:  # the texture's rescale of every level's own CoC (dof_levels.cl)
-        for lvl in range(c["nlev"] + 1):
-            k["dof_texture_plane"].set_args(c["lv"], c["lsum"], i32(c["pw"]), i32(c["ph"]), i32(lvl))
-            evs.append(_launch_rows(rt, k["dof_texture_plane"], (c["pw"], c["ph"]), per_item=1))
+    if c["tex_plane"]:  # the texture's rescale of every level's own CoC, one launch (dof_levels.cl)
+        k["dof_texture_plane"].set_args(c["lv"], c["lsum"], i32(c["pw"]), i32(c["ph"]), i32(c["nlev"]))
+        evs.append(_launch_rows(rt, k["dof_texture_plane"], (c["pw"], c["ph"]), per_item=1))
     k["dof_tile_max"].set_args(c["lv"], c["tmax"], c["tlight"], i32(c["ww"]), i32(c["hw"]), i32(c["pad"]), i32(c["tw"]),
                                i32(c["th"]))
     evs.append(_launch(rt, k["dof_tile_max"], (c["tw"], c["th"]), 4))
