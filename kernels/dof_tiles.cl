@@ -75,8 +75,8 @@ __kernel void dof_tile_max(__global const float *restrict lv, __global float *re
  * A neighbour's sources behind every pixel of the tile (CoC above the tile's max + the front
  * margin) are clamped to the pixel's own radius by the gather: they do not dilate. */
 __kernel void dof_tile_dilate(__global const float *restrict tmax, __global const int *restrict tlight,
-                              __global int *restrict tn, __global const int *restrict ntaps, const int tw,
-                              const int th)
+                              __global int *restrict tn, __global const int *restrict ntaps,
+                              __constant const float *restrict tap_dist, const int tw, const int th)
 {
     const int tx = get_global_id(0), ty = get_global_id(1);
     if (tx >= tw || ty >= th) return;
@@ -100,13 +100,20 @@ __kernel void dof_tile_dilate(__global const float *restrict tmax, __global cons
     while (lvl < DOF_LEVELS && (int)ceil(r / (float)(1 << lvl) - 0.5f) > DOF_BUDGET) ++lvl;
     while (route < DOF_LEVELS && (int)ceil(ra / (float)(1 << route) - 0.5f) > DOF_BUDGET) ++route;
     const int k = clamp((int)ceil(r / (float)(1 << lvl) - 0.5f), 0, DOF_BUDGET);
+    /* only the taps nearer than R/s + DOF_TRIM (lattice units; TRIM_LATTICE in clpost/stages/dof.py):
+     * ntaps[k] holds every tap nearer than k + 1 >= R/s + 1/2, and the ring between has coverage 0
+     * for every source that dilated the tile; the 3x3 around p always (a light's LIGHT_SMALL_PX
+     * weight) */
+    int cnt = ntaps[k];
+    const float bound = r / (float)(1 << lvl) + DOF_TRIM;
+    while (cnt > 9 && tap_dist[cnt - 1] >= bound) --cnt;
     /* a level-0 tile's taps reach DOF_BUDGET <= DOF_TILE px: the 3x3 tiles around it hold them */
     int light = 0;
     if (DOF_LIGHTS && lvl == 0)
         for (int ny = max(ty - 1, 0); ny <= min(ty + 1, th - 1); ++ny)
             for (int nx = max(tx - 1, 0); nx <= min(tx + 1, tw - 1); ++nx)
                 light |= tlight[ny * tw + nx];
-    tn[ty * tw + tx] = ntaps[k] | (lvl << 24) | (route << 28) | (light ? DOF_LIGHT_BIT : 0);
+    tn[ty * tw + tx] = cnt | (lvl << 24) | (route << 28) | (light ? DOF_LIGHT_BIT : 0);
 }
 
 /* Final's mixed resolution (clpost/stages/dof.py, mixed_mask): launched over the tiles of the

@@ -746,6 +746,13 @@ def reach_rmax(rmax: int, reach: float) -> int:
     return int(math.ceil(rmax * reach))
 
 
+TRIM_LATTICE = 0.515625
+"""The tile plan's tap count keeps the taps nearer than R/s + this (lattice units; dof_tile_dilate):
+a source of reach R covers out to R + ramp/2 px (ramp max(s/2, 1) px), i.e. R/s + 1/2 at stride
+1 and R/s + 1/4 above, so the taps beyond have coverage exactly 0; 1/64 (exact in binary) more
+keeps the float rounding of the coverage's ramp on the safe side."""
+
+
 def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0,
               route: bool = False) -> tuple[np.ndarray, np.ndarray]:
     r"""Per tile (Jimenez 2014: tile max, dilated by the reach of the neighbouring tiles) the
@@ -770,7 +777,7 @@ def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0,
     a = np.pad(np.asarray(coc).astype(f32), ((0, th * TILE - h), (0, tw * TILE - w)), mode="edge")
     blocks = a.reshape(th, TILE, tw, TILE)
     lo, hi = blocks.min(axis=(1, 3)), blocks.max(axis=(1, 3))
-    ntaps = tap_table(budget, 0, 0.0, 0.0)[5]
+    ntaps, tap_dist = tap_table(budget, 0, 0.0, 0.0)[5], tap_table(budget, 0, 0.0, 0.0)[2].astype(f32)
     reach_t = (rmax + TILE) // TILE
     lvl = np.zeros((th, tw), int)
     cnt = np.zeros((th, tw), int)
@@ -792,7 +799,11 @@ def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0,
             while math.ceil(r / 2 ** lv - 0.5) > budget:
                 lv += 1
             lvl[ty, tx] = lv
-            cnt[ty, tx] = ntaps[min(max(math.ceil(r / 2 ** lv - 0.5), 0), budget)]
+            n = ntaps[min(max(math.ceil(r / 2 ** lv - 0.5), 0), budget)]
+            # only the taps nearer than R/s + 1/2 + 1/64 (the ring out to k + 1 has coverage 0 for
+            # every source that dilated the tile), never fewer than the 3x3 (LIGHT_SMALL_PX's weight)
+            bound = f32(f32(f32(r) / f32(2 ** lv)) + f32(TRIM_LATTICE))
+            cnt[ty, tx] = n if n <= 9 else max(int(np.count_nonzero(tap_dist[:n] < bound)), 9)
     expand = np.ones((TILE, TILE), int)
     return np.kron(lvl, expand)[:h, :w], np.kron(cnt, expand)[:h, :w]
 
@@ -1252,7 +1263,7 @@ class Dof(GatherStage):
                 "DOF_HALF_BLEND": f"{1.0 / (HALF_PATH_VAR_PX2 - LOCAL_VAR_PX2)!r}f",
                 "DOF_LOCAL_VAR": f"{LOCAL_VAR_PX2!r}f", "DOF_LOCAL_MIN": f"{LOCAL_MIN_PX!r}f",
                 "DOF_SMALL_LO": f"{SMALL_LO_PX!r}f", "DOF_SMALL_K": f"{1.0 / (SMALL_HI_PX - SMALL_LO_PX)!r}f",
-                "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_HIDDEN_MARGIN": f"{HIDDEN_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
+                "DOF_FRONT_MARGIN": f"{FRONT_MARGIN_PX!r}f", "DOF_TRIM": f"{TRIM_LATTICE!r}f", "DOF_HIDDEN_MARGIN": f"{HIDDEN_MARGIN_PX!r}f", "DOF_FRINGE_STEP": f"{FRINGE_STEP!r}f",
                 "DOF_LIGHTS": int(not traced and camera.optical_vignetting == 0),
                 "DOF_LIGHT_SMALL_LO": f"{LIGHT_SMALL_PX[0]!r}f", "DOF_LIGHT_SMALL_HI": f"{LIGHT_SMALL_PX[1]!r}f",
                 "DOF_LIGHT_LUMA": f"{LIGHT_LUMA!r}f", "DOF_LIGHT_RMAX": f"{LIGHT_RMAX_PX!r}f",

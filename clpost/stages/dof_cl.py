@@ -184,7 +184,8 @@ def _enqueue_plan(rt, c, src, coc, w, h):
     k["dof_tile_max"].set_args(c["lv"], c["tmax"], c["tlight"], i32(c["ww"]), i32(c["hw"]), i32(c["pad"]), i32(c["tw"]),
                                i32(c["th"]))
     evs.append(_launch(rt, k["dof_tile_max"], (c["tw"], c["th"]), 4))
-    k["dof_tile_dilate"].set_args(c["tmax"], c["tlight"], c["tn"], c["ntaps"], i32(c["tw"]), i32(c["th"]))
+    k["dof_tile_dilate"].set_args(c["tmax"], c["tlight"], c["tn"], c["ntaps"], c["taps"][2], i32(c["tw"]),
+                                  i32(c["th"]))
     evs.append(_launch(rt, k["dof_tile_dilate"], (c["tw"], c["th"]), 4))
     return evs
 
