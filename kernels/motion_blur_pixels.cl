@@ -262,7 +262,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const CLP_I own_dir = lhx > 0.5f;
     /* a still X whose neighbourhood holds a second surface moving another way (NeighborMax) sends
      * its odd taps along that: no tap would look along it otherwise */
-    const CLP_I use2 = !own_dir && CLP_FN(motion_blur_len2)(v2x, v2y) > 0.0f;
+    const CLP_I use2 = (lhx <= 0.5f) & (CLP_FN(motion_blur_len2)(v2x, v2y) > 0.0f);
     const CLP_F vxx = own_dir ? hx : (use2 ? v2x : vnx), vxy = own_dir ? hy : (use2 ? v2y : vny);   /* odd taps follow X's own motion */
     const CLP_F ln = sqrt(l2n);
     const CLP_F lv = sqrt(CLP_FN(motion_blur_len2)(vxx, vxy));
@@ -271,7 +271,10 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const CLP_F rln = 1.0f / fmax(ln, 1e-30f), rlv = 1.0f / fmax(lv, 1e-30f);
     const CLP_F cosang = (vnx * vxx + vny * vxy) * (rln * rlv);
     const CLP_F agree0 = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
-    const CLP_F agree = use2 ? 1.0f : agree0;   /* two directions of a still X: no own path to split */
+    /* two directions of a still X: no own path to split (agree 1). Written as arithmetic on u2 = 1 or 0:
+     * Oclgrind 21.10 evaluates a vector select of a constant as inf */
+    const CLP_F u2 = fabs(CLP_TO_F(use2));
+    const CLP_F agree = agree0 + u2 * (1.0f - agree0);
     const CLP_F wx = MB_LOAD(iz, i0);
     const CLP_F wx0 = fmax(wx, 1e-30f);   /* fmax(fmax(wx, wy), 1e-30) = fmax(wx0, wy) */
     const CLP_F xf = CLP_TO_F(xs), yf = (CLP_F)((float)y);
@@ -301,7 +304,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const CLP_F kan = hdn * agree * rlx, kav = hdv * agree2 * rlx;
     /* the front layer's set weights: with two directions each set alone estimates what reaches X
      * along its direction (weight 2 on both; composited nearer over farther below) */
-    const CLP_F wfo = use2 ? 2.0f : agree, wfe = use2 ? 2.0f : agree2;
+    const CLP_F wfo = agree + u2 * (2.0f - agree), wfe = agree2 + u2 * (2.0f - agree2);
     CLP_F sfr = 0.0f, sfg = 0.0f, sfb = 0.0f;   /* front sums: even taps (cf, sf*), odd taps (cfo, sfo*) */
     CLP_F cfo = 0.0f, sfor = 0.0f, sfog = 0.0f, sfob = 0.0f;
     CLP_F sor = cxr * wc, sog = cxg * wc, sob = cxb * wc;
