@@ -394,17 +394,22 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     /* out = cf' F + (1 - cf') [co' O + (1 - co') B], cf' = min(cf, 1), co' = min(co / ca, 1), layer
      * colours normalised (co' O = so min(1/ca, 1/co); one reciprocal per layer) */
     /* the front layer: both sets' sums, or with two directions the nearer set's surface over the
-     * farther's, c = c_n + (1 - c_n) c_f and c F = c_n F_n + (1 - c_n) c_f F_f (c_n, c_f clamped to 1) */
-    const CLP_I onear = near2 > 0.5f;
-    const CLP_F cn = onear ? cfo : cf, cr_ = onear ? cf : cfo;
-    const CLP_F cnc = fmin(cn, 1.0f), crc = fmin(cr_, 1.0f);
-    const CLP_F rn = cnc * (1.0f / fmax(cn, 1e-30f)), rr = (1.0f - cnc) * crc * (1.0f / fmax(cr_, 1e-30f));
-    const CLP_F ctw = cnc + (1.0f - cnc) * crc;
-    const CLP_F ct = use2 ? ctw : cf + cfo;
-    const CLP_F s2r = (onear ? sfor : sfr) * rn + (onear ? sfr : sfor) * rr;
-    const CLP_F s2g = (onear ? sfog : sfg) * rn + (onear ? sfg : sfog) * rr;
-    const CLP_F s2b = (onear ? sfob : sfb) * rn + (onear ? sfb : sfob) * rr;
-    const CLP_F str = use2 ? s2r : sfr + sfor, stg = use2 ? s2g : sfg + sfog, stb = use2 ? s2b : sfb + sfob;
+     * farther's, c = c_n + (1 - c_n) c_f and c F = c_n F_n + (1 - c_n) c_f F_f (c_n, c_f clamped to 1;
+     * only where some pixel of the run has a second direction) */
+    CLP_F ct = cf + cfo, str = sfr + sfor, stg = sfg + sfog, stb = sfb + sfob;
+    if (CLP_ANY(use2)) {
+        const CLP_I onear = near2 > 0.5f;
+        const CLP_F cn = onear ? cfo : cf, cr_ = onear ? cf : cfo;
+        const CLP_F cnc = fmin(cn, 1.0f), crc = fmin(cr_, 1.0f);
+        const CLP_F rn = cnc * (1.0f / fmax(cn, 1e-30f)), rr = (1.0f - cnc) * crc * (1.0f / fmax(cr_, 1e-30f));
+        const CLP_F s2r = (onear ? sfor : sfr) * rn + (onear ? sfr : sfor) * rr;
+        const CLP_F s2g = (onear ? sfog : sfg) * rn + (onear ? sfg : sfog) * rr;
+        const CLP_F s2b = (onear ? sfob : sfb) * rn + (onear ? sfb : sfob) * rr;
+        ct = use2 ? cnc + (1.0f - cnc) * crc : ct;
+        str = use2 ? s2r : str;
+        stg = use2 ? s2g : stg;
+        stb = use2 ? s2b : stb;
+    }
     const CLP_F cfc = fmin(ct, 1.0f);
     const CLP_I front = ct > 0.0f;
     const CLP_F ao = fmin(1.0f / ca, 1.0f / co), ab = (1.0f - co * ao) * (1.0f / wb), af = 1.0f / ct;

@@ -27,7 +27,8 @@ of its 3×3 neighbours (edge-clamped, first in scan order on ties) takes that ne
 and depth: its colour is (partly) that surface's, and spreads with it.
 
 *Taps.* S taps along two directions: even i along :math:`v_N`, odd i along X's own half-vector
-:math:`h_X` (:math:`v_N` where :math:`|h_X| \le 0.5`), stratified over the whole path, which reaches
+:math:`h_X` (for a still X, :math:`|h_X| \le 0.5`: the neighbourhood's *second direction* where it has
+one, else :math:`v_N`), stratified over the whole path, which reaches
 FOOT = ½ px beyond the vector — :math:`d_i = \hat v\,(|v| + \tfrac12)` for v = :math:`v_N` or
 :math:`h_X` (a surface pixel swept over ±|h| overlaps its neighbours partly up to half a pixel
 further: its footprint),
@@ -49,6 +50,19 @@ still tiles leave on its moving ones, never costing more than a frame moving eve
 :math:`S_q` (where every tile moves, C = :math:`S_q`); a slower neighbourhood takes fewer: the S strata of the path :math:`2|v_N|` are
 then at most 1/D px apart (D = DENSITY = 1.5), so more taps would only resample the same pixels (a
 frame's cost follows its motion; the choice of D: ``docs/motion_blur.md``).
+
+*Second direction* (a still pixel between two movers): TileMax also keeps each tile's longest
+half-vector whose direction differs from the tile's maximum (cos < AGREE0, tested as
+:math:`a\cdot b < 0` or :math:`(a\cdot b)^2 <` DIFFER2 :math:`|a|^2|b|^2`) and both their pixels' inverse depths;
+NeighborMax the longest of its 3×3 tiles' 18 candidates that differs from :math:`v_N`, kept only if
+faster than ½ px and its surface is not level with :math:`v_N`'s (inverse depths apart by more than
+SOFT_Z/2 relative: another surface moving another way, not one spinning surface). Without it a
+still pixel whose tiles' :math:`v_N` belongs to a faster mover never looks along a slower one
+(the wall ahead of the Cycles motion scene's cube, next to the ball: docs/motion_blur.md). Both tap
+sets then gather the front layer at weight 2 (each estimates what reaches X along its direction;
+the own layer as where the sets agree) and the nearer set's front (by the candidates' inverse
+depths) is composited over the farther's: :math:`c_F = c_n + (1 - c_n) c_f`,
+:math:`c_F F = c_n F_n + (1 - c_n) c_f F_f` (:math:`c_n, c_f` clamped to 1).
 
 *Coverage.* A surface Y moving with half-vector :math:`h_Y` passes over X, |X − Y| = d, for the
 fraction :math:`\delta_i / (2|h_Y|)` of the shutter per tap (:math:`\delta_i = 2|d_i|/S` the path
