@@ -150,8 +150,9 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
 }
 
 /* One tap s of the gather on the pixels where TAP (a CLP_I, or 1) is true; uses and updates the
- * locals of motion_blur_gather. */
-#define MB_TAP(s, TAP) do { \
+ * locals of motion_blur_gather. SPLIT (a constant): the odd taps' front sums apart (cfo, sfo*), for
+ * runs where a pixel has a second direction; else every tap's in cf, sf* (fewer live registers). */
+#define MB_TAP(s, TAP, SPLIT) do { \
         const int odd = (s) & 1; \
         const CLP_F dx = odd ? dvx : dnx, dy = odd ? dvy : dny; \
         const CLP_F u = ((float)(s) + 0.5f + j) * inv_s;   /* S strata covering the whole path */ \
@@ -201,7 +202,7 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
         const CLP_F cr = CLP_GATHER(src, k), cg = CLP_GATHER(src + n, k), cb = CLP_GATHER(src + 2 * n, k); \
         /* the layer sums by fused multiply-adds (FP_CONTRACT is off for the tap positions): one \
          * instruction each, the same rounding at every width */ \
-        if (odd) { cfo += af; sfor = fma(af, cr, sfor); sfog = fma(af, cg, sfog); sfob = fma(af, cb, sfob); } \
+        if ((SPLIT) && odd) { cfo += af; sfor = fma(af, cr, sfor); sfog = fma(af, cg, sfog); sfob = fma(af, cb, sfob); } \
         else { cf += af; sfr = fma(af, cr, sfr); sfg = fma(af, cg, sfg); sfb = fma(af, cb, sfb); } \
         co += ao; sor = fma(ao, cr, sor); sog = fma(ao, cg, sog); sob = fma(ao, cb, sob); \
         ca += aa; \
@@ -210,16 +211,17 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
 
 #if CLP_W == 16
 /* the 16-pixel gather's taps 0 .. N - 1 (N its lanes' largest S): masks only where the lanes' S differ */
-#define MB_LOOP16(N) do { \
+#define MB_LOOP16S(N, SPLIT) do { \
         if (smin == (N)) { \
             for (int s = 0; s < (N); ++s) { \
                 if (s == (N) / 2) continue;   /* the centre stratum is X itself */ \
-                MB_TAP(s, (int16)(-1)); \
+                MB_TAP(s, (int16)(-1), SPLIT); \
             } \
         } else { \
-            for (int s = 0; s < (N); ++s) MB_TAP(s, (int16)s < ns && (int16)s != nc); \
+            for (int s = 0; s < (N); ++s) MB_TAP(s, (int16)s < ns && (int16)s != nc, SPLIT); \
         } \
     } while (0)
+#define MB_LOOP16(N) do { if (split) MB_LOOP16S(N, 1); else MB_LOOP16S(N, 0); } while (0)
 #endif
 
 /* The gather of pixels x0 .. x0 + CLP_W - 1 of row y (x0 + CLP_W <= width). */
@@ -310,9 +312,16 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     CLP_F sor = cxr * wc, sog = cxg * wc, sob = cxb * wc;
     CLP_F sbr = cxr * wb, sbg = cxg * wb, sbb = cxb * wb;
 #if CLP_W == 1
-    for (int s = 0; s < ns; ++s) {
-        if (s == nc) continue;   /* the centre stratum is X itself */
-        MB_TAP(s, 1);
+    if (use2) {
+        for (int s = 0; s < ns; ++s) {
+            if (s == nc) continue;   /* the centre stratum is X itself */
+            MB_TAP(s, 1, 1);
+        }
+    } else {
+        for (int s = 0; s < ns; ++s) {
+            if (s == nc) continue;
+            MB_TAP(s, 1, 0);
+        }
     }
 #else
     /* the loop runs to the largest S of the 16 pixels (a row of 16 spans at most two tiles), in
@@ -327,6 +336,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const int4 n4 = min(n8.lo, n8.hi);
     const int2 n2 = min(n4.lo, n4.hi);
     const int smin = min(n2.x, n2.y);
+    const int split = CLP_ANY(use2);
     switch (smax) {
 #if MOTION_BLUR_SAMPLES_MAX >= 3
     case 3: MB_LOOP16(3); break;
@@ -396,7 +406,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     /* the front layer: both sets' sums, or with two directions the nearer set's surface over the
      * farther's, c = c_n + (1 - c_n) c_f and c F = c_n F_n + (1 - c_n) c_f F_f (c_n, c_f clamped to 1;
      * only where some pixel of the run has a second direction) */
-    CLP_F ct = cf + cfo, str = sfr + sfor, stg = sfg + sfog, stb = sfb + sfob;
+    CLP_F ct = cf + cfo, str = sfr + sfor, stg = sfg + sfog, stb = sfb + sfob;   /* (cfo, sfo* 0 unless split) */
     if (CLP_ANY(use2)) {
         const CLP_I onear = near2 > 0.5f;
         const CLP_F cn = onear ? cfo : cf, cr_ = onear ? cf : cfo;
@@ -424,3 +434,4 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
 #undef MB_STORE
 #undef MB_TAP
 #undef MB_LOOP16
+#undef MB_LOOP16S
