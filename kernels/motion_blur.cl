@@ -5,7 +5,7 @@
  * Buffers: colour planar (c*n + i); velocity interleaved (2i, 2i+1) px per frame, forward,
  * +x right, +y down; depth planar metres (+inf sky). Scratch: hv = clamped half-vectors and
  * their unclamped length and what a tap reads of Y packed in one word (4 planes: x, y, key, record),
- * iz = 1/depth (0 for sky), tile max (8 planes) and
+ * iz = 1/depth (0 for sky), tile max (4 planes) and
  * neighbour max (5 planes). Maxima are ranked by the unclamped length: clamped vectors all
  * have length K, and ranking them by a rounding-level difference would not be reproducible.
  *
@@ -63,9 +63,7 @@ inline int motion_blur_differs(const float ax, const float ay, const float bx, c
 }
 
 /* Each K x K tile's largest half-vector (by the unclamped length; first in scan order on ties) and
- * the inverse depth of its pixel, then the largest whose direction differs from it (the tile's
- * second direction, same ranking; zero where none) and its inverse depth: planes x, y, key, 1/z,
- * x2, y2, key2, 1/z2 */
+ * the inverse depth of its pixel: planes x, y, key, 1/z */
 __kernel void motion_blur_tilemax(__global const float *restrict hv, __global const float *restrict iz,
                                   __global float *restrict tile,
                                   const int width, const int height, const int tw, const int th)
@@ -84,35 +82,20 @@ __kernel void motion_blur_tilemax(__global const float *restrict hv, __global co
             if (l > best2) { best2 = l; best = (float2)(hv[i], hv[n + i]); bz = iz[i]; }
         }
     }
-    float2 sec = (float2)(0.0f, 0.0f);
-    float sec2 = 0.0f, sz = 0.0f;
-    for (int y = ty * MOTION_BLUR_TILE; y < y1; ++y) {
-        for (int x = tx * MOTION_BLUR_TILE; x < x1; ++x) {
-            const size_t i = (size_t)y * (size_t)width + (size_t)x;
-            const float l = hv[2 * n + i];
-            if (l > sec2 && motion_blur_differs(hv[i], hv[n + i], best.x, best.y)) {
-                sec2 = l; sec = (float2)(hv[i], hv[n + i]); sz = iz[i];
-            }
-        }
-    }
     const size_t t = (size_t)ty * (size_t)tw + (size_t)tx;
     const size_t tn = (size_t)tw * (size_t)th;
     tile[t] = best.x;
     tile[tn + t] = best.y;
     tile[2 * tn + t] = best2;
     tile[3 * tn + t] = bz;
-    tile[4 * tn + t] = sec.x;
-    tile[5 * tn + t] = sec.y;
-    tile[6 * tn + t] = sec2;
-    tile[7 * tn + t] = sz;
 }
 
 /* v_N: the largest tile half-vector in the 3 x 3 tile neighbourhood (scan order on ties); and the
- * neighbourhood's second direction: the largest of its tiles' maxima and second directions whose
- * direction differs from v_N, kept only where it is faster than half a pixel and its surface is not
- * level with v_N's (1/z apart by more than half the soft depth test's ramp): another surface moving
- * another way. Planes x, y (v_N), x2, y2 (the second direction, 0 where none), and 1 where the
- * second direction's surface is the nearer. */
+ * neighbourhood's second direction: the largest of those tile maxima whose direction differs from
+ * v_N, kept only where it is faster than half a pixel and its surface is not level with v_N's (1/z
+ * apart by more than half the soft depth test's ramp): another surface moving another way.
+ * Planes x, y (v_N), x2, y2 (the second direction, 0 where none), and 1 where the second
+ * direction's surface is the nearer. */
 __kernel void motion_blur_neighbormax(__global const float *restrict tile, __global float *restrict nmax,
                                       const int tw, const int th)
 {
@@ -137,12 +120,10 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
             const int sx = tx + dx, sy = ty + dy;
             if (sx < 0 || sy < 0 || sx >= tw || sy >= th) continue;
             const size_t t = (size_t)sy * (size_t)tw + (size_t)sx;
-            for (int c = 0; c < 2; ++c) {   /* the tile's maximum, then its second direction */
-                const float l = tile[(2 + 4 * c) * tn + t];
-                const float cx = tile[4 * c * tn + t], cy = tile[(1 + 4 * c) * tn + t];
-                if (l > sec2 && motion_blur_differs(cx, cy, best.x, best.y)) {
-                    sec2 = l; sec = (float2)(cx, cy); sz = tile[(3 + 4 * c) * tn + t];
-                }
+            const float l = tile[2 * tn + t];
+            const float cx = tile[t], cy = tile[tn + t];
+            if (l > sec2 && motion_blur_differs(cx, cy, best.x, best.y)) {
+                sec2 = l; sec = (float2)(cx, cy); sz = tile[3 * tn + t];
             }
         }
     }

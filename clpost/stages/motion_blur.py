@@ -51,10 +51,10 @@ still tiles leave on its moving ones, never costing more than a frame moving eve
 then at most 1/D px apart (D = DENSITY = 1.5), so more taps would only resample the same pixels (a
 frame's cost follows its motion; the choice of D: ``docs/motion_blur.md``).
 
-*Second direction* (a still pixel between two movers): TileMax also keeps each tile's longest
-half-vector whose direction differs from the tile's maximum (cos < AGREE0, tested as
-:math:`a\cdot b < 0` or :math:`(a\cdot b)^2 <` DIFFER2 :math:`|a|^2|b|^2`) and both their pixels' inverse depths;
-NeighborMax the longest of its 3×3 tiles' 18 candidates that differs from :math:`v_N`, kept only if
+*Second direction* (a still pixel between two movers): TileMax also keeps the inverse depth of
+each tile's maximum; NeighborMax the longest of its 3×3 tiles' maxima whose direction differs from
+:math:`v_N` (cos < AGREE0, tested as :math:`a\cdot b < 0` or :math:`(a\cdot b)^2 <` DIFFER2
+:math:`|a|^2|b|^2`), kept only if
 faster than ½ px and its surface is not level with :math:`v_N`'s (inverse depths apart by more than
 SOFT_Z/2 relative: another surface moving another way, not one spinning surface). Without it a
 still pixel whose tiles' :math:`v_N` belongs to a faster mover never looks along a slower one
@@ -303,7 +303,7 @@ class MotionBlur(GatherStage):
     def _buffers(self, rt, w, h):
         tw, th = -(-w // TILE), -(-h // TILE)
         return dict(hv=rt.scratch(self, "hv", (4, h, w)), iz=rt.scratch(self, "iz", (h, w)),
-                    tile=rt.scratch(self, "tile", (8, th, tw)), nmax=rt.scratch(self, "nmax", (5, th, tw)),
+                    tile=rt.scratch(self, "tile", (4, th, tw)), nmax=rt.scratch(self, "nmax", (5, th, tw)),
                     cap=rt.scratch(self, "cap", (1,), np.int32),
                     tmp=rt.scratch(self, "tmp", (3, h, w)), tw=tw, th=th)
 
@@ -468,8 +468,8 @@ def _differs32(ax, ay, bx, by) -> np.ndarray:
 
 
 def second_directions(hk: np.ndarray, iz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The neighbourhood's second direction per tile (module docstring, "Taps"; the kernels'
-    TileMax and NeighborMax): th×tw×2 float32 (zero where none) and th×tw bool, True where its
+    """The neighbourhood's second direction per tile (module docstring, "Second direction"; the
+    kernels' TileMax and NeighborMax): th×tw×2 float32 (zero where none) and th×tw bool, True where its
     surface is the nearer one. ``hk`` the keyed half-vectors (float32 values), ``iz`` 1/depth."""
     hh, ww = hk.shape[:2]
     tw, th = -(-ww // TILE), -(-hh // TILE)
@@ -477,14 +477,11 @@ def second_directions(hk: np.ndarray, iz: np.ndarray) -> tuple[np.ndarray, np.nd
     rec[:hh, :ww, :3], rec[:hh, :ww, 3] = hk[..., :3], iz
     tiles = rec.reshape(th, TILE, tw, TILE, 4).transpose(0, 2, 1, 3, 4).reshape(th, tw, TILE * TILE, 4)
     tmax = _argmax_len(tiles)                                          # x, y, key, 1/z of the tile's max
-    dif = _differs32(tiles[..., 0], tiles[..., 1], tmax[..., None, 0], tmax[..., None, 1])
-    tsec = _argmax_len(np.where(dif[..., None], tiles, np.float32(0)))  # the largest that differs
-    pad = np.zeros((th + 2, tw + 2, 2, 4), np.float32)
-    pad[1:-1, 1:-1, 0], pad[1:-1, 1:-1, 1] = tmax, tsec
-    neigh = np.stack([pad[1 + dy:1 + dy + th, 1 + dx:1 + dx + tw] for dy in (-1, 0, 1) for dx in (-1, 0, 1)],
-                     axis=2)                                           # th, tw, 9, 2, 4: scan order
-    n1 = _argmax_len(neigh[:, :, :, 0])                                # v_N and its 1/z
-    cand = neigh.reshape(th, tw, 18, 4)                                # each tile's max, then its second
+    pad = np.zeros((th + 2, tw + 2, 4), np.float32)
+    pad[1:-1, 1:-1] = tmax
+    cand = np.stack([pad[1 + dy:1 + dy + th, 1 + dx:1 + dx + tw] for dy in (-1, 0, 1) for dx in (-1, 0, 1)],
+                    axis=2)                                            # th, tw, 9, 4: scan order
+    n1 = _argmax_len(cand)                                             # v_N and its 1/z
     dif = _differs32(cand[..., 0], cand[..., 1], n1[..., None, 0], n1[..., None, 1])
     n2 = _argmax_len(np.where(dif[..., None], cand, np.float32(0)))
     sz, bz = n2[..., 3], n1[..., 3]
