@@ -5,8 +5,8 @@
  * Buffers: colour planar (c*n + i); velocity interleaved (2i, 2i+1) px per frame, forward,
  * +x right, +y down; depth planar metres (+inf sky). Scratch: hv = clamped half-vectors and
  * their unclamped length and what a tap reads of Y packed in one word (4 planes: x, y, key, record),
- * iz = 1/depth (0 for sky), tile and
- * neighbour-max (3 planes each). Maxima are ranked by the unclamped length: clamped vectors all
+ * iz = 1/depth (0 for sky), tile max (4 planes) and
+ * neighbour max (5 planes). Maxima are ranked by the unclamped length: clamped vectors all
  * have length K, and ranking them by a rounding-level difference would not be reproducible.
  *
  * Defines: MOTION_BLUR_TILE (tile size K = the largest blur half-length in px),
@@ -54,22 +54,32 @@ __kernel void motion_blur_prep(__global const float *restrict velocity,
 #endif
 }
 
-/* largest half-vector (by length; first in scan order on ties) of each K x K tile */
-__kernel void motion_blur_tilemax(__global const float *restrict hv, __global float *restrict tile,
+/* 1 where direction a differs from b by more than acos(MOTION_BLUR_AGREE0) (a . b < 0.8 |a| |b|, in
+ * squares; a zero vector differs from nothing) */
+inline int motion_blur_differs(const float ax, const float ay, const float bx, const float by) {
+    const float d = ax * bx + ay * by;
+    const float la = ax * ax + ay * ay, lb = bx * bx + by * by;
+    return d < 0.0f || d * d < MOTION_BLUR_DIFFER2 * (la * lb);
+}
+
+/* Each K x K tile's largest half-vector (by the unclamped length; first in scan order on ties) and
+ * the inverse depth of its pixel: planes x, y, key, 1/z */
+__kernel void motion_blur_tilemax(__global const float *restrict hv, __global const float *restrict iz,
+                                  __global float *restrict tile,
                                   const int width, const int height, const int tw, const int th)
 {
     const int tx = get_global_id(0), ty = get_global_id(1);
     if (tx >= tw || ty >= th) return;
     const size_t n = (size_t)width * (size_t)height;
     float2 best = (float2)(0.0f, 0.0f);
-    float best2 = 0.0f;   /* the unclamped length of best */
+    float best2 = 0.0f, bz = 0.0f;   /* the unclamped length of best, its pixel's 1/z */
     const int y1 = min(ty * MOTION_BLUR_TILE + MOTION_BLUR_TILE, height);
     const int x1 = min(tx * MOTION_BLUR_TILE + MOTION_BLUR_TILE, width);
     for (int y = ty * MOTION_BLUR_TILE; y < y1; ++y) {
         for (int x = tx * MOTION_BLUR_TILE; x < x1; ++x) {
             const size_t i = (size_t)y * (size_t)width + (size_t)x;
             const float l = hv[2 * n + i];
-            if (l > best2) { best2 = l; best = (float2)(hv[i], hv[n + i]); }
+            if (l > best2) { best2 = l; best = (float2)(hv[i], hv[n + i]); bz = iz[i]; }
         }
     }
     const size_t t = (size_t)ty * (size_t)tw + (size_t)tx;
@@ -77,9 +87,15 @@ __kernel void motion_blur_tilemax(__global const float *restrict hv, __global fl
     tile[t] = best.x;
     tile[tn + t] = best.y;
     tile[2 * tn + t] = best2;
+    tile[3 * tn + t] = bz;
 }
 
-/* largest tile half-vector in the 3 x 3 tile neighbourhood (scan order on ties) */
+/* v_N: the largest tile half-vector in the 3 x 3 tile neighbourhood (scan order on ties); and the
+ * neighbourhood's second direction: the largest of those tile maxima whose direction differs from
+ * v_N, kept only where it is faster than half a pixel and its surface is not level with v_N's (1/z
+ * apart by more than half the soft depth test's ramp): another surface moving another way.
+ * Planes x, y (v_N), x2, y2 (the second direction, 0 where none), and 1 where the second
+ * direction's surface is the nearer. */
 __kernel void motion_blur_neighbormax(__global const float *restrict tile, __global float *restrict nmax,
                                       const int tw, const int th)
 {
@@ -87,19 +103,37 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
     if (tx >= tw || ty >= th) return;
     const size_t tn = (size_t)tw * (size_t)th;
     float2 best = (float2)(0.0f, 0.0f);
-    float best2 = 0.0f;
+    float best2 = 0.0f, bz = 0.0f;
     for (int dy = -1; dy <= 1; ++dy) {
         for (int dx = -1; dx <= 1; ++dx) {
             const int sx = tx + dx, sy = ty + dy;
             if (sx < 0 || sy < 0 || sx >= tw || sy >= th) continue;
             const size_t t = (size_t)sy * (size_t)tw + (size_t)sx;
             const float l = tile[2 * tn + t];
-            if (l > best2) { best2 = l; best = (float2)(tile[t], tile[tn + t]); }
+            if (l > best2) { best2 = l; best = (float2)(tile[t], tile[tn + t]); bz = tile[3 * tn + t]; }
         }
     }
+    float2 sec = (float2)(0.0f, 0.0f);
+    float sec2 = 0.0f, sz = 0.0f;
+    for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+            const int sx = tx + dx, sy = ty + dy;
+            if (sx < 0 || sy < 0 || sx >= tw || sy >= th) continue;
+            const size_t t = (size_t)sy * (size_t)tw + (size_t)sx;
+            const float l = tile[2 * tn + t];
+            const float cx = tile[t], cy = tile[tn + t];
+            if (l > sec2 && motion_blur_differs(cx, cy, best.x, best.y)) {
+                sec2 = l; sec = (float2)(cx, cy); sz = tile[3 * tn + t];
+            }
+        }
+    }
+    const int other = sec2 > 0.5f && fabs(sz - bz) > 0.5f * MOTION_BLUR_SOFT_Z * fmax(fmax(sz, bz), 1e-30f);
     const size_t t = (size_t)ty * (size_t)tw + (size_t)tx;
     nmax[t] = best.x;
     nmax[tn + t] = best.y;
+    nmax[2 * tn + t] = other ? sec.x : 0.0f;
+    nmax[3 * tn + t] = other ? sec.y : 0.0f;
+    nmax[4 * tn + t] = other && sz > bz ? 1.0f : 0.0f;
 }
 
 /* The frame's tap cap (one work-item): the quality's S_q times the share of tiles that run the

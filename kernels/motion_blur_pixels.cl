@@ -21,6 +21,7 @@
 #define MOTION_BLUR_R2Y 0.5698402910f
 #define MOTION_BLUR_RINT_MAGIC 12582912.0f   /* 1.5 * 2^23: x + this rounds x (|x| < 2^22) to an integer */
 #define MOTION_BLUR_FRINGE2 0.01f  /* MOTION_BLUR_FRINGE = 0.1, squared */
+#define MOTION_BLUR_DIFFER2 0.64f  /* MOTION_BLUR_AGREE0 squared: a second direction differs by more (DIFFER2 in the .py) */
 #endif
 
 /* a row of CLP_W floats at buf + i (i the first pixel's index) */
@@ -149,8 +150,9 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
 }
 
 /* One tap s of the gather on the pixels where TAP (a CLP_I, or 1) is true; uses and updates the
- * locals of motion_blur_gather. */
-#define MB_TAP(s, TAP) do { \
+ * locals of motion_blur_gather. SPLIT (a constant): the odd taps' front sums apart (cfo, sfo*), for
+ * runs where a pixel has a second direction; else every tap's in cf, sf* (fewer live registers). */
+#define MB_TAP(s, TAP, SPLIT) do { \
         const int odd = (s) & 1; \
         const CLP_F dx = odd ? dvx : dnx, dy = odd ? dvy : dny; \
         const CLP_F u = ((float)(s) + 0.5f + j) * inv_s;   /* S strata covering the whole path */ \
@@ -191,7 +193,7 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
         /* a surface in front reaches X only along its own motion line, give or take its footprint \
          * and a spinning object's spread of directions: |d x e_Y| (e_Y = h_Y / |h_Y|) within LINE +- 1/2 px */ \
         const CLP_F line = clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * eyy - ddy * eyx) * (1.0f / MOTION_BLUR_DIR), 0.0f, 1.0f); \
-        const CLP_F af0 = line * f * (1.0f - own) * a * (odd ? agree : agree2); \
+        const CLP_F af0 = line * f * (1.0f - own) * a * (odd ? wfo : wfe); \
         const CLP_F ao0 = f * own * a * (odd ? agree2 : agree); \
         const CLP_F aa0 = clx * clx * (odd ? kav : kan);   /* ao0 if Y were X (f = b = 1) */ \
         const CLP_F ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx * ((zden * ly) * q); \
@@ -200,7 +202,8 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
         const CLP_F cr = CLP_GATHER(src, k), cg = CLP_GATHER(src + n, k), cb = CLP_GATHER(src + 2 * n, k); \
         /* the layer sums by fused multiply-adds (FP_CONTRACT is off for the tap positions): one \
          * instruction each, the same rounding at every width */ \
-        cf += af; sfr = fma(af, cr, sfr); sfg = fma(af, cg, sfg); sfb = fma(af, cb, sfb); \
+        if ((SPLIT) && odd) { cfo += af; sfor = fma(af, cr, sfor); sfog = fma(af, cg, sfog); sfob = fma(af, cb, sfob); } \
+        else { cf += af; sfr = fma(af, cr, sfr); sfg = fma(af, cg, sfg); sfb = fma(af, cb, sfb); } \
         co += ao; sor = fma(ao, cr, sor); sog = fma(ao, cg, sog); sob = fma(ao, cb, sob); \
         ca += aa; \
         wb += ab; sbr = fma(ab, cr, sbr); sbg = fma(ab, cg, sbg); sbb = fma(ab, cb, sbb); \
@@ -208,16 +211,17 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
 
 #if CLP_W == 16
 /* the 16-pixel gather's taps 0 .. N - 1 (N its lanes' largest S): masks only where the lanes' S differ */
-#define MB_LOOP16(N) do { \
+#define MB_LOOP16S(N, SPLIT) do { \
         if (smin == (N)) { \
             for (int s = 0; s < (N); ++s) { \
                 if (s == (N) / 2) continue;   /* the centre stratum is X itself */ \
-                MB_TAP(s, (int16)(-1)); \
+                MB_TAP(s, (int16)(-1), SPLIT); \
             } \
         } else { \
-            for (int s = 0; s < (N); ++s) MB_TAP(s, (int16)s < ns && (int16)s != nc); \
+            for (int s = 0; s < (N); ++s) MB_TAP(s, (int16)s < ns && (int16)s != nc, SPLIT); \
         } \
     } while (0)
+#define MB_LOOP16(N) do { if (split) MB_LOOP16S(N, 1); else MB_LOOP16S(N, 0); } while (0)
 #endif
 
 /* The gather of pixels x0 .. x0 + CLP_W - 1 of row y (x0 + CLP_W <= width). */
@@ -234,6 +238,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const int xs = x0;
     const size_t t = (size_t)(y / MOTION_BLUR_TILE) * (size_t)tw + (size_t)(x0 / MOTION_BLUR_TILE);
     const float vnx = nmax[t], vny = nmax[tn + t];
+    const float v2x = nmax[2 * tn + t], v2y = nmax[3 * tn + t], near2 = nmax[4 * tn + t];
 #else
     const int16 xs = (int16)(x0) + convert_int16(CLP_ULANES16);
     /* v_N: the 16 pixels span at most two tiles, t0 (lane 0's) and t0 + 1: two scalar loads each, not gathers */
@@ -242,6 +247,9 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const int t1 = min(t0 + 1, (y / MOTION_BLUR_TILE) * tw + (x0 + 15) / MOTION_BLUR_TILE);
     const float16 vnx = second ? (float16)nmax[t1] : (float16)nmax[t0];
     const float16 vny = second ? (float16)nmax[tn + t1] : (float16)nmax[tn + t0];
+    const float16 v2x = second ? (float16)nmax[2 * tn + t1] : (float16)nmax[2 * tn + t0];
+    const float16 v2y = second ? (float16)nmax[3 * tn + t1] : (float16)nmax[3 * tn + t0];
+    const float16 near2 = second ? (float16)nmax[4 * tn + t1] : (float16)nmax[4 * tn + t0];
 #endif
     const CLP_F cxr = MB_LOAD(src, i0), cxg = MB_LOAD(src + n, i0), cxb = MB_LOAD(src + 2 * n, i0);
     const CLP_F l2n = CLP_FN(motion_blur_len2)(vnx, vny);
@@ -254,14 +262,21 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const CLP_F lhx = sqrt(CLP_FN(motion_blur_len2)(hx, hy));
     const CLP_F lx = fmax(lhx, 0.5f);
     const CLP_I own_dir = lhx > 0.5f;
-    const CLP_F vxx = own_dir ? hx : vnx, vxy = own_dir ? hy : vny;   /* odd taps follow X's own motion */
+    /* a still X whose neighbourhood holds a second surface moving another way (NeighborMax) sends
+     * its odd taps along that: no tap would look along it otherwise */
+    const CLP_I use2 = (lhx <= 0.5f) & (CLP_FN(motion_blur_len2)(v2x, v2y) > 0.0f);
+    const CLP_F vxx = own_dir ? hx : (use2 ? v2x : vnx), vxy = own_dir ? hy : (use2 ? v2y : vny);   /* odd taps follow X's own motion */
     const CLP_F ln = sqrt(l2n);
     const CLP_F lv = sqrt(CLP_FN(motion_blur_len2)(vxx, vxy));
     /* where X's own motion leaves v_N's direction, the tap sets split the work: odd taps (on X's
      * path) carry X's own surface, even taps (on v_N) the surfaces in front of X */
     const CLP_F rln = 1.0f / fmax(ln, 1e-30f), rlv = 1.0f / fmax(lv, 1e-30f);
     const CLP_F cosang = (vnx * vxx + vny * vxy) * (rln * rlv);
-    const CLP_F agree = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
+    const CLP_F agree0 = clamp((cosang - MOTION_BLUR_AGREE0) / (MOTION_BLUR_AGREE1 - MOTION_BLUR_AGREE0), 0.0f, 1.0f);
+    /* two directions of a still X: no own path to split (agree 1). Written as arithmetic on u2 = 1 or 0:
+     * Oclgrind 21.10 evaluates a vector select of a constant as inf */
+    const CLP_F u2 = fabs(CLP_TO_F(use2));
+    const CLP_F agree = agree0 + u2 * (1.0f - agree0);
     const CLP_F wx = MB_LOAD(iz, i0);
     const CLP_F wx0 = fmax(wx, 1e-30f);   /* fmax(fmax(wx, wy), 1e-30) = fmax(wx0, wy) */
     const CLP_F xf = CLP_TO_F(xs), yf = (CLP_F)((float)y);
@@ -279,7 +294,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const CLP_F hdn = pn * inv_s, hdv = pv * inv_s;   /* half the path length per tap, per set */
     /* X's own point covers X for (its footprint: the centre stratum's path, at least the pixel)
      * over its streak 2 |h_X|: a static pixel (|h_X| <= 0.5) is its own surface all the time */
-    const CLP_F wc = fmax(hdn + hdv, 1.0f) / (2.0f * lx);
+    const CLP_F wc = fmax(hdn + (own_dir ? hdv : hdn), 1.0f) / (2.0f * lx);
     CLP_F cf = 0.0f, co = wc, wb = 1e-3f;
     /* ca: what co would be if every tap were X's own surface (Y = X); the own layer's coverage is
      * the share co / ca of X's path (the taps' rounding cancels), per tap cyl(d, |h_X|)^2 times: */
@@ -289,13 +304,24 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
      * agree (+ (1 - agree) 0, exactly) on the other */
     const CLP_F agree2 = agree + (1.0f - agree) * 2.0f;
     const CLP_F kan = hdn * agree * rlx, kav = hdv * agree2 * rlx;
-    CLP_F sfr = 0.0f, sfg = 0.0f, sfb = 0.0f;
+    /* the front layer's set weights: with two directions each set alone estimates what reaches X
+     * along its direction (weight 2 on both; composited nearer over farther below) */
+    const CLP_F wfo = agree + u2 * (2.0f - agree), wfe = agree2 + u2 * (2.0f - agree2);
+    CLP_F sfr = 0.0f, sfg = 0.0f, sfb = 0.0f;   /* front sums: even taps (cf, sf*), odd taps (cfo, sfo*) */
+    CLP_F cfo = 0.0f, sfor = 0.0f, sfog = 0.0f, sfob = 0.0f;
     CLP_F sor = cxr * wc, sog = cxg * wc, sob = cxb * wc;
     CLP_F sbr = cxr * wb, sbg = cxg * wb, sbb = cxb * wb;
 #if CLP_W == 1
-    for (int s = 0; s < ns; ++s) {
-        if (s == nc) continue;   /* the centre stratum is X itself */
-        MB_TAP(s, 1);
+    if (use2) {
+        for (int s = 0; s < ns; ++s) {
+            if (s == nc) continue;   /* the centre stratum is X itself */
+            MB_TAP(s, 1, 1);
+        }
+    } else {
+        for (int s = 0; s < ns; ++s) {
+            if (s == nc) continue;
+            MB_TAP(s, 1, 0);
+        }
     }
 #else
     /* the loop runs to the largest S of the 16 pixels (a row of 16 spans at most two tiles), in
@@ -310,6 +336,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const int4 n4 = min(n8.lo, n8.hi);
     const int2 n2 = min(n4.lo, n4.hi);
     const int smin = min(n2.x, n2.y);
+    const int split = CLP_ANY(use2);
     switch (smax) {
 #if MOTION_BLUR_SAMPLES_MAX >= 3
     case 3: MB_LOOP16(3); break;
@@ -376,11 +403,28 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
 #endif
     /* out = cf' F + (1 - cf') [co' O + (1 - co') B], cf' = min(cf, 1), co' = min(co / ca, 1), layer
      * colours normalised (co' O = so min(1/ca, 1/co); one reciprocal per layer) */
-    const CLP_F cfc = fmin(cf, 1.0f);
-    const CLP_I front = cf > 0.0f;
-    const CLP_F ao = fmin(1.0f / ca, 1.0f / co), ab = (1.0f - co * ao) * (1.0f / wb), af = 1.0f / cf;
+    /* the front layer: both sets' sums, or with two directions the nearer set's surface over the
+     * farther's, c = c_n + (1 - c_n) c_f and c F = c_n F_n + (1 - c_n) c_f F_f (c_n, c_f clamped to 1;
+     * only where some pixel of the run has a second direction) */
+    CLP_F ct = cf + cfo, str = sfr + sfor, stg = sfg + sfog, stb = sfb + sfob;   /* (cfo, sfo* 0 unless split) */
+    if (CLP_ANY(use2)) {
+        const CLP_I onear = near2 > 0.5f;
+        const CLP_F cn = onear ? cfo : cf, cr_ = onear ? cf : cfo;
+        const CLP_F cnc = fmin(cn, 1.0f), crc = fmin(cr_, 1.0f);
+        const CLP_F rn = cnc * (1.0f / fmax(cn, 1e-30f)), rr = (1.0f - cnc) * crc * (1.0f / fmax(cr_, 1e-30f));
+        const CLP_F s2r = (onear ? sfor : sfr) * rn + (onear ? sfr : sfor) * rr;
+        const CLP_F s2g = (onear ? sfog : sfg) * rn + (onear ? sfg : sfog) * rr;
+        const CLP_F s2b = (onear ? sfob : sfb) * rn + (onear ? sfb : sfob) * rr;
+        ct = use2 ? cnc + (1.0f - cnc) * crc : ct;
+        str = use2 ? s2r : str;
+        stg = use2 ? s2g : stg;
+        stb = use2 ? s2b : stb;
+    }
+    const CLP_F cfc = fmin(ct, 1.0f);
+    const CLP_I front = ct > 0.0f;
+    const CLP_F ao = fmin(1.0f / ca, 1.0f / co), ab = (1.0f - co * ao) * (1.0f / wb), af = 1.0f / ct;
     const CLP_F our = sor * ao + sbr * ab, oug = sog * ao + sbg * ab, oub = sob * ao + sbb * ab;
-    const CLP_F frr = front ? sfr * af : cxr, frg = front ? sfg * af : cxg, frb = front ? sfb * af : cxb;
+    const CLP_F frr = front ? str * af : cxr, frg = front ? stg * af : cxg, frb = front ? stb * af : cxb;
     MB_STORE(still ? cxr : cfc * frr + (1.0f - cfc) * our, dst, i0);
     MB_STORE(still ? cxg : cfc * frg + (1.0f - cfc) * oug, dst + n, i0);
     MB_STORE(still ? cxb : cfc * frb + (1.0f - cfc) * oub, dst + 2 * n, i0);
@@ -390,3 +434,4 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
 #undef MB_STORE
 #undef MB_TAP
 #undef MB_LOOP16
+#undef MB_LOOP16S

@@ -314,6 +314,36 @@ def test_front_surface_reaches_only_pixels_on_its_own_motion_line(rng):
     assert np.abs(out[26, 18:32, 0] - 0.2).max() < 1e-3, out[26, 18:32, 0]
 
 
+@pytest.mark.parametrize("wide", [True, False])
+def test_a_still_pixel_sees_a_second_mover_that_its_neighbourhood_maximum_hides(rng, monkeypatch, wide):
+    # a bright bar sliding right (|h| 5 px, depth 4) over a static wall (depth 10), and a faster dark
+    # mover going down-left (|h| 10.6 px, depth 2) in the next tile, so the wall ahead of the bar has
+    # the diagonal as v_N and no tap along the bar: its leading streak stopped at the edge (x 36-39:
+    # 0.33 / 0.2 / 0.2 / 0.2 where the frame without the diagonal mover gives 0.85 / 0.66 / 0.47 / 0.29).
+    # The neighbourhood's second direction (another surface: depth 4 vs 2) sends a still pixel's odd
+    # taps along the bar; the streak matches the frame without the diagonal mover.
+    from clpost.runtime import Runtime
+
+    if not wide:
+        monkeypatch.setattr(Runtime, "wide", property(lambda self: False))
+    h, w = 60, 80
+
+    def frame(diagonal):
+        color = np.full((h, w, 3), 0.2, np.float32)
+        vel = np.zeros((h, w, 2), np.float32)
+        depth = np.full((h, w), 10.0, np.float32)
+        color[20:30, 20:35], vel[20:30, 20:35], depth[20:30, 20:35] = 2.0, (20.0, 0.0), 4.0
+        if diagonal:
+            color[36:40, 40:44], vel[36:40, 40:44], depth[36:40, 40:44] = 0.0, (-30.0, 30.0), 2.0
+        return Frame(color, depth=depth, velocity=vel, metadata={"frame_index": 1})
+
+    alone, _ = _compare(CAM, frame(False), "final")
+    both, _ = _compare(CAM, frame(True), "final")
+    ahead = (slice(22, 28), slice(36, 40), 0)
+    assert alone[ahead].mean(axis=0).min() > 0.25                    # the bar's streak reaches x = 39
+    np.testing.assert_allclose(both[ahead].mean(axis=0), alone[ahead].mean(axis=0), atol=0.1)
+
+
 def test_clamp_keeps_direction_and_caps_length():
     v = np.array([[[3e38, -3e38], [0.0, 0.0], [3.0, 4.0]]], np.float32)
     hv = half_vectors(v, 0.25)

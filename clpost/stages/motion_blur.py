@@ -27,7 +27,8 @@ of its 3×3 neighbours (edge-clamped, first in scan order on ties) takes that ne
 and depth: its colour is (partly) that surface's, and spreads with it.
 
 *Taps.* S taps along two directions: even i along :math:`v_N`, odd i along X's own half-vector
-:math:`h_X` (:math:`v_N` where :math:`|h_X| \le 0.5`), stratified over the whole path, which reaches
+:math:`h_X` (for a still X, :math:`|h_X| \le 0.5`: the neighbourhood's *second direction* where it has
+one, else :math:`v_N`), stratified over the whole path, which reaches
 FOOT = ½ px beyond the vector — :math:`d_i = \hat v\,(|v| + \tfrac12)` for v = :math:`v_N` or
 :math:`h_X` (a surface pixel swept over ±|h| overlaps its neighbours partly up to half a pixel
 further: its footprint),
@@ -49,6 +50,19 @@ still tiles leave on its moving ones, never costing more than a frame moving eve
 :math:`S_q` (where every tile moves, C = :math:`S_q`); a slower neighbourhood takes fewer: the S strata of the path :math:`2|v_N|` are
 then at most 1/D px apart (D = DENSITY = 1.5), so more taps would only resample the same pixels (a
 frame's cost follows its motion; the choice of D: ``docs/motion_blur.md``).
+
+*Second direction* (a still pixel between two movers): TileMax also keeps the inverse depth of
+each tile's maximum; NeighborMax the longest of its 3×3 tiles' maxima whose direction differs from
+:math:`v_N` (cos < AGREE0, tested as :math:`a\cdot b < 0` or :math:`(a\cdot b)^2 <` DIFFER2
+:math:`|a|^2|b|^2`), kept only if
+faster than ½ px and its surface is not level with :math:`v_N`'s (inverse depths apart by more than
+SOFT_Z/2 relative: another surface moving another way, not one spinning surface). Without it a
+still pixel whose tiles' :math:`v_N` belongs to a faster mover never looks along a slower one
+(the wall ahead of the Cycles motion scene's cube, next to the ball: docs/motion_blur.md). Both tap
+sets then gather the front layer at weight 2 (each estimates what reaches X along its direction;
+the own layer as where the sets agree) and the nearer set's front (by the candidates' inverse
+depths) is composited over the farther's: :math:`c_F = c_n + (1 - c_n) c_f`,
+:math:`c_F F = c_n F_n + (1 - c_n) c_f F_f` (:math:`c_n, c_f` clamped to 1).
 
 *Coverage.* A surface Y moving with half-vector :math:`h_Y` passes over X, |X − Y| = d, for the
 fraction :math:`\delta_i / (2|h_Y|)` of the shutter per tap (:math:`\delta_i = 2|d_i|/S` the path
@@ -182,6 +196,7 @@ DIR = 127.0
 JITTER_R2 = (0.7548776662, 0.5698402910)
 """The R2 lattice's steps per pixel in x and y (Roberts 2018, the plastic number's 1/φ₂, 1/φ₂²)."""
 AGREE0, AGREE1 = 0.8, 0.95
+DIFFER2 = 0.64   # AGREE0²: a neighbourhood's second direction differs from v_N by more
 """cos(angle) between v_N and X's own half-vector below which the two tap sets split the work."""
 """A pixel faster than FRINGE × its fastest 3×3 neighbour takes that neighbour's motion (fringe rule)."""
 
@@ -288,7 +303,7 @@ class MotionBlur(GatherStage):
     def _buffers(self, rt, w, h):
         tw, th = -(-w // TILE), -(-h // TILE)
         return dict(hv=rt.scratch(self, "hv", (4, h, w)), iz=rt.scratch(self, "iz", (h, w)),
-                    tile=rt.scratch(self, "tile", (3, th, tw)), nmax=rt.scratch(self, "nmax", (2, th, tw)),
+                    tile=rt.scratch(self, "tile", (4, th, tw)), nmax=rt.scratch(self, "nmax", (5, th, tw)),
                     cap=rt.scratch(self, "cap", (1,), np.int32),
                     tmp=rt.scratch(self, "tmp", (3, h, w)), tw=tw, th=th)
 
@@ -310,7 +325,7 @@ class MotionBlur(GatherStage):
                        np.float32(shutter_fraction(camera) / 2.0))
             events.append(rt.launch(k, *self._row_launch(rt, w, h)))
             k = self._kernel(rt, camera, "motion_blur_tilemax")
-            k.set_args(b["hv"], b["tile"], np.int32(w), np.int32(h), np.int32(tw), np.int32(th))
+            k.set_args(b["hv"], b["iz"], b["tile"], np.int32(w), np.int32(h), np.int32(tw), np.int32(th))
             events.append(rt.launch(k, (tw, th)))
             k = self._kernel(rt, camera, "motion_blur_neighbormax")
             k.set_args(b["tile"], b["nmax"], np.int32(tw), np.int32(th))
@@ -442,6 +457,39 @@ def tile_max(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return tmax, _argmax_len(neigh)
 
 
+def _differs32(ax, ay, bx, by) -> np.ndarray:
+    """Direction a differs from b by more than acos(AGREE0): a·b < 0 or (a·b)² < DIFFER2 |a|²|b|²,
+    in float32 as the kernel's ``motion_blur_differs`` (a zero vector differs from nothing)."""
+    f = np.float32
+    ax, ay, bx, by = (np.asarray(q, f) for q in (ax, ay, bx, by))
+    d = ax * bx + ay * by
+    la, lb = ax * ax + ay * ay, bx * bx + by * by
+    return (d < 0) | (d * d < f(DIFFER2) * (la * lb))
+
+
+def second_directions(hk: np.ndarray, iz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The neighbourhood's second direction per tile (module docstring, "Second direction"; the
+    kernels' TileMax and NeighborMax): th×tw×2 float32 (zero where none) and th×tw bool, True where its
+    surface is the nearer one. ``hk`` the keyed half-vectors (float32 values), ``iz`` 1/depth."""
+    hh, ww = hk.shape[:2]
+    tw, th = -(-ww // TILE), -(-hh // TILE)
+    rec = np.zeros((th * TILE, tw * TILE, 4), np.float32)
+    rec[:hh, :ww, :3], rec[:hh, :ww, 3] = hk[..., :3], iz
+    tiles = rec.reshape(th, TILE, tw, TILE, 4).transpose(0, 2, 1, 3, 4).reshape(th, tw, TILE * TILE, 4)
+    tmax = _argmax_len(tiles)                                          # x, y, key, 1/z of the tile's max
+    pad = np.zeros((th + 2, tw + 2, 4), np.float32)
+    pad[1:-1, 1:-1] = tmax
+    cand = np.stack([pad[1 + dy:1 + dy + th, 1 + dx:1 + dx + tw] for dy in (-1, 0, 1) for dx in (-1, 0, 1)],
+                    axis=2)                                            # th, tw, 9, 4: scan order
+    n1 = _argmax_len(cand)                                             # v_N and its 1/z
+    dif = _differs32(cand[..., 0], cand[..., 1], n1[..., None, 0], n1[..., None, 1])
+    n2 = _argmax_len(np.where(dif[..., None], cand, np.float32(0)))
+    sz, bz = n2[..., 3], n1[..., 3]
+    other = (n2[..., 2] > np.float32(0.5)) & (
+        np.abs(sz - bz) > np.float32(0.5) * np.float32(SOFT_Z) * np.maximum(np.maximum(sz, bz), np.float32(1e-30)))
+    return np.where(other[..., None], n2[..., :2], np.float32(0)), other & (sz > bz)
+
+
 def taps(ln32: np.ndarray, samples: int) -> np.ndarray:
     """S per pixel (module docstring, "Taps"): min(samples, 2⌈DENSITY |v_N|⌉ + 1) from |v_N| in float32
     (``samples``: the frame's cap, :func:`tap_cap`)."""
@@ -506,9 +554,17 @@ def reference_blur(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray | 
     color = np.asarray(color, dtype=np.float64)
     L = reference_layers(color, velocity, depth, fraction, samples, frame_index, seed, samples_max)
     cf, co = L["cf"], L["co"]
+    # two directions (a still X with a second surface moving another way): the nearer set's front over the farther's
+    cfe, sfe, cfo, sfo, near2 = cf - L["cfo"], L["sf"] - L["sfo"], L["cfo"], L["sfo"], L["near2"]
+    cn, cr = np.where(near2, cfo, cfe), np.where(near2, cfe, cfo)
+    sn, sr = np.where(near2[..., None], sfo, sfe), np.where(near2[..., None], sfe, sfo)
+    cnc, crc = np.minimum(cn, 1.0), np.minimum(cr, 1.0)
+    two = cnc[..., None] * sn / np.maximum(cn, 1e-30)[..., None] + ((1.0 - cnc) * crc)[..., None] * sr / np.maximum(cr, 1e-30)[..., None]
+    cf = np.where(L["use2"], cnc + (1.0 - cnc) * crc, cf)
+    sf = np.where(L["use2"][..., None], two, L["sf"])
     cfc, coc = np.minimum(cf, 1.0)[..., None], np.minimum(co / L["ca"], 1.0)[..., None]   # the own share of X's path
     own = coc * L["so"] / co[..., None] + (1.0 - coc) * L["sb"] / L["wb"][..., None]
-    fr = np.where((cf > 0)[..., None], L["sf"] / np.where(cf > 0, cf, 1.0)[..., None], color)
+    fr = np.where((cf > 0)[..., None], sf / np.where(cf > 0, cf, 1.0)[..., None], color)
     out = cfc * fr + (1.0 - cfc) * own
     out[L["still"]] = color[L["still"]]
     return out
@@ -531,17 +587,22 @@ def reference_layers(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray 
     vn = nmax[ys // TILE, xs // TILE, :2]
     vn32 = vn.astype(np.float32)
     iz = np.where(np.isinf(z), 0.0, 1.0 / np.where(np.isinf(z), 1.0, z))
+    iz32 = np.where(np.isinf(z), np.float32(0), np.float32(1) / np.where(np.isinf(z), np.float32(1), z.astype(np.float32)))
+    v2, near2 = second_directions(hk, iz32)
+    v2, near2 = v2[ys // TILE, xs // TILE], near2[ys // TILE, xs // TILE]
     lhx = _len32(h32)
     lx32 = np.maximum(lhx, np.float32(0.5))
     lx = lx32.astype(np.float64)
-    vx32 = np.where((lhx > 0.5)[..., None], h32, vn32)   # odd taps: X's own motion
+    own_dir = lhx > 0.5
+    use2 = ~own_dir & (_len32(v2) > 0)        # a still X with a second surface moving another way
+    vx32 = np.where(own_dir[..., None], h32, np.where(use2[..., None], v2, vn32))   # odd taps: X's own motion
     ln32, lv32 = _len32(vn32), _len32(vx32)
     ln, lv = ln32.astype(np.float64), lv32.astype(np.float64)
     tiny = np.float32(1e-30)
     rln32 = np.float32(1) / np.maximum(ln32, tiny)
     rlv32 = np.float32(1) / np.maximum(lv32, tiny)
     cosang = (vn32[..., 0] * vx32[..., 0] + vn32[..., 1] * vx32[..., 1]) / np.maximum(ln * lv, 1e-30)
-    agree = np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0)
+    agree = np.where(use2, 1.0, np.clip((cosang - AGREE0) / (AGREE1 - AGREE0), 0.0, 1.0))
     j = jitter(seed, frame_index, xs, ys)
     samples = tap_cap(nmax, samples, samples if samples_max is None else samples_max)   # the frame's cap
     ns = taps(_len32(vn32), samples)                          # S per pixel
@@ -552,8 +613,10 @@ def reference_layers(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray 
     dn32 = vn32 * (pn32 * rln32)[..., None]
     dv32 = vx32 * (pv32 * rlv32)[..., None]
     pn, pv = pn32.astype(np.float64), pv32.astype(np.float64)
-    wc = np.maximum((pn32 * inv).astype(np.float64) + (pv32 * inv), 1.0) / (2.0 * lx)   # at least the pixel
-    cf, sf = np.zeros((hh, ww)), np.zeros_like(color)          # surfaces in front of X
+    wc = np.maximum((pn32 * inv).astype(np.float64) + (np.where(own_dir, pv32, pn32) * inv), 1.0) / (2.0 * lx)   # at least the pixel
+    cf, sf = np.zeros((hh, ww)), np.zeros_like(color)          # surfaces in front of X (both sets)
+    cfo, sfo = np.zeros((hh, ww)), np.zeros_like(color)        # ... of them, the odd taps'
+    wfo, wfe = np.where(use2, 2.0, agree), np.where(use2, 2.0, agree + (1.0 - agree) * 2.0)   # front set weights
     co, so = wc.copy(), color * wc[..., None]                  # X's own surface along its path
     ca = wc.copy()                                              # c_O if every tap were X's own surface
     wb = np.full((hh, ww), 1e-3)
@@ -578,7 +641,7 @@ def reference_layers(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray 
         own = b * cx                             # level with X and on X's own path
         ey = erec[sy, sx].astype(np.float64)
         line = np.clip(LINE + 0.5 - np.abs(dx32 * ey[..., 1] - dy32 * ey[..., 0]) / DIR, 0.0, 1.0)
-        af = line * f * (1.0 - own) * a * (agree + (1.0 - agree) * (0.0 if s % 2 else 2.0))
+        af = line * f * (1.0 - own) * a * (wfo if s % 2 else wfe)
         go = agree + (1.0 - agree) * (2.0 if s % 2 else 0.0)
         ao = f * own * a * go
         ca = ca + tap * cx * cx * (pv if s % 2 else pn) * inv64 / lx * go   # Y = X: f = b = 1
@@ -586,10 +649,13 @@ def reference_layers(color: np.ndarray, velocity: np.ndarray, depth: np.ndarray 
               / np.maximum(dx32 * dx32 + dy32 * dy32, np.float32(1)))                 # nearest look most like it
         cy = color[sy, sx]
         cf, sf = cf + af, sf + af[..., None] * cy
+        if s % 2:
+            cfo, sfo = cfo + af, sfo + af[..., None] * cy
         co, so = co + ao, so + ao[..., None] * cy
         wb, sb = wb + ab, sb + ab[..., None] * cy
     still = vn[..., 0] ** 2 + vn[..., 1] ** 2 <= 0.25
-    return dict(cf=cf, sf=sf, co=co, so=so, ca=ca, wb=wb, sb=sb, still=still)
+    return dict(cf=cf, sf=sf, cfo=cfo, sfo=sfo, use2=use2, near2=near2, co=co, so=so, ca=ca, wb=wb, sb=sb,
+                still=still)
 
 
 def reference_rolling(color: np.ndarray, velocity: np.ndarray, readout_frames: float) -> np.ndarray:
