@@ -102,31 +102,28 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
     const int tx = get_global_id(0), ty = get_global_id(1);
     if (tx >= tw || ty >= th) return;
     const size_t tn = (size_t)tw * (size_t)th;
+    /* the 3x3 tiles once (row by row; a tile beyond the frame has length 0, which neither
+     * selection below takes), then v_N and the second direction from the same values */
+    float cx[9], cy[9], cl[9], cz[9];
+    for (int k = 0; k < 9; ++k) {
+        const int sx = tx + k % 3 - 1, sy = ty + k / 3 - 1;
+        const int in = sx >= 0 && sy >= 0 && sx < tw && sy < th;
+        const size_t t = in ? (size_t)sy * (size_t)tw + (size_t)sx : 0;
+        cx[k] = in ? tile[t] : 0.0f;
+        cy[k] = in ? tile[tn + t] : 0.0f;
+        cl[k] = in ? tile[2 * tn + t] : 0.0f;
+        cz[k] = in ? tile[3 * tn + t] : 0.0f;
+    }
     float2 best = (float2)(0.0f, 0.0f);
     float best2 = 0.0f, bz = 0.0f;
-    for (int dy = -1; dy <= 1; ++dy) {
-        for (int dx = -1; dx <= 1; ++dx) {
-            const int sx = tx + dx, sy = ty + dy;
-            if (sx < 0 || sy < 0 || sx >= tw || sy >= th) continue;
-            const size_t t = (size_t)sy * (size_t)tw + (size_t)sx;
-            const float l = tile[2 * tn + t];
-            if (l > best2) { best2 = l; best = (float2)(tile[t], tile[tn + t]); bz = tile[3 * tn + t]; }
-        }
-    }
+    for (int k = 0; k < 9; ++k)
+        if (cl[k] > best2) { best2 = cl[k]; best = (float2)(cx[k], cy[k]); bz = cz[k]; }
     float2 sec = (float2)(0.0f, 0.0f);
     float sec2 = 0.0f, sz = 0.0f;
-    for (int dy = -1; dy <= 1; ++dy) {
-        for (int dx = -1; dx <= 1; ++dx) {
-            const int sx = tx + dx, sy = ty + dy;
-            if (sx < 0 || sy < 0 || sx >= tw || sy >= th) continue;
-            const size_t t = (size_t)sy * (size_t)tw + (size_t)sx;
-            const float l = tile[2 * tn + t];
-            const float cx = tile[t], cy = tile[tn + t];
-            if (l > sec2 && motion_blur_differs(cx, cy, best.x, best.y)) {
-                sec2 = l; sec = (float2)(cx, cy); sz = tile[3 * tn + t];
-            }
+    for (int k = 0; k < 9; ++k)
+        if (cl[k] > sec2 && motion_blur_differs(cx[k], cy[k], best.x, best.y)) {
+            sec2 = cl[k]; sec = (float2)(cx[k], cy[k]); sz = cz[k];
         }
-    }
     const int other = sec2 > 0.5f && fabs(sz - bz) > 0.5f * MOTION_BLUR_SOFT_Z * fmax(fmax(sz, bz), 1e-30f);
     const size_t t = (size_t)ty * (size_t)tw + (size_t)tx;
     nmax[t] = best.x;
