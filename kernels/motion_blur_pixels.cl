@@ -265,6 +265,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     /* a still X whose neighbourhood holds a second surface moving another way (NeighborMax) sends
      * its odd taps along that: no tap would look along it otherwise */
     const CLP_I use2 = (lhx <= 0.5f) & (CLP_FN(motion_blur_len2)(v2x, v2y) > 0.0f);
+    const int split = CLP_ANY(use2);   /* a pixel of the run has two directions: split sums, composite */
     const CLP_F vxx = own_dir ? hx : (use2 ? v2x : vnx), vxy = own_dir ? hy : (use2 ? v2y : vny);   /* odd taps follow X's own motion */
     const CLP_F ln = sqrt(l2n);
     const CLP_F lv = sqrt(CLP_FN(motion_blur_len2)(vxx, vxy));
@@ -312,7 +313,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     CLP_F sor = cxr * wc, sog = cxg * wc, sob = cxb * wc;
     CLP_F sbr = cxr * wb, sbg = cxg * wb, sbb = cxb * wb;
 #if CLP_W == 1
-    if (use2) {
+    if (split) {
         for (int s = 0; s < ns; ++s) {
             if (s == nc) continue;   /* the centre stratum is X itself */
             MB_TAP(s, 1, 1);
@@ -336,7 +337,6 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const int4 n4 = min(n8.lo, n8.hi);
     const int2 n2 = min(n4.lo, n4.hi);
     const int smin = min(n2.x, n2.y);
-    const int split = CLP_ANY(use2);
     switch (smax) {
 #if MOTION_BLUR_SAMPLES_MAX >= 3
     case 3: MB_LOOP16(3); break;
@@ -407,7 +407,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
      * farther's, c = c_n + (1 - c_n) c_f and c F = c_n F_n + (1 - c_n) c_f F_f (c_n, c_f clamped to 1;
      * only where some pixel of the run has a second direction) */
     CLP_F ct = cf + cfo, str = sfr + sfor, stg = sfg + sfog, stb = sfb + sfob;   /* (cfo, sfo* 0 unless split) */
-    if (CLP_ANY(use2)) {
+    if (split) {
         const CLP_I onear = near2 > 0.5f;
         const CLP_F cn = onear ? cfo : cf, cr_ = onear ? cf : cfo;
         const CLP_F cnc = fmin(cn, 1.0f), crc = fmin(cr_, 1.0f);

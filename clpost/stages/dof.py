@@ -777,7 +777,8 @@ def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0,
     a = np.pad(np.asarray(coc).astype(f32), ((0, th * TILE - h), (0, tw * TILE - w)), mode="edge")
     blocks = a.reshape(th, TILE, tw, TILE)
     lo, hi = blocks.min(axis=(1, 3)), blocks.max(axis=(1, 3))
-    ntaps, tap_dist = tap_table(budget, 0, 0.0, 0.0)[5], tap_table(budget, 0, 0.0, 0.0)[2].astype(f32)
+    table = tap_table(budget, 0, 0.0, 0.0)
+    ntaps, tap_dist = table[5], table[2].astype(f32)
     reach_t = (rmax + TILE) // TILE
     lvl = np.zeros((th, tw), int)
     cnt = np.zeros((th, tw), int)

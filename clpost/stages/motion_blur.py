@@ -189,6 +189,7 @@ FOOT = 0.5
 """Half a pixel: a surface pixel swept over ±|h| overlaps a pixel partly up to FOOT beyond |h|, so
 the tap paths reach |v| + FOOT and the cylinders ramp over |h| ± FOOT (module docstring)."""
 FRINGE = 0.1
+"""A pixel faster than FRINGE × its fastest 3×3 neighbour takes that neighbour's motion (fringe rule)."""
 LINE = 2.0
 """A surface in front of X reaches X only within LINE ± ½ px of its own motion line (module docstring)."""
 DIR = 127.0
@@ -196,9 +197,10 @@ DIR = 127.0
 JITTER_R2 = (0.7548776662, 0.5698402910)
 """The R2 lattice's steps per pixel in x and y (Roberts 2018, the plastic number's 1/φ₂, 1/φ₂²)."""
 AGREE0, AGREE1 = 0.8, 0.95
-DIFFER2 = 0.64   # AGREE0²: a neighbourhood's second direction differs from v_N by more
 """cos(angle) between v_N and X's own half-vector below which the two tap sets split the work."""
-"""A pixel faster than FRINGE × its fastest 3×3 neighbour takes that neighbour's motion (fringe rule)."""
+DIFFER2 = AGREE0 * AGREE0
+"""A neighbourhood's second direction differs from v_N by more than acos(AGREE0): the test in squares
+(:func:`_differs32`; MOTION_BLUR_DIFFER2 in kernels/motion_blur_pixels.cl)."""
 
 
 def shutter_from_angle(angle_deg: float, fps: float) -> float:
@@ -443,18 +445,28 @@ def _argmax_len(vecs: np.ndarray) -> np.ndarray:
 
 
 def tile_max(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(TileMax, NeighborMax) of keyed half-vectors h (H×W×3 from ``half_vectors(...,
-    with_length=True)``): th×tw×3 each."""
-    hh, ww = h.shape[:2]
+    """(TileMax, NeighborMax) of keyed half-vectors h (H×W×C, C ≥ 3, from ``half_vectors(...,
+    with_length=True)``; further channels ride along with their pixel's vector): th×tw×C each."""
+    tmax = _tile_maxima(np.asarray(h, np.float64))
+    return tmax, _argmax_len(_neighbourhoods(tmax))
+
+
+def _tile_maxima(h: np.ndarray) -> np.ndarray:
+    """Each TILE×TILE tile's pixel with the largest key (channel 2; first in scan order on ties, 0
+    beyond the frame): th×tw×C in h's dtype."""
+    hh, ww, c = h.shape
     tw, th = -(-ww // TILE), -(-hh // TILE)
-    pad = np.zeros((th * TILE, tw * TILE, 3))
+    pad = np.zeros((th * TILE, tw * TILE, c), h.dtype)
     pad[:hh, :ww] = h
-    tiles = pad.reshape(th, TILE, tw, TILE, 3).transpose(0, 2, 1, 3, 4).reshape(th, tw, TILE * TILE, 3)
-    tmax = _argmax_len(tiles)
-    tp = np.zeros((th + 2, tw + 2, 3))
+    return _argmax_len(pad.reshape(th, TILE, tw, TILE, c).transpose(0, 2, 1, 3, 4).reshape(th, tw, TILE * TILE, c))
+
+
+def _neighbourhoods(tmax: np.ndarray) -> np.ndarray:
+    """Each tile's 3×3 tiles (zeros beyond the frame), in scan order: th×tw×9×C."""
+    th, tw = tmax.shape[:2]
+    tp = np.zeros((th + 2, tw + 2) + tmax.shape[2:], tmax.dtype)
     tp[1:-1, 1:-1] = tmax
-    neigh = np.stack([tp[1 + dy:1 + dy + th, 1 + dx:1 + dx + tw] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=2)
-    return tmax, _argmax_len(neigh)
+    return np.stack([tp[1 + dy:1 + dy + th, 1 + dx:1 + dx + tw] for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=2)
 
 
 def _differs32(ax, ay, bx, by) -> np.ndarray:
@@ -471,16 +483,8 @@ def second_directions(hk: np.ndarray, iz: np.ndarray) -> tuple[np.ndarray, np.nd
     """The neighbourhood's second direction per tile (module docstring, "Second direction"; the
     kernels' TileMax and NeighborMax): th×tw×2 float32 (zero where none) and th×tw bool, True where its
     surface is the nearer one. ``hk`` the keyed half-vectors (float32 values), ``iz`` 1/depth."""
-    hh, ww = hk.shape[:2]
-    tw, th = -(-ww // TILE), -(-hh // TILE)
-    rec = np.zeros((th * TILE, tw * TILE, 4), np.float32)
-    rec[:hh, :ww, :3], rec[:hh, :ww, 3] = hk[..., :3], iz
-    tiles = rec.reshape(th, TILE, tw, TILE, 4).transpose(0, 2, 1, 3, 4).reshape(th, tw, TILE * TILE, 4)
-    tmax = _argmax_len(tiles)                                          # x, y, key, 1/z of the tile's max
-    pad = np.zeros((th + 2, tw + 2, 4), np.float32)
-    pad[1:-1, 1:-1] = tmax
-    cand = np.stack([pad[1 + dy:1 + dy + th, 1 + dx:1 + dx + tw] for dy in (-1, 0, 1) for dx in (-1, 0, 1)],
-                    axis=2)                                            # th, tw, 9, 4: scan order
+    rec = np.concatenate([np.asarray(hk[..., :3], np.float32), np.asarray(iz, np.float32)[..., None]], axis=-1)
+    cand = _neighbourhoods(_tile_maxima(rec))                          # th, tw, 9, (x, y, key, 1/z)
     n1 = _argmax_len(cand)                                             # v_N and its 1/z
     dif = _differs32(cand[..., 0], cand[..., 1], n1[..., None, 0], n1[..., None, 1])
     n2 = _argmax_len(np.where(dif[..., None], cand, np.float32(0)))
