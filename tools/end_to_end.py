@@ -82,6 +82,54 @@ def _pipelined(plan, inputs: list, cams: list, repeats: int, frames: int, outs: 
     return statistics.median(times), statistics.median(host)
 
 
+def _timeline(plan, inputs: list, cams: list, frames: int, outs: list) -> dict[str, float]:
+    """Where a pipelined frame's time goes, from its commands' OpenCL profiling times (every queue
+    of the context counts on the device's clock; ``queued`` is when the host enqueued the
+    command): per frame, medians over the frames after the first two, in ms —
+    ``cadence``: between consecutive frames' first uploads being enqueued (the host's submit
+    rate); ``upload``/``compute``/``download``: busy time of the upload queue, the compute queue
+    (kernels and the slot's device-to-device copies) and the downloads; ``compute idle``: the
+    compute queue's gap before the frame's first command; of it ``waiting for host``: that
+    command's start minus the later of its enqueue and the previous frame's last compute command
+    (the device had nothing to do), and ``waiting for upload``: the frame's last upload's end
+    minus the previous frame's last compute end (the bus was late)."""
+    from collections import deque
+
+    depth, done, pending = len(outs) - 1, [], deque()
+    for k in range(frames):
+        if len(pending) >= depth:
+            p = pending.popleft()
+            p.result()
+            done.append(p)
+        pending.append(plan.submit(inputs[k % len(inputs)], cams[k % len(cams)], out=outs[k % len(outs)]))
+    while pending:
+        p = pending.popleft()
+        p.result()
+        done.append(p)
+    rows = []
+    for p in done:
+        ev = [(label, e.profile.queued * 1e-6, e.profile.start * 1e-6, e.profile.end * 1e-6)
+              for label, e in p._events]
+        up = [e for e in ev if e[0] == "upload"]
+        down = [e for e in ev if e[0] == "download"]
+        comp = sorted((e for e in ev if e[0] not in ("upload", "download")), key=lambda e: e[2])
+        rows.append(dict(first_q=min(e[1] for e in up), up=sum(e[3] - e[2] for e in up),
+                         up_end=max(e[3] for e in up), down=sum(e[3] - e[2] for e in down),
+                         comp=sum(e[3] - e[2] for e in comp), c_first=comp[0], c_end=max(e[3] for e in comp)))
+    stats: dict[str, list] = {k: [] for k in ("cadence", "upload", "compute", "download", "compute idle",
+                                              "waiting for host", "waiting for upload")}
+    for a, b in zip(rows[1:-1], rows[2:]):
+        stats["cadence"].append(b["first_q"] - a["first_q"])
+        stats["upload"].append(b["up"])
+        stats["compute"].append(b["comp"])
+        stats["download"].append(b["down"])
+        _, queued, start, _ = b["c_first"]
+        stats["compute idle"].append(start - a["c_end"])
+        stats["waiting for host"].append(max(0.0, start - max(queued, a["c_end"])) if queued > a["c_end"] else 0.0)
+        stats["waiting for upload"].append(max(0.0, b["up_end"] - a["c_end"]))
+    return {k: statistics.median(v) for k, v in stats.items()}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--device")
@@ -97,6 +145,9 @@ def main(argv=None) -> int:
                     help="pipeline on a CPU device too (a check of the GPU path, not a speed-up)")
     ap.add_argument("--focus-pull", action="store_true",
                     help="each frame its own focus distance (FOCUS_PULL_M): per-frame tables change")
+    ap.add_argument("--timeline", action="store_true",
+                    help="after each row, where a pipelined frame's time goes (first --in-flight value; "
+                         "OpenCL profiling times of its uploads, compute-queue commands and downloads)")
     a = ap.parse_args(argv)
     w, h = (int(v) for v in a.size.split("x"))
     depths = [int(v) for v in a.in_flight.split(",")]
@@ -135,6 +186,12 @@ def main(argv=None) -> int:
                     bad.append(f"{name} {q} ({d} in flight)")
                 row += f" {piped:.2f} | {1e3 / piped:.0f} | {host:.2f} |"
             print(row, flush=True)
+            if a.timeline:
+                plan.in_flight = depths[0]
+                outs = [pipe.runtime.pinned_empty((oh, ow, 3)) for _ in range(depths[0] + 1)]
+                t = _timeline(plan, inputs, cams, a.frames, outs)
+                print(f"|   timeline, {depths[0]} in flight, ms per frame: "
+                      + ", ".join(f"{k} {v:.2f}" for k, v in t.items()) + " |", flush=True)
             pipe.close()  # the frames in flight and the download thread end with the row
     if bad:
         print(f"pipelined frames differ from Plan.run's: {', '.join(bad)}", file=sys.stderr)
