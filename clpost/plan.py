@@ -424,6 +424,7 @@ class Plan:
             bufs.stream = Stream(self.in_flight)
         bufs.stream.resize(self.in_flight)
         stream = bufs.stream
+        given = out is not None
         out = self._out_array(out, stream.upcoming)
         meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
         slot = stream.reserve()  # waits for the frame that used it last
@@ -431,12 +432,14 @@ class Plan:
         names = ["color", *self._aux_names]
         copies: list = []  # (host array, slot buffer, event of the copy into it): the downloads
 
-        def download(host: np.ndarray, buf):
+        def download(host: np.ndarray, buf, fresh: bool = True):
             """A download of the frame's: copied into the slot on the compute queue now, to the
-            host by the download worker (Stream.download) once that copy is done."""
-            staging = slot.output(rt, len(copies), host.nbytes)
+            host by the download worker (Stream.download) once that copy is done — through the
+            slot's page-locked bounce array where ``host`` is an array the plan made (``fresh``)."""
+            key = len(copies)
+            staging = slot.output(rt, key, host.nbytes)
             ev = cl.enqueue_copy(q, staging, buf, byte_count=host.nbytes)
-            copies.append((host, staging, ev))
+            copies.append((host, staging, ev, slot.bounce(rt, key, host, uq) if fresh else None))
             return ev
 
         uploads: list = []  # ("upload", event) of the tables and arrays the stages copy mid-frame
@@ -466,11 +469,11 @@ class Plan:
             # a resampling stage's host depth/velocity that a later stage reads back (uploaded again
             # from the host, _upload_aux) must be downloaded in the compute queue's order
             evs, host_out, size = self._enqueue_launches(frame, cam, None if self._aux_reread else download, upload)
-            staged = {id(ev) for *_, ev in copies}
+            staged = {id(c[2]) for c in copies}
             events += uploads
             events += [("stage_out" if id(ev) in staged else "stage_in" if id(ev) in staged_in else label, ev)
                        for label, ev in evs]
-            download(out, self._color_out(size))
+            download(out, self._color_out(size), fresh=not given)
             events.append(("stage_out", copies[-1][2]))
             q.flush()
         except BaseException:

@@ -441,15 +441,16 @@ class Runtime:
         per-frame transfer, which a recording replays."""
         return cl.enqueue_copy(self.queue, dst, src, is_blocking=blocking)
 
-    def pinned_empty(self, shape: tuple[int, ...], dtype=np.float32) -> np.ndarray:
+    def pinned_empty(self, shape: tuple[int, ...], dtype=np.float32, queue=None) -> np.ndarray:
         """A host array in page-locked memory (an ``ALLOC_HOST_PTR`` buffer, mapped): a discrete
         GPU copies it by DMA at the bus's rate instead of staging pageable memory through the
         driver (H100, PCIe: 52 vs 13 GB/s, ``tools/transfer_bench.py``). Fill a frame's arrays
         in it (or pass it as ``Plan.run(out=...)``) to keep transfers off the frame time. The
-        array keeps its buffer mapped while it lives."""
+        array keeps its buffer mapped while it lives. ``queue``: the queue that maps it (default
+        the compute queue, where the map waits for every command before it)."""
         nbytes = max(int(np.prod(shape)) * np.dtype(dtype).itemsize, 4)
         buf = cl.Buffer(self.context, cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR, nbytes)
-        arr, _ = cl.enqueue_map_buffer(self.queue, buf, cl.map_flags.READ | cl.map_flags.WRITE, 0,
+        arr, _ = cl.enqueue_map_buffer(queue or self.queue, buf, cl.map_flags.READ | cl.map_flags.WRITE, 0,
                                        tuple(shape), dtype, is_blocking=True)
         return arr
 

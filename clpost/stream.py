@@ -111,6 +111,9 @@ class Slot:
     inputs: dict = field(default_factory=dict)
     tables: dict = field(default_factory=dict)
     outputs: dict = field(default_factory=dict)
+    bounces: dict = field(default_factory=dict)
+    """Page-locked host arrays by download key: what the downloads into arrays the plan makes
+    itself (a resampling stage's depth and velocity, the image without ``out``) land in first."""
     pending: PendingFrame | None = None
     """The last frame that used this slot (waited for before the slot is used again)."""
 
@@ -123,6 +126,15 @@ class Slot:
     def output(self, rt, key, nbytes: int):
         return _staging(self.outputs, rt, key, nbytes)
 
+    def bounce(self, rt, key, host: np.ndarray, queue) -> np.ndarray:
+        """A page-locked array of ``host``'s shape and type, this slot's for download ``key``
+        (made by a map on ``queue``, the upload queue, whose commands wait for nothing on the
+        device: not behind the compute queue's work, nor behind downloads waiting for it)."""
+        arr = self.bounces.get(key)
+        if arr is None or arr.shape != host.shape or arr.dtype != host.dtype:
+            arr = self.bounces[key] = rt.pinned_empty(host.shape, host.dtype, queue)
+        return arr
+
 
 def _staging(buffers: dict, rt, key, nbytes: int):
     """``buffers[key]``, made anew when missing or of another size."""
@@ -133,13 +145,24 @@ def _staging(buffers: dict, rt, key, nbytes: int):
 
 
 def _download(queue, copies: list) -> list:
-    """The download worker's job: each (host array, slot buffer, event of the copy into it)
-    copied into its host array once that event completes; blocking, so that a driver that
-    copies into pageable memory synchronously blocks this thread, not the one submitting."""
+    """The download worker's job: each (host array, slot buffer, event of the copy into it,
+    page-locked bounce array or None) copied into its host array once that event completes.
+    None of the copies is a blocking read: NVIDIA's driver holds every other thread's enqueue
+    for as long as a blocking read into pageable memory runs (H200: the submitting thread
+    stopped for each frame's depth download, so frames ran one after another — docs/
+    benchmarks.md, "Frames in flight"), so a download into an array the plan made itself goes by
+    DMA into the slot's page-locked bounce array and from there by a host copy (NumPy's, which
+    releases the GIL); a caller's ``out`` is copied into directly (page-locked, it is DMA)."""
     import pyopencl as cl
 
-    return [("download", cl.enqueue_copy(queue, host, buf, wait_for=[staged], is_blocking=True))
-            for host, buf, staged in copies]
+    events = [(cl.enqueue_copy(queue, host if bounce is None else bounce, buf, wait_for=[staged],
+                               is_blocking=False), host, bounce) for host, buf, staged, bounce in copies]
+    queue.flush()
+    for ev, host, bounce in events:
+        ev.wait()
+        if bounce is not None:
+            np.copyto(host, bounce)
+    return [("download", ev) for ev, _, _ in events]
 
 
 class Stream:

@@ -245,6 +245,44 @@ def test_a_first_frame_submitted_records_its_stages_with_the_downloads_moved(rng
         np.testing.assert_array_equal(g.velocity, w.velocity)
 
 
+def test_the_download_worker_never_blocks_in_a_read_and_bounces_the_plans_own_arrays(rng, monkeypatch):
+    """NVIDIA's driver holds every other thread's enqueue while a blocking read into pageable
+    memory runs, which serialised the frames in flight on the H200 (docs/benchmarks.md, "Frames in
+    flight"): the download worker's copies are non-blocking, and those into arrays the plan made
+    (distortion's depth and velocity, the image without ``out``) land in the slot's page-locked
+    bounce arrays, then a host copy; a caller's ``out`` is copied into directly. The frames are
+    still Plan.run's, each with arrays of its own."""
+    import threading
+
+    pipe, frame, cam, stages = _worst_case(rng)
+    frames = _frames(frame, 3)
+    plan = pipe.plan_for(frame)
+    want = [plan.run(f, cam) for f in frames]
+    plan.pipelined, plan.in_flight = True, 1
+    seen, real = [], cl.enqueue_copy
+
+    def spy(queue, dst, src, **kw):
+        if threading.current_thread().name == "clpost-download":
+            seen.append((dst, kw.get("is_blocking", True)))
+        return real(queue, dst, src, **kw)
+
+    monkeypatch.setattr(cl, "enqueue_copy", spy)
+    out = plan.runtime.pinned_empty(want[0].color.shape)
+    got = [plan.submit(f, cam).result() for f in frames[:2]]
+    got.append(plan.submit(frames[2], cam, out=out).result())
+    assert seen and not any(blocking for _, blocking in seen)
+    bounces = [a for s in plan.buffers.stream.slots for a in s.bounces.values()]
+    assert len(bounces) == 3  # depth, velocity, image: one slot's
+    assert sum(any(dst is b for b in bounces) for dst, _ in seen) == 3 * 2 + 2  # the last image went to out
+    assert sum(dst is out for dst, _ in seen) == 1
+    for w, g in zip(want, got):
+        np.testing.assert_array_equal(g.color, w.color)
+        np.testing.assert_array_equal(g.depth, w.depth)
+        np.testing.assert_array_equal(g.velocity, w.velocity)
+        assert not any(np.may_share_memory(g.depth, b) or np.may_share_memory(g.velocity, b) for b in bounces)
+    assert got[2].color is out and not any(np.may_share_memory(g.color, b) for g in got[:2] for b in bounces)
+
+
 def test_label_planes_resampled_in_flight_belong_to_their_frame(rng):
     """Distortion re-records every frame that has label planes (its upload of them is not
     replayable): each submitted frame's labels, depth and image are its own, as Plan.run's."""

@@ -82,7 +82,7 @@ def _pipelined(plan, inputs: list, cams: list, repeats: int, frames: int, outs: 
     return statistics.median(times), statistics.median(host)
 
 
-def _timeline(plan, inputs: list, cams: list, frames: int, outs: list) -> dict[str, float]:
+def _timeline(plan, inputs: list, cams: list, frames: int, outs: list, dump=None) -> dict[str, float]:
     """Where a pipelined frame's time goes, from its commands' OpenCL profiling times (every queue
     of the context counts on the device's clock; ``queued`` is when the host enqueued the
     command): per frame, medians over the frames after the first two, in ms —
@@ -92,7 +92,8 @@ def _timeline(plan, inputs: list, cams: list, frames: int, outs: list) -> dict[s
     compute queue's gap before the frame's first command; of it ``waiting for host``: that
     command's start minus the later of its enqueue and the previous frame's last compute command
     (the device had nothing to do), and ``waiting for upload``: the frame's last upload's end
-    minus the previous frame's last compute end (the bus was late)."""
+    minus the previous frame's last compute end (the bus was late). ``dump``: a file to list every
+    command of three middle frames in (label, queued, start, end)."""
     from collections import deque
 
     depth, done, pending = len(outs) - 1, [], deque()
@@ -106,6 +107,13 @@ def _timeline(plan, inputs: list, cams: list, frames: int, outs: list) -> dict[s
         p = pending.popleft()
         p.result()
         done.append(p)
+    if dump:  # every command of three middle frames, ms from the first one's first enqueue
+        mid = done[len(done) // 2 - 1:len(done) // 2 + 2]
+        t0 = min(e.profile.queued for p in mid for _, e in p._events) * 1e-6
+        for i, p in enumerate(mid):
+            for label, e in sorted(p._events, key=lambda le: le[1].profile.start):
+                print(f"    frame +{i} {label:<28} queued {e.profile.queued * 1e-6 - t0:8.3f} "
+                      f"start {e.profile.start * 1e-6 - t0:8.3f} end {e.profile.end * 1e-6 - t0:8.3f}", file=dump)
     rows = []
     for p in done:
         ev = [(label, e.profile.queued * 1e-6, e.profile.start * 1e-6, e.profile.end * 1e-6)
@@ -189,7 +197,7 @@ def main(argv=None) -> int:
             if a.timeline:
                 plan.in_flight = depths[0]
                 outs = [pipe.runtime.pinned_empty((oh, ow, 3)) for _ in range(depths[0] + 1)]
-                t = _timeline(plan, inputs, cams, a.frames, outs)
+                t = _timeline(plan, inputs, cams, a.frames, outs, sys.stderr)
                 print(f"|   timeline, {depths[0]} in flight, ms per frame: "
                       + ", ".join(f"{k} {v:.2f}" for k, v in t.items()) + " |", flush=True)
             pipe.close()  # the frames in flight and the download thread end with the row
