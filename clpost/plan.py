@@ -324,7 +324,10 @@ class Plan:
         plan's; its scalars — focus, f-number, shutter, exposure … — may differ per frame).
         ``out``: a C-contiguous float32 (H, W, 3) array of the output size to download the image
         into (e.g. :meth:`~clpost.runtime.Runtime.pinned_empty`'s, which a discrete GPU reads and
-        writes ~4× faster than pageable memory); default a new array.
+        writes ~4× faster than pageable memory); default a new array. Or a dict of such arrays
+        by name: ``color``, and ``depth`` (H, W) and ``velocity`` (H, W, 2) where the plan
+        resamples them (distortion makes the output frame's depth and velocity at the output
+        size; without an array for them, new ones each frame).
         Returns a new Frame whose color is the camera's output."""
         t0 = time.thread_time()
         try:
@@ -342,13 +345,13 @@ class Plan:
             self._camera_seen = cam
             self._events, self._timings, self.last_patched = [], {}, []
             return frame.replace(metadata=meta, validate=False)
-        out = self._out_array(out)
+        out, outs = self._outputs(out, frame)
         rt, q, bufs = self.runtime, self.runtime.queue, self.buffers
         events = [("upload", cl.enqueue_copy(q, bufs.color_in, frame.color, is_blocking=False))]
         for name in self._aux_names:
             events.append(("upload", cl.enqueue_copy(q, self._aux_buffer(name, frame), getattr(frame, name),
                                                      is_blocking=False)))
-        evs, host_out, size = self._enqueue_launches(frame, cam)
+        evs, host_out, size = self._enqueue_launches(frame, cam, outs=outs)
         events += evs
         events.append(("download", cl.enqueue_copy(q, out, self._color_out(size), is_blocking=True)))
         # The queue is in order, so every command is complete: let the transfers' events drop their
@@ -424,8 +427,8 @@ class Plan:
             bufs.stream = Stream(self.in_flight)
         bufs.stream.resize(self.in_flight)
         stream = bufs.stream
-        given = out is not None
-        out = self._out_array(out, stream.upcoming)
+        given = isinstance(out, np.ndarray) or (isinstance(out, dict) and out.get("color") is not None)
+        out, outs = self._outputs(out, frame, stream.upcoming)
         meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
         slot = stream.reserve()  # waits for the frame that used it last
         uq, dq = rt.transfer_queues()
@@ -439,6 +442,7 @@ class Plan:
             key = len(copies)
             staging = slot.output(rt, key, host.nbytes)
             ev = cl.enqueue_copy(q, staging, buf, byte_count=host.nbytes)
+            fresh = fresh and not any(host is a for a in outs.values())  # not the caller's
             copies.append((host, staging, ev, slot.bounce(rt, key, host, uq) if fresh else None))
             return ev
 
@@ -468,7 +472,8 @@ class Plan:
                 events.append(("stage_in", cl.enqueue_copy(q, dst, slot.inputs[n], wait_for=[up])))
             # a resampling stage's host depth/velocity that a later stage reads back (uploaded again
             # from the host, _upload_aux) must be downloaded in the compute queue's order
-            evs, host_out, size = self._enqueue_launches(frame, cam, None if self._aux_reread else download, upload)
+            evs, host_out, size = self._enqueue_launches(frame, cam, None if self._aux_reread else download, upload,
+                                                         outs)
             staged = {id(c[2]) for c in copies}
             events += uploads
             events += [("stage_out" if id(ev) in staged else "stage_in" if id(ev) in staged_in else label, ev)
@@ -483,9 +488,51 @@ class Plan:
                 queue.finish()
             raise
         pending = PendingFrame(frame.replace(color=out, metadata=meta, validate=False, **host_out), events,
-                               bufs.stream.download(dq, copies), self)
+                               bufs.stream.download(dq, copies), self, [out, *outs.values()])
         bufs.stream.commit(slot, pending)
         return pending
+
+    def _outputs(self, out, frame: Frame, free=None) -> tuple[np.ndarray, dict]:
+        """``out`` (an image array, a dict of arrays by name, or None) checked: the image array
+        (:meth:`_out_array`) and the caller's arrays for the resampled host buffers by name —
+        one line naming what is wrong, before anything is enqueued."""
+        if out is None or isinstance(out, np.ndarray):
+            return self._out_array(out, free), {}
+        if not isinstance(out, dict):
+            raise InputError(f"Plan.run: out= must be a float32 image array or a dict of arrays by name "
+                             f"('color', 'depth', 'velocity'), not {type(out).__name__}")
+        unknown = sorted(set(out) - {"color", "depth", "velocity"})
+        if unknown:
+            raise InputError(f"Plan.run: out= names {unknown}; the arrays a plan downloads into are "
+                             "'color', 'depth' and 'velocity'")
+        w, h = self.output_size
+        resamples = any(isinstance(s, GatherStage) and type(s).host_buffers is not GatherStage.host_buffers
+                        for s in self.stages)
+        outs = {}
+        for name, shape in (("depth", (h, w)), ("velocity", (h, w, 2))):
+            a = out.get(name)
+            if a is None:
+                continue
+            if not resamples or getattr(frame, name) is None:
+                raise InputError(f"Plan.run: out['{name}'] given, but this plan makes no new {name} (only a "
+                                 f"resampling stage such as distortion does, from the frame's {name}); leave it out")
+            if not isinstance(a, np.ndarray) or a.shape != shape or a.dtype != np.float32 or not a.flags.c_contiguous:
+                raise InputError(f"Plan.run: out['{name}'] must be a C-contiguous float32 array of shape {shape} "
+                                 f"(the plan's output size), not {getattr(a, 'dtype', type(a).__name__)} "
+                                 f"{getattr(a, 'shape', '')}")
+            self._check_not_in_flight(a, f"out['{name}']", free)
+            outs[name] = a
+        return self._out_array(out.get("color"), free), outs
+
+    def _check_not_in_flight(self, a: np.ndarray, what: str, free=None) -> None:
+        """Refuse ``a`` where a submitted frame whose ``result()`` was not taken (other than slot
+        ``free``'s, which :meth:`submit` waits for first) may still download into it."""
+        stream = self.buffers.stream if self.buffers is not None else None
+        if stream is not None and any(s is not free and s.pending is not None and s.pending.holds(a)
+                                      for s in stream.slots):
+            raise InputError(f"Plan.run: {what} is an array of a submitted frame still in flight (its "
+                             "download would overwrite this frame's); take that frame's result() first, "
+                             "or give another array")
 
     def _out_array(self, out: np.ndarray | None, free=None) -> np.ndarray:
         """``out`` checked against the plan's output (one line naming the shape it must have) and
@@ -498,12 +545,7 @@ class Plan:
         if out.shape != (h, w, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
             raise InputError(f"Plan.run: out= must be a C-contiguous float32 array of shape {(h, w, 3)} "
                              f"(the plan's output), not {out.dtype} {out.shape}")
-        stream = self.buffers.stream if self.buffers is not None else None
-        if stream is not None and any(s is not free and s.pending is not None and s.pending.holds(out)
-                                      for s in stream.slots):
-            raise InputError("Plan.run: out= is the image array of a submitted frame still in flight (its "
-                             "download would overwrite this frame's); take that frame's result() first, "
-                             "or give another array")
+        self._check_not_in_flight(out, "out=", free)
         return out
 
     def _aux_buffer(self, name: str, frame: Frame):
@@ -514,7 +556,7 @@ class Plan:
             buf = bufs.aux[name] = self.runtime.empty(getattr(frame, name).shape)
         return buf
 
-    def _enqueue_launches(self, frame: Frame, cam, download=None, upload=None) -> tuple[list, dict, tuple[int, int]]:
+    def _enqueue_launches(self, frame: Frame, cam, download=None, upload=None, outs=None) -> tuple[list, dict, tuple[int, int]]:
         """Enqueue the plan's launches for one frame on the runtime's queue, reading the frame from
         ``buffers.color_in`` and ``buffers.aux`` (enqueued before) and leaving the image in
         :meth:`_color_out`; per-frame scalars set as kernel arguments (OpenCL takes an argument's
@@ -523,12 +565,13 @@ class Plan:
         without blocking: on the queue, or by ``download(host, buffer) -> event``) and the output
         size. Host arrays the stages copy to the device (a pointwise stage's changed table, a
         gather stage's uploads) go without blocking: on the queue, or by ``upload(buffer, host)
-        -> event`` (the event on the queue after which the buffer holds them)."""
+        -> event`` (the event on the queue after which the buffer holds them). ``outs``: the
+        caller's arrays for the host buffers by name (:meth:`_outputs`), used instead of fresh ones."""
         same_camera = cam is self._camera_seen or cam == self._camera_seen
         self._camera_seen = cam
         self._events, self._timings = [], {}
         try:
-            return self._enqueue_nodes(frame, cam, same_camera, download, upload)
+            return self._enqueue_nodes(frame, cam, same_camera, download, upload, outs or {})
         except BaseException:
             self._forget()
             raise
@@ -543,7 +586,7 @@ class Plan:
         for node in self.nodes:
             node.recording, node.args, node.key = None, None, None
 
-    def _enqueue_nodes(self, frame: Frame, cam, same_camera: bool, download, upload) -> tuple[list, dict, tuple[int, int]]:
+    def _enqueue_nodes(self, frame: Frame, cam, same_camera: bool, download, upload, outs) -> tuple[list, dict, tuple[int, int]]:
         import pyopencl as cl
 
         patched = self.last_patched = []
@@ -573,9 +616,10 @@ class Plan:
                 io = (src, dst, *aux.values())
                 if (rec is not None and same_camera and key is not None and key == rec.key and rec.io == io
                         and stage.__dict__.get("_replayed") is rec):
-                    evs, host = rec.replay(q, view, download, upload)
+                    evs, host = rec.replay(q, view, download, upload, outs)
                 else:  # first frame, or what the launches depend on changed: run the stage's code
-                    rec, evs, host = self._record(node, stage, cam, view, src, dst, aux, key, download, upload)
+                    rec, evs, host = self._record(node, stage, cam, view, src, dst, aux, key, download, upload,
+                                                  outs)
                     rec.io = io
                     patched += [(f"{stage.name}[{i}]", j) for i, j in rec.patched]
                 events += evs
@@ -608,13 +652,13 @@ class Plan:
         return events, host_out, size
 
     def _record(self, node: _Node, stage: GatherStage, cam, view: Frame, src, dst, aux, key, download=None,
-                upload=None):
+                upload=None, outs=None):
         """Run a gather stage's code through a :class:`~clpost.runtime_record.Recorder` (its
         commands are enqueued and recorded; the node's previous recording lends its kernel
         objects, so only changed arguments are set); the recording replaces the node's."""
         from .runtime_record import Recorder
 
-        recorder = Recorder(self.runtime, view, key, node.recording, download, upload)
+        recorder = Recorder(self.runtime, view, key, node.recording, download, upload, outs)
         returned = [(stage.name, ev) for ev in stage.enqueue(recorder, cam, view, src, dst, aux)]
         host, evs = stage.enqueue_host_buffers(recorder, cam, view, aux)
         returned += evs

@@ -473,6 +473,12 @@ class Runtime:
         return (pmd == HUGE_PAGE and bool(self.device.type & cl.device_type.CPU)
                 and "Portable Computing Language" in self.device.platform.name)
 
+    def host_array(self, name: str, shape: tuple[int, ...], dtype=np.float32) -> np.ndarray:
+        """The host array a stage downloads the output frame's buffer ``name`` into (a resampling
+        stage's ``depth``, ``velocity``): a new one here; while a plan records the stage, the
+        array the caller gave for it (``Plan.run(out={...})``, :class:`clpost.runtime_record.Recorder`)."""
+        return np.empty(shape, dtype)
+
     def empty(self, shape: tuple[int, ...], dtype=np.float32) -> "cl.Buffer":
         nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
         if nbytes >= HUGE_PAGE and self.huge_pages:

@@ -62,9 +62,10 @@ class Copy:
         return (self.frame_src is not None or isinstance(self.src, np.ndarray)) and isinstance(
             self.dst, cl.MemoryObjectHolder)
 
-    def enqueue(self, queue, frame):
+    def enqueue(self, queue, frame, dst=None):
         src = getattr(frame, self.frame_src) if self.frame_src else self.src
-        dst = np.empty(*self.fresh) if self.fresh else self.dst
+        if dst is None:
+            dst = np.empty(*self.fresh) if self.fresh else self.dst
         return cl.enqueue_copy(queue, dst, src, is_blocking=False), dst
 
 
@@ -99,24 +100,27 @@ class Recording:
     patched: list = field(default_factory=list)
     """(command index, argument index) set when this recording was made from the previous one."""
 
-    def replay(self, queue, frame, download=None, upload=None) -> tuple[list, dict]:
+    def replay(self, queue, frame, download=None, upload=None, outs=None) -> tuple[list, dict]:
         """Enqueue every command again (``frame``: the frame whose arrays the uploads read);
         returns [(label, event)] and the host buffers. ``download(host, buffer) -> event``: how a
         download into a fresh host array is enqueued instead of on ``queue``; ``upload(buffer,
-        host) -> event``: how a copy of a host array into a buffer is (``Recorder``'s)."""
+        host) -> event``: how a copy of a host array into a buffer is (``Recorder``'s);
+        ``outs``: the caller's arrays for host buffers by name, downloaded into instead of new
+        ones."""
         events, fresh = [], {}
+        given = {v: outs[k] for k, v in self.host.items() if type(v) is int and k in outs} if outs else {}
         for i, (cmd, label) in enumerate(zip(self.commands, self.labels)):
             if type(cmd) is Launch:
                 events.append((label, cl.enqueue_nd_range_kernel(queue, cmd.kernel, cmd.global_size,
                                                                  cmd.local_size)))
             elif cmd.fresh and download is not None:
-                dst = np.empty(*cmd.fresh)
+                dst = given[i] if i in given else np.empty(*cmd.fresh)
                 events.append((label, download(dst, cmd.src)))
                 fresh[i] = dst
             elif upload is not None and cmd.uploads:
                 events.append((label, upload(cmd.dst, getattr(frame, cmd.frame_src) if cmd.frame_src else cmd.src)))
             else:
-                ev, dst = cmd.enqueue(queue, frame)
+                ev, dst = cmd.enqueue(queue, frame, given.get(i))
                 events.append((label, ev))
                 if cmd.fresh:
                     fresh[i] = dst
@@ -131,19 +135,28 @@ class Recorder:
     how a download into a host array is enqueued instead of on the runtime's queue (recorded the
     same; :meth:`clpost.plan.Plan.submit` moves a frame's downloads off the compute queue);
     ``upload(buffer, host) -> event``: likewise for a copy of a host array into a buffer (the
-    returned event is the one after which the buffer holds it)."""
+    returned event is the one after which the buffer holds it). ``outs``: the caller's arrays for
+    the output frame's host buffers by name (:meth:`host_array`)."""
 
-    def __init__(self, rt, frame, key, previous: Recording | None = None, download=None, upload=None) -> None:
+    def __init__(self, rt, frame, key, previous: Recording | None = None, download=None, upload=None,
+                 outs=None) -> None:
         self.rt = rt
         self.frame = frame
         self._download = download
         self._upload = upload
+        self._outs = outs or {}
         self.recording = Recording(key)
         self._events: list = []
         self._old = previous.commands if previous is not None else []
 
     def __getattr__(self, name):  # program, constant, scratch, empty, device, context, queue, name …
         return getattr(self.rt, name)
+
+    def host_array(self, name: str, shape, dtype=np.float32) -> np.ndarray:
+        """The caller's array for the output frame's buffer ``name`` where it gave one (checked
+        by the plan before anything is enqueued), else a new one (:meth:`Runtime.host_array`)."""
+        given = self._outs.get(name)
+        return given if given is not None else np.empty(shape, dtype)
 
     # -- kernels: captured, so that their arguments are known --------------------------------
     def kernel(self, source, name, defines=None, program=None) -> Captured:

@@ -48,8 +48,11 @@ class PendingFrame:
     keep the frame's host arrays alive until their transfers complete; the arrays must not be
     changed before :meth:`result` (the upload reads them while other frames run)."""
 
-    def __init__(self, frame: Frame, events: list | None = None, downloads=None, plan=None) -> None:
+    def __init__(self, frame: Frame, events: list | None = None, downloads=None, plan=None,
+                 writes: list | None = None) -> None:
         self._frame = frame
+        self._writes = writes if writes is not None else [frame.color]
+        """The host arrays the frame's downloads write (its image, the caller's depth/velocity)."""
         self._events = events or []
         self._downloads = downloads
         """The future of the frame's downloads (:meth:`Stream.download`); None: complete."""
@@ -58,9 +61,10 @@ class PendingFrame:
         self._error: BaseException | None = None
 
     def holds(self, array: np.ndarray) -> bool:
-        """Whether ``array`` shares memory with the frame's image (its ``out``) and ``result()``
-        has not been taken: the download may still write it."""
-        return not self._waited and np.may_share_memory(self._frame.color, array)
+        """Whether ``array`` shares memory with an array the frame's downloads write (its image,
+        the caller's depth/velocity) and ``result()`` has not been taken: the download may still
+        write it."""
+        return not self._waited and any(np.may_share_memory(a, array) for a in self._writes)
 
     def done(self) -> bool:
         """Whether the frame's downloads have completed (its image is in ``out``)."""

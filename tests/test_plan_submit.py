@@ -546,3 +546,70 @@ def test_the_interpreter_exits_with_a_download_that_never_completes(tmp_path):
     run = subprocess.run([sys.executable, str(script)], cwd=root, capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr[-2000:]
     assert "submitted" in run.stdout
+
+
+def test_the_output_frames_depth_and_velocity_go_into_the_callers_arrays(rng):
+    """``out`` as a dict: the image, and the depth and velocity distortion makes at the output
+    size, downloaded into the caller's arrays (page-locked ones: a GPU's DMA, no host copy) —
+    by Plan.run on the recording frame and on replays, and by submitted frames in flight, which
+    then use no bounce array for them. Each frame is what Plan.run gives with new arrays."""
+    pipe, frame, cam, stages = _worst_case(rng)
+    frames = _frames(frame, 4)
+    plan = pipe.plan_for(frame)
+    rt = plan.runtime
+    w, h = plan.output_size
+
+    def outs():
+        return {"color": rt.pinned_empty((h, w, 3)), "depth": rt.pinned_empty((h, w)),
+                "velocity": np.empty((h, w, 2), np.float32)}
+    ref = Pipeline(cam, quality="final", stages=stages).plan_for(frame)
+    want = [ref.run(f, cam) for f in frames]
+    for f, wnt in zip(frames[:2], want):  # recorded, then replayed
+        o = outs()
+        got = plan.run(f, cam, out=o)
+        assert got.color is o["color"] and got.depth is o["depth"] and got.velocity is o["velocity"]
+        for n in ("color", "depth", "velocity"):
+            np.testing.assert_array_equal(getattr(got, n), getattr(wnt, n))
+    only = plan.run(frames[2], cam, out={"depth": rt.pinned_empty((h, w))})  # the rest new
+    np.testing.assert_array_equal(only.velocity, want[2].velocity)
+    plan.pipelined, plan.in_flight = True, 2
+    try:
+        given = [outs() for _ in frames]
+        pending = [plan.submit(f, cam, out=o) for f, o in zip(frames, given)]
+        got = [p.result() for p in pending]
+    finally:
+        plan.pipelined = False
+    assert not any(s.bounces for s in plan.buffers.stream.slots)
+    for g, o, wnt in zip(got, given, want):
+        for n in ("color", "depth", "velocity"):
+            assert getattr(g, n) is o[n]
+            np.testing.assert_array_equal(getattr(g, n), getattr(wnt, n))
+
+
+def test_wrong_output_arrays_are_refused_with_one_line(rng):
+    """A name no plan downloads, an array of the wrong shape, a depth array for a plan that makes
+    no new depth, and an array a frame in flight still writes: one InputError line each, before
+    anything is enqueued."""
+    pipe, frame, cam, stages = _worst_case(rng)
+    plan = pipe.plan_for(frame)
+    w, h = plan.output_size
+    with pytest.raises(InputError, match="'alpha'"):
+        plan.run(frame, cam, out={"alpha": np.empty((h, w), np.float32)})
+    with pytest.raises(InputError, match=r"out\['velocity'\] must be .*\(%d, %d, 2\)" % (h, w)):
+        plan.run(frame, cam, out={"velocity": np.empty((h, w), np.float32)})
+    with pytest.raises(InputError, match="must be a float32 image array or a dict"):
+        plan.run(frame, cam, out=[np.empty((h, w, 3), np.float32)])
+    plain = Pipeline(Camera(f_number=2.0, depth_of_field=True, focus_distance_m=0.8), quality="draft")
+    small = Frame(frame.color, depth=frame.depth)
+    with pytest.raises(InputError, match=r"out\['depth'\] given, but this plan makes no new depth"):
+        plain.plan_for(small).run(small, out={"depth": np.empty(frame.depth.shape, np.float32)})
+    depth = plan.runtime.pinned_empty((h, w))
+    plan.pipelined, plan.in_flight = True, 2
+    try:
+        first = plan.submit(frame, cam, out={"depth": depth})
+        with pytest.raises(InputError, match=r"out\['depth'\] is an array of a submitted frame still in flight"):
+            plan.submit(frame, cam, out={"depth": depth})
+        first.result()
+        plan.submit(frame, cam, out={"depth": depth}).result()  # taken: free again
+    finally:
+        plan.pipelined = False

@@ -153,6 +153,9 @@ def main(argv=None) -> int:
                     help="pipeline on a CPU device too (a check of the GPU path, not a speed-up)")
     ap.add_argument("--focus-pull", action="store_true",
                     help="each frame its own focus distance (FOCUS_PULL_M): per-frame tables change")
+    ap.add_argument("--aux-out", action="store_true",
+                    help="pipelined frames also download distortion's depth and velocity into page-locked "
+                         "arrays of the caller's (Plan.submit(out={...})) instead of new ones")
     ap.add_argument("--timeline", action="store_true",
                     help="after each row, where a pipelined frame's time goes (first --in-flight value; "
                          "OpenCL profiling times of its uploads, compute-queue commands and downloads)")
@@ -180,16 +183,22 @@ def main(argv=None) -> int:
             inputs = [pf, _pinned_frame(pipe.runtime, frame.replace(color=frame.color[::-1].copy()))]
             cams = [rcam.with_(focus_distance_m=f) for f in FOCUS_PULL_M] if a.focus_pull else [rcam]
             plan.pipelined = plan.pipelined or a.force_pipelined
+            aux = [(n, s) for n, s in (("depth", ()), ("velocity", (2,)))
+                   if a.aux_out and "distortion" in plan.stage_names and getattr(frame, n) is not None]
             row = f"| {name} | {q} | {plain:.2f} | {1e3 / plain:.0f} | {pinned:.2f} | {1e3 / pinned:.0f} |"
             for d in depths:
                 plan.in_flight = d
                 outs = [out] + [pipe.runtime.pinned_empty((oh, ow, 3)) for _ in range(d)]
                 for o in outs:  # what the check below compares must be pipelined frames'
                     o.fill(np.nan)
+                if aux:
+                    outs = [dict(color=o, **{n: pipe.runtime.pinned_empty((oh, ow) + s) for n, s in aux})
+                            for o in outs]
                 piped, host = _pipelined(plan, inputs, cams, a.repeats, a.frames, outs)
                 # each out holds the last frame that used it: a frame given another's image fails
                 last = {k % len(outs): k for k in range(a.frames)}
-                if not all(np.array_equal(outs[j], plan.run(inputs[k % len(inputs)], cams[k % len(cams)]).color)
+                if not all(np.array_equal(outs[j]["color"] if aux else outs[j],
+                                          plan.run(inputs[k % len(inputs)], cams[k % len(cams)]).color)
                            for j, k in last.items()):
                     bad.append(f"{name} {q} ({d} in flight)")
                 row += f" {piped:.2f} | {1e3 / piped:.0f} | {host:.2f} |"
@@ -197,6 +206,9 @@ def main(argv=None) -> int:
             if a.timeline:
                 plan.in_flight = depths[0]
                 outs = [pipe.runtime.pinned_empty((oh, ow, 3)) for _ in range(depths[0] + 1)]
+                if aux:
+                    outs = [dict(color=o, **{n: pipe.runtime.pinned_empty((oh, ow) + s) for n, s in aux})
+                            for o in outs]
                 t = _timeline(plan, inputs, cams, a.frames, outs, sys.stderr)
                 print(f"|   timeline, {depths[0]} in flight, ms per frame: "
                       + ", ".join(f"{k} {v:.2f}" for k, v in t.items()) + " |", flush=True)

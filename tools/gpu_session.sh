@@ -23,6 +23,7 @@ nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null; np
 # little against the 2-core box (dof 31.5 ms there vs 54 here at worst final): huge-page buffers
 # on and off on the machine's own PoCL, same bench, one after the other.
 step 60 end_to_end_full python3 -W ignore tools/end_to_end.py --device nvidia --scenes full --timeline --repeats 3
+step 60 end_to_end_full_aux python3 -W ignore tools/end_to_end.py --device nvidia --scenes full --timeline --repeats 3 --aux-out
 step 60 end_to_end_pull python3 -W ignore tools/end_to_end.py --device nvidia --focus-pull --scenes worst,full --qualities draft --in-flight 2
 P="bench --sizes 1920x1080 --scenes worst --qualities final --device pocl --repeats 5"
 python3 -c "import pyopencl as cl; print([d.version + ' ' + d.driver_version for p in cl.get_platforms() for d in p.get_devices()])" 2>&1 | tail -1

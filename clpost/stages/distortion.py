@@ -761,10 +761,10 @@ class Distortion(GatherStage):
                                             dev["depth_out"], dev["velocity_out"], np.int32(n),
                                             np.int32(frame.depth is not None), np.int32(frame.velocity is not None))))
         if frame.depth is not None:
-            out["depth"] = np.empty((h, w), np.float32)
+            out["depth"] = rt.host_array("depth", (h, w), np.float32)
             events.append(("download", rt.copy(out["depth"], dev["depth_out"])))
         if frame.velocity is not None:
-            out["velocity"] = np.empty((h, w, 2), np.float32)
+            out["velocity"] = rt.host_array("velocity", (h, w, 2), np.float32)
             events.append(("download", rt.copy(out["velocity"], dev["velocity_out"])))
         return out, label_events + events
 
