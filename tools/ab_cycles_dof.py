@@ -8,7 +8,8 @@ Usage::
         --qualities draft,preview,final --repeats 100
 
 Prints per scene × quality the median ms of each, the median of per-repeat old/new ratios (> 1:
-new is faster) and the ratio of the fastest runs. The old revision is exported with
+new is faster), the ratio of the fastest runs and the max abs difference of the two outputs (0: a
+speed change that keeps the bits). The old revision is exported with
 ``tools/ab_stages.py``'s loader; scenes come from ``tests/data/cycles`` (``--data`` for another)."""
 from __future__ import annotations
 
@@ -72,12 +73,14 @@ def main(argv=None) -> int:
             for p, fr in zip(pipes, frames):  # build and warm
                 p.run(fr)
             kernels.clear()
-            times, _ = ab.interleaved(pipes, frames, "dof", args.repeats)
+            times, outs = ab.interleaved(pipes, frames, "dof", args.repeats)
+            diff = float(np.max(np.abs(np.asarray(outs[0], np.float64) - np.asarray(outs[1], np.float64))))
             per = {k: round(statistics.median(event_ms(e) for e in v) * len(v) / (args.repeats + 1), 2)
                    for k, v in sorted(kernels.items())}
             r = [o / n for o, n in zip(*times)]
             print(f"{name:12s} {q:7s} old {statistics.median(times[0]):7.2f} new {statistics.median(times[1]):7.2f} ms"
-                  f"  old/new median {statistics.median(r):.3f}  fastest runs {min(times[0]) / min(times[1]):.3f}",
+                  f"  old/new median {statistics.median(r):.3f}  fastest runs {min(times[0]) / min(times[1]):.3f}"
+                  f"  max abs diff {diff:.3g}",
                   flush=True)
             print("    per kernel, ms/frame:", per, flush=True)
     return 0
