@@ -19,6 +19,11 @@ Vogel spiral centred and whitened).
 
     PYTHONPATH=. python tools/astigmatism_point_check.py [--crops 20,10 24,53 40,30] [--truth-taps 1024]
         [--point-classes 8:16] [--box 8] [--pattern vogel|matched] [--no-crops]
+    PYTHONPATH=. python tools/astigmatism_point_check.py --membership   (only the table below)
+
+``--membership``: for a pixel whose own semi-axes are ρ times its tile's bound, the per-axis spread of
+the taps it keeps (membership clamp(9 − 8 μ², 0, 1), μ = |u|/ρ) against its own uniform ellipse, per
+spiral — how a sparse pattern turns the tile bound into an axis error.
 """
 from __future__ import annotations
 
@@ -148,6 +153,20 @@ def highlights():
           f"own ellipses (disc measure) {np.abs(q[:, 0]).max():.3f} / {np.abs(q[:, 1]).max():.3f}")
 
 
+def membership():
+    for name, u in (("Vogel 16", VOGEL(16)), ("matched 16", matched_disc(16)), ("Vogel 32", VOGEL(32)),
+                    ("matched 32", matched_disc(32)), ("Vogel 64", VOGEL(64))):
+        u = u.astype(np.float64)
+        cells = []
+        for rho in (1.0, 0.97, 0.94, 0.92, 0.90, 0.85):
+            m = np.clip(9.0 - 8.0 * (u ** 2).sum(1) / rho ** 2, 0.0, 1.0)
+            mean = (m[:, None] * u).sum(0) / m.sum()
+            var = (m[:, None] * (u - mean) ** 2).sum(0) / m.sum()
+            ax = np.sqrt(var / (rho ** 2 / 4)) - 1  # sagittal u_x, tangential u_y
+            cells.append(f"rho {rho:.2f}: s {ax[0]:+.3f} t {ax[1]:+.3f}")
+        print(f"{name:10s} " + " | ".join(cells))
+
+
 def main():
     global PATTERN
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -158,7 +177,11 @@ def main():
     ap.add_argument("--box", type=int, help="what-if POINT_BOX (the shrink follows: 4(k²/12 − 1/6))")
     ap.add_argument("--pattern", choices=("vogel", "matched"), default="vogel",
                     help="the point classes' spiral: Vogel (the kernels') or centred and whitened")
+    ap.add_argument("--membership", action="store_true", help="only the kept-taps table (module docstring)")
     a = ap.parse_args()
+    if a.membership:
+        membership()
+        return
     if a.point_classes:
         ast.POINT_CLASSES = tuple((float(px), int(n)) for px, n in (c.split(":") for c in a.point_classes.split(",")))
     if a.box:
