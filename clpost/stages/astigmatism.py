@@ -139,6 +139,9 @@ disc's: semi-axis a, variance a²/4 per axis. Unlike a bilinear tap, a point tap
 constant in its offset: as a tile's bound moves (a focus pull) its output steps by one tap's share
 of the box's difference where a tap crosses a pixel edge. Accuracy and speed against 64 bilinear taps
 (``tools/astigmatism_point_check.py``): docs/benchmarks.md, "astigmatism: point classes".
+Why not fewer point taps (16 of them bias a lone highlight's axes by up to 8 %: the tile bound seen
+through a pattern too sparse for the membership cut, plus the Vogel-16 spiral's unequal ⟨u²⟩):
+docs/benchmarks.md, "astigmatism: why 16 point taps bias a highlight's sagittal axis".
 The box plane is filled only where point tiles read (``astigmatism_reach`` flags the tiles within
 reach of one, ``astigmatism_box`` skips the others).
 
@@ -598,7 +601,10 @@ def splat_axes_px(splat, taps: int) -> tuple[float, float]:
     :math:`a\,u` (:math:`u` the unit spiral, :func:`~clpost.stages._field.vogel_disc`) spread the
     splat over :math:`\sigma^2 = a^2 \langle u^2\rangle + \frac16` per axis — 1/6 from bilinear
     weights at uniform sub-pixel offsets, which the point classes' shrunk ellipses keep (module
-    docstring, "Point taps") — so :math:`2a = 2\sqrt{(\sigma^2 - \frac16)/\langle u^2\rangle}`."""
+    docstring, "Point taps") — so :math:`2a = 2\sqrt{(\sigma^2 - \frac16)/\langle u^2\rangle}`. It reports the
+    semi-axis the spiral was scaled by, not the splat's physical size: the two differ by the
+    spiral's own :math:`\langle u^2\rangle` against a uniform disc's ¼ (16 points: 0.2295 / 0.2705,
+    −4.2 / +4.0 % on the axes; 64: within 0.1 %); ``tools/astigmatism_point_check.py`` prints both."""
     m = np.asarray(splat, np.float64)
     m = m / m.sum()
     ys, xs = np.mgrid[0:m.shape[0], 0:m.shape[1]]
