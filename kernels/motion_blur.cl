@@ -13,7 +13,8 @@
  * MOTION_BLUR_SAMPLES (S_q, odd; the centre tap is the pixel itself), MOTION_BLUR_SAMPLES_MAX (odd:
  * the most taps a frame whose motion covers few tiles may take, motion_blur_budget),
  * MOTION_BLUR_DENSITY (taps per px of half-path: S = min(C, 2 ceil(DENSITY |v_N|) + 1), C the frame's cap),
- * MOTION_BLUR_LANES (below).
+ * MOTION_BLUR_LANES (below); the filter's constants (MOTION_BLUR_SOFT_Z, FOOT, AGREE0/1, DIFFER2, DIR,
+ * LINE, FRINGE2, R2X/R2Y) from the same defines() (motion_blur.py's _model_defines, the one place).
  *
  * The per-pixel math of the prep and the gather (and the constants) is kernels/motion_blur_pixels.cl,
  * instantiated before this file at one pixel (plain names) and at 16 (_w16).

@@ -10,18 +10,10 @@
 #pragma OPENCL FP_CONTRACT OFF
 /* FP_CONTRACT OFF: no a*b+c fusion, so tap positions round exactly as in the numpy reference. */
 
-#ifndef MOTION_BLUR_SOFT_Z
-#define MOTION_BLUR_SOFT_Z 0.05f   /* relative depth difference over which fore/background blend */
-#define MOTION_BLUR_FOOT 0.5f      /* half a pixel: a swept pixel's footprint reaches this beyond |h| (FOOT in the .py) */
-#define MOTION_BLUR_AGREE0 0.8f    /* cos(v_N, h_X) below which the tap sets split (AGREE0/1 in the .py) */
-#define MOTION_BLUR_AGREE1 0.95f
-#define MOTION_BLUR_DIR 127.0f     /* steps of the tap record's unit direction (DIR in the .py) */
-#define MOTION_BLUR_LINE 2.0f      /* a front surface reaches X within this of its motion line, +- 1/2 px (LINE in the .py) */
-#define MOTION_BLUR_R2X 0.7548776662f   /* the R2 lattice's steps per pixel in x and y (JITTER_R2 in the .py) */
-#define MOTION_BLUR_R2Y 0.5698402910f
+/* The model's constants come from the stage's defines() (clpost/stages/motion_blur.py, one place):
+ * MOTION_BLUR_SOFT_Z, FOOT, AGREE0, AGREE1, DIFFER2, DIR, LINE, FRINGE2 and the jitter's R2X, R2Y. */
+#ifndef MOTION_BLUR_RINT_MAGIC
 #define MOTION_BLUR_RINT_MAGIC 12582912.0f   /* 1.5 * 2^23: x + this rounds x (|x| < 2^22) to an integer */
-#define MOTION_BLUR_FRINGE2 0.01f  /* MOTION_BLUR_FRINGE = 0.1, squared */
-#define MOTION_BLUR_DIFFER2 0.64f  /* MOTION_BLUR_AGREE0 squared: a second direction differs by more (DIFFER2 in the .py) */
 #endif
 
 /* a row of CLP_W floats at buf + i (i the first pixel's index) */
