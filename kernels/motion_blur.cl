@@ -73,14 +73,16 @@ __kernel void motion_blur_tilemax(__global const float *restrict hv, __global co
     if (tx >= tw || ty >= th) return;
     const size_t n = (size_t)width * (size_t)height;
     float2 best = (float2)(0.0f, 0.0f);
-    float best2 = 0.0f, bz = 0.0f;   /* the unclamped length of best, its pixel's 1/z */
+    float best2 = 0.0f;   /* the unclamped length of best */
+    size_t bi = 0;        /* its pixel (its 1/z is read once, after the scan) */
+    int found = 0;
     const int y1 = min(ty * MOTION_BLUR_TILE + MOTION_BLUR_TILE, height);
     const int x1 = min(tx * MOTION_BLUR_TILE + MOTION_BLUR_TILE, width);
     for (int y = ty * MOTION_BLUR_TILE; y < y1; ++y) {
         for (int x = tx * MOTION_BLUR_TILE; x < x1; ++x) {
             const size_t i = (size_t)y * (size_t)width + (size_t)x;
             const float l = hv[2 * n + i];
-            if (l > best2) { best2 = l; best = (float2)(hv[i], hv[n + i]); bz = iz[i]; }
+            if (l > best2) { best2 = l; best = (float2)(hv[i], hv[n + i]); bi = i; found = 1; }
         }
     }
     const size_t t = (size_t)ty * (size_t)tw + (size_t)tx;
@@ -88,7 +90,7 @@ __kernel void motion_blur_tilemax(__global const float *restrict hv, __global co
     tile[t] = best.x;
     tile[tn + t] = best.y;
     tile[2 * tn + t] = best2;
-    tile[3 * tn + t] = bz;
+    tile[3 * tn + t] = found ? iz[bi] : 0.0f;
 }
 
 /* v_N: the largest tile half-vector in the 3 x 3 tile neighbourhood (scan order on ties); and the
