@@ -106,8 +106,10 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
     if (tx >= tw || ty >= th) return;
     const size_t tn = (size_t)tw * (size_t)th;
     /* the 3x3 tiles once (row by row; a tile beyond the frame has length 0, which neither
-     * selection below takes), then v_N and the second direction from the same values */
+     * selection below takes), then v_N and the second direction from the same values (the loops
+     * unrolled, so the arrays stay in registers) */
     float cx[9], cy[9], cl[9], cz[9];
+#pragma unroll
     for (int k = 0; k < 9; ++k) {
         const int sx = tx + k % 3 - 1, sy = ty + k / 3 - 1;
         const int in = sx >= 0 && sy >= 0 && sx < tw && sy < th;
@@ -119,10 +121,12 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
     }
     float2 best = (float2)(0.0f, 0.0f);
     float best2 = 0.0f, bz = 0.0f;
+#pragma unroll
     for (int k = 0; k < 9; ++k)
         if (cl[k] > best2) { best2 = cl[k]; best = (float2)(cx[k], cy[k]); bz = cz[k]; }
     float2 sec = (float2)(0.0f, 0.0f);
     float sec2 = 0.0f, sz = 0.0f;
+#pragma unroll
     for (int k = 0; k < 9; ++k)
         if (cl[k] > sec2 && motion_blur_differs(cx[k], cy[k], best.x, best.y)) {
             sec2 = cl[k]; sec = (float2)(cx[k], cy[k]); sz = cz[k];
