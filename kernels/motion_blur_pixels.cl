@@ -218,15 +218,17 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
 #define MB_LOOP16(N) do { if (split) MB_LOOP16S(N, 1); else MB_LOOP16S(N, 0); } while (0)
 #endif
 
-/* The gather of pixels x0 .. x0 + CLP_W - 1 of row y (x0 + CLP_W <= width); TWO (a constant where it
- * is inlined, motion_blur_gather below): 0 where no tile of the run has a second direction, which
- * compiles the second direction's loads, masks and weights out of the common path. */
+/* The gather of pixels x0 .. x0 + CLP_W - 1 of row y (x0 + CLP_W <= width), from motion_blur_gather
+ * below: the pixels' second direction (v2x, v2y; 0 where none) and where they take it (use2); two,
+ * a constant where it is inlined: 1 where a pixel of the run takes it (split sums, composite), 0
+ * elsewhere (v2 and use2 then 0), which compiles the second direction's masks, weights and sums
+ * out of the common path. */
 inline __attribute__((always_inline)) void CLP_FN(motion_blur_gather_two)(
         __global const float *restrict src, __global float *restrict dst,
         __global const float *restrict hv, __global const float *restrict iz,
         __global const float *restrict nmax, const int cap, const int x0, const int y,
         const int width, const int height, const int tw, const int th,
-        const uint seed, const uint frame, const int two)
+        const uint seed, const uint frame, const CLP_F v2x, const CLP_F v2y, const CLP_I use2, const int two)
 {
     const size_t n = (size_t)width * (size_t)height;
     const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
@@ -235,7 +237,6 @@ inline __attribute__((always_inline)) void CLP_FN(motion_blur_gather_two)(
     const int xs = x0;
     const size_t t = (size_t)(y / MOTION_BLUR_TILE) * (size_t)tw + (size_t)(x0 / MOTION_BLUR_TILE);
     const float vnx = nmax[t], vny = nmax[tn + t];
-    const float v2x = two ? nmax[2 * tn + t] : 0.0f, v2y = two ? nmax[3 * tn + t] : 0.0f;
     const float near2 = two ? nmax[4 * tn + t] : 0.0f;
 #else
     const int16 xs = (int16)(x0) + convert_int16(CLP_ULANES16);
@@ -245,8 +246,6 @@ inline __attribute__((always_inline)) void CLP_FN(motion_blur_gather_two)(
     const int t1 = min(t0 + 1, (y / MOTION_BLUR_TILE) * tw + (x0 + 15) / MOTION_BLUR_TILE);
     const float16 vnx = second ? (float16)nmax[t1] : (float16)nmax[t0];
     const float16 vny = second ? (float16)nmax[tn + t1] : (float16)nmax[tn + t0];
-    const float16 v2x = two ? (second ? (float16)nmax[2 * tn + t1] : (float16)nmax[2 * tn + t0]) : (float16)0.0f;
-    const float16 v2y = two ? (second ? (float16)nmax[3 * tn + t1] : (float16)nmax[3 * tn + t0]) : (float16)0.0f;
     const float16 near2 = two ? (second ? (float16)nmax[4 * tn + t1] : (float16)nmax[4 * tn + t0]) : (float16)0.0f;
 #endif
     const CLP_F cxr = MB_LOAD(src, i0), cxg = MB_LOAD(src + n, i0), cxb = MB_LOAD(src + 2 * n, i0);
@@ -260,10 +259,7 @@ inline __attribute__((always_inline)) void CLP_FN(motion_blur_gather_two)(
     const CLP_F lhx = sqrt(CLP_FN(motion_blur_len2)(hx, hy));
     const CLP_F lx = fmax(lhx, 0.5f);
     const CLP_I own_dir = lhx > 0.5f;
-    /* a still X whose neighbourhood holds a second surface moving another way (NeighborMax) sends
-     * its odd taps along that: no tap would look along it otherwise */
-    const CLP_I use2 = (lhx <= 0.5f) & (CLP_FN(motion_blur_len2)(v2x, v2y) > 0.0f);
-    const int split = CLP_ANY(use2);   /* a pixel of the run has two directions: split sums, composite */
+    const int split = two;   /* a pixel of the run has two directions: split sums, composite */
     const CLP_F vxx = own_dir ? hx : (use2 ? v2x : vnx), vxy = own_dir ? hy : (use2 ? v2y : vny);   /* odd taps follow X's own motion */
     const CLP_F ln = sqrt(l2n);
     const CLP_F lv = sqrt(CLP_FN(motion_blur_len2)(vxx, vxy));
@@ -429,23 +425,60 @@ inline __attribute__((always_inline)) void CLP_FN(motion_blur_gather_two)(
     MB_STORE(still ? cxb : cfc * frb + (1.0f - cfc) * oub, dst + 2 * n, i0);
 }
 
-/* The gather of pixels x0 .. x0 + CLP_W - 1 of row y: the form with a second direction only where
- * a tile of the run has one (NeighborMax's planes 2, 3 nonzero; the 16 pixels span tiles t0, t1) */
+/* The gather of a run where a pixel takes a second direction (1 % of the bench frame's runs): at 16
+ * pixels a call, not inlined, so the common path's code and registers are as without it (inlined,
+ * final's gather measured 1-2 % slower on frames with no second direction at all) */
+#if CLP_W == 16
+__attribute__((noinline))
+#else
+inline
+#endif
+void CLP_FN(motion_blur_gather_split)(
+        __global const float *restrict src, __global float *restrict dst,
+        __global const float *restrict hv, __global const float *restrict iz,
+        __global const float *restrict nmax, const int cap, const int x0, const int y,
+        const int width, const int height, const int tw, const int th,
+        const uint seed, const uint frame, const CLP_F v2x, const CLP_F v2y, const CLP_I use2)
+{
+    CLP_FN(motion_blur_gather_two)(src, dst, hv, iz, nmax, cap, x0, y, width, height, tw, th, seed, frame,
+                                   v2x, v2y, use2, 1);
+}
+
+/* The gather of pixels x0 .. x0 + CLP_W - 1 of row y (x0 + CLP_W <= width). A still X (|h_X| <= 1/2)
+ * whose neighbourhood holds a second surface moving another way (NeighborMax's planes 2, 3; the 16
+ * pixels span tiles t0 and t1) sends its odd taps along that: no tap would look along it otherwise.
+ * Runs where no pixel does (nearly all) take the gather without the second direction's work. */
 inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __global float *restrict dst,
                                        __global const float *restrict hv, __global const float *restrict iz,
                                        __global const float *restrict nmax, const int cap, const int x0, const int y,
                                        const int width, const int height, const int tw, const int th,
                                        const uint seed, const uint frame)
 {
+    const size_t n = (size_t)width * (size_t)height;
     const size_t tn = (size_t)tw * (size_t)th;
     const int t0 = (y / MOTION_BLUR_TILE) * tw + x0 / MOTION_BLUR_TILE;
     const int t1 = (y / MOTION_BLUR_TILE) * tw + (x0 + CLP_W - 1) / MOTION_BLUR_TILE;
-    const int two = nmax[2 * tn + t0] != 0.0f || nmax[3 * tn + t0] != 0.0f
-                    || nmax[2 * tn + t1] != 0.0f || nmax[3 * tn + t1] != 0.0f;
-    if (two)
-        CLP_FN(motion_blur_gather_two)(src, dst, hv, iz, nmax, cap, x0, y, width, height, tw, th, seed, frame, 1);
+    CLP_F v2x = 0.0f, v2y = 0.0f;
+    CLP_I use2 = 0;
+    if (nmax[2 * tn + t0] != 0.0f || nmax[3 * tn + t0] != 0.0f || nmax[2 * tn + t1] != 0.0f || nmax[3 * tn + t1] != 0.0f) {
+#if CLP_W == 1
+        v2x = nmax[2 * tn + t0];
+        v2y = nmax[3 * tn + t0];
+#else
+        const int16 second = ((int16)(x0) + convert_int16(CLP_ULANES16)) / MOTION_BLUR_TILE != (int16)(x0 / MOTION_BLUR_TILE);
+        v2x = second ? (float16)nmax[2 * tn + t1] : (float16)nmax[2 * tn + t0];
+        v2y = second ? (float16)nmax[3 * tn + t1] : (float16)nmax[3 * tn + t0];
+#endif
+        const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
+        const CLP_F hx = MB_LOAD(hv, i0), hy = MB_LOAD(hv + n, i0);
+        use2 = (sqrt(CLP_FN(motion_blur_len2)(hx, hy)) <= 0.5f) & (CLP_FN(motion_blur_len2)(v2x, v2y) > 0.0f);
+    }
+    if (CLP_ANY(use2))
+        CLP_FN(motion_blur_gather_split)(src, dst, hv, iz, nmax, cap, x0, y, width, height, tw, th, seed, frame,
+                                         v2x, v2y, use2);
     else
-        CLP_FN(motion_blur_gather_two)(src, dst, hv, iz, nmax, cap, x0, y, width, height, tw, th, seed, frame, 0);
+        CLP_FN(motion_blur_gather_two)(src, dst, hv, iz, nmax, cap, x0, y, width, height, tw, th, seed, frame,
+                                       (CLP_F)0.0f, (CLP_F)0.0f, (CLP_I)0, 0);
 }
 
 #undef MB_LOAD
