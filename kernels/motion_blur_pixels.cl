@@ -222,11 +222,11 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
  * below: the pixels' second direction (v2x, v2y; 0 where none) and where they take it (use2); two,
  * a constant where it is inlined: 1 where a pixel of the run takes it (split sums, composite), 0
  * elsewhere (v2 and use2 then 0), which compiles the second direction's masks, weights and sums
- * out of the common path. */
+ * out of the common path. Always inlined, into callers whose pointers are restrict (its own are not:
+ * inlining restrict parameters leaves noalias scope intrinsics that Oclgrind 21.10 cannot run). */
 inline __attribute__((always_inline)) void CLP_FN(motion_blur_gather_two)(
-        __global const float *restrict src, __global float *restrict dst,
-        __global const float *restrict hv, __global const float *restrict iz,
-        __global const float *restrict nmax, const int cap, const int x0, const int y,
+        __global const float *src, __global float *dst, __global const float *hv, __global const float *iz,
+        __global const float *nmax, const int cap, const int x0, const int y,
         const int width, const int height, const int tw, const int th,
         const uint seed, const uint frame, const CLP_F v2x, const CLP_F v2y, const CLP_I use2, const int two)
 {
