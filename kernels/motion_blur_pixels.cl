@@ -425,9 +425,9 @@ inline __attribute__((always_inline)) void CLP_FN(motion_blur_gather_two)(
     MB_STORE(still ? cxb : cfc * frb + (1.0f - cfc) * oub, dst + 2 * n, i0);
 }
 
-/* The gather of a run where a pixel takes a second direction (1 % of the bench frame's runs): at 16
- * pixels a call, not inlined, so the common path's code and registers are as without it (inlined,
- * final's gather measured 1-2 % slower on frames with no second direction at all) */
+/* The gather of a run where a pixel takes a second direction (few runs of a frame): at 16 pixels a
+ * call, not inlined, so the common path's code and registers stay as without it (docs/motion_blur.md,
+ * "The second direction at the old cost") */
 #if CLP_W == 16
 __attribute__((noinline))
 #else
