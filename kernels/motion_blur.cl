@@ -13,7 +13,8 @@
  * MOTION_BLUR_SAMPLES (S_q, odd; the centre tap is the pixel itself), MOTION_BLUR_SAMPLES_MAX (odd:
  * the most taps a frame whose motion covers few tiles may take, motion_blur_budget),
  * MOTION_BLUR_DENSITY (taps per px of half-path: S = min(C, 2 ceil(DENSITY |v_N|) + 1), C the frame's cap),
- * MOTION_BLUR_LANES (below).
+ * MOTION_BLUR_LANES (below); the filter's constants (MOTION_BLUR_SOFT_Z, FOOT, AGREE0/1, DIFFER2, DIR,
+ * LINE, FRINGE2, R2X/R2Y) from the same defines() (motion_blur.py's _model_defines, the one place).
  *
  * The per-pixel math of the prep and the gather (and the constants) is kernels/motion_blur_pixels.cl,
  * instantiated before this file at one pixel (plain names) and at 16 (_w16).
@@ -72,14 +73,16 @@ __kernel void motion_blur_tilemax(__global const float *restrict hv, __global co
     if (tx >= tw || ty >= th) return;
     const size_t n = (size_t)width * (size_t)height;
     float2 best = (float2)(0.0f, 0.0f);
-    float best2 = 0.0f, bz = 0.0f;   /* the unclamped length of best, its pixel's 1/z */
+    float best2 = 0.0f;   /* the unclamped length of best */
+    size_t bi = 0;        /* its pixel (its 1/z is read once, after the scan) */
+    int found = 0;
     const int y1 = min(ty * MOTION_BLUR_TILE + MOTION_BLUR_TILE, height);
     const int x1 = min(tx * MOTION_BLUR_TILE + MOTION_BLUR_TILE, width);
     for (int y = ty * MOTION_BLUR_TILE; y < y1; ++y) {
         for (int x = tx * MOTION_BLUR_TILE; x < x1; ++x) {
             const size_t i = (size_t)y * (size_t)width + (size_t)x;
             const float l = hv[2 * n + i];
-            if (l > best2) { best2 = l; best = (float2)(hv[i], hv[n + i]); bz = iz[i]; }
+            if (l > best2) { best2 = l; best = (float2)(hv[i], hv[n + i]); bi = i; found = 1; }
         }
     }
     const size_t t = (size_t)ty * (size_t)tw + (size_t)tx;
@@ -87,7 +90,7 @@ __kernel void motion_blur_tilemax(__global const float *restrict hv, __global co
     tile[t] = best.x;
     tile[tn + t] = best.y;
     tile[2 * tn + t] = best2;
-    tile[3 * tn + t] = bz;
+    tile[3 * tn + t] = found ? iz[bi] : 0.0f;
 }
 
 /* v_N: the largest tile half-vector in the 3 x 3 tile neighbourhood (scan order on ties); and the
@@ -103,8 +106,10 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
     if (tx >= tw || ty >= th) return;
     const size_t tn = (size_t)tw * (size_t)th;
     /* the 3x3 tiles once (row by row; a tile beyond the frame has length 0, which neither
-     * selection below takes), then v_N and the second direction from the same values */
+     * selection below takes), then v_N and the second direction from the same values (the loops
+     * unrolled, so the arrays stay in registers) */
     float cx[9], cy[9], cl[9], cz[9];
+#pragma unroll
     for (int k = 0; k < 9; ++k) {
         const int sx = tx + k % 3 - 1, sy = ty + k / 3 - 1;
         const int in = sx >= 0 && sy >= 0 && sx < tw && sy < th;
@@ -116,10 +121,12 @@ __kernel void motion_blur_neighbormax(__global const float *restrict tile, __glo
     }
     float2 best = (float2)(0.0f, 0.0f);
     float best2 = 0.0f, bz = 0.0f;
+#pragma unroll
     for (int k = 0; k < 9; ++k)
         if (cl[k] > best2) { best2 = cl[k]; best = (float2)(cx[k], cy[k]); bz = cz[k]; }
     float2 sec = (float2)(0.0f, 0.0f);
     float sec2 = 0.0f, sz = 0.0f;
+#pragma unroll
     for (int k = 0; k < 9; ++k)
         if (cl[k] > sec2 && motion_blur_differs(cx[k], cy[k], best.x, best.y)) {
             sec2 = cl[k]; sec = (float2)(cx[k], cy[k]); sz = cz[k];

@@ -10,18 +10,10 @@
 #pragma OPENCL FP_CONTRACT OFF
 /* FP_CONTRACT OFF: no a*b+c fusion, so tap positions round exactly as in the numpy reference. */
 
-#ifndef MOTION_BLUR_SOFT_Z
-#define MOTION_BLUR_SOFT_Z 0.05f   /* relative depth difference over which fore/background blend */
-#define MOTION_BLUR_FOOT 0.5f      /* half a pixel: a swept pixel's footprint reaches this beyond |h| (FOOT in the .py) */
-#define MOTION_BLUR_AGREE0 0.8f    /* cos(v_N, h_X) below which the tap sets split (AGREE0/1 in the .py) */
-#define MOTION_BLUR_AGREE1 0.95f
-#define MOTION_BLUR_DIR 127.0f     /* steps of the tap record's unit direction (DIR in the .py) */
-#define MOTION_BLUR_LINE 2.0f      /* a front surface reaches X within this of its motion line, +- 1/2 px (LINE in the .py) */
-#define MOTION_BLUR_R2X 0.7548776662f   /* the R2 lattice's steps per pixel in x and y (JITTER_R2 in the .py) */
-#define MOTION_BLUR_R2Y 0.5698402910f
+/* The model's constants come from the stage's defines() (clpost/stages/motion_blur.py, one place):
+ * MOTION_BLUR_SOFT_Z, FOOT, AGREE0, AGREE1, DIFFER2, DIR, LINE, FRINGE2 and the jitter's R2X, R2Y. */
+#ifndef MOTION_BLUR_RINT_MAGIC
 #define MOTION_BLUR_RINT_MAGIC 12582912.0f   /* 1.5 * 2^23: x + this rounds x (|x| < 2^22) to an integer */
-#define MOTION_BLUR_FRINGE2 0.01f  /* MOTION_BLUR_FRINGE = 0.1, squared */
-#define MOTION_BLUR_DIFFER2 0.64f  /* MOTION_BLUR_AGREE0 squared: a second direction differs by more (DIFFER2 in the .py) */
 #endif
 
 /* a row of CLP_W floats at buf + i (i the first pixel's index) */
@@ -150,8 +142,10 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
 }
 
 /* One tap s of the gather on the pixels where TAP (a CLP_I, or 1) is true; uses and updates the
- * locals of motion_blur_gather. SPLIT (a constant): the odd taps' front sums apart (cfo, sfo*), for
- * runs where a pixel has a second direction; else every tap's in cf, sf* (fewer live registers). */
+ * locals of motion_blur_gather. SPLIT (a constant): the odd taps' front sums apart (cfo, sfo*) and
+ * the front set weights wfo, wfe, for runs where a pixel has a second direction; else every tap's in
+ * cf, sf*, weighted by agree, agree2 (what wfo, wfe are without one, exactly: the loop keeps two
+ * float16 fewer live, which spilled on the common path). */
 #define MB_TAP(s, TAP, SPLIT) do { \
         const int odd = (s) & 1; \
         const CLP_F dx = odd ? dvx : dnx, dy = odd ? dvy : dny; \
@@ -193,7 +187,7 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
         /* a surface in front reaches X only along its own motion line, give or take its footprint \
          * and a spinning object's spread of directions: |d x e_Y| (e_Y = h_Y / |h_Y|) within LINE +- 1/2 px */ \
         const CLP_F line = clamp(MOTION_BLUR_LINE + 0.5f - fabs(ddx * eyy - ddy * eyx) * (1.0f / MOTION_BLUR_DIR), 0.0f, 1.0f); \
-        const CLP_F af0 = line * f * (1.0f - own) * a * (odd ? wfo : wfe); \
+        const CLP_F af0 = line * f * (1.0f - own) * a * ((SPLIT) ? (odd ? wfo : wfe) : (odd ? agree : agree2)); \
         const CLP_F ao0 = f * own * a * (odd ? agree2 : agree); \
         const CLP_F aa0 = clx * clx * (odd ? kav : kan);   /* ao0 if Y were X (f = b = 1) */ \
         const CLP_F ab0 = b * ((1.0f - f) + f * (1.0f - cly)) * clx * ((zden * ly) * q); \
@@ -224,12 +218,17 @@ inline void CLP_FN(motion_blur_prep_pixels)(__global const float *restrict veloc
 #define MB_LOOP16(N) do { if (split) MB_LOOP16S(N, 1); else MB_LOOP16S(N, 0); } while (0)
 #endif
 
-/* The gather of pixels x0 .. x0 + CLP_W - 1 of row y (x0 + CLP_W <= width). */
-inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __global float *restrict dst,
-                                       __global const float *restrict hv, __global const float *restrict iz,
-                                       __global const float *restrict nmax, const int cap, const int x0, const int y,
-                                       const int width, const int height, const int tw, const int th,
-                                       const uint seed, const uint frame)
+/* The gather of pixels x0 .. x0 + CLP_W - 1 of row y (x0 + CLP_W <= width), from motion_blur_gather
+ * below: the pixels' second direction (v2x, v2y; 0 where none) and where they take it (use2); two,
+ * a constant where it is inlined: 1 where a pixel of the run takes it (split sums, composite), 0
+ * elsewhere (v2 and use2 then 0), which compiles the second direction's masks, weights and sums
+ * out of the common path. Always inlined, into callers whose pointers are restrict (its own are not:
+ * inlining restrict parameters leaves noalias scope intrinsics that Oclgrind 21.10 cannot run). */
+inline __attribute__((always_inline)) void CLP_FN(motion_blur_gather_two)(
+        __global const float *src, __global float *dst, __global const float *hv, __global const float *iz,
+        __global const float *nmax, const int cap, const int x0, const int y,
+        const int width, const int height, const int tw, const int th,
+        const uint seed, const uint frame, const CLP_F v2x, const CLP_F v2y, const CLP_I use2, const int two)
 {
     const size_t n = (size_t)width * (size_t)height;
     const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
@@ -238,7 +237,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const int xs = x0;
     const size_t t = (size_t)(y / MOTION_BLUR_TILE) * (size_t)tw + (size_t)(x0 / MOTION_BLUR_TILE);
     const float vnx = nmax[t], vny = nmax[tn + t];
-    const float v2x = nmax[2 * tn + t], v2y = nmax[3 * tn + t], near2 = nmax[4 * tn + t];
+    const float near2 = two ? nmax[4 * tn + t] : 0.0f;
 #else
     const int16 xs = (int16)(x0) + convert_int16(CLP_ULANES16);
     /* v_N: the 16 pixels span at most two tiles, t0 (lane 0's) and t0 + 1: two scalar loads each, not gathers */
@@ -247,9 +246,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const int t1 = min(t0 + 1, (y / MOTION_BLUR_TILE) * tw + (x0 + 15) / MOTION_BLUR_TILE);
     const float16 vnx = second ? (float16)nmax[t1] : (float16)nmax[t0];
     const float16 vny = second ? (float16)nmax[tn + t1] : (float16)nmax[tn + t0];
-    const float16 v2x = second ? (float16)nmax[2 * tn + t1] : (float16)nmax[2 * tn + t0];
-    const float16 v2y = second ? (float16)nmax[3 * tn + t1] : (float16)nmax[3 * tn + t0];
-    const float16 near2 = second ? (float16)nmax[4 * tn + t1] : (float16)nmax[4 * tn + t0];
+    const float16 near2 = two ? (second ? (float16)nmax[4 * tn + t1] : (float16)nmax[4 * tn + t0]) : (float16)0.0f;
 #endif
     const CLP_F cxr = MB_LOAD(src, i0), cxg = MB_LOAD(src + n, i0), cxb = MB_LOAD(src + 2 * n, i0);
     const CLP_F l2n = CLP_FN(motion_blur_len2)(vnx, vny);
@@ -262,10 +259,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     const CLP_F lhx = sqrt(CLP_FN(motion_blur_len2)(hx, hy));
     const CLP_F lx = fmax(lhx, 0.5f);
     const CLP_I own_dir = lhx > 0.5f;
-    /* a still X whose neighbourhood holds a second surface moving another way (NeighborMax) sends
-     * its odd taps along that: no tap would look along it otherwise */
-    const CLP_I use2 = (lhx <= 0.5f) & (CLP_FN(motion_blur_len2)(v2x, v2y) > 0.0f);
-    const int split = CLP_ANY(use2);   /* a pixel of the run has two directions: split sums, composite */
+    const int split = two;   /* a pixel of the run has two directions: split sums, composite */
     const CLP_F vxx = own_dir ? hx : (use2 ? v2x : vnx), vxy = own_dir ? hy : (use2 ? v2y : vny);   /* odd taps follow X's own motion */
     const CLP_F ln = sqrt(l2n);
     const CLP_F lv = sqrt(CLP_FN(motion_blur_len2)(vxx, vxy));
@@ -277,7 +271,7 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     /* two directions of a still X: no own path to split (agree 1). Written as arithmetic on u2 = 1 or 0:
      * Oclgrind 21.10 evaluates a vector select of a constant as inf */
     const CLP_F u2 = fabs(CLP_TO_F(use2));
-    const CLP_F agree = agree0 + u2 * (1.0f - agree0);
+    const CLP_F agree = two ? agree0 + u2 * (1.0f - agree0) : agree0;   /* the same where u2 = 0 */
     const CLP_F wx = MB_LOAD(iz, i0);
     const CLP_F wx0 = fmax(wx, 1e-30f);   /* fmax(fmax(wx, wy), 1e-30) = fmax(wx0, wy) */
     const CLP_F xf = CLP_TO_F(xs), yf = (CLP_F)((float)y);
@@ -406,7 +400,8 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     /* the front layer: both sets' sums, or with two directions the nearer set's surface over the
      * farther's, c = c_n + (1 - c_n) c_f and c F = c_n F_n + (1 - c_n) c_f F_f (c_n, c_f clamped to 1;
      * only where some pixel of the run has a second direction) */
-    CLP_F ct = cf + cfo, str = sfr + sfor, stg = sfg + sfog, stb = sfb + sfob;   /* (cfo, sfo* 0 unless split) */
+    /* (cfo, sfo* 0 unless split: + 0 leaves the sums, which start at +0, as they are) */
+    CLP_F ct = two ? cf + cfo : cf, str = two ? sfr + sfor : sfr, stg = two ? sfg + sfog : sfg, stb = two ? sfb + sfob : sfb;
     if (split) {
         const CLP_I onear = near2 > 0.5f;
         const CLP_F cn = onear ? cfo : cf, cr_ = onear ? cf : cfo;
@@ -428,6 +423,62 @@ inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __glo
     MB_STORE(still ? cxr : cfc * frr + (1.0f - cfc) * our, dst, i0);
     MB_STORE(still ? cxg : cfc * frg + (1.0f - cfc) * oug, dst + n, i0);
     MB_STORE(still ? cxb : cfc * frb + (1.0f - cfc) * oub, dst + 2 * n, i0);
+}
+
+/* The gather of a run where a pixel takes a second direction (few runs of a frame): at 16 pixels a
+ * call, not inlined, so the common path's code and registers stay as without it (docs/motion_blur.md,
+ * "The second direction at the old cost") */
+#if CLP_W == 16
+__attribute__((noinline))
+#else
+inline
+#endif
+void CLP_FN(motion_blur_gather_split)(
+        __global const float *restrict src, __global float *restrict dst,
+        __global const float *restrict hv, __global const float *restrict iz,
+        __global const float *restrict nmax, const int cap, const int x0, const int y,
+        const int width, const int height, const int tw, const int th,
+        const uint seed, const uint frame, const CLP_F v2x, const CLP_F v2y, const CLP_I use2)
+{
+    CLP_FN(motion_blur_gather_two)(src, dst, hv, iz, nmax, cap, x0, y, width, height, tw, th, seed, frame,
+                                   v2x, v2y, use2, 1);
+}
+
+/* The gather of pixels x0 .. x0 + CLP_W - 1 of row y (x0 + CLP_W <= width). A still X (|h_X| <= 1/2)
+ * whose neighbourhood holds a second surface moving another way (NeighborMax's planes 2, 3; the 16
+ * pixels span tiles t0 and t1) sends its odd taps along that: no tap would look along it otherwise.
+ * Runs where no pixel does (nearly all) take the gather without the second direction's work. */
+inline void CLP_FN(motion_blur_gather)(__global const float *restrict src, __global float *restrict dst,
+                                       __global const float *restrict hv, __global const float *restrict iz,
+                                       __global const float *restrict nmax, const int cap, const int x0, const int y,
+                                       const int width, const int height, const int tw, const int th,
+                                       const uint seed, const uint frame)
+{
+    const size_t n = (size_t)width * (size_t)height;
+    const size_t tn = (size_t)tw * (size_t)th;
+    const int t0 = (y / MOTION_BLUR_TILE) * tw + x0 / MOTION_BLUR_TILE;
+    const int t1 = (y / MOTION_BLUR_TILE) * tw + (x0 + CLP_W - 1) / MOTION_BLUR_TILE;
+    CLP_F v2x = 0.0f, v2y = 0.0f;
+    CLP_I use2 = 0;
+    if (nmax[2 * tn + t0] != 0.0f || nmax[3 * tn + t0] != 0.0f || nmax[2 * tn + t1] != 0.0f || nmax[3 * tn + t1] != 0.0f) {
+#if CLP_W == 1
+        v2x = nmax[2 * tn + t0];
+        v2y = nmax[3 * tn + t0];
+#else
+        const int16 second = ((int16)(x0) + convert_int16(CLP_ULANES16)) / MOTION_BLUR_TILE != (int16)(x0 / MOTION_BLUR_TILE);
+        v2x = second ? (float16)nmax[2 * tn + t1] : (float16)nmax[2 * tn + t0];
+        v2y = second ? (float16)nmax[3 * tn + t1] : (float16)nmax[3 * tn + t0];
+#endif
+        const size_t i0 = (size_t)y * (size_t)width + (size_t)x0;
+        const CLP_F hx = MB_LOAD(hv, i0), hy = MB_LOAD(hv + n, i0);
+        use2 = (sqrt(CLP_FN(motion_blur_len2)(hx, hy)) <= 0.5f) & (CLP_FN(motion_blur_len2)(v2x, v2y) > 0.0f);
+    }
+    if (CLP_ANY(use2))
+        CLP_FN(motion_blur_gather_split)(src, dst, hv, iz, nmax, cap, x0, y, width, height, tw, th, seed, frame,
+                                         v2x, v2y, use2);
+    else
+        CLP_FN(motion_blur_gather_two)(src, dst, hv, iz, nmax, cap, x0, y, width, height, tw, th, seed, frame,
+                                       (CLP_F)0.0f, (CLP_F)0.0f, (CLP_I)0, 0);
 }
 
 #undef MB_LOAD

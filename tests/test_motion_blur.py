@@ -537,3 +537,25 @@ def test_anti_aliased_moving_lamp_is_a_box_streak(quality):
     assert peaks.mean() < 1.5 * truth[plateau].max(), (peaks, truth[plateau])
     l1 = np.abs(rows - truth).sum(axis=1) / truth.sum()
     assert l1.mean() < 0.4, l1
+
+
+def test_kernel_constants_come_from_the_stage_defines_only():
+    # every MOTION_BLUR_* name the kernels use is a define of the stage (one place: the .py), or a
+    # kernel-internal #define (the rounding trick, the lane count); each float literal is the .py's float32
+    import re
+
+    from clpost.runtime import kernel_source
+    from clpost.stages import motion_blur as mb
+
+    defines = MotionBlur("final").defines(CAM)
+    src = re.sub(r"/\*.*?\*/", "", "".join(kernel_source(k) for k in ("motion_blur_pixels", "motion_blur")),
+                 flags=re.S)   # the code, not its comments
+    own = set(re.findall(r"#define (MOTION_BLUR_\w+)", src))
+    assert own == {"MOTION_BLUR_RINT_MAGIC", "MOTION_BLUR_LANES"}
+    assert set(re.findall(r"\bMOTION_BLUR_[A-Z0-9_]+\b", src)) - own - {"MOTION_BLUR_LANES"} <= set(defines)
+    expect = {"SOFT_Z": mb.SOFT_Z, "FOOT": mb.FOOT, "AGREE0": mb.AGREE0, "AGREE1": mb.AGREE1,
+              "DIFFER2": mb.AGREE0 ** 2, "DIR": mb.DIR, "LINE": mb.LINE, "FRINGE2": mb.FRINGE ** 2,
+              "R2X": mb.JITTER_R2[0], "R2Y": mb.JITTER_R2[1], "DENSITY": DENSITY}
+    for name, value in expect.items():
+        literal = defines[f"MOTION_BLUR_{name}"]
+        assert literal.endswith("f") and np.float32(float(literal[:-1])) == np.float32(value), name

@@ -200,7 +200,7 @@ AGREE0, AGREE1 = 0.8, 0.95
 """cos(angle) between v_N and X's own half-vector below which the two tap sets split the work."""
 DIFFER2 = AGREE0 * AGREE0
 """A neighbourhood's second direction differs from v_N by more than acos(AGREE0): the test in squares
-(:func:`_differs32`; MOTION_BLUR_DIFFER2 in kernels/motion_blur_pixels.cl)."""
+(:func:`_differs32`; the kernels' MOTION_BLUR_DIFFER2, :func:`_model_defines`)."""
 
 
 def shutter_from_angle(angle_deg: float, fps: float) -> float:
@@ -275,7 +275,7 @@ class MotionBlur(GatherStage):
     def defines(self, camera):
         return {"MOTION_BLUR_TILE": TILE, "MOTION_BLUR_SAMPLES": self.samples,
                 "MOTION_BLUR_SAMPLES_MAX": SAMPLES_MAX[self.quality],
-                "MOTION_BLUR_DENSITY": f"{DENSITY!r}f"}
+                "MOTION_BLUR_DENSITY": f"{DENSITY!r}f", **_model_defines()}
 
     def taps_per_pixel(self, camera, frame) -> int:
         """Colour samples per output pixel, all channels: the centre plus at most ``samples`` taps
@@ -361,6 +361,14 @@ class MotionBlur(GatherStage):
         if _rolling_needed(camera, frame):
             out = reference_rolling(out, frame.velocity, camera.readout_time_s * camera.frame_rate_fps)
         return out
+
+
+def _model_defines() -> dict[str, str]:
+    """The filter's constants as the kernels' float literals (kernels/motion_blur_pixels.cl), from
+    this module's names only: each literal rounds to the float32 the reference uses."""
+    consts = {"SOFT_Z": SOFT_Z, "FOOT": FOOT, "AGREE0": AGREE0, "AGREE1": AGREE1, "DIFFER2": DIFFER2,
+              "DIR": DIR, "LINE": LINE, "FRINGE2": FRINGE * FRINGE, "R2X": JITTER_R2[0], "R2Y": JITTER_R2[1]}
+    return {f"MOTION_BLUR_{k}": f"{float(v)!r}f" for k, v in consts.items()}
 
 
 def _program_source(lanes: int) -> str:
