@@ -165,7 +165,6 @@ __constant float distortion_fir[DISTORTION_FIR_K + 1] = {
     (uint16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
 #endif
 __kernel void distortion_fir_rows(__global const float *restrict src, __global float *restrict tmp,
-                                  __global float *restrict pad,
                                   const int src_w, const int src_h, const int pitch, const int th)
 {
     const int g = get_global_id(0), r = get_global_id(1), ch = get_global_id(2);
@@ -202,13 +201,8 @@ __kernel void distortion_fir_rows(__global const float *restrict src, __global f
     acc = mad(distortion_fir[3], DISTORTION_SHIFT(a, b, 9) + DISTORTION_SHIFT(a, b, 15), acc);
     acc = mad(distortion_fir[2], DISTORTION_SHIFT(a, b, 10) + DISTORTION_SHIFT(a, b, 14), acc);
     acc = mad(distortion_fir[1], DISTORTION_SHIFT(a, b, 11) + DISTORTION_SHIFT(a, b, 13), acc);
-    const float16 centre = DISTORTION_SHIFT(a, b, 12);  /* the source at padded columns 16g ... 16g + 15 */
-    acc = mad(distortion_fir[0], centre, acc);
+    acc = mad(distortion_fir[0], DISTORTION_SHIFT(a, b, 12), acc);
     vstore16(acc, 0, tmp + ((size_t)ch * th + r) * pitch + 16 * g);
-    /* the padded source copy (/ COEF_SCALE, exact): padded row r - K of th - 2K = ch_rows, for the
-     * gathers' 2x2 cell samples without bounds arithmetic */
-    const int q = r - DISTORTION_FIR_K, ch_rows = th - 2 * DISTORTION_FIR_K;
-    if (q >= 0 && q < ch_rows) vstore16(centre, 0, pad + ((size_t)ch * ch_rows + q) * pitch + 16 * g);
 }
 
 /* Column pass. Work-item (g, q0, ch): coefficient rows q = DISTORTION_FIR_ROWS q0 + o (source
@@ -245,8 +239,7 @@ __kernel void distortion_fir_cols(__global const float *restrict tmp, __global f
  * (planes of n), computed in float64. No floor, clamp or polynomial per tap (a table is faster
  * than computing the weights per pixel; docs/measurements.md#kernel-forms-on-pocl). One work-group
  * of DISTORTION_TILE^2 per listed tile (x0, y0). */
-__kernel void distortion_table(__global const float *restrict src, __global const float *restrict pad,
-                               __global float *restrict dst,
+__kernel void distortion_table(__global const float *restrict src, __global float *restrict dst,
                                __global const int *restrict base, __global const float *restrict wts,
                                __global const int *restrict tiles, __global const float *restrict hdr,
                                const int src_w, const int src_h, const int width, const int height)
@@ -267,20 +260,26 @@ __kernel void distortion_table(__global const float *restrict src, __global cons
         wx[k] = wts[k * n + i];
         wy[k] = wts[(4 + k) * n + i];
     }
-    /* the 2x2 cell: samples at window (1, 1) ... (2, 2) of the 4x4 taps, from the padded source copy */
+    /* the 2x2 cell: samples at window (1, 1) ... (2, 2) of the 4x4 taps, from the coefficients
+     * (36 f = (1 4 1) (x) (1 4 1) c, the B-spline at the knots) */
     const float tx = wts[8 * n + i], ty = wts[9 * n + i];
     const int cell = b + src_w + 1;
     const float th = mix(mix(hdr[cell], hdr[cell + 1], tx), mix(hdr[cell + src_w], hdr[cell + src_w + 1], tx), ty);
     for (int c = 0; c < 3; ++c) {
         const int plane = c * sn + b;
-        float acc = 0.0f;
+        float acc = 0.0f, h1[4], h2[4];
         for (int m = 0; m < 4; ++m) {
-            float row = 0.0f;
-            for (int k = 0; k < 4; ++k) row += wx[k] * src[plane + m * src_w + k];
+            float row = 0.0f, cm[4];
+            for (int k = 0; k < 4; ++k) {
+                cm[k] = src[plane + m * src_w + k];
+                row += wx[k] * cm[k];
+            }
             acc += wy[m] * row;
+            h1[m] = cm[0] + 4.0f * cm[1] + cm[2];
+            h2[m] = cm[1] + 4.0f * cm[2] + cm[3];
         }
-        const int pc = c * sn + cell;
-        const float a = pad[pc], e = pad[pc + 1], d = pad[pc + src_w], f = pad[pc + src_w + 1];
+        const float a = (h1[0] + 4.0f * h1[1] + h1[2]) * (1.0f / 36.0f), e = (h2[0] + 4.0f * h2[1] + h2[2]) * (1.0f / 36.0f);
+        const float d = (h1[1] + 4.0f * h1[2] + h1[3]) * (1.0f / 36.0f), f = (h2[1] + 4.0f * h2[2] + h2[3]) * (1.0f / 36.0f);
         const float lo = min(min(a, e), min(d, f)), hi = max(max(a, e), max(d, f));
         const float lin = mix(mix(a, e, tx), mix(d, f, tx), ty);
         const float v = mix(clamp(acc, lo, hi), lin, th);
@@ -322,13 +321,16 @@ inline void distortion_bspline4(const float16 t, float16 *w)
  * the same order as the 5 x 5 form, whose extra row enters with weight 0 (docs/benchmarks.md,
  * "Worst final, third pass"). */
 /* One channel: the lane's B-spline sum acc over NR rows of the window at p (5: rows 0-3 or 1-4 by
- * down; 4: the rows chosen), columns 0-3 or 1-4 by right where SEL (else the 4 at p). NR and SEL
- * are constants at every use, so each form compiles without the other's selects. */
-inline __attribute__((always_inline)) float16 distortion_bspline_ch(
+ * down; 4: the rows chosen), columns 0-3 or 1-4 by right where SEL (else the 4 at p), and the
+ * cell's samples a b (top) d e (bottom) from the same loads (6 f = d0 + 4 d1 + d2, the B-spline at
+ * the knots). NR and SEL are constants at every use, so each form compiles without the other's
+ * selects. */
+inline __attribute__((always_inline)) void distortion_bspline_ch(
     __global const float *p, const size_t pitch, const int NR, const int SEL, const int16 right,
-    const float16 *wx, const float16 *wy)
+    const int16 down, const float16 *wx, const float16 *wy, float16 *acc_, float16 *a_, float16 *b_,
+    float16 *d_, float16 *e_)
 {
-    float16 acc = (float16)(0.0f);
+    float16 acc = (float16)(0.0f), hl[5], hr[5];
     /* the rows written out (a loop over NR rows was not unrolled: "loop not unrolled") */
 #define DISTORTION_BSPLINE_ROW(r) do { \
         __global const float *q = p + (size_t)(r) * pitch; \
@@ -350,6 +352,8 @@ inline __attribute__((always_inline)) float16 distortion_bspline_ch(
         rowv = mad(wx[2], d2, rowv); \
         rowv = mad(wx[3], d3, rowv); \
         acc = mad(wy[r], rowv, acc); \
+        hl[r] = mad(4.0f, d1, d0 + d2); \
+        hr[r] = mad(4.0f, d2, d1 + d3); \
     } while (0)
     DISTORTION_BSPLINE_ROW(0);
     DISTORTION_BSPLINE_ROW(1);
@@ -357,32 +361,22 @@ inline __attribute__((always_inline)) float16 distortion_bspline_ch(
     DISTORTION_BSPLINE_ROW(3);
     if (NR == 5) DISTORTION_BSPLINE_ROW(4);
 #undef DISTORTION_BSPLINE_ROW
-    return acc;
+    float16 l0, l1, l2, l3, r0, r1, r2, r3;
+    if (NR == 5) {  /* the cell's rows: window rows 0-3 (fy < 1) or 1-4 */
+        l0 = select(hl[0], hl[1], down); l1 = select(hl[1], hl[2], down);
+        l2 = select(hl[2], hl[3], down); l3 = select(hl[3], hl[4], down);
+        r0 = select(hr[0], hr[1], down); r1 = select(hr[1], hr[2], down);
+        r2 = select(hr[2], hr[3], down); r3 = select(hr[3], hr[4], down);
+    } else {
+        l0 = hl[0]; l1 = hl[1]; l2 = hl[2]; l3 = hl[3];
+        r0 = hr[0]; r1 = hr[1]; r2 = hr[2]; r3 = hr[3];
+    }
+    *acc_ = acc;
+    *a_ = mad(4.0f, l1, l0 + l2) * (1.0f / 36.0f);
+    *b_ = mad(4.0f, r1, r0 + r2) * (1.0f / 36.0f);
+    *d_ = mad(4.0f, l2, l1 + l3) * (1.0f / 36.0f);
+    *e_ = mad(4.0f, r2, r1 + r3) * (1.0f / 36.0f);
 }
-
-/* the lane's 2x2 cell samples a b (top) d e (bottom) from the padded source copy at s (the cell
- * of a lane with right = down = 0): 4 loads where every lane has the same cell (SELX, SELY 0:
- * s already offset), else the 2 or 3 columns (rows) with a select per lane */
-#define DISTORTION_CELL_ROW(q, SELX, l, r) do { \
-        if (SELX) { \
-            const float16 s1 = vload16(0, (q) + 1); \
-            l = select(vload16(0, q), s1, right); \
-            r = select(s1, vload16(0, (q) + 2), right); \
-        } else { \
-            l = vload16(0, q); \
-            r = vload16(0, (q) + 1); \
-        } \
-    } while (0)
-#define DISTORTION_CELL(s, SELX, SELY, a, b, d, e) do { \
-        DISTORTION_CELL_ROW(s, SELX, a, b); \
-        DISTORTION_CELL_ROW((s) + pitch, SELX, d, e); \
-        if (SELY) { \
-            float16 g, h; \
-            DISTORTION_CELL_ROW((s) + 2 * pitch, SELX, g, h); \
-            a = select(a, d, down); b = select(b, e, down); \
-            d = select(d, g, down); e = select(e, h, down); \
-        } \
-    } while (0)
 
 /* the output of one channel from its sum and cell samples: clamped to the cell, handed over to
  * bilinear by th, colour 0 without a preimage */
@@ -392,18 +386,17 @@ inline __attribute__((always_inline)) float16 distortion_bspline_ch(
         const float16 v = mix(clamp(acc, lo, hi), lin, th); \
         vstore16(select((float16)(0.0f), v * DISTORTION_COEF_SCALE, ok), 0, dst + (c) * n + i); \
     } while (0)
-#define DISTORTION_BSPLINE_CHANNELS(off, NR, SEL, SELY, wyv) do { \
+#define DISTORTION_BSPLINE_CHANNELS(off, NR, SEL, wyv) do { \
         for (int c = 0; c < 3; ++c) { \
-            float16 a, b, d, e; \
-            const float16 acc = distortion_bspline_ch(coef + c * sn + base + (off), pitch, NR, SEL, right, \
-                                                      wx, wyv); \
-            DISTORTION_CELL(pad + c * sn + cell + (off), SEL, SELY, a, b, d, e); \
+            float16 acc, a, b, d, e; \
+            distortion_bspline_ch(coef + c * sn + base + (off), pitch, NR, SEL, right, down, wx, wyv, \
+                                  &acc, &a, &b, &d, &e); \
             DISTORTION_BSPLINE_STORE(acc, a, b, d, e, c); \
         } \
     } while (0)
 
-__kernel void distortion_bspline_tiles(__global const float *restrict coef, __global const float *restrict pad,
-                                       __global float *restrict dst, __global const float *restrict map, __global const int *restrict tiles,
+__kernel void distortion_bspline_tiles(__global const float *restrict coef, __global float *restrict dst,
+                                       __global const float *restrict map, __global const int *restrict tiles,
                                        __global const float *restrict hdr,
                                        const int pitch, const int ch_rows, const int width, const int height,
                                        const int ntiles)
@@ -441,16 +434,16 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
     const int allr = all(right), onex = allr || !any(right);
     const int alld = all(down), oney = alld || !any(down);
     if (onex && oney) {
-        DISTORTION_BSPLINE_CHANNELS((size_t)allr + (size_t)alld * pitch, 4, 0, 0, v4);
+        DISTORTION_BSPLINE_CHANNELS((size_t)allr + (size_t)alld * pitch, 4, 0, v4);
     } else if (oney) {
-        DISTORTION_BSPLINE_CHANNELS((size_t)alld * pitch, 4, 1, 0, v4);
+        DISTORTION_BSPLINE_CHANNELS((size_t)alld * pitch, 4, 1, v4);
     } else {
         wy[0] = select(v4[0], (float16)(0.0f), down);
         wy[1] = select(v4[1], v4[0], down);
         wy[2] = select(v4[2], v4[1], down);
         wy[3] = select(v4[3], v4[2], down);
         wy[4] = select((float16)(0.0f), v4[3], down);
-        DISTORTION_BSPLINE_CHANNELS(0, 5, 1, 1, wy);
+        DISTORTION_BSPLINE_CHANNELS(0, 5, 1, wy);
     }
 }
 

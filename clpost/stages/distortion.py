@@ -675,7 +675,7 @@ class Distortion(GatherStage):
             for b, a in zip(bufs, host):
                 cl.enqueue_copy(rt.queue, b, np.ascontiguousarray(a))
             if bspline:  # coefficients, the row pass's planes, the hand-over weight
-                bufs += (rt.empty((3, ph, pw)), rt.empty((3, th, pw)), rt.empty((ph, pw)), rt.empty((3, ph, pw)))
+                bufs += (rt.empty((3, ph, pw)), rt.empty((3, th, pw)), rt.empty((ph, pw)))
             self._dev_maps = {key: bufs}  # one camera and size at a time: the map is static
         source = kernel_source("common") + kernel_source("distortion")
 
@@ -693,11 +693,11 @@ class Distortion(GatherStage):
                 events.append(rt.launch(kernel("distortion_rest"), (TILE, TILE, len(rest)), None, src, dst, bufs[0],
                                         bufs[2], np.int32(sw), np.int32(sh), *out))
             return events
-        base, wts, fmap, tiles_b, rest_b, coef, tmp, hdr, pad = bufs
+        base, wts, fmap, tiles_b, rest_b, coef, tmp, hdr = bufs
         tiles, rest = bspline_tiles(model, frame.size, kkey)
         rows, cols = kernel("distortion_fir_rows"), kernel("distortion_fir_cols")
         dering = kernel("distortion_dering")
-        events = [rt.launch(rows, (pw // 16, th, 3), None, src, tmp, pad, np.int32(sw), np.int32(sh), np.int32(pw),
+        events = [rt.launch(rows, (pw // 16, th, 3), None, src, tmp, np.int32(sw), np.int32(sh), np.int32(pw),
                             np.int32(th)),
                   rt.launch(cols, (pw // 16, ph // FIR_ROWS, 3), None, tmp, coef, np.int32(pw), np.int32(th),
                             np.int32(ph)),
@@ -705,11 +705,11 @@ class Distortion(GatherStage):
                             np.int32(pw), np.int32(ph))]
         if len(tiles):
             kern = kernel("distortion_bspline_tiles")
-            events.append(rt.launch(kern, (TILE, len(tiles)), (1, TILE_GROUP), coef, pad, dst, fmap, tiles_b, hdr,
+            events.append(rt.launch(kern, (TILE, len(tiles)), (1, TILE_GROUP), coef, dst, fmap, tiles_b, hdr,
                                     np.int32(pw), np.int32(ph), *out, np.int32(len(tiles))))
         if len(rest):
             kern = kernel("distortion_table")
-            events.append(rt.launch(kern, (TILE, TILE, len(rest)), None, coef, pad, dst, base, wts, rest_b, hdr,
+            events.append(rt.launch(kern, (TILE, TILE, len(rest)), None, coef, dst, base, wts, rest_b, hdr,
                                     np.int32(pw), np.int32(ph), *out))
         return events
 
