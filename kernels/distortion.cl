@@ -285,8 +285,11 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
         const float a = (h1[0] + 4.0f * h1[1] + h1[2]) * (1.0f / 36.0f), e = (h2[0] + 4.0f * h2[1] + h2[2]) * (1.0f / 36.0f);
         const float d = (h1[1] + 4.0f * h1[2] + h1[3]) * (1.0f / 36.0f), f = (h2[1] + 4.0f * h2[2] + h2[3]) * (1.0f / 36.0f);
         const float lo = min(min(a, e), min(d, f)), hi = max(max(a, e), max(d, f));
-        const float lin = mix(mix(a, e, tx), mix(d, f, tx), ty);
-        const float v = mix(clamp(acc, lo, hi), lin, th);
+        /* mix(x, y, t) as fma(y - x, t, x) (as DISTORTION_BSPLINE_STORE): PoCL's mix is a subtract,
+         * a multiply and an add */
+        const float top = fma(e - a, tx, a), bottom = fma(f - d, tx, d);
+        const float lin = fma(bottom - top, ty, top), cl = clamp(acc, lo, hi);
+        const float v = fma(lin - cl, th, cl);
         dst[c * n + i] = v * DISTORTION_COEF_SCALE;
     }
 }
@@ -383,11 +386,13 @@ inline __attribute__((always_inline)) void distortion_bspline_ch(
 }
 
 /* the output of one channel from its sum and cell samples: clamped to the cell, handed over to
- * bilinear by th, colour 0 without a preimage */
+ * bilinear by th, colour 0 without a preimage; mix(x, y, t) written as fma(y - x, t, x): PoCL
+ * compiles mix as a subtract, a multiply and an add (docs/benchmarks.md, "fifth pass") */
 #define DISTORTION_BSPLINE_STORE(acc, a, b, d, e, c) do { \
         const float16 lo = min(min(a, b), min(d, e)), hi = max(max(a, b), max(d, e)); \
-        const float16 lin = mix(mix(a, b, tx), mix(d, e, tx), ty); \
-        const float16 v = mix(clamp(acc, lo, hi), lin, th); \
+        const float16 top = fma(b - a, tx, a), bottom = fma(e - d, tx, d); \
+        const float16 lin = fma(bottom - top, ty, top), cl = clamp(acc, lo, hi); \
+        const float16 v = fma(lin - cl, th, cl); \
         vstore16(select((float16)(0.0f), v * DISTORTION_COEF_SCALE, ok), 0, dst + (c) * n + i); \
     } while (0)
 #define DISTORTION_BSPLINE_CHANNELS(off, NR, SEL, wyv) do { \
