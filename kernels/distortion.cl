@@ -23,6 +23,10 @@
  * (docs/distortion_calibration.md). Taps outside the render repeat its edge (the coefficients are
  * those of the edge-extended source, as scipy's map_coordinates(order=3, mode="nearest"), the
  * reference, computes them), stored with DISTORTION_PAD pixels around the render.
+ * The final filter's multiply-adds are fma, not mad: PoCL compiles mad as a multiply and an add
+ * (two instructions, two roundings), fma as one vfmadd with one rounding; 7-9 % off the final
+ * filter's four kernels at 1080p (docs/benchmarks.md, "Distortion's final filter, fifth pass").
+ * Where a factor is a power of two (4, 1/2, 1/512) both are exact and give the same bits.
  */
 
 /* Bilinear. One output pixel of the map: taps beyond the render repeat its edge, no preimage ->
@@ -190,18 +194,18 @@ __kernel void distortion_fir_rows(__global const float *restrict src, __global f
      * smallest taps first and the centre last: with the column pass ordered alike, the rounding
      * error of the coefficients fell from 1.4e-6 to 0.64e-6 of max|f| (1e8 spikes, 300x200) */
     float16 acc = distortion_fir[12] * (a + DISTORTION_SHIFT(b, c, 8));
-    acc = mad(distortion_fir[11], DISTORTION_SHIFT(a, b, 1) + DISTORTION_SHIFT(b, c, 7), acc);
-    acc = mad(distortion_fir[10], DISTORTION_SHIFT(a, b, 2) + DISTORTION_SHIFT(b, c, 6), acc);
-    acc = mad(distortion_fir[9], DISTORTION_SHIFT(a, b, 3) + DISTORTION_SHIFT(b, c, 5), acc);
-    acc = mad(distortion_fir[8], DISTORTION_SHIFT(a, b, 4) + DISTORTION_SHIFT(b, c, 4), acc);
-    acc = mad(distortion_fir[7], DISTORTION_SHIFT(a, b, 5) + DISTORTION_SHIFT(b, c, 3), acc);
-    acc = mad(distortion_fir[6], DISTORTION_SHIFT(a, b, 6) + DISTORTION_SHIFT(b, c, 2), acc);
-    acc = mad(distortion_fir[5], DISTORTION_SHIFT(a, b, 7) + DISTORTION_SHIFT(b, c, 1), acc);
-    acc = mad(distortion_fir[4], DISTORTION_SHIFT(a, b, 8) + b, acc);
-    acc = mad(distortion_fir[3], DISTORTION_SHIFT(a, b, 9) + DISTORTION_SHIFT(a, b, 15), acc);
-    acc = mad(distortion_fir[2], DISTORTION_SHIFT(a, b, 10) + DISTORTION_SHIFT(a, b, 14), acc);
-    acc = mad(distortion_fir[1], DISTORTION_SHIFT(a, b, 11) + DISTORTION_SHIFT(a, b, 13), acc);
-    acc = mad(distortion_fir[0], DISTORTION_SHIFT(a, b, 12), acc);
+    acc = fma(distortion_fir[11], DISTORTION_SHIFT(a, b, 1) + DISTORTION_SHIFT(b, c, 7), acc);
+    acc = fma(distortion_fir[10], DISTORTION_SHIFT(a, b, 2) + DISTORTION_SHIFT(b, c, 6), acc);
+    acc = fma(distortion_fir[9], DISTORTION_SHIFT(a, b, 3) + DISTORTION_SHIFT(b, c, 5), acc);
+    acc = fma(distortion_fir[8], DISTORTION_SHIFT(a, b, 4) + DISTORTION_SHIFT(b, c, 4), acc);
+    acc = fma(distortion_fir[7], DISTORTION_SHIFT(a, b, 5) + DISTORTION_SHIFT(b, c, 3), acc);
+    acc = fma(distortion_fir[6], DISTORTION_SHIFT(a, b, 6) + DISTORTION_SHIFT(b, c, 2), acc);
+    acc = fma(distortion_fir[5], DISTORTION_SHIFT(a, b, 7) + DISTORTION_SHIFT(b, c, 1), acc);
+    acc = fma(distortion_fir[4], DISTORTION_SHIFT(a, b, 8) + b, acc);
+    acc = fma(distortion_fir[3], DISTORTION_SHIFT(a, b, 9) + DISTORTION_SHIFT(a, b, 15), acc);
+    acc = fma(distortion_fir[2], DISTORTION_SHIFT(a, b, 10) + DISTORTION_SHIFT(a, b, 14), acc);
+    acc = fma(distortion_fir[1], DISTORTION_SHIFT(a, b, 11) + DISTORTION_SHIFT(a, b, 13), acc);
+    acc = fma(distortion_fir[0], DISTORTION_SHIFT(a, b, 12), acc);
     vstore16(acc, 0, tmp + ((size_t)ch * th + r) * pitch + 16 * g);
 }
 
@@ -224,8 +228,8 @@ __kernel void distortion_fir_cols(__global const float *restrict tmp, __global f
         acc[o] = distortion_fir[DISTORTION_FIR_K] * (v[o] + v[o + 2 * DISTORTION_FIR_K]);
 #pragma unroll
         for (int k = DISTORTION_FIR_K - 1; k >= 1; --k)
-            acc[o] = mad(distortion_fir[k], v[o + DISTORTION_FIR_K - k] + v[o + DISTORTION_FIR_K + k], acc[o]);
-        acc[o] = mad(distortion_fir[0], v[o + DISTORTION_FIR_K], acc[o]);
+            acc[o] = fma(distortion_fir[k], v[o + DISTORTION_FIR_K - k] + v[o + DISTORTION_FIR_K + k], acc[o]);
+        acc[o] = fma(distortion_fir[0], v[o + DISTORTION_FIR_K], acc[o]);
     }
 #pragma unroll
     for (int o = 0; o < DISTORTION_FIR_ROWS; ++o)
@@ -281,8 +285,11 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
         const float a = (h1[0] + 4.0f * h1[1] + h1[2]) * (1.0f / 36.0f), e = (h2[0] + 4.0f * h2[1] + h2[2]) * (1.0f / 36.0f);
         const float d = (h1[1] + 4.0f * h1[2] + h1[3]) * (1.0f / 36.0f), f = (h2[1] + 4.0f * h2[2] + h2[3]) * (1.0f / 36.0f);
         const float lo = min(min(a, e), min(d, f)), hi = max(max(a, e), max(d, f));
-        const float lin = mix(mix(a, e, tx), mix(d, f, tx), ty);
-        const float v = mix(clamp(acc, lo, hi), lin, th);
+        /* mix(x, y, t) as fma(y - x, t, x) (as DISTORTION_BSPLINE_STORE): PoCL's mix is a subtract,
+         * a multiply and an add */
+        const float top = fma(e - a, tx, a), bottom = fma(f - d, tx, d);
+        const float lin = fma(bottom - top, ty, top), cl = clamp(acc, lo, hi);
+        const float v = fma(lin - cl, th, cl);
         dst[c * n + i] = v * DISTORTION_COEF_SCALE;
     }
 }
@@ -294,7 +301,7 @@ inline void distortion_bspline4(const float16 t, float16 *w)
 {
     const float16 s = 1.0f - t, t2 = t * t, t3 = t2 * t;
     w[0] = s * s * s * (1.0f / 6.0f);
-    w[1] = mad(0.5f, t3, (float16)(2.0f / 3.0f) - t2);
+    w[1] = fma(0.5f, t3, (float16)(2.0f / 3.0f) - t2);
     w[3] = t3 * (1.0f / 6.0f);
     w[2] = 1.0f - w[0] - w[1] - w[3];
 }
@@ -348,12 +355,12 @@ inline __attribute__((always_inline)) void distortion_bspline_ch(
             d3 = vload16(0, q + 3); \
         } \
         float16 rowv = wx[0] * d0; \
-        rowv = mad(wx[1], d1, rowv); \
-        rowv = mad(wx[2], d2, rowv); \
-        rowv = mad(wx[3], d3, rowv); \
-        acc = mad(wy[r], rowv, acc); \
-        hl[r] = mad(4.0f, d1, d0 + d2); \
-        hr[r] = mad(4.0f, d2, d1 + d3); \
+        rowv = fma(wx[1], d1, rowv); \
+        rowv = fma(wx[2], d2, rowv); \
+        rowv = fma(wx[3], d3, rowv); \
+        acc = fma(wy[r], rowv, acc); \
+        hl[r] = fma(4.0f, d1, d0 + d2); \
+        hr[r] = fma(4.0f, d2, d1 + d3); \
     } while (0)
     DISTORTION_BSPLINE_ROW(0);
     DISTORTION_BSPLINE_ROW(1);
@@ -372,18 +379,20 @@ inline __attribute__((always_inline)) void distortion_bspline_ch(
         r0 = hr[0]; r1 = hr[1]; r2 = hr[2]; r3 = hr[3];
     }
     *acc_ = acc;
-    *a_ = mad(4.0f, l1, l0 + l2) * (1.0f / 36.0f);
-    *b_ = mad(4.0f, r1, r0 + r2) * (1.0f / 36.0f);
-    *d_ = mad(4.0f, l2, l1 + l3) * (1.0f / 36.0f);
-    *e_ = mad(4.0f, r2, r1 + r3) * (1.0f / 36.0f);
+    *a_ = fma(4.0f, l1, l0 + l2) * (1.0f / 36.0f);
+    *b_ = fma(4.0f, r1, r0 + r2) * (1.0f / 36.0f);
+    *d_ = fma(4.0f, l2, l1 + l3) * (1.0f / 36.0f);
+    *e_ = fma(4.0f, r2, r1 + r3) * (1.0f / 36.0f);
 }
 
 /* the output of one channel from its sum and cell samples: clamped to the cell, handed over to
- * bilinear by th, colour 0 without a preimage */
+ * bilinear by th, colour 0 without a preimage; mix(x, y, t) written as fma(y - x, t, x): PoCL
+ * compiles mix as a subtract, a multiply and an add (docs/benchmarks.md, "fifth pass") */
 #define DISTORTION_BSPLINE_STORE(acc, a, b, d, e, c) do { \
         const float16 lo = min(min(a, b), min(d, e)), hi = max(max(a, b), max(d, e)); \
-        const float16 lin = mix(mix(a, b, tx), mix(d, e, tx), ty); \
-        const float16 v = mix(clamp(acc, lo, hi), lin, th); \
+        const float16 top = fma(b - a, tx, a), bottom = fma(e - d, tx, d); \
+        const float16 lin = fma(bottom - top, ty, top), cl = clamp(acc, lo, hi); \
+        const float16 v = fma(lin - cl, th, cl); \
         vstore16(select((float16)(0.0f), v * DISTORTION_COEF_SCALE, ok), 0, dst + (c) * n + i); \
     } while (0)
 #define DISTORTION_BSPLINE_CHANNELS(off, NR, SEL, wyv) do { \
@@ -427,7 +436,7 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
 #pragma unroll
     for (int r = 0; r < 3; ++r) {
         __global const float *q = hdr + cell + (size_t)r * pitch;
-        th = mad(r == 0 ? by0 : (r == 1 ? by1 : by2),
+        th = fma(r == 0 ? by0 : (r == 1 ? by1 : by2),
                  bx0 * vload16(0, q) + bx1 * vload16(0, q + 1) + bx2 * vload16(0, q + 2), th);
     }
     /* one window for every lane? (all() / any() of a vector: one test per work-item) */
@@ -462,10 +471,10 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
  * 96 x that, which overflowed float (inf - inf: NaN weights) from max|f| ~ 1e36; / 512 keeps both
  * below max|f|. The weight is a ratio, so (a power of two, no underflow: |f| > 1e-35) the same up to
  * native_divide's rounding. Each channel is scaled before the sum, summed in the order (R + G) + B as
- * before (a mad each: one more operation). */
+ * before (an fma each: one more operation). */
 #define DISTORTION_HDR_SCALE 512.0f
 #define DISTORTION_SUM3(r, g, b) \
-    mad((b), 1.0f / DISTORTION_HDR_SCALE, mad((g), 1.0f / DISTORTION_HDR_SCALE, (r) * (1.0f / DISTORTION_HDR_SCALE)))
+    fma((b), 1.0f / DISTORTION_HDR_SCALE, fma((g), 1.0f / DISTORTION_HDR_SCALE, (r) * (1.0f / DISTORTION_HDR_SCALE)))
 inline float16 distortion_hdr_t(const float16 lo, const float16 hi)
 {
     /* native_divide: PoCL's correctly rounded float16 division is not vectorised (half the
