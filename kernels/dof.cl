@@ -45,8 +45,22 @@
 #define DOF_LOAD(p) vload8(0, (p))
 #define DOF_STORE(v, p) vstore8((v), 0, (p))
 #define DOF_LANES ((float8)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f))
+#elif DOF_VEC == 1
+/* one pixel per work-item (a GPU's form: a warp's loads coalesce across work-items, and the
+ * accumulators fit its registers); scalar comparisons give 1, not -1, so DOF_ANY tests != 0 */
+#define DOF_F float
+#define DOF_I int
+#define DOF_CONVERT_I convert_int
+#define DOF_LOAD(p) (*(p))
+#define DOF_STORE(v, p) (*(p) = (v))
+#define DOF_LANES 0.0f
 #else
-#error "DOF_VEC must be 8 or 16"
+#error "DOF_VEC must be 1, 8 or 16"
+#endif
+#if DOF_VEC == 1
+#define DOF_ANY(m) ((m) != 0)
+#else
+#define DOF_ANY(m) any(m)
 #endif
 
 /* wf, wb: the layers' weights (red's with DOF_PROFILE, whose weights differ per channel: wfg,
@@ -131,6 +145,9 @@ inline void dof_hidden(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F
  * lights' test keeps any(), which measured no slower there */
 inline int dof_any(const DOF_I m)
 {
+#if DOF_VEC == 1
+    return m != 0;
+#else
 #if DOF_VEC == 16
     const int8 m8 = m.lo | m.hi;
 #else
@@ -139,6 +156,7 @@ inline int dof_any(const DOF_I m)
     const int4 m4 = m8.lo | m8.hi;
     const int2 m2 = m4.lo | m4.hi;
     return (m2.x | m2.y) != 0;
+#endif
 }
 
 /* one source tap for 8 neighbouring target pixels: colours (cr, cg, cb), signed CoC rq and
@@ -170,7 +188,7 @@ inline void dof_tapv(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F c
     DOF_I small = (DOF_I)(0);
     if (DOF_LIGHTS && lights) {  /* stride 1, a light near the tile; not with cat's-eye bokeh or a traced profile */
         const DOF_I bright = DOF_LIGHT_Y0 * cr + DOF_LIGHT_Y1 * cg + DOF_LIGHT_Y2 * cb > DOF_LIGHT_LUMA;
-        if (any(bright)) {
+        if (DOF_ANY(bright)) {
             DOF_F n1, n4;
             dof_light_sums(lsum, r, far, &n1, &n4);
             /* (a texture of |sa| = 1 can zero a small disc's sums: such a light keeps the 1-px ramp) */
@@ -348,7 +366,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
                  (LIGHT), (HIDDEN), lsum, DOF_TEX_PLANE ? DOF_LOAD(L + 5 * pn + q) : (DOF_F)(1.0f), tp);\
     } }
     /* the hidden background's taps (dof_hidden) only where a pixel is in front of the focus */
-    const int hidden = any(rp < -DOF_HIDDEN_MARGIN);
+    const int hidden = DOF_ANY(rp < -DOF_HIDDEN_MARGIN);
     if (DOF_LIGHTS && lvl == 0 && packed < 0) {
         if (hidden)
             DOF_TAPS(1, 1)
@@ -394,7 +412,7 @@ __kernel void dof(__global const float *restrict lv, __global const float *restr
      * dof_local_px, on level 0 of the padded buffers (their border replicates the edge, as its
      * clamp does) */
     const DOF_F bl = select(clamp((fabs(rp) - DOF_SMALL_LO) * DOF_SMALL_K, 0.0f, 1.0f), (DOF_F)(1.0f), alpha > 0.0f);
-    if (count > 1 && any(bl < 1.0f)) {  /* one-tap tiles: kept as gathered (_full_small's one_tap) */
+    if (count > 1 && DOF_ANY(bl < 1.0f)) {  /* one-tap tiles: kept as gathered (_full_small's one_tap) */
         const DOF_F ap = DOF_LOCAL_A(rp);
         DOF_I need = fabs(rp) >= DOF_LOCAL_MIN;
         DOF_F lr = (DOF_F)(0.0f), lg = (DOF_F)(0.0f), lb = (DOF_F)(0.0f), lw = (DOF_F)(0.0f);

@@ -674,11 +674,12 @@ def test_camera_validates_the_dof_fields():
             Camera(**kw)
 
 
-@pytest.mark.parametrize("vec", ["8", "16"])
+@pytest.mark.parametrize("vec", ["1", "8", "16"])
 @pytest.mark.parametrize("quality", ["final", "draft"])
 def test_both_gather_vector_widths_match_the_reference(rng, monkeypatch, vec, quality):
-    """The gather runs 8 or 16 pixels per work-item (by the device's native float width); both
-    widths, on a width that leaves partial groups of 8 and 16 and with every optional term on."""
+    """The gather runs 8 or 16 pixels per work-item (by the device's native float width), or one
+    (CLPOST_DOF_VEC=1, a GPU's form); every width, on a width that leaves partial groups of 8 and
+    16 and with every optional term on."""
     monkeypatch.setenv("CLPOST_DOF_VEC", vec)
     frame = odd_frame(rng, w=101, h=29)  # wide enough for every kernel's vector path at half res
     cam = Camera(**CAM, blades=5, spherical_aberration=-0.4, optical_vignetting=0.6)

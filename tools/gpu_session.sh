@@ -21,7 +21,13 @@ nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null; np
 # H200"): the worst case end to end, bench on the GPU and on 16 PoCL cores, device_vs_device. Open:
 # what bounds the full camera pipelined (--timeline), and why the 16-core PoCL gathers scaled so
 # little against the 2-core box (dof 31.5 ms there vs 54 here at worst final): huge-page buffers
-# on and off on the machine's own PoCL, same bench, one after the other.
+# on and off on the machine's own PoCL, per kernel (tools/ab_kernel.py --pages).
+# dof's gather in its one-pixel form (CLPOST_DOF_VEC=1, bit-identical on PoCL) against the 8-wide
+# form a GPU gets by default: if clearly faster, make it the GPU's default (gather_vector_width)
+CB="bench --sizes 1920x1080 --scenes worst --qualities draft,final --device nvidia --repeats 7"
+CLPOST_DOF_VEC=8 step 60 dof_vec8 python3 -W ignore -c "$C" $CB
+CLPOST_DOF_VEC=1 step 60 dof_vec1 python3 -W ignore -c "$C" $CB
+CLPOST_DOF_VEC=1 step 90 dof_vec1_vs_pocl python3 -W ignore tools/device_vs_device.py
 step 60 end_to_end_full python3 -W ignore tools/end_to_end.py --device nvidia --scenes full --timeline --repeats 3
 step 60 end_to_end_full_aux python3 -W ignore tools/end_to_end.py --device nvidia --scenes full --timeline --repeats 3 --aux-out
 step 60 end_to_end_pull python3 -W ignore tools/end_to_end.py --device nvidia --focus-pull --scenes worst,full --qualities draft --in-flight 2
