@@ -10,7 +10,11 @@ check it); on a discrete GPU the pinned form copies at the bus's rate. Median of
 after warm-up. ``--focus-pull``: each submitted frame has its own focus distance (a pull over
 ``FOCUS_PULL_M``), so the stages' per-frame tables change every frame. The "host ms" columns are
 the submitting thread's CPU time per ``submit`` (``Plan.last_host_ms``, median): per-frame host
-work, which should not grow with the frame's pixels (compare two ``--size``s).
+work, which should not grow with the frame's pixels (compare two ``--size``s). ``--timeline``: after
+each row, where a pipelined frame's time goes (busy time of the upload queue, the compute queue and
+the downloads, and what the compute queue waited for), from the commands' OpenCL profiling times;
+stderr lists every command of three middle frames. ``--aux-out``: the pipelined frames also hand
+the plan page-locked arrays for distortion's depth and velocity (``Plan.submit(out={...})``).
 
     python tools/end_to_end.py --force-pipelined --focus-pull --size 480x270 --scenes worst,full \
         --qualities draft --in-flight 2
