@@ -61,29 +61,47 @@ FOCUS_PULL_M = (0.5, 0.7, 1.0, 1.5, 2.5, 4.0)
 """``--focus-pull``'s focus distances, frame k taking ``FOCUS_PULL_M[k % 6]``."""
 
 
-def _pipelined(plan, inputs: list, cams: list, repeats: int, frames: int, outs: list) -> tuple[float, float]:
-    """(wall ms per frame, median host ms per submit) of ``frames`` frames through
-    ``Plan.submit`` (median of ``repeats`` runs): frame k is ``inputs[k % len(inputs)]`` with
-    ``cams[k % len(cams)]`` into ``outs[k % len(outs)]``, its result taken when ``len(outs) - 1``
-    later frames are in flight (then its ``out`` is used again)."""
+def _stream(plan, inputs: list, cams: list, frames: int, outs: list, host: list | None = None) -> list:
+    """``frames`` frames through ``Plan.submit``, in order: frame k is ``inputs[k % len(inputs)]``
+    with ``cams[k % len(cams)]`` into ``outs[k % len(outs)]``, its result taken when ``len(outs) -
+    1`` later frames are in flight (then its ``out`` is used again); the submitted frames, every
+    result taken. ``host``: a list each submit's ``Plan.last_host_ms`` is appended to."""
     from collections import deque
 
-    depth = len(outs) - 1
+    depth, done, pending = len(outs) - 1, [], deque()
+    for k in range(frames):
+        if len(pending) >= depth:
+            done.append(pending.popleft())
+            done[-1].result()
+        pending.append(plan.submit(inputs[k % len(inputs)], cams[k % len(cams)], out=outs[k % len(outs)]))
+        if host is not None:
+            host.append(plan.last_host_ms)
+    while pending:
+        done.append(pending.popleft())
+        done[-1].result()
+    return done
+
+
+def _pipelined(plan, inputs: list, cams: list, repeats: int, frames: int, outs: list) -> tuple[float, float]:
+    """(wall ms per frame, median host ms per submit) of :func:`_stream` (median of ``repeats``
+    runs after one warm-up)."""
+    _stream(plan, inputs, cams, frames, outs)
     times, host = [], []
-    for i in range(repeats + 1):
+    for _ in range(repeats):
         t0 = time.perf_counter()
-        pending: deque = deque()
-        for k in range(frames):
-            if len(pending) >= depth:
-                pending.popleft().result()
-            pending.append(plan.submit(inputs[k % len(inputs)], cams[k % len(cams)], out=outs[k % len(outs)]))
-            if i >= 1:
-                host.append(plan.last_host_ms)
-        while pending:
-            pending.popleft().result()
-        if i >= 1:
-            times.append((time.perf_counter() - t0) * 1e3 / frames)
+        _stream(plan, inputs, cams, frames, outs, host)
+        times.append((time.perf_counter() - t0) * 1e3 / frames)
     return statistics.median(times), statistics.median(host)
+
+
+def _outs(rt, size: tuple[int, int], n: int, aux: list) -> list:
+    """``n`` page-locked output images (NaN, so an image no frame wrote shows), each in a dict with
+    page-locked arrays for ``aux``'s (name, trailing shape) where given (``--aux-out``)."""
+    ow, oh = size
+    outs = [rt.pinned_empty((oh, ow, 3)) for _ in range(n)]
+    for o in outs:
+        o.fill(np.nan)
+    return [dict(color=o, **{k: rt.pinned_empty((oh, ow) + s) for k, s in aux}) for o in outs] if aux else outs
 
 
 def _timeline(plan, inputs: list, cams: list, frames: int, outs: list, dump=None) -> dict[str, float]:
@@ -98,19 +116,7 @@ def _timeline(plan, inputs: list, cams: list, frames: int, outs: list, dump=None
     (the device had nothing to do), and ``waiting for upload``: the frame's last upload's end
     minus the previous frame's last compute end (the bus was late). ``dump``: a file to list every
     command of three middle frames in (label, queued, start, end)."""
-    from collections import deque
-
-    depth, done, pending = len(outs) - 1, [], deque()
-    for k in range(frames):
-        if len(pending) >= depth:
-            p = pending.popleft()
-            p.result()
-            done.append(p)
-        pending.append(plan.submit(inputs[k % len(inputs)], cams[k % len(cams)], out=outs[k % len(outs)]))
-    while pending:
-        p = pending.popleft()
-        p.result()
-        done.append(p)
+    done = _stream(plan, inputs, cams, frames, outs)
     if dump:  # every command of three middle frames, ms from the first one's first enqueue
         mid = done[len(done) // 2 - 1:len(done) // 2 + 2]
         t0 = min(e.profile.queued for p in mid for _, e in p._events) * 1e-6
@@ -192,27 +198,19 @@ def main(argv=None) -> int:
             row = f"| {name} | {q} | {plain:.2f} | {1e3 / plain:.0f} | {pinned:.2f} | {1e3 / pinned:.0f} |"
             for d in depths:
                 plan.in_flight = d
-                outs = [out] + [pipe.runtime.pinned_empty((oh, ow, 3)) for _ in range(d)]
-                for o in outs:  # what the check below compares must be pipelined frames'
-                    o.fill(np.nan)
-                if aux:
-                    outs = [dict(color=o, **{n: pipe.runtime.pinned_empty((oh, ow) + s) for n, s in aux})
-                            for o in outs]
+                outs = _outs(pipe.runtime, (ow, oh), d + 1, aux)
                 piped, host = _pipelined(plan, inputs, cams, a.repeats, a.frames, outs)
                 # each out holds the last frame that used it: a frame given another's image fails
                 last = {k % len(outs): k for k in range(a.frames)}
-                if not all(np.array_equal(outs[j]["color"] if aux else outs[j],
-                                          plan.run(inputs[k % len(inputs)], cams[k % len(cams)]).color)
-                           for j, k in last.items()):
+                got = [outs[j] if aux else dict(color=outs[j]) for j in last]
+                want = [plan.run(inputs[k % len(inputs)], cams[k % len(cams)]) for k in last.values()]
+                if not all(np.array_equal(g[n], getattr(w_, n)) for g, w_ in zip(got, want) for n in g):
                     bad.append(f"{name} {q} ({d} in flight)")
                 row += f" {piped:.2f} | {1e3 / piped:.0f} | {host:.2f} |"
             print(row, flush=True)
             if a.timeline:
                 plan.in_flight = depths[0]
-                outs = [pipe.runtime.pinned_empty((oh, ow, 3)) for _ in range(depths[0] + 1)]
-                if aux:
-                    outs = [dict(color=o, **{n: pipe.runtime.pinned_empty((oh, ow) + s) for n, s in aux})
-                            for o in outs]
+                outs = _outs(pipe.runtime, (ow, oh), depths[0] + 1, aux)
                 t = _timeline(plan, inputs, cams, a.frames, outs, sys.stderr)
                 print(f"|   timeline, {depths[0]} in flight, ms per frame: "
                       + ", ".join(f"{k} {v:.2f}" for k, v in t.items()) + " |", flush=True)
