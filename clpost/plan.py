@@ -429,21 +429,22 @@ class Plan:
         stream = bufs.stream
         given = isinstance(out, np.ndarray) or (isinstance(out, dict) and out.get("color") is not None)
         out, outs = self._outputs(out, frame, stream.upcoming)
+        callers = [*outs.values(), *([out] if given else [])]  # downloaded into directly: no bounce
         meta = dict(frame.metadata, camera=cam.describe(), plan=self.stage_names)
         slot = stream.reserve()  # waits for the frame that used it last
         uq, dq = rt.transfer_queues()
         names = ["color", *self._aux_names]
         copies: list = []  # (host array, slot buffer, event of the copy into it): the downloads
 
-        def download(host: np.ndarray, buf, fresh: bool = True):
+        def download(host: np.ndarray, buf):
             """A download of the frame's: copied into the slot on the compute queue now, to the
             host by the download worker (Stream.download) once that copy is done — through the
-            slot's page-locked bounce array where ``host`` is an array the plan made (``fresh``)."""
+            slot's page-locked bounce array unless ``host`` is one of the caller's arrays."""
             key = len(copies)
             staging = slot.output(rt, key, host.nbytes)
             ev = cl.enqueue_copy(q, staging, buf, byte_count=host.nbytes)
-            fresh = fresh and not any(host is a for a in outs.values())  # not the caller's
-            copies.append((host, staging, ev, slot.bounce(rt, key, host, uq) if fresh else None))
+            mine = not any(host is a for a in callers)
+            copies.append((host, staging, ev, slot.bounce(rt, key, host, uq) if mine else None))
             return ev
 
         uploads: list = []  # ("upload", event) of the tables and arrays the stages copy mid-frame
@@ -478,7 +479,7 @@ class Plan:
             events += uploads
             events += [("stage_out" if id(ev) in staged else "stage_in" if id(ev) in staged_in else label, ev)
                        for label, ev in evs]
-            download(out, self._color_out(size), fresh=not given)
+            download(out, self._color_out(size))
             events.append(("stage_out", copies[-1][2]))
             q.flush()
         except BaseException:

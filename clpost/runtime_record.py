@@ -156,7 +156,7 @@ class Recorder:
         """The caller's array for the output frame's buffer ``name`` where it gave one (checked
         by the plan before anything is enqueued), else a new one (:meth:`Runtime.host_array`)."""
         given = self._outs.get(name)
-        return given if given is not None else np.empty(shape, dtype)
+        return given if given is not None else self.rt.host_array(name, shape, dtype)
 
     # -- kernels: captured, so that their arguments are known --------------------------------
     def kernel(self, source, name, defines=None, program=None) -> Captured:

@@ -146,7 +146,7 @@ inline void dof_hidden(DofAccV *acc, const DOF_F cr, const DOF_F cg, const DOF_F
 inline int dof_any(const DOF_I m)
 {
 #if DOF_VEC == 1
-    return m != 0;
+    return DOF_ANY(m);
 #else
 #if DOF_VEC == 16
     const int8 m8 = m.lo | m.hi;
