@@ -318,7 +318,8 @@ class Runtime:
     def wide(self) -> bool:
         """Whether kernels with a wide form take 16 pixels per work-item (CPUs: the lanes of SIMD
         registers) or one (GPUs: a warp's loads coalesce; groups of a tile's pixels): the fused
-        pointwise kernels (:func:`clpost.codegen.vector_path`) and astigmatism's gather."""
+        pointwise kernels (:func:`clpost.codegen.vector_path`), astigmatism's gather and dof's gather
+        (:func:`clpost.stages.dof_cl.gather_vector_width`)."""
         return not (self.device.type & cl.device_type.GPU)
 
     @staticmethod

@@ -33,7 +33,7 @@ step 60 end_to_end_full_aux python3 -W ignore tools/end_to_end.py --device nvidi
 step 60 end_to_end_pull python3 -W ignore tools/end_to_end.py --device nvidia --focus-pull --scenes worst,full --qualities draft --in-flight 2
 python3 -c "import pyopencl as cl; print([d.version + ' ' + d.driver_version for p in cl.get_platforms() for d in p.get_devices()])" 2>&1 | tail -1
 # per kernel, 4 KiB pages (old) against huge pages (new), worst final and draft on the 16 PoCL cores
-CLPOST_DEVICE=pocl step 120 pocl_pages_final python3 -W ignore tools/ab_kernel.py --scene worst --quality final --size 1920x1080 --repeats 5 --pages
-CLPOST_DEVICE=pocl step 80 pocl_pages_draft python3 -W ignore tools/ab_kernel.py --scene worst --quality draft --size 1920x1080 --repeats 5 --pages
+CLPOST_DEVICE=pocl step 100 pocl_pages_final python3 -W ignore tools/ab_kernel.py --scene worst --quality final --size 1920x1080 --repeats 5 --pages
+CLPOST_DEVICE=pocl step 60 pocl_pages_draft python3 -W ignore tools/ab_kernel.py --scene worst --quality draft --size 1920x1080 --repeats 5 --pages
 step 100 device_vs_device python3 -W ignore tools/device_vs_device.py
 uptime

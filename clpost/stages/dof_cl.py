@@ -61,16 +61,20 @@ def _launch_rows(rt, kernel, size, per_item=16, local=(8, 1)):
 
 
 def gather_vector_width(rt) -> int:
-    """Pixels per work-item of the gather: 16 where the device's native float vector is 16 wide
-    (AVX-512, where it is faster than 8: docs/measurements.md#kernel-forms-on-pocl; presumably its
-    32 registers hold the 8 accumulators and the pixel's constants without spilling), else 8.
-    ``CLPOST_DOF_VEC`` (1, 8 or 16) overrides it, for measuring and for the tests of every width;
-    1 is the one-pixel form a GPU may want (not the default anywhere until measured on one)."""
+    """Pixels per work-item of the gather: one on a GPU (:attr:`clpost.runtime.Runtime.wide`
+    false: the H200 ran worst final's gather in 1.23 ms against 1.49 ms in the 8-wide form,
+    docs/benchmarks.md "dof's gather on a GPU"); on a CPU 16 where the device's native float
+    vector is 16 wide (AVX-512, where it is faster than 8: docs/measurements.md#kernel-forms-on-pocl;
+    presumably its 32 registers hold the 8 accumulators and the pixel's constants without
+    spilling), else 8. ``CLPOST_DOF_VEC`` (1, 8 or 16) overrides it, for measuring and for the
+    tests of every width."""
     import os
 
     env = os.environ.get("CLPOST_DOF_VEC")
     if env in ("1", "8", "16"):
         return int(env)
+    if not rt.wide:
+        return 1
     return 16 if getattr(rt.device, "native_vector_width_float", 8) >= 16 else 8
 
 
