@@ -1,7 +1,8 @@
 """Host↔device transfer rates of one 1080p RGB float32 frame: pageable NumPy arrays (what
 ``Plan.run`` uploads and downloads today), pinned (page-locked, ``ALLOC_HOST_PTR``) host memory,
 and a fresh output array (first touch of its pages included) — the bound on end-to-end frame
-rates on a discrete GPU. Median of ``--repeats`` after one warm-up, OpenCL events and wall clock.
+rates on a discrete GPU — and the download thread's host copy out of a page-locked array into a
+fresh or a reused one. Median of ``--repeats`` after one warm-up, OpenCL events and wall clock.
 
     python tools/transfer_bench.py --device nvidia
 """
@@ -59,10 +60,34 @@ def main(argv=None) -> int:
     for name, fn in rows:
         d, wl = _median(fn, a.repeats)
         print(f"| {name} | {d:.2f} | {wl:.2f} | {nbytes / wl / 1e6:.1f} |")
-    t0 = time.perf_counter()
-    for _ in range(a.repeats):
-        np.copyto(pin_view, host)
-    print(f"| host memcpy into the pinned array | – | {(time.perf_counter() - t0) * 1e3 / a.repeats:.2f} | – |")
+    # the download thread's host copy (clpost/stream.py _download) out of a page-locked bounce array:
+    # into a fresh array (first touch of its pages: what a caller without out= gets) on one thread
+    # and split over threads, and into a reused one
+    from concurrent.futures import ThreadPoolExecutor
+
+    pool = ThreadPoolExecutor(4)
+
+    def split(dst, k):
+        parts = np.array_split(np.arange(dst.shape[0]), k)
+        for f in [pool.submit(np.copyto, dst[p[0]:p[-1] + 1], pin_view[p[0]:p[-1] + 1]) for p in parts]:
+            f.result()
+
+    host_rows = [
+        ("host copy into the pinned array", lambda: np.copyto(pin_view, host)),
+        ("host copy pinned → reused array", lambda: np.copyto(out, pin_view)),
+        ("host copy pinned → fresh array, 1 thread", lambda: np.copyto(np.empty_like(host), pin_view)),
+        ("host copy pinned → fresh array, 4 threads", lambda: split(np.empty_like(host), 4)),
+    ]
+    for name, fn in host_rows:
+        fn()
+        times = []
+        for _ in range(a.repeats):
+            t0 = time.perf_counter()
+            fn()
+            times.append((time.perf_counter() - t0) * 1e3)
+        wl = statistics.median(times)
+        print(f"| {name} | – | {wl:.2f} | {nbytes / wl / 1e6:.1f} |")
+    pool.shutdown()
     return 0
 
 
