@@ -5,7 +5,8 @@ Device choice (first match wins):
 1. ``device=`` argument / ``--device`` / the ``CLPOST_DEVICE`` environment variable: a
    case-insensitive substring of the platform or device name (``pocl``, ``nvidia``, ``cpu``).
 2. Otherwise a GPU device, if any platform offers one.
-3. Otherwise the PoCL CPU device (shipped by ``pyopencl[pocl]``), else any CPU device.
+3. Otherwise the PoCL CPU device (shipped by ``pyopencl[pocl]``), the newest PoCL where there are
+   two, else any CPU device. Several devices matching a name (``pocl``) are taken in this order too.
 
 Each candidate must build a one-line kernel first; a device whose compiler fails is skipped and
 the next candidate tried. Why: the PoCL 3.0 that pip ships links LLVM 14, which does not know
@@ -30,6 +31,7 @@ import contextlib
 import functools
 import mmap
 import os
+import re
 import threading
 import weakref
 from collections import OrderedDict
@@ -188,6 +190,21 @@ def _compiler_problem(dev: "cl.Device") -> str | None:
     return _smoke_results[key]
 
 
+def _rank(dev: "cl.Device") -> tuple:
+    """Sort key of the candidates (module docstring): a GPU, then PoCL's CPU device — the newest
+    PoCL first where two are installed (pip's 3.0 beside a distribution's 5.0 ran the worst case
+    2.8× slower on the same 16 cores: its LLVM 14 targets an older CPU; docs/benchmarks.md,
+    "Two PoCLs on one machine, and huge pages on 16 cores") — then any other CPU device."""
+    if dev.type & cl.device_type.GPU:
+        return (0,)
+    if dev.type & cl.device_type.CPU:
+        if _is_pocl(dev):
+            m = re.search(r"pocl (\d+)\.(\d+)", dev.platform.version.lower())
+            return (1, -int(m.group(1)), -int(m.group(2))) if m else (1, 0, 0)
+        return (2,)
+    return (3,)
+
+
 def _is_pocl(dev: "cl.Device") -> bool:
     name = dev.platform.name.lower()
     return "portable computing language" in name or "pocl" in name
@@ -212,13 +229,8 @@ def choose_device(spec: str | None = None) -> "cl.Device":
                 "give a substring of one of these names"
             )
     else:
-        def rank(d):
-            if d.type & cl.device_type.GPU:
-                return 0
-            if d.type & cl.device_type.CPU:
-                return 1 if _is_pocl(d) else 2
-            return 3
-        candidates = sorted(devs, key=rank)
+        candidates = devs
+    candidates = sorted(candidates, key=_rank)
     problems = []
     for d in candidates:
         why = _compiler_problem(d)

@@ -54,6 +54,31 @@ def test_pocl_matches_by_implementation_name():
     assert "pocl" in dev.platform.version.lower()
 
 
+def test_the_newest_pocl_is_chosen_whatever_the_platform_order(monkeypatch):
+    """pip's PoCL 3.0 beside a distribution's newer PoCL: the newer one, listed first or last (the
+    ICD loader's order is not ours), for the default choice and for a name both match."""
+    from types import SimpleNamespace
+
+    import pyopencl as cl
+
+    import clpost.runtime as R
+
+    def dev(version, kind=cl.device_type.CPU, name="pthread-cpu"):
+        plat = SimpleNamespace(name="Portable Computing Language", version=f"OpenCL 3.0 {version} Linux")
+        return SimpleNamespace(platform=plat, name=name, type=kind)
+
+    old, new, other = dev("PoCL 3.0-rc2"), dev("PoCL 5.0+debian"), dev("Intel(R) OpenCL 2024", name="Xeon")
+    other.platform.name = "Intel(R) OpenCL"
+    monkeypatch.setattr(R, "_compiler_problem", lambda d: None)
+    for order in ([old, new, other], [other, new, old], [new, other, old]):
+        monkeypatch.setattr(R, "list_devices", lambda order=order: list(order))
+        assert R.choose_device() is new
+        assert R.choose_device("pocl") is new
+    gpu = dev("CUDA 13.0", kind=cl.device_type.GPU, name="H200")
+    monkeypatch.setattr(R, "list_devices", lambda: [old, new, gpu])
+    assert R.choose_device() is gpu
+
+
 def test_device_option_after_the_subcommand(capsys):
     from clpost.cli import main
 

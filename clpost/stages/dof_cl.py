@@ -63,7 +63,7 @@ def _launch_rows(rt, kernel, size, per_item=16, local=(8, 1)):
 def gather_vector_width(rt) -> int:
     """Pixels per work-item of the gather: one on a GPU (:attr:`clpost.runtime.Runtime.wide`
     false: the H200 ran worst final's gather in 1.23 ms against 1.49 ms in the 8-wide form,
-    docs/benchmarks.md "dof's gather on a GPU"); on a CPU 16 where the device's native float
+    docs/benchmarks.md "The H200 again (2026-11-27)"); on a CPU 16 where the device's native float
     vector is 16 wide (AVX-512, where it is faster than 8: docs/measurements.md#kernel-forms-on-pocl;
     presumably its 32 registers hold the 8 accumulators and the pixel's constants without
     spilling), else 8. ``CLPOST_DOF_VEC`` (1, 8 or 16) overrides it, for measuring and for the
