@@ -531,6 +531,141 @@ __kernel void distortion_dering(__global const float *restrict src, __global flo
     }
 }
 
+/* The final filter's one-pixel (GPU) forms: `distortion_fir_rows1`, `_fir_cols1`, `_dering1` and
+ * `_bspline_tiles1` do per work-item, for one output position, the operations the 16-lane kernels
+ * above do per lane, in the same order (so PoCL gives the same bits; tests/test_distortion.py), with
+ * consecutive work-items on consecutive x: a warp's loads coalesce, and no work-item holds 16-wide
+ * windows (`distortion_fir_cols` keeps 28 float16 rows in flight, which a GPU spills). Chosen where
+ * `Runtime.wide` is false (clpost/stages/distortion.py). */
+__kernel void distortion_fir_rows1(__global const float *restrict src, __global float *restrict tmp,
+                                   const int src_w, const int src_h, const int pitch, const int th)
+{
+    const int x = get_global_id(0), r = get_global_id(1), ch = get_global_id(2);
+    if (x >= pitch || r >= th) return;
+    const int sy = clamp(r - DISTORTION_PAD - DISTORTION_FIR_K, 0, src_h - 1);
+    __global const float *s = src + ((size_t)ch * src_h + sy) * src_w;
+    const int x0 = x - DISTORTION_PAD - DISTORTION_FIR_K;  /* window element j: column x0 + j */
+#define DISTORTION_W(j) (s[clamp(x0 + (j), 0, src_w - 1)] * (1.0f / DISTORTION_COEF_SCALE))
+    float acc = distortion_fir[12] * (DISTORTION_W(0) + DISTORTION_W(24));
+#pragma unroll
+    for (int k = 11; k >= 1; --k)
+        acc = fma(distortion_fir[k], DISTORTION_W(12 - k) + DISTORTION_W(12 + k), acc);
+    acc = fma(distortion_fir[0], DISTORTION_W(12), acc);
+#undef DISTORTION_W
+    tmp[((size_t)ch * th + r) * pitch + x] = acc;
+}
+
+__kernel void distortion_fir_cols1(__global const float *restrict tmp, __global float *restrict coef,
+                                   const int pitch, const int th, const int ch_rows)
+{
+    const int x = get_global_id(0), q = get_global_id(1), ch = get_global_id(2);
+    if (x >= pitch || q >= ch_rows) return;
+    __global const float *t = tmp + ((size_t)ch * th + q) * pitch + x;
+    float acc = distortion_fir[DISTORTION_FIR_K] * (t[0] + t[(size_t)2 * DISTORTION_FIR_K * pitch]);
+#pragma unroll
+    for (int k = DISTORTION_FIR_K - 1; k >= 1; --k)
+        acc = fma(distortion_fir[k], t[(size_t)(DISTORTION_FIR_K - k) * pitch] + t[(size_t)(DISTORTION_FIR_K + k) * pitch],
+                  acc);
+    acc = fma(distortion_fir[0], t[(size_t)DISTORTION_FIR_K * pitch], acc);
+    coef[((size_t)ch * ch_rows + q) * pitch + x] = acc;
+}
+
+__kernel void distortion_dering1(__global const float *restrict src, __global float *restrict hdr,
+                                 const int src_w, const int src_h, const int pitch, const int ch_rows)
+{
+    const int x = get_global_id(0), q = get_global_id(1);
+    if (x >= pitch || q >= ch_rows) return;
+    const size_t sn = (size_t)src_w * src_h;
+    int cols[5];
+    for (int k = 0; k < 5; ++k) cols[k] = clamp(x - DISTORTION_PAD - 2 + k, 0, src_w - 1);
+    float rlo[5], rhi[5];
+    for (int j = 0; j < 5; ++j) {
+        __global const float *s = src + (size_t)clamp(q - DISTORTION_PAD - 2 + j, 0, src_h - 1) * src_w;
+        float v[5];
+        for (int k = 0; k < 5; ++k) v[k] = DISTORTION_SUM3(s[cols[k]], s[sn + cols[k]], s[2 * sn + cols[k]]);
+        rlo[j] = min((float)INFINITY, min(min(v[0], v[1]), min(min(v[2], v[3]), v[4])));
+        rhi[j] = max((float)-INFINITY, max(max(v[0], v[1]), max(max(v[2], v[3]), v[4])));
+    }
+    const float lo = min(min(min(rlo[0], rlo[1]), min(rlo[2], rlo[3])), rlo[4]);
+    const float hi = max(max(max(rhi[0], rhi[1]), max(rhi[2], rhi[3])), rhi[4]);
+    const float r = clamp(native_divide(hi - DISTORTION_R1 * lo, (DISTORTION_R2 - DISTORTION_R1) * lo), 0.0f, 1.0f);
+    hdr[(size_t)q * pitch + x] = lo > 0.0f ? r : (hi > lo ? 1.0f : 0.0f);
+}
+
+/* distortion_bspline_tiles for one pixel: lane `get_global_id(0)` of the tile row; its own 4x4
+ * window (the 16-lane form's 5x5 and selects reduce to it, the extra row and column entering with
+ * weight 0). One work-group per tile (TILE x TILE work-items). */
+__kernel void distortion_bspline_tiles1(__global const float *restrict coef, __global float *restrict dst,
+                                        __global const float *restrict map, __global const int *restrict tiles,
+                                        __global const float *restrict hdr,
+                                        const int pitch, const int ch_rows, const int width, const int height,
+                                        const int ntiles)
+{
+    const int lane = get_global_id(0), row = get_global_id(1), tile = get_global_id(2);
+    if (tile >= ntiles) return;
+    const int4 t = vload4(tile, tiles);
+    const int y = t.y + row;
+    if (y >= height) return;
+    const size_t n = (size_t)width * height, sn = (size_t)pitch * ch_rows;
+    const size_t i = (size_t)y * width + t.x + lane;
+    const float sx = map[i];
+    const int ok = sx > -1.0e29f;
+    const float fx = ok ? sx - ((float)(t.x + t.z) + (float)lane) : 0.0f;
+    const float fy = ok ? map[n + i] - (float)(y + t.w) : 0.0f;
+    const int right = fx >= 1.0f, down = fy >= 1.0f;
+    const float tx = right ? fx - 1.0f : fx, ty = down ? fy - 1.0f : fy;
+    float wx[4], wy[4];
+    {   /* distortion_bspline4, one lane */
+        float s = 1.0f - tx, t2 = tx * tx, t3 = t2 * tx;
+        wx[0] = s * s * s * (1.0f / 6.0f);
+        wx[1] = fma(0.5f, t3, (2.0f / 3.0f) - t2);
+        wx[3] = t3 * (1.0f / 6.0f);
+        wx[2] = 1.0f - wx[0] - wx[1] - wx[3];
+        s = 1.0f - ty; t2 = ty * ty; t3 = t2 * ty;
+        wy[0] = s * s * s * (1.0f / 6.0f);
+        wy[1] = fma(0.5f, t3, (2.0f / 3.0f) - t2);
+        wy[3] = t3 * (1.0f / 6.0f);
+        wy[2] = 1.0f - wy[0] - wy[1] - wy[3];
+    }
+    const float bx0 = max(1.0f - fx, 0.0f), bx2 = max(fx - 1.0f, 0.0f), bx1 = 1.0f - bx0 - bx2;
+    const float by0 = max(1.0f - fy, 0.0f), by2 = max(fy - 1.0f, 0.0f), by1 = 1.0f - by0 - by2;
+    const size_t base = (size_t)(y + t.w - 1 + DISTORTION_PAD) * pitch + (size_t)(t.x + t.z - 1 + DISTORTION_PAD)
+        + (size_t)lane;
+    const size_t cell = base + pitch + 1;
+    float th = 0.0f;
+#pragma unroll
+    for (int r = 0; r < 3; ++r) {
+        __global const float *h = hdr + cell + (size_t)r * pitch;
+        th = fma(r == 0 ? by0 : (r == 1 ? by1 : by2), bx0 * h[0] + bx1 * h[1] + bx2 * h[2], th);
+    }
+    const size_t off = base + (size_t)right + (size_t)down * pitch;
+    for (int c = 0; c < 3; ++c) {
+        __global const float *p = coef + c * sn + off;
+        float acc = 0.0f, hl[4], hr[4];
+#pragma unroll
+        for (int r = 0; r < 4; ++r) {
+            __global const float *q = p + (size_t)r * pitch;
+            const float d0 = q[0], d1 = q[1], d2 = q[2], d3 = q[3];
+            float rowv = wx[0] * d0;
+            rowv = fma(wx[1], d1, rowv);
+            rowv = fma(wx[2], d2, rowv);
+            rowv = fma(wx[3], d3, rowv);
+            acc = fma(wy[r], rowv, acc);
+            hl[r] = fma(4.0f, d1, d0 + d2);
+            hr[r] = fma(4.0f, d2, d1 + d3);
+        }
+        const float a = fma(4.0f, hl[1], hl[0] + hl[2]) * (1.0f / 36.0f);
+        const float b = fma(4.0f, hr[1], hr[0] + hr[2]) * (1.0f / 36.0f);
+        const float d = fma(4.0f, hl[2], hl[1] + hl[3]) * (1.0f / 36.0f);
+        const float e = fma(4.0f, hr[2], hr[1] + hr[3]) * (1.0f / 36.0f);
+        const float lo = min(min(a, b), min(d, e)), hi = max(max(a, b), max(d, e));
+        const float top = fma(b - a, tx, a), bottom = fma(e - d, tx, d);
+        const float lin = fma(bottom - top, ty, top), cl = clamp(acc, lo, hi);
+        const float v = fma(lin - cl, th, cl);
+        dst[c * n + i] = ok ? v * DISTORTION_COEF_SCALE : 0.0f;
+    }
+}
+
 /* The distorted image's depth and velocity (the colour kernels' companions, so the host does no
  * per-pixel work): nearest source pixel `flat[i]` (-1: no preimage -> depth +inf, velocity 0);
  * velocities are displacements in the render, so they map to the output by the inverse of the

@@ -385,6 +385,42 @@ def test_tile_lists_cover_the_image_and_both_kernels_match_the_reference(rng, qu
     assert np.all(np.isfinite(out)) and out.min() >= 0
 
 
+@pytest.mark.parametrize("size", [(133, 77), (37, 23), (1, 1)])
+def test_the_final_filters_one_pixel_form_gives_the_16_lane_forms_bits(rng, monkeypatch, size):
+    """A GPU (Runtime.wide false) runs the final filter's one-pixel kernels (distortion_fir_rows1,
+    _fir_cols1, _dering1, _bspline_tiles1): the same operations per pixel as the 16-lane kernels,
+    so on PoCL the same bits, with 1e8 highlights (the hand-over weight) and colour 0 without a
+    preimage; on sizes with vector tiles, with only the table's tiles, and one pixel."""
+    from clpost.runtime import Runtime
+
+    w, h = size
+    m = OpenCVModel(w, h, 0.9 * w + 1, 0.9 * w + 1, (w - 1) / 2 + 0.3, (h - 1) / 2 - 0.2, k1=-0.2, k2=0.05, p1=0.002)
+    frame = odd_frame(rng, w=w, h=h, scale=1e3)
+    frame = frame.replace(color=np.where(rng.random((h, w, 1)) < 0.05, 1e8, frame.color).astype(np.float32))
+    import pyopencl as cl
+
+    enqueue, launched = cl.enqueue_nd_range_kernel, []
+
+    def recording(queue, kernel, *a, **k):
+        launched.append(kernel.function_name)
+        return enqueue(queue, kernel, *a, **k)
+
+    monkeypatch.setattr(cl, "enqueue_nd_range_kernel", recording)
+    outs, names = {}, {}
+    for wide in (True, False):
+        launched.clear()
+        with Runtime.forced_width(wide):
+            pipe = Pipeline(Camera(distortion=m), quality="final", stages=["distortion"])
+            outs[wide] = pipe.run(frame).color
+        names[wide] = {n for n in launched if n.startswith("distortion_") and n != "distortion_aux"}
+    assert outs[True].max() > 0
+    np.testing.assert_array_equal(outs[False], outs[True])
+    assert {"distortion_fir_rows1", "distortion_fir_cols1", "distortion_dering1"} <= names[False], names
+    assert not any(n.endswith("1") for n in names[True]), names
+    if w > 16:
+        assert "distortion_bspline_tiles1" in names[False] and "distortion_bspline_tiles" in names[True], names
+
+
 def _device_coefficients(planes: np.ndarray) -> np.ndarray:
     """The final filter's prefilter kernels (distortion_fir_rows, _cols) on float32 planes (3, h, w):
     the B-spline coefficient planes (3, h + 2 PAD, w + 2 PAD) cut out of the padded buffers."""

@@ -8,6 +8,7 @@ output (the forms do the same operations per pixel: 0 where the device compiles 
 
     PYTHONPATH=. python tools/gpu_forms.py --device nvidia            # 1080p, draft and final
     PYTHONPATH=. python tools/gpu_forms.py --device pocl --size 320x180 --repeats 3   # a CPU check
+    PYTHONPATH=. python tools/gpu_forms.py --device nvidia --scene worst --qualities final   # dof, distortion
 
 The device's own choice (``Runtime.wide``: off on a GPU) is printed first; docs/benchmarks.md's
 GPU section says what to record. ``Runtime.wide`` also picks the fused pointwise kernels' and
@@ -25,9 +26,10 @@ from clpost.bench import SCENES, synthetic_frame
 from clpost.pipeline import Pipeline
 from clpost.runtime import Runtime
 
-def measure(device: str | None, w: int, h: int, quality: str, repeats: int, warmup: int = 2) -> dict:
+def measure(device: str | None, w: int, h: int, quality: str, repeats: int, warmup: int = 2,
+            scene_name: str = "full") -> dict:
     """Per form (True: wide, False: narrow): stage ms medians, plan device ms median, last output."""
-    scene = SCENES["full"]
+    scene = SCENES[scene_name]
     cam, _ = scene.camera(w, h)
     frame = synthetic_frame(w, h, velocity_px=scene.velocity_px)
     pipes, times, outs = {}, {True: {}, False: {}}, {}
@@ -57,16 +59,17 @@ def main(argv=None) -> int:
     ap.add_argument("--size", default="1920x1080")
     ap.add_argument("--qualities", default="draft,final")
     ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--scene", default="full", choices=sorted(SCENES), help="a bench scene (default full)")
     a = ap.parse_args(argv)
     w, h = (int(v) for v in a.size.split("x"))
     warnings.simplefilter("ignore")   # the scene is timed, not looked at (exposure warnings)
-    rt = Pipeline(SCENES["full"].camera(w, h)[0], stages=["exposure"], device=a.device).runtime
+    rt = Pipeline(SCENES[a.scene].camera(w, h)[0], stages=["exposure"], device=a.device).runtime
     print(f"device: {rt.name}; its own form: {'wide (16 lanes)' if rt.wide else 'narrow (one pixel)'}; "
-          f"scene full {w}x{h}, median of {a.repeats}, forms interleaved")
+          f"scene {a.scene} {w}x{h}, median of {a.repeats}, forms interleaved")
     print("| quality | kernel | wide ms | narrow ms | wide/narrow | max abs(narrow-wide)/max abs(wide) |")
     print("|---|---|---:|---:|---:|---:|")
     for q in a.qualities.split(","):
-        r = measure(a.device, w, h, q, a.repeats)
+        r = measure(a.device, w, h, q, a.repeats, scene_name=a.scene)
         # every timed kernel: white grain runs inside the fused pointwise group, whose form
         # Runtime.wide picks too
         for k in (*[k for k in r["ms"][True] if k not in ("upload", "download", "(plan)")], "(plan)"):

@@ -225,11 +225,13 @@ def cases():
     # without data), at both filters; sizes include a partial tile in x and in y
     dist = {"barrel": dict(k1=-0.12, k2=0.03, p1=1e-4),
             "foldover": dict(k1=0.6, k2=-0.9, p1=0.01, p2=-0.01)}
+    # (final: the GPU's one-pixel kernels, Oclgrind's default form, and the CPUs' 16-lane ones: "wide")
     for label, k in dist.items():
-        for q in ("draft", "final"):
+        for q, form in (("draft", None), ("final", None), ("final", "wide")):
             for w, h in ((3, 2), (17, 5), (37, 23), (61, 35)):
-                add(f"distortion-{label} {q} {w}x{h}",
-                    lambda k=k, q=q, w=w, h=h: _run(_distortion_model(base, w, h, **k), ["distortion"], q, w, h))
+                add(f"distortion-{label} {q}{' wide' if form else ''} {w}x{h}",
+                    lambda k=k, q=q, w=w, h=h, form=form: _run(_distortion_model(base, w, h, **k), ["distortion"],
+                                                               q, w, h, **({form: True} if form else {})))
 
     # label planes (distortion_labels): fold-over leaves pixels without a preimage (index -1)
     for w, h in ((3, 2), (37, 23)):
@@ -246,10 +248,11 @@ def cases():
     model = OpenCVModel.from_camera(base, (48, 48))
     edge = replace(base, distortion=model)
     for sign, label in ((1, "+"), (-1, "-")):
-        for q in ("draft", "final"):
+        for q, form in (("draft", None), ("final", None), ("final", "wide")):
             k = (model.fx, model.fy, model.cx - sign * 12.6, model.cy - sign * 12.6)
-            add(f"distortion-shift{label} {q} 48x48",
-                lambda k=k, q=q: _run(edge, ["distortion"], q, 48, 48, intrinsics=k))
+            add(f"distortion-shift{label} {q}{' wide' if form else ''} 48x48",
+                lambda k=k, q=q, form=form: _run(edge, ["distortion"], q, 48, 48, intrinsics=k,
+                                                 **({form: True} if form else {})))
 
     vig = replace(base, vignetting="natural")
     film = replace(base, film="kodak-ektar-100")

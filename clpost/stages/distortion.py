@@ -695,18 +695,27 @@ class Distortion(GatherStage):
             return events
         base, wts, fmap, tiles_b, rest_b, coef, tmp, hdr = bufs
         tiles, rest = bspline_tiles(model, frame.size, kkey)
-        rows, cols = kernel("distortion_fir_rows"), kernel("distortion_fir_cols")
-        dering = kernel("distortion_dering")
-        events = [rt.launch(rows, (pw // 16, th, 3), None, src, tmp, np.int32(sw), np.int32(sh), np.int32(pw),
+        # the CPU's 16-lane kernels, or their one-pixel forms on a GPU (kernels/distortion.cl says
+        # why; the same operations per pixel): rows of 64 work-items, a tile per work-group
+        wide = rt.wide
+        sfx, per, group, plane = ("", 16, None, None) if wide else ("1", 1, (64, 1, 1), (64, 1))
+        rows, cols = kernel("distortion_fir_rows" + sfx), kernel("distortion_fir_cols" + sfx)
+        dering = kernel("distortion_dering" + sfx)
+        col_rows = FIR_ROWS if wide else 1
+        events = [rt.launch(rows, (pw // per, th, 3), group, src, tmp, np.int32(sw), np.int32(sh), np.int32(pw),
                             np.int32(th)),
-                  rt.launch(cols, (pw // 16, ph // FIR_ROWS, 3), None, tmp, coef, np.int32(pw), np.int32(th),
+                  rt.launch(cols, (pw // per, ph // col_rows, 3), group, tmp, coef, np.int32(pw), np.int32(th),
                             np.int32(ph)),
-                  rt.launch(dering, (pw // 16, ph // FIR_ROWS), None, src, hdr, np.int32(sw), np.int32(sh),
+                  rt.launch(dering, (pw // per, ph // col_rows), plane, src, hdr, np.int32(sw), np.int32(sh),
                             np.int32(pw), np.int32(ph))]
         if len(tiles):
-            kern = kernel("distortion_bspline_tiles")
-            events.append(rt.launch(kern, (TILE, len(tiles)), (1, TILE_GROUP), coef, dst, fmap, tiles_b, hdr,
-                                    np.int32(pw), np.int32(ph), *out, np.int32(len(tiles))))
+            tile_args = (coef, dst, fmap, tiles_b, hdr, np.int32(pw), np.int32(ph), *out, np.int32(len(tiles)))
+            if wide:
+                events.append(rt.launch(kernel("distortion_bspline_tiles"), (TILE, len(tiles)), (1, TILE_GROUP),
+                                        *tile_args))
+            else:
+                events.append(rt.launch(kernel("distortion_bspline_tiles1"), (TILE, TILE, len(tiles)),
+                                        (TILE, TILE, 1), *tile_args))
         if len(rest):
             kern = kernel("distortion_table")
             events.append(rt.launch(kern, (TILE, TILE, len(rest)), None, coef, dst, base, wts, rest_b, hdr,
