@@ -19,7 +19,11 @@ and a far layer). F and B:
   colour line passes nearest to c). ``--own``: the far side must be p's own surface (CoC within
   ``--min-px``/2 of p's) and the near side nearer than p by ``--min-px`` (three layers: a pixel of
   an in-focus object between a blurred wire and the far wall is no mix of those two); ``--wide``:
-  the near side's next pixel on the same line near too (a 1-px depth speckle is no silhouette).
+  the near side's next pixel on the same line near too (a 1-px depth speckle is no silhouette);
+  ``--solid``: no far neighbour of the near side's pixel q, across the pair's line, has q's
+  luminance within 1 − ``FRINGE_STEP`` (a near depth sample whose colour continues into the far
+  surface is a pane's speckle or a semi-transparent surface, not an opaque edge); ``--solid8``:
+  any of q's 8 neighbours (with ``--solid``).
 
 α: ``unmix`` (least squares on the line from B to F, clamped to [0, 1]) or ``geo`` (the expected
 coverage of a straight edge between the last near and first far sample: ¾ for a near pixel, ¼ for
@@ -82,6 +86,22 @@ def edge_split(color: np.ndarray, coc: np.ndarray, o) -> tuple:
             if o.wide:
                 m1 = m1 & (_shift(coc, 2 * dy, 2 * dx) < mid)
                 m2 = m2 & (_shift(coc, -2 * dy, -2 * dx) < mid)
+            if o.solid:
+                # the near side's pixel q: a far neighbour of q across the edge's direction with q's
+                # colour (luma within 1 - FRINGE_STEP) makes q a depth speckle, no opaque edge
+                y_ = c @ dof.luma_weights()
+                for sg, m in ((1, m1), (-1, m2)):
+                    qy, qx = sg * dy, sg * dx
+                    yq = _shift(y_, qy, qx)
+                    twin = np.zeros(coc.shape, bool)
+                    for py, px in (((dx, dy), (-dx, -dy)) if not o.solid8 else
+                                   [(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1) if (i, j) != (0, 0)]):
+                        rn, yn = _shift(coc, qy + py, qx + px), _shift(y_, qy + py, qx + px)
+                        twin |= (rn >= mid) & (np.abs(yn - yq) <= (1 - dof.FRINGE_STEP) * np.maximum(yq, yn))
+                    if sg == 1:
+                        m1 = m1 & ~twin
+                    else:
+                        m2 = m2 & ~twin
             Fq, Bq = np.where(m1[..., None], ca, cb), np.where(m1[..., None], cb, ca)
             if o.best:
                 dq = Fq - Bq
@@ -143,7 +163,7 @@ def main(argv=None) -> int:
     p.add_argument("--estimate", choices=("mean", "mirror"), default="mirror")
     p.add_argument("--alpha", choices=("unmix", "geo"), default="unmix")
     p.add_argument("--min-px", type=float, default=2.0)
-    for f in ("own", "wide", "diag", "best", "floor", "far-only", "drop-near"):
+    for f in ("own", "wide", "solid", "solid8", "diag", "best", "floor", "far-only", "drop-near"):
         p.add_argument(f"--{f}", action="store_true")
     o = p.parse_args(argv)
     print("scene quality: PSNR / FLIP without the split -> with it")
