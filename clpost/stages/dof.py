@@ -811,15 +811,24 @@ def tile_plan(coc: np.ndarray, rmax: int, budget: int, reach: float = 1.0,
 
 def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int, blades: int,
                      rotation_deg: float, roundness: float, sa: float,
-                     vignetting: float, profile=None, lights: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                     vignetting: float, profile=None, lights: bool = True,
+                     split=None) -> tuple[np.ndarray, np.ndarray]:
     """The lattice gather in float64 (see the module docstring), tile plan included. ``profile``:
     ``(PencilMap, scale)`` of a traced lens (the traced texture, per channel; ``sa`` unused) or
     None. ``lights``: the full-resolution gather's lights (:data:`LIGHT_RAMP_PX`; not at half
     resolution, whose working pixels are 2×2 box means — a second pixel footprint, so the ¼-px
-    ramp's premise does not hold there — and whose lights the narrow layer spreads). Returns
+    ramp's premise does not hold there — and whose lights the narrow layer spreads). ``split``:
+    None, or per pixel ``(D, O, b, r_o)`` (H×W×3, H×W×3, H×W, H×W): each source pixel q becomes two
+    sources, its own layer's colour D_q with share 1 − b_q at its own CoC and another layer's
+    colour O_q with share b_q at CoC r_o (an anti-aliased edge pixel's two surfaces), at stride 1
+    and in the centre tap; b = 0 everywhere is the one-source gather to the bit. Only the
+    measurement of docs/fidelity.md, "Splitting the edge pixels into two layers"
+    (tools/dof_edge_split.py), passes it; the kernels have no such input. Returns
     (colour, front coverage α of green)."""
     h, w = coc.shape
     lights_arg = lights
+    if split is not None:
+        sp_d, sp_o, sp_b, sp_r = split
     reach = pencil.T_MAX if profile is not None else 1.0
     dxs, dys, dists, rf, rn, _ = tap_table(budget, blades, rotation_deg, roundness)
     area = aperture_area(blades, rotation_deg, roundness)
@@ -860,72 +869,89 @@ def gather_reference(color: np.ndarray, coc: np.ndarray, rmax: int, budget: int,
         else:
             rq = coc_stack[lvl, ys + pad + dy, xs + pad + dx]
             cq = col_stack[lvl, ys + pad + dy, xs + pad + dx]
-        front = rq < rp - FRONT_MARGIN_PX
-        behind = rq > rp + FRONT_MARGIN_PX
-        r = np.where(behind, np.maximum(np.abs(rp), 0.5), np.maximum(np.abs(rq), 0.5))
-        far = rq >= 0
-        # a tap behind p, clamped to p's radius, takes p's layer's texture (a far wall's taps behind
-        # a near light: the light's own pixel is normalised against its own disc's texture)
-        texfar = np.where(behind, rp >= 0, far)
-        # the texture at half resolution: its lattice sum kept the untextured one's (texture_sums)
-        tscale = 1.0
-        if tsum is not None:
-            t1, th = light_sum_at(tsum, r / s, texfar)
-            tscale = np.where(s >= 2, th, t1)
-        rho = np.where(far, rf[k], rn[k])
-        rr = r * rho
-        cov = np.clip((rr * reach - dist) / ramp + 0.5, 0.0, 1.0)
-        # a light (LIGHT_LUMA): the LIGHT_RAMP_PX ramp in the colour sums, rescaled by its lattice
-        # sums; `cov` (1-px ramp) stays the normalising weight
-        bright = (s == 1) & lights & (cq @ np.array(LIGHT_LUMA_WEIGHTS) > LIGHT_LUMA)
-        n1, n4 = light_sum_at(lsum, r, far)
-        # (a texture of |σ| = 1 can zero a small disc's sums: such a light keeps the 1-px ramp)
-        light = bright & (r < LIGHT_RMAX_PX) & (n4 > 0)
-        n1s, n4s = np.where(n1 > 0, n1, 1.0), np.where(n4 > 0, n4, 1.0)
-        ramp_l = np.clip((rr * reach - dist) / LIGHT_RAMP_PX + 0.5, 0.0, 1.0)
-        cov_c = np.where(light, ramp_l * np.where(front, 1.0, n1) / n4s,
-                         np.where(front & bright, cov / n1s, cov))
-        # a small light (LIGHT_SMALL_PX): the 3×3's separable weight, texture-free, as the whole
-        # colour weight (lights: no profile, no vignetting, s = 1)
-        small = light & (r >= LIGHT_SMALL_PX[0]) & (r < LIGHT_SMALL_PX[1])
-        aw = local_weight(r)
-        near3 = (np.abs(dx) <= 1) & (np.abs(dy) <= 1)
-        sep = np.where(near3, np.where(dx != 0, aw, 1.0 - 2.0 * aw) * np.where(dy != 0, aw, 1.0 - 2.0 * aw), 0.0)
-        w_small = sep * np.where(front, 1.0, n1)
-        if profile is None:
-            t = np.minimum(dist / rr, 1.0)
-            a = np.where(texfar, -sa, sa)
-            g = (1.0 + a * (2 * t * t - 1.0)) * tscale * s * s / (area * r * r)
-            prof = np.ones(3)
+        if split is None:
+            srcs = ((cq, rq, None),)
+        elif k == 0:
+            bo = np.clip(np.abs(sp_r) / s, 0.0, 1.0)[..., None]
+            srcs = ((sp_d + (lvl_c - sp_d) * beta[..., None], rq, 1.0 - sp_b),
+                    (sp_o + (lvl_c - sp_o) * bo, sp_r, sp_b))
         else:
-            g = s * s / (area * r * r)
-            prof = profile_weight(profile, rq, dist / rr)
-        if vignetting > 0:
-            # the pupil at the midpoint of p and q, and the mean of their 1/φ: w(p, q) = w(q, p),
-            # so a point light keeps its energy through the normalisation (module docstring)
-            hqx, hqy = field_position(xs + dx, ys + dy, w, h)
-            hx, hy = field_position(xs + 0.5 * dx, ys + 0.5 * dy, w, h)
-            sgn = np.where(far, 1.0, -1.0)
-            ax, ay = -dx / (r * sgn), -dy / (r * sgn)
-            bx, by = pupil.barrel_centre(hx), pupil.barrel_centre(hy)
-            e = np.maximum(np.hypot(ax - bx, ay - by), np.hypot(ax + bx, ay + by))
-            inv_phi = 0.5 * (1.0 / pupil.area_fraction(np.hypot(*field_position(xs, ys, w, h)))
-                             + 1.0 / pupil.area_fraction(np.hypot(hqx, hqy)))
-            g = g * np.clip((1.0 - e) * r + 0.5, 0.0, 1.0) * inv_phi
-        g = np.where(live, g, 0.0)[..., None] * prof
-        wgt = np.where(small[..., None], np.where(live, w_small, 0.0)[..., None], g * cov_c[..., None])
-        wf = np.where(front[..., None], wgt, 0.0)
-        F += wf * cq; Wf += wf
-        hid = behind & live & (np.abs(rq) < np.abs(rp) - HIDDEN_MARGIN_PX)
-        wh = np.where(hid[..., None], wgt, 0.0)
-        Wh += wh
-        B += (wgt - wf - wh) * cq; Wb += np.where(front[..., None], 0.0, g * cov[..., None])
-        # the estimate's kernel: the background's own radius (at most p's), widened to the
-        # nearest behind tap (taps come in distance order): the hidden surface's colour at p
-        dmin = np.where(hid & np.isinf(dmin), dist, dmin)
-        rh = np.maximum(np.maximum(np.abs(rq), 0.5), dmin + 0.5 * ramp)
-        kh = np.where(hid, np.clip((rh - dist) / ramp + 0.5, 0.0, 1.0), 0.0)
-        H += kh[..., None] * cq; Hk += kh
+            yq, xq = np.clip(ys + dy, 0, h - 1), np.clip(xs + dx, 0, w - 1)
+            one = s == 1
+            bq = np.where(one, sp_b[yq, xq], 0.0)
+            srcs = ((np.where(one[..., None], sp_d[yq, xq], cq), rq, 1.0 - bq),
+                    (sp_o[yq, xq], np.where(one, sp_r[yq, xq], rq), bq))
+        for cq, rq, share in srcs:
+            front = rq < rp - FRONT_MARGIN_PX
+            behind = rq > rp + FRONT_MARGIN_PX
+            r = np.where(behind, np.maximum(np.abs(rp), 0.5), np.maximum(np.abs(rq), 0.5))
+            far = rq >= 0
+            # a tap behind p, clamped to p's radius, takes p's layer's texture (a far wall's taps behind
+            # a near light: the light's own pixel is normalised against its own disc's texture)
+            texfar = np.where(behind, rp >= 0, far)
+            # the texture at half resolution: its lattice sum kept the untextured one's (texture_sums)
+            tscale = 1.0
+            if tsum is not None:
+                t1, th = light_sum_at(tsum, r / s, texfar)
+                tscale = np.where(s >= 2, th, t1)
+            rho = np.where(far, rf[k], rn[k])
+            rr = r * rho
+            cov = np.clip((rr * reach - dist) / ramp + 0.5, 0.0, 1.0)
+            # a light (LIGHT_LUMA): the LIGHT_RAMP_PX ramp in the colour sums, rescaled by its lattice
+            # sums; `cov` (1-px ramp) stays the normalising weight
+            bright = (s == 1) & lights & (cq @ np.array(LIGHT_LUMA_WEIGHTS) > LIGHT_LUMA)
+            n1, n4 = light_sum_at(lsum, r, far)
+            # (a texture of |σ| = 1 can zero a small disc's sums: such a light keeps the 1-px ramp)
+            light = bright & (r < LIGHT_RMAX_PX) & (n4 > 0)
+            n1s, n4s = np.where(n1 > 0, n1, 1.0), np.where(n4 > 0, n4, 1.0)
+            ramp_l = np.clip((rr * reach - dist) / LIGHT_RAMP_PX + 0.5, 0.0, 1.0)
+            cov_c = np.where(light, ramp_l * np.where(front, 1.0, n1) / n4s,
+                             np.where(front & bright, cov / n1s, cov))
+            # a small light (LIGHT_SMALL_PX): the 3×3's separable weight, texture-free, as the whole
+            # colour weight (lights: no profile, no vignetting, s = 1)
+            small = light & (r >= LIGHT_SMALL_PX[0]) & (r < LIGHT_SMALL_PX[1])
+            aw = local_weight(r)
+            near3 = (np.abs(dx) <= 1) & (np.abs(dy) <= 1)
+            sep = np.where(near3, np.where(dx != 0, aw, 1.0 - 2.0 * aw) * np.where(dy != 0, aw, 1.0 - 2.0 * aw), 0.0)
+            w_small = sep * np.where(front, 1.0, n1)
+            if profile is None:
+                t = np.minimum(dist / rr, 1.0)
+                a = np.where(texfar, -sa, sa)
+                g = (1.0 + a * (2 * t * t - 1.0)) * tscale * s * s / (area * r * r)
+                prof = np.ones(3)
+            else:
+                g = s * s / (area * r * r)
+                prof = profile_weight(profile, rq, dist / rr)
+            if vignetting > 0:
+                # the pupil at the midpoint of p and q, and the mean of their 1/φ: w(p, q) = w(q, p),
+                # so a point light keeps its energy through the normalisation (module docstring)
+                hqx, hqy = field_position(xs + dx, ys + dy, w, h)
+                hx, hy = field_position(xs + 0.5 * dx, ys + 0.5 * dy, w, h)
+                sgn = np.where(far, 1.0, -1.0)
+                ax, ay = -dx / (r * sgn), -dy / (r * sgn)
+                bx, by = pupil.barrel_centre(hx), pupil.barrel_centre(hy)
+                e = np.maximum(np.hypot(ax - bx, ay - by), np.hypot(ax + bx, ay + by))
+                inv_phi = 0.5 * (1.0 / pupil.area_fraction(np.hypot(*field_position(xs, ys, w, h)))
+                                 + 1.0 / pupil.area_fraction(np.hypot(hqx, hqy)))
+                g = g * np.clip((1.0 - e) * r + 0.5, 0.0, 1.0) * inv_phi
+            g = np.where(live, g if share is None else g * share, 0.0)[..., None] * prof
+            wgt = np.where(small[..., None], np.where(live, w_small if share is None else w_small * share, 0.0)[..., None], g * cov_c[..., None])
+            wf = np.where(front[..., None], wgt, 0.0)
+            F += wf * cq; Wf += wf
+            hid = behind & live & (np.abs(rq) < np.abs(rp) - HIDDEN_MARGIN_PX)
+            if share is not None:
+                hid = hid & (share > 0)
+            wh = np.where(hid[..., None], wgt, 0.0)
+            Wh += wh
+            B += (wgt - wf - wh) * cq; Wb += np.where(front[..., None], 0.0, g * cov[..., None])
+            # the estimate's kernel: the background's own radius (at most p's), widened to the
+            # nearest behind tap (taps come in distance order): the hidden surface's colour at p
+            dmin = np.where(hid & np.isinf(dmin), dist, dmin)
+            rh = np.maximum(np.maximum(np.abs(rq), 0.5), dmin + 0.5 * ramp)
+            kh = np.where(hid, np.clip((rh - dist) / ramp + 0.5, 0.0, 1.0), 0.0)
+            if share is not None:
+                kh = kh * share
+            H += kh[..., None] * cq; Hk += kh
     B += Wh * np.where(Hk[..., None] > 0, H / np.where(Hk > 0, Hk, 1.0)[..., None], 0.0)
     alpha = np.minimum(1.0, Wf)
     fr = np.where(Wf > 0, F / np.where(Wf > 0, Wf, 1.0), 0.0)
