@@ -17,23 +17,18 @@ step() {  # step SECONDS NAME COMMAND...: run with a limit, keep its output, say
     timeout "$limit" "$@" > "$OUT/$name.txt" 2>&1; echo "$name rc $?"; tail -n 12 "$OUT/$name.txt"
 }
 nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null; nproc; git log --oneline -1 2>/dev/null
-# Measured on the H200 on 2026-11-26 (docs/benchmarks.md, "Frames in flight (`Plan.submit`) on the
-# H200"): the worst case end to end, bench on the GPU and on 16 PoCL cores, device_vs_device. Open:
-# what bounds the full camera pipelined (--timeline), and why the 16-core PoCL gathers scaled so
-# little against the 2-core box (dof 31.5 ms there vs 54 here at worst final): huge-page buffers
-# on and off on the machine's own PoCL, per kernel (tools/ab_kernel.py --pages).
-# dof's gather in its one-pixel form (CLPOST_DOF_VEC=1, bit-identical on PoCL) against the 8-wide
-# form a GPU gets by default: if clearly faster, make it the GPU's default (gather_vector_width)
-CB="bench --sizes 1920x1080 --scenes worst --qualities draft,final --device nvidia --repeats 7"
-CLPOST_DOF_VEC=8 step 60 dof_vec8 python3 -W ignore -c "$C" $CB
-CLPOST_DOF_VEC=1 step 60 dof_vec1 python3 -W ignore -c "$C" $CB
-CLPOST_DOF_VEC=1 step 90 dof_vec1_vs_pocl python3 -W ignore tools/device_vs_device.py
-step 60 end_to_end_full python3 -W ignore tools/end_to_end.py --device nvidia --scenes full --timeline --repeats 3
+# Measured on H200s on 2026-11-26/27 (docs/benchmarks.md, "Frames in flight (`Plan.submit`) on
+# the H200" and "The H200 again"): end to end (worst final 330-359 fps, the full camera 542-648 fps
+# with out=), dof's one-pixel gather (now a GPU's default), two PoCLs, huge pages (not it). Open:
+# the one-pixel forms' kernel times against the 16-lane forms on the GPU (gpu_forms; its 16-lane
+# forms are slow there, hence 3 repeats), where worst final's 2.6 ms go per kernel (dof_levels and
+# the B-spline gather were the largest), and the full camera without out= (host copy rates).
+# Only 8 files come back from a lent machine: one file per step, 8 steps at most.
+step 120 forms_worst_final python3 -W ignore tools/gpu_forms.py --device nvidia --scene worst --qualities final --repeats 3
+CLPOST_DEVICE=nvidia step 60 kernels_worst_final python3 -W ignore tools/ab_kernel.py --scene worst --quality final --size 1920x1080 --repeats 5
+step 60 end_to_end python3 -W ignore tools/end_to_end.py --device nvidia --scenes worst,full --qualities draft,final --in-flight 2 --repeats 3
 step 60 end_to_end_full_aux python3 -W ignore tools/end_to_end.py --device nvidia --scenes full --timeline --repeats 3 --aux-out
-step 60 end_to_end_pull python3 -W ignore tools/end_to_end.py --device nvidia --focus-pull --scenes worst,full --qualities draft --in-flight 2
-python3 -c "import pyopencl as cl; print([d.version + ' ' + d.driver_version for p in cl.get_platforms() for d in p.get_devices()])" 2>&1 | tail -1
-# per kernel, 4 KiB pages (old) against huge pages (new), worst final and draft on the 16 PoCL cores
-CLPOST_DEVICE=pocl step 100 pocl_pages_final python3 -W ignore tools/ab_kernel.py --scene worst --quality final --size 1920x1080 --repeats 5 --pages
-CLPOST_DEVICE=pocl step 60 pocl_pages_draft python3 -W ignore tools/ab_kernel.py --scene worst --quality draft --size 1920x1080 --repeats 5 --pages
-step 100 device_vs_device python3 -W ignore tools/device_vs_device.py
+step 30 host_copy python3 -W ignore tools/transfer_bench.py --device nvidia --repeats 7
+step 80 bench_pocl python3 -W ignore -c "$C" $B --device pocl --repeats 3
+step 110 device_vs_device python3 -W ignore tools/device_vs_device.py
 uptime
