@@ -13,7 +13,7 @@ Vectorisation (found with ``POCL_VECTORIZER_REMARKS=1``): PoCL vectorises none o
 scalar forms across work-items — the gather's tap loop has a per-tile trip count ("loop control
 flow is not understood"), the others clamp/branch per pixel. So every full-image kernel does 16
 pixels of a row per work-item in explicit ``float16`` (the gather: :func:`gather_vector_width`,
-8 or 16), loads whole rows with ``vload16`` where the group of pixels lies inside the image and
+8 or 16 on a CPU, one pixel on a GPU), loads whole rows with ``vload16`` where the group of pixels lies inside the image and
 falls back to the per-pixel formula only for the groups at an edge; the gather reads 1/max(|CoC|,
 1/2) from a fifth plane of each level instead of dividing per tap. Same formulas, same float
 operations in the same order where it mattered: the output is within 5e-7 (relative) of the
