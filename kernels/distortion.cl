@@ -236,6 +236,18 @@ __kernel void distortion_fir_cols(__global const float *restrict tmp, __global f
         vstore16(acc[o], 0, coef + ((size_t)ch * ch_rows + q + o) * pitch + 16 * g);
 }
 
+/* One channel's output value v (type T: float or float16) from its B-spline sum acc and the 2x2
+ * cell's samples tl tr (top) bl br (bottom): acc clamped to the cell's least and largest sample,
+ * handed over to the cell's bilinear value by the weight th (HDR-safe: resample and hdr_weight in
+ * clpost/stages/distortion.py). mix(x, y, t) written as fma(y - x, t, x): PoCL compiles mix as a
+ * subtract, a multiply and an add (docs/benchmarks.md, "fifth pass"). */
+#define DISTORTION_HANDOVER(T, v, acc, tl, tr, bl, br, tx, ty, th) do { \
+        const T lo_ = min(min(tl, tr), min(bl, br)), hi_ = max(max(tl, tr), max(bl, br)); \
+        const T top_ = fma((tr) - (tl), tx, tl), bottom_ = fma((br) - (bl), tx, bl); \
+        const T lin_ = fma(bottom_ - top_, ty, top_), cl_ = clamp(acc, lo_, hi_); \
+        v = fma(lin_ - cl_, th, cl_); \
+    } while (0)
+
 /* The 16-tap gather of the final filter, on the tiles that `distortion_bspline_tiles` does not
  * take, from a per-pixel tap table built once per map on the host (clpost/stages/distortion.py,
  * tap_table): base[i] is the index of the top-left tap of the 4x4 window in a coefficient plane
@@ -284,12 +296,8 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
         }
         const float a = (h1[0] + 4.0f * h1[1] + h1[2]) * (1.0f / 36.0f), e = (h2[0] + 4.0f * h2[1] + h2[2]) * (1.0f / 36.0f);
         const float d = (h1[1] + 4.0f * h1[2] + h1[3]) * (1.0f / 36.0f), f = (h2[1] + 4.0f * h2[2] + h2[3]) * (1.0f / 36.0f);
-        const float lo = min(min(a, e), min(d, f)), hi = max(max(a, e), max(d, f));
-        /* mix(x, y, t) as fma(y - x, t, x) (as DISTORTION_BSPLINE_STORE): PoCL's mix is a subtract,
-         * a multiply and an add */
-        const float top = fma(e - a, tx, a), bottom = fma(f - d, tx, d);
-        const float lin = fma(bottom - top, ty, top), cl = clamp(acc, lo, hi);
-        const float v = fma(lin - cl, th, cl);
+        float v;
+        DISTORTION_HANDOVER(float, v, acc, a, e, d, f, tx, ty, th);
         dst[c * n + i] = v * DISTORTION_COEF_SCALE;
     }
 }
@@ -297,14 +305,15 @@ __kernel void distortion_table(__global const float *restrict src, __global floa
 /* The cubic B-spline weights of the taps at floor - 1 ... floor + 2 for the fraction t in [0, 1)
  * (the host's bspline3, which the tap table uses; the third as 1 minus the others, the weights
  * summing to 1 by construction). */
-inline void distortion_bspline4(const float16 t, float16 *w)
-{
-    const float16 s = 1.0f - t, t2 = t * t, t3 = t2 * t;
-    w[0] = s * s * s * (1.0f / 6.0f);
-    w[1] = fma(0.5f, t3, (float16)(2.0f / 3.0f) - t2);
-    w[3] = t3 * (1.0f / 6.0f);
-    w[2] = 1.0f - w[0] - w[1] - w[3];
-}
+#define DISTORTION_BSPLINE4_BODY(T) { \
+        const T s = 1.0f - t, t2 = t * t, t3 = t2 * t; \
+        w[0] = s * s * s * (1.0f / 6.0f); \
+        w[1] = fma(0.5f, t3, (T)(2.0f / 3.0f) - t2); \
+        w[3] = t3 * (1.0f / 6.0f); \
+        w[2] = 1.0f - w[0] - w[1] - w[3]; \
+    }
+inline void distortion_bspline4(const float16 t, float16 *w) DISTORTION_BSPLINE4_BODY(float16)
+inline void distortion_bspline4_1(const float t, float *w) DISTORTION_BSPLINE4_BODY(float)
 
 /* The final filter on the tiles of DISTORTION_TILE x DISTORTION_TILE output pixels whose integer
  * displacement floor(s) - x takes at most two neighbouring values where there is a preimage (the
@@ -385,14 +394,10 @@ inline __attribute__((always_inline)) void distortion_bspline_ch(
     *e_ = fma(4.0f, r2, r1 + r3) * (1.0f / 36.0f);
 }
 
-/* the output of one channel from its sum and cell samples: clamped to the cell, handed over to
- * bilinear by th, colour 0 without a preimage; mix(x, y, t) written as fma(y - x, t, x): PoCL
- * compiles mix as a subtract, a multiply and an add (docs/benchmarks.md, "fifth pass") */
+/* the output of one channel (DISTORTION_HANDOVER), colour 0 without a preimage */
 #define DISTORTION_BSPLINE_STORE(acc, a, b, d, e, c) do { \
-        const float16 lo = min(min(a, b), min(d, e)), hi = max(max(a, b), max(d, e)); \
-        const float16 top = fma(b - a, tx, a), bottom = fma(e - d, tx, d); \
-        const float16 lin = fma(bottom - top, ty, top), cl = clamp(acc, lo, hi); \
-        const float16 v = fma(lin - cl, th, cl); \
+        float16 v; \
+        DISTORTION_HANDOVER(float16, v, acc, a, b, d, e, tx, ty, th); \
         vstore16(select((float16)(0.0f), v * DISTORTION_COEF_SCALE, ok), 0, dst + (c) * n + i); \
     } while (0)
 #define DISTORTION_BSPLINE_CHANNELS(off, NR, SEL, wyv) do { \
@@ -475,11 +480,13 @@ __kernel void distortion_bspline_tiles(__global const float *restrict coef, __gl
 #define DISTORTION_HDR_SCALE 512.0f
 #define DISTORTION_SUM3(r, g, b) \
     fma((b), 1.0f / DISTORTION_HDR_SCALE, fma((g), 1.0f / DISTORTION_HDR_SCALE, (r) * (1.0f / DISTORTION_HDR_SCALE)))
+/* clamp((hi - R1 lo) / ((R2 - R1) lo), 0, 1), for lo > 0. native_divide: PoCL's correctly rounded
+ * float16 division is not vectorised (half the kernel's time); a weight needs no last ulp */
+#define DISTORTION_HDR_RATIO(lo, hi) \
+    clamp(native_divide((hi) - DISTORTION_R1 * (lo), (DISTORTION_R2 - DISTORTION_R1) * (lo)), 0.0f, 1.0f)
 inline float16 distortion_hdr_t(const float16 lo, const float16 hi)
 {
-    /* native_divide: PoCL's correctly rounded float16 division is not vectorised (half the
-     * kernel's time); a weight needs no last ulp */
-    const float16 r = clamp(native_divide(hi - DISTORTION_R1 * lo, (DISTORTION_R2 - DISTORTION_R1) * lo), 0.0f, 1.0f);
+    const float16 r = DISTORTION_HDR_RATIO(lo, hi);
     return select(select((float16)(0.0f), (float16)(1.0f), hi > lo), r, lo > 0.0f);
 }
 /* lo, hi (float16) take the least and largest of the 5 values at lanes l ... l + 4 of a:b */
@@ -588,8 +595,7 @@ __kernel void distortion_dering1(__global const float *restrict src, __global fl
     }
     const float lo = min(min(min(rlo[0], rlo[1]), min(rlo[2], rlo[3])), rlo[4]);
     const float hi = max(max(max(rhi[0], rhi[1]), max(rhi[2], rhi[3])), rhi[4]);
-    const float r = clamp(native_divide(hi - DISTORTION_R1 * lo, (DISTORTION_R2 - DISTORTION_R1) * lo), 0.0f, 1.0f);
-    hdr[(size_t)q * pitch + x] = lo > 0.0f ? r : (hi > lo ? 1.0f : 0.0f);
+    hdr[(size_t)q * pitch + x] = lo > 0.0f ? DISTORTION_HDR_RATIO(lo, hi) : (hi > lo ? 1.0f : 0.0f);
 }
 
 /* distortion_bspline_tiles for one pixel: lane `get_global_id(0)` of the tile row; its own 4x4
@@ -615,18 +621,8 @@ __kernel void distortion_bspline_tiles1(__global const float *restrict coef, __g
     const int right = fx >= 1.0f, down = fy >= 1.0f;
     const float tx = right ? fx - 1.0f : fx, ty = down ? fy - 1.0f : fy;
     float wx[4], wy[4];
-    {   /* distortion_bspline4, one lane */
-        float s = 1.0f - tx, t2 = tx * tx, t3 = t2 * tx;
-        wx[0] = s * s * s * (1.0f / 6.0f);
-        wx[1] = fma(0.5f, t3, (2.0f / 3.0f) - t2);
-        wx[3] = t3 * (1.0f / 6.0f);
-        wx[2] = 1.0f - wx[0] - wx[1] - wx[3];
-        s = 1.0f - ty; t2 = ty * ty; t3 = t2 * ty;
-        wy[0] = s * s * s * (1.0f / 6.0f);
-        wy[1] = fma(0.5f, t3, (2.0f / 3.0f) - t2);
-        wy[3] = t3 * (1.0f / 6.0f);
-        wy[2] = 1.0f - wy[0] - wy[1] - wy[3];
-    }
+    distortion_bspline4_1(tx, wx);
+    distortion_bspline4_1(ty, wy);
     const float bx0 = max(1.0f - fx, 0.0f), bx2 = max(fx - 1.0f, 0.0f), bx1 = 1.0f - bx0 - bx2;
     const float by0 = max(1.0f - fy, 0.0f), by2 = max(fy - 1.0f, 0.0f), by1 = 1.0f - by0 - by2;
     const size_t base = (size_t)(y + t.w - 1 + DISTORTION_PAD) * pitch + (size_t)(t.x + t.z - 1 + DISTORTION_PAD)
@@ -658,10 +654,8 @@ __kernel void distortion_bspline_tiles1(__global const float *restrict coef, __g
         const float b = fma(4.0f, hr[1], hr[0] + hr[2]) * (1.0f / 36.0f);
         const float d = fma(4.0f, hl[2], hl[1] + hl[3]) * (1.0f / 36.0f);
         const float e = fma(4.0f, hr[2], hr[1] + hr[3]) * (1.0f / 36.0f);
-        const float lo = min(min(a, b), min(d, e)), hi = max(max(a, b), max(d, e));
-        const float top = fma(b - a, tx, a), bottom = fma(e - d, tx, d);
-        const float lin = fma(bottom - top, ty, top), cl = clamp(acc, lo, hi);
-        const float v = fma(lin - cl, th, cl);
+        float v;
+        DISTORTION_HANDOVER(float, v, acc, a, b, d, e, tx, ty, th);
         dst[c * n + i] = ok ? v * DISTORTION_COEF_SCALE : 0.0f;
     }
 }

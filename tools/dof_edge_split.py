@@ -50,11 +50,9 @@ from clpost import fidelity as fd  # noqa: E402
 from clpost.stages import dof  # noqa: E402
 
 
-def _shift(a: np.ndarray, dy: int, dx: int, pad: int = 2) -> np.ndarray:
-    """a at (y + dy, x + dx), edge-clamped."""
-    h, w = a.shape[:2]
-    p = np.pad(a, ((pad, pad), (pad, pad)) + ((0, 0),) * (a.ndim - 2), mode="edge")
-    return p[pad + dy:pad + dy + h, pad + dx:pad + dx + w]
+def _shift(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
+    """a at (y + dy, x + dx), edge-clamped (dof's own 1-D shift along each axis)."""
+    return dof._shift_clamped(dof._shift_clamped(a, dy, 0), dx, 1)
 
 
 def edge_split(color: np.ndarray, coc: np.ndarray, o) -> tuple:
