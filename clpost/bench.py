@@ -52,8 +52,9 @@ from .stages import PointwiseStage, registry
 
 SCHEMA_VERSION = 1
 DEFAULT_SIZES = ((640, 360), (1280, 720), (1920, 1080), (3840, 2160))
-BYTES_PER_PIXEL = {"color": 12, "depth": 4, "velocity": 8}
-"""float32 bytes per pixel of each device buffer (RGB, planar depth, interleaved velocity)."""
+BYTES_PER_PIXEL = {"color": 12, "depth": 4, "velocity": 8, "front": 20}
+"""float32 bytes per pixel of each device buffer (RGB, planar depth, interleaved velocity, the
+front layer's five channels)."""
 
 TALK_HD4000_FPS = {
     # Intel HD Graphics 4000, figures of the talk this project reproduces.

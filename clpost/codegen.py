@@ -25,6 +25,9 @@ AUX_BUFFERS = {
     # stage reads it). Layouts: depth H×W float32 (+inf sky); velocity H×W×2 float32 interleaved.
     "depth": "__global const float *restrict depth",
     "velocity": "__global const float *restrict velocity",
+    # the front layer H×W×5 interleaved (premultiplied R, G, B, alpha, depth); the front_layer
+    # stage's own kernels read it, no pointwise stage does
+    "front": "__global const float *restrict front",
 }
 
 

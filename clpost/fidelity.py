@@ -208,15 +208,32 @@ def cycles_camera(shot: dict, width: int, height: int, dof: bool = True, motion:
     return Camera(**kw)
 
 
+def cycles_layers(data, entry: dict):
+    """The two-layer frame of a Cycles manifest ``entry`` with ``layers`` (tools/cycles_truth/make.py
+    ``--layers``): its ``bg.exr`` with its ``fg.exr`` (premultiplied, as a transparent film writes
+    it) as the :attr:`~clpost.frame.Frame.front` layer."""
+    from pathlib import Path
+
+    from .exr import read_frame
+    from .frame import Frame, front_layer
+
+    fg = read_frame(Path(data) / entry["layers"]["fg"]["file"])
+    bg = read_frame(Path(data) / entry["layers"]["bg"]["file"])
+    alpha = fg.alpha if fg.alpha is not None else np.ones(fg.color.shape[:2], np.float32)
+    return Frame(color=bg.color, depth=bg.depth, front=front_layer(fg.color, alpha, fg.depth))
+
+
 CYCLES_STAGES = {"dof": ["dof"], "motion": ["motion_blur"], "dofmotion": ["dof", "motion_blur"]}
 """A Cycles truth's kind -> the clpost stages that reproduce it from the pinhole export."""
 
 
-def cycles_pipeline(entry: dict, kind: str, quality: str):
+def cycles_pipeline(entry: dict, kind: str, quality: str, front: bool = False):
     """The :class:`~clpost.pipeline.Pipeline` that reproduces truth ``kind`` of a Cycles manifest
-    ``entry`` from its pinhole export (:func:`cycles_camera`, :data:`CYCLES_STAGES`)."""
+    ``entry`` from its pinhole export (:func:`cycles_camera`, :data:`CYCLES_STAGES`); ``front``:
+    from its two layers (the ``front_layer`` stage added)."""
     from .pipeline import Pipeline
 
     w, h = entry["size"]
     cam = cycles_camera(entry["shot"], w, h, dof=kind != "motion", motion=kind != "dof")
-    return Pipeline(cam, quality=quality, stages=CYCLES_STAGES[kind])
+    stages = CYCLES_STAGES[kind] + (["front_layer"] if front else [])
+    return Pipeline(cam, quality=quality, stages=stages)

@@ -12,6 +12,9 @@ buffer        shape       unit / meaning
 ``alpha``     H×W         coverage in [0, 1]; 0 marks "no data" (optional)
 ``labels``    H×W each    named label planes — instance/object ids, segmentation, normals, any AOV —
                           that follow the geometry but are never blended (optional, see below)
+``front``     H×W×5       a second layer in front of the image: premultiplied linear R, G, B, its
+                          coverage α in [0, 1], its planar depth in metres (> 0, ``+inf`` allowed
+                          where α = 0); :func:`front_layer` packs it (optional, see below)
 ============  ==========  ====================================================================
 
 ``labels`` maps a channel name (the EXR's full name, e.g. ``ViewLayer.IndexOB.X``, ``id``,
@@ -25,6 +28,14 @@ once to float32 (explicitly, here); any other dtype is refused rather than silen
 Frame never keeps the caller's arrays: float32 input is copied, so writing into the caller's
 array afterwards cannot slip unvalidated values (NaN) into the frame.
 NaN is never valid; ±inf only as ``+inf`` in depth.
+
+``front`` is what a renderer gives when the foreground is rendered as its own layer (a view layer
+or render pass of the near objects over a transparent film, the rest hidden from the camera
+or held out): the image (``color``, ``depth``) is then the background without them. The
+``front_layer`` stage defocuses it by its own depth and composites it over the background
+after depth of field, so the lens sees the background behind a blurred foreground's edge,
+which a one-layer image does not hold (docs/fidelity.md, "What two layers would give"). The
+stage consumes it: a processed frame has no ``front``.
 
 ``metadata["frame_index"]`` (int, default 0) is the frame number of a sequence; the renderer and
 the batch loop set it, and the grain and sensor stages hash it into their noise.
@@ -169,6 +180,8 @@ class Frame:
     labels: dict = field(default_factory=dict)
     """Named (H, W) label planes (module docstring); carried through the geometric stages by
     nearest sampling."""
+    front: np.ndarray | None = None
+    """The layer in front of the image, H×W×5 (module docstring; :func:`front_layer`)."""
     copy: InitVar[bool] = True
     """``False``: the Frame takes the caller's float32 arrays over instead of copying them (a
     reader's fresh buffers); the caller must not write them afterwards."""
@@ -226,6 +239,9 @@ class Frame:
             _first_bad("alpha", np.isnan(a), "are NaN", "alpha is coverage in [0, 1]")
             _first_bad("alpha", (a < 0) | (a > 1), "are outside [0, 1]", "alpha is coverage in [0, 1]; clip it")
             object.__setattr__(self, "alpha", np.ascontiguousarray(a))
+
+        if self.front is not None:
+            object.__setattr__(self, "front", _front_plane(self.front, (h, w), copy))
 
         labels = {} if self.labels is None else self.labels
         if not isinstance(labels, dict):
@@ -303,7 +319,7 @@ class Frame:
         otherwise cost more than an exposure pass.
         """
         kw = dict(color=self.color, depth=self.depth, velocity=self.velocity,
-                  alpha=self.alpha, metadata=dict(self.metadata), labels=dict(self.labels))
+                  alpha=self.alpha, metadata=dict(self.metadata), labels=dict(self.labels), front=self.front)
         kw.update(changes)
         if validate:
             return Frame(**kw)
@@ -311,3 +327,54 @@ class Frame:
         for k, v in kw.items():
             object.__setattr__(out, k, v)
         return out
+
+
+def front_layer(color: np.ndarray, alpha: np.ndarray, depth: np.ndarray, premultiplied: bool = True) -> np.ndarray:
+    """The H×W×5 ``Frame.front`` array of a layer: ``color`` (H×W×3 linear RGB, premultiplied by
+    ``alpha`` unless ``premultiplied=False``), ``alpha`` (H×W coverage) and ``depth`` (H×W planar
+    metres; any value > 0 or ``+inf`` where alpha is 0). A covered pixel whose depth is ``+inf``
+    (the depth pass's one sample missed the layer) takes its covered neighbours' nearest depth."""
+    color = np.asarray(color, np.float32)[..., :3]
+    a = np.asarray(alpha, np.float32)
+    if color.shape[:2] != a.shape or np.shape(depth) != a.shape:
+        raise InputError(f"front_layer: color {color.shape}, alpha {a.shape} and depth {np.shape(depth)} "
+                         "must share one H×W")
+    if not premultiplied:
+        color = color * a[..., None]
+    return np.concatenate([color, a[..., None], _fill_missed(np.asarray(depth, np.float32), a > 0)[..., None]],
+                          axis=-1)
+
+
+def _fill_missed(depth: np.ndarray, covered: np.ndarray) -> np.ndarray:
+    """A renderer's depth pass is one sample per pixel (Cycles: the first), so a pixel the layer
+    covers only in part may hold no hit (+inf; a reader maps Blender's 1e10 to it): such a pixel
+    takes the nearest depth of its covered 3×3 neighbours, repeated until every covered pixel
+    has one (a layer with no finite depth at all stays at +inf)."""
+    d = np.where(covered, depth, np.inf).astype(np.float32)
+    todo = covered & np.isinf(d)
+    while todo.any():
+        p = np.pad(d, 1, constant_values=np.inf)
+        h, w = d.shape
+        near = np.min([p[j:j + h, i:i + w] for j in range(3) for i in range(3)], axis=0)
+        d = np.where(todo, near, d)
+        left = covered & np.isinf(d)
+        if left.sum() == todo.sum():
+            break
+        todo = left
+    return np.where(covered, d, depth).astype(np.float32)
+
+
+def _front_plane(front, hw: tuple[int, int], copy: bool) -> np.ndarray:
+    f = _as_float32("front", front, copy)
+    if f.shape != (*hw, 5):
+        raise InputError(f"Frame.front: shape {f.shape} is not (H, W, 5) = {(*hw, 5)}: premultiplied R, G, B, "
+                         "alpha, depth (clpost.frame.front_layer packs them)")
+    rgba, depth = f[..., :4], f[..., 4]
+    if not np.isfinite(rgba).all():
+        _first_bad("front", ~np.isfinite(rgba).all(axis=2), "have a non-finite colour or alpha",
+                   "fix the front layer's render (NaN and inf are never valid)")
+    _first_bad("front", (f[..., 3] < 0) | (f[..., 3] > 1), "have alpha outside [0, 1]",
+               "alpha is the front layer's coverage in [0, 1]; clip it")
+    _first_bad("front", ~(depth > 0), "have depth NaN, <= 0 or -inf",
+               "the front layer's depth is planar camera-space Z in metres (> 0, +inf where alpha is 0)")
+    return np.ascontiguousarray(f)

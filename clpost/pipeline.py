@@ -155,6 +155,10 @@ class Pipeline:
             else:
                 out.append(PlanEntry(st.name, False, why))
         check_prerequisites(self._stages, out, self._selected, self._already_applied, cam, frame)
+        if frame.front is not None and not any(e.planned for e in out if e.stage == "front_layer"):
+            src = frame.metadata.get("path")
+            raise InputError((f"{src}: " if src else "") + "the frame has a front layer (Frame.front, --front) but "
+                             "--stages leaves out front_layer, which would drop it; add front_layer to --stages")
         return out
 
     def plan(self, frame: Frame) -> list[str]:

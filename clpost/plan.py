@@ -57,7 +57,8 @@ def resized_view(frame: Frame, size: tuple[int, int], host: dict, by: str) -> Fr
     meta = dict(frame.metadata, resampled_by=by)
     meta.pop("intrinsics", None)  # the render's pinhole intrinsics no longer describe these pixels
     return frame.replace(color=placeholder, depth=host.get("depth"), velocity=host.get("velocity"),
-                         alpha=host.get("alpha"), labels=host.get("labels", {}), metadata=meta, validate=False)
+                         alpha=host.get("alpha"), labels=host.get("labels", {}), metadata=meta, front=None,
+                         validate=False)
 
 
 @dataclass
@@ -361,7 +362,7 @@ class Plan:
             if isinstance(ev, cl.NannyEvent):
                 ev.wait()
         self._events = events  # read into last_timings only when asked (profiling queries cost host time)
-        return frame.replace(color=out, metadata=meta, validate=False, **host_out)
+        return frame.replace(color=out, metadata=meta, validate=False, front=None, **host_out)
 
     def submit(self, frame: Frame, camera=None, out: np.ndarray | None = None):
         """Enqueue one frame and return at once with a :class:`clpost.stream.PendingFrame`, whose
@@ -488,7 +489,7 @@ class Plan:
             for queue in (uq, q):
                 queue.finish()
             raise
-        pending = PendingFrame(frame.replace(color=out, metadata=meta, validate=False, **host_out), events,
+        pending = PendingFrame(frame.replace(color=out, metadata=meta, validate=False, front=None, **host_out), events,
                                bufs.stream.download(dq, copies), self, [out, *outs.values()])
         bufs.stream.commit(slot, pending)
         return pending

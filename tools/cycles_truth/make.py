@@ -7,6 +7,10 @@ Per scene (each render in its own Blender process, tools/cycles_truth/render.py)
 
 - ``pinhole.exr``: the artist's export, byte for byte as Blender wrote it (multilayer, float,
   ZIP; Combined, Depth, Vector, and Emit for the metrics), seed 0.
+- ``fg.exr`` and ``bg.exr`` (``--layers``; the scenes of ``scenes.FOREGROUND``): the same
+  export split into two layers — the foreground objects over a transparent film and the rest
+  without them (``render.py``'s ``fg`` and ``bg`` kinds), as Blender wrote them, seed 0: the
+  input of the ``front_layer`` stage (tools/cycles_truth/two_layers.py).
 - ``dof.exr`` (every scene), ``motion.exr`` and ``dofmotion.exr`` (scenes with motion): the mean
   of two Cycles renders with seeds 1 and 2, stored as half-float RGB (ZIP), with the Emit pass (the
   lamps alone) as emit.R/G/B. The two seeds'
@@ -102,6 +106,9 @@ def main(argv=None) -> int:
     p.add_argument("--raw", default="/tmp/cycles/raw")
     p.add_argument("--reuse", action="store_true", help="keep raw renders already in --raw with the same settings")
     p.add_argument("--out", default=os.path.join(HERE, "..", "..", "tests", "data", "cycles"))
+    p.add_argument("--layers", action="store_true", help="also render the fg and bg layers (scenes.FOREGROUND)")
+    p.add_argument("--layers-only", action="store_true",
+                   help="render only the layers, into the scene's entry already in the manifest")
     a = p.parse_args(argv)
     os.makedirs(a.raw, exist_ok=True)
     out = os.path.abspath(a.out)
@@ -112,6 +119,13 @@ def main(argv=None) -> int:
         t0 = time.time()
         d = os.path.join(out, scene)
         os.makedirs(d, exist_ok=True)
+        if a.layers_only:
+            if scene not in manifest["scenes"]:
+                raise SystemExit(f"make.py: --layers-only needs {scene} in {man_path}; render it first")
+            entry = manifest["scenes"][scene]
+            entry["layers"] = render_layers(scene, d, a)
+            write_manifest(man_path, scene, entry)
+            continue
         pin_raw = os.path.join(a.raw, f"{scene}_pinhole.exr")
         info = render(scene, "pinhole", pin_raw, a.pinhole_spp, 0, a.threads, a.threshold, a.reuse, a.size)
         shutil.copyfile(pin_raw, os.path.join(d, "pinhole.exr"))
@@ -135,22 +149,41 @@ def main(argv=None) -> int:
                                      "adaptive_threshold": a.threshold, "render_s": times,
                                      "noise_floor_psnr_srgb_db": round(floor, 2)}
             print(f"{scene} {kind}: floor {floor:.2f} dB, {times} s", flush=True)
+        if a.layers:
+            entry["layers"] = render_layers(scene, d, a)
         entry["wall_s"] = round(time.time() - t0, 1)
         rel_out = os.path.relpath(out, os.path.join(HERE, "..", ".."))
         entry["command"] = (f"/work/bpyvenv/bin/python tools/cycles_truth/make.py --scenes {scene} --spp {a.spp} "
                             f"--pinhole-spp {a.pinhole_spp} --threshold {a.threshold:g}"
                             + ("" if a.size == "480x270" else f" --size {a.size}")
                             + ("" if rel_out == os.path.join("tests", "data", "cycles") else f" --out {rel_out}"))
-        if os.path.exists(man_path):  # another make.py may have added scenes meanwhile
-            manifest = json.load(open(man_path))
-        manifest["scenes"][scene] = entry
-        manifest.pop("command", None)  # per scene now
-        manifest["note"] = "written by tools/cycles_truth/make.py; see tests/data/cycles/README.md"
-        tmp = man_path + ".tmp"
-        with open(tmp, "w") as fh:
-            json.dump(manifest, fh, indent=1)
-        os.replace(tmp, man_path)
+        write_manifest(man_path, scene, entry)
     return 0
+
+
+def render_layers(scene, d, a) -> dict:
+    """fg.exr and bg.exr of ``scene`` into folder ``d`` (as Blender wrote them); their manifest entry."""
+    out = {}
+    for kind in ("fg", "bg"):
+        raw = os.path.join(a.raw, f"{scene}_{kind}.exr")
+        info = render(scene, kind, raw, a.pinhole_spp, 0, a.threads, a.threshold, a.reuse, a.size)
+        shutil.copyfile(raw, os.path.join(d, f"{kind}.exr"))
+        out[kind] = {"file": f"{scene}/{kind}.exr", "spp": a.pinhole_spp, "seed": 0, "render_s": info["render_s"]}
+    rel_out = os.path.relpath(os.path.dirname(d), os.path.join(HERE, "..", ".."))
+    out["command"] = (f"/work/bpyvenv/bin/python tools/cycles_truth/make.py --scenes {scene} --layers-only "
+                      f"--pinhole-spp {a.pinhole_spp} --out {rel_out}")
+    return out
+
+
+def write_manifest(man_path, scene, entry) -> None:
+    manifest = json.load(open(man_path)) if os.path.exists(man_path) else {"scenes": {}}
+    manifest["scenes"][scene] = entry  # re-read first: another make.py may have added scenes meanwhile
+    manifest.pop("command", None)  # per scene now
+    manifest["note"] = "written by tools/cycles_truth/make.py; see tests/data/cycles/README.md"
+    tmp = man_path + ".tmp"
+    with open(tmp, "w") as fh:
+        json.dump(manifest, fh, indent=1)
+    os.replace(tmp, man_path)
 
 
 if __name__ == "__main__":

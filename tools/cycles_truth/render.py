@@ -17,6 +17,12 @@ Kinds:
 - ``motion``: motion blur on, shutter ``Shot.shutter_frames`` (0.5 frame = 180°), centred on the
   frame.
 - ``dofmotion``: both.
+- ``fg`` and ``bg`` (scenes of ``scenes.FOREGROUND`` only): the pinhole split into two layers, as
+  an artist renders them separately. ``fg``: the foreground objects alone over a transparent film
+  (premultiplied RGBA, Depth), everything else invisible to the camera; ``bg``: the rest with the
+  foreground invisible to the camera. Invisible objects still cast their shadows, so
+  ``fg + (1 − α) bg`` is the pinhole. ``fg``'s Depth pass has alpha threshold 0 (the layer's
+  nearest surface however transparent; Blender's default 0.5 skips a pane of opacity 0.3).
 
 Denoising off; adaptive sampling with ``--threshold`` (0 = off) and a minimum of spp/4 samples.
 A JSON sidecar (out + ``.json``) records the camera, the lamps, the samples, the seed and the
@@ -37,7 +43,7 @@ import bpy  # noqa: E402
 
 import scenes  # noqa: E402
 
-KINDS = ("pinhole", "dof", "motion", "dofmotion")
+KINDS = ("pinhole", "dof", "motion", "dofmotion", "fg", "bg")
 
 
 def configure(kind: str, shot, a) -> None:
@@ -64,7 +70,7 @@ def configure(kind: str, shot, a) -> None:
     r.threads = a.threads
     r.use_compositing = False
     r.use_sequencer = False
-    r.film_transparent = False
+    r.film_transparent = kind == "fg"
     scene.view_settings.view_transform = "Standard"
     scene.view_settings.look = "None"
     scene.camera.data.dof.use_dof = kind in ("dof", "dofmotion")
@@ -74,13 +80,27 @@ def configure(kind: str, shot, a) -> None:
     vl = scene.view_layers[0]
     vl.use_pass_combined = True
     vl.use_pass_emit = True  # the lamps alone (the sky is the Environment pass): per-emitter metrics
-    vl.use_pass_z = kind == "pinhole"
+    vl.use_pass_z = kind in ("pinhole", "fg", "bg")
     vl.use_pass_vector = kind == "pinhole"  # Cycles writes vectors only with motion blur off
+    if kind == "fg":  # the depth of the layer's nearest surface however transparent (default 0.5)
+        vl.pass_alpha_threshold = 0.0
     im = r.image_settings
     im.media_type = "MULTI_LAYER_IMAGE"
     im.file_format = "OPEN_EXR_MULTILAYER"
     im.color_depth = "32"
     im.exr_codec = "ZIP"
+
+
+def split_layers(scene_name: str, kind: str) -> None:
+    """Hide from the camera what the ``fg`` / ``bg`` layer leaves out (shadows stay)."""
+    if kind not in ("fg", "bg"):
+        return
+    if scene_name not in scenes.FOREGROUND:
+        raise SystemExit(f"render.py: kind {kind} needs a scene of scenes.FOREGROUND "
+                         f"({', '.join(sorted(scenes.FOREGROUND))}), not {scene_name}")
+    for ob in bpy.context.scene.objects:
+        if ob.type in ("MESH", "CURVE", "SURFACE", "META"):
+            ob.visible_camera = scenes.is_foreground(scene_name, ob.name) == (kind == "fg")
 
 
 def main(argv=None) -> int:
@@ -99,6 +119,7 @@ def main(argv=None) -> int:
     w, h = (int(v) for v in a.size.lower().split("x"))
     shot = scenes.build(a.scene, w, h)
     configure(a.kind, shot, a)
+    split_layers(a.scene, a.kind)
     scene = bpy.context.scene
     scene.render.filepath = os.path.abspath(a.output)
     scene.render.use_file_extension = False

@@ -413,6 +413,22 @@ SCENES = {
 # "Held-out scenes")
 # ----------------------------------------------------------------------------------------------
 
+# The foreground of the partial-occlusion scenes, by object name prefix: what `render.py`'s ``fg``
+# and ``bg`` kinds split the pinhole into (the layers an artist renders separately, which the
+# one-layer input lacks; docs/fidelity.md, "What two layers would give").
+FOREGROUND = {
+    "thin": ("bar", "handrail", "wire3"),
+    "occluder": ("pole", "ball", "branch"),
+    "transparent": ("pane",),
+    "h_fence": ("fw", "fence_top", "post"),
+    "h_panes": ("pane", "sheet"),
+}
+
+
+def is_foreground(scene_name, object_name):
+    return any(object_name.startswith(p) for p in FOREGROUND[scene_name])
+
+
 def at_px(shot, width, u, v, y):
     """World (x, y, z) of the point at depth y seen at pixel (u·width, v·height), height = width·9/16."""
     f = f_px_of(shot, width)
