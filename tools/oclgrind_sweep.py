@@ -25,8 +25,9 @@ SIZES = ((1, 1), (3, 2), (17, 5), (37, 23))
 
 
 def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0, intrinsics=None, labels=0,
-           moving=None, lights=False, light_depth=None):
+           moving=None, lights=False, light_depth=None, front=False):
     from clpost import Frame
+    from clpost.frame import front_layer
 
     rng = np.random.default_rng(seed + 7919 * w + h)
     color = (rng.random((h, w, 3)) * scale).astype(np.float32)
@@ -50,7 +51,12 @@ def _frame(w: int, h: int, seed: int = 0, *, depth=True, velocity=0.0, scale=4.0
     if intrinsics is not None:
         meta["intrinsics"] = intrinsics
     lab = {f"id{i}": rng.integers(0, 2**32, (h, w), dtype=np.uint64).astype(np.uint32) for i in range(labels)}
-    return Frame(color, depth=d, velocity=v, metadata=meta, labels=lab)
+    fr = None
+    if front:  # a front layer: soft coverage (0 in a third of the pixels) touching every edge, near depths
+        a = np.clip(rng.uniform(-0.5, 1.2, (h, w)), 0.0, 1.0).astype(np.float32)
+        fr = front_layer(rng.random((h, w, 3)) * scale * a[..., None], a,
+                         np.where(a > 0, rng.uniform(0.2, 1.0, (h, w)), np.inf))
+    return Frame(color, depth=d, velocity=v, metadata=meta, labels=lab, front=fr)
 
 
 def _run(camera, stages, quality, w, h, *, narrow=False, wide=False, **frame_kw):
@@ -293,6 +299,12 @@ def cases():
     for w, h in ((3, 2), (17, 5)):
         add(f"grain-boolean final {w}x{h}",
             lambda w=w, h=h: _run(boolean, ["exposure", "film", "grain"], "final", w, h))
+    # front_layer: a foreground layer over dof's background (its tile reach, the clamped taps)
+    front_cam = dof_sized(dof_cams["blades"])
+    for q in ("draft", "final"):
+        for w, h in small:
+            add(f"front_layer {q} {w}x{h}",
+                lambda q=q, w=w, h=h: _run(front_cam, ["dof", "front_layer"], q, w, h, front=True))
     # a gather between pointwise stages: both layout conversions around it
     for w, h in ((3, 2), (37, 23)):
         add(f"layouts vignetting|astigmatism|exposure final {w}x{h}",
