@@ -168,18 +168,44 @@ __kernel void front_layer_gather(__global const float *restrict planes, __global
     o[p] = v.x; o[n + p] = v.y; o[2 * n + p] = v.z; o[3 * n + p] = v.w;
 }
 
+/* per full-resolution tile: whether any level >= 1 has spread something under the bilinear
+ * corners of one of its pixels (else the composite skips the levels there) */
+__kernel void front_layer_active(__global const float *restrict reach, __global const int *restrict levels,
+                                 __global int *restrict active, const int tw, const int th)
+{
+    const int tx = get_global_id(0), ty = get_global_id(1);
+    if (tx >= tw || ty >= th) return;
+    int any = 0;
+    for (int L = 1; L < FRONT_LEVELS && !any; ++L) {
+        __global const int *lv = levels + 5 * (L - 1);
+        const int wl = lv[0], hl = lv[1], twl = lv[3], thl = (hl + FRONT_TILE - 1) / FRONT_TILE;
+        /* level pixels under the tile's pixels' corners: floor((x + 0.5) / 2^L - 0.5) ... + 1 */
+        const int x0 = clamp(((tx * FRONT_TILE) >> L) - 1, 0, wl - 1), x1 = clamp((((tx + 1) * FRONT_TILE - 1) >> L) + 1, 0, wl - 1);
+        const int y0 = clamp(((ty * FRONT_TILE) >> L) - 1, 0, hl - 1), y1 = clamp((((ty + 1) * FRONT_TILE - 1) >> L) + 1, 0, hl - 1);
+        __global const float *rl = reach + lv[4];
+        for (int j = y0 / FRONT_TILE; j <= min(y1 / FRONT_TILE, thl - 1); ++j)
+            for (int i = x0 / FRONT_TILE; i <= min(x1 / FRONT_TILE, twl - 1); ++i)
+                any |= rl[j * twl + i] >= 0.0f;
+    }
+    active[(size_t)ty * tw + tx] = any;
+}
+
 /* out = F_rgb + (1 - F_a) src: F = level 0 spread here + each level >= 1 upsampled (bilinear,
  * pixel centres aligned, edges clamped) where its tiles under the four corners reach anything.
  * levels[5 (L - 1) ...]: level L's wl, hl, offset in `spread`, tiles across, offset in `reach` */
 __kernel void front_layer(__global const float *restrict src, __global const float *restrict planes,
                           __global const float *restrict reach, __global const float *restrict rho,
                           __global const float *restrict spread, __global const int *restrict levels,
-                          __global float *restrict dst, const int w, const int h, const int tw)
+                          __global const int *restrict active, __global float *restrict dst, const int w,
+                          const int h, const int tw)
 {
     const int x = get_global_id(0), y = get_global_id(1);
     if (x >= w || y >= h) return;
     float4 acc = front_spread(planes, reach, rho, x, y, w, h, tw);
+    const int on = active[(size_t)(y / FRONT_TILE) * tw + x / FRONT_TILE];
+#pragma unroll
     for (int L = 1; L < FRONT_LEVELS; ++L) {
+        if (!on) break;
         __global const int *lv = levels + 5 * (L - 1);
         const int wl = lv[0], hl = lv[1], twl = lv[3];
         const float f = (float)(1 << L);

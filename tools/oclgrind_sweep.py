@@ -300,11 +300,15 @@ def cases():
         add(f"grain-boolean final {w}x{h}",
             lambda w=w, h=h: _run(boolean, ["exposure", "film", "grain"], "final", w, h))
     # front_layer: a foreground layer over dof's background (its tile reach, the clamped taps)
+    # and "levels": 0.05 mm pixels, front radii of 4-40 px, spread at levels 0-4 (draft) / 0-3 (final)
     front_cam = dof_sized(dof_cams["blades"])
+    front_wide = lambda w, h: replace(dof_cams["blades"], sensor_mm=(0.05 * w, 0.05 * h))  # noqa: E731
     for q in ("draft", "final"):
         for w, h in small:
             add(f"front_layer {q} {w}x{h}",
                 lambda q=q, w=w, h=h: _run(front_cam, ["dof", "front_layer"], q, w, h, front=True))
+        add(f"front_layer levels {q} 45x29",
+            lambda q=q: _run(front_wide, ["dof", "front_layer"], q, 45, 29, front=True))
     # a gather between pointwise stages: both layout conversions around it
     for w, h in ((3, 2), (37, 23)):
         add(f"layouts vignetting|astigmatism|exposure final {w}x{h}",

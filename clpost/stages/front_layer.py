@@ -273,6 +273,9 @@ class FrontLayer(GatherStage):
             if L > 0:
                 evs.append(rt.launch(knl["front_layer_gather"], (wl, hl), None, planes, reach, rho, spread,
                                      i32(wl), i32(hl), i32(tw), i32(offsets[L - 1]), i32(toffsets[L])))
-        evs.append(rt.launch(knl["front_layer"], (w, h), None, src, planes0, reach, rho, spread, table, dst,
+        active = rt.scratch(self, "active", (tsizes[0][1], tsizes[0][0]), np.int32)
+        evs.append(rt.launch(knl["front_layer_active"], tsizes[0], None, reach, table, active, i32(tsizes[0][0]),
+                             i32(tsizes[0][1])))
+        evs.append(rt.launch(knl["front_layer"], (w, h), None, src, planes0, reach, rho, spread, table, active, dst,
                              i32(w), i32(h), i32(tsizes[0][0])))
         return evs
