@@ -41,3 +41,26 @@ def assert_stage_runs(stage, camera, frame):
     """``assert_planned`` for a stage object whose ``reference`` a test calls directly."""
     why = stage.skip_reason(camera, frame)
     assert why is None, f"stage '{stage.name}' is skipped ({why}): the comparison would be vacuous"
+
+
+def assert_two_layers_meet_the_targets(data, entry: dict, scene: str, quality: str) -> None:
+    """A Cycles scene stored as two layers (docs/fidelity.md, "Two layers"): the layers are the
+    one-layer export split; clpost on them beats clpost on the one-layer export (itself above
+    Blender's Defocus) at every quality, and final meets the issue's targets (within 4 dB of the
+    noise floor, FLIP ≤ 0.03)."""
+    from clpost import fidelity as fd
+    from clpost.exr import read_frame
+
+    frame = read_frame(data / entry["pinhole"]["file"])
+    truth = fd.read_rgb(data / entry["truths"]["dof"]["file"], "")
+    layered = fd.cycles_layers(data, entry)
+    f = layered.front
+    assert fd.psnr_srgb(frame.color, f[..., :3] + (1 - f[..., 3:4]) * layered.color) > 50
+    two = fd.cycles_pipeline(entry, "dof", quality, front=True).run(layered).color
+    one = fd.cycles_pipeline(entry, "dof", quality).run(frame).color
+    psnr, flip = fd.psnr_srgb(truth, two), fd.flip_ldr(truth, two)
+    floor = entry["truths"]["dof"]["noise_floor_psnr_srgb_db"]
+    assert psnr > fd.psnr_srgb(truth, one), f"{scene} {quality}: {psnr:.2f} dB"
+    assert quality != "final" or psnr >= floor - 4, f"{scene} final: {psnr:.2f} dB, floor {floor}"
+    if flip is not None:
+        assert flip < fd.flip_ldr(truth, one) and (quality != "final" or flip <= 0.03), f"{scene} {quality}: {flip:.5f}"

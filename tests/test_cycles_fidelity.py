@@ -16,6 +16,8 @@ import pytest
 from clpost import fidelity as fd
 from clpost.exr import read_frame
 
+from conftest import assert_two_layers_meet_the_targets
+
 DATA = Path(__file__).parent / "data" / "cycles"
 MANIFEST = json.loads((DATA / "manifest.json").read_text())
 MARGIN_DB = 0.5
@@ -214,19 +216,4 @@ def test_layered_scenes_are_stored():
 @pytest.mark.parametrize("scene", LAYERED)
 @pytest.mark.parametrize("quality", ["draft", "final"])
 def test_two_layers_meet_the_targets(scene, quality):
-    entry, frame = _scene(scene)
-    truth = _channels(DATA / entry["truths"]["dof"]["file"], "")
-    layered = fd.cycles_layers(DATA, entry)
-    f = layered.front
-    over = f[..., :3] + (1 - f[..., 3:4]) * layered.color
-    assert fd.psnr_srgb(frame.color, over) > 50  # the two layers are the one-layer export, split
-    two = fd.cycles_pipeline(entry, "dof", quality, front=True).run(layered).color
-    one = _run(entry, frame, "dof", quality)
-    psnr, flip = fd.psnr_srgb(truth, two), fd.flip_ldr(truth, two)
-    # every quality above the one-layer export (itself above Blender's Defocus, docs/fidelity.md);
-    # final within 4 dB of the noise floor and FLIP ≤ 0.03 (the targets)
-    floor = entry["truths"]["dof"]["noise_floor_psnr_srgb_db"]
-    assert psnr > fd.psnr_srgb(truth, one), f"{scene} {quality}: {psnr:.2f} dB"
-    assert quality != "final" or psnr >= floor - 4, f"{scene} final: {psnr:.2f} dB, floor {floor}"
-    if flip is not None:
-        assert flip < fd.flip_ldr(truth, one) and (quality != "final" or flip <= 0.03), f"{scene} {quality}: {flip:.5f}"
+    assert_two_layers_meet_the_targets(DATA, MANIFEST["scenes"][scene], scene, quality)

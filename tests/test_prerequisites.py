@@ -16,12 +16,15 @@ FILM = Camera(luminance_scale=1.0, f_number=4.0, shutter_s=1 / 100, iso=200.0, f
 SENSOR = Camera(luminance_scale=1.0, f_number=4.0, shutter_s=1 / 100, iso=200.0, sensor_preset="apsc-cmos")
 RAW = Camera(luminance_scale=1.0, f_number=4.0, shutter_s=1 / 100, iso=200.0, raw_calibration="a7s2-like", isp=True)
 HALATION = FILM.with_(halation=True)
+DOF = Camera(luminance_scale=1.0, f_number=1.4, focus_distance_m=2.0, depth_of_field=True, sensor_mm=(0.3, 0.2))
 
 
 def _camera(name):
     closure = _closure(name)
     if "halation" in closure:
         return HALATION
+    if "dof" in closure:  # front_layer: composites over dof's background
+        return DOF
     return SENSOR if "sensor" in closure else RAW if "raw" in closure else FILM
 
 
@@ -40,13 +43,21 @@ def _closure(name: str) -> set[str]:
     return out
 
 
-def _frame(w=7, h=5, highlight=False):
-    """A dim frame; ``highlight``: with one lamp bright enough for halation to be planned."""
+def _frame(w=7, h=5, highlight=False, front=False):
+    """A dim frame; ``highlight``: with one lamp bright enough for halation to be planned;
+    ``front``: with depth (out of focus) and a front layer."""
+    from clpost.frame import front_layer
+
     rng = np.random.default_rng(3)
     color = (rng.random((h, w, 3)) * 0.5 + 0.05).astype(np.float32)
     if highlight:
         color[h // 2, w // 2] = 5000.0
-    return Frame(color)
+    if not front:
+        return Frame(color)
+    a = np.zeros((h, w), np.float32)
+    a[1:3, 1:4] = 1.0
+    return Frame(color, depth=rng.uniform(0.5, 20.0, (h, w)).astype(np.float32),
+                 front=front_layer(color * a[..., None], a, np.full((h, w), 0.5, np.float32)))
 
 
 def test_the_declared_prerequisites():
@@ -61,7 +72,7 @@ def test_the_declared_prerequisites():
 
 @pytest.mark.parametrize("name,req", _pairs())
 def test_a_stage_without_its_prerequisite_is_refused(name, req):
-    frame, cam = _frame(highlight="halation" in _closure(name)), _camera(name)
+    frame, cam = _frame(highlight="halation" in _closure(name), front="front_layer" in _closure(name)), _camera(name)
     selected = sorted(_closure(name) - {req}, key=lambda n: registry()[n].order)
     with pytest.raises(InputError) as exc:
         Pipeline(cam, stages=selected).plan(frame)
