@@ -89,7 +89,7 @@ def _compare_case(*args):
 def _compare_runs(old, old_bench, new_bench, scene, w, h, quality, device, repeats, warmup):
     sc = new_bench.SCENES[scene]
     frame = (new_bench.demo_frame(w, h) if sc.frame == "demo"
-             else new_bench.synthetic_frame(w, h, velocity_px=sc.velocity_px))
+             else new_bench.synthetic_frame(w, h, velocity_px=sc.velocity_px, front=getattr(sc, "front", False)))
     p_old, f_old = _pipeline(old, old_bench, scene, w, h, quality, device, frame)
     p_new, f_new = _pipeline(sys.modules[__package__], new_bench, scene, w, h, quality, device, frame)
     times: dict[str, tuple[list, list]] = {}
