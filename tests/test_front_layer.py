@@ -91,10 +91,10 @@ def _synthetic_front(h=120, w=200):
     return front_layer(col, a, d)
 
 
-@pytest.mark.parametrize("quality, min_db", [("draft", 36.0), ("final", 47.0)])
+@pytest.mark.parametrize("quality, min_db", [("draft", 37.0), ("final", 47.0)])
 def test_the_levels_stay_close_to_the_exact_scatter(quality, min_db):
     # radii up to 12.7 px (levels 0-1 at final, 0-2 at draft) against every pixel spread at full
-    # resolution; measured 38.2 / 49.0 dB (LEVEL_SHRINK_PX2 = 2: 37.8 / 49.0 at 1.33, 36.8 / 48.9 at 1)
+    # resolution; measured 39.1 / 49.0 dB (LEVEL_SHRINK_PX2 = 2: 38.7 / 49.0 at 1.5, 37.3 / 48.9 at 1)
     from clpost import fidelity as fd
 
     cam = fd.cycles_camera({"focal_mm": 50.0, "sensor_mm": 36.0, "f_number": 2.0, "focus_m": 3.0, "blades": 6,

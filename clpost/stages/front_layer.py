@@ -52,7 +52,7 @@ from .dof import aperture_radius, coc_px, max_coc_px
 TILE = 8
 NORM_STEPS = 256
 """Entries of the N(r) table per pixel of radius."""
-LEVEL_RADIUS = {"draft": 2, "preview": 3, "final": 4}
+LEVEL_RADIUS = {"draft": 3, "preview": 4, "final": 5}
 """R of the module docstring: a level spreads radii of R … 2R of its pixels (level 0: below 2R)."""
 LEVEL_SHRINK_PX2 = 2.0
 """A level ≥ 1 spreads at radius √(r_L² − 2) level px: the block mean and the bilinear upsampling
