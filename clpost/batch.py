@@ -148,13 +148,17 @@ def read_front(pipeline: Pipeline, job: FrameJob, frame: Frame, layout: str | No
     """The ``Frame.front`` array of ``job.front`` for the input ``frame``: read like an input
     (:func:`read_input`: same layout rule, radial depth made planar), its colour taken as
     premultiplied (the EXR convention, what a transparent film writes), its alpha and depth
-    required, its windows those of the input (:func:`clpost.frame.front_layer` packs it and fills
+    required, its arrays those of the input: one display window and one extent (the data window
+    may be a crop inside it) (:func:`clpost.frame.front_layer` packs it and fills
     covered pixels whose depth sample missed the layer)."""
     from .frame import front_layer
 
     path = job.front
     fg = read_input(pipeline, path, layout, camera)
-    if fg.size != frame.size or fg.windows != frame.windows:
+    # the arrays line up when both cover one extent of one display window (a front cropped to
+    # its data window inside it is fine: no data there is alpha 0)
+    wf, wi = fg.windows, frame.windows
+    if fg.size != frame.size or wf.display != wi.display or wf.extent != wi.extent:
         def shown(f):
             w = f.windows
             return (f"{f.width}x{f.height}" + ("" if w == Windows.full(*f.size) else

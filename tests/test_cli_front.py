@@ -192,3 +192,55 @@ def test_info_says_a_layer_with_alpha_and_depth_can_be_a_front(tmp_path, capsys)
     fg_text, bg_text = capsys.readouterr().out.split(str(tmp_path / "bg.0001.exr"))
     assert "usable as a front layer (process --front)" in fg_text
     assert "alpha: covers" in bg_text and "usable as a front layer" not in bg_text  # opaque everywhere
+
+
+def test_a_front_with_other_windows_is_refused_before_anything_is_written(tmp_path, capsys):
+    """Same display size but the input has overscan and the front does not: the pixels would not line up."""
+    from clpost.frame import Windows
+
+    make_layers(tmp_path, n=1)
+    rng = np.random.default_rng(1)
+    win = Windows(((-2, -2), (W + 1, H + 1)), ((0, 0), (W - 1, H - 1)))
+    bg = Frame(rng.random((H + 4, W + 4, 3)).astype(np.float32), depth=np.full((H + 4, W + 4), 5, np.float32),
+               metadata={"windows": win})
+    exr.write_frame(tmp_path / "bg.0001.exr", bg, layout="blender")
+    err = one_line_error(capsys, "process", tmp_path / "bg.####.exr", "-o", tmp_path / "out" / "c.####.exr",
+                         "--front", tmp_path / "fg.####.exr", *CAM_ARGS)
+    assert "fg.0001.exr" in err and "differs from the input's" in err and "data (-2,-2)-(34,22)" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_front_cropped_by_its_data_window_without_alpha_is_refused(tmp_path, capsys):
+    """The reader gives a cropped file alpha 1 inside its data window; that is no coverage: the
+    front needs its own alpha channel."""
+    from clpost.frame import Windows
+
+    make_layers(tmp_path, n=1)
+    win = Windows(((4, 3), (W - 5, H - 4)), ((0, 0), (W - 1, H - 1)))
+    fg = Frame(np.ones((H, W, 3), np.float32), depth=np.ones((H, W), np.float32), metadata={"windows": win})
+    exr.write_frame(tmp_path / "fg.0001.exr", fg, layout="clpost")
+    assert exr.read_frame(tmp_path / "fg.0001.exr").alpha is not None  # made from the data window
+    err = one_line_error(capsys, "process", tmp_path / "bg.0001.exr", "-o", tmp_path / "out" / "c.exr",
+                         "--front", tmp_path / "fg.0001.exr", *CAM_ARGS)
+    assert "no alpha channel" in err
+    # with its alpha, a front cropped to where it covers is fine: outside its data window is alpha 0
+    a = np.zeros((H, W), np.float32)
+    a[6:12, 8:20] = 1
+    exr.write_frame(tmp_path / "fg.0001.exr", fg.replace(color=fg.color * a[..., None], alpha=a), layout="clpost")
+    assert run_cli("process", tmp_path / "bg.0001.exr", "-o", tmp_path / "c.exr", "--front", tmp_path / "fg.0001.exr",
+                   "--quiet", *CAM_ARGS) == 0
+    bg, fr = (exr.read_frame(tmp_path / f"{k}.0001.exr") for k in ("bg", "fg"))
+    assert fr.windows.data != fr.windows.display
+    want = Pipeline(CAM).run(Frame(bg.color, depth=bg.depth, alpha=bg.alpha,
+                                   front=front_layer(fr.color, fr.alpha, fr.depth)))
+    np.testing.assert_allclose(exr.read_frame(tmp_path / "c.exr").color, want.color, rtol=1e-5, atol=1e-6)
+
+
+def test_an_opaque_front_warns_that_the_input_never_shows(tmp_path, capsys):
+    make_layers(tmp_path, n=1)
+    fg = Frame(np.ones((H, W, 3), np.float32), depth=np.ones((H, W), np.float32), alpha=np.ones((H, W), np.float32))
+    exr.write_frame(tmp_path / "fg.0001.exr", fg, layout="blender")
+    assert run_cli("process", tmp_path / "bg.0001.exr", "-o", tmp_path / "c.exr", "--front", tmp_path / "fg.0001.exr",
+                   "--quiet", *CAM_ARGS) == 0
+    warn = [ln for ln in capsys.readouterr().err.splitlines() if "alpha is 1 everywhere" in ln]
+    assert len(warn) == 1 and "Film > Transparent" in warn[0]
