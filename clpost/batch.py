@@ -161,8 +161,9 @@ def read_front(pipeline: Pipeline, job: FrameJob, frame: Frame, layout: str | No
     if fg.size != frame.size or wf.display != wi.display or wf.extent != wi.extent:
         def shown(f):
             w = f.windows
-            return (f"{f.width}x{f.height}" + ("" if w == Windows.full(*f.size) else
-                                               f" (data {exr.window_str(w.data)}, display {exr.window_str(w.display)})"))
+            if w == Windows.full(*f.size):
+                return f"{f.width}x{f.height}"
+            return f"{f.width}x{f.height} (data {exr.window_str(w.data)}, display {exr.window_str(w.display)})"
         raise InputError(f"--front {path}: size {shown(fg)} differs from the input's {shown(frame)} ({job.src}); "
                          "render the front layer with the input's resolution and windows")
     if not fg.metadata.get("alpha_channel") or fg.alpha is None:

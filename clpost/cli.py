@@ -256,6 +256,7 @@ def _front_paths(args, jobs) -> None:
                          "the front layer's file (or a pattern for both)")
     for j in jobs:
         j.front = Path(expand(pattern, j.frame)) if has_pattern(pattern) else Path(pattern)
+
     def ids(p):
         return {os.path.realpath(p), _identity(p)} - {None}
     inputs = {k: j.src for j in jobs for k in ids(j.src)}

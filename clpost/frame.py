@@ -328,7 +328,6 @@ class Frame:
             object.__setattr__(out, k, v)
         return out
 
-
     def with_front(self, front: np.ndarray | None, copy: bool = True) -> "Frame":
         """A new Frame with ``front`` (H×W×5, :func:`front_layer`) validated and the other buffers as
         they are (already validated: no second scan of them); ``copy=False`` takes a fresh float32

@@ -953,7 +953,8 @@ def info(path: str | os.PathLike) -> dict:
     no layout fits), ``depth_kind``, ``depth`` (``{"min", "max", "inf_count"}`` over finite
     values, or None), ``velocity`` (``{"x": (min, max), "y": (min, max), "max_magnitude"}`` in
     our convention, or None), ``alpha`` (``{"covered", "opaque", "pixels"}``: pixel counts of alpha
-    > 0, alpha = 1 and all, or None without an alpha channel), ``problems`` (messages that stop :func:`read_frame`, or warnings),
+    > 0, alpha = 1 and all, or None without an alpha channel), ``problems`` (messages that stop
+    :func:`read_frame`, or warnings),
     ``camera_attributes`` (the :data:`CAMERA_ATTRIBUTES` present: what ``process`` reads per frame).
     """
     p = Path(path)
