@@ -30,7 +30,7 @@ import numpy as np
 from . import exr
 from .display_image import output_format, write_image
 from .errors import InputError
-from .frame import Frame
+from .frame import Frame, Windows
 from .pipeline import Pipeline
 
 
@@ -39,6 +39,9 @@ class FrameJob:
     frame: int
     src: Path
     dst: Path
+    front: Path | None = None
+    """The foreground layer rendered apart (``clpost process --front``), read into
+    ``Frame.front`` (:func:`read_front`); None for a one-layer frame."""
 
 
 @dataclass
@@ -136,7 +139,41 @@ def load_job(pipeline: Pipeline, job: FrameJob, layout: str | None = None,
         )
     # The frame number seeds grain/sensor noise (CONVENTIONS "Randomness"): frames differ, reruns agree.
     frame = frame.replace(metadata=dict(frame.metadata, frame_index=int(job.frame)), validate=False)
+    if job.front is not None:
+        frame = frame.with_front(read_front(pipeline, job, frame, layout, cam), copy=False)
     return cam, frame
+
+
+def read_front(pipeline: Pipeline, job: FrameJob, frame: Frame, layout: str | None = None, camera=None) -> np.ndarray:
+    """The ``Frame.front`` array of ``job.front`` for the input ``frame``: read like an input
+    (:func:`read_input`: same layout rule, radial depth made planar), its colour taken as
+    premultiplied (the EXR convention, what a transparent film writes), its alpha and depth
+    required, its arrays those of the input: one display window and one extent (the data window
+    may be a crop inside it) (:func:`clpost.frame.front_layer` packs it and fills
+    covered pixels whose depth sample missed the layer)."""
+    from .frame import front_layer
+
+    path = job.front
+    fg = read_input(pipeline, path, layout, camera)
+    # the arrays line up when both cover one extent of one display window (a front cropped to
+    # its data window inside it is fine: no data there is alpha 0)
+    wf, wi = fg.windows, frame.windows
+    if fg.size != frame.size or wf.display != wi.display or wf.extent != wi.extent:
+        def shown(f):
+            w = f.windows
+            if w == Windows.full(*f.size):
+                return f"{f.width}x{f.height}"
+            return f"{f.width}x{f.height} (data {exr.window_str(w.data)}, display {exr.window_str(w.display)})"
+        raise InputError(f"--front {path}: size {shown(fg)} differs from the input's {shown(frame)} ({job.src}); "
+                         "render the front layer with the input's resolution and windows")
+    if not fg.metadata.get("alpha_channel") or fg.alpha is None:
+        raise InputError(f"--front {path}: no alpha channel ({fg.metadata.get('layout')} layout); the front layer's "
+                         "coverage is its alpha: render it over a transparent film (Blender: Film > Transparent) "
+                         "and write RGBA")
+    if fg.depth is None:
+        raise InputError(f"--front {path}: no depth channel ({fg.metadata.get('layout')} layout); the front layer "
+                         "is defocused by its own depth: render it with a depth pass (Blender: Passes > Z)")
+    return front_layer(fg.color, fg.alpha, fg.depth, premultiplied=True)
 
 
 def run_job(pipeline: Pipeline, job: FrameJob, cam, frame: Frame, display="srgb",

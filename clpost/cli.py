@@ -232,6 +232,8 @@ def _jobs(args):
         check_input(Path(src))
         jobs = [FrameJob(0, Path(src), Path(dst))]
     check_paths([(j.src, j.dst) for j in jobs], dst)
+    if args.front is not None:
+        _front_paths(args, jobs)
     if args.preview is not None:
         from .batch import preview_path
 
@@ -241,8 +243,59 @@ def _jobs(args):
     return jobs
 
 
+def _front_paths(args, jobs) -> None:
+    """Each job's ``--front`` file (the pattern expanded with the job's frame number), checked
+    before anything is read or written: it exists, it is neither an input nor an output, and its
+    image has the input's size (headers only)."""
+    from .outputs import _identity
+    from .sequence import expand, has_pattern
+
+    pattern = args.front
+    if has_pattern(pattern) and not has_pattern(args.input):
+        raise InputError(f"--front {pattern}: has a frame pattern but the input {args.input} is one file; give "
+                         "the front layer's file (or a pattern for both)")
+    for j in jobs:
+        j.front = Path(expand(pattern, j.frame)) if has_pattern(pattern) else Path(pattern)
+
+    def ids(p):
+        return {os.path.realpath(p), _identity(p)} - {None}
+    inputs = {k: j.src for j in jobs for k in ids(j.src)}
+    outputs = {k: j.dst for j in jobs for k in ids(j.dst)}
+    for j in sorted({j.front: j for j in jobs}.values(), key=lambda j: j.frame):
+        name = f"--front {pattern}" + (f": {j.front}" if str(j.front) != pattern else "")
+        for k in ids(j.front):
+            if k in inputs:
+                raise InputError(f"{name} is the input {inputs[k]}; --front names the "
+                                 "foreground layer rendered apart, the input the background (e.g. --front fg.####.exr)")
+            if k in outputs:
+                raise InputError(f"{name} is the output {outputs[k]}; writing it would destroy "
+                                 "the front layer — choose another -o")
+        if j.front.is_dir():
+            raise InputError(f"{name} is a directory; give the front layer's EXR file or "
+                             "frame pattern (e.g. fg.####.exr)")
+        if not j.front.is_file():
+            which = f" (frame {j.frame}, input {j.src})" if has_pattern(args.input) else ""
+            raise InputError(f"{name} does not exist{which}; render the front layer for every input frame"
+                             + (", or narrow --frames" if which else ""))
+        src_size, front_size = exr.display_size(j.src), exr.display_size(j.front)
+        if front_size != src_size:
+            raise InputError(f"{name} is {front_size[0]}x{front_size[1]} but the input {j.src} "
+                             f"is {src_size[0]}x{src_size[1]}; render both layers at one resolution")
+
+
+def _front_summary(front) -> str:
+    """What ``--explain`` says of a front layer: its coverage and depth range."""
+    import numpy as np
+
+    cov = front[..., 3] > 0
+    d = front[..., 4][cov & np.isfinite(front[..., 4])]
+    depth = f"depth {d.min():.3g}-{d.max():.3g} m" if d.size else "no finite depth"
+    return (f"premultiplied RGB, alpha, depth; covers {int(cov.sum())} of {cov.size} px, "
+            f"{int((front[..., 3] >= 1).sum())} opaque; {depth}")
+
+
 def cmd_process(args) -> int:
-    from .batch import process_sequence, read_input
+    from .batch import load_job, process_sequence
     from .pipeline import Pipeline
 
     if args.stages == [] and not args.explain:
@@ -271,10 +324,12 @@ def cmd_process(args) -> int:
     pipe = Pipeline(camera, quality=args.quality, stages=args.stages, device=args.device)
     if args.explain:
         _explain_sources(sources, jobs)
-        first = read_input(pipe, jobs[0].src, args.channels)
+        first = load_job(pipe, jobs[0], args.channels)[1]
         cam = pipe.camera_for(first)
         win = first.windows
         print(f"plan for {jobs[0].src} ({first.width}x{first.height}, quality {args.quality}):")
+        if first.front is not None:
+            print(f"front layer: {jobs[0].front} ({_front_summary(first.front)})")
         if win.data != win.display or win.origin != (0, 0):
             print(f"windows: display {exr.window_str(win.display)}, data {exr.window_str(win.data)} "
                   f"(overscan left/top/right/bottom {'/'.join(map(str, win.overscan))} px)")
@@ -305,6 +360,8 @@ def cmd_process(args) -> int:
             print(f"display-referred outputs: {display.label}; input colour space {src.name!r}{how} "
                   f"(from {src.source})")
         return 0
+    if args.front is not None:
+        _check_first_front(args, pipe, jobs, sources)
     from tqdm import tqdm
 
     # A bar on a terminal; in logs (no TTY) one line per frame instead of bar redraws.
@@ -354,6 +411,25 @@ def cmd_process(args) -> int:
         # Bad input frames are the user's to fix (exit 2, as the serial loop); anything else is 1.
         return 2 if set(rep.failed) <= set(rep.user_errors) else 1
     return 0
+
+
+def _check_first_front(args, pipe, jobs, sources) -> None:
+    """The first frame to write read with its front layer and planned, before anything is written:
+    a front without alpha or depth, or a --stages that drops it, stops the run here (one line,
+    whether the frames then run here or on Dask workers)."""
+    from .batch import BatchReport, load_job, pending
+
+    todo = pending(jobs, args.overwrite, BatchReport())
+    if not todo:
+        return
+    cam, frame = load_job(pipe, todo[0], args.channels, None, sources)
+    pipe.explain(frame, pipe.camera_for(frame, cam), reasons=False)
+    if frame.front is not None and (frame.front[..., 3] >= 1).all():
+        import warnings
+
+        warnings.warn(f"--front {todo[0].front}: alpha is 1 everywhere, so no pixel of the input shows through; "
+                      "render the front layer over a transparent film (Blender: Film > Transparent) with the "
+                      "rest of the scene hidden from the camera")
 
 
 def _explain_sources(sources, jobs) -> None:
@@ -680,6 +756,11 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("-o", "--output", required=True,
                     help="output or pattern: .exr (linear, the camera in its header), or a viewable "
                          ".png/.jpg/.tif (display-encoded for --display, ICC profile embedded)")
+    pr.add_argument("--front", default=None, metavar="FG_INPUT",
+                    help="a foreground rendered as its own layer: EXR or pattern like the input's (each frame's "
+                         "own number), with alpha and depth (any layout --channels reads); its colour is taken as "
+                         "premultiplied (the EXR convention). Defocused by its own depth and composited over the "
+                         "input (stage front_layer, after dof); docs/conventions.md \"Front layer\"")
     pr.add_argument("--preview", default=None, metavar="DIR",
                     help="also write a display-encoded PNG of each frame into DIR (<output stem>.png)")
     _add_display_option(pr, "encoding of .png/.jpg/.tif outputs and previews")

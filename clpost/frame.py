@@ -328,6 +328,14 @@ class Frame:
             object.__setattr__(out, k, v)
         return out
 
+    def with_front(self, front: np.ndarray | None, copy: bool = True) -> "Frame":
+        """A new Frame with ``front`` (H×W×5, :func:`front_layer`) validated and the other buffers as
+        they are (already validated: no second scan of them); ``copy=False`` takes a fresh float32
+        ``front`` over, as the constructor's ``copy``."""
+        if front is not None:
+            front = _front_plane(front, (self.height, self.width), copy)
+        return self.replace(validate=False, front=front)
+
 
 def front_layer(color: np.ndarray, alpha: np.ndarray, depth: np.ndarray, premultiplied: bool = True) -> np.ndarray:
     """The H×W×5 ``Frame.front`` array of a layer: ``color`` (H×W×3 linear RGB, premultiplied by

@@ -92,6 +92,18 @@ def setup_seq(d):
     _seq(d)
 
 
+def setup_front(d, alpha=True, n=2, size=(16, 12)):
+    """in.0001-0003.exr and a front layer fg.0001..n.exr: a square over a transparent film."""
+    _seq(d)
+    w, h = size
+    for i in range(1, n + 1):
+        a = np.zeros((h, w), np.float32)
+        a[3:8, 4:10] = 1
+        fg = Frame(np.full((h, w, 3), 0.5, np.float32) * a[..., None], alpha=a if alpha else None,
+                   depth=np.where(a > 0, np.float32(0.5), np.float32(np.inf)).astype(np.float32))
+        exr.write_frame(d / f"fg.{i:04d}.exr", fg)
+
+
 def setup_huge_display(d):
     exr.write_frame(d / "big.exr", frame(8, 8, depth=False, velocity=False))
     patch_window(d / "big.exr", b"displayWindow", (0, 0, 59999, 59999))
@@ -195,6 +207,19 @@ CASES = {
     "expose with a size change": (
         setup_expose_sizes, ["expose", "in.####.exr", "-o", "{d}/out/e.exr", "--open", "0", "--close", "3/24",
                              "--fps", "24", "--quiet"], 2, ["in.0002.exr", "20x12", "--frames"]),
+    "--front missing for frame 3": (setup_front, ["process", "in.####.exr", "-o", "out/o.####.exr", "--front",
+                                                  "fg.####.exr", *CAM], 2, ["fg.0003.exr", "does not exist", "--frames"]),
+    "--front without alpha": (lambda d: setup_front(d, alpha=False, n=3),
+                              ["process", "in.####.exr", "-o", "out/o.####.exr", "--front", "fg.####.exr", *CAM], 2,
+                              ["fg.0001.exr", "no alpha channel", "Film > Transparent"]),
+    "--front at another size": (lambda d: setup_front(d, n=3, size=(20, 12)),
+                                ["process", "in.####.exr", "-o", "out/o.####.exr", "--front", "fg.####.exr", *CAM], 2,
+                                ["fg.0001.exr", "20x12", "16x12", "one resolution"]),
+    "--front is the input": (setup_front, ["process", "in.####.exr", "-o", "out/o.####.exr", "--front", "in.####.exr",
+                                           *CAM], 2, ["--front", "is the input", "fg.####.exr"]),
+    "--front with --stages leaving out front_layer": (
+        lambda d: setup_front(d, n=3), ["process", "in.####.exr", "-o", "out/o.####.exr", "--front", "fg.####.exr",
+                                        "--stages", "exposure", *CAM], 2, ["in.0001.exr", "add front_layer to --stages"]),
     "second writer into a locked output sequence": (
         setup_live_lock, ["process", "in.####.exr", "-o", "out/o.####.exr", "--quiet", *CAM], 2,
         ["out/o.####.exr", f"pid {os.getpid()}", "wait for it"]),

@@ -661,7 +661,7 @@ def _frame_from_parts(path: Path, parts: Sequence[_Part], layout: "str | ReadSpe
     header = parts[0].header
     metadata = {"path": str(path), "layout": layout, "header": _str_attrs(header),
                 "attributes": _camera_attrs(header), "depth_kind": kind_out,
-                "windows": Windows(data, display)}
+                "windows": Windows(data, display), "alpha_channel": m.alpha is not None}
     if view is not None or header.get("multiView") or header.get("view"):
         metadata["view"] = view or str(header.get("view") or header["multiView"][0])
     if header.get("chromaticities") is not None:
@@ -725,7 +725,9 @@ def read_frame(path: str | os.PathLike, layout: "str | ReadSpec | None" = None, 
     The arrays cover the data and display windows (``Frame.windows``; outside the data window:
     color 0, alpha 0, depth ``+inf``, velocity 0). ``metadata`` = ``{"path", "layout", "header":
     str attributes of the first part, "attributes": its camera standard attributes
-    (:data:`CAMERA_ATTRIBUTES`, floats), "depth_kind": "planar" | "radial", "windows"}``, plus
+    (:data:`CAMERA_ATTRIBUTES`, floats), "depth_kind": "planar" | "radial", "windows",
+    "alpha_channel": whether the file has an alpha channel (else alpha is None, or 1 over a data
+    window smaller than the frame)}``, plus
     ``"view"`` for a multi-view file and ``"chromaticities"`` when the file declares them. Color is
     required; depth and velocity are optional (``None`` when the file has no such pass).
     ``labels`` (``Camera.labels``: ``auto``, ``all``, ``none`` or names; :mod:`clpost.labels.channels`)
@@ -950,7 +952,9 @@ def info(path: str | os.PathLike) -> dict:
     "display_window"}``), ``size`` ((width, height) of the display window), ``layout`` (None if
     no layout fits), ``depth_kind``, ``depth`` (``{"min", "max", "inf_count"}`` over finite
     values, or None), ``velocity`` (``{"x": (min, max), "y": (min, max), "max_magnitude"}`` in
-    our convention, or None), ``problems`` (messages that stop :func:`read_frame`, or warnings),
+    our convention, or None), ``alpha`` (``{"covered", "opaque", "pixels"}``: pixel counts of alpha
+    > 0, alpha = 1 and all, or None without an alpha channel), ``problems`` (messages that stop
+    :func:`read_frame`, or warnings),
     ``camera_attributes`` (the :data:`CAMERA_ATTRIBUTES` present: what ``process`` reads per frame).
     """
     p = Path(path)
@@ -961,7 +965,7 @@ def info(path: str | os.PathLike) -> dict:
         "parts": [{"name": pt.name, "channels": sorted(pt.types.items()),
                    "data_window": pt.data_window, "display_window": pt.display_window} for pt in parts],
         "size": (ox1 - ox0 + 1, oy1 - oy0 + 1),
-        "layout": None, "depth_kind": None, "depth": None, "velocity": None, "problems": [],
+        "layout": None, "depth_kind": None, "depth": None, "velocity": None, "alpha": None, "problems": [],
         "camera_attributes": _camera_attrs(parts[0].header),
     }
     try:
@@ -976,6 +980,10 @@ def info(path: str | os.PathLike) -> dict:
     out["depth_kind"] = frame.metadata["depth_kind"]
     out["depth"] = _depth_stats(frame.depth)
     out["velocity"] = _velocity_stats(frame.velocity)
+    if frame.metadata.get("alpha_channel") and frame.alpha is not None:
+        a = frame.alpha
+        out["alpha"] = {"covered": int(np.count_nonzero(a > 0)), "opaque": int(np.count_nonzero(a >= 1)),
+                        "pixels": int(a.size)}
     return out
 
 
@@ -1004,6 +1012,11 @@ def format_info(d: dict) -> str:
     else:
         lines.append(f"  velocity (px/frame, +x right, +y down): x [{_fmt(vel['x'][0])}, {_fmt(vel['x'][1])}], "
                      f"y [{_fmt(vel['y'][0])}, {_fmt(vel['y'][1])}], max |v| {_fmt(vel['max_magnitude'])}")
+    al = d.get("alpha")
+    if al is not None:
+        front = dep is not None and al["opaque"] < al["pixels"]
+        use = "; with depth: usable as a front layer (process --front)" if front else ""
+        lines.append(f"  alpha: covers {al['covered']} of {al['pixels']} px, {al['opaque']} opaque{use}")
     cam = d.get("camera_attributes")
     if cam:
         lines.append("  camera attributes: " + ", ".join(
