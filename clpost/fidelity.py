@@ -151,7 +151,7 @@ def without_lamps(frame, emit: np.ndarray):
     from .frame import Frame
 
     return Frame(color=np.maximum(frame.color[..., :3] - emit, 0.0).astype(np.float32), depth=frame.depth,
-                 velocity=frame.velocity, alpha=frame.alpha)
+                 velocity=frame.velocity, alpha=frame.alpha, front=frame.front)
 
 
 def lamp_metrics(run, data, entry: dict, frame, white: float, truth: str = "dof", lamps=None) -> list[dict]:

@@ -14,7 +14,10 @@ interpreter as subprocesses (bpy is not a clpost dependency): ``tools/blender_de
 same frame written in clpost's native layout (Max Blur = the frame's largest CoC radius, + 2 px)
 and ``tools/blender_vector_blur.py`` on the pinhole EXR itself. Scores: PSNR of the sRGB views and
 LDR-FLIP (:mod:`clpost.fidelity`), for motion also inside the box around moving pixels, and the
-per-emitter metrics. Without ``--blender`` the peers' rows are left out. Results also go to
+per-emitter metrics. A scene stored also as two layers (manifest ``layers``: ``fg.exr``, ``bg.exr``)
+gets rows "clpost Q, two layers": its background with the foreground as ``Frame.front`` through
+the same pipeline plus the front_layer stage (docs/fidelity.md, "Two layers"). Without
+``--blender`` the peers' rows are left out. Results also go to
 ``--work``/results.json (the numbers tests/test_cycles_fidelity.py's floors were set from).
 """
 from __future__ import annotations
@@ -61,14 +64,18 @@ without_lamps = fd.without_lamps
 
 
 def run_clpost(frame: Frame, entry: dict, kind: str, quality: str, repeats: int):
-    pipe = fd.cycles_pipeline(entry, kind, quality)
+    """clpost's result (and median event / wall ms over ``repeats``); a frame with a front layer runs
+    with the front_layer stage (its time counted)."""
+    front = frame.front is not None
+    pipe = fd.cycles_pipeline(entry, kind, quality, front=front)
+    stages = STAGES[kind] + (["front_layer"] if front else [])
     out = pipe.run(frame).color
     events, walls = [], []
     for _ in range(repeats):
         t0 = time.perf_counter()
         out = pipe.run(frame).color
         walls.append((time.perf_counter() - t0) * 1e3)
-        events.append(sum(pipe.last_timings.get(s, 0.0) for s in STAGES[kind]))
+        events.append(sum(pipe.last_timings.get(s, 0.0) for s in stages))
     if not repeats:
         return np.asarray(out[..., :3], np.float32), None, None
     return np.asarray(out[..., :3], np.float32), statistics.median(events), statistics.median(walls)
@@ -225,13 +232,20 @@ def main(argv=None) -> int:
                 peer, ms, wall = run_vector_blur(a.blender, data, entry, work, name, a.threads, a.repeats)
                 rows["Blender Vector Blur"] = dict(score(peer, truth, entry, kind, frame), ms=ms, wall_ms=wall)
             final = None
-            for q in a.qualities.split(","):
-                out, ms, wall = run_clpost(frame, entry, kind, q, a.repeats)
-                lamps = (out - run_clpost(dark, entry, kind, q, 0)[0], truth_lamps) if with_lamps else None
-                rows[f"clpost {q}"] = dict(score(out, truth, entry, kind, frame, lamps), ms=ms, wall_ms=wall)
-                print(f"{name} {kind} {q}: {rows[f'clpost {q}']['psnr']:.2f} dB", flush=True)
-                if q == "final":
-                    final = out
+            inputs = [("", frame, dark)]
+            if kind == "dof" and "layers" in entry:  # the same export as two layers (front_layer)
+                layered = fd.cycles_layers(data, entry)
+                bg_emit = read_rgb(data / entry["layers"]["bg"]["file"], "Emission.")
+                inputs.append((", two layers", layered, without_lamps(layered, bg_emit)))
+            for label, src, src_dark in inputs:
+                for q in a.qualities.split(","):
+                    out, ms, wall = run_clpost(src, entry, kind, q, a.repeats)
+                    lamps = (out - run_clpost(src_dark, entry, kind, q, 0)[0], truth_lamps) if with_lamps else None
+                    row = f"clpost {q}{label}"
+                    rows[row] = dict(score(out, truth, entry, kind, frame, lamps), ms=ms, wall_ms=wall)
+                    print(f"{name} {kind} {q}{label}: {rows[row]['psnr']:.2f} dB", flush=True)
+                    if q == "final" and not label:
+                        final = out
             # --merge without --blender: the earlier run's peer rows stay (clpost's are regenerated)
             kept = {k: v for k, v in earlier.get(kind, {}).items() if k not in rows and not k.startswith("clpost ")}
             results[name][kind] = {"pinhole input": rows.pop("pinhole input"), **kept, **rows}
