@@ -340,8 +340,9 @@ class Frame:
 def front_layer(color: np.ndarray, alpha: np.ndarray, depth: np.ndarray, premultiplied: bool = True) -> np.ndarray:
     """The H×W×5 ``Frame.front`` array of a layer: ``color`` (H×W×3 linear RGB, premultiplied by
     ``alpha`` unless ``premultiplied=False``), ``alpha`` (H×W coverage) and ``depth`` (H×W planar
-    metres; any value > 0 or ``+inf`` where alpha is 0). A covered pixel whose depth is ``+inf``
-    (the depth pass's one sample missed the layer) takes its covered neighbours' nearest depth."""
+    metres; any value > 0 or ``+inf`` where alpha is 0). A partly covered pixel takes the nearest
+    depth of its own and its covered neighbours' (the depth pass's one sample may have missed the
+    layer there: :func:`_fill_missed`)."""
     color = np.asarray(color, np.float32)[..., :3]
     a = np.asarray(alpha, np.float32)
     if color.shape[:2] != a.shape or np.shape(depth) != a.shape:
@@ -349,22 +350,28 @@ def front_layer(color: np.ndarray, alpha: np.ndarray, depth: np.ndarray, premult
                          "must share one H×W")
     if not premultiplied:
         color = color * a[..., None]
-    return np.concatenate([color, a[..., None], _fill_missed(np.asarray(depth, np.float32), a > 0)[..., None]],
+    return np.concatenate([color, a[..., None], _fill_missed(np.asarray(depth, np.float32), a)[..., None]],
                           axis=-1)
 
 
-def _fill_missed(depth: np.ndarray, covered: np.ndarray) -> np.ndarray:
+def _fill_missed(depth: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """A renderer's depth pass is one sample per pixel (Cycles: the first), so a pixel the layer
-    covers only in part may hold no hit (+inf; a reader maps Blender's 1e10 to it): such a pixel
-    takes the nearest depth of its covered 3×3 neighbours, repeated until every covered pixel
-    has one (a layer with no finite depth at all stays at +inf)."""
+    covers only in part may record what lies behind the layer: no hit (+inf; a reader maps
+    Blender's 1e10 to it), or a held-out or background surface where the renderer writes one.
+    Such a pixel (0 < α < 1) takes the nearest depth of its own and its covered 3×3 neighbours';
+    one with +inf and no covered neighbour with a depth takes it once one has, repeated until
+    every covered pixel has one (a layer with no finite depth at all stays at +inf)."""
+    covered, h, w = alpha > 0, *depth.shape
+
+    def nearest(d):
+        p = np.pad(d, 1, constant_values=np.inf)
+        return np.min([p[j:j + h, i:i + w] for j in range(3) for i in range(3)], axis=0)
+
     d = np.where(covered, depth, np.inf).astype(np.float32)
+    d = np.where(covered & (alpha < 1), nearest(d), d)
     todo = covered & np.isinf(d)
     while todo.any():
-        p = np.pad(d, 1, constant_values=np.inf)
-        h, w = d.shape
-        near = np.min([p[j:j + h, i:i + w] for j in range(3) for i in range(3)], axis=0)
-        d = np.where(todo, near, d)
+        d = np.where(todo, nearest(d), d)
         left = covered & np.isinf(d)
         if left.sum() == todo.sum():
             break

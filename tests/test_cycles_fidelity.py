@@ -204,7 +204,7 @@ MEASURED_EMITTERS = {"area_ratio_max": 2.13, "halo_px_sum": 129 + 108 + 146 + 35
 # The DoF targets on the scenes stored as two layers as well (tools/cycles_truth/make.py
 # --layers): the foreground rendered as its own layer, processed with the front_layer stage
 # (docs/fidelity.md, "Two layers: the foreground rendered as its own layer"). Measured (PSNR / FLIP,
-# draft and final): occluder 52.42 / 0.00683, 54.17 / 0.00622; thin 42.36 / 0.01555, 42.22 / 0.01631;
+# draft and final): occluder 52.65 / 0.00675, 54.39 / 0.00618; thin 42.36 / 0.01555, 42.22 / 0.01631;
 # transparent 49.14 / 0.00841, 49.02 / 0.00844.
 LAYERED = sorted(n for n, e in MANIFEST["scenes"].items() if "layers" in e)
 

@@ -132,7 +132,7 @@ def test_heldout_lamps_at_draft_and_preview_keep_their_energy():
 
 # Two layers (docs/fidelity.md, "Two layers: the foreground rendered as its own layer"), held
 # out: never used to build the front_layer stage. Measured (PSNR / FLIP, draft and final): h_fence
-# 48.44 / 0.01201, 48.70 / 0.00917; h_panes 40.50 / 0.01690, 41.16 / 0.01124.
+# 48.53 / 0.01187, 48.76 / 0.00912; h_panes 40.52 / 0.01682, 41.21 / 0.01123.
 LAYERED = sorted(n for n, e in MANIFEST["scenes"].items() if "layers" in e)
 
 

@@ -171,6 +171,15 @@ def test_a_missed_depth_sample_takes_the_layer_s_nearest_neighbour():
     np.testing.assert_array_equal(f[..., :3], a[..., None] * np.ones(3))  # premultiplied as given
     g = front_layer(np.full((5, 7, 3), 2.0), a, d, premultiplied=False)
     np.testing.assert_allclose(g[..., 0], 2.0 * a)
+    # a partly covered edge whose one depth sample hit what lies behind (a held-out wall at 30 m)
+    # takes the layer's depth; a fully covered pixel keeps its own, even beside a nearer one
+    a2 = a.copy()
+    a2[1:4, 5] = 0.4
+    d2 = d.copy()
+    d2[1:4, 5] = 30.0
+    f2 = front_layer(a2[..., None] * np.ones(3), a2, d2)
+    np.testing.assert_array_equal(f2[1:4, 5, 4], [2.0, 2.0, 2.0])
+    assert f2[2, 3, 4] == 2.0 and f2[2, 2, 4] == 1.5
 
 
 def test_the_output_frame_has_no_front_layer_and_the_plan_needs_one_every_frame():

@@ -71,7 +71,7 @@ def front_radius(camera, depth: np.ndarray, width_px: int, quality: str) -> np.n
 
 def n_levels(quality: str) -> int:
     """Levels 0 … n − 1: the quality's largest radius falls in the last."""
-    return int(math.floor(math.log2(max_coc_px(quality) / LEVEL_RADIUS[quality]))) + 1
+    return max(1, int(math.floor(math.log2(max_coc_px(quality) / LEVEL_RADIUS[quality]))) + 1)
 
 
 def level_of(r: np.ndarray, quality: str) -> np.ndarray:
