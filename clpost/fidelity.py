@@ -217,10 +217,15 @@ def cycles_layers(data, entry: dict):
     from .exr import read_frame
     from .frame import Frame, front_layer
 
-    fg = read_frame(Path(data) / entry["layers"]["fg"]["file"])
+    from .errors import InputError
+
+    path = Path(data) / entry["layers"]["fg"]["file"]
+    fg = read_frame(path)
     bg = read_frame(Path(data) / entry["layers"]["bg"]["file"])
-    alpha = fg.alpha if fg.alpha is not None else np.ones(fg.color.shape[:2], np.float32)
-    return Frame(color=bg.color, depth=bg.depth, front=front_layer(fg.color, alpha, fg.depth))
+    if fg.alpha is None or fg.depth is None:
+        raise InputError(f"{path}: a front layer needs alpha and depth (render it over a transparent film "
+                         "with the Z pass)")
+    return Frame(color=bg.color, depth=bg.depth, front=front_layer(fg.color, fg.alpha, fg.depth))
 
 
 CYCLES_STAGES = {"dof": ["dof"], "motion": ["motion_blur"], "dofmotion": ["dof", "motion_blur"]}

@@ -24,16 +24,13 @@ sys.path.insert(0, str(ROOT / "tools"))
 
 import cycles_compare as cc  # noqa: E402
 from clpost import fidelity as fd  # noqa: E402
-from clpost.exr import read_frame  # noqa: E402
-from clpost.frame import Frame, front_layer  # noqa: E402
+from clpost.frame import Frame  # noqa: E402
 
 
 def load_layers(scene: str, data: Path, entry: dict, layers: str | None) -> Frame:
     if not layers:
         return fd.cycles_layers(data, entry)
-    fg, bg = (read_frame(Path(layers) / f"{scene}_{k}.exr") for k in ("fg", "bg"))
-    alpha = fg.alpha if fg.alpha is not None else np.ones(fg.color.shape[:2], np.float32)
-    return Frame(color=bg.color, depth=bg.depth, front=front_layer(fg.color, alpha, fg.depth))
+    return fd.cycles_layers(Path(layers), {"layers": {k: {"file": f"{scene}_{k}.exr"} for k in ("fg", "bg")}})
 
 
 def main(argv=None) -> int:
