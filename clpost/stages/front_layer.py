@@ -29,15 +29,16 @@ L = 0 (full resolution, exact) for r < 2R, else ⌊log₂(r/R)⌋ (radius R … 
 R = :data:`LEVEL_RADIUS` of the quality. Level L ≥ 1 holds, per 2^L × 2^L block, the mean of the
 block's level-L pixels (premultiplied colour and coverage; zero for the others) at their
 α-weighted mean radius / 2^L, narrowed by :data:`LEVEL_SHRINK_PX2`; each level is spread as above
-at its own resolution and upsampled bilinearly (pixel centres aligned, edges clamped). The block mean and the upsampling blur a
-level's discs by about 2^L/2 px, a few percent of their radius R·2^L … 2R·2^L; what that costs
-against the exact scatter and against Cycles: docs/fidelity.md, "Two layers".
+at its own resolution and upsampled bilinearly (pixel centres aligned, edges clamped). What the
+levels cost against the exact scatter and against Cycles: docs/fidelity.md, "Two layers".
 
 Kernels (``kernels/front_layer.cl``): ``front_layer_prep`` (level 0's planes: colour and coverage
 over N(r), radius or −1), ``front_layer_down`` (each level ≥ 1's planes), ``front_layer_tiles``
-(each 8×8 tile's largest radius, −1 where nothing spreads), ``front_layer_gather`` (a level ≥ 1
-spread), ``front_layer`` (level 0 spread, the levels upsampled, the composite). ρ(o) and N(r)
-come from tables (N at 1/256 px, linear).
+(each 8×8 tile's largest radius, −1 where nothing spreads), ``front_layer_reach`` (each tile's
+reach: the largest radius that can spread onto it), ``front_layer_gather`` (a level ≥ 1 spread),
+``front_layer_active`` (whether any level ≥ 1 reaches a full-resolution tile),
+``front_layer`` (level 0 spread, the levels upsampled, the composite). ρ(o) and N(r) come from
+tables (N at 1/256 px, linear).
 """
 from __future__ import annotations
 
@@ -58,8 +59,8 @@ LEVEL_SHRINK_PX2 = 2.0
 """A level ≥ 1 spreads at radius √(r_L² − 2) level px: the block mean and the bilinear upsampling
 widen its discs (their variance by ≈ ¼ + the coarser ramp's ≈ 1/12 level px², so 4 × that ≈ 1.3
 in r²), and 2.0 is what the exact model favours: the error against :func:`front_scatter` is
-least there on the occluder scene's front layer and on a synthetic one, at draft and final, in a
-sweep of 0 … 3 (docs/fidelity.md, "Two layers")."""
+least there on the occluder scene's front layer and on a synthetic one, at every quality, in
+sweeps of 0 … 3 (docs/fidelity.md, "Two layers")."""
 
 
 def front_radius(camera, depth: np.ndarray, width_px: int, quality: str) -> np.ndarray:
