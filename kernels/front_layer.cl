@@ -190,19 +190,15 @@ __kernel void front_layer_active(__global const float *restrict reach, __global 
     active[(size_t)ty * tw + tx] = any;
 }
 
-/* out = F_rgb + (1 - F_a) src: F = level 0 spread here + each level >= 1 upsampled (bilinear,
- * pixel centres aligned, edges clamped) where its tiles under the four corners reach anything.
+/* pixel (x, y)'s output from its level-0 spread acc: + each level >= 1 upsampled (bilinear,
+ * pixel centres aligned, edges clamped) where its tiles under the four corners reach anything
+ * (on: the pixel's tile has any), then out = F_rgb + (1 - F_a) src.
  * levels[5 (L - 1) ...]: level L's wl, hl, offset in `spread`, tiles across, offset in `reach` */
-__kernel void front_layer(__global const float *restrict src, __global const float *restrict planes,
-                          __global const float *restrict reach, __global const float *restrict rho,
-                          __global const float *restrict spread, __global const int *restrict levels,
-                          __global const int *restrict active, __global float *restrict dst, const int w,
-                          const int h, const int tw)
+inline void front_finish(float4 acc, const int x, const int y, const int w, const int h, const int on,
+                         __global const float *restrict src, __global const float *restrict reach,
+                         __global const float *restrict spread, __global const int *restrict levels,
+                         __global float *restrict dst)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= w || y >= h) return;
-    float4 acc = front_spread(planes, reach, rho, x, y, w, h, tw);
-    const int on = active[(size_t)(y / FRONT_TILE) * tw + x / FRONT_TILE];
 #pragma unroll
     for (int L = 1; L < FRONT_LEVELS; ++L) {
         if (!on) break;
@@ -233,4 +229,109 @@ __kernel void front_layer(__global const float *restrict src, __global const flo
     dst[p] = c.x;
     dst[n + p] = c.y;
     dst[2 * n + p] = c.z;
+}
+
+/* the composite, one pixel per work-item (GPUs) */
+__kernel void front_layer(__global const float *restrict src, __global const float *restrict planes,
+                          __global const float *restrict reach, __global const float *restrict rho,
+                          __global const float *restrict spread, __global const int *restrict levels,
+                          __global const int *restrict active, __global float *restrict dst, const int w,
+                          const int h, const int tw)
+{
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= w || y >= h) return;
+    const float4 acc = front_spread(planes, reach, rho, x, y, w, h, tw);
+    front_finish(acc, x, y, w, h, active[(size_t)(y / FRONT_TILE) * tw + x / FRONT_TILE], src, reach, spread,
+                 levels, dst);
+}
+
+/* ---- 16-pixel forms (CPUs: one work-item spreads 16 consecutive pixels of a row as the lanes of
+ * float16 vectors; the same taps in the same order as front_spread, lane by lane) ---- */
+
+/* 16 consecutive values of a level plane at row offset `row`, columns qx ... qx + 15 clamped */
+inline float16 front_row16(__global const float *restrict p, const size_t row, const int qx, const int w)
+{
+    if (qx >= 0 && qx + 15 < w) return vload16(0, p + row + qx);
+    float t[16];
+    for (int l = 0; l < 16; ++l) t[l] = p[row + clamp(qx + l, 0, w - 1)];
+    return vload16(0, t);
+}
+
+/* the largest reach of the tiles under pixels x0 ... x0 + 15 of row y */
+inline float front_reach16(__global const float *restrict reach_tiles, const int x0, const int y, const int w,
+                           const int tw)
+{
+    const size_t trow = (size_t)(y / FRONT_TILE) * tw;
+    float reach = -1.0f;
+    for (int t = x0 / FRONT_TILE; t <= min(x0 + 15, w - 1) / FRONT_TILE; ++t) reach = fmax(reach, reach_tiles[trow + t]);
+    return reach;
+}
+
+/* front_spread of pixels x0 ... x0 + 15 of row y (lanes past the frame's edge: clamped sources,
+ * not stored) within `reach` (front_reach16) */
+inline void front_spread16(__global const float *restrict planes, const float reach,
+                           __global const float *restrict rho, const int x0, const int y, const int w,
+                           const int h, float16 *ar, float16 *ag, float16 *ab, float16 *aa)
+{
+    *ar = *ag = *ab = *aa = (float16)(0.0f);
+    if (reach < 0.0f) return;
+    const size_t n = (size_t)w * h;
+    const int R = min((int)ceil(reach + 0.5f), FRONT_REACH);
+    for (int dy = -R; dy <= R; ++dy) {
+        const size_t row = (size_t)clamp(y - dy, 0, h - 1) * w;
+        for (int dx = -R; dx <= R; ++dx) {
+            const float rh = rho[(dy + FRONT_REACH) * (2 * FRONT_REACH + 1) + dx + FRONT_REACH];
+            const float dist = sqrt((float)(dx * dx + dy * dy));
+            const int qx = x0 - dx;
+            /* a source without a radius (-1) weighs 0 (r rho - dist + 1/2 <= 0) and its planes are 0 */
+            const float16 wt = clamp(front_row16(planes + 4 * n, row, qx, w) * rh - dist + 0.5f, 0.0f, 1.0f);
+            if (!any(wt > 0.0f)) continue;
+            *ar += wt * front_row16(planes, row, qx, w);
+            *ag += wt * front_row16(planes + n, row, qx, w);
+            *ab += wt * front_row16(planes + 2 * n, row, qx, w);
+            *aa += wt * front_row16(planes + 3 * n, row, qx, w);
+        }
+    }
+}
+
+/* a spread, 16 pixels per work-item, into its place in `spread`; where nothing reaches, zeros
+ * (zeros = 1: a level >= 1, whose bilinear corners the composite may read there) or nothing
+ * (level 0: the composite reads a pixel's own spread only where its tile's reach says some) */
+__kernel void front_layer_gather16(__global const float *restrict planes, __global const float *restrict reach,
+                                   __global const float *restrict rho, __global float *restrict spread,
+                                   const int w, const int h, const int tw, const int offset, const int roff,
+                                   const int zeros)
+{
+    const int x0 = get_global_id(0) * 16, y = get_global_id(1);
+    if (x0 >= w || y >= h) return;
+    const float r = front_reach16(reach + roff, x0, y, w, tw);
+    if (r < 0.0f && !zeros) return;
+    float16 v[4];
+    front_spread16(planes, r, rho, x0, y, w, h, &v[0], &v[1], &v[2], &v[3]);
+    const size_t n = (size_t)w * h, p = (size_t)y * w + x0;
+    __global float *o = spread + offset;
+    for (int c = 0; c < 4; ++c) {
+        if (x0 + 15 < w) {
+            vstore16(v[c], 0, o + c * n + p);
+        } else {
+            float t[16];
+            vstore16(v[c], 0, t);
+            for (int l = 0; x0 + l < w; ++l) o[c * n + p + l] = t[l];
+        }
+    }
+}
+
+/* the composite after front_layer_gather16 spread level 0 into `spread0` (4 planes, full
+ * resolution): one pixel per work-item, the levels as in front_layer */
+__kernel void front_layer_add(__global const float *restrict src, __global const float *restrict spread0,
+                              __global const float *restrict reach, __global const float *restrict spread,
+                              __global const int *restrict levels, __global const int *restrict active,
+                              __global float *restrict dst, const int w, const int h, const int tw)
+{
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= w || y >= h) return;
+    const size_t n = (size_t)w * h, p = (size_t)y * w + x, t = (size_t)(y / FRONT_TILE) * tw + x / FRONT_TILE;
+    const float4 acc = reach[t] >= 0.0f ? (float4)(spread0[p], spread0[n + p], spread0[2 * n + p], spread0[3 * n + p])
+                                        : (float4)(0.0f);
+    front_finish(acc, x, y, w, h, active[t], src, reach, spread, levels, dst);
 }

@@ -115,6 +115,36 @@ def test_the_levels_stay_close_to_the_exact_scatter(quality, min_db):
                                FL.front_scatter(near, np.where(f[..., 3] > 0, r, 0.0), bg, 6, 0.0, 0.0), atol=1e-9)
 
 
+@pytest.mark.parametrize("quality", ["draft", "final"])
+def test_the_cpu_and_gpu_forms_agree(quality):
+    # the 16-pixel spreads (Runtime.wide: front_layer_gather16 + front_layer_add) against the
+    # one-pixel kernels, on rows not a multiple of 16 with radii over every level; PoCL gives the
+    # same bits (same taps, same order), the bound leaves room for another compiler's contraction
+    import pyopencl as cl
+
+    from clpost.runtime import Runtime
+
+    cam = camera(f_number=0.9, sensor_mm=(1.5, 1.0))
+    frame = layered(141, 95, seed=5, front_depth=(0.2, 3.0))
+    outs, launched = {}, {True: set(), False: set()}
+    enqueue = cl.enqueue_nd_range_kernel
+    for wide in (True, False):
+        def record(queue, kernel, *a, _wide=wide, **kw):
+            launched[_wide].add(kernel.function_name)
+            return enqueue(queue, kernel, *a, **kw)
+
+        cl.enqueue_nd_range_kernel = record
+        try:
+            with Runtime.forced_width(wide):
+                outs[wide] = Pipeline(cam, quality=quality, stages=STAGES).run(frame).color
+        finally:
+            cl.enqueue_nd_range_kernel = enqueue
+    assert {"front_layer_gather16", "front_layer_add"} <= launched[True]
+    assert {"front_layer_gather", "front_layer"} <= launched[False] and "front_layer_gather16" not in launched[False]
+    np.testing.assert_allclose(outs[True], outs[False], rtol=0, atol=1e-6 * float(np.abs(outs[False]).max()))
+    assert not np.array_equal(outs[True], frame.color)
+
+
 def test_no_coverage_leaves_the_image_unchanged():
     cam = camera()
     frame = layered(47, 31, far_bg=True)

@@ -309,6 +309,11 @@ def cases():
                 lambda q=q, w=w, h=h: _run(front_cam, ["dof", "front_layer"], q, w, h, front=True))
         add(f"front_layer levels {q} 45x29",
             lambda q=q: _run(front_wide, ["dof", "front_layer"], q, 45, 29, front=True))
+        # the CPUs' 16-pixel spreads (front_layer_gather16, front_layer_add): rows not a multiple of 16
+        add(f"front_layer levels wide {q} 45x29",
+            lambda q=q: _run(front_wide, ["dof", "front_layer"], q, 45, 29, front=True, wide=True))
+        add(f"front_layer wide {q} 3x2",
+            lambda q=q: _run(front_cam, ["dof", "front_layer"], q, 3, 2, front=True, wide=True))
     # a gather between pointwise stages: both layout conversions around it
     for w, h in ((3, 2), (37, 23)):
         add(f"layouts vignetting|astigmatism|exposure final {w}x{h}",

@@ -37,8 +37,10 @@ over N(r), radius or −1), ``front_layer_down`` (each level ≥ 1's planes), ``
 (each 8×8 tile's largest radius, −1 where nothing spreads), ``front_layer_reach`` (each tile's
 reach: the largest radius that can spread onto it), ``front_layer_gather`` (a level ≥ 1 spread),
 ``front_layer_active`` (whether any level ≥ 1 reaches a full-resolution tile),
-``front_layer`` (level 0 spread, the levels upsampled, the composite). ρ(o) and N(r) come from
-tables (N at 1/256 px, linear).
+``front_layer`` (level 0 spread, the levels upsampled, the composite). On a CPU
+(:attr:`~clpost.runtime.Runtime.wide`) every spread is ``front_layer_gather16`` (16 pixels of a
+row as float16 lanes, the same taps in the same order), level 0's into a full-resolution buffer
+that ``front_layer_add`` composites. ρ(o) and N(r) come from tables (N at 1/256 px, linear).
 """
 from __future__ import annotations
 
@@ -256,6 +258,7 @@ class FrontLayer(GatherStage):
         k, inv_u = self._radius_args(camera, frame)
         i32, f32 = np.int32, np.float32
         rlim = f32(max_coc_px(q))
+        form, lanes = ("16", 16) if rt.wide else ("", 1)  # the spreads' 16-pixel forms on a CPU
         evs = []
         for L, ((wl, hl), (tw, th)) in enumerate(zip(sizes, tsizes)):
             planes = rt.scratch(self, f"planes{L}", (5, hl, wl))
@@ -272,11 +275,19 @@ class FrontLayer(GatherStage):
             evs.append(rt.launch(knl["front_layer_reach"], (tw, th), None, tiles, reach, i32(tw), i32(th),
                                  i32(toffsets[L])))
             if L > 0:
-                evs.append(rt.launch(knl["front_layer_gather"], (wl, hl), None, planes, reach, rho, spread,
-                                     i32(wl), i32(hl), i32(tw), i32(offsets[L - 1]), i32(toffsets[L])))
+                zeros = (i32(1),) if rt.wide else ()
+                evs.append(rt.launch(knl["front_layer_gather" + form], (-(-wl // lanes), hl), None, planes, reach, rho,
+                                     spread, i32(wl), i32(hl), i32(tw), i32(offsets[L - 1]), i32(toffsets[L]), *zeros))
         active = rt.scratch(self, "active", (tsizes[0][1], tsizes[0][0]), np.int32)
         evs.append(rt.launch(knl["front_layer_active"], tsizes[0], None, reach, table, active, i32(tsizes[0][0]),
                              i32(tsizes[0][1])))
-        evs.append(rt.launch(knl["front_layer"], (w, h), None, src, planes0, reach, rho, spread, table, active, dst,
-                             i32(w), i32(h), i32(tsizes[0][0])))
+        if rt.wide:  # level 0 spread by the 16-pixel gather, then the composite reads it
+            spread0 = rt.scratch(self, "spread0", (4, h, w))
+            evs.append(rt.launch(knl["front_layer_gather16"], (-(-w // 16), h), None, planes0, reach, rho, spread0,
+                                 i32(w), i32(h), i32(tsizes[0][0]), i32(0), i32(0), i32(0)))
+            evs.append(rt.launch(knl["front_layer_add"], (w, h), None, src, spread0, reach, spread, table, active, dst,
+                                 i32(w), i32(h), i32(tsizes[0][0])))
+        else:
+            evs.append(rt.launch(knl["front_layer"], (w, h), None, src, planes0, reach, rho, spread, table, active, dst,
+                                 i32(w), i32(h), i32(tsizes[0][0])))
         return evs
