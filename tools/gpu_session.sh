@@ -23,7 +23,7 @@ nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null; np
 # the one-pixel forms' kernel times against the 16-lane forms on the GPU (gpu_forms; its 16-lane
 # forms are slow there, hence 3 repeats), where worst final's 2.6 ms go per kernel (dof_levels and
 # the B-spline gather were the largest), and the full camera without out= (host copy rates).
-# Only 8 files come back from a lent machine: one file per step, 8 steps at most.
+# Only 8 files come back from a lent machine: one file per step, 8 steps at most (8 now).
 step 120 forms_worst_final python3 -W ignore tools/gpu_forms.py --device nvidia --scene worst --qualities final --repeats 3
 CLPOST_DEVICE=nvidia step 60 kernels_worst_final python3 -W ignore tools/ab_kernel.py --scene worst --quality final --size 1920x1080 --repeats 5
 step 60 end_to_end python3 -W ignore tools/end_to_end.py --device nvidia --scenes worst,full --qualities draft,final --in-flight 2 --repeats 3
@@ -31,4 +31,6 @@ step 60 end_to_end_full_aux python3 -W ignore tools/end_to_end.py --device nvidi
 step 30 host_copy python3 -W ignore tools/transfer_bench.py --device nvidia --repeats 7
 step 80 bench_pocl python3 -W ignore -c "$C" $B --device pocl --repeats 3
 step 110 device_vs_device python3 -W ignore tools/device_vs_device.py
+# the front layer (session 12, never on a GPU yet): its one-pixel kernels' cost against dof's
+step 40 bench_layers python3 -W ignore -c "$C" bench --sizes 1920x1080 --scenes layers --qualities draft,final --device nvidia --repeats 7
 uptime
