@@ -149,9 +149,8 @@ def read_front(pipeline: Pipeline, job: FrameJob, frame: Frame, layout: str | No
     (:func:`read_input`: same layout rule, radial depth made planar), its colour taken as
     premultiplied (the EXR convention, what a transparent film writes), its alpha and depth
     required, its arrays those of the input: one display window and one extent (the data window
-    may be a crop inside it) (:func:`clpost.frame.front_layer` packs it and fills
-    covered pixels whose depth sample missed the layer)."""
-    from .frame import front_layer
+    may be a crop inside it) (:func:`clpost.frame.front_of`)."""
+    from .frame import front_of
 
     path = job.front
     fg = read_input(pipeline, path, layout, camera)
@@ -166,14 +165,7 @@ def read_front(pipeline: Pipeline, job: FrameJob, frame: Frame, layout: str | No
             return f"{f.width}x{f.height} (data {exr.window_str(w.data)}, display {exr.window_str(w.display)})"
         raise InputError(f"--front {path}: size {shown(fg)} differs from the input's {shown(frame)} ({job.src}); "
                          "render the front layer with the input's resolution and windows")
-    if not fg.metadata.get("alpha_channel") or fg.alpha is None:
-        raise InputError(f"--front {path}: no alpha channel ({fg.metadata.get('layout')} layout); the front layer's "
-                         "coverage is its alpha: render it over a transparent film (Blender: Film > Transparent) "
-                         "and write RGBA")
-    if fg.depth is None:
-        raise InputError(f"--front {path}: no depth channel ({fg.metadata.get('layout')} layout); the front layer "
-                         "is defocused by its own depth: render it with a depth pass (Blender: Passes > Z)")
-    return front_layer(fg.color, fg.alpha, fg.depth, premultiplied=True)
+    return front_of(fg, f"--front {path}")
 
 
 def run_job(pipeline: Pipeline, job: FrameJob, cam, frame: Frame, display="srgb",

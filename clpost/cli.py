@@ -247,7 +247,7 @@ def _front_paths(args, jobs) -> None:
     """Each job's ``--front`` file (the pattern expanded with the job's frame number), checked
     before anything is read or written: it exists, it is neither an input nor an output, and its
     image has the input's size (headers only)."""
-    from .outputs import _identity
+    from .outputs import path_keys
     from .sequence import expand, has_pattern
 
     pattern = args.front
@@ -257,13 +257,11 @@ def _front_paths(args, jobs) -> None:
     for j in jobs:
         j.front = Path(expand(pattern, j.frame)) if has_pattern(pattern) else Path(pattern)
 
-    def ids(p):
-        return {os.path.realpath(p), _identity(p)} - {None}
-    inputs = {k: j.src for j in jobs for k in ids(j.src)}
-    outputs = {k: j.dst for j in jobs for k in ids(j.dst)}
+    inputs = {k: j.src for j in jobs for k in path_keys(j.src)}
+    outputs = {k: j.dst for j in jobs for k in path_keys(j.dst)}
     for j in sorted({j.front: j for j in jobs}.values(), key=lambda j: j.frame):
         name = f"--front {pattern}" + (f": {j.front}" if str(j.front) != pattern else "")
-        for k in ids(j.front):
+        for k in path_keys(j.front):
             if k in inputs:
                 raise InputError(f"{name} is the input {inputs[k]}; --front names the "
                                  "foreground layer rendered apart, the input the background (e.g. --front fg.####.exr)")

@@ -215,17 +215,11 @@ def cycles_layers(data, entry: dict):
     from pathlib import Path
 
     from .exr import read_frame
-    from .frame import Frame, front_layer
-
-    from .errors import InputError
+    from .frame import front_of
 
     path = Path(data) / entry["layers"]["fg"]["file"]
-    fg = read_frame(path)
     bg = read_frame(Path(data) / entry["layers"]["bg"]["file"])
-    if fg.alpha is None or fg.depth is None:
-        raise InputError(f"{path}: a front layer needs alpha and depth (render it over a transparent film "
-                         "with the Z pass)")
-    return Frame(color=bg.color, depth=bg.depth, front=front_layer(fg.color, fg.alpha, fg.depth))
+    return bg.with_front(front_of(read_frame(path), str(path)), copy=False)
 
 
 CYCLES_STAGES = {"dof": ["dof"], "motion": ["motion_blur"], "dofmotion": ["dof", "motion_blur"]}

@@ -34,7 +34,8 @@ or render pass of the near objects over a transparent film, the rest hidden from
 or held out): the image (``color``, ``depth``) is then the background without them. The
 ``front_layer`` stage defocuses it by its own depth and composites it over the background
 after depth of field, so the lens sees the background behind a blurred foreground's edge,
-which a one-layer image does not hold (docs/fidelity.md, "What two layers would give"). The
+which a one-layer image does not hold (docs/fidelity.md, "Two layers: the foreground rendered
+as its own layer"). The
 stage consumes it: a processed frame has no ``front``.
 
 ``metadata["frame_index"]`` (int, default 0) is the frame number of a sequence; the renderer and
@@ -352,6 +353,21 @@ def front_layer(color: np.ndarray, alpha: np.ndarray, depth: np.ndarray, premult
         color = color * a[..., None]
     return np.concatenate([color, a[..., None], _fill_missed(np.asarray(depth, np.float32), a)[..., None]],
                           axis=-1)
+
+
+def front_of(layer: "Frame", name: str) -> np.ndarray:
+    """The ``Frame.front`` array of a front layer read from a file (``name`` says which in an
+    error: a path, ``--front PATH``): its colour taken as premultiplied (the EXR convention, what
+    a transparent film writes), its alpha and depth required. A reader's alpha made up for a
+    cropped data window (``metadata["alpha_channel"]`` False) is no coverage."""
+    layout = layer.metadata.get("layout")
+    if layer.alpha is None or not layer.metadata.get("alpha_channel", True):
+        raise InputError(f"{name}: no alpha channel ({layout} layout); the front layer's coverage is its alpha: "
+                         "render it over a transparent film (Blender: Film > Transparent) and write RGBA")
+    if layer.depth is None:
+        raise InputError(f"{name}: no depth channel ({layout} layout); the front layer is defocused by its own "
+                         "depth: render it with a depth pass (Blender: Passes > Z)")
+    return front_layer(layer.color, layer.alpha, layer.depth)
 
 
 def _fill_missed(depth: np.ndarray, alpha: np.ndarray) -> np.ndarray:

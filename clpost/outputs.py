@@ -33,6 +33,12 @@ def _identity(path: Path) -> tuple[int, int] | None:
     return st.st_dev, st.st_ino
 
 
+def path_keys(path: Path) -> set:
+    """What makes two paths one file: its real path and, for an existing file, its (device,
+    inode) — a hard link or another spelling of the same file shares one of them."""
+    return {os.path.realpath(path), _identity(path)} - {None}
+
+
 def suggest_output(path: str | os.PathLike) -> str:
     """A name beside ``path`` that is not the input: ``x.exr`` → ``x_post.exr``."""
     p = Path(path)
@@ -60,15 +66,9 @@ def check_paths(pairs: Sequence[tuple[Path, Path]], output_arg: str | None = Non
     inputs = {}
     for src, _ in pairs:
         check_input(src)
-        inputs[os.path.realpath(src)] = src
-        ident = _identity(src)
-        if ident is not None:
-            inputs[ident] = src
+        inputs.update(dict.fromkeys(path_keys(src), src))
     for _, dst in pairs:
-        hit = inputs.get(os.path.realpath(dst))
-        if hit is None:
-            ident = _identity(dst)
-            hit = inputs.get(ident) if ident is not None else None
+        hit = next((inputs[k] for k in path_keys(dst) if k in inputs), None)
         if hit is not None:
             shown = output_arg or str(dst)
             raise InputError(f"-o {shown}: output {dst} is the input {hit}; writing it would destroy the "

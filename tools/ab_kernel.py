@@ -72,7 +72,7 @@ def record_plan(scene: str, quality: str, size: tuple[int, int], stages: list[st
     cl.enqueue_nd_range_kernel, cl.Kernel.set_args, cl.Kernel.set_arg = enq, sa, s1
     sc = SCENES[scene]
     w, h = size
-    frame = synthetic_frame(w, h, velocity_px=sc.velocity_px)
+    frame = synthetic_frame(w, h, velocity_px=sc.velocity_px, front=sc.front)
     cam, _ = sc.camera(w, h)
     pipe = Pipeline(cam, quality=quality, stages=stages or list(sc.wants))
     pipe.run(frame)  # builds, first launches

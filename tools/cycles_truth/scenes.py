@@ -415,7 +415,7 @@ SCENES = {
 
 # The foreground of the partial-occlusion scenes, by object name prefix: what `render.py`'s ``fg``
 # and ``bg`` kinds split the pinhole into (the layers an artist renders separately, which the
-# one-layer input lacks; docs/fidelity.md, "What two layers would give").
+# one-layer input lacks; docs/fidelity.md, "Two layers").
 FOREGROUND = {
     "thin": ("bar", "handrail", "wire3"),
     "occluder": ("pole", "ball", "branch"),
