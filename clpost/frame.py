@@ -377,11 +377,12 @@ def _fill_missed(depth: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     Such a pixel (0 < α < 1) takes the nearest depth of its own and its covered 3×3 neighbours';
     one with +inf and no covered neighbour with a depth takes it once one has, repeated until
     every covered pixel has one (a layer with no finite depth at all stays at +inf)."""
-    covered, h, w = alpha > 0, *depth.shape
+    covered = alpha > 0
 
-    def nearest(d):
+    def nearest(d):  # the 3×3 minimum, separable (rows, then columns)
         p = np.pad(d, 1, constant_values=np.inf)
-        return np.min([p[j:j + h, i:i + w] for j in range(3) for i in range(3)], axis=0)
+        m = np.minimum(np.minimum(p[:-2], p[1:-1]), p[2:])
+        return np.minimum(np.minimum(m[:, :-2], m[:, 1:-1]), m[:, 2:])
 
     d = np.where(covered, depth, np.inf).astype(np.float32)
     d = np.where(covered & (alpha < 1), nearest(d), d)
