@@ -9,6 +9,7 @@ output (the forms do the same operations per pixel: 0 where the device compiles 
     PYTHONPATH=. python tools/gpu_forms.py --device nvidia            # 1080p, draft and final
     PYTHONPATH=. python tools/gpu_forms.py --device pocl --size 320x180 --repeats 3   # a CPU check
     PYTHONPATH=. python tools/gpu_forms.py --device nvidia --scene worst --qualities final   # dof, distortion
+    PYTHONPATH=. python tools/gpu_forms.py --device pocl --scene layers --repeats 5           # front_layer
 
 The device's own choice (``Runtime.wide``: off on a GPU) is printed first; docs/benchmarks.md's
 GPU section says what to record. ``Runtime.wide`` also picks the fused pointwise kernels' and
@@ -31,7 +32,7 @@ def measure(device: str | None, w: int, h: int, quality: str, repeats: int, warm
     """Per form (True: wide, False: narrow): stage ms medians, plan device ms median, last output."""
     scene = SCENES[scene_name]
     cam, _ = scene.camera(w, h)
-    frame = synthetic_frame(w, h, velocity_px=scene.velocity_px)
+    frame = synthetic_frame(w, h, velocity_px=scene.velocity_px, front=scene.front)
     pipes, times, outs = {}, {True: {}, False: {}}, {}
     for wide in (True, False):
         with Runtime.forced_width(wide):
